@@ -1,0 +1,85 @@
+//! The safe side of the export layer: what a co-simulation model implements, and the variable
+//! table that both the C exports and the modelDescription.xml are derived from.
+
+use std::path::PathBuf;
+
+use serde::{de::DeserializeOwned, Serialize};
+
+use crate::variables::ModelInfo;
+
+/// What went wrong inside a model call. Every variant becomes `fmi2Error` at the C boundary,
+/// with the `Display` text sent to the host's logger.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum ModelError {
+    #[error("unknown value reference {vr} for a {kind} variable")]
+    UnknownVariable { vr: u32, kind: &'static str },
+    #[error("invalid value for '{name}': {reason}")]
+    InvalidValue { name: String, reason: String },
+    #[error("the state diverged at t = {time}: {what}")]
+    Diverged { time: f64, what: String },
+    #[error("{0}")]
+    Other(String),
+}
+
+/// Where and how the host instantiated the FMU.
+#[derive(Debug, Clone, Default)]
+pub struct InstantiateContext {
+    pub instance_name: String,
+    /// The unpacked FMU's `resources/` directory, when the host gave a `file:` URI.
+    pub resource_dir: Option<PathBuf>,
+}
+
+/// A co-simulation model: the only thing an FMU of this project writes by hand.
+///
+/// Call order, enforced by the export layer before any of these methods run:
+/// `instantiate` → (`set_*`)* → `exit_initialization` → (`set_*` / `set_real_input_derivative` /
+/// `do_step` / `get_*`)* → drop. `get_*` may run from initialization mode on. A `reset` is a
+/// fresh `instantiate` with the same context. `Clone` is the in-memory FMU state (`fmi2GetFMUstate`);
+/// serde is the serialized one.
+///
+/// The layer has already checked, before calling a setter, that the value reference exists in
+/// `info()` with the right type, that the variable may be set in the current state and that a real
+/// value is finite; a model still returns `UnknownVariable` for anything it does not know.
+pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
+    /// The variable table and identity (GUID, model identifier, capabilities). Built once.
+    fn info() -> &'static ModelInfo;
+
+    fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError>;
+
+    fn get_real(&mut self, vr: u32) -> Result<f64, ModelError>;
+    fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError>;
+
+    fn get_integer(&mut self, vr: u32) -> Result<i32, ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "Integer" })
+    }
+    fn set_integer(&mut self, vr: u32, _value: i32) -> Result<(), ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "Integer" })
+    }
+    fn get_boolean(&mut self, vr: u32) -> Result<bool, ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "Boolean" })
+    }
+    fn set_boolean(&mut self, vr: u32, _value: bool) -> Result<(), ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "Boolean" })
+    }
+    fn get_string(&mut self, vr: u32) -> Result<String, ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "String" })
+    }
+    fn set_string(&mut self, vr: u32, _value: &str) -> Result<(), ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "String" })
+    }
+
+    /// First time derivative of a real input, valid from the current communication point: the
+    /// model treats the input as `u(t) = u + du·(t − t_c)` inside the next step. Only called
+    /// when `info().can_interpolate_inputs`.
+    fn set_real_input_derivative(&mut self, vr: u32, _derivative: f64) -> Result<(), ModelError> {
+        Err(ModelError::UnknownVariable { vr, kind: "Real input" })
+    }
+
+    /// Leaving initialization mode: check the parameters together and precompute.
+    fn exit_initialization(&mut self) -> Result<(), ModelError> {
+        Ok(())
+    }
+
+    /// Advance from `time` to `time + step_size`. A non-finite state is `ModelError::Diverged`.
+    fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError>;
+}

@@ -1,0 +1,284 @@
+//! The optional-effect library `g(y, ẏ)`: forces that eq. (1) does not have, each kind in its
+//! own file behind [`Effect`]. Adding a kind is one new file, one field in [`Effects`] and its
+//! line in `Effects::all_variables` / the dispatch below.
+//!
+//! Sign convention: an effect adds to `g`, the left-hand side of `M ÿ + C ẏ + K y + g = φ u`, so
+//! a restoring force is positive along the displacement that causes it.
+
+pub mod contact;
+pub mod cubic;
+pub mod friction;
+
+use fmi2::{ModelError, Variable};
+use serde::{Deserialize, Serialize};
+
+pub use contact::Contact;
+pub use cubic::Cubic;
+pub use friction::Friction;
+
+/// Displacements and velocities of floors 1..3 (ground excluded).
+pub type Floors = [f64; 3];
+
+/// A real parameter of an effect kind, as it appears in the variable table.
+pub struct RealParam {
+    pub suffix: &'static str,
+    pub unit: &'static str,
+    pub start: f64,
+    /// Smallest allowed value; `strictly` excludes it.
+    pub min: f64,
+    pub strictly: bool,
+    pub description: &'static str,
+}
+
+/// One kind of physical effect at one location (a storey or a floor).
+pub trait Effect: Clone + std::fmt::Debug + Serialize + for<'de> Deserialize<'de> {
+    /// Kind name as the diagnosis reports it: "contact", "cubic", "friction".
+    const KIND: &'static str;
+    /// Locations this kind can sit at (3 storeys or 3 floors).
+    const LOCATIONS: usize = 3;
+    /// Variable-name prefix at `location` (0-based), e.g. "contact23".
+    fn prefix(location: usize) -> String;
+    /// Human description of the location, for the modelDescription.
+    fn where_(location: usize) -> String;
+    fn real_params() -> &'static [RealParam];
+    /// Integer parameters: (suffix, start, min, max, description).
+    fn integer_params() -> &'static [(&'static str, i32, i32, i32, &'static str)] {
+        &[]
+    }
+    /// The effect with its parameters at their start values.
+    fn at_start(location: usize) -> Self;
+    fn real(&self, index: usize) -> f64;
+    fn set_real(&mut self, index: usize, value: f64);
+    fn integer(&self, _index: usize) -> i32 {
+        0
+    }
+    fn set_integer(&mut self, _index: usize, _value: i32) {}
+    /// Add this effect's force at `location` to `g`.
+    fn add_force(&self, location: usize, y: &Floors, v: &Floors, g: &mut Floors);
+}
+
+/// Value-reference layout of a library: base + 10·location + slot, where slot 0 is the `enabled`
+/// Boolean, 1..=7 the reals and 8..=9 the integers.
+const SLOTS_PER_LOCATION: u32 = 10;
+const FIRST_REAL_SLOT: u32 = 1;
+const FIRST_INTEGER_SLOT: u32 = 8;
+
+/// One effect kind at each of its locations, each with its own `enabled` switch.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Library<E> {
+    base_vr: u32,
+    enabled: Vec<bool>,
+    effects: Vec<E>,
+}
+
+impl<E: Effect> Library<E> {
+    pub fn new(base_vr: u32) -> Self {
+        Library { base_vr, enabled: vec![false; E::LOCATIONS], effects: (0..E::LOCATIONS).map(E::at_start).collect() }
+    }
+
+    pub fn variables(base_vr: u32) -> Vec<Variable> {
+        let mut vars = Vec::new();
+        for location in 0..E::LOCATIONS {
+            let prefix = E::prefix(location);
+            let vr0 = base_vr + SLOTS_PER_LOCATION * location as u32;
+            vars.push(
+                Variable::boolean_parameter(&format!("{prefix}_enabled"), vr0, false)
+                    .describe(&format!("{} {}: switched on", E::KIND, E::where_(location))),
+            );
+            for (i, p) in E::real_params().iter().enumerate() {
+                let mut var =
+                    Variable::real_parameter(&format!("{prefix}_{}", p.suffix), vr0 + FIRST_REAL_SLOT + i as u32, p.unit, p.start)
+                        .describe(&format!("{} {}: {}", E::KIND, E::where_(location), p.description));
+                if p.min > f64::MIN {
+                    var = var.min(p.min);
+                }
+                vars.push(var);
+            }
+            for (i, (suffix, start, min, max, description)) in E::integer_params().iter().enumerate() {
+                vars.push(
+                    Variable::integer_parameter(&format!("{prefix}_{suffix}"), vr0 + FIRST_INTEGER_SLOT + i as u32, *start)
+                        .min(f64::from(*min))
+                        .max(f64::from(*max))
+                        .describe(&format!("{} {}: {}", E::KIND, E::where_(location), description)),
+                );
+            }
+        }
+        vars
+    }
+
+    /// (location, slot) of a value reference of this library, if it is one.
+    fn locate(&self, vr: u32) -> Option<(usize, u32)> {
+        let offset = vr.checked_sub(self.base_vr)?;
+        let location = (offset / SLOTS_PER_LOCATION) as usize;
+        (location < E::LOCATIONS).then_some((location, offset % SLOTS_PER_LOCATION))
+    }
+
+    pub fn owns(&self, vr: u32) -> bool {
+        self.locate(vr).is_some()
+    }
+
+    pub fn get_real(&self, vr: u32) -> Option<f64> {
+        let (location, slot) = self.locate(vr)?;
+        let index = slot.checked_sub(FIRST_REAL_SLOT)? as usize;
+        (index < E::real_params().len()).then(|| self.effects[location].real(index))
+    }
+
+    pub fn set_real(&mut self, vr: u32, value: f64) -> Option<Result<(), ModelError>> {
+        let (location, slot) = self.locate(vr)?;
+        let index = slot.checked_sub(FIRST_REAL_SLOT)? as usize;
+        let p = E::real_params().get(index)?;
+        let ok = if p.strictly { value > p.min } else { value >= p.min };
+        if !ok {
+            return Some(Err(ModelError::InvalidValue {
+                name: format!("{}_{}", E::prefix(location), p.suffix),
+                reason: format!("{value} must be {} {}", if p.strictly { ">" } else { "≥" }, p.min),
+            }));
+        }
+        self.effects[location].set_real(index, value);
+        Some(Ok(()))
+    }
+
+    pub fn get_integer(&self, vr: u32) -> Option<i32> {
+        let (location, slot) = self.locate(vr)?;
+        let index = slot.checked_sub(FIRST_INTEGER_SLOT)? as usize;
+        (index < E::integer_params().len()).then(|| self.effects[location].integer(index))
+    }
+
+    pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
+        let (location, slot) = self.locate(vr)?;
+        let index = slot.checked_sub(FIRST_INTEGER_SLOT)? as usize;
+        let (suffix, _, min, max, _) = E::integer_params().get(index)?;
+        if value < *min || value > *max {
+            return Some(Err(ModelError::InvalidValue {
+                name: format!("{}_{suffix}", E::prefix(location)),
+                reason: format!("{value} is outside [{min}, {max}]"),
+            }));
+        }
+        self.effects[location].set_integer(index, value);
+        Some(Ok(()))
+    }
+
+    pub fn get_boolean(&self, vr: u32) -> Option<bool> {
+        let (location, slot) = self.locate(vr)?;
+        (slot == 0).then(|| self.enabled[location])
+    }
+
+    pub fn set_boolean(&mut self, vr: u32, value: bool) -> Option<()> {
+        let (location, slot) = self.locate(vr)?;
+        (slot == 0).then(|| self.enabled[location] = value)
+    }
+
+    pub fn any_enabled(&self) -> bool {
+        self.enabled.iter().any(|&e| e)
+    }
+
+    #[inline]
+    pub fn add_forces(&self, y: &Floors, v: &Floors, g: &mut Floors) {
+        for (location, effect) in self.effects.iter().enumerate() {
+            if self.enabled[location] {
+                effect.add_force(location, y, v, g);
+            }
+        }
+    }
+
+    /// Direct access, for tests and the synthetic structure.
+    pub fn effect_mut(&mut self, location: usize) -> &mut E {
+        &mut self.effects[location]
+    }
+    pub fn enable(&mut self, location: usize, on: bool) {
+        self.enabled[location] = on;
+    }
+}
+
+/// Every effect kind of the library.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Effects {
+    pub contact: Library<Contact>,
+    pub cubic: Library<Cubic>,
+    pub friction: Library<Friction>,
+}
+
+pub const CONTACT_BASE_VR: u32 = 100;
+pub const CUBIC_BASE_VR: u32 = 200;
+pub const FRICTION_BASE_VR: u32 = 300;
+
+impl Default for Effects {
+    fn default() -> Self {
+        Effects {
+            contact: Library::new(CONTACT_BASE_VR),
+            cubic: Library::new(CUBIC_BASE_VR),
+            friction: Library::new(FRICTION_BASE_VR),
+        }
+    }
+}
+
+impl Effects {
+    pub fn all_variables() -> Vec<Variable> {
+        let mut vars = Library::<Contact>::variables(CONTACT_BASE_VR);
+        vars.extend(Library::<Cubic>::variables(CUBIC_BASE_VR));
+        vars.extend(Library::<Friction>::variables(FRICTION_BASE_VR));
+        vars
+    }
+
+    pub fn any_enabled(&self) -> bool {
+        self.contact.any_enabled() || self.cubic.any_enabled() || self.friction.any_enabled()
+    }
+
+    /// `g(y, ẏ)`: the sum of every enabled effect's force on each floor.
+    #[inline]
+    pub fn force(&self, y: &Floors, v: &Floors) -> Floors {
+        let mut g = [0.0; 3];
+        self.contact.add_forces(y, v, &mut g);
+        self.cubic.add_forces(y, v, &mut g);
+        self.friction.add_forces(y, v, &mut g);
+        g
+    }
+
+    pub fn get_real(&self, vr: u32) -> Option<f64> {
+        self.contact.get_real(vr).or_else(|| self.cubic.get_real(vr)).or_else(|| self.friction.get_real(vr))
+    }
+    pub fn set_real(&mut self, vr: u32, value: f64) -> Option<Result<(), ModelError>> {
+        self.contact
+            .set_real(vr, value)
+            .or_else(|| self.cubic.set_real(vr, value))
+            .or_else(|| self.friction.set_real(vr, value))
+    }
+    pub fn get_integer(&self, vr: u32) -> Option<i32> {
+        self.contact.get_integer(vr).or_else(|| self.cubic.get_integer(vr)).or_else(|| self.friction.get_integer(vr))
+    }
+    pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
+        self.contact
+            .set_integer(vr, value)
+            .or_else(|| self.cubic.set_integer(vr, value))
+            .or_else(|| self.friction.set_integer(vr, value))
+    }
+    pub fn get_boolean(&self, vr: u32) -> Option<bool> {
+        self.contact.get_boolean(vr).or_else(|| self.cubic.get_boolean(vr)).or_else(|| self.friction.get_boolean(vr))
+    }
+    pub fn set_boolean(&mut self, vr: u32, value: bool) -> Option<()> {
+        self.contact
+            .set_boolean(vr, value)
+            .or_else(|| self.cubic.set_boolean(vr, value))
+            .or_else(|| self.friction.set_boolean(vr, value))
+    }
+}
+
+/// Inter-storey drift of storey `s` (0-based: storey 0 is ground–floor 1): `y_s − y_{s−1}`.
+#[inline]
+pub fn drift(y: &Floors, storey: usize) -> f64 {
+    if storey == 0 {
+        y[0]
+    } else {
+        y[storey] - y[storey - 1]
+    }
+}
+
+/// Apply a storey force `f` (positive when it resists a positive drift): on the upper floor of
+/// the storey `+f`, on the lower floor (if not the ground) `−f`.
+#[inline]
+pub fn add_storey_force(storey: usize, f: f64, g: &mut Floors) {
+    g[storey] += f;
+    if storey > 0 {
+        g[storey - 1] -= f;
+    }
+}

@@ -1,0 +1,236 @@
+//! The three-storey shear model of eq. (1) with a control force and the effect library.
+
+use fmi2::{CoSimModel, InstantiateContext, ModelError, ModelInfo, VarType};
+use numerics::ode::rk4_substeps;
+use serde::{Deserialize, Serialize};
+
+use crate::effects::{Effects, Floors};
+use crate::variables::*;
+
+/// RK4 sub-steps per communication step. From the convergence study in
+/// `tests/convergence.rs` at the examples' 51.2 Hz: see ARCHITECTURE.md for the figures.
+pub const DEFAULT_SUBSTEPS: u32 = 8;
+
+/// The linear structure: masses of floors 1..3, damping and stiffness of storeys 1..3.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ShearParameters {
+    pub mass: [f64; 3],
+    pub damping: [f64; 3],
+    pub stiffness: [f64; 3],
+    pub substeps: u32,
+}
+
+impl Default for ShearParameters {
+    /// The reference paper's prior means (Table 1).
+    fn default() -> Self {
+        ShearParameters {
+            mass: [5.2; 3],
+            damping: [(-4.605f64).exp(); 3],
+            stiffness: [4021.0; 3],
+            substeps: DEFAULT_SUBSTEPS,
+        }
+    }
+}
+
+/// An input held as `value + slope·(t − t_set)` inside a step (first-order interpolation).
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct RampInput {
+    pub value: f64,
+    pub slope: f64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ShearModel {
+    pub params: ShearParameters,
+    pub effects: Effects,
+    /// Displacements and velocities of floors 1..3 (relative to the ground).
+    pub displacement: Floors,
+    pub velocity: Floors,
+    pub force: RampInput,
+    pub control_force: RampInput,
+}
+
+impl ShearModel {
+    pub fn new(params: ShearParameters, effects: Effects) -> Self {
+        ShearModel {
+            params,
+            effects,
+            displacement: [0.0; 3],
+            velocity: [0.0; 3],
+            force: RampInput::default(),
+            control_force: RampInput::default(),
+        }
+    }
+
+    /// Floor accelerations for a state and a net input force on floor 1: eq. (1) solved for ÿ.
+    #[inline]
+    pub fn acceleration(&self, y: &Floors, v: &Floors, input: f64) -> Floors {
+        let ShearParameters { mass: m, damping: c, stiffness: k, .. } = &self.params;
+        // Storey forces (positive = resisting a positive drift) of the linear springs and dampers.
+        let d = [y[0], y[1] - y[0], y[2] - y[1]];
+        let dv = [v[0], v[1] - v[0], v[2] - v[1]];
+        let s = [k[0] * d[0] + c[0] * dv[0], k[1] * d[1] + c[1] * dv[1], k[2] * d[2] + c[2] * dv[2]];
+        let mut rhs = [input - s[0] + s[1], s[2] - s[1], -s[2]];
+        if self.effects.any_enabled() {
+            let g = self.effects.force(y, v);
+            for i in 0..3 {
+                rhs[i] -= g[i];
+            }
+        }
+        [rhs[0] / m[0], rhs[1] / m[1], rhs[2] / m[2]]
+    }
+
+    /// Advance the state from `t` to `t + h` with the inputs as ramps.
+    pub fn advance(&mut self, h: f64) {
+        let (f0, fs) = (self.force.value - self.control_force.value, self.force.slope - self.control_force.slope);
+        let x0 = [
+            self.displacement[0],
+            self.displacement[1],
+            self.displacement[2],
+            self.velocity[0],
+            self.velocity[1],
+            self.velocity[2],
+        ];
+        let rhs = |tau: f64, x: &[f64; 6]| {
+            let y = [x[0], x[1], x[2]];
+            let v = [x[3], x[4], x[5]];
+            let a = self.acceleration(&y, &v, f0 + fs * tau);
+            [v[0], v[1], v[2], a[0], a[1], a[2]]
+        };
+        let x = rk4_substeps(rhs, 0.0, &x0, h, self.params.substeps);
+        self.displacement = [x[0], x[1], x[2]];
+        self.velocity = [x[3], x[4], x[5]];
+        for input in [&mut self.force, &mut self.control_force] {
+            input.value += input.slope * h;
+        }
+    }
+
+    fn net_input(&self) -> f64 {
+        self.force.value - self.control_force.value
+    }
+
+    fn floor_index(vr: u32, first: u32) -> Option<usize> {
+        vr.checked_sub(first).map(|i| i as usize).filter(|&i| i < 3)
+    }
+}
+
+fn positive(name: &str, value: f64, strictly: bool) -> Result<f64, ModelError> {
+    let ok = if strictly { value > 0.0 } else { value >= 0.0 };
+    if ok {
+        Ok(value)
+    } else {
+        Err(ModelError::InvalidValue {
+            name: name.to_owned(),
+            reason: format!("{value} must be {} 0", if strictly { ">" } else { "≥" }),
+        })
+    }
+}
+
+impl CoSimModel for ShearModel {
+    fn info() -> &'static ModelInfo {
+        info()
+    }
+
+    fn instantiate(_context: &InstantiateContext) -> Result<Self, ModelError> {
+        Ok(ShearModel::new(ShearParameters::default(), Effects::default()))
+    }
+
+    fn get_real(&mut self, vr: u32) -> Result<f64, ModelError> {
+        let (y, v) = (self.displacement, self.velocity);
+        let value = match vr {
+            FORCE => self.force.value,
+            CONTROL_FORCE => self.control_force.value,
+            _ => {
+                if let Some(i) = Self::floor_index(vr, ACC) {
+                    self.acceleration(&y, &v, self.net_input())[i]
+                } else if let Some(i) = Self::floor_index(vr, DISP) {
+                    y[i]
+                } else if let Some(i) = Self::floor_index(vr, VEL) {
+                    v[i]
+                } else if let Some(i) = Self::floor_index(vr, DRIFT) {
+                    crate::effects::drift(&y, i)
+                } else if let Some(i) = Self::floor_index(vr, MASS) {
+                    self.params.mass[i]
+                } else if let Some(i) = Self::floor_index(vr, DAMPING) {
+                    self.params.damping[i]
+                } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
+                    self.params.stiffness[i]
+                } else {
+                    return self.effects.get_real(vr).ok_or(ModelError::UnknownVariable { vr, kind: "Real" });
+                }
+            }
+        };
+        Ok(value)
+    }
+
+    fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {
+        let name = || info().find(VarType::Real, vr).map(|v| v.name.clone()).unwrap_or_default();
+        match vr {
+            FORCE => self.force.value = value,
+            CONTROL_FORCE => self.control_force.value = value,
+            _ => {
+                if let Some(i) = Self::floor_index(vr, MASS) {
+                    self.params.mass[i] = positive(&name(), value, true)?;
+                } else if let Some(i) = Self::floor_index(vr, DAMPING) {
+                    self.params.damping[i] = positive(&name(), value, false)?;
+                } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
+                    self.params.stiffness[i] = positive(&name(), value, false)?;
+                } else {
+                    return self.effects.set_real(vr, value).unwrap_or(Err(ModelError::UnknownVariable { vr, kind: "Real" }));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn get_integer(&mut self, vr: u32) -> Result<i32, ModelError> {
+        if vr == SUBSTEPS {
+            return Ok(self.params.substeps as i32);
+        }
+        self.effects.get_integer(vr).ok_or(ModelError::UnknownVariable { vr, kind: "Integer" })
+    }
+
+    fn set_integer(&mut self, vr: u32, value: i32) -> Result<(), ModelError> {
+        if vr == SUBSTEPS {
+            if !(1..=10000).contains(&value) {
+                return Err(ModelError::InvalidValue { name: "substeps".into(), reason: format!("{value} is outside [1, 10000]") });
+            }
+            self.params.substeps = value as u32;
+            return Ok(());
+        }
+        self.effects.set_integer(vr, value).unwrap_or(Err(ModelError::UnknownVariable { vr, kind: "Integer" }))
+    }
+
+    fn get_boolean(&mut self, vr: u32) -> Result<bool, ModelError> {
+        self.effects.get_boolean(vr).ok_or(ModelError::UnknownVariable { vr, kind: "Boolean" })
+    }
+
+    fn set_boolean(&mut self, vr: u32, value: bool) -> Result<(), ModelError> {
+        self.effects.set_boolean(vr, value).ok_or(ModelError::UnknownVariable { vr, kind: "Boolean" })
+    }
+
+    fn set_real_input_derivative(&mut self, vr: u32, derivative: f64) -> Result<(), ModelError> {
+        match vr {
+            FORCE => self.force.slope = derivative,
+            CONTROL_FORCE => self.control_force.slope = derivative,
+            _ => return Err(ModelError::UnknownVariable { vr, kind: "Real input" }),
+        }
+        Ok(())
+    }
+
+    fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
+        self.advance(step_size);
+        let finite = self.displacement.iter().chain(&self.velocity).all(|x| x.is_finite());
+        if finite {
+            Ok(())
+        } else {
+            Err(ModelError::Diverged {
+                time: time + step_size,
+                what: format!(
+                    "non-finite displacement {:?} or velocity {:?}; check the parameters and the substeps",
+                    self.displacement, self.velocity
+                ),
+            })
+        }
+    }
+}

@@ -1,0 +1,3 @@
+//! Numerics for the twin, with no FFI and no I/O.
+
+pub mod ode;
