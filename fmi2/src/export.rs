@@ -139,6 +139,32 @@ fn lookup<'a, M: CoSimModel>(var_type: VarType, vr: u32) -> Result<&'a crate::va
     })
 }
 
+/// Hand a batch of values to the model, whole or not at all. With more than one value, the
+/// current values are read first; if the model refuses one, those already set are put back (in
+/// reverse order, so a reference named twice ends at its value from before the call).
+fn set_all<M: CoSimModel, T>(
+    model: &mut M,
+    vrs: &[u32],
+    values: &[T],
+    get: impl Fn(&mut M, u32) -> Result<T, ModelError>,
+    set: impl Fn(&mut M, u32, &T) -> Result<(), ModelError>,
+) -> Result<(), CallError> {
+    let previous = if vrs.len() > 1 {
+        vrs.iter().map(|&vr| get(model, vr)).collect::<Result<Vec<T>, _>>()?
+    } else {
+        Vec::new()
+    };
+    for (i, (&vr, value)) in vrs.iter().zip(values).enumerate() {
+        if let Err(e) = set(model, vr, value) {
+            for (&vr, old) in vrs[..i].iter().zip(&previous).rev() {
+                let _ = set(model, vr, old);
+            }
+            return Err(e.into());
+        }
+    }
+    Ok(())
+}
+
 /// Check that every value reference may be set now, before any is: a batch is set whole or not at all.
 fn check_settable<M: CoSimModel>(inst: &Instance<M>, var_type: VarType, vrs: &[u32]) -> Result<(), CallError> {
     let initialized = matches!(inst.state, FsmState::StepComplete);
@@ -215,7 +241,20 @@ pub unsafe fn instantiate<M: CoSimModel>(
             }
         }
     }))
-    .unwrap_or(std::ptr::null_mut())
+    .unwrap_or_else(|payload| {
+        let text = panic_text(payload.as_ref());
+        // The host still hears why there is no instance; a second panic stays here too.
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            if !functions.is_null() {
+                // SAFETY: as above.
+                let callbacks = unsafe { *functions };
+                let name = unsafe { from_c_str(instance_name) }.unwrap_or_default();
+                Logger::new(&name, callbacks, logging_on != 0)
+                    .log(fmi2Fatal, &format!("fmi2Instantiate: the model panicked: {text}"));
+            }
+        }));
+        std::ptr::null_mut()
+    })
 }
 
 /// # Safety
@@ -400,15 +439,13 @@ pub unsafe fn set_real<M: CoSimModel>(
                 return refuse(format!("value of '{name}' (vr {r}) is {x}; only finite reals are accepted"));
             }
         }
-        for (&r, &x) in vrs.iter().zip(values) {
-            inst.model.set_real(r, x)?;
-        }
+        set_all(&mut inst.model, vrs, values, M::get_real, |m, r, &x| m.set_real(r, x))?;
         Ok(fmi2OK)
     })
 }
 
 macro_rules! setter {
-    ($fn_name:ident, $c_name:literal, $ctype:ty, $var_type:expr, |$model:ident, $vr:ident, $x:ident| $set:expr) => {
+    ($fn_name:ident, $c_name:literal, $ctype:ty, $var_type:expr, $convert:expr, $get:expr, $set:expr) => {
         /// # Safety
         /// `vr` and `value` point to `n` elements (or are null when `n == 0`).
         pub unsafe fn $fn_name<M: CoSimModel>(
@@ -423,18 +460,32 @@ macro_rules! setter {
                     return refuse("vr or value is null but nvr > 0");
                 };
                 check_settable(inst, $var_type, vrs)?;
-                let $model = &mut inst.model;
-                for (&$vr, &$x) in vrs.iter().zip(values) {
-                    $set;
-                }
+                let values: Vec<_> = values.iter().map($convert).collect();
+                set_all(&mut inst.model, vrs, &values, $get, $set)?;
                 Ok(fmi2OK)
             })
         }
     };
 }
 
-setter!(set_integer, "fmi2SetInteger", fmi2Integer, VarType::Integer, |model, vr, x| model.set_integer(vr, x)?);
-setter!(set_boolean, "fmi2SetBoolean", fmi2Boolean, VarType::Boolean, |model, vr, x| model.set_boolean(vr, x != 0)?);
+setter!(
+    set_integer,
+    "fmi2SetInteger",
+    fmi2Integer,
+    VarType::Integer,
+    |&x: &fmi2Integer| x,
+    M::get_integer,
+    |m: &mut M, vr, &x| m.set_integer(vr, x)
+);
+setter!(
+    set_boolean,
+    "fmi2SetBoolean",
+    fmi2Boolean,
+    VarType::Boolean,
+    |&x: &fmi2Boolean| x != 0,
+    M::get_boolean,
+    |m: &mut M, vr, &x| m.set_boolean(vr, x)
+);
 
 /// # Safety
 /// As the setters; each string is NUL-terminated.
@@ -458,9 +509,7 @@ pub unsafe fn set_string<M: CoSimModel>(
                 None => return refuse("a string value is null"),
             }
         }
-        for (&r, text) in vrs.iter().zip(&texts) {
-            inst.model.set_string(r, text)?;
-        }
+        set_all(&mut inst.model, vrs, &texts, M::get_string, |m, r, text| m.set_string(r, text))?;
         Ok(fmi2OK)
     })
 }

@@ -40,6 +40,9 @@ pub struct InstantiateContext {
 /// The layer has already checked, before calling a setter, that the value reference exists in
 /// `info()` with the right type, that the variable may be set in the current state and that a real
 /// value is finite; a model still returns `UnknownVariable` for anything it does not know.
+/// To set a batch of several values whole or not at all, the layer first reads them with the
+/// matching `get_*` (in any state), and puts them back if the model refuses a later one: `get_*`
+/// of a settable variable returns what its `set_*` stored.
 pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
     /// The variable table and identity (GUID, model identifier, capabilities). Built once.
     fn info() -> &'static ModelInfo;

@@ -384,11 +384,12 @@ impl ModelInfo {
             if let Some(unit) = v.unit {
                 ty.push_attribute(("unit", unit));
             }
+            let bound = |x: f64| if v.var_type == VarType::Integer { format!("{}", x as i64) } else { fmt_real(x) };
             if let Some(min) = v.min {
-                ty.push_attribute(("min", fmt_real(min).as_str()));
+                ty.push_attribute(("min", bound(min).as_str()));
             }
             if let Some(max) = v.max {
-                ty.push_attribute(("max", fmt_real(max).as_str()));
+                ty.push_attribute(("max", bound(max).as_str()));
             }
             match &v.start {
                 Start::None => {}

@@ -1,0 +1,392 @@
+//! Loading an FMU's shared library and driving one instance through a safe wrapper whose methods
+//! return `Result`. FMI status → `Result` happens in one place, `Instance::check`.
+
+#![allow(non_upper_case_globals)]
+
+use std::ffi::{c_char, c_int, c_void, CStr, CString};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use fmi2::abi::*;
+
+use super::ImportError;
+
+extern "C" {
+    fn twin_set_log_sink(sink: unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char));
+    fn twin_fmi2_logger(env: *mut c_void, instance: *const c_char, status: c_int, category: *const c_char, format: *const c_char, ...);
+}
+
+/// One message an FMU sent through the logger.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FmuMessage {
+    pub status: fmi2Status,
+    pub category: String,
+    pub text: String,
+}
+
+/// Where an instance's messages go: kept for error reports, and echoed to stderr when
+/// `TWIN_FMU_LOG` is set.
+#[derive(Debug, Default)]
+struct MessageLog {
+    instance: String,
+    messages: Mutex<Vec<FmuMessage>>,
+}
+
+unsafe extern "C" fn log_sink(env: *mut c_void, _instance: *const c_char, status: c_int, category: *const c_char, message: *const c_char) {
+    if env.is_null() {
+        return;
+    }
+    // SAFETY: `env` is the componentEnvironment this module passed to fmi2Instantiate: a
+    // `MessageLog` that lives until after fmi2FreeInstance. The strings are NUL-terminated
+    // (the C shim guarantees it).
+    let log = unsafe { &*(env as *const MessageLog) };
+    let text = |p: *const c_char| if p.is_null() { String::new() } else { unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned() };
+    let entry = FmuMessage { status: status as fmi2Status, category: text(category), text: text(message) };
+    if std::env::var_os("TWIN_FMU_LOG").is_some() {
+        eprintln!("[{}] {}: {}", log.instance, entry.category, entry.text);
+    }
+    if let Ok(mut messages) = log.messages.lock() {
+        messages.push(entry);
+    }
+}
+
+type Fn0 = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+type GetReal = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut fmi2Real) -> fmi2Status;
+type SetReal = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Real) -> fmi2Status;
+type GetInt = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut fmi2Integer) -> fmi2Status;
+type SetInt = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Integer) -> fmi2Status;
+
+/// The functions of a loaded FMI 2.0 co-simulation library.
+struct Api {
+    instantiate: unsafe extern "C" fn(fmi2String, fmi2Type, fmi2String, fmi2String, *const fmi2CallbackFunctions, fmi2Boolean, fmi2Boolean) -> fmi2Component,
+    free_instance: unsafe extern "C" fn(fmi2Component),
+    setup_experiment: unsafe extern "C" fn(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real) -> fmi2Status,
+    enter_initialization_mode: Fn0,
+    exit_initialization_mode: Fn0,
+    terminate: Fn0,
+    reset: Fn0,
+    get_real: GetReal,
+    set_real: SetReal,
+    get_integer: GetInt,
+    set_integer: SetInt,
+    get_boolean: GetInt,
+    set_boolean: SetInt,
+    do_step: unsafe extern "C" fn(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status,
+    set_real_input_derivatives: Option<unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Integer, *const fmi2Real) -> fmi2Status>,
+    get_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
+    set_fmu_state: Option<unsafe extern "C" fn(fmi2Component, fmi2FMUstate) -> fmi2Status>,
+    free_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
+    // Keeps the code above mapped; dropped last.
+    _library: libloading::Library,
+}
+
+/// A loaded FMU library, shared by its instances.
+#[derive(Clone)]
+pub struct Library {
+    api: Arc<Api>,
+    path: PathBuf,
+    guid: String,
+    resource_uri: String,
+}
+
+impl Library {
+    /// Load `path` (an unpacked `binaries/linux64/<id>.so`). `resources` is the unpacked
+    /// `resources/` directory handed to instances as a `file:` URI.
+    pub fn load(path: &Path, guid: &str, resources: &Path) -> Result<Self, ImportError> {
+        let bad = |message: String| ImportError::Library { path: path.to_owned(), message };
+        // SAFETY: loading a shared library runs its initialisers; an FMU is code the user chose
+        // to run, as any FMI tool does.
+        let library = unsafe { libloading::Library::new(path) }.map_err(|e| bad(format!("cannot load: {e}")))?;
+        macro_rules! required {
+            ($name:literal) => {
+                // SAFETY: the symbol is an FMI 2.0 function with the standard's signature.
+                *unsafe { library.get(concat!($name, "\0").as_bytes()) }
+                    .map_err(|e| bad(format!("missing function {}: {e}", $name)))?
+            };
+        }
+        macro_rules! optional {
+            ($name:literal) => {
+                // SAFETY: as above.
+                unsafe { library.get(concat!($name, "\0").as_bytes()) }.ok().map(|s| *s)
+            };
+        }
+        let api = Api {
+            instantiate: required!("fmi2Instantiate"),
+            free_instance: required!("fmi2FreeInstance"),
+            setup_experiment: required!("fmi2SetupExperiment"),
+            enter_initialization_mode: required!("fmi2EnterInitializationMode"),
+            exit_initialization_mode: required!("fmi2ExitInitializationMode"),
+            terminate: required!("fmi2Terminate"),
+            reset: required!("fmi2Reset"),
+            get_real: required!("fmi2GetReal"),
+            set_real: required!("fmi2SetReal"),
+            get_integer: required!("fmi2GetInteger"),
+            set_integer: required!("fmi2SetInteger"),
+            get_boolean: required!("fmi2GetBoolean"),
+            set_boolean: required!("fmi2SetBoolean"),
+            do_step: required!("fmi2DoStep"),
+            set_real_input_derivatives: optional!("fmi2SetRealInputDerivatives"),
+            get_fmu_state: optional!("fmi2GetFMUstate"),
+            set_fmu_state: optional!("fmi2SetFMUstate"),
+            free_fmu_state: optional!("fmi2FreeFMUstate"),
+            _library: library,
+        };
+        let resource_uri = format!("file://{}", resources.display()).replace(' ', "%20");
+        Ok(Library { api: Arc::new(api), path: path.to_owned(), guid: guid.to_owned(), resource_uri })
+    }
+
+    pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {
+        // SAFETY: the sink is a plain function; setting it more than once is harmless.
+        unsafe { twin_set_log_sink(log_sink) };
+        let log = Box::new(MessageLog { instance: instance_name.to_owned(), messages: Mutex::new(Vec::new()) });
+        // SAFETY: the shim has the FMI logger's C-variadic signature; the transmute only names
+        // its type as the ABI module declares it.
+        let logger: fmi2CallbackLogger = Some(unsafe {
+            std::mem::transmute::<
+                unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char, ...),
+                unsafe extern "C" fn(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...),
+            >(twin_fmi2_logger)
+        });
+        let callbacks = Box::new(fmi2CallbackFunctions {
+            logger,
+            allocate_memory: Some(alloc_zeroed),
+            free_memory: Some(free_memory),
+            step_finished: None,
+            component_environment: &*log as *const MessageLog as *mut c_void,
+        });
+        let name = CString::new(instance_name).map_err(|_| ImportError::Library {
+            path: self.path.clone(),
+            message: format!("instance name '{instance_name}' contains a NUL byte"),
+        })?;
+        let guid = CString::new(self.guid.as_str()).unwrap_or_default();
+        let uri = CString::new(self.resource_uri.as_str()).unwrap_or_default();
+        // SAFETY: all strings are NUL-terminated and outlive the call; `callbacks` and `log` are
+        // boxed and owned by the returned Instance, so they outlive the FMU instance.
+        let component = unsafe {
+            (self.api.instantiate)(name.as_ptr(), fmi2CoSimulation, guid.as_ptr(), uri.as_ptr(), &*callbacks, fmi2False, fmi2False)
+        };
+        let instance = Instance { api: self.api.clone(), component, states: Vec::new(), name: instance_name.to_owned(), log, _callbacks: callbacks };
+        if component.is_null() {
+            return Err(ImportError::Call {
+                instance: instance_name.to_owned(),
+                call: "fmi2Instantiate",
+                status: "returned NULL".into(),
+                messages: instance.take_messages_text(),
+            });
+        }
+        Ok(instance)
+    }
+}
+
+unsafe extern "C" fn alloc_zeroed(n: usize, size: usize) -> *mut c_void {
+    // SAFETY: calloc has exactly this contract.
+    unsafe { libc_calloc(n, size) }
+}
+unsafe extern "C" fn free_memory(p: *mut c_void) {
+    // SAFETY: p came from alloc_zeroed (calloc) or is null.
+    unsafe { libc_free(p) }
+}
+extern "C" {
+    #[link_name = "calloc"]
+    fn libc_calloc(n: usize, size: usize) -> *mut c_void;
+    #[link_name = "free"]
+    fn libc_free(p: *mut c_void);
+}
+
+/// A saved FMU state, owned by the instance that made it (freed with it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StateHandle(usize);
+
+/// One instance of an FMU. Not `Sync`: FMI allows one call at a time per instance.
+pub struct Instance {
+    api: Arc<Api>,
+    component: fmi2Component,
+    states: Vec<fmi2FMUstate>,
+    name: String,
+    log: Box<MessageLog>,
+    _callbacks: Box<fmi2CallbackFunctions>,
+}
+
+// SAFETY: an FMI 2.0 instance may be used from any thread, one call at a time; `&mut self` on
+// every call enforces that.
+unsafe impl Send for Instance {}
+
+impl Instance {
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn take_messages_text(&self) -> String {
+        let messages = self.log.messages.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default();
+        messages.iter().map(|m| m.text.as_str()).collect::<Vec<_>>().join("; ")
+    }
+
+    /// Messages the FMU logged so far (and clears them).
+    pub fn take_messages(&self) -> Vec<FmuMessage> {
+        self.log.messages.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default()
+    }
+
+    /// FMI status → Result, in one place. Warnings pass (their text stays in the log).
+    fn check(&self, call: &'static str, status: fmi2Status) -> Result<(), ImportError> {
+        match status {
+            fmi2OK | fmi2Warning => Ok(()),
+            other => Err(ImportError::Call {
+                instance: self.name.clone(),
+                call,
+                status: match other {
+                    fmi2Discard => "fmi2Discard",
+                    fmi2Error => "fmi2Error",
+                    fmi2Fatal => "fmi2Fatal",
+                    fmi2Pending => "fmi2Pending",
+                    _ => "an unknown status",
+                }
+                .into(),
+                messages: self.take_messages_text(),
+            }),
+        }
+    }
+
+    pub fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> Result<(), ImportError> {
+        // SAFETY: `component` is a live instance of this library.
+        let status = unsafe {
+            (self.api.setup_experiment)(self.component, fmi2False, 0.0, start_time, stop_time.is_some() as fmi2Boolean, stop_time.unwrap_or(0.0))
+        };
+        self.check("fmi2SetupExperiment", status)
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Result<(), ImportError> {
+        // SAFETY: as above.
+        let status = unsafe { (self.api.enter_initialization_mode)(self.component) };
+        self.check("fmi2EnterInitializationMode", status)
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Result<(), ImportError> {
+        // SAFETY: as above.
+        let status = unsafe { (self.api.exit_initialization_mode)(self.component) };
+        self.check("fmi2ExitInitializationMode", status)
+    }
+
+    pub fn terminate(&mut self) -> Result<(), ImportError> {
+        // SAFETY: as above.
+        let status = unsafe { (self.api.terminate)(self.component) };
+        self.check("fmi2Terminate", status)
+    }
+
+    pub fn reset(&mut self) -> Result<(), ImportError> {
+        // SAFETY: as above.
+        let status = unsafe { (self.api.reset)(self.component) };
+        self.check("fmi2Reset", status)
+    }
+
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), values.len(), "set_real: one value per value reference");
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.set_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        self.check("fmi2SetReal", status)
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), values.len(), "get_real: one slot per value reference");
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.get_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr()) };
+        self.check("fmi2GetReal", status)
+    }
+
+    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), values.len(), "set_integer: one value per value reference");
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.set_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        self.check("fmi2SetInteger", status)
+    }
+
+    pub fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), values.len(), "get_integer: one slot per value reference");
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.get_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr()) };
+        self.check("fmi2GetInteger", status)
+    }
+
+    pub fn set_boolean(&mut self, vrs: &[u32], values: &[bool]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), values.len(), "set_boolean: one value per value reference");
+        let ints: Vec<fmi2Boolean> = values.iter().map(|&b| b as fmi2Boolean).collect();
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.set_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_ptr()) };
+        self.check("fmi2SetBoolean", status)
+    }
+
+    pub fn get_boolean(&mut self, vrs: &[u32], values: &mut [bool]) -> Result<(), ImportError> {
+        let mut ints = vec![0 as fmi2Boolean; vrs.len()];
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe { (self.api.get_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_mut_ptr()) };
+        self.check("fmi2GetBoolean", status)?;
+        for (slot, i) in values.iter_mut().zip(ints) {
+            *slot = i != 0;
+        }
+        Ok(())
+    }
+
+    pub fn can_interpolate_inputs(&self) -> bool {
+        self.api.set_real_input_derivatives.is_some()
+    }
+
+    /// First-order input derivatives for the next step.
+    pub fn set_real_input_derivatives(&mut self, vrs: &[u32], slopes: &[f64]) -> Result<(), ImportError> {
+        assert_eq!(vrs.len(), slopes.len(), "one slope per value reference");
+        let Some(f) = self.api.set_real_input_derivatives else {
+            return Err(ImportError::Unsupported { instance: self.name.clone(), what: "fmi2SetRealInputDerivatives" });
+        };
+        let orders = vec![1 as fmi2Integer; vrs.len()];
+        // SAFETY: all slices have vrs.len() elements.
+        let status = unsafe { f(self.component, vrs.as_ptr(), vrs.len(), orders.as_ptr(), slopes.as_ptr()) };
+        self.check("fmi2SetRealInputDerivatives", status)
+    }
+
+    pub fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ImportError> {
+        // SAFETY: as above.
+        let status = unsafe { (self.api.do_step)(self.component, time, step_size, fmi2True) };
+        self.check("fmi2DoStep", status)
+    }
+
+    /// Save the FMU state (for rollback); the handle stays valid until the instance drops.
+    pub fn save_state(&mut self) -> Result<StateHandle, ImportError> {
+        let f = self.api.get_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2GetFMUstate" })?;
+        let mut state: fmi2FMUstate = std::ptr::null_mut();
+        // SAFETY: `state` is a valid slot; the FMU allocates the state.
+        let status = unsafe { f(self.component, &mut state) };
+        self.check("fmi2GetFMUstate", status)?;
+        self.states.push(state);
+        Ok(StateHandle(self.states.len() - 1))
+    }
+
+    /// Overwrite a saved state with the current one.
+    pub fn update_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
+        let f = self.api.get_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2GetFMUstate" })?;
+        let slot = &mut self.states[handle.0];
+        // SAFETY: the slot holds a state of this instance; the FMU updates it in place.
+        let status = unsafe { f(self.component, slot) };
+        self.check("fmi2GetFMUstate", status)
+    }
+
+    pub fn restore_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
+        let f = self.api.set_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2SetFMUstate" })?;
+        // SAFETY: the handle indexes a state this instance made.
+        let status = unsafe { f(self.component, self.states[handle.0]) };
+        self.check("fmi2SetFMUstate", status)
+    }
+}
+
+impl Drop for Instance {
+    fn drop(&mut self) {
+        if self.component.is_null() {
+            return;
+        }
+        if let Some(free_state) = self.api.free_fmu_state {
+            for state in &mut self.states {
+                // SAFETY: each state came from this instance and is freed once.
+                unsafe { free_state(self.component, state) };
+            }
+        }
+        // SAFETY: the component is live and freed exactly once; the log and callbacks outlive it.
+        unsafe { (self.api.free_instance)(self.component) };
+    }
+}

@@ -1,0 +1,85 @@
+//! Import of FMI 2.0 co-simulation FMUs: unpack with limits, read the modelDescription, load
+//! the library, and drive instances through a safe wrapper.
+
+pub mod archive;
+pub mod library;
+pub mod model_description;
+
+use std::path::{Path, PathBuf};
+
+pub use archive::{unpack, UnpackLimits, Unpacked};
+pub use library::{FmuMessage, Instance, Library, StateHandle};
+pub use model_description::{Causality, ModelDescription, ScalarType, ScalarVariable};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    #[error("{path}: {message}")]
+    Archive { path: PathBuf, message: String },
+    #[error("{path}: modelDescription.xml: {message}")]
+    ModelDescription { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Library { path: PathBuf, message: String },
+    #[error("{instance}: {call} {status}{}", if messages.is_empty() { String::new() } else { format!(": {messages}") })]
+    Call { instance: String, call: &'static str, status: String, messages: String },
+    #[error("{instance}: the FMU does not provide {what}")]
+    Unsupported { instance: String, what: &'static str },
+    #[error("{fmu}: no variable named '{name}'")]
+    UnknownVariable { fmu: String, name: String },
+}
+
+/// An FMU unpacked and loaded, ready to instantiate.
+pub struct Fmu {
+    pub path: PathBuf,
+    pub model_description: ModelDescription,
+    library: Library,
+    // Dropped after `library`, so the .so file outlives its mapping.
+    _unpacked: Unpacked,
+}
+
+impl Fmu {
+    pub fn open(path: &Path) -> Result<Self, ImportError> {
+        Self::open_with_limits(path, UnpackLimits::default())
+    }
+
+    pub fn open_with_limits(path: &Path, limits: UnpackLimits) -> Result<Self, ImportError> {
+        let unpacked = unpack(path, limits)?;
+        let md_path = unpacked.path().join("modelDescription.xml");
+        let xml = std::fs::read_to_string(&md_path).map_err(|e| ImportError::Archive {
+            path: path.to_owned(),
+            message: format!("no readable modelDescription.xml: {e}"),
+        })?;
+        let model_description = ModelDescription::parse(&xml, path)?;
+        let platform_dir = unpacked.path().join("binaries/linux64");
+        let binary = platform_dir.join(format!("{}.so", model_description.model_identifier));
+        if !binary.is_file() {
+            let present: Vec<String> = std::fs::read_dir(unpacked.path().join("binaries"))
+                .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+                .unwrap_or_default();
+            return Err(ImportError::Archive {
+                path: path.to_owned(),
+                message: format!(
+                    "no binary binaries/linux64/{}.so for this platform (platforms present: {})",
+                    model_description.model_identifier,
+                    if present.is_empty() { "none".to_owned() } else { present.join(", ") }
+                ),
+            });
+        }
+        let library = Library::load(&binary, &model_description.guid, &unpacked.path().join("resources"))
+            .map_err(|e| match e {
+                ImportError::Library { message, .. } => ImportError::Library { path: path.to_owned(), message },
+                other => other,
+            })?;
+        Ok(Fmu { path: path.to_owned(), model_description, library, _unpacked: unpacked })
+    }
+
+    pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {
+        self.library.instantiate(instance_name)
+    }
+
+    pub fn value_reference(&self, name: &str) -> Result<u32, ImportError> {
+        self.model_description.variable(name).map(|v| v.value_reference).ok_or_else(|| ImportError::UnknownVariable {
+            fmu: self.path.display().to_string(),
+            name: name.to_owned(),
+        })
+    }
+}

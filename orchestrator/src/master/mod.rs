@@ -1,0 +1,35 @@
+//! The fixed-step master algorithm: FMUs (slaves) and zero-time blocks connected output → input,
+//! measured signals replayed as inputs, observers recording chosen outputs.
+//!
+//! One communication point `t_k` at a time, as one sentence: *apply inputs → evaluate outputs in
+//! zero time → record → step every slave to `t_{k+1}`*. Time is an integer step count `k` with
+//! `t_k = start + k·h` computed afresh (never accumulated), so 1024 steps of 1/51.2 s end at
+//! exactly 20 s.
+//!
+//! Gauss–Seidel (default): nodes are evaluated in their order, each seeing the outputs its
+//! predecessors produced at this same point; the pass repeats until no output changes, which
+//! resolves loops through outputs without direct feedthrough (e.g. displacement → LQR → control
+//! force → acceleration). Jacobi: every node sees the outputs as they were when the point was
+//! reached, one pass, no iteration.
+
+mod clock;
+mod system;
+
+pub use clock::Clock;
+pub use system::{Algorithm, Block, NodeId, Observer, Port, Recorder, Slave, System};
+
+#[derive(Debug, thiserror::Error)]
+pub enum MasterError {
+    #[error(transparent)]
+    Import(#[from] crate::import::ImportError),
+    #[error("block '{block}': {message}")]
+    Block { block: String, message: String },
+    #[error("system: {0}")]
+    Config(String),
+    #[error("at t = {time}: {source}")]
+    AtTime {
+        time: f64,
+        #[source]
+        source: Box<MasterError>,
+    },
+}

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Build every FMU of the workspace in release mode and package it as target/fmu/<modelIdentifier>.fmu.
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+target_dir=${CARGO_TARGET_DIR:-$root/target}
+
+# crate name : modelIdentifier
+fmus=("fmu-shear:fmu_shear")
+
+packages=()
+for entry in "${fmus[@]}"; do packages+=(-p "${entry%%:*}"); done
+cargo build --release --quiet "${packages[@]}"
+cargo build --release --quiet -p orchestrator --bin twin
+
+mkdir -p "$target_dir/fmu"
+for entry in "${fmus[@]}"; do
+  crate=${entry%%:*}
+  id=${entry##*:}
+  args=(--model-description "modelDescription/$id.xml"
+        --library "$target_dir/release/lib${crate//-/_}.so"
+        --out "$target_dir/fmu/$id.fmu")
+  [ -d "$crate/documentation" ] && args+=(--documentation "$crate/documentation")
+  [ -d "$crate/resources" ] && args+=(--resources "$crate/resources")
+  "$target_dir/release/twin" pack-fmu "${args[@]}"
+done
