@@ -60,7 +60,7 @@ fn with_instance<M: CoSimModel>(
         let Some(inst) = (unsafe { Instance::<M>::from_ptr(c) }) else {
             return fmi2Error;
         };
-        if inst.state == FsmState::Fatal {
+        if inst.state == FsmState::Fatal && call != "fmi2FreeFMUstate" {
             inst.log(fmi2Fatal, &format!("{call}: the instance had a fatal error; only fmi2FreeInstance is allowed"));
             return fmi2Error;
         }
@@ -557,7 +557,8 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(c: fmi2Component, state: fmi2FMUstate
 /// # Safety
 /// `state` points to a slot holding null or a state of this library; the slot is nulled.
 pub unsafe fn free_fmu_state<M: CoSimModel>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
-    with_instance::<M>(c, "fmi2FreeFMUstate", mask::ANY_LIVE, |_inst| {
+    // Allowed after a fatal error too, so the host can release what it holds.
+    with_instance::<M>(c, "fmi2FreeFMUstate", mask::ANY_LIVE | FsmState::Fatal.bit(), |_inst| {
         if state.is_null() {
             return refuse("FMUstate is null");
         }

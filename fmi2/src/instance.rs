@@ -145,6 +145,9 @@ impl Logger {
     }
 }
 
+/// `repr(C)` with the magic first, so `from_ptr` can read it through a raw pointer before
+/// trusting the rest.
+#[repr(C)]
 pub struct Instance<M> {
     magic: u64,
     pub(crate) context: InstantiateContext,
@@ -178,9 +181,12 @@ impl<M: CoSimModel> Instance<M> {
         if c.is_null() {
             return None;
         }
-        // SAFETY: the caller promises `c` came from `Box::into_raw(Box<Instance<M>>)`.
-        let inst = unsafe { &mut *(c as *mut Self) };
-        (inst.magic == INSTANCE_MAGIC).then_some(inst)
+        // SAFETY: the caller promises `c` came from `Box::into_raw(Box<Instance<M>>)`; the magic
+        // (first field of a repr(C) struct) is read before any reference to the whole is formed.
+        if unsafe { std::ptr::read(c as *const u64) } != INSTANCE_MAGIC {
+            return None;
+        }
+        Some(unsafe { &mut *(c as *mut Self) })
     }
 
     pub(crate) fn into_ptr(self) -> fmi2Component {
@@ -216,6 +222,7 @@ impl<M: CoSimModel> Instance<M> {
 
 /// An FMU state (`fmi2FMUstate`): everything needed to resume from this point.
 #[derive(Clone, serde::Serialize, serde::Deserialize)]
+#[repr(C)]
 pub struct Snapshot<M> {
     magic: u64,
     model: M,
@@ -231,9 +238,11 @@ impl<M: CoSimModel> Snapshot<M> {
         if s.is_null() {
             return None;
         }
-        // SAFETY: promised by the caller.
-        let snap = unsafe { &mut *(s as *mut Self) };
-        (snap.magic == SNAPSHOT_MAGIC).then_some(snap)
+        // SAFETY: promised by the caller; the magic is read first, as in Instance::from_ptr.
+        if unsafe { std::ptr::read(s as *const u64) } != SNAPSHOT_MAGIC {
+            return None;
+        }
+        Some(unsafe { &mut *(s as *mut Self) })
     }
 
     pub(crate) fn into_ptr(self) -> fmi2FMUstate {
@@ -266,6 +275,13 @@ impl<M: CoSimModel> Snapshot<M> {
         let snap: Self = postcard::from_bytes(body).map_err(|e| format!("the serialized FMU state is corrupt: {e}"))?;
         if snap.magic != SNAPSHOT_MAGIC {
             return Err("the serialized FMU state is corrupt: bad magic".into());
+        }
+        if !snap.time.is_finite() || matches!(snap.state, FsmState::Error | FsmState::Fatal) {
+            return Err(format!(
+                "the serialized FMU state is not a usable state (time {}, state {})",
+                snap.time,
+                snap.state.name()
+            ));
         }
         Ok(snap)
     }

@@ -599,11 +599,14 @@ fn instantiate_without_callbacks_returns_null() {
     assert!(c.is_null());
 }
 
+/// Instance name, fmuType, GUID (null where `None`), and what the log must say.
+type InstantiateCase<'a> = (Option<&'a str>, fmi2Type, Option<&'a str>, &'a [&'a str]);
+
 #[test]
 fn instantiate_refuses_a_bad_guid_type_or_name_and_says_why() {
     let host = Host::new();
     let callbacks = host.callbacks();
-    let cases: [(Option<&str>, fmi2Type, Option<&str>, &[&str]); 6] = [
+    let cases: [InstantiateCase; 6] = [
         (
             Some("slave"),
             fmi2CoSimulation,

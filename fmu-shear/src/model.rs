@@ -220,15 +220,17 @@ impl CoSimModel for ShearModel {
 
     fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
         self.advance(step_size);
-        let finite = self.displacement.iter().chain(&self.velocity).all(|x| x.is_finite());
+        // Accelerations overflow a step before the state does; check what the host will read.
+        let acc = self.acceleration(&self.displacement, &self.velocity, self.net_input());
+        let finite = self.displacement.iter().chain(&self.velocity).chain(&acc).all(|x| x.is_finite());
         if finite {
             Ok(())
         } else {
             Err(ModelError::Diverged {
                 time: time + step_size,
                 what: format!(
-                    "non-finite displacement {:?} or velocity {:?}; check the parameters and the substeps",
-                    self.displacement, self.velocity
+                    "non-finite displacement {:?}, velocity {:?} or acceleration {:?}; check the parameters and the substeps",
+                    self.displacement, self.velocity, acc
                 ),
             })
         }

@@ -1,7 +1,12 @@
-//! The twin's orchestrator: FMU packaging and import, the master algorithm, and what the `twin`
-//! CLI does with them.
+//! The twin's orchestrator: FMU packaging and import, the master algorithm, the twin archive,
+//! comparisons and reports, and the `twin` CLI's commands.
 
+pub mod cli;
+pub mod compare;
+pub mod data;
 pub mod fmu_archive;
 pub mod import;
-pub mod data;
 pub mod master;
+pub mod report;
+pub mod run;
+pub mod twin;

@@ -49,23 +49,36 @@ pub fn read_force(path: &Path) -> Result<ForceRecord, String> {
 }
 
 /// Read named columns of a CSV with a header line as `f64`, in the order asked for.
-pub fn read_columns<const N: usize>(path: &Path, names: &[&str; N]) -> Result<[Vec<f64>; N], String> {
+pub fn read_columns<const N: usize>(
+    path: &Path,
+    names: &[&str; N],
+) -> Result<[Vec<f64>; N], String> {
     let file = path.display();
     let mut reader = csv::Reader::from_path(path).map_err(|e| format!("{file}: {e}"))?;
-    let header = reader.headers().map_err(|e| format!("{file}: header: {e}"))?.clone();
+    let header = reader
+        .headers()
+        .map_err(|e| format!("{file}: header: {e}"))?
+        .clone();
     let mut index = [0usize; N];
     for (slot, name) in index.iter_mut().zip(names) {
         *slot = header
             .iter()
             .position(|h| h.trim() == *name)
-            .ok_or_else(|| format!("{file}: line 1: no column `{name}` in header {:?}", header.iter().collect::<Vec<_>>()))?;
+            .ok_or_else(|| {
+                format!(
+                    "{file}: line 1: no column `{name}` in header {:?}",
+                    header.iter().collect::<Vec<_>>()
+                )
+            })?;
     }
     let mut columns: [Vec<f64>; N] = std::array::from_fn(|_| Vec::new());
     for (row, record) in reader.records().enumerate() {
         let line = row + 2;
         let record = record.map_err(|e| format!("{file}: line {line}: {e}"))?;
         for ((column, &i), name) in columns.iter_mut().zip(&index).zip(names) {
-            let text = record.get(i).ok_or_else(|| format!("{file}: line {line}: missing `{name}`"))?;
+            let text = record
+                .get(i)
+                .ok_or_else(|| format!("{file}: line {line}: missing `{name}`"))?;
             let value: f64 = text
                 .trim()
                 .parse()
@@ -132,7 +145,11 @@ pub struct Agreement {
 /// Per-floor agreement of `actual` with `reference` (same length required).
 pub fn agreement(actual: &[[f64; 3]], reference: &[[f64; 3]]) -> Result<[Agreement; 3], String> {
     if actual.len() != reference.len() {
-        return Err(format!("{} samples against {} in the reference", actual.len(), reference.len()));
+        return Err(format!(
+            "{} samples against {} in the reference",
+            actual.len(),
+            reference.len()
+        ));
     }
     Ok(std::array::from_fn(|floor| {
         let mut max_abs = 0.0f64;
@@ -143,8 +160,16 @@ pub fn agreement(actual: &[[f64; 3]], reference: &[[f64; 3]]) -> Result<[Agreeme
             amplitude = amplitude.max(b[floor].abs());
             differing_samples += usize::from(a[floor].to_bits() != b[floor].to_bits());
         }
-        let relative_to_max_abs = if amplitude > 0.0 { max_abs / amplitude } else { max_abs };
-        Agreement { max_abs, relative_to_max_abs, differing_samples }
+        let relative_to_max_abs = if amplitude > 0.0 {
+            max_abs / amplitude
+        } else {
+            max_abs
+        };
+        Agreement {
+            max_abs,
+            relative_to_max_abs,
+            differing_samples,
+        }
     }))
 }
 
@@ -169,8 +194,18 @@ mod tests {
     #[test]
     fn the_two_conventions_share_the_first_sample_and_then_part() {
         let force = [0.0, 1.0, -1.0, 0.5];
-        let run = |c| simulate_accelerations(ShearModel::new(Default::default(), Default::default()), &force, STEP, c);
-        let (ramp, hold) = (run(InputConvention::PiecewiseLinear), run(InputConvention::ZeroOrderHold));
+        let run = |c| {
+            simulate_accelerations(
+                ShearModel::new(Default::default(), Default::default()),
+                &force,
+                STEP,
+                c,
+            )
+        };
+        let (ramp, hold) = (
+            run(InputConvention::PiecewiseLinear),
+            run(InputConvention::ZeroOrderHold),
+        );
         assert_eq!(ramp.len(), 4);
         assert_eq!(ramp[0], hold[0]);
         assert!(ramp[1][0] != hold[1][0]);

@@ -10,7 +10,8 @@
 //!   h = 1/51.2 s = 0.01953125 s. The `time` column of the CSV is not used (it is rounded to
 //!   6 decimals); t_k = k·h is exact in binary.
 //! - force as a piecewise-linear ramp: on [t_k, t_{k+1}] the force is F_k + s_k·(t − t_k),
-//!   s_k = (F_{k+1} − F_k)/h. Through FMI: `fmi2SetReal(force, F_k)` and
+//!   s_k = (F_{k+1} − F_k)/h, a division by h in f64 (not a product with 51.2, which is
+//!   inexact). Through FMI: `fmi2SetReal(force, F_k)` and
 //!   `fmi2SetRealInputDerivatives(force, order 1, s_k)` at t_k, then `fmi2DoStep(t_k, h)`.
 //! - output row k: acc1, acc2, acc3 (m/s²) at t_k, read after the input at t_k is set and before
 //!   the step from t_k — so row 0 is the response to F_0 alone (zero state) and every row k
@@ -35,7 +36,8 @@ use std::sync::OnceLock;
 use fmu_shear::effects::Effects;
 use fmu_shear::{ShearModel, ShearParameters};
 use shear_twin_tests::{
-    agreement, dataset, read_columns, read_force, simulate_accelerations, workspace_root, InputConvention, STEP,
+    agreement, dataset, read_columns, read_force, simulate_accelerations, workspace_root,
+    InputConvention, STEP,
 };
 
 /// Allowed max |Δ| / max |golden| per floor (measured: 0, bit-identical).
@@ -45,13 +47,20 @@ const GOLDEN_TOLERANCE: f64 = 1e-12;
 const ROWS: usize = 1024;
 
 fn golden_path() -> PathBuf {
-    workspace_root().join("tests").join("golden").join("shear_default_dataset1.csv")
+    workspace_root()
+        .join("tests")
+        .join("golden")
+        .join("shear_default_dataset1.csv")
 }
 
 /// The golden's outputs recomputed: default model, dataset1's force as piecewise-linear ramps.
 fn recompute(convention: InputConvention) -> Vec<[f64; 3]> {
     let record = read_force(&dataset("dataset1.csv")).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(record.force.len(), ROWS, "dataset1.csv should have {ROWS} samples");
+    assert_eq!(
+        record.force.len(),
+        ROWS,
+        "dataset1.csv should have {ROWS} samples"
+    );
     let model = ShearModel::new(ShearParameters::default(), Effects::default());
     simulate_accelerations(model, &record.force, STEP, convention)
 }
@@ -78,11 +87,16 @@ fn golden() -> &'static (Vec<f64>, Vec<[f64; 3]>) {
             eprintln!("UPDATE_GOLDEN=1: wrote {}", path.display());
         }
         if !path.exists() {
-            panic!("{} is missing; generate it on purpose with UPDATE_GOLDEN=1", path.display());
+            panic!(
+                "{} is missing; generate it on purpose with UPDATE_GOLDEN=1",
+                path.display()
+            );
         }
-        let [time, acc1, acc2, acc3] =
-            read_columns(&path, &["time", "acc1", "acc2", "acc3"]).unwrap_or_else(|e| panic!("{e}"));
-        let rows = (0..time.len()).map(|k| [acc1[k], acc2[k], acc3[k]]).collect();
+        let [time, acc1, acc2, acc3] = read_columns(&path, &["time", "acc1", "acc2", "acc3"])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let rows = (0..time.len())
+            .map(|k| [acc1[k], acc2[k], acc3[k]])
+            .collect();
         (time, rows)
     })
 }
@@ -120,7 +134,12 @@ fn the_golden_distinguishes_ramps_from_held_values() {
     let floors = agreement(&held, golden).unwrap_or_else(|e| panic!("{e}"));
     eprintln!("zero-order hold vs golden: {floors:?}");
     for (floor, a) in floors.iter().enumerate() {
-        assert!(a.relative_to_max_abs > 1e-2, "acc{}: held input within {:e} of the golden", floor + 1, a.relative_to_max_abs);
+        assert!(
+            a.relative_to_max_abs > 1e-2,
+            "acc{}: held input within {:e} of the golden",
+            floor + 1,
+            a.relative_to_max_abs
+        );
     }
 }
 

@@ -32,7 +32,9 @@ use fmi::fmi2::schema::{Causality, Fmi2ModelDescription, ScalarVariableElement};
 use fmi::traits::{FmiImport, FmiInstance};
 use fmu_shear::effects::Effects;
 use fmu_shear::{ShearModel, ShearParameters};
-use shear_twin_tests::{agreement, dataset, read_force, simulate_accelerations, workspace_root, InputConvention, STEP};
+use shear_twin_tests::{
+    agreement, dataset, read_force, simulate_accelerations, workspace_root, InputConvention, STEP,
+};
 
 /// The parameters the test sets through FMI, away from their start values so that a setter that
 /// did nothing would show.
@@ -42,7 +44,10 @@ const SUBSTEPS: i32 = 12;
 fn fmu_path() -> PathBuf {
     match std::env::var_os("SHEAR_FMU") {
         Some(path) => PathBuf::from(path),
-        None => workspace_root().join("target").join("fmu").join("fmu_shear.fmu"),
+        None => workspace_root()
+            .join("target")
+            .join("fmu")
+            .join("fmu_shear.fmu"),
     }
 }
 
@@ -58,7 +63,12 @@ fn error_chain(error: &dyn Error) -> String {
 }
 
 /// The value reference of a variable by name, checked to be of the expected causality and type.
-fn value_reference(description: &Fmi2ModelDescription, name: &str, causality: Causality, real: bool) -> u32 {
+fn value_reference(
+    description: &Fmi2ModelDescription,
+    name: &str,
+    causality: Causality,
+    real: bool,
+) -> u32 {
     let variable = description
         .model_variable_by_name(name)
         .unwrap_or_else(|e| panic!("modelDescription has no `{name}`: {}", error_chain(&e)));
@@ -72,18 +82,29 @@ fn value_reference(description: &Fmi2ModelDescription, name: &str, causality: Ca
 fn rust_fmi_runs_the_shear_fmu_like_the_model_in_process() -> Result<(), Box<dyn Error>> {
     let path = fmu_path();
     if !path.exists() {
-        panic!("{} not found: run scripts/build-fmus.sh first (or set SHEAR_FMU)", path.display());
+        panic!(
+            "{} not found: run scripts/build-fmus.sh first (or set SHEAR_FMU)",
+            path.display()
+        );
     }
-    let import: Fmi2Import = fmi::import::from_path(&path)
-        .unwrap_or_else(|e| panic!("rust-fmi cannot load {}: {}", path.display(), error_chain(&e)));
+    let import: Fmi2Import = fmi::import::from_path(&path).unwrap_or_else(|e| {
+        panic!(
+            "rust-fmi cannot load {}: {}",
+            path.display(),
+            error_chain(&e)
+        )
+    });
 
     let description = import.model_description();
     assert_eq!(description.fmi_version, "2.0");
-    let co_simulation = description.co_simulation.as_ref().expect("the FMU declares CoSimulation");
+    let co_simulation = description
+        .co_simulation
+        .as_ref()
+        .expect("the FMU declares CoSimulation");
     assert_eq!(co_simulation.model_identifier, "fmu_shear");
     let force = value_reference(description, "force", Causality::Input, true);
-    let accelerations =
-        ["acc1", "acc2", "acc3"].map(|name| value_reference(description, name, Causality::Output, true));
+    let accelerations = ["acc1", "acc2", "acc3"]
+        .map(|name| value_reference(description, name, Causality::Output, true));
     let k2 = value_reference(description, "k2", Causality::Parameter, true);
     let substeps = value_reference(description, "substeps", Causality::Parameter, false);
 
@@ -94,7 +115,13 @@ fn rust_fmi_runs_the_shear_fmu_like_the_model_in_process() -> Result<(), Box<dyn
 
     let mut instance = import
         .instantiate_cs("shear", false, false)
-        .unwrap_or_else(|e| panic!("rust-fmi cannot instantiate {}: {}", path.display(), error_chain(&e)));
+        .unwrap_or_else(|e| {
+            panic!(
+                "rust-fmi cannot instantiate {}: {}",
+                path.display(),
+                error_chain(&e)
+            )
+        });
     assert_eq!(Common::get_version(&instance), "2.0");
     assert_eq!(instance.get_types_platform(), "default");
 
@@ -106,10 +133,16 @@ fn rust_fmi_runs_the_shear_fmu_like_the_model_in_process() -> Result<(), Box<dyn
 
     let mut read_back_k2 = [0.0];
     instance.get_real(&[k2], &mut read_back_k2)?;
-    assert_eq!(read_back_k2[0], STOREY2_STIFFNESS, "k2 read back through FMI");
+    assert_eq!(
+        read_back_k2[0], STOREY2_STIFFNESS,
+        "k2 read back through FMI"
+    );
     let mut read_back_substeps = [0];
     instance.get_integer(&[substeps], &mut read_back_substeps)?;
-    assert_eq!(read_back_substeps[0], SUBSTEPS, "substeps read back through FMI");
+    assert_eq!(
+        read_back_substeps[0], SUBSTEPS,
+        "substeps read back through FMI"
+    );
 
     let mut through_fmi = Vec::with_capacity(samples);
     for (k, &value) in record.force.iter().enumerate() {
@@ -135,7 +168,9 @@ fn rust_fmi_runs_the_shear_fmu_like_the_model_in_process() -> Result<(), Box<dyn
     );
 
     let floors = agreement(&through_fmi, &in_process)?;
-    eprintln!("rust-fmi vs in-process (k2 = {STOREY2_STIFFNESS}, substeps = {SUBSTEPS}): {floors:?}");
+    eprintln!(
+        "rust-fmi vs in-process (k2 = {STOREY2_STIFFNESS}, substeps = {SUBSTEPS}): {floors:?}"
+    );
     for (floor, a) in floors.iter().enumerate() {
         assert_eq!(
             a.differing_samples,
@@ -153,11 +188,19 @@ fn rust_fmi_runs_the_shear_fmu_like_the_model_in_process() -> Result<(), Box<dyn
     // measured peaks 1.16, 0.68, 0.83 m/s², asserted above 0.1), and the parameters set through
     // FMI matter — the default model is far from the FMU's output (measured max |Δ| / amplitude
     // 0.76, 0.87, 0.75; asserted above 1e-3).
-    let peaks: [f64; 3] =
-        std::array::from_fn(|floor| through_fmi.iter().map(|a| a[floor].abs()).fold(0.0, f64::max));
+    let peaks: [f64; 3] = std::array::from_fn(|floor| {
+        through_fmi
+            .iter()
+            .map(|a| a[floor].abs())
+            .fold(0.0, f64::max)
+    });
     eprintln!("peak |acc1..3| through rust-fmi: {peaks:?} m/s²");
     for (floor, peak) in peaks.iter().enumerate() {
-        assert!(*peak > 0.1, "acc{} peak {peak} m/s²: the FMU barely responds", floor + 1);
+        assert!(
+            *peak > 0.1,
+            "acc{} peak {peak} m/s²: the FMU barely responds",
+            floor + 1
+        );
     }
     let default_model = simulate_accelerations(
         ShearModel::new(ShearParameters::default(), Effects::default()),

@@ -1,0 +1,206 @@
+//! The `twin` commands: arguments → validated configuration → work → files written atomically.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use serde_json::json;
+
+use crate::compare::{compare, CompareOptions, Comparison};
+use crate::data::Measurement;
+use crate::run::{run_twin, Prediction, Progress};
+use crate::twin::Twin;
+
+#[derive(Parser)]
+#[command(name = "twin", version, about = "shear-twin: an operational digital twin of a shear frame, on FMI 2.0")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run the twin on a measurement's force and compare its accelerations with the measured ones.
+    Compare(CompareArgs),
+    /// Package a built FMU library and its modelDescription.xml into a .fmu archive.
+    PackFmu(PackArgs),
+    /// Write the default twin (the shear FMU, default parameters) as an SSP archive.
+    Init {
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+pub struct CompareArgs {
+    /// The twin (.ssp); the default twin when absent.
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// Measurement CSV: time,force,acc1,acc2,acc3.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Predicted accelerations as CSV (time,acc1,acc2,acc3).
+    #[arg(long)]
+    pub predictions: Option<PathBuf>,
+    /// Plot (.svg): measured, predicted, ±3σ band, residual, failing windows.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Also draw the frequency-response view.
+    #[arg(long)]
+    pub frf: bool,
+    /// Seconds at the start left out of the error measures.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+}
+
+#[derive(clap::Args)]
+pub struct PackArgs {
+    #[arg(long)]
+    pub model_description: PathBuf,
+    #[arg(long)]
+    pub library: PathBuf,
+    #[arg(long)]
+    pub documentation: Option<PathBuf>,
+    #[arg(long)]
+    pub resources: Option<PathBuf>,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Noise variance when the twin has none (not calibrated): 2 % of each floor's measured
+/// variance, the centre the calibration's noise prior uses.
+pub const PRIOR_NOISE_FRACTION: f64 = 0.02;
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Compare(args) => compare_command(&args),
+        Command::PackFmu(a) => {
+            let contents = crate::fmu_archive::FmuContents {
+                model_description: a.model_description,
+                library: a.library,
+                documentation: a.documentation,
+                resources: a.resources,
+            };
+            let id = crate::fmu_archive::pack_fmu(&contents, &a.out)?;
+            println!("wrote {} (modelIdentifier {id})", a.out.display());
+            Ok(())
+        }
+        Command::Init { out } => {
+            Twin::default_twin()?.write(&out)?;
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+    }
+}
+
+/// Write through a temporary file in the same directory, then rename: a failure leaves no
+/// partial file.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(parent).with_context(|| format!("{}: cannot create a temporary file", parent.display()))?;
+    write(tmp.as_file_mut()).with_context(|| format!("writing {}", path.display()))?;
+    tmp.persist(path).with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(())
+}
+
+fn variance(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n
+}
+
+fn progress_bar() -> impl FnMut(u64, u64) {
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut progress = Progress::new(move |done, total| {
+        let b = bar.get_or_insert_with(|| indicatif::ProgressBar::new(total));
+        b.set_position(done);
+        if done == total {
+            b.finish_and_clear();
+        }
+    });
+    move |done, total| progress.tick(done, total)
+}
+
+pub fn compare_command(args: &CompareArgs) -> Result<()> {
+    if !(args.transient >= 0.0 && args.transient.is_finite()) {
+        bail!("--transient must be a non-negative number of seconds, was {}", args.transient);
+    }
+    if let Some(plot) = &args.plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            bail!("{}: only .svg plots are supported", plot.display());
+        }
+    }
+    let data = Measurement::read(&args.data)?;
+    if args.transient >= data.duration() {
+        bail!("--transient {} s leaves nothing of {} ({} s long)", args.transient, data.path.display(), data.duration());
+    }
+    let twin = Twin::load(args.twin.as_deref())?;
+    let prediction = run_twin(&twin, &data, progress_bar())?;
+    let (noise_variance, noise_source) = match twin.noise_variance {
+        Some(v) => (v, "twin (calibrated)"),
+        None => ([0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])), "prior: 2 % of the measured variance"),
+    };
+    let options = CompareOptions { transient: args.transient, ..CompareOptions::default() };
+    let comparison = compare(&data.time, &data.acc, &prediction.acc, noise_variance, options);
+
+    // Everything is computed before anything is written: a failure leaves no partial output.
+    if let Some(path) = &args.predictions {
+        write_atomically(path, |f| write_predictions(f, &prediction))?;
+    }
+    if let Some(path) = &args.report {
+        let report = json!({
+            "twin": twin.describe(),
+            "data": data.path.display().to_string(),
+            "nmse": comparison.nmse,
+            "failing_windows": comparison.failing_windows,
+            "noise_variance": noise_variance,
+            "noise_variance_source": noise_source,
+            "transient": args.transient,
+            "samples": data.len(),
+            "sample_interval": data.dt,
+        });
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{} on {}", twin.describe(), data.path.display());
+        crate::report::plot_comparison(&comparison, &data.force, &title, path, args.frf)?;
+    }
+    print_summary(&twin, &data, &comparison);
+    Ok(())
+}
+
+fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
+    let mut w = csv::Writer::from_writer(f);
+    w.write_record(["time", "acc1", "acc2", "acc3"])?;
+    for k in 0..p.time.len() {
+        w.write_record([format!("{}", p.time[k]), format!("{:e}", p.acc[0][k]), format!("{:e}", p.acc[1][k]), format!("{:e}", p.acc[2][k])])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
+    println!("twin: {}", twin.describe());
+    println!("data: {} ({} samples, {} Hz)", data.path.display(), data.len(), 1.0 / data.dt);
+    println!("{:<8} {:>10} {:>12}", "floor", "NMSE %", "noise sd");
+    for f in 0..3 {
+        println!("{:<8} {:>10.3} {:>12.4e}", f + 1, c.nmse[f], c.noise_sd[f]);
+    }
+    if c.failing_windows.is_empty() {
+        println!("failing windows: none (the residual stays inside ±3σ)");
+    } else {
+        println!("failing windows ({}):", c.failing_windows.len());
+        for w in &c.failing_windows {
+            let floors: Vec<String> = w.floors.iter().map(|f| f.to_string()).collect();
+            println!("  {:>7.2}–{:<7.2} s  floors {:<6} NMSE {:.1} / {:.1} / {:.1} %", w.start, w.end, floors.join(","), w.nmse[0], w.nmse[1], w.nmse[2]);
+        }
+    }
+}

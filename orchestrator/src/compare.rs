@@ -1,0 +1,168 @@
+//! Model against measurement: NMSE per floor, residuals, the ±3σ band from the twin's noise
+//! variances, and the failing windows where the residual leaves the band.
+
+use serde::Serialize;
+
+/// Seconds at the start of a record left out of every error measure: the model starts at rest
+/// and the structure does not, and with ~1 % damping that difference takes seconds to die out.
+pub const DEFAULT_TRANSIENT: f64 = 2.0;
+/// Out-of-band stretches closer than this (s) are one window.
+pub const DEFAULT_MERGE_GAP: f64 = 0.5;
+/// A window needs at least this many out-of-band samples: with Gaussian noise alone, 0.27 % of
+/// samples leave a ±3σ band, i.e. a few isolated ones per floor in a 1024-sample record.
+pub const DEFAULT_MIN_OUTLIERS: usize = 3;
+
+/// `100 / (N var(y)) Σ (y − ŷ)²` over the given samples.
+pub fn nmse(measured: &[f64], predicted: &[f64]) -> f64 {
+    let n = measured.len() as f64;
+    if measured.is_empty() {
+        return f64::NAN;
+    }
+    let mean = measured.iter().sum::<f64>() / n;
+    let var = measured.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n;
+    let sse: f64 = measured.iter().zip(predicted).map(|(y, p)| (y - p).powi(2)).sum();
+    100.0 * sse / (n * var)
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct FailingWindow {
+    pub start: f64,
+    pub end: f64,
+    /// Floors (1-based) whose residual left the band inside the window.
+    pub floors: Vec<usize>,
+    /// NMSE per floor inside the window.
+    pub nmse: [f64; 3],
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct CompareOptions {
+    pub transient: f64,
+    pub merge_gap: f64,
+    pub min_outliers: usize,
+}
+
+impl Default for CompareOptions {
+    fn default() -> Self {
+        CompareOptions { transient: DEFAULT_TRANSIENT, merge_gap: DEFAULT_MERGE_GAP, min_outliers: DEFAULT_MIN_OUTLIERS }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    pub time: Vec<f64>,
+    pub measured: [Vec<f64>; 3],
+    pub predicted: [Vec<f64>; 3],
+    /// Noise standard deviation per floor: the band is predicted ± 3σ.
+    pub noise_sd: [f64; 3],
+    /// Index of the first sample after the transient cut-off.
+    pub first: usize,
+    pub nmse: [f64; 3],
+    pub failing_windows: Vec<FailingWindow>,
+}
+
+impl Comparison {
+    pub fn residual(&self, floor: usize) -> Vec<f64> {
+        self.measured[floor].iter().zip(&self.predicted[floor]).map(|(y, p)| y - p).collect()
+    }
+}
+
+pub fn compare(
+    time: &[f64],
+    measured: &[Vec<f64>; 3],
+    predicted: &[Vec<f64>; 3],
+    noise_variance: [f64; 3],
+    options: CompareOptions,
+) -> Comparison {
+    let n = time.len();
+    let first = time.iter().position(|&t| t - time[0] >= options.transient).unwrap_or(n);
+    let nmse_floor = |f: usize, range: std::ops::Range<usize>| nmse(&measured[f][range.clone()], &predicted[f][range]);
+    let overall = [0, 1, 2].map(|f| nmse_floor(f, first..n));
+    let noise_sd = noise_variance.map(f64::sqrt);
+
+    // Out-of-band samples per floor, after the transient.
+    let outside = |f: usize, k: usize| (measured[f][k] - predicted[f][k]).abs() > 3.0 * noise_sd[f];
+    let out_samples: Vec<usize> = (first..n).filter(|&k| (0..3).any(|f| outside(f, k))).collect();
+
+    // Group out-of-band samples into windows, merging stretches closer than merge_gap.
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for &k in &out_samples {
+        match groups.last_mut() {
+            Some(g) if time[k] - time[*g.last().unwrap_or(&k)] <= options.merge_gap => g.push(k),
+            _ => groups.push(vec![k]),
+        }
+    }
+    let failing_windows = groups
+        .into_iter()
+        .filter(|g| g.len() >= options.min_outliers)
+        .map(|g| {
+            let (a, b) = (g[0], g[g.len() - 1]);
+            let floors = (0..3).filter(|&f| g.iter().any(|&k| outside(f, k))).map(|f| f + 1).collect();
+            FailingWindow { start: time[a], end: time[b], floors, nmse: [0, 1, 2].map(|f| nmse_floor(f, a..b + 1)) }
+        })
+        .collect();
+
+    Comparison {
+        time: time.to_vec(),
+        measured: measured.clone(),
+        predicted: predicted.clone(),
+        noise_sd,
+        first,
+        nmse: overall,
+        failing_windows,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nmse_is_zero_for_a_perfect_model_and_100_for_the_mean() {
+        let y = [1.0, -1.0, 2.0, -2.0];
+        assert_eq!(nmse(&y, &y), 0.0);
+        assert!((nmse(&y, &[0.0; 4]) - 100.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn windows_cover_where_the_residual_leaves_the_band_and_merge_when_close() {
+        let dt = 0.01;
+        let n = 1000;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let base: Vec<f64> = time.iter().map(|t| (7.0 * t).sin()).collect();
+        let predicted = [base.clone(), base.clone(), base.clone()];
+        let mut measured = predicted.clone();
+        // Floor 3 fails in 5.00–5.10 s and 5.30–5.40 s (merged: gap 0.2 s < 0.5 s), floor 1 at 8.0–8.05 s.
+        for k in 500..=510 {
+            measured[2][k] += 1.0;
+        }
+        for k in 530..=540 {
+            measured[2][k] -= 1.0;
+        }
+        for k in 800..=805 {
+            measured[0][k] += 1.0;
+        }
+        // One isolated outlier (noise-like) is not a window.
+        measured[1][300] += 1.0;
+        let c = compare(&time, &measured, &predicted, [0.01; 3], CompareOptions::default());
+        assert_eq!(c.failing_windows.len(), 2, "{:?}", c.failing_windows);
+        let w = &c.failing_windows[0];
+        assert!((w.start - 5.0).abs() < 1e-9 && (w.end - 5.4).abs() < 1e-9, "{w:?}");
+        assert_eq!(w.floors, vec![3]);
+        assert_eq!(w.nmse[0], 0.0);
+        assert!(w.nmse[2] > 100.0);
+        assert_eq!(c.failing_windows[1].floors, vec![1]);
+        assert!(c.nmse[2] > 0.0 && c.nmse[1] > 0.0);
+    }
+
+    #[test]
+    fn the_transient_is_left_out() {
+        let time: Vec<f64> = (0..300).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = time.iter().map(|t| t.sin()).collect();
+        let mut measured = [y.clone(), y.clone(), y.clone()];
+        measured[0][10] += 5.0; // inside the first 2 s
+        let c = compare(&time, &measured, &[y.clone(), y.clone(), y], [1e-4; 3], CompareOptions::default());
+        assert_eq!(c.nmse[0], 0.0);
+        assert!(c.failing_windows.is_empty());
+        assert_eq!(c.first, 200);
+    }
+}

@@ -1,0 +1,955 @@
+//! SVG plots of a [`Comparison`]: the time view (the paper's Figure 4) and the frequency view
+//! (its Figure 3), and the H1 frequency-response estimate the latter draws.
+
+use std::f64::consts::PI;
+use std::fmt::Display;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use rustfft::num_complex::Complex;
+use rustfft::FftPlanner;
+
+use super::ReportError;
+use crate::compare::Comparison;
+
+/// Samples per Welch segment of the frequency view: at 51.2 Hz, 5 s and 0.2 Hz resolution.
+pub const FRF_SEGMENT: usize = 256;
+
+/// The frequency view reaches at most this far (dB) below its highest point, lower values drawn
+/// on its bottom edge: one estimate diving toward a zero would otherwise flatten all the others.
+const FRF_DEPTH_DB: f64 = 80.0;
+
+const TIME_VIEW_SIZE: (u32, u32) = (1400, 900);
+const FRF_VIEW_SIZE: (u32, u32) = (1400, 520);
+const FONT: &str = "sans-serif";
+
+// Okabe–Ito colours: measured, predicted and band stay apart for colour-blind readers too.
+const MEASURED: RGBColor = RGBColor(0x00, 0x72, 0xB2);
+const PREDICTED: RGBColor = RGBColor(0xE6, 0x9F, 0x00);
+const BAND: RGBColor = RGBColor(0x00, 0x9E, 0x73);
+const RESIDUAL: RGBColor = RGBColor(0x33, 0x33, 0x33);
+const FAILING: RGBColor = RGBColor(0xD6, 0x27, 0x28);
+const TRANSIENT: RGBColor = RGBColor(0x80, 0x80, 0x80);
+const BAND_OPACITY: f64 = 0.25;
+/// A failing window on a floor that left the band in it …
+const FAILING_OPACITY: f64 = 0.25;
+/// … and the same window, fainter, on the floors that stayed inside: it lines the panels up.
+const FAILING_ELSEWHERE_OPACITY: f64 = 0.07;
+const TRANSIENT_OPACITY: f64 = 0.18;
+
+/// A frequency-response estimate, DC left out (every segment has its mean removed).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrequencyResponse {
+    /// Hz, from one bin (1 / (segment · dt)) up to Nyquist.
+    pub frequency: Vec<f64>,
+    /// 20 log10 |H|; not finite where the input has no power.
+    pub magnitude_db: Vec<f64>,
+    /// Segments averaged.
+    pub segments: usize,
+}
+
+/// H1 estimate `H = Σ conj(X)·Y / Σ |X|²` of the response `output` to `input` (sampled every
+/// `dt` s), Welch-averaged over Hann-windowed segments of `segment_len` samples with 50 %
+/// overlap, each with its mean removed; trailing samples that do not fill a segment are
+/// unused. A record shorter than one segment is one segment. `None` if the two signals differ
+/// in length, `dt` is not positive, or there are fewer than 4 samples.
+pub fn welch_h1(
+    input: &[f64],
+    output: &[f64],
+    dt: f64,
+    segment_len: usize,
+) -> Option<FrequencyResponse> {
+    let n = input.len();
+    let segment_len = segment_len.min(n);
+    if output.len() != n || !(dt.is_finite() && dt > 0.0) || segment_len < 4 {
+        return None;
+    }
+    // Periodic Hann window; its scale cancels in the ratio.
+    let window: Vec<f64> = (0..segment_len)
+        .map(|k| 0.5 - 0.5 * (2.0 * PI * k as f64 / segment_len as f64).cos())
+        .collect();
+    let fft = FftPlanner::<f64>::new().plan_fft_forward(segment_len);
+    let windowed = |samples: &[f64]| -> Vec<Complex<f64>> {
+        let mean = samples.iter().sum::<f64>() / samples.len() as f64;
+        samples
+            .iter()
+            .zip(&window)
+            .map(|(s, w)| Complex::new((s - mean) * w, 0.0))
+            .collect()
+    };
+    let bins = segment_len / 2;
+    let mut sxx = vec![0.0; bins + 1];
+    let mut sxy = vec![Complex::new(0.0, 0.0); bins + 1];
+    let mut segments = 0;
+    let step = segment_len / 2;
+    let mut start = 0;
+    while start + segment_len <= n {
+        let mut x = windowed(&input[start..start + segment_len]);
+        let mut y = windowed(&output[start..start + segment_len]);
+        fft.process(&mut x);
+        fft.process(&mut y);
+        for k in 1..=bins {
+            sxx[k] += x[k].norm_sqr();
+            sxy[k] += x[k].conj() * y[k];
+        }
+        segments += 1;
+        start += step;
+    }
+    let df = 1.0 / (segment_len as f64 * dt);
+    Some(FrequencyResponse {
+        frequency: (1..=bins).map(|k| k as f64 * df).collect(),
+        magnitude_db: (1..=bins)
+            .map(|k| 20.0 * (sxy[k].norm() / sxx[k]).log10())
+            .collect(),
+        segments,
+    })
+}
+
+/// Writes the comparison `c` as an SVG at `path` (nothing else is accepted): one panel per
+/// floor, stacked on a shared time axis, each with the measured and predicted acceleration, the
+/// prediction ± 3σ band, the residual (measured − predicted) on the same axis, the transient
+/// (left out of every error measure) greyed and the failing windows shaded red — strongly on
+/// the floors that left the band in the window, faintly on the others. The caption gives the
+/// floor's NMSE after the transient.
+///
+/// With `frequency_view`, a second SVG is written beside the first, `<stem>-frf.svg`: per
+/// floor, the H1 estimate (see [`welch_h1`], segments of [`FRF_SEGMENT`]) of the response
+/// from `force` to the measured and to the predicted acceleration, in dB up to Nyquist, over
+/// the samples after the transient. `force` is only read for this view.
+///
+/// Each file is written to a temporary file in its directory and renamed into place, and
+/// everything is drawn before anything is written: an error leaves no partial file.
+pub fn plot_comparison(
+    c: &Comparison,
+    force: &[f64],
+    title: &str,
+    path: &Path,
+    frequency_view: bool,
+) -> Result<(), ReportError> {
+    let is_svg = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    if !is_svg {
+        return Err(ReportError::UnsupportedFormat {
+            path: path.to_owned(),
+        });
+    }
+    let bad_input = |message: String| ReportError::BadInput {
+        path: path.to_owned(),
+        message,
+    };
+    check_lengths(c, force, frequency_view).map_err(bad_input)?;
+    let responses = if frequency_view {
+        Some(floor_responses(c, force).map_err(bad_input)?)
+    } else {
+        None
+    };
+
+    let time_view = draw_time_view(c, title).map_err(|message| ReportError::Draw {
+        path: path.to_owned(),
+        message,
+    })?;
+    let mut files = vec![(path.to_owned(), time_view)];
+    if let Some(responses) = responses {
+        let frf_path = frf_path(path);
+        let svg =
+            draw_frequency_view(c, &responses, title).map_err(|message| ReportError::Draw {
+                path: frf_path.clone(),
+                message,
+            })?;
+        files.push((frf_path, svg));
+    }
+    for (path, svg) in &files {
+        write_atomically(path, svg)?;
+    }
+    Ok(())
+}
+
+/// `<dir>/<stem>-frf.svg` beside `<dir>/<stem>.svg`.
+fn frf_path(path: &Path) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!("{stem}-frf.svg"))
+}
+
+fn check_lengths(c: &Comparison, force: &[f64], frequency_view: bool) -> Result<(), String> {
+    let n = c.time.len();
+    if n < 2 {
+        return Err(format!(
+            "the record has {n} samples; a plot needs at least 2"
+        ));
+    }
+    for floor in 0..3 {
+        let (m, p) = (c.measured[floor].len(), c.predicted[floor].len());
+        if m != n || p != n {
+            return Err(format!(
+                "floor {}: {m} measured and {p} predicted samples for {n} time samples",
+                floor + 1
+            ));
+        }
+    }
+    if c.first > n {
+        return Err(format!("the transient ends at sample {} of {n}", c.first));
+    }
+    if frequency_view && force.len() != n {
+        return Err(format!(
+            "{} force samples for {n} time samples",
+            force.len()
+        ));
+    }
+    Ok(())
+}
+
+fn sampling_interval(c: &Comparison) -> f64 {
+    let n = c.time.len();
+    (c.time[n - 1] - c.time[0]) / (n - 1) as f64
+}
+
+/// Per floor, the H1 estimate from the force to the measured and to the predicted acceleration.
+fn floor_responses(c: &Comparison, force: &[f64]) -> Result<[[FrequencyResponse; 2]; 3], String> {
+    let after = c.first..c.time.len();
+    let dt = sampling_interval(c);
+    let estimate = |acc: &[f64]| {
+        welch_h1(&force[after.clone()], &acc[after.clone()], dt, FRF_SEGMENT).ok_or_else(|| {
+            format!(
+                "the frequency view needs at least 4 samples after the transient and a positive sampling interval; \
+                 there are {} samples, every {dt} s",
+                after.len()
+            )
+        })
+    };
+    let mut responses = Vec::with_capacity(3);
+    for floor in 0..3 {
+        responses.push([
+            estimate(&c.measured[floor])?,
+            estimate(&c.predicted[floor])?,
+        ]);
+    }
+    responses.try_into().map_err(|_| "three floors".to_owned())
+}
+
+fn write_atomically(path: &Path, contents: &str) -> Result<(), ReportError> {
+    let io = |source| ReportError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".plot-").suffix(".tmp");
+    // A report is for reading: not the owner-only mode temporary files are created with.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let mut file = builder.tempfile_in(dir).map_err(io)?;
+    file.write_all(contents.as_bytes()).map_err(io)?;
+    file.flush().map_err(io)?;
+    file.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
+}
+
+fn text(e: impl Display) -> String {
+    e.to_string()
+}
+
+/// A tick label rounded to the axis' resolution, without trailing zeros or "-0".
+fn tick_label(value: f64, span: f64) -> String {
+    let decimals = if span > 0.0 && span.is_finite() {
+        (2.0 - span.log10().floor()).clamp(0.0, 12.0) as usize
+    } else {
+        3
+    };
+    let label = format!("{value:.decimals$}");
+    let label = if label.contains('.') {
+        label.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        &label
+    };
+    if label.trim_start_matches('-').chars().all(|ch| ch == '0') {
+        "0".to_owned()
+    } else {
+        label.to_owned()
+    }
+}
+
+fn percent(value: f64) -> String {
+    if value.is_finite() {
+        format!("{value:.2} %")
+    } else {
+        "n/a".to_owned()
+    }
+}
+
+/// (low, high) of the finite values, widened by `pad` of the span on each side; (-1, 1) if
+/// there are none, and a unit span around a constant.
+fn padded_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    if hi - lo <= f64::EPSILON * lo.abs().max(1.0) {
+        return (lo - 0.5, hi + 0.5);
+    }
+    let margin = pad * (hi - lo);
+    (lo - margin, hi + margin)
+}
+
+fn points<'a>(
+    x: &'a [f64],
+    y: impl IntoIterator<Item = f64> + 'a,
+) -> impl Iterator<Item = (f64, f64)> + 'a {
+    x.iter()
+        .copied()
+        .zip(y)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+}
+
+enum KeyItem<'a> {
+    Line(RGBColor, &'a str),
+    Area(RGBColor, f64, &'a str),
+    Note(&'a str),
+}
+
+/// The key strip under the title, shared by all panels. Areas are drawn as polygons so that
+/// the only rectangles in the picture are the spans they stand for.
+fn draw_key(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    items: &[KeyItem<'_>],
+    left: i32,
+) -> Result<(), String> {
+    let font = (FONT, 15).into_font();
+    let label_style = TextStyle::from(font.clone()).pos(Pos::new(HPos::Left, VPos::Center));
+    let (_, height) = area.dim_in_pixel();
+    let y = height as i32 / 2;
+    let mut x = left;
+    for item in items {
+        let label = match item {
+            KeyItem::Line(colour, label) => {
+                area.draw(&PathElement::new(
+                    vec![(x, y), (x + 28, y)],
+                    colour.stroke_width(2),
+                ))
+                .map_err(text)?;
+                label
+            }
+            KeyItem::Area(colour, opacity, label) => {
+                let swatch = vec![(x, y - 7), (x + 28, y - 7), (x + 28, y + 7), (x, y + 7)];
+                area.draw(&Polygon::new(swatch, colour.mix(*opacity).filled()))
+                    .map_err(text)?;
+                label
+            }
+            KeyItem::Note(label) => label,
+        };
+        area.draw(&Text::new(
+            label.to_string(),
+            (x + 36, y),
+            label_style.clone(),
+        ))
+        .map_err(text)?;
+        let (width, _) = area.estimate_text_size(label, &label_style).map_err(text)?;
+        x += 36 + width as i32 + 36;
+    }
+    Ok(())
+}
+
+fn draw_time_view(c: &Comparison, title: &str) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, TIME_VIEW_SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(text)?;
+        let root = root.titled(title, (FONT, 24)).map_err(text)?;
+        let (key, panels) = root.split_vertically(30);
+        let transient = format!(
+            "transient (first {:.1} s, not scored)",
+            transient_duration(c)
+        );
+        draw_key(
+            &key,
+            &[
+                KeyItem::Line(MEASURED, "measured"),
+                KeyItem::Line(PREDICTED, "predicted"),
+                KeyItem::Area(BAND, BAND_OPACITY, "prediction ± 3σ"),
+                KeyItem::Line(RESIDUAL, "residual (measured − predicted)"),
+                KeyItem::Area(FAILING, FAILING_OPACITY, "failing window"),
+                KeyItem::Area(TRANSIENT, TRANSIENT_OPACITY, &transient),
+            ],
+            PANEL_LEFT as i32 + 10,
+        )?;
+        // Only the bottom panel carries the time axis; it gets that room on top of the same
+        // plotting height as the others.
+        let (_, height) = panels.dim_in_pixel();
+        let panel_height = (height - TIME_AXIS_HEIGHT) / 3;
+        let (top, rest) = panels.split_vertically(panel_height);
+        let (middle, bottom) = rest.split_vertically(panel_height);
+        for (floor, area) in [top, middle, bottom].iter().enumerate() {
+            draw_floor(c, floor, area, floor == 2)?;
+        }
+        root.present().map_err(text)?;
+    }
+    Ok(svg)
+}
+
+const PANEL_LEFT: u32 = 80;
+const TIME_AXIS_HEIGHT: u32 = 45;
+
+fn transient_duration(c: &Comparison) -> f64 {
+    let last = c.time.len() - 1;
+    c.time[c.first.min(last)] - c.time[0]
+}
+
+fn draw_floor(
+    c: &Comparison,
+    floor: usize,
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    with_time_axis: bool,
+) -> Result<(), String> {
+    let n = c.time.len();
+    let (t0, t1) = (c.time[0], c.time[n - 1]);
+    let half_sample = 0.5 * sampling_interval(c);
+    let measured = &c.measured[floor];
+    let predicted = &c.predicted[floor];
+    let residual = c.residual(floor);
+    let band = 3.0 * c.noise_sd[floor];
+    let band = if band.is_finite() { band } else { 0.0 };
+    let (lo, hi) = padded_range(
+        measured
+            .iter()
+            .chain(&residual)
+            .copied()
+            .chain(predicted.iter().flat_map(|p| [p - band, p + band])),
+        0.04,
+    );
+
+    let windows_here = c
+        .failing_windows
+        .iter()
+        .filter(|w| w.floors.contains(&(floor + 1)))
+        .count();
+    let mut caption = format!("floor {} — NMSE {}", floor + 1, percent(c.nmse[floor]));
+    if windows_here > 0 {
+        caption += &format!(
+            " — out of band in {windows_here} window{}",
+            if windows_here == 1 { "" } else { "s" }
+        );
+    }
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, (FONT, 17))
+        .margin_left(10)
+        .margin_right(24)
+        .margin_top(2)
+        .margin_bottom(4)
+        .x_label_area_size(if with_time_axis { TIME_AXIS_HEIGHT } else { 0 })
+        .y_label_area_size(PANEL_LEFT)
+        .build_cartesian_2d(t0..t1, lo..hi)
+        .map_err(text)?;
+    let time_label = |t: &f64| tick_label(*t, t1 - t0);
+    let acceleration_label = |a: &f64| tick_label(*a, hi - lo);
+    let mut mesh = chart.configure_mesh();
+    mesh.x_label_formatter(&time_label)
+        .y_label_formatter(&acceleration_label)
+        .x_labels(21)
+        .y_labels(5)
+        .max_light_lines(1)
+        .bold_line_style(BLACK.mix(0.10))
+        .light_line_style(BLACK.mix(0.04))
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .y_desc("acceleration (m/s²)");
+    if with_time_axis {
+        mesh.x_desc("time (s)");
+    }
+    mesh.draw().map_err(text)?;
+
+    if c.first > 0 {
+        let end = c.time[c.first.min(n - 1)];
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(t0, lo), (end, hi)],
+                TRANSIENT.mix(TRANSIENT_OPACITY).filled(),
+            )))
+            .map_err(text)?;
+    }
+    for window in &c.failing_windows {
+        let opacity = if window.floors.contains(&(floor + 1)) {
+            FAILING_OPACITY
+        } else {
+            FAILING_ELSEWHERE_OPACITY
+        };
+        let span = [
+            ((window.start - half_sample).max(t0), lo),
+            ((window.end + half_sample).min(t1), hi),
+        ];
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                span,
+                FAILING.mix(opacity).filled(),
+            )))
+            .map_err(text)?;
+    }
+    if band > 0.0 {
+        let upper = points(&c.time, predicted.iter().map(|p| p + band));
+        let lower: Vec<(f64, f64)> = points(&c.time, predicted.iter().map(|p| p - band)).collect();
+        let outline: Vec<(f64, f64)> = upper.chain(lower.into_iter().rev()).collect();
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                outline,
+                BAND.mix(BAND_OPACITY).filled(),
+            )))
+            .map_err(text)?;
+    }
+    chart
+        .draw_series(LineSeries::new(
+            points(&c.time, measured.iter().copied()),
+            MEASURED.stroke_width(1),
+        ))
+        .map_err(text)?;
+    chart
+        .draw_series(LineSeries::new(
+            points(&c.time, predicted.iter().copied()),
+            PREDICTED.stroke_width(1),
+        ))
+        .map_err(text)?;
+    chart
+        .draw_series(LineSeries::new(
+            points(&c.time, residual.iter().copied()),
+            RESIDUAL.stroke_width(1),
+        ))
+        .map_err(text)?;
+    Ok(())
+}
+
+fn draw_frequency_view(
+    c: &Comparison,
+    responses: &[[FrequencyResponse; 2]; 3],
+    title: &str,
+) -> Result<String, String> {
+    let dt = sampling_interval(c);
+    let nyquist = 0.5 / dt;
+    let (lo, hi) = padded_range(
+        responses
+            .iter()
+            .flatten()
+            .flat_map(|r| r.magnitude_db.iter().copied()),
+        0.05,
+    );
+    let lo = lo.max(hi - FRF_DEPTH_DB);
+    let frequency_label = |f: &f64| tick_label(*f, nyquist);
+    let db_label = |db: &f64| tick_label(*db, 1000.0);
+    let segments = responses[0][0].segments;
+    let segment_len = FRF_SEGMENT.min(c.time.len() - c.first);
+
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, FRF_VIEW_SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .titled(
+                &format!("{title} — frequency response, force → floor acceleration"),
+                (FONT, 24),
+            )
+            .map_err(text)?;
+        let (key, panels) = root.split_vertically(30);
+        let method = format!(
+            "H1 estimate, Welch: {segment_len}-sample Hann segments, 50 % overlap, {segments} averages, from t = {:.1} s",
+            c.time[c.first.min(c.time.len() - 1)]
+        );
+        draw_key(
+            &key,
+            &[
+                KeyItem::Line(MEASURED, "measured"),
+                KeyItem::Line(PREDICTED, "predicted"),
+                KeyItem::Note(&method),
+            ],
+            PANEL_LEFT as i32 + 10,
+        )?;
+        for (floor, area) in panels.split_evenly((1, 3)).iter().enumerate() {
+            let mut chart = ChartBuilder::on(area)
+                .caption(format!("floor {}", floor + 1), (FONT, 17))
+                .margin_left(10)
+                .margin_right(20)
+                .margin_bottom(4)
+                .x_label_area_size(TIME_AXIS_HEIGHT)
+                .y_label_area_size(PANEL_LEFT)
+                .build_cartesian_2d(0.0..nyquist, lo..hi)
+                .map_err(text)?;
+            chart
+                .configure_mesh()
+                .x_label_formatter(&frequency_label)
+                .y_label_formatter(&db_label)
+                .x_labels(8)
+                .y_labels(8)
+                .max_light_lines(1)
+                .bold_line_style(BLACK.mix(0.10))
+                .light_line_style(BLACK.mix(0.04))
+                .label_style((FONT, 13))
+                .axis_desc_style((FONT, 14))
+                .x_desc("frequency (Hz)")
+                .y_desc("|H| (dB re 1 (m/s²)/N)")
+                .draw()
+                .map_err(text)?;
+            for (response, colour) in responses[floor].iter().zip([MEASURED, PREDICTED]) {
+                let clamped = response.magnitude_db.iter().map(|db| db.max(lo));
+                let line = points(&response.frequency, clamped);
+                chart
+                    .draw_series(LineSeries::new(line, colour.stroke_width(1)))
+                    .map_err(text)?;
+            }
+        }
+        root.present().map_err(text)?;
+    }
+    Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compare::{compare, CompareOptions, FailingWindow};
+    use quick_xml::events::Event;
+
+    const DT: f64 = 1.0 / 51.2;
+
+    /// Uniform in [-1, 1), reproducible (xorshift64*).
+    fn noise(seed: u64, n: usize) -> Vec<f64> {
+        let mut state = seed.max(1);
+        (0..n)
+            .map(|_| {
+                state ^= state >> 12;
+                state ^= state << 25;
+                state ^= state >> 27;
+                let bits = state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11;
+                2.0 * (bits as f64 / (1u64 << 53) as f64) - 1.0
+            })
+            .collect()
+    }
+
+    /// 1024 samples, two failing windows: floor 3 alone, then floors 1 and 2.
+    fn synthetic() -> (Comparison, Vec<f64>) {
+        let n = 1024;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 * DT).collect();
+        let force = noise(7, n);
+        let predicted = [1.0, 1.6, 2.0].map(|gain| {
+            time.iter()
+                .map(|t| gain * (2.0 * PI * 3.0 * t).sin())
+                .collect::<Vec<_>>()
+        });
+        let mut measured = predicted.clone();
+        for (floor, values) in measured.iter_mut().enumerate() {
+            for (v, e) in values.iter_mut().zip(noise(11 + floor as u64, n)) {
+                *v += 0.05 * e;
+            }
+        }
+        let failing_windows = vec![
+            FailingWindow {
+                start: 5.0,
+                end: 5.4,
+                floors: vec![3],
+                nmse: [0.1, 0.1, 150.0],
+            },
+            FailingWindow {
+                start: 12.0,
+                end: 12.6,
+                floors: vec![1, 2],
+                nmse: [90.0, 60.0, 0.1],
+            },
+        ];
+        let c = Comparison {
+            time,
+            measured,
+            predicted,
+            noise_sd: [0.03; 3],
+            first: 103,
+            nmse: [0.26, 2.44, 2.94],
+            failing_windows,
+        };
+        (c, force)
+    }
+
+    struct Svg {
+        texts: String,
+        /// (fill, opacity) of every <rect>.
+        rects: Vec<(String, String)>,
+    }
+
+    /// Parses the whole file (failing on malformed XML), checks the root is <svg>, and collects
+    /// the text and the rectangles.
+    fn parse_svg(path: &Path) -> Svg {
+        let source = std::fs::read_to_string(path).expect("the SVG is readable");
+        let mut reader = quick_xml::Reader::from_str(&source);
+        let mut svg = Svg {
+            texts: String::new(),
+            rects: Vec::new(),
+        };
+        let mut root = None;
+        loop {
+            match reader.read_event().unwrap_or_else(|e| {
+                panic!(
+                    "{}: malformed at {}: {e}",
+                    path.display(),
+                    reader.buffer_position()
+                )
+            }) {
+                Event::Eof => break,
+                Event::Start(e) | Event::Empty(e) => {
+                    let name = String::from_utf8_lossy(e.name().as_ref()).into_owned();
+                    root.get_or_insert_with(|| name.clone());
+                    if name == "rect" {
+                        let attr = |key: &str| {
+                            e.try_get_attribute(key)
+                                .ok()
+                                .flatten()
+                                .map(|a| String::from_utf8_lossy(&a.value).into_owned())
+                                .unwrap_or_default()
+                        };
+                        svg.rects.push((attr("fill"), attr("opacity")));
+                    }
+                }
+                Event::Text(t) => {
+                    svg.texts += &t.unescape().expect("text unescapes");
+                    svg.texts.push('\n');
+                }
+                _ => {}
+            }
+        }
+        assert_eq!(root.as_deref(), Some("svg"));
+        svg
+    }
+
+    #[test]
+    fn time_view_is_well_formed_with_title_captions_and_one_span_per_window_and_panel() {
+        let (c, force) = synthetic();
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("comparison.svg");
+        plot_comparison(&c, &force, "dataset 2 <linear model>", &path, false).expect("plots");
+
+        let svg = parse_svg(&path);
+        assert!(
+            svg.texts.contains("dataset 2 <linear model>"),
+            "{}",
+            svg.texts
+        );
+        assert!(svg.texts.contains("floor 1 — NMSE 0.26 %"), "{}", svg.texts);
+        assert!(
+            svg.texts
+                .contains("floor 3 — NMSE 2.94 % — out of band in 1 window"),
+            "{}",
+            svg.texts
+        );
+        assert!(svg.texts.contains("time (s)") && svg.texts.contains("acceleration (m/s²)"));
+
+        // Each window is one rectangle in each of the three panels: strong on the floors that
+        // left the band (3, then 1 and 2), faint on the others. The key draws its swatches as
+        // polygons, so these are all the red rectangles there are.
+        let failing = format!("#{:02X}{:02X}{:02X}", FAILING.0, FAILING.1, FAILING.2);
+        let red: Vec<&String> = svg
+            .rects
+            .iter()
+            .filter(|(fill, _)| *fill == failing)
+            .map(|(_, opacity)| opacity)
+            .collect();
+        assert_eq!(red.len(), 3 * c.failing_windows.len(), "{red:?}");
+        let strong = red
+            .iter()
+            .filter(|o| o.parse::<f64>().ok() == Some(FAILING_OPACITY))
+            .count();
+        let floors_out: usize = c.failing_windows.iter().map(|w| w.floors.len()).sum();
+        assert_eq!(strong, floors_out);
+        // The transient is greyed once per panel.
+        let grey = format!("#{:02X}{:02X}{:02X}", TRANSIENT.0, TRANSIENT.1, TRANSIENT.2);
+        assert_eq!(
+            svg.rects.iter().filter(|(fill, _)| *fill == grey).count(),
+            3
+        );
+
+        // Only the plot is left in the directory: no temporary file, no frequency view.
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("lists")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("comparison.svg")]);
+    }
+
+    #[test]
+    fn frequency_view_is_written_beside_the_time_view() {
+        let (c, force) = synthetic();
+        let dir = tempfile::tempdir().expect("temp dir");
+        plot_comparison(&c, &force, "dataset 2", &dir.path().join("d2.svg"), true).expect("plots");
+        let svg = parse_svg(&dir.path().join("d2-frf.svg"));
+        for expected in [
+            "dataset 2",
+            "floor 1",
+            "floor 3",
+            "frequency (Hz)",
+            "H1 estimate",
+        ] {
+            assert!(
+                svg.texts.contains(expected),
+                "{expected} missing from {}",
+                svg.texts
+            );
+        }
+        assert!(dir.path().join("d2.svg").exists());
+    }
+
+    #[test]
+    fn only_svg_is_accepted_and_the_error_names_the_path() {
+        let (c, force) = synthetic();
+        let dir = tempfile::tempdir().expect("temp dir");
+        for name in ["comparison.png", "comparison"] {
+            let path = dir.path().join(name);
+            let err = plot_comparison(&c, &force, "t", &path, false).expect_err("refused");
+            assert!(matches!(err, ReportError::UnsupportedFormat { .. }));
+            assert_eq!(
+                err.to_string(),
+                format!("only .svg is supported: {}", path.display())
+            );
+            assert!(!path.exists());
+        }
+    }
+
+    #[test]
+    fn bad_input_is_refused_before_anything_is_written() {
+        let (c, force) = synthetic();
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("comparison.svg");
+        let err = plot_comparison(&c, &force[..100], "t", &path, true).expect_err("refused");
+        assert!(matches!(err, ReportError::BadInput { .. }), "{err}");
+        assert!(
+            err.to_string()
+                .contains("100 force samples for 1024 time samples"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_dir(dir.path()).expect("lists").count(), 0);
+    }
+
+    #[test]
+    fn h1_of_a_pure_gain_is_6_02_db_at_every_frequency() {
+        let force = noise(3, 1024);
+        let response: Vec<f64> = force.iter().map(|f| 2.0 * f).collect();
+        let frf = welch_h1(&force, &response, DT, FRF_SEGMENT).expect("estimates");
+        assert_eq!(frf.segments, 7); // (1024 − 256) / 128 + 1
+        assert_eq!(frf.frequency.len(), FRF_SEGMENT / 2);
+        assert!((frf.frequency[0] - 0.2).abs() < 1e-12);
+        assert!(
+            (frf.frequency[frf.frequency.len() - 1] - 25.6).abs() < 1e-9,
+            "up to Nyquist"
+        );
+        for (f, db) in frf.frequency.iter().zip(&frf.magnitude_db) {
+            assert!((db - 20.0 * 2f64.log10()).abs() < 1e-9, "{db} dB at {f} Hz");
+        }
+    }
+
+    #[test]
+    fn h1_of_a_one_dof_oscillator_peaks_at_its_natural_frequency() {
+        // ÿ = F − 2ζω ẏ − ω² y, with the force held over each sample, RK4 in 20 substeps;
+        // the output is the acceleration, as from the accelerometers.
+        let (natural, zeta) = (5.0, 0.02);
+        let omega = 2.0 * PI * natural;
+        let force = noise(5, 8192);
+        let rate = |f: f64, [y, v]: [f64; 2]| [v, f - 2.0 * zeta * omega * v - omega * omega * y];
+        let substeps = 20;
+        let h = DT / substeps as f64;
+        let mut state = [0.0, 0.0];
+        let mut acceleration = Vec::with_capacity(force.len());
+        for &f in &force {
+            acceleration.push(rate(f, state)[1]);
+            for _ in 0..substeps {
+                let k1 = rate(f, state);
+                let k2 = rate(f, [state[0] + 0.5 * h * k1[0], state[1] + 0.5 * h * k1[1]]);
+                let k3 = rate(f, [state[0] + 0.5 * h * k2[0], state[1] + 0.5 * h * k2[1]]);
+                let k4 = rate(f, [state[0] + h * k3[0], state[1] + h * k3[1]]);
+                for i in 0..2 {
+                    state[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                }
+            }
+        }
+        let frf = welch_h1(&force, &acceleration, DT, FRF_SEGMENT).expect("estimates");
+        let peak = (0..frf.frequency.len())
+            .max_by(|&a, &b| frf.magnitude_db[a].total_cmp(&frf.magnitude_db[b]))
+            .expect("bins");
+        let resolution = frf.frequency[0];
+        assert!(
+            (frf.frequency[peak] - natural).abs() <= resolution + 1e-9,
+            "peak at {} Hz, expected {natural} Hz within one bin ({resolution} Hz)",
+            frf.frequency[peak]
+        );
+        // A resonance, not a bump: well above the mass line (|H| → 1, 0 dB) far above it.
+        assert!(
+            frf.magnitude_db[peak] > 20.0,
+            "{} dB",
+            frf.magnitude_db[peak]
+        );
+    }
+
+    #[test]
+    fn renders_dataset_one_against_a_smoothed_stand_in() {
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/dataset1.csv");
+        let m = crate::data::Measurement::read(&csv).expect("dataset one reads");
+        // Stand-in prediction, only for the picture: the measurement through a centred
+        // [1/4, 1/2, 1/4] smoother, with floor 3 pushed off between 12 and 13 s.
+        let predicted = m.acc.clone().map(|acc| {
+            let n = acc.len();
+            (0..n)
+                .map(|k| {
+                    0.25 * acc[k.saturating_sub(1)] + 0.5 * acc[k] + 0.25 * acc[(k + 1).min(n - 1)]
+                })
+                .collect::<Vec<f64>>()
+        });
+        // The band: what the smoothing leaves, before floor 3 is pushed off.
+        let noise_variance = [0, 1, 2].map(|f| {
+            let residual = m.acc[f]
+                .iter()
+                .zip(&predicted[f])
+                .map(|(y, p)| (y - p).powi(2));
+            residual.sum::<f64>() / m.len() as f64
+        });
+        let mut predicted = predicted;
+        for (t, p) in m.time.iter().zip(predicted[2].iter_mut()) {
+            if (12.0..13.0).contains(t) {
+                *p *= 0.6;
+            }
+        }
+        let c = compare(
+            &m.time,
+            &m.acc,
+            &predicted,
+            noise_variance,
+            CompareOptions::default(),
+        );
+        assert!(
+            c.failing_windows
+                .iter()
+                .any(|w| w.floors.contains(&3) && w.start < 13.0 && w.end > 12.0),
+            "{:?} {noise_variance:?} {:?}",
+            c.failing_windows,
+            c.nmse
+        );
+
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("dataset1.svg");
+        plot_comparison(
+            &c,
+            &m.force,
+            "dataset 1 — smoothed stand-in prediction",
+            &path,
+            true,
+        )
+        .expect("plots");
+        let svg = parse_svg(&path);
+        assert!(svg.texts.contains("floor 2"));
+        parse_svg(&dir.path().join("dataset1-frf.svg"));
+    }
+}

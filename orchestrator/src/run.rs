@@ -1,0 +1,123 @@
+//! Running a twin on a measurement: the system of the twin's FMUs, the measured force replayed
+//! as its input, the accelerations recorded.
+
+use std::time::{Duration, Instant};
+
+use crate::data::Measurement;
+use crate::import::Instance;
+use crate::master::{Clock, MasterError, Port, Recorder, System};
+use crate::twin::{Twin, TwinError, OUTPUTS};
+
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    #[error(transparent)]
+    Master(#[from] MasterError),
+    #[error("twin: {0}")]
+    Wiring(String),
+}
+
+/// Predicted accelerations at every sample of the measurement.
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    pub time: Vec<f64>,
+    pub acc: [Vec<f64>; 3],
+}
+
+/// Calls `on_progress(done, total)`, but only once a run has lasted more than a second, so short
+/// runs print nothing.
+pub struct Progress<F: FnMut(u64, u64)> {
+    started: Instant,
+    report: F,
+}
+
+impl<F: FnMut(u64, u64)> Progress<F> {
+    pub fn new(report: F) -> Self {
+        Progress { started: Instant::now(), report }
+    }
+    pub fn tick(&mut self, done: u64, total: u64) {
+        if self.started.elapsed() > Duration::from_secs(1) {
+            (self.report)(done, total);
+        }
+    }
+}
+
+/// Run `twin` on `data`'s force (the control force, if the data has a `control` column and the
+/// twin takes it, is replayed too).
+pub fn run_twin(twin: &Twin, data: &Measurement, mut progress: impl FnMut(u64, u64)) -> Result<Prediction, RunError> {
+    let start = data.time[0];
+    let instances = twin.instantiate(start)?;
+    let mut system = System::new();
+    let mut nodes = Vec::new();
+    // Keep the FMUs loaded for as long as their instances run.
+    let mut loaded = Vec::new();
+    for (component, fmu, instance) in instances {
+        // Ports: every connector the twin's connections use on this component.
+        let inputs: Vec<String> = twin
+            .connections
+            .iter()
+            .filter(|c| c.end_element.as_deref() == Some(&component.name))
+            .map(|c| c.end_connector.clone())
+            .collect();
+        let outputs: Vec<String> = twin
+            .connections
+            .iter()
+            .filter(|c| c.start_element.as_deref() == Some(&component.name))
+            .map(|c| c.start_connector.clone())
+            .collect();
+        let vr = |name: &String| fmu.value_reference(name).map_err(TwinError::from);
+        let input_vrs = inputs.iter().map(vr).collect::<Result<Vec<_>, _>>()?;
+        let output_vrs = outputs.iter().map(vr).collect::<Result<Vec<_>, _>>()?;
+        let boxed: Box<Instance> = Box::new(instance);
+        let id = system.add_slave(&component.name, boxed, input_vrs, output_vrs);
+        nodes.push((component.name.clone(), id, inputs, outputs));
+        loaded.push(fmu);
+    }
+    let signal_for = |name: &str| -> Option<Vec<f64>> {
+        match name {
+            "force" => Some(data.force.clone()),
+            "control_force" => data.extra.get("control").cloned(),
+            _ => None,
+        }
+    };
+    let mut signals = std::collections::HashMap::new();
+    for conn in &twin.connections {
+        let Some(end) = &conn.end_element else { continue };
+        let (_, to, inputs, _) = nodes.iter().find(|(n, ..)| n == end).ok_or_else(|| RunError::Wiring(format!("no component '{end}'")))?;
+        let port_index = inputs.iter().position(|i| *i == conn.end_connector).unwrap_or(0);
+        let from = match &conn.start_element {
+            None => {
+                let Some(samples) = signal_for(&conn.start_connector) else { continue };
+                *signals.entry(conn.start_connector.clone()).or_insert_with(|| system.add_signal(&conn.start_connector, samples))
+            }
+            Some(start_el) => {
+                let (_, from_id, _, outputs) =
+                    nodes.iter().find(|(n, ..)| n == start_el).ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
+                let p = outputs.iter().position(|o| *o == conn.start_connector).unwrap_or(0);
+                Port::Output(*from_id, p)
+            }
+        };
+        system.connect(from, *to, port_index)?;
+    }
+    let mut watched = Vec::new();
+    for output in OUTPUTS {
+        let conn = twin
+            .connections
+            .iter()
+            .find(|c| c.end_element.is_none() && c.end_connector == output)
+            .ok_or_else(|| RunError::Wiring(format!("no connection feeds the system output '{output}'")))?;
+        let start_el = conn.start_element.as_ref().ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
+        let (_, id, _, outputs) =
+            nodes.iter().find(|(n, ..)| n == start_el).ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
+        let p = outputs.iter().position(|o| *o == conn.start_connector).unwrap_or(0);
+        watched.push((output.to_owned(), Port::Output(*id, p)));
+    }
+    let mut recorder = Recorder::new(watched);
+    let clock = Clock::new(start, data.dt, (data.len() - 1) as u64);
+    system.run(clock, &mut [&mut recorder], &mut progress)?;
+    drop(system);
+    drop(loaded);
+    let [a1, a2, a3] = std::mem::take(&mut recorder.columns).try_into().map_err(|_| RunError::Wiring("three outputs".into()))?;
+    Ok(Prediction { time: recorder.time, acc: [a1, a2, a3] })
+}

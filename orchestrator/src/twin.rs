@@ -1,0 +1,591 @@
+//! A twin stored as an SSP 1.0 archive (`.ssp`): `SystemStructure.ssd` describing the system,
+//! the FMUs under `resources/`, and each component's parameter values as an `.ssv` parameter
+//! set bound to it. The same archive opens in any SSP tool (fmpy's `simulate_ssp` among them).
+//!
+//! The twin's own figures that are no FMU parameter (the noise variance of each floor's
+//! measurement, used for the ±3σ band and by calibration) are parameter connectors of the
+//! system, bound to `resources/twin.ssv`.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
+use quick_xml::Writer;
+
+use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits, Unpacked};
+
+const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescription";
+const NS_SSC: &str = "http://ssp-standard.org/SSP1/SystemStructureCommon";
+const NS_SSV: &str = "http://ssp-standard.org/SSP1/SystemStructureParameterValues";
+
+/// The physics component's name in every twin.
+pub const PHYSICS: &str = "physics";
+/// The shear FMU's archive name.
+pub const SHEAR_FMU: &str = "fmu_shear.fmu";
+/// System inputs and outputs of a twin.
+pub const INPUTS: [&str; 2] = ["force", "control_force"];
+pub const OUTPUTS: [&str; 3] = ["acc1", "acc2", "acc3"];
+
+#[derive(Debug, thiserror::Error)]
+pub enum TwinError {
+    #[error(transparent)]
+    Import(#[from] ImportError),
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+    #[error("{path}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ParameterValue {
+    Real(f64),
+    Integer(i32),
+    Boolean(bool),
+}
+
+impl std::fmt::Display for ParameterValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ParameterValue::Real(x) => write!(f, "{x}"),
+            ParameterValue::Integer(i) => write!(f, "{i}"),
+            ParameterValue::Boolean(b) => write!(f, "{b}"),
+        }
+    }
+}
+
+/// One FMU of the twin, with the parameter values the twin gives it.
+#[derive(Debug, Clone)]
+pub struct Component {
+    pub name: String,
+    /// File name under `resources/` in the archive.
+    pub fmu_name: String,
+    /// Where the FMU file is on disk now.
+    pub fmu_path: PathBuf,
+    pub parameters: BTreeMap<String, ParameterValue>,
+}
+
+/// A connection between system connectors (`element` None) and component connectors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Connection {
+    pub start_element: Option<String>,
+    pub start_connector: String,
+    pub end_element: Option<String>,
+    pub end_connector: String,
+}
+
+#[derive(Debug)]
+pub struct Twin {
+    pub name: String,
+    pub components: Vec<Component>,
+    pub connections: Vec<Connection>,
+    /// Measurement noise variance per floor, (m/s²)²; None until calibrated.
+    pub noise_variance: Option<[f64; 3]>,
+    /// Where it was read from; None for the default twin.
+    pub source: Option<PathBuf>,
+    /// Keeps the unpacked archive (and so `fmu_path`s) alive.
+    _unpacked: Option<Unpacked>,
+}
+
+/// Where the built FMUs are: `$TWIN_FMU_DIR`, `<exe dir>/../fmu` (the `target/fmu` beside a
+/// cargo-built `twin`), then `target/fmu` under the working directory.
+pub fn find_fmu(file_name: &str) -> Result<PathBuf, TwinError> {
+    let mut candidates = Vec::new();
+    if let Some(dir) = std::env::var_os("TWIN_FMU_DIR") {
+        candidates.push(PathBuf::from(dir).join(file_name));
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        if let Some(dir) = exe.parent().and_then(Path::parent) {
+            candidates.push(dir.join("fmu").join(file_name));
+        }
+    }
+    candidates.push(PathBuf::from("target/fmu").join(file_name));
+    candidates.iter().find(|p| p.is_file()).cloned().ok_or_else(|| TwinError::Invalid {
+        path: PathBuf::from(file_name),
+        message: format!(
+            "not found (looked in {}); build the FMUs with scripts/build-fmus.sh or set TWIN_FMU_DIR",
+            candidates.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    })
+}
+
+impl Twin {
+    /// The shear FMU with its default parameters, force in, accelerations out.
+    pub fn default_twin() -> Result<Self, TwinError> {
+        let fmu_path = find_fmu(SHEAR_FMU)?;
+        let mut connections = Vec::new();
+        for input in INPUTS {
+            connections.push(Connection {
+                start_element: None,
+                start_connector: input.into(),
+                end_element: Some(PHYSICS.into()),
+                end_connector: input.into(),
+            });
+        }
+        for output in OUTPUTS {
+            connections.push(Connection {
+                start_element: Some(PHYSICS.into()),
+                start_connector: output.into(),
+                end_element: None,
+                end_connector: output.into(),
+            });
+        }
+        Ok(Twin {
+            name: "shear-twin".into(),
+            components: vec![Component {
+                name: PHYSICS.into(),
+                fmu_name: SHEAR_FMU.into(),
+                fmu_path,
+                parameters: BTreeMap::new(),
+            }],
+            connections,
+            noise_variance: None,
+            source: None,
+            _unpacked: None,
+        })
+    }
+
+    /// `path` is an `.ssp` archive, or None for the default twin.
+    pub fn load(path: Option<&Path>) -> Result<Self, TwinError> {
+        match path {
+            None => Self::default_twin(),
+            Some(p) => Self::read(p),
+        }
+    }
+
+    pub fn component(&self, name: &str) -> Option<&Component> {
+        self.components.iter().find(|c| c.name == name)
+    }
+
+    pub fn component_mut(&mut self, name: &str) -> Option<&mut Component> {
+        self.components.iter_mut().find(|c| c.name == name)
+    }
+
+    pub fn describe(&self) -> String {
+        self.source.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "default twin (shear FMU, default parameters)".into())
+    }
+
+    // -----------------------------------------------------------------------------------------
+    // Reading
+
+    pub fn read(path: &Path) -> Result<Self, TwinError> {
+        let invalid = |message: String| TwinError::Invalid { path: path.to_owned(), message };
+        let unpacked = import::unpack(path, UnpackLimits::default())?;
+        let ssd_path = unpacked.path().join("SystemStructure.ssd");
+        let ssd = std::fs::read_to_string(&ssd_path)
+            .map_err(|e| invalid(format!("no readable SystemStructure.ssd: {e}")))?;
+        let parsed = parse_ssd(&ssd).map_err(|m| invalid(format!("SystemStructure.ssd: {m}")))?;
+        let mut components = Vec::new();
+        for c in parsed.components {
+            let fmu_name = c
+                .source
+                .strip_prefix("resources/")
+                .filter(|n| !n.contains('/'))
+                .ok_or_else(|| invalid(format!("component '{}': source '{}' is not resources/<file>.fmu", c.name, c.source)))?
+                .to_owned();
+            let fmu_path = unpacked.path().join("resources").join(&fmu_name);
+            if !fmu_path.is_file() {
+                return Err(invalid(format!("component '{}': {} is missing from the archive", c.name, c.source)));
+            }
+            let mut parameters = BTreeMap::new();
+            for binding in c.bindings {
+                let ssv_path = unpacked.path().join(&binding);
+                let ssv = std::fs::read_to_string(&ssv_path).map_err(|e| invalid(format!("{binding}: {e}")))?;
+                for (name, value) in parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))? {
+                    parameters.insert(name, value);
+                }
+            }
+            components.push(Component { name: c.name, fmu_name, fmu_path, parameters });
+        }
+        let mut noise_variance = None;
+        for binding in parsed.system_bindings {
+            let ssv = std::fs::read_to_string(unpacked.path().join(&binding)).map_err(|e| invalid(format!("{binding}: {e}")))?;
+            let values: BTreeMap<String, ParameterValue> =
+                parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?.into_iter().collect();
+            let get = |i: usize| match values.get(&format!("noise_variance{i}")) {
+                Some(ParameterValue::Real(x)) if *x > 0.0 && x.is_finite() => Ok(*x),
+                Some(other) => Err(invalid(format!("{binding}: noise_variance{i} = {other} is not a positive real"))),
+                None => Err(invalid(format!("{binding}: noise_variance{i} is missing"))),
+            };
+            noise_variance = Some([get(1)?, get(2)?, get(3)?]);
+        }
+        Ok(Twin {
+            name: parsed.name,
+            components,
+            connections: parsed.connections,
+            noise_variance,
+            source: Some(path.to_owned()),
+            _unpacked: Some(unpacked),
+        })
+    }
+
+    // -----------------------------------------------------------------------------------------
+    // Writing
+
+    /// Write the archive to `path` (through a temporary file: a failure leaves nothing half-written).
+    pub fn write(&self, path: &Path) -> Result<(), TwinError> {
+        let io = |source| TwinError::Io { path: path.to_owned(), source };
+        let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let tmp = tempfile::NamedTempFile::new_in(parent).map_err(io)?;
+        {
+            let mut zip = zip::ZipWriter::new(tmp.as_file());
+            let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+            let zip_err = |e: zip::result::ZipError| TwinError::Invalid { path: path.to_owned(), message: format!("writing the archive: {e}") };
+            zip.start_file("SystemStructure.ssd", options).map_err(zip_err)?;
+            zip.write_all(self.ssd_xml().as_bytes()).map_err(io)?;
+            let mut written = Vec::new();
+            for c in &self.components {
+                if !written.contains(&c.fmu_name) {
+                    let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io { path: c.fmu_path.clone(), source })?;
+                    zip.start_file(format!("resources/{}", c.fmu_name), options).map_err(zip_err)?;
+                    zip.write_all(&bytes).map_err(io)?;
+                    written.push(c.fmu_name.clone());
+                }
+                zip.start_file(format!("resources/{}.ssv", c.name), options).map_err(zip_err)?;
+                zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes()).map_err(io)?;
+            }
+            if let Some(nv) = self.noise_variance {
+                let values: BTreeMap<String, ParameterValue> =
+                    (0..3).map(|i| (format!("noise_variance{}", i + 1), ParameterValue::Real(nv[i]))).collect();
+                zip.start_file("resources/twin.ssv", options).map_err(zip_err)?;
+                zip.write_all(ssv_xml("twin", &values).as_bytes()).map_err(io)?;
+            }
+            zip.finish().map_err(zip_err)?;
+        }
+        tmp.persist(path).map_err(|e| io(e.error))?;
+        Ok(())
+    }
+
+    fn ssd_xml(&self, ) -> String {
+        let ok = "writing XML to memory cannot fail";
+        let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
+        w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None))).expect(ok);
+        let mut root = BytesStart::new("ssd:SystemStructureDescription");
+        root.push_attribute(("xmlns:ssd", NS_SSD));
+        root.push_attribute(("xmlns:ssc", NS_SSC));
+        root.push_attribute(("xmlns:ssv", NS_SSV));
+        root.push_attribute(("version", "1.0"));
+        root.push_attribute(("name", self.name.as_str()));
+        w.write_event(Event::Start(root)).expect(ok);
+        let mut system = BytesStart::new("ssd:System");
+        system.push_attribute(("name", self.name.as_str()));
+        w.write_event(Event::Start(system)).expect(ok);
+
+        let connector = |w: &mut Writer<Vec<u8>>, name: &str, kind: &str, ty: &str| {
+            let mut c = BytesStart::new("ssd:Connector");
+            c.push_attribute(("name", name));
+            c.push_attribute(("kind", kind));
+            w.write_event(Event::Start(c)).expect(ok);
+            w.write_event(Event::Empty(BytesStart::new(format!("ssc:{ty}")))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:Connector"))).expect(ok);
+        };
+        let binding = |w: &mut Writer<Vec<u8>>, source: &str| {
+            w.write_event(Event::Start(BytesStart::new("ssd:ParameterBindings"))).expect(ok);
+            let mut b = BytesStart::new("ssd:ParameterBinding");
+            b.push_attribute(("source", source));
+            w.write_event(Event::Empty(b)).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:ParameterBindings"))).expect(ok);
+        };
+
+        w.write_event(Event::Start(BytesStart::new("ssd:Connectors"))).expect(ok);
+        for input in INPUTS {
+            connector(&mut w, input, "input", "Real");
+        }
+        for output in OUTPUTS {
+            connector(&mut w, output, "output", "Real");
+        }
+        if self.noise_variance.is_some() {
+            for i in 1..=3 {
+                connector(&mut w, &format!("noise_variance{i}"), "parameter", "Real");
+            }
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:Connectors"))).expect(ok);
+        if self.noise_variance.is_some() {
+            binding(&mut w, "resources/twin.ssv");
+        }
+
+        w.write_event(Event::Start(BytesStart::new("ssd:Elements"))).expect(ok);
+        for c in &self.components {
+            let mut e = BytesStart::new("ssd:Component");
+            e.push_attribute(("name", c.name.as_str()));
+            e.push_attribute(("type", "application/x-fmu-sharedlibrary"));
+            e.push_attribute(("source", format!("resources/{}", c.fmu_name).as_str()));
+            w.write_event(Event::Start(e)).expect(ok);
+            w.write_event(Event::Start(BytesStart::new("ssd:Connectors"))).expect(ok);
+            let mut listed: Vec<(&str, &str)> = Vec::new();
+            for conn in &self.connections {
+                if conn.end_element.as_deref() == Some(&c.name) {
+                    listed.push((&conn.end_connector, "input"));
+                }
+                if conn.start_element.as_deref() == Some(&c.name) {
+                    listed.push((&conn.start_connector, "output"));
+                }
+            }
+            listed.dedup();
+            for (name, kind) in listed {
+                connector(&mut w, name, kind, "Real");
+            }
+            w.write_event(Event::End(BytesEnd::new("ssd:Connectors"))).expect(ok);
+            binding(&mut w, &format!("resources/{}.ssv", c.name));
+            w.write_event(Event::End(BytesEnd::new("ssd:Component"))).expect(ok);
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:Elements"))).expect(ok);
+
+        w.write_event(Event::Start(BytesStart::new("ssd:Connections"))).expect(ok);
+        for conn in &self.connections {
+            let mut e = BytesStart::new("ssd:Connection");
+            if let Some(s) = &conn.start_element {
+                e.push_attribute(("startElement", s.as_str()));
+            }
+            e.push_attribute(("startConnector", conn.start_connector.as_str()));
+            if let Some(s) = &conn.end_element {
+                e.push_attribute(("endElement", s.as_str()));
+            }
+            e.push_attribute(("endConnector", conn.end_connector.as_str()));
+            w.write_event(Event::Empty(e)).expect(ok);
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:Connections"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:System"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription"))).expect(ok);
+        let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
+        s.push('\n');
+        s
+    }
+
+    // -----------------------------------------------------------------------------------------
+    // Running
+
+    /// Open every component's FMU, instantiate it, apply the twin's parameters and initialise.
+    /// Returns the FMUs (keep them alive while the instances run) and the instances.
+    pub fn instantiate(&self, start_time: f64) -> Result<Vec<(Component, Fmu, Instance)>, TwinError> {
+        let mut out = Vec::new();
+        for c in &self.components {
+            let fmu = Fmu::open(&c.fmu_path)?;
+            let mut instance = fmu.instantiate(&c.name)?;
+            instance.setup_experiment(start_time, None)?;
+            instance.enter_initialization_mode()?;
+            apply_parameters(&fmu, &mut instance, &c.parameters)?;
+            instance.exit_initialization_mode()?;
+            out.push((c.clone(), fmu, instance));
+        }
+        Ok(out)
+    }
+}
+
+/// Set parameter values on an instance in initialization mode, by name.
+pub fn apply_parameters(fmu: &Fmu, instance: &mut Instance, parameters: &BTreeMap<String, ParameterValue>) -> Result<(), TwinError> {
+    for (name, value) in parameters {
+        let variable = fmu.model_description.variable(name).ok_or_else(|| ImportError::UnknownVariable {
+            fmu: fmu.path.display().to_string(),
+            name: name.clone(),
+        })?;
+        let vr = [variable.value_reference];
+        match (variable.scalar_type, value) {
+            (ScalarType::Real, ParameterValue::Real(x)) => instance.set_real(&vr, &[*x])?,
+            (ScalarType::Integer | ScalarType::Enumeration, ParameterValue::Integer(i)) => instance.set_integer(&vr, &[*i])?,
+            (ScalarType::Boolean, ParameterValue::Boolean(b)) => instance.set_boolean(&vr, &[*b])?,
+            (ty, v) => {
+                return Err(TwinError::Invalid {
+                    path: fmu.path.clone(),
+                    message: format!("parameter '{name}' is {ty:?} but the twin gives {v:?}"),
+                })
+            }
+        }
+    }
+    Ok(())
+}
+
+fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String {
+    let ok = "writing XML to memory cannot fail";
+    let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
+    w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None))).expect(ok);
+    let mut root = BytesStart::new("ssv:ParameterSet");
+    root.push_attribute(("xmlns:ssv", NS_SSV));
+    root.push_attribute(("version", "1.0"));
+    root.push_attribute(("name", name));
+    w.write_event(Event::Start(root)).expect(ok);
+    w.write_event(Event::Start(BytesStart::new("ssv:Parameters"))).expect(ok);
+    for (pname, value) in parameters {
+        let mut p = BytesStart::new("ssv:Parameter");
+        p.push_attribute(("name", pname.as_str()));
+        w.write_event(Event::Start(p)).expect(ok);
+        let (tag, text) = match value {
+            ParameterValue::Real(x) => ("ssv:Real", format!("{x:e}")),
+            ParameterValue::Integer(i) => ("ssv:Integer", i.to_string()),
+            ParameterValue::Boolean(b) => ("ssv:Boolean", b.to_string()),
+        };
+        let mut e = BytesStart::new(tag);
+        e.push_attribute(("value", text.as_str()));
+        w.write_event(Event::Empty(e)).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssv:Parameter"))).expect(ok);
+    }
+    w.write_event(Event::End(BytesEnd::new("ssv:Parameters"))).expect(ok);
+    w.write_event(Event::End(BytesEnd::new("ssv:ParameterSet"))).expect(ok);
+    let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
+    s.push('\n');
+    s
+}
+
+struct ParsedComponent {
+    name: String,
+    source: String,
+    bindings: Vec<String>,
+}
+
+struct ParsedSsd {
+    name: String,
+    components: Vec<ParsedComponent>,
+    connections: Vec<Connection>,
+    system_bindings: Vec<String>,
+}
+
+fn attributes(e: &BytesStart) -> Result<BTreeMap<String, String>, String> {
+    let mut out = BTreeMap::new();
+    for attr in e.attributes() {
+        let attr = attr.map_err(|e| e.to_string())?;
+        let key = String::from_utf8_lossy(attr.key.local_name().as_ref()).into_owned();
+        let value = attr.unescape_value().map_err(|e| e.to_string())?.into_owned();
+        out.insert(key, value);
+    }
+    Ok(out)
+}
+
+/// Read the parts of an SSD this product uses (namespace prefixes are ignored: local names).
+fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
+    let mut reader = quick_xml::Reader::from_str(xml);
+    let mut parsed = ParsedSsd { name: String::new(), components: Vec::new(), connections: Vec::new(), system_bindings: Vec::new() };
+    let mut in_component = false;
+    let mut depth_system = 0usize;
+    let mut saw_root = false;
+    loop {
+        let event = reader.read_event().map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
+        match &event {
+            Event::Start(e) | Event::Empty(e) => {
+                let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+                let attrs = attributes(e)?;
+                let is_start = matches!(event, Event::Start(_));
+                match local.as_str() {
+                    "SystemStructureDescription" => {
+                        saw_root = true;
+                        if attrs.get("version").map(String::as_str) != Some("1.0") {
+                            return Err(format!("version is {:?}; SSP 1.0 is expected", attrs.get("version")));
+                        }
+                        parsed.name = attrs.get("name").cloned().unwrap_or_default();
+                    }
+                    "System" => {
+                        depth_system += 1;
+                        if depth_system > 1 {
+                            return Err("nested systems are not supported".into());
+                        }
+                    }
+                    "Component" => {
+                        let name = attrs.get("name").cloned().ok_or("a Component has no name")?;
+                        let source = attrs.get("source").cloned().ok_or(format!("component '{name}' has no source"))?;
+                        parsed.components.push(ParsedComponent { name, source, bindings: Vec::new() });
+                        in_component = is_start;
+                    }
+                    "ParameterBinding" => {
+                        let source = attrs.get("source").cloned().ok_or("a ParameterBinding has no source (inline values are not supported)")?;
+                        match (in_component, parsed.components.last_mut()) {
+                            (true, Some(c)) => c.bindings.push(source),
+                            _ => parsed.system_bindings.push(source),
+                        }
+                    }
+                    "Connection" => {
+                        let get = |k: &str| attrs.get(k).cloned();
+                        parsed.connections.push(Connection {
+                            start_element: get("startElement"),
+                            start_connector: get("startConnector").ok_or("a Connection has no startConnector")?,
+                            end_element: get("endElement"),
+                            end_connector: get("endConnector").ok_or("a Connection has no endConnector")?,
+                        });
+                    }
+                    _ => {}
+                }
+            }
+            Event::End(e) => {
+                if e.local_name().as_ref() == b"Component" {
+                    in_component = false;
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    if !saw_root {
+        return Err("no SystemStructureDescription element".into());
+    }
+    Ok(parsed)
+}
+
+fn parse_ssv(xml: &str) -> Result<Vec<(String, ParameterValue)>, String> {
+    let mut reader = quick_xml::Reader::from_str(xml);
+    let mut out = Vec::new();
+    let mut current: Option<String> = None;
+    loop {
+        let event = reader.read_event().map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
+        match &event {
+            Event::Start(e) | Event::Empty(e) => {
+                let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+                let attrs = attributes(e)?;
+                match local.as_str() {
+                    "Parameter" => current = Some(attrs.get("name").cloned().ok_or("a Parameter has no name")?),
+                    "Real" | "Integer" | "Boolean" if current.is_some() => {
+                        let name = current.take().unwrap_or_default();
+                        let text = attrs.get("value").ok_or(format!("parameter '{name}' has no value"))?;
+                        let bad = || format!("parameter '{name}': '{text}' is not a valid {local}");
+                        let value = match local.as_str() {
+                            "Real" => ParameterValue::Real(text.parse().map_err(|_| bad()).and_then(|x: f64| if x.is_finite() { Ok(x) } else { Err(bad()) })?),
+                            "Integer" => ParameterValue::Integer(text.parse().map_err(|_| bad())?),
+                            _ => ParameterValue::Boolean(match text.as_str() {
+                                "true" | "1" => true,
+                                "false" | "0" => false,
+                                _ => return Err(bad()),
+                            }),
+                        };
+                        out.push((name, value));
+                    }
+                    _ => {}
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ssv_round_trips() {
+        let mut p = BTreeMap::new();
+        p.insert("k1".to_owned(), ParameterValue::Real(4321.125));
+        p.insert("substeps".to_owned(), ParameterValue::Integer(16));
+        p.insert("contact23_enabled".to_owned(), ParameterValue::Boolean(true));
+        let xml = ssv_xml("physics", &p);
+        let back: BTreeMap<String, ParameterValue> = parse_ssv(&xml).expect("parses").into_iter().collect();
+        assert_eq!(back, p);
+    }
+
+    #[test]
+    fn ssv_refuses_bad_values() {
+        let xml = r#"<ssv:ParameterSet xmlns:ssv="x" version="1.0" name="p"><ssv:Parameters>
+            <ssv:Parameter name="k1"><ssv:Real value="abc"/></ssv:Parameter></ssv:Parameters></ssv:ParameterSet>"#;
+        let err = parse_ssv(xml).expect_err("bad real");
+        assert!(err.contains("k1"), "{err}");
+    }
+
+    #[test]
+    fn ssd_refuses_other_versions_and_garbage() {
+        assert!(parse_ssd("<ssd:SystemStructureDescription version=\"2.0\" name=\"x\"/>").is_err());
+        assert!(parse_ssd("<nothing/>").is_err());
+        assert!(parse_ssd("<a><b></a>").is_err());
+    }
+}

@@ -1,0 +1,71 @@
+"""Fixtures of the fmpy and third-party cross-checks of the shear FMU.
+
+The FMU is `target/fmu/fmu_shear.fmu` (built by scripts/build-fmus.sh), or the file named by the
+environment variable SHEAR_FMU. Run with the project's environment:
+
+    scripts/setup-python.sh && .venv/bin/python -m pytest tests/python -q
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import fmpy.simulation
+import pytest
+
+from shear_drive import ShearFmu, read_record
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="session")
+def fmu_path() -> Path:
+    path = Path(os.environ.get("SHEAR_FMU", REPO_ROOT / "target" / "fmu" / "fmu_shear.fmu"))
+    if not path.is_file():
+        pytest.fail(f"the shear FMU {path} does not exist: run scripts/build-fmus.sh", pytrace=False)
+    return path
+
+
+@pytest.fixture(scope="session")
+def shear_fmu(fmu_path, tmp_path_factory) -> ShearFmu:
+    return ShearFmu.open(fmu_path, tmp_path_factory.mktemp("fmu_shear"))
+
+
+@pytest.fixture(scope="session")
+def record():
+    """dataset1: the structure shaken gently, 1024 samples at 51.2 Hz."""
+    return read_record(REPO_ROOT / "data" / "dataset1.csv")
+
+
+@pytest.fixture(scope="session")
+def start_parameters(shear_fmu) -> dict:
+    """Every parameter at its start value: the prior means, every effect switched off."""
+    return {
+        name: shear_fmu.start_value(name)
+        for name, variable in shear_fmu.variables.items()
+        if variable.causality == "parameter"
+    }
+
+
+@pytest.fixture
+def fmpy_input_derivatives_fixed(monkeypatch):
+    """Let fmpy 0.3.32's `simulate_fmu(..., set_input_derivatives=True)` run on this FMU.
+
+    fmpy 0.3.32 keeps the derivatives of the continuous inputs in a buffer of a fixed nine
+    elements (`derivatives=(value_type * 9)()` in fmpy/simulation.py, class Input), and
+    `Input.apply` fills it with `derivatives[:] = d`, which raises "ValueError: Can only assign
+    sequence of same size" unless the input signals hold exactly nine continuous inputs. This
+    sizes that buffer to the number of inputs and changes nothing else; the test
+    `test_fmpy_0_3_32_cannot_set_input_derivatives_unaided` shows the defect is still there.
+    """
+    original_init = fmpy.simulation.Input.__init__
+
+    def init_with_sized_derivatives(self, *args, **kwargs):
+        original_init(self, *args, **kwargs)
+        self.continuous = [
+            info._replace(derivatives=(info.derivatives._type_ * len(info.values))())
+            for info in getattr(self, "continuous", [])
+        ]
+
+    monkeypatch.setattr(fmpy.simulation.Input, "__init__", init_with_sized_derivatives)
