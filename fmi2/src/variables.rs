@@ -224,9 +224,12 @@ pub struct ModelInfo {
     pub units: Vec<Unit>,
     pub can_interpolate_inputs: bool,
     pub default_experiment: Option<DefaultExperiment>,
-    /// Per type, value reference → index into `variables`.
-    lookup: [HashMap<u32, usize>; 4],
+    /// Per type, value reference → index into `variables` (dense: `NONE` where there is no
+    /// variable). Looked up on every get/set, so no hashing.
+    lookup: [Vec<u32>; 4],
 }
+
+const NONE: u32 = u32::MAX;
 
 pub const LOG_CATEGORIES: [(&str, &str); 3] = [
     ("logStatusError", "errors: wrong call order, bad arguments, a diverging state"),
@@ -248,15 +251,24 @@ impl ModelInfo {
         can_interpolate_inputs: bool,
         default_experiment: Option<DefaultExperiment>,
     ) -> Result<Self, String> {
-        let mut lookup: [HashMap<u32, usize>; 4] = Default::default();
+        const MAX_DENSE_VR: u32 = 1 << 20;
+        let mut lookup: [Vec<u32>; 4] = Default::default();
         let mut names = HashMap::new();
         for (index, v) in variables.iter().enumerate() {
             if names.insert(v.name.clone(), index).is_some() {
                 return Err(format!("variable name '{}' appears twice", v.name));
             }
-            if lookup[v.var_type.slot()].insert(v.vr, index).is_some() {
+            if v.vr >= MAX_DENSE_VR {
+                return Err(format!("'{}': value reference {} is above {MAX_DENSE_VR}", v.name, v.vr));
+            }
+            let table = &mut lookup[v.var_type.slot()];
+            if table.len() <= v.vr as usize {
+                table.resize(v.vr as usize + 1, NONE);
+            }
+            if table[v.vr as usize] != NONE {
                 return Err(format!("{} value reference {} appears twice", v.var_type.xml_name(), v.vr));
             }
+            table[v.vr as usize] = index as u32;
             let needs_start = matches!(v.causality, Causality::Input | Causality::Parameter);
             if needs_start == matches!(v.start, Start::None) {
                 return Err(format!("'{}': a start value is required for inputs and parameters only", v.name));
@@ -290,7 +302,10 @@ impl ModelInfo {
     }
 
     pub fn find(&self, var_type: VarType, vr: u32) -> Option<&Variable> {
-        self.lookup[var_type.slot()].get(&vr).map(|&i| &self.variables[i])
+        match self.lookup[var_type.slot()].get(vr as usize) {
+            Some(&i) if i != NONE => Some(&self.variables[i as usize]),
+            _ => None,
+        }
     }
 
     pub fn by_name(&self, name: &str) -> Option<&Variable> {

@@ -1,6 +1,7 @@
 //! The twin's orchestrator: FMU packaging and import, the master algorithm, the twin archive,
 //! comparisons and reports, and the `twin` CLI's commands.
 
+pub mod calibrate;
 pub mod cli;
 pub mod compare;
 pub mod data;
@@ -9,4 +10,5 @@ pub mod import;
 pub mod master;
 pub mod report;
 pub mod run;
+pub mod synth;
 pub mod twin;

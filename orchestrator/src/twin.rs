@@ -87,8 +87,8 @@ pub struct Twin {
     pub noise_variance: Option<[f64; 3]>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
-    /// Keeps the unpacked archive (and so `fmu_path`s) alive.
-    _unpacked: Option<Unpacked>,
+    /// Keeps the unpacked archive (and so `fmu_path`s) alive, shared by duplicates.
+    _unpacked: Option<std::sync::Arc<Unpacked>>,
 }
 
 /// Where the built FMUs are: `$TWIN_FMU_DIR`, `<exe dir>/../fmu` (the `target/fmu` beside a
@@ -157,6 +157,18 @@ impl Twin {
         }
     }
 
+    /// A copy to modify (e.g. with calibrated parameters); it shares the unpacked FMUs.
+    pub fn duplicate(&self) -> Twin {
+        Twin {
+            name: self.name.clone(),
+            components: self.components.clone(),
+            connections: self.connections.clone(),
+            noise_variance: self.noise_variance,
+            source: self.source.clone(),
+            _unpacked: self._unpacked.clone(),
+        }
+    }
+
     pub fn component(&self, name: &str) -> Option<&Component> {
         self.components.iter().find(|c| c.name == name)
     }
@@ -219,7 +231,7 @@ impl Twin {
             connections: parsed.connections,
             noise_variance,
             source: Some(path.to_owned()),
-            _unpacked: Some(unpacked),
+            _unpacked: Some(std::sync::Arc::new(unpacked)),
         })
     }
 

@@ -224,14 +224,13 @@ fn floor_responses(c: &Comparison, force: &[f64]) -> Result<[[FrequencyResponse;
             )
         })
     };
-    let mut responses = Vec::with_capacity(3);
-    for floor in 0..3 {
-        responses.push([
+    let [first, second, third] = [0, 1, 2].map(|floor| -> Result<_, String> {
+        Ok([
             estimate(&c.measured[floor])?,
             estimate(&c.predicted[floor])?,
-        ]);
-    }
-    responses.try_into().map_err(|_| "three floors".to_owned())
+        ])
+    });
+    Ok([first?, second?, third?])
 }
 
 fn write_atomically(path: &Path, contents: &str) -> Result<(), ReportError> {
@@ -325,7 +324,7 @@ enum KeyItem<'a> {
 }
 
 /// The key strip under the title, shared by all panels. Areas are drawn as polygons so that
-/// the only rectangles in the picture are the spans they stand for.
+/// the only shaded rectangles in the picture are the spans they stand for.
 fn draw_key(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     items: &[KeyItem<'_>],
@@ -377,18 +376,17 @@ fn draw_time_view(c: &Comparison, title: &str) -> Result<String, String> {
             "transient (first {:.1} s, not scored)",
             transient_duration(c)
         );
-        draw_key(
-            &key,
-            &[
-                KeyItem::Line(MEASURED, "measured"),
-                KeyItem::Line(PREDICTED, "predicted"),
-                KeyItem::Area(BAND, BAND_OPACITY, "prediction ± 3σ"),
-                KeyItem::Line(RESIDUAL, "residual (measured − predicted)"),
-                KeyItem::Area(FAILING, FAILING_OPACITY, "failing window"),
-                KeyItem::Area(TRANSIENT, TRANSIENT_OPACITY, &transient),
-            ],
-            PANEL_LEFT as i32 + 10,
-        )?;
+        let mut items = vec![
+            KeyItem::Line(MEASURED, "measured"),
+            KeyItem::Line(PREDICTED, "predicted"),
+            KeyItem::Area(BAND, BAND_OPACITY, "prediction ± 3σ"),
+            KeyItem::Line(RESIDUAL, "residual (measured − predicted)"),
+            KeyItem::Area(FAILING, FAILING_OPACITY, "failing window"),
+        ];
+        if c.first > 0 {
+            items.push(KeyItem::Area(TRANSIENT, TRANSIENT_OPACITY, &transient));
+        }
+        draw_key(&key, &items, PANEL_LEFT as i32 + 10)?;
         // Only the bottom panel carries the time axis; it gets that room on top of the same
         // plotting height as the others.
         let (_, height) = panels.dim_in_pixel();

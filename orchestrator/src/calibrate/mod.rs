@@ -1,0 +1,457 @@
+//! MAP calibration of FMU parameters and per-floor noise variances (eqs. (2)–(3) of the reference
+//! paper), through the FMI interface, with a Laplace approximation of the posterior.
+//!
+//! The negative log posterior, up to a constant, with `s_f = log σ²_f` and `z` the calibrated
+//! parameters standardised by their priors (`u = μ + σ_prior·z`, `u` the value or its log):
+//!
+//! `J(z, s) = Σ_f [ N s_f / 2 + SSE_f(z) e^{−s_f} / 2 + (s_f − μ_s,f)² / (2 v_s) ] + ‖z‖² / 2`
+//!
+//! Optimiser: for fixed noise variances `J` is a least-squares problem in `z` (weighted
+//! residuals plus the prior as residuals), solved by Levenberg–Marquardt (`levenberg-marquardt`
+//! crate) with a forward-difference Jacobian (one extra simulation per parameter); the noise
+//! variances then have a 1-D Newton update each, and the two alternate until both settle.
+//! Multi-start: the prior mean plus starts drawn from the prior widened ×3 (seeded), run in
+//! parallel, one FMU instance per thread; the best posterior wins. The damping's prior mean
+//! (c ≈ 0.01 N s/m) is far from a structure's real damping, and from there the optimiser can
+//! stop with the damping stuck near zero; the widened starts reach past it.
+//!
+//! Uncertainty: the Hessian of `J` at the optimum (Gauss–Newton for the model part, from a
+//! central-difference Jacobian; exact for the noise part and the cross terms), inverted.
+
+pub mod prior;
+pub mod simulator;
+
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use rand::{rngs::StdRng, Rng, SeedableRng};
+use rand_distr::StandardNormal;
+use serde::Serialize;
+
+use crate::data::Measurement;
+use crate::import::{Fmu, ScalarType};
+use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
+pub use prior::{default_prior, read_priors, Prior, Space};
+use simulator::Simulator;
+
+/// The default set of calibrated parameters.
+pub const DEFAULT_PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
+
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    #[error("calibrate: {0}")]
+    Setup(String),
+    #[error("calibrate: no start converged to a finite posterior ({0})")]
+    Failed(String),
+}
+
+#[derive(Debug, Clone)]
+pub struct CalibrationSetup {
+    pub parameters: Vec<String>,
+    /// Overrides of the default priors, by parameter name.
+    pub priors: BTreeMap<String, Prior>,
+    /// Seconds at the start of the record left out of the likelihood.
+    pub transient: f64,
+    pub starts: usize,
+    pub seed: u64,
+    /// Prior on log σ²_f: centred on this fraction of floor f's measured variance…
+    pub noise_fraction: f64,
+    /// …with this variance (of the log).
+    pub noise_log_variance: f64,
+    pub threads: usize,
+}
+
+impl Default for CalibrationSetup {
+    fn default() -> Self {
+        CalibrationSetup {
+            parameters: DEFAULT_PARAMETERS.iter().map(|s| s.to_string()).collect(),
+            priors: BTreeMap::new(),
+            transient: crate::compare::DEFAULT_TRANSIENT,
+            starts: 12,
+            seed: 1,
+            noise_fraction: 0.02,
+            noise_log_variance: 1.0,
+            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ParameterEstimate {
+    pub name: String,
+    pub value: f64,
+    pub prior: Prior,
+    /// Posterior sd in the prior's coordinate (of the value, or of its log for log-space priors).
+    pub sd_coordinate: f64,
+    /// Posterior sd of the value itself (delta method for log-space priors).
+    pub sd: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct StartOutcome {
+    pub start: usize,
+    pub neg_log_posterior: f64,
+    pub evaluations: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibration {
+    pub parameters: Vec<ParameterEstimate>,
+    /// Correlation matrix of the calibrated parameters (in their prior coordinates).
+    pub correlation: Vec<Vec<f64>>,
+    pub noise_variance: [f64; 3],
+    /// Posterior sd of log σ²_f.
+    pub noise_log_sd: [f64; 3],
+    pub neg_log_posterior: f64,
+    /// NMSE per floor on the calibration record, after the transient.
+    pub nmse: [f64; 3],
+    pub starts: Vec<StartOutcome>,
+    pub simulations: usize,
+    pub seconds: f64,
+}
+
+/// What one calibration works on, shared by the threads.
+struct Target<'a> {
+    fmu: &'a Fmu,
+    base: BTreeMap<String, ParameterValue>,
+    data: &'a Measurement,
+    first: usize,
+    vrs: Vec<u32>,
+    priors: Vec<Prior>,
+    noise_mean: [f64; 3],
+    noise_var: f64,
+}
+
+impl Target<'_> {
+    fn values(&self, z: &[f64]) -> Vec<f64> {
+        z.iter().zip(&self.priors).map(|(z, p)| p.value(p.mean + p.sd() * z)).collect()
+    }
+    fn n_used(&self) -> usize {
+        self.data.len() - self.first
+    }
+}
+
+/// Residuals `y − ŷ` after the transient for parameters `z`, or None if the FMU refused them
+/// (out of range, or the simulation diverged).
+fn raw_residuals(sim: &mut Simulator, target: &Target, z: &[f64], buf: &mut [Vec<f64>; 3]) -> Option<Vec<f64>> {
+    let values = target.values(z);
+    if values.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    sim.simulate(&target.vrs, &values, buf).ok()?;
+    let n = target.data.len();
+    let mut r = Vec::with_capacity(3 * target.n_used());
+    for f in 0..3 {
+        for k in target.first..n {
+            r.push(target.data.acc[f][k] - buf[f][k]);
+        }
+    }
+    Some(r)
+}
+
+fn sse_per_floor(r: &[f64], per_floor: usize) -> [f64; 3] {
+    [0, 1, 2].map(|f| r[f * per_floor..(f + 1) * per_floor].iter().map(|x| x * x).sum())
+}
+
+/// The least-squares problem in `z` for fixed noise variances.
+struct Problem<'s, 'a> {
+    sim: RefCell<&'s mut Simulator<'a>>,
+    target: &'s Target<'a>,
+    weights: [f64; 3],
+    z: DVector<f64>,
+    residuals: Option<DVector<f64>>,
+    buf: RefCell<[Vec<f64>; 3]>,
+    evaluations: RefCell<usize>,
+}
+
+impl Problem<'_, '_> {
+    fn weighted(&self, z: &[f64]) -> Option<DVector<f64>> {
+        *self.evaluations.borrow_mut() += 1;
+        let mut sim = self.sim.borrow_mut();
+        let r = raw_residuals(&mut sim, self.target, z, &mut self.buf.borrow_mut())?;
+        let per = self.target.n_used();
+        let mut out = DVector::zeros(r.len() + z.len());
+        for (i, x) in r.iter().enumerate() {
+            out[i] = x * self.weights[i / per];
+        }
+        for (j, zj) in z.iter().enumerate() {
+            out[r.len() + j] = *zj;
+        }
+        Some(out)
+    }
+}
+
+/// Parameters the FMU refuses (or that diverge) look like a very bad fit, so the optimiser
+/// backs off instead of stopping.
+const REFUSED_RESIDUAL: f64 = 1e6;
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, z: &DVector<f64>) {
+        self.z = z.clone();
+        self.residuals = self.weighted(z.as_slice());
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.z.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let m = 3 * self.target.n_used() + self.z.len();
+        Some(self.residuals.clone().unwrap_or_else(|| DVector::from_element(m, REFUSED_RESIDUAL)))
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let base = self.residuals.clone()?;
+        let mut jac = DMatrix::zeros(base.len(), self.z.len());
+        for j in 0..self.z.len() {
+            let h = 1e-6 * self.z[j].abs().max(1.0);
+            let mut z = self.z.clone();
+            z[j] += h;
+            let shifted = self.weighted(z.as_slice())?;
+            jac.set_column(j, &((shifted - &base) / h));
+        }
+        Some(jac)
+    }
+}
+
+/// Newton on `N s/2 + SSE e^{−s}/2 + (s − μ)²/(2v)`, convex in s.
+fn optimal_log_noise(n: f64, sse: f64, mean: f64, var: f64, start: f64) -> f64 {
+    let mut s = start;
+    for _ in 0..50 {
+        let g = n / 2.0 - sse * (-s).exp() / 2.0 + (s - mean) / var;
+        let h = sse * (-s).exp() / 2.0 + 1.0 / var;
+        let step = g / h;
+        s -= step.clamp(-5.0, 5.0);
+        if step.abs() < 1e-12 {
+            break;
+        }
+    }
+    s
+}
+
+fn neg_log_posterior(target: &Target, sse: [f64; 3], s: [f64; 3], z: &[f64]) -> f64 {
+    let n = target.n_used() as f64;
+    let mut j = 0.5 * z.iter().map(|x| x * x).sum::<f64>();
+    for f in 0..3 {
+        j += n * s[f] / 2.0 + sse[f] * (-s[f]).exp() / 2.0 + (s[f] - target.noise_mean[f]).powi(2) / (2.0 * target.noise_var);
+    }
+    j
+}
+
+struct StartResult {
+    z: Vec<f64>,
+    s: [f64; 3],
+    objective: f64,
+    evaluations: usize,
+}
+
+fn run_start<'a>(sim: &mut Simulator<'a>, target: &Target<'a>, z0: Vec<f64>) -> Option<StartResult> {
+    let per = target.n_used();
+    let mut s = target.noise_mean;
+    let mut z = z0;
+    let mut evaluations = 0;
+    let mut buf: [Vec<f64>; 3] = Default::default();
+    for _outer in 0..8 {
+        let weights = s.map(|sf| (-sf / 2.0).exp());
+        let mut problem = Problem {
+            sim: RefCell::new(&mut *sim),
+            target,
+            weights,
+            z: DVector::from_vec(z.clone()),
+            residuals: None,
+            buf: RefCell::new(Default::default()),
+            evaluations: RefCell::new(0),
+        };
+        problem.set_params(&DVector::from_vec(z.clone()));
+        let (problem, _report) = LevenbergMarquardt::new().with_ftol(1e-10).with_xtol(1e-10).with_patience(60).minimize(problem);
+        evaluations += *problem.evaluations.borrow();
+        z = problem.z.as_slice().to_vec();
+        let r = raw_residuals(sim, target, &z, &mut buf)?;
+        evaluations += 1;
+        let sse = sse_per_floor(&r, per);
+        let s_new = [0, 1, 2].map(|f| optimal_log_noise(per as f64, sse[f], target.noise_mean[f], target.noise_var, s[f]));
+        let settled = (0..3).all(|f| (s_new[f] - s[f]).abs() < 1e-4);
+        s = s_new;
+        if settled {
+            break;
+        }
+    }
+    let r = raw_residuals(sim, target, &z, &mut buf)?;
+    let objective = neg_log_posterior(target, sse_per_floor(&r, per), s, &z);
+    objective.is_finite().then_some(StartResult { z, s, objective, evaluations: evaluations + 1 })
+}
+
+/// The Laplace approximation at (z, s): covariance of (z, s).
+fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Option<DMatrix<f64>> {
+    let p = z.len();
+    let per = target.n_used();
+    let mut buf: [Vec<f64>; 3] = Default::default();
+    let r0 = raw_residuals(sim, target, z, &mut buf)?;
+    let mut jac = DMatrix::zeros(r0.len(), p);
+    for j in 0..p {
+        let h = 1e-4 * z[j].abs().max(1.0);
+        let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+        zp[j] += h;
+        zm[j] -= h;
+        let rp = raw_residuals(sim, target, &zp, &mut buf)?;
+        let rm = raw_residuals(sim, target, &zm, &mut buf)?;
+        for i in 0..r0.len() {
+            jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * h);
+        }
+    }
+    let sse = sse_per_floor(&r0, per);
+    let mut hess = DMatrix::zeros(p + 3, p + 3);
+    for f in 0..3 {
+        let w = (-s[f]).exp();
+        let rows = f * per..(f + 1) * per;
+        let jf = jac.rows(rows.start, per);
+        let rf = DVector::from_column_slice(&r0[rows]);
+        let jtj = jf.transpose() * jf;
+        let jtr = jf.transpose() * rf;
+        for a in 0..p {
+            for b in 0..p {
+                hess[(a, b)] += w * jtj[(a, b)];
+            }
+            hess[(a, p + f)] = -w * jtr[a];
+            hess[(p + f, a)] = -w * jtr[a];
+        }
+        hess[(p + f, p + f)] = sse[f] * w / 2.0 + 1.0 / target.noise_var;
+    }
+    for a in 0..p {
+        hess[(a, a)] += 1.0;
+    }
+    hess.try_inverse()
+}
+
+/// Calibrate the physics component of `twin` on `data`.
+pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> Result<Calibration, CalibrateError> {
+    let started = Instant::now();
+    let component = twin.component(PHYSICS).ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
+    let first = data.time.iter().position(|&t| t - data.time[0] >= setup.transient).unwrap_or(data.len());
+    if data.len() - first < 10 {
+        return Err(CalibrateError::Setup(format!("the transient cut-off of {} s leaves {} samples", setup.transient, data.len() - first)));
+    }
+    if setup.parameters.is_empty() {
+        return Err(CalibrateError::Setup("no parameter to calibrate".into()));
+    }
+    let mut vrs = Vec::new();
+    let mut priors = Vec::new();
+    for name in &setup.parameters {
+        let var = fmu
+            .model_description
+            .variable(name)
+            .ok_or_else(|| CalibrateError::Setup(format!("{} has no parameter '{name}'", component.fmu_name)))?;
+        if var.scalar_type != ScalarType::Real || var.causality != crate::import::Causality::Parameter {
+            return Err(CalibrateError::Setup(format!("'{name}' is not a real parameter")));
+        }
+        let current = match component.parameters.get(name) {
+            Some(ParameterValue::Real(x)) => *x,
+            _ => var.start.as_deref().and_then(|s| s.parse().ok()).unwrap_or(0.0),
+        };
+        let prior = setup.priors.get(name).copied().unwrap_or_else(|| default_prior(name, current));
+        vrs.push(var.value_reference);
+        priors.push(prior);
+    }
+    let variance = |x: &[f64]| {
+        let n = x.len() as f64;
+        let m = x.iter().sum::<f64>() / n;
+        x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
+    };
+    let noise_mean = [0, 1, 2].map(|f| (setup.noise_fraction * variance(&data.acc[f][first..])).ln());
+    let mut base = component.parameters.clone();
+    for name in &setup.parameters {
+        base.remove(name);
+    }
+    let target = Target { fmu: &fmu, base, data, first, vrs, priors, noise_mean, noise_var: setup.noise_log_variance };
+
+    // Starts: the prior mean, then draws from the prior widened ×3.
+    let mut rng = StdRng::seed_from_u64(setup.seed);
+    let p = setup.parameters.len();
+    let starts: Vec<Vec<f64>> = (0..setup.starts.max(1))
+        .map(|i| if i == 0 { vec![0.0; p] } else { (0..p).map(|_| 3.0 * rng.sample::<f64, _>(StandardNormal)).collect() })
+        .collect();
+    let threads = setup.threads.clamp(1, starts.len());
+    let chunks: Vec<Vec<(usize, Vec<f64>)>> =
+        (0..threads).map(|t| starts.iter().cloned().enumerate().skip(t).step_by(threads).collect()).collect();
+    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = chunks
+            .into_iter()
+            .map(|chunk| {
+                let target = &target;
+                scope.spawn(move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
+                    let mut sim = Simulator::new(target.fmu, target.base.clone(), &target.data.force, target.data.time[0], target.data.dt, "calibration")?;
+                    Ok(chunk.into_iter().map(|(i, z0)| (i, run_start(&mut sim, target, z0))).collect())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err(TwinError::Invalid { path: "calibration".into(), message: "a worker thread panicked".into() }))).collect()
+    });
+    let mut outcomes = Vec::new();
+    let mut best: Option<StartResult> = None;
+    let mut simulations = 0;
+    for r in results {
+        for (i, res) in r? {
+            if let Some(res) = res {
+                simulations += res.evaluations;
+                outcomes.push(StartOutcome { start: i, neg_log_posterior: res.objective, evaluations: res.evaluations });
+                if best.as_ref().map_or(true, |b| res.objective < b.objective) {
+                    best = Some(res);
+                }
+            }
+        }
+    }
+    outcomes.sort_by_key(|o| o.start);
+    let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
+
+    let mut sim = Simulator::new(&fmu, target.base.clone(), &data.force, data.time[0], data.dt, "laplace")?;
+    let cov = laplace(&mut sim, &target, &best.z, best.s)
+        .ok_or_else(|| CalibrateError::Failed("the posterior Hessian at the optimum is singular".into()))?;
+    let values = target.values(&best.z);
+    let parameters: Vec<ParameterEstimate> = (0..p)
+        .map(|j| {
+            let prior = target.priors[j];
+            let sd_coordinate = prior.sd() * cov[(j, j)].max(0.0).sqrt();
+            let sd = match prior.space {
+                Space::Linear => sd_coordinate,
+                Space::Log => values[j] * sd_coordinate,
+            };
+            ParameterEstimate { name: setup.parameters[j].clone(), value: values[j], prior, sd_coordinate, sd }
+        })
+        .collect();
+    let correlation = (0..p).map(|a| (0..p).map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt()).collect()).collect();
+    let mut buf: [Vec<f64>; 3] = Default::default();
+    sim.simulate(&target.vrs, &values, &mut buf)?;
+    let nmse = [0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
+    Ok(Calibration {
+        parameters,
+        correlation,
+        noise_variance: best.s.map(f64::exp),
+        noise_log_sd: [0, 1, 2].map(|f| cov[(p + f, p + f)].max(0.0).sqrt()),
+        neg_log_posterior: best.objective,
+        nmse,
+        starts: outcomes,
+        simulations: simulations + 2 * p + 2,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// A copy of `twin` with the calibrated values and noise variances.
+pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, CalibrateError> {
+    let mut out = twin.duplicate();
+    let physics = out.component_mut(PHYSICS).ok_or_else(|| CalibrateError::Setup("no physics component".into()))?;
+    for p in &calibration.parameters {
+        physics.parameters.insert(p.name.clone(), ParameterValue::Real(p.value));
+    }
+    out.noise_variance = Some(calibration.noise_variance);
+    Ok(out)
+}
