@@ -7,5 +7,6 @@ cd "$root"
 
 scripts/setup-python.sh
 scripts/build-fmus.sh
+scripts/make-third-party-fmus.sh
 cargo test --workspace --no-fail-fast
 .venv/bin/python -m pytest tests/python -q

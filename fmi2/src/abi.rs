@@ -49,10 +49,12 @@ pub type fmi2CallbackLogger = Option<
         ...
     ),
 >;
-pub type fmi2CallbackAllocateMemory = Option<unsafe extern "C" fn(nobj: usize, size: usize) -> *mut c_void>;
+pub type fmi2CallbackAllocateMemory =
+    Option<unsafe extern "C" fn(nobj: usize, size: usize) -> *mut c_void>;
 pub type fmi2CallbackFreeMemory = Option<unsafe extern "C" fn(obj: *mut c_void)>;
-pub type fmi2StepFinished =
-    Option<unsafe extern "C" fn(component_environment: fmi2ComponentEnvironment, status: fmi2Status)>;
+pub type fmi2StepFinished = Option<
+    unsafe extern "C" fn(component_environment: fmi2ComponentEnvironment, status: fmi2Status),
+>;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]

@@ -13,7 +13,9 @@ use std::any::Any;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use crate::abi::*;
-use crate::instance::{from_c_str, mask, resource_dir_from_uri, FsmState, Instance, Logger, Snapshot};
+use crate::instance::{
+    from_c_str, mask, resource_dir_from_uri, FsmState, Instance, Logger, Snapshot,
+};
 use crate::model::{CoSimModel, InstantiateContext, ModelError};
 use crate::variables::{Causality, VarType};
 
@@ -27,7 +29,9 @@ impl From<ModelError> for CallError {
     fn from(e: ModelError) -> Self {
         match e {
             ModelError::Diverged { .. } | ModelError::Other(_) => CallError::Failed(e.to_string()),
-            ModelError::UnknownVariable { .. } | ModelError::InvalidValue { .. } => CallError::Refused(e.to_string()),
+            ModelError::UnknownVariable { .. } | ModelError::InvalidValue { .. } => {
+                CallError::Refused(e.to_string())
+            }
         }
     }
 }
@@ -61,7 +65,12 @@ fn with_instance<M: CoSimModel>(
             return fmi2Error;
         };
         if inst.state == FsmState::Fatal && call != "fmi2FreeFMUstate" {
-            inst.log(fmi2Fatal, &format!("{call}: the instance had a fatal error; only fmi2FreeInstance is allowed"));
+            inst.log(
+                fmi2Fatal,
+                &format!(
+                    "{call}: the instance had a fatal error; only fmi2FreeInstance is allowed"
+                ),
+            );
             return fmi2Error;
         }
         if allowed & inst.state.bit() == 0 {
@@ -133,9 +142,15 @@ unsafe fn c_slice_mut<'a, T>(ptr: *mut T, n: usize) -> Option<&'a mut [T]> {
     }
 }
 
-fn lookup<'a, M: CoSimModel>(var_type: VarType, vr: u32) -> Result<&'a crate::variables::Variable, CallError> {
+fn lookup<'a, M: CoSimModel>(
+    var_type: VarType,
+    vr: u32,
+) -> Result<&'a crate::variables::Variable, CallError> {
     M::info().find(var_type, vr).ok_or_else(|| {
-        CallError::Refused(format!("unknown value reference {vr} for a {} variable", var_type.xml_name()))
+        CallError::Refused(format!(
+            "unknown value reference {vr} for a {} variable",
+            var_type.xml_name()
+        ))
     })
 }
 
@@ -150,7 +165,9 @@ fn set_all<M: CoSimModel, T>(
     set: impl Fn(&mut M, u32, &T) -> Result<(), ModelError>,
 ) -> Result<(), CallError> {
     let previous = if vrs.len() > 1 {
-        vrs.iter().map(|&vr| get(model, vr)).collect::<Result<Vec<T>, _>>()?
+        vrs.iter()
+            .map(|&vr| get(model, vr))
+            .collect::<Result<Vec<T>, _>>()?
     } else {
         Vec::new()
     };
@@ -166,7 +183,11 @@ fn set_all<M: CoSimModel, T>(
 }
 
 /// Check that every value reference may be set now, before any is: a batch is set whole or not at all.
-fn check_settable<M: CoSimModel>(inst: &Instance<M>, var_type: VarType, vrs: &[u32]) -> Result<(), CallError> {
+fn check_settable<M: CoSimModel>(
+    inst: &Instance<M>,
+    var_type: VarType,
+    vrs: &[u32],
+) -> Result<(), CallError> {
     let initialized = matches!(inst.state, FsmState::StepComplete);
     for &vr in vrs {
         let var = lookup::<M>(var_type, vr)?;
@@ -206,9 +227,15 @@ pub unsafe fn instantiate<M: CoSimModel>(
         // SAFETY: NUL-terminated strings from the host, or null.
         let name = unsafe { from_c_str(instance_name) }.unwrap_or_default();
         let context = InstantiateContext {
-            instance_name: if name.is_empty() { "(unnamed)".to_owned() } else { name.clone() },
+            instance_name: if name.is_empty() {
+                "(unnamed)".to_owned()
+            } else {
+                name.clone()
+            },
             // SAFETY: as above.
-            resource_dir: unsafe { from_c_str(resource_location) }.as_deref().and_then(resource_dir_from_uri),
+            resource_dir: unsafe { from_c_str(resource_location) }
+                .as_deref()
+                .and_then(resource_dir_from_uri),
         };
         // A throw-away instance carries the logger for the messages before the model exists.
         let logger = Logger::new(&context.instance_name, callbacks, logging_on != 0);
@@ -218,7 +245,9 @@ pub unsafe fn instantiate<M: CoSimModel>(
             return std::ptr::null_mut();
         }
         if fmu_type != fmi2CoSimulation {
-            logger_only(&format!("fmi2Instantiate: this FMU supports co-simulation only (fmuType was {fmu_type})"));
+            logger_only(&format!(
+                "fmi2Instantiate: this FMU supports co-simulation only (fmuType was {fmu_type})"
+            ));
             return std::ptr::null_mut();
         }
         let expected = &M::info().guid;
@@ -249,8 +278,10 @@ pub unsafe fn instantiate<M: CoSimModel>(
                 // SAFETY: as above.
                 let callbacks = unsafe { *functions };
                 let name = unsafe { from_c_str(instance_name) }.unwrap_or_default();
-                Logger::new(&name, callbacks, logging_on != 0)
-                    .log(fmi2Fatal, &format!("fmi2Instantiate: the model panicked: {text}"));
+                Logger::new(&name, callbacks, logging_on != 0).log(
+                    fmi2Fatal,
+                    &format!("fmi2Instantiate: the model panicked: {text}"),
+                );
             }
         }));
         std::ptr::null_mut()
@@ -288,7 +319,9 @@ pub unsafe fn set_debug_logging<M: CoSimModel>(
                 None => return refuse("a category name is null"),
             }
         }
-        inst.logger.set_debug_logging(logging_on != 0, &names).map_err(CallError::Refused)?;
+        inst.logger
+            .set_debug_logging(logging_on != 0, &names)
+            .map_err(CallError::Refused)?;
         Ok(fmi2OK)
     })
 }
@@ -307,7 +340,9 @@ pub fn setup_experiment<M: CoSimModel>(
         }
         let stop = if stop_time_defined != 0 {
             if !(stop_time.is_finite() && stop_time >= start_time) {
-                return refuse(format!("stopTime must be finite and ≥ startTime {start_time}, was {stop_time}"));
+                return refuse(format!(
+                    "stopTime must be finite and ≥ startTime {start_time}, was {stop_time}"
+                ));
             }
             Some(stop_time)
         } else {
@@ -320,19 +355,31 @@ pub fn setup_experiment<M: CoSimModel>(
 }
 
 pub fn enter_initialization_mode<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
-    with_instance::<M>(c, "fmi2EnterInitializationMode", mask::ENTER_INITIALIZATION, |inst| {
-        inst.state = FsmState::InitializationMode;
-        Ok(fmi2OK)
-    })
+    with_instance::<M>(
+        c,
+        "fmi2EnterInitializationMode",
+        mask::ENTER_INITIALIZATION,
+        |inst| {
+            inst.state = FsmState::InitializationMode;
+            Ok(fmi2OK)
+        },
+    )
 }
 
 pub fn exit_initialization_mode<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
-    with_instance::<M>(c, "fmi2ExitInitializationMode", mask::EXIT_INITIALIZATION, |inst| {
-        // Parameters that do not fit together are a refused call: the host may fix them and retry.
-        inst.model.exit_initialization().map_err(|e| CallError::Refused(e.to_string()))?;
-        inst.state = FsmState::StepComplete;
-        Ok(fmi2OK)
-    })
+    with_instance::<M>(
+        c,
+        "fmi2ExitInitializationMode",
+        mask::EXIT_INITIALIZATION,
+        |inst| {
+            // Parameters that do not fit together are a refused call: the host may fix them and retry.
+            inst.model
+                .exit_initialization()
+                .map_err(|e| CallError::Refused(e.to_string()))?;
+            inst.state = FsmState::StepComplete;
+            Ok(fmi2OK)
+        },
+    )
 }
 
 pub fn terminate<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
@@ -367,7 +414,9 @@ macro_rules! getter {
         ) -> fmi2Status {
             with_instance::<M>(c, $c_name, mask::GET, |inst| {
                 // SAFETY: promised by the caller.
-                let (Some(vrs), Some(out)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice_mut(value, n) }) else {
+                let (Some(vrs), Some(out)) =
+                    (unsafe { c_slice(vr, n) }, unsafe { c_slice_mut(value, n) })
+                else {
                     return refuse("vr or value is null but nvr > 0");
                 };
                 for &$vr in vrs {
@@ -383,15 +432,33 @@ macro_rules! getter {
     };
 }
 
-getter!(get_real, "fmi2GetReal", fmi2Real, VarType::Real, |model, vr| model.get_real(vr)?);
-getter!(get_integer, "fmi2GetInteger", fmi2Integer, VarType::Integer, |model, vr| model.get_integer(vr)?);
-getter!(get_boolean, "fmi2GetBoolean", fmi2Boolean, VarType::Boolean, |model, vr| {
-    if model.get_boolean(vr)? {
-        fmi2True
-    } else {
-        fmi2False
+getter!(
+    get_real,
+    "fmi2GetReal",
+    fmi2Real,
+    VarType::Real,
+    |model, vr| model.get_real(vr)?
+);
+getter!(
+    get_integer,
+    "fmi2GetInteger",
+    fmi2Integer,
+    VarType::Integer,
+    |model, vr| model.get_integer(vr)?
+);
+getter!(
+    get_boolean,
+    "fmi2GetBoolean",
+    fmi2Boolean,
+    VarType::Boolean,
+    |model, vr| {
+        if model.get_boolean(vr)? {
+            fmi2True
+        } else {
+            fmi2False
+        }
     }
-});
+);
 
 /// # Safety
 /// As the getters. The returned strings stay valid until the next call on this instance.
@@ -403,7 +470,8 @@ pub unsafe fn get_string<M: CoSimModel>(
 ) -> fmi2Status {
     with_instance::<M>(c, "fmi2GetString", mask::GET, |inst| {
         // SAFETY: promised by the caller.
-        let (Some(vrs), Some(out)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice_mut(value, n) }) else {
+        let (Some(vrs), Some(out)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice_mut(value, n) })
+        else {
             return refuse("vr or value is null but nvr > 0");
         };
         let mut strings = Vec::with_capacity(n);
@@ -429,17 +497,22 @@ pub unsafe fn set_real<M: CoSimModel>(
 ) -> fmi2Status {
     with_instance::<M>(c, "fmi2SetReal", mask::SET, |inst| {
         // SAFETY: promised by the caller.
-        let (Some(vrs), Some(values)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) }) else {
+        let (Some(vrs), Some(values)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) })
+        else {
             return refuse("vr or value is null but nvr > 0");
         };
         check_settable(inst, VarType::Real, vrs)?;
         for (&r, &x) in vrs.iter().zip(values) {
             if !x.is_finite() {
                 let name = &lookup::<M>(VarType::Real, r)?.name;
-                return refuse(format!("value of '{name}' (vr {r}) is {x}; only finite reals are accepted"));
+                return refuse(format!(
+                    "value of '{name}' (vr {r}) is {x}; only finite reals are accepted"
+                ));
             }
         }
-        set_all(&mut inst.model, vrs, values, M::get_real, |m, r, &x| m.set_real(r, x))?;
+        set_all(&mut inst.model, vrs, values, M::get_real, |m, r, &x| {
+            m.set_real(r, x)
+        })?;
         Ok(fmi2OK)
     })
 }
@@ -456,7 +529,9 @@ macro_rules! setter {
         ) -> fmi2Status {
             with_instance::<M>(c, $c_name, mask::SET, |inst| {
                 // SAFETY: promised by the caller.
-                let (Some(vrs), Some(values)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) }) else {
+                let (Some(vrs), Some(values)) =
+                    (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) })
+                else {
                     return refuse("vr or value is null but nvr > 0");
                 };
                 check_settable(inst, $var_type, vrs)?;
@@ -497,7 +572,8 @@ pub unsafe fn set_string<M: CoSimModel>(
 ) -> fmi2Status {
     with_instance::<M>(c, "fmi2SetString", mask::SET, |inst| {
         // SAFETY: promised by the caller.
-        let (Some(vrs), Some(values)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) }) else {
+        let (Some(vrs), Some(values)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice(value, n) })
+        else {
             return refuse("vr or value is null but nvr > 0");
         };
         check_settable(inst, VarType::String, vrs)?;
@@ -509,7 +585,9 @@ pub unsafe fn set_string<M: CoSimModel>(
                 None => return refuse("a string value is null"),
             }
         }
-        set_all(&mut inst.model, vrs, &texts, M::get_string, |m, r, text| m.set_string(r, text))?;
+        set_all(&mut inst.model, vrs, &texts, M::get_string, |m, r, text| {
+            m.set_string(r, text)
+        })?;
         Ok(fmi2OK)
     })
 }
@@ -519,7 +597,10 @@ pub unsafe fn set_string<M: CoSimModel>(
 
 /// # Safety
 /// `state` points to an `fmi2FMUstate` slot: null, or a state from this instance's library.
-pub unsafe fn get_fmu_state<M: CoSimModel>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+pub unsafe fn get_fmu_state<M: CoSimModel>(
+    c: fmi2Component,
+    state: *mut fmi2FMUstate,
+) -> fmi2Status {
     with_instance::<M>(c, "fmi2GetFMUstate", mask::GET_STATE, |inst| {
         if state.is_null() {
             return refuse("FMUstate is null");
@@ -556,24 +637,36 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(c: fmi2Component, state: fmi2FMUstate
 
 /// # Safety
 /// `state` points to a slot holding null or a state of this library; the slot is nulled.
-pub unsafe fn free_fmu_state<M: CoSimModel>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+pub unsafe fn free_fmu_state<M: CoSimModel>(
+    c: fmi2Component,
+    state: *mut fmi2FMUstate,
+) -> fmi2Status {
     // Allowed after a fatal error too, so the host can release what it holds.
-    with_instance::<M>(c, "fmi2FreeFMUstate", mask::ANY_LIVE | FsmState::Fatal.bit(), |_inst| {
-        if state.is_null() {
-            return refuse("FMUstate is null");
-        }
-        // SAFETY: non-null slot from the host; the state is freed once and the slot nulled.
-        unsafe {
-            Snapshot::<M>::free(*state);
-            *state = std::ptr::null_mut();
-        }
-        Ok(fmi2OK)
-    })
+    with_instance::<M>(
+        c,
+        "fmi2FreeFMUstate",
+        mask::ANY_LIVE | FsmState::Fatal.bit(),
+        |_inst| {
+            if state.is_null() {
+                return refuse("FMUstate is null");
+            }
+            // SAFETY: non-null slot from the host; the state is freed once and the slot nulled.
+            unsafe {
+                Snapshot::<M>::free(*state);
+                *state = std::ptr::null_mut();
+            }
+            Ok(fmi2OK)
+        },
+    )
 }
 
 /// # Safety
 /// `state` is a state of this library; `size` is writable.
-pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(c: fmi2Component, state: fmi2FMUstate, size: *mut usize) -> fmi2Status {
+pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(
+    c: fmi2Component,
+    state: fmi2FMUstate,
+    size: *mut usize,
+) -> fmi2Status {
     with_instance::<M>(c, "fmi2SerializedFMUstateSize", mask::ANY_LIVE, |_inst| {
         // SAFETY: promised by the caller.
         let Some(snapshot) = (unsafe { Snapshot::<M>::from_ptr(state) }) else {
@@ -604,7 +697,10 @@ pub unsafe fn serialize_fmu_state<M: CoSimModel>(
         };
         let data = snapshot.to_bytes().map_err(CallError::Refused)?;
         if data.len() > size {
-            return refuse(format!("the buffer has {size} bytes but the state needs {}", data.len()));
+            return refuse(format!(
+                "the buffer has {size} bytes but the state needs {}",
+                data.len()
+            ));
         }
         // SAFETY: promised by the caller; data.len() ≤ size.
         let Some(out) = (unsafe { c_slice_mut(bytes as *mut u8, data.len()) }) else {
@@ -658,9 +754,11 @@ pub unsafe fn set_real_input_derivatives<M: CoSimModel>(
             return refuse("this FMU cannot interpolate inputs (canInterpolateInputs=\"false\")");
         }
         // SAFETY: promised by the caller.
-        let (Some(vrs), Some(orders), Some(values)) =
-            (unsafe { c_slice(vr, n) }, unsafe { c_slice(order, n) }, unsafe { c_slice(value, n) })
-        else {
+        let (Some(vrs), Some(orders), Some(values)) = (
+            unsafe { c_slice(vr, n) },
+            unsafe { c_slice(order, n) },
+            unsafe { c_slice(value, n) },
+        ) else {
             return refuse("vr, order or value is null but nvr > 0");
         };
         for ((&r, &k), &x) in vrs.iter().zip(orders).zip(values) {
@@ -669,10 +767,16 @@ pub unsafe fn set_real_input_derivatives<M: CoSimModel>(
                 return refuse(format!("'{}' (vr {r}) is not an input", var.name));
             }
             if k != 1 {
-                return refuse(format!("derivative order {k} for '{}': only order 1 is supported", var.name));
+                return refuse(format!(
+                    "derivative order {k} for '{}': only order 1 is supported",
+                    var.name
+                ));
             }
             if !x.is_finite() {
-                return refuse(format!("derivative of '{}' is {x}; only finite reals are accepted", var.name));
+                return refuse(format!(
+                    "derivative of '{}' is {x}; only finite reals are accepted",
+                    var.name
+                ));
             }
         }
         for (&r, &x) in vrs.iter().zip(values) {
@@ -711,10 +815,15 @@ pub fn do_step<M: CoSimModel>(
     with_instance::<M>(c, "fmi2DoStep", mask::DO_STEP, |inst| {
         let (t, h) = (current_communication_point, communication_step_size);
         if !(h.is_finite() && h > 0.0) {
-            return refuse(format!("communicationStepSize must be > 0 and finite, was {h}"));
+            return refuse(format!(
+                "communicationStepSize must be > 0 and finite, was {h}"
+            ));
         }
         if !t.is_finite() || (t - inst.time).abs() > time_tolerance(inst.time, h) {
-            return refuse(format!("expected currentCommunicationPoint = {} but was {t}", inst.time));
+            return refuse(format!(
+                "expected currentCommunicationPoint = {} but was {t}",
+                inst.time
+            ));
         }
         if let Some(stop) = inst.stop_time {
             if t + h > stop + time_tolerance(stop, h) {
@@ -735,7 +844,11 @@ pub fn cancel_step<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
 
 /// # Safety
 /// `value` is writable.
-pub unsafe fn get_status<M: CoSimModel>(c: fmi2Component, kind: fmi2StatusKind, value: *mut fmi2Status) -> fmi2Status {
+pub unsafe fn get_status<M: CoSimModel>(
+    c: fmi2Component,
+    kind: fmi2StatusKind,
+    value: *mut fmi2Status,
+) -> fmi2Status {
     with_instance::<M>(c, "fmi2GetStatus", mask::STATUS, |_inst| {
         if value.is_null() {
             return refuse("value is null");
@@ -753,7 +866,11 @@ pub unsafe fn get_status<M: CoSimModel>(c: fmi2Component, kind: fmi2StatusKind, 
 
 /// # Safety
 /// `value` is writable.
-pub unsafe fn get_real_status<M: CoSimModel>(c: fmi2Component, kind: fmi2StatusKind, value: *mut fmi2Real) -> fmi2Status {
+pub unsafe fn get_real_status<M: CoSimModel>(
+    c: fmi2Component,
+    kind: fmi2StatusKind,
+    value: *mut fmi2Real,
+) -> fmi2Status {
     with_instance::<M>(c, "fmi2GetRealStatus", mask::STATUS, |inst| {
         if value.is_null() {
             return refuse("value is null");
@@ -771,13 +888,23 @@ pub unsafe fn get_real_status<M: CoSimModel>(c: fmi2Component, kind: fmi2StatusK
 
 /// # Safety
 /// `value` is writable.
-pub unsafe fn get_integer_status<M: CoSimModel>(c: fmi2Component, _kind: fmi2StatusKind, _value: *mut fmi2Integer) -> fmi2Status {
-    with_instance::<M>(c, "fmi2GetIntegerStatus", mask::STATUS, |_inst| Ok(fmi2Discard))
+pub unsafe fn get_integer_status<M: CoSimModel>(
+    c: fmi2Component,
+    _kind: fmi2StatusKind,
+    _value: *mut fmi2Integer,
+) -> fmi2Status {
+    with_instance::<M>(c, "fmi2GetIntegerStatus", mask::STATUS, |_inst| {
+        Ok(fmi2Discard)
+    })
 }
 
 /// # Safety
 /// `value` is writable.
-pub unsafe fn get_boolean_status<M: CoSimModel>(c: fmi2Component, kind: fmi2StatusKind, value: *mut fmi2Boolean) -> fmi2Status {
+pub unsafe fn get_boolean_status<M: CoSimModel>(
+    c: fmi2Component,
+    kind: fmi2StatusKind,
+    value: *mut fmi2Boolean,
+) -> fmi2Status {
     with_instance::<M>(c, "fmi2GetBooleanStatus", mask::STATUS, |inst| {
         if value.is_null() {
             return refuse("value is null");
@@ -785,7 +912,13 @@ pub unsafe fn get_boolean_status<M: CoSimModel>(c: fmi2Component, kind: fmi2Stat
         match kind {
             fmi2Terminated => {
                 // SAFETY: non-null, writable.
-                unsafe { *value = if inst.state == FsmState::Terminated { fmi2True } else { fmi2False } };
+                unsafe {
+                    *value = if inst.state == FsmState::Terminated {
+                        fmi2True
+                    } else {
+                        fmi2False
+                    }
+                };
                 Ok(fmi2OK)
             }
             _ => Ok(fmi2Discard),
@@ -795,8 +928,14 @@ pub unsafe fn get_boolean_status<M: CoSimModel>(c: fmi2Component, kind: fmi2Stat
 
 /// # Safety
 /// `value` is writable.
-pub unsafe fn get_string_status<M: CoSimModel>(c: fmi2Component, _kind: fmi2StatusKind, _value: *mut fmi2String) -> fmi2Status {
-    with_instance::<M>(c, "fmi2GetStringStatus", mask::STATUS, |_inst| Ok(fmi2Discard))
+pub unsafe fn get_string_status<M: CoSimModel>(
+    c: fmi2Component,
+    _kind: fmi2StatusKind,
+    _value: *mut fmi2String,
+) -> fmi2Status {
+    with_instance::<M>(c, "fmi2GetStringStatus", mask::STATUS, |_inst| {
+        Ok(fmi2Discard)
+    })
 }
 
 /// # Safety

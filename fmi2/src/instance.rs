@@ -44,7 +44,11 @@ impl FsmState {
             FsmState::Error,
             FsmState::Fatal,
         ];
-        let names: Vec<&str> = all.iter().filter(|s| mask & s.bit() != 0).map(|s| s.name()).collect();
+        let names: Vec<&str> = all
+            .iter()
+            .filter(|s| mask & s.bit() != 0)
+            .map(|s| s.name())
+            .collect();
         names.join(" | ")
     }
 }
@@ -52,16 +56,21 @@ impl FsmState {
 /// Allowed-state masks, after the FMI 2.0 co-simulation state machine.
 pub mod mask {
     use super::FsmState::*;
-    pub const ANY_LIVE: u8 =
-        Instantiated as u8 | InitializationMode as u8 | StepComplete as u8 | Terminated as u8 | Error as u8;
+    pub const ANY_LIVE: u8 = Instantiated as u8
+        | InitializationMode as u8
+        | StepComplete as u8
+        | Terminated as u8
+        | Error as u8;
     pub const SETUP_EXPERIMENT: u8 = Instantiated as u8;
     pub const ENTER_INITIALIZATION: u8 = Instantiated as u8;
     pub const EXIT_INITIALIZATION: u8 = InitializationMode as u8;
     pub const TERMINATE: u8 = StepComplete as u8 | Error as u8;
-    pub const GET: u8 = InitializationMode as u8 | StepComplete as u8 | Terminated as u8 | Error as u8;
+    pub const GET: u8 =
+        InitializationMode as u8 | StepComplete as u8 | Terminated as u8 | Error as u8;
     pub const SET: u8 = Instantiated as u8 | InitializationMode as u8 | StepComplete as u8;
     pub const DO_STEP: u8 = StepComplete as u8;
-    pub const GET_STATE: u8 = Instantiated as u8 | InitializationMode as u8 | StepComplete as u8 | Terminated as u8;
+    pub const GET_STATE: u8 =
+        Instantiated as u8 | InitializationMode as u8 | StepComplete as u8 | Terminated as u8;
     pub const SET_STATE: u8 = ANY_LIVE;
     pub const STATUS: u8 = StepComplete as u8 | Terminated as u8 | Error as u8;
 }
@@ -81,7 +90,11 @@ pub struct Logger {
 }
 
 impl Logger {
-    pub(crate) fn new(instance_name: &str, callbacks: fmi2CallbackFunctions, debug_logging: bool) -> Self {
+    pub(crate) fn new(
+        instance_name: &str,
+        callbacks: fmi2CallbackFunctions,
+        debug_logging: bool,
+    ) -> Self {
         Logger {
             name: to_c_string(instance_name),
             callbacks,
@@ -90,14 +103,21 @@ impl Logger {
         }
     }
 
-    pub(crate) fn set_debug_logging(&mut self, on: bool, categories: &[String]) -> Result<(), String> {
+    pub(crate) fn set_debug_logging(
+        &mut self,
+        on: bool,
+        categories: &[String],
+    ) -> Result<(), String> {
         let mut enabled = [categories.is_empty(); LOG_CATEGORIES.len()];
         for category in categories {
             match LOG_CATEGORIES.iter().position(|(name, _)| name == category) {
                 Some(i) => enabled[i] = true,
                 None => {
                     let known: Vec<&str> = LOG_CATEGORIES.iter().map(|(n, _)| *n).collect();
-                    return Err(format!("unknown log category '{category}'; known: {}", known.join(", ")));
+                    return Err(format!(
+                        "unknown log category '{category}'; known: {}",
+                        known.join(", ")
+                    ));
                 }
             }
         }
@@ -209,7 +229,13 @@ impl<M: CoSimModel> Instance<M> {
     }
 
     pub(crate) fn snapshot(&self) -> Snapshot<M> {
-        Snapshot { magic: SNAPSHOT_MAGIC, model: self.model.clone(), time: self.time, stop_time: self.stop_time, state: self.state }
+        Snapshot {
+            magic: SNAPSHOT_MAGIC,
+            model: self.model.clone(),
+            time: self.time,
+            stop_time: self.stop_time,
+            state: self.state,
+        }
     }
 
     pub(crate) fn restore(&mut self, snapshot: &Snapshot<M>) {
@@ -262,17 +288,19 @@ impl<M: CoSimModel> Snapshot<M> {
     /// Serialized form: a header naming the model's GUID, then postcard.
     pub(crate) fn to_bytes(&self) -> Result<Vec<u8>, String> {
         let mut bytes = serialization_header::<M>();
-        let body = postcard::to_stdvec(self).map_err(|e| format!("cannot serialize the FMU state: {e}"))?;
+        let body = postcard::to_stdvec(self)
+            .map_err(|e| format!("cannot serialize the FMU state: {e}"))?;
         bytes.extend_from_slice(&body);
         Ok(bytes)
     }
 
     pub(crate) fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
         let header = serialization_header::<M>();
-        let body = bytes
-            .strip_prefix(header.as_slice())
-            .ok_or("the serialized FMU state was not made by this model (header or GUID differs)")?;
-        let snap: Self = postcard::from_bytes(body).map_err(|e| format!("the serialized FMU state is corrupt: {e}"))?;
+        let body = bytes.strip_prefix(header.as_slice()).ok_or(
+            "the serialized FMU state was not made by this model (header or GUID differs)",
+        )?;
+        let snap: Self = postcard::from_bytes(body)
+            .map_err(|e| format!("the serialized FMU state is corrupt: {e}"))?;
         if snap.magic != SNAPSHOT_MAGIC {
             return Err("the serialized FMU state is corrupt: bad magic".into());
         }
@@ -310,7 +338,9 @@ pub(crate) unsafe fn from_c_str(s: fmi2String) -> Option<String> {
 
 /// The `resources/` directory from the URI a host passes to `fmi2Instantiate`.
 pub(crate) fn resource_dir_from_uri(uri: &str) -> Option<std::path::PathBuf> {
-    let rest = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:"))?;
+    let rest = uri
+        .strip_prefix("file://")
+        .or_else(|| uri.strip_prefix("file:"))?;
     let rest = rest.strip_prefix("localhost").unwrap_or(rest);
     let bytes = rest.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
@@ -336,15 +366,24 @@ mod tests {
 
     #[test]
     fn resource_uris_become_paths() {
-        assert_eq!(resource_dir_from_uri("file:///tmp/a%20b/resources"), Some("/tmp/a b/resources".into()));
+        assert_eq!(
+            resource_dir_from_uri("file:///tmp/a%20b/resources"),
+            Some("/tmp/a b/resources".into())
+        );
         assert_eq!(resource_dir_from_uri("file:/tmp/x"), Some("/tmp/x".into()));
-        assert_eq!(resource_dir_from_uri("file://localhost/tmp/x"), Some("/tmp/x".into()));
+        assert_eq!(
+            resource_dir_from_uri("file://localhost/tmp/x"),
+            Some("/tmp/x".into())
+        );
         assert_eq!(resource_dir_from_uri("http://example/x"), None);
     }
 
     #[test]
     fn masks_name_their_states() {
         assert_eq!(FsmState::names_in(mask::DO_STEP), "StepComplete");
-        assert_eq!(FsmState::names_in(mask::EXIT_INITIALIZATION), "InitializationMode");
+        assert_eq!(
+            FsmState::names_in(mask::EXIT_INITIALIZATION),
+            "InitializationMode"
+        );
     }
 }

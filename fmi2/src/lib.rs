@@ -16,7 +16,9 @@ pub mod variables;
 
 pub use instance::FsmState;
 pub use model::{CoSimModel, InstantiateContext, ModelError};
-pub use variables::{Causality, DefaultExperiment, ModelInfo, Start, Unit, VarType, Variability, Variable};
+pub use variables::{
+    Causality, DefaultExperiment, ModelInfo, Start, Unit, VarType, Variability, Variable,
+};
 
 /// Define the 34 FMI 2.0 co-simulation C functions for a model type, in the calling crate
 /// (which must be built as a `cdylib`). Every signature is checked against the standard's
@@ -59,7 +61,15 @@ macro_rules! export_fmu {
                 logging_on: fmi2Boolean,
             ) -> fmi2Component {
                 unsafe {
-                    x::instantiate::<Model>(instance_name, fmu_type, guid, resource_location, functions, visible, logging_on)
+                    x::instantiate::<Model>(
+                        instance_name,
+                        fmu_type,
+                        guid,
+                        resource_location,
+                        functions,
+                        visible,
+                        logging_on,
+                    )
                 }
             }
             #[no_mangle]
@@ -75,7 +85,14 @@ macro_rules! export_fmu {
                 stop_time_defined: fmi2Boolean,
                 stop_time: fmi2Real,
             ) -> fmi2Status {
-                x::setup_experiment::<Model>(c, tolerance_defined, tolerance, start_time, stop_time_defined, stop_time)
+                x::setup_experiment::<Model>(
+                    c,
+                    tolerance_defined,
+                    tolerance,
+                    start_time,
+                    stop_time_defined,
+                    stop_time,
+                )
             }
             #[no_mangle]
             pub extern "C" fn fmi2EnterInitializationMode(c: fmi2Component) -> fmi2Status {
@@ -166,15 +183,24 @@ macro_rules! export_fmu {
                 unsafe { x::set_string::<Model>(c, vr, n, value) }
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetFMUstate(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetFMUstate(
+                c: fmi2Component,
+                state: *mut fmi2FMUstate,
+            ) -> fmi2Status {
                 unsafe { x::get_fmu_state::<Model>(c, state) }
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetFMUstate(c: fmi2Component, state: fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetFMUstate(
+                c: fmi2Component,
+                state: fmi2FMUstate,
+            ) -> fmi2Status {
                 unsafe { x::set_fmu_state::<Model>(c, state) }
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2FreeFMUstate(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2FreeFMUstate(
+                c: fmi2Component,
+                state: *mut fmi2FMUstate,
+            ) -> fmi2Status {
                 unsafe { x::free_fmu_state::<Model>(c, state) }
             }
             #[no_mangle]
@@ -213,7 +239,11 @@ macro_rules! export_fmu {
                 dv_known: *const fmi2Real,
                 dv_unknown: *mut fmi2Real,
             ) -> fmi2Status {
-                unsafe { x::get_directional_derivative::<Model>(c, unknown, n_unknown, known, n_known, dv_known, dv_unknown) }
+                unsafe {
+                    x::get_directional_derivative::<Model>(
+                        c, unknown, n_unknown, known, n_known, dv_known, dv_unknown,
+                    )
+                }
             }
             #[no_mangle]
             pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
@@ -242,18 +272,31 @@ macro_rules! export_fmu {
                 communication_step_size: fmi2Real,
                 no_set_fmu_state_prior: fmi2Boolean,
             ) -> fmi2Status {
-                x::do_step::<Model>(c, current_communication_point, communication_step_size, no_set_fmu_state_prior)
+                x::do_step::<Model>(
+                    c,
+                    current_communication_point,
+                    communication_step_size,
+                    no_set_fmu_state_prior,
+                )
             }
             #[no_mangle]
             pub extern "C" fn fmi2CancelStep(c: fmi2Component) -> fmi2Status {
                 x::cancel_step::<Model>(c)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetStatus(c: fmi2Component, kind: fmi2StatusKind, value: *mut fmi2Status) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetStatus(
+                c: fmi2Component,
+                kind: fmi2StatusKind,
+                value: *mut fmi2Status,
+            ) -> fmi2Status {
                 unsafe { x::get_status::<Model>(c, kind, value) }
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetRealStatus(c: fmi2Component, kind: fmi2StatusKind, value: *mut fmi2Real) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetRealStatus(
+                c: fmi2Component,
+                kind: fmi2StatusKind,
+                value: *mut fmi2Real,
+            ) -> fmi2Status {
                 unsafe { x::get_real_status::<Model>(c, kind, value) }
             }
             #[no_mangle]

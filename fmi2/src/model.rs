@@ -53,16 +53,28 @@ pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError>;
 
     fn get_integer(&mut self, vr: u32) -> Result<i32, ModelError> {
-        Err(ModelError::UnknownVariable { vr, kind: "Integer" })
+        Err(ModelError::UnknownVariable {
+            vr,
+            kind: "Integer",
+        })
     }
     fn set_integer(&mut self, vr: u32, _value: i32) -> Result<(), ModelError> {
-        Err(ModelError::UnknownVariable { vr, kind: "Integer" })
+        Err(ModelError::UnknownVariable {
+            vr,
+            kind: "Integer",
+        })
     }
     fn get_boolean(&mut self, vr: u32) -> Result<bool, ModelError> {
-        Err(ModelError::UnknownVariable { vr, kind: "Boolean" })
+        Err(ModelError::UnknownVariable {
+            vr,
+            kind: "Boolean",
+        })
     }
     fn set_boolean(&mut self, vr: u32, _value: bool) -> Result<(), ModelError> {
-        Err(ModelError::UnknownVariable { vr, kind: "Boolean" })
+        Err(ModelError::UnknownVariable {
+            vr,
+            kind: "Boolean",
+        })
     }
     fn get_string(&mut self, vr: u32) -> Result<String, ModelError> {
         Err(ModelError::UnknownVariable { vr, kind: "String" })
@@ -72,10 +84,14 @@ pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
     }
 
     /// First time derivative of a real input, valid from the current communication point: the
-    /// model treats the input as `u(t) = u + du·(t − t_c)` inside the next step. Only called
+    /// model treats the input as `u(t) = u + du·(t − t_c)` inside the next step (that step only:
+    /// a model ends the step with the input at its end value and the derivative at zero). Only called
     /// when `info().can_interpolate_inputs`.
     fn set_real_input_derivative(&mut self, vr: u32, _derivative: f64) -> Result<(), ModelError> {
-        Err(ModelError::UnknownVariable { vr, kind: "Real input" })
+        Err(ModelError::UnknownVariable {
+            vr,
+            kind: "Real input",
+        })
     }
 
     /// Leaving initialization mode: check the parameters together and precompute.

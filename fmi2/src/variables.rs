@@ -99,7 +99,13 @@ pub struct Variable {
 }
 
 impl Variable {
-    fn new(name: &str, vr: u32, var_type: VarType, causality: Causality, variability: Variability) -> Self {
+    fn new(
+        name: &str,
+        vr: u32,
+        var_type: VarType,
+        causality: Causality,
+        variability: Variability,
+    ) -> Self {
         Variable {
             name: name.to_owned(),
             vr,
@@ -116,46 +122,88 @@ impl Variable {
     }
 
     pub fn real_input(name: &str, vr: u32, unit: &'static str, start: f64) -> Self {
-        let mut v = Self::new(name, vr, VarType::Real, Causality::Input, Variability::Continuous);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Real,
+            Causality::Input,
+            Variability::Continuous,
+        );
         v.start = Start::Real(start);
         v.unit = Some(unit);
         v
     }
 
     pub fn real_output(name: &str, vr: u32, unit: &'static str) -> Self {
-        let mut v = Self::new(name, vr, VarType::Real, Causality::Output, Variability::Continuous);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Real,
+            Causality::Output,
+            Variability::Continuous,
+        );
         v.unit = Some(unit);
         v
     }
 
     /// A fixed real parameter: set before or during initialization, never after.
     pub fn real_parameter(name: &str, vr: u32, unit: &'static str, start: f64) -> Self {
-        let mut v = Self::new(name, vr, VarType::Real, Causality::Parameter, Variability::Fixed);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Real,
+            Causality::Parameter,
+            Variability::Fixed,
+        );
         v.start = Start::Real(start);
         v.unit = Some(unit);
         v
     }
 
     pub fn integer_parameter(name: &str, vr: u32, start: i32) -> Self {
-        let mut v = Self::new(name, vr, VarType::Integer, Causality::Parameter, Variability::Fixed);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Integer,
+            Causality::Parameter,
+            Variability::Fixed,
+        );
         v.start = Start::Integer(start);
         v
     }
 
     pub fn boolean_parameter(name: &str, vr: u32, start: bool) -> Self {
-        let mut v = Self::new(name, vr, VarType::Boolean, Causality::Parameter, Variability::Fixed);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Boolean,
+            Causality::Parameter,
+            Variability::Fixed,
+        );
         v.start = Start::Boolean(start);
         v
     }
 
     pub fn boolean_input(name: &str, vr: u32, start: bool) -> Self {
-        let mut v = Self::new(name, vr, VarType::Boolean, Causality::Input, Variability::Discrete);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::Boolean,
+            Causality::Input,
+            Variability::Discrete,
+        );
         v.start = Start::Boolean(start);
         v
     }
 
     pub fn string_parameter(name: &str, vr: u32, start: &str) -> Self {
-        let mut v = Self::new(name, vr, VarType::String, Causality::Parameter, Variability::Fixed);
+        let mut v = Self::new(
+            name,
+            vr,
+            VarType::String,
+            Causality::Parameter,
+            Variability::Fixed,
+        );
         v.start = Start::String(start.to_owned());
         v
     }
@@ -191,7 +239,11 @@ impl Variable {
                 "'{}' is a fixed parameter: it can be set only before fmi2ExitInitializationMode",
                 self.name
             )),
-            (c, _) => Err(format!("'{}' has causality {} and cannot be set", self.name, c.xml_name())),
+            (c, _) => Err(format!(
+                "'{}' has causality {} and cannot be set",
+                self.name,
+                c.xml_name()
+            )),
         }
     }
 }
@@ -232,7 +284,10 @@ pub struct ModelInfo {
 const NONE: u32 = u32::MAX;
 
 pub const LOG_CATEGORIES: [(&str, &str); 3] = [
-    ("logStatusError", "errors: wrong call order, bad arguments, a diverging state"),
+    (
+        "logStatusError",
+        "errors: wrong call order, bad arguments, a diverging state",
+    ),
     ("logStatusWarning", "warnings"),
     ("logCalls", "every fmi2 call, when debug logging is on"),
 ];
@@ -259,19 +314,29 @@ impl ModelInfo {
                 return Err(format!("variable name '{}' appears twice", v.name));
             }
             if v.vr >= MAX_DENSE_VR {
-                return Err(format!("'{}': value reference {} is above {MAX_DENSE_VR}", v.name, v.vr));
+                return Err(format!(
+                    "'{}': value reference {} is above {MAX_DENSE_VR}",
+                    v.name, v.vr
+                ));
             }
             let table = &mut lookup[v.var_type.slot()];
             if table.len() <= v.vr as usize {
                 table.resize(v.vr as usize + 1, NONE);
             }
             if table[v.vr as usize] != NONE {
-                return Err(format!("{} value reference {} appears twice", v.var_type.xml_name(), v.vr));
+                return Err(format!(
+                    "{} value reference {} appears twice",
+                    v.var_type.xml_name(),
+                    v.vr
+                ));
             }
             table[v.vr as usize] = index as u32;
             let needs_start = matches!(v.causality, Causality::Input | Causality::Parameter);
             if needs_start == matches!(v.start, Start::None) {
-                return Err(format!("'{}': a start value is required for inputs and parameters only", v.name));
+                return Err(format!(
+                    "'{}': a start value is required for inputs and parameters only",
+                    v.name
+                ));
             }
             if let Some(unit) = v.unit {
                 if !units.iter().any(|u| u.name == unit) {
@@ -279,9 +344,14 @@ impl ModelInfo {
                 }
             }
             for dep in &v.depends_on {
-                let ok = variables.iter().any(|i| i.vr == *dep && i.causality == Causality::Input);
+                let ok = variables
+                    .iter()
+                    .any(|i| i.vr == *dep && i.causality == Causality::Input);
                 if !ok {
-                    return Err(format!("'{}' depends on value reference {dep}, which is no input", v.name));
+                    return Err(format!(
+                        "'{}' depends on value reference {dep}, which is no input",
+                        v.name
+                    ));
                 }
             }
         }
@@ -321,7 +391,8 @@ impl ModelInfo {
         // Writing to a Vec<u8> cannot fail; the expect documents that.
         let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
         let ok = "writing XML to memory cannot fail";
-        w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None))).expect(ok);
+        w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
+            .expect(ok);
 
         let mut root = BytesStart::new("fmiModelDescription");
         root.push_attribute(("fmiVersion", "2.0"));
@@ -338,7 +409,14 @@ impl ModelInfo {
         let mut cs = BytesStart::new("CoSimulation");
         cs.push_attribute(("modelIdentifier", self.model_identifier.as_str()));
         cs.push_attribute(("canHandleVariableCommunicationStepSize", "true"));
-        cs.push_attribute(("canInterpolateInputs", if self.can_interpolate_inputs { "true" } else { "false" }));
+        cs.push_attribute((
+            "canInterpolateInputs",
+            if self.can_interpolate_inputs {
+                "true"
+            } else {
+                "false"
+            },
+        ));
         cs.push_attribute(("maxOutputDerivativeOrder", "0"));
         cs.push_attribute(("canGetAndSetFMUstate", "true"));
         cs.push_attribute(("canSerializeFMUstate", "true"));
@@ -346,7 +424,8 @@ impl ModelInfo {
         cs.push_attribute(("providesDirectionalDerivative", "false"));
         w.write_event(Event::Empty(cs)).expect(ok);
 
-        w.write_event(Event::Start(BytesStart::new("UnitDefinitions"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("UnitDefinitions")))
+            .expect(ok);
         for unit in &self.units {
             let mut u = BytesStart::new("Unit");
             u.push_attribute(("name", unit.name));
@@ -360,16 +439,19 @@ impl ModelInfo {
             w.write_event(Event::Empty(base)).expect(ok);
             w.write_event(Event::End(BytesEnd::new("Unit"))).expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("UnitDefinitions"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("UnitDefinitions")))
+            .expect(ok);
 
-        w.write_event(Event::Start(BytesStart::new("LogCategories"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("LogCategories")))
+            .expect(ok);
         for (name, description) in LOG_CATEGORIES {
             let mut c = BytesStart::new("Category");
             c.push_attribute(("name", name));
             c.push_attribute(("description", description));
             w.write_event(Event::Empty(c)).expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("LogCategories"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("LogCategories")))
+            .expect(ok);
 
         if let Some(e) = self.default_experiment {
             let mut d = BytesStart::new("DefaultExperiment");
@@ -379,10 +461,14 @@ impl ModelInfo {
             w.write_event(Event::Empty(d)).expect(ok);
         }
 
-        w.write_event(Event::Start(BytesStart::new("ModelVariables"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("ModelVariables")))
+            .expect(ok);
         for (index, v) in self.variables.iter().enumerate() {
-            w.write_event(Event::Comment(quick_xml::events::BytesText::new(&format!(" index {} ", index + 1))))
-                .expect(ok);
+            w.write_event(Event::Comment(quick_xml::events::BytesText::new(&format!(
+                " index {} ",
+                index + 1
+            ))))
+            .expect(ok);
             let mut sv = BytesStart::new("ScalarVariable");
             sv.push_attribute(("name", v.name.as_str()));
             sv.push_attribute(("valueReference", v.vr.to_string().as_str()));
@@ -399,7 +485,13 @@ impl ModelInfo {
             if let Some(unit) = v.unit {
                 ty.push_attribute(("unit", unit));
             }
-            let bound = |x: f64| if v.var_type == VarType::Integer { format!("{}", x as i64) } else { fmt_real(x) };
+            let bound = |x: f64| {
+                if v.var_type == VarType::Integer {
+                    format!("{}", x as i64)
+                } else {
+                    fmt_real(x)
+                }
+            };
             if let Some(min) = v.min {
                 ty.push_attribute(("min", bound(min).as_str()));
             }
@@ -410,20 +502,26 @@ impl ModelInfo {
                 Start::None => {}
                 Start::Real(x) => ty.push_attribute(("start", fmt_real(*x).as_str())),
                 Start::Integer(i) => ty.push_attribute(("start", i.to_string().as_str())),
-                Start::Boolean(b) => ty.push_attribute(("start", if *b { "true" } else { "false" })),
+                Start::Boolean(b) => {
+                    ty.push_attribute(("start", if *b { "true" } else { "false" }))
+                }
                 Start::String(s) => ty.push_attribute(("start", s.as_str())),
             }
             w.write_event(Event::Empty(ty)).expect(ok);
-            w.write_event(Event::End(BytesEnd::new("ScalarVariable"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ScalarVariable")))
+                .expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("ModelVariables"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ModelVariables")))
+            .expect(ok);
 
-        w.write_event(Event::Start(BytesStart::new("ModelStructure"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("ModelStructure")))
+            .expect(ok);
         let outputs: Vec<usize> = (0..self.variables.len())
             .filter(|&i| self.variables[i].causality == Causality::Output)
             .collect();
         if !outputs.is_empty() {
-            w.write_event(Event::Start(BytesStart::new("Outputs"))).expect(ok);
+            w.write_event(Event::Start(BytesStart::new("Outputs")))
+                .expect(ok);
             for &i in &outputs {
                 let v = &self.variables[i];
                 let mut u = BytesStart::new("Unknown");
@@ -431,7 +529,11 @@ impl ModelInfo {
                 let deps: Vec<String> = v
                     .depends_on
                     .iter()
-                    .filter_map(|vr| self.variables.iter().position(|x| x.vr == *vr && x.causality == Causality::Input))
+                    .filter_map(|vr| {
+                        self.variables
+                            .iter()
+                            .position(|x| x.vr == *vr && x.causality == Causality::Input)
+                    })
                     .map(|p| (p + 1).to_string())
                     .collect();
                 u.push_attribute(("dependencies", deps.join(" ").as_str()));
@@ -439,17 +541,22 @@ impl ModelInfo {
                 u.push_attribute(("dependenciesKind", kinds.as_str()));
                 w.write_event(Event::Empty(u)).expect(ok);
             }
-            w.write_event(Event::End(BytesEnd::new("Outputs"))).expect(ok);
-            w.write_event(Event::Start(BytesStart::new("InitialUnknowns"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("Outputs")))
+                .expect(ok);
+            w.write_event(Event::Start(BytesStart::new("InitialUnknowns")))
+                .expect(ok);
             for &i in &outputs {
                 let mut u = BytesStart::new("Unknown");
                 u.push_attribute(("index", (i + 1).to_string().as_str()));
                 w.write_event(Event::Empty(u)).expect(ok);
             }
-            w.write_event(Event::End(BytesEnd::new("InitialUnknowns"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("InitialUnknowns")))
+                .expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("ModelStructure"))).expect(ok);
-        w.write_event(Event::End(BytesEnd::new("fmiModelDescription"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ModelStructure")))
+            .expect(ok);
+        w.write_event(Event::End(BytesEnd::new("fmiModelDescription")))
+            .expect(ok);
 
         let mut text = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
         text.push('\n');
@@ -476,7 +583,9 @@ fn fmt_real(x: f64) -> String {
 /// Not cryptographic; it only has to change whenever the variable table does.
 fn guid_of(text: &str) -> String {
     let lane = |offset: u64| {
-        text.bytes().fold(offset, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
+        text.bytes().fold(offset, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
     };
     let a = lane(0xcbf2_9ce4_8422_2325);
     let b = lane(0x6c62_272e_07bb_0142);
@@ -498,15 +607,38 @@ mod tests {
     use super::*;
 
     fn units() -> Vec<Unit> {
-        vec![Unit { name: "N", kg: 1, m: 1, s: -2 }]
+        vec![Unit {
+            name: "N",
+            kg: 1,
+            m: 1,
+            s: -2,
+        }]
     }
 
     #[test]
     fn guid_changes_with_the_table() {
-        let a = ModelInfo::new("m", "m", "", "1", vec![Variable::real_input("u", 1, "N", 0.0)], units(), true, None)
-            .expect("valid table");
-        let b = ModelInfo::new("m", "m", "", "1", vec![Variable::real_input("u", 2, "N", 0.0)], units(), true, None)
-            .expect("valid table");
+        let a = ModelInfo::new(
+            "m",
+            "m",
+            "",
+            "1",
+            vec![Variable::real_input("u", 1, "N", 0.0)],
+            units(),
+            true,
+            None,
+        )
+        .expect("valid table");
+        let b = ModelInfo::new(
+            "m",
+            "m",
+            "",
+            "1",
+            vec![Variable::real_input("u", 2, "N", 0.0)],
+            units(),
+            true,
+            None,
+        )
+        .expect("valid table");
         assert_ne!(a.guid, b.guid);
         assert_eq!(a.guid.len(), 38);
     }
@@ -518,7 +650,10 @@ mod tests {
             "m",
             "",
             "1",
-            vec![Variable::real_input("u", 1, "N", 0.0), Variable::real_output("y", 1, "N")],
+            vec![
+                Variable::real_input("u", 1, "N", 0.0),
+                Variable::real_output("y", 1, "N"),
+            ],
             units(),
             true,
             None,
@@ -531,7 +666,8 @@ mod tests {
     fn parameters_need_start_and_outputs_must_not_have_one() {
         let mut out = Variable::real_output("y", 2, "N");
         out.start = Start::Real(1.0);
-        let err = ModelInfo::new("m", "m", "", "1", vec![out], units(), true, None).expect_err("start on output");
+        let err = ModelInfo::new("m", "m", "", "1", vec![out], units(), true, None)
+            .expect_err("start on output");
         assert!(err.contains("start value"), "{err}");
     }
 

@@ -5,6 +5,7 @@
 //! (`effects/`), every effect off by default.
 
 pub mod effects;
+pub mod integrate;
 pub mod model;
 pub mod variables;
 

@@ -23,22 +23,68 @@ pub const MODEL_IDENTIFIER: &str = "fmu_shear";
 
 fn units() -> Vec<Unit> {
     vec![
-        Unit { name: "s", kg: 0, m: 0, s: 1 },
-        Unit { name: "kg", kg: 1, m: 0, s: 0 },
-        Unit { name: "m", kg: 0, m: 1, s: 0 },
-        Unit { name: "m/s", kg: 0, m: 1, s: -1 },
-        Unit { name: "m/s2", kg: 0, m: 1, s: -2 },
-        Unit { name: "N", kg: 1, m: 1, s: -2 },
-        Unit { name: "N.s/m", kg: 1, m: 0, s: -1 },
-        Unit { name: "N/m", kg: 1, m: 0, s: -2 },
-        Unit { name: "N/m3", kg: 1, m: -2, s: -2 },
+        Unit {
+            name: "s",
+            kg: 0,
+            m: 0,
+            s: 1,
+        },
+        Unit {
+            name: "kg",
+            kg: 1,
+            m: 0,
+            s: 0,
+        },
+        Unit {
+            name: "m",
+            kg: 0,
+            m: 1,
+            s: 0,
+        },
+        Unit {
+            name: "m/s",
+            kg: 0,
+            m: 1,
+            s: -1,
+        },
+        Unit {
+            name: "m/s2",
+            kg: 0,
+            m: 1,
+            s: -2,
+        },
+        Unit {
+            name: "N",
+            kg: 1,
+            m: 1,
+            s: -2,
+        },
+        Unit {
+            name: "N.s/m",
+            kg: 1,
+            m: 0,
+            s: -1,
+        },
+        Unit {
+            name: "N/m",
+            kg: 1,
+            m: 0,
+            s: -2,
+        },
+        Unit {
+            name: "N/m3",
+            kg: 1,
+            m: -2,
+            s: -2,
+        },
     ]
 }
 
 fn variables() -> Vec<Variable> {
     let p = ShearParameters::default();
     let mut v = vec![
-        Variable::real_input("force", FORCE, "N", 0.0).describe("excitation force on floor 1 (the shaker)"),
+        Variable::real_input("force", FORCE, "N", 0.0)
+            .describe("excitation force on floor 1 (the shaker)"),
         Variable::real_input("control_force", CONTROL_FORCE, "N", 0.0)
             .describe("control force on floor 1, acting against the excitation"),
     ];
@@ -52,18 +98,29 @@ fn variables() -> Vec<Variable> {
     }
     for i in 0..3u32 {
         let floor = i + 1;
-        v.push(Variable::real_output(&format!("disp{floor}"), DISP + i, "m").describe(&format!("displacement of floor {floor}")));
+        v.push(
+            Variable::real_output(&format!("disp{floor}"), DISP + i, "m")
+                .describe(&format!("displacement of floor {floor}")),
+        );
     }
     for i in 0..3u32 {
         let floor = i + 1;
-        v.push(Variable::real_output(&format!("vel{floor}"), VEL + i, "m/s").describe(&format!("velocity of floor {floor}")));
+        v.push(
+            Variable::real_output(&format!("vel{floor}"), VEL + i, "m/s")
+                .describe(&format!("velocity of floor {floor}")),
+        );
     }
     for i in 0..3u32 {
         let storey = i + 1;
-        let below = if i == 0 { "the ground".to_owned() } else { format!("floor {i}") };
+        let below = if i == 0 {
+            "the ground".to_owned()
+        } else {
+            format!("floor {i}")
+        };
         v.push(
-            Variable::real_output(&format!("drift{storey}"), DRIFT + i, "m")
-                .describe(&format!("inter-storey drift of storey {storey}: floor {storey} minus {below}")),
+            Variable::real_output(&format!("drift{storey}"), DRIFT + i, "m").describe(&format!(
+                "inter-storey drift of storey {storey}: floor {storey} minus {below}"
+            )),
         );
     }
     for i in 0..3usize {
@@ -85,9 +142,14 @@ fn variables() -> Vec<Variable> {
     for i in 0..3usize {
         let n = i + 1;
         v.push(
-            Variable::real_parameter(&format!("k{n}"), STIFFNESS + i as u32, "N/m", p.stiffness[i])
-                .min(0.0)
-                .describe(&format!("lateral stiffness of storey {n}")),
+            Variable::real_parameter(
+                &format!("k{n}"),
+                STIFFNESS + i as u32,
+                "N/m",
+                p.stiffness[i],
+            )
+            .min(0.0)
+            .describe(&format!("lateral stiffness of storey {n}")),
         );
     }
     v.push(

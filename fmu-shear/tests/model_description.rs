@@ -18,15 +18,22 @@ fn committed_model_description_matches_the_variable_table() {
     if std::env::var_os("UPDATE_MODEL_DESCRIPTION").is_some() {
         std::fs::write(&path, &generated).expect("write modelDescription");
     }
-    let committed = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("{}: {e}; regenerate with UPDATE_MODEL_DESCRIPTION=1", path.display()));
+    let committed = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}; regenerate with UPDATE_MODEL_DESCRIPTION=1",
+            path.display()
+        )
+    });
     assert!(
         committed == generated,
         "{} differs from the variable table; regenerate with UPDATE_MODEL_DESCRIPTION=1 and review the diff",
         path.display()
     );
     let guid_attr = format!("guid=\"{}\"", ShearModel::info().guid);
-    assert!(committed.contains(&guid_attr), "the committed XML carries the GUID the code checks");
+    assert!(
+        committed.contains(&guid_attr),
+        "the committed XML carries the GUID the code checks"
+    );
 }
 
 #[test]
@@ -46,7 +53,21 @@ fn every_effect_is_off_by_default_and_parameters_have_the_paper_priors() {
         assert_eq!(start(&format!("c{i}")), (-4.605f64).exp());
         assert_eq!(start(&format!("k{i}")), 4021.0);
     }
-    for name in ["force", "control_force", "acc1", "acc2", "acc3", "disp1", "vel3", "contact23_gap", "cubic2_stiffness", "friction1_force"] {
-        assert!(info.by_name(name).is_some(), "variable {name} is in the table");
+    for name in [
+        "force",
+        "control_force",
+        "acc1",
+        "acc2",
+        "acc3",
+        "disp1",
+        "vel3",
+        "contact23_gap",
+        "cubic2_stiffness",
+        "friction1_force",
+    ] {
+        assert!(
+            info.by_name(name).is_some(),
+            "variable {name} is in the table"
+        );
     }
 }

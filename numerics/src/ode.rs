@@ -2,8 +2,15 @@
 
 /// One classical 4th-order Runge–Kutta step of size `h` from `(t, x)`.
 #[inline]
-pub fn rk4_step<const N: usize>(f: impl Fn(f64, &[f64; N]) -> [f64; N], t: f64, x: &[f64; N], h: f64) -> [f64; N] {
-    let axpy = |a: &[f64; N], s: f64, b: &[f64; N]| -> [f64; N] { std::array::from_fn(|i| a[i] + s * b[i]) };
+pub fn rk4_step<const N: usize>(
+    f: impl Fn(f64, &[f64; N]) -> [f64; N],
+    t: f64,
+    x: &[f64; N],
+    h: f64,
+) -> [f64; N] {
+    let axpy = |a: &[f64; N], s: f64, b: &[f64; N]| -> [f64; N] {
+        std::array::from_fn(|i| a[i] + s * b[i])
+    };
     let k1 = f(t, x);
     let k2 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k1));
     let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));

@@ -13,7 +13,11 @@ use crate::run::{run_twin, Prediction, Progress};
 use crate::twin::Twin;
 
 #[derive(Parser)]
-#[command(name = "twin", version, about = "shear-twin: an operational digital twin of a shear frame, on FMI 2.0")]
+#[command(
+    name = "twin",
+    version,
+    about = "shear-twin: an operational digital twin of a shear frame, on FMI 2.0"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -141,11 +145,19 @@ pub fn run(cli: Cli) -> Result<()> {
 
 /// Write through a temporary file in the same directory, then rename: a failure leaves no
 /// partial file.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
-    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(parent).with_context(|| format!("{}: cannot create a temporary file", parent.display()))?;
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<()> {
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(parent)
+        .with_context(|| format!("{}: cannot create a temporary file", parent.display()))?;
     write(tmp.as_file_mut()).with_context(|| format!("writing {}", path.display()))?;
-    tmp.persist(path).with_context(|| format!("{}: cannot write", path.display()))?;
+    crate::fmu_archive::persist_readable(tmp, path)
+        .with_context(|| format!("{}: cannot write", path.display()))?;
     Ok(())
 }
 
@@ -169,7 +181,10 @@ fn progress_bar() -> impl FnMut(u64, u64) {
 
 pub fn compare_command(args: &CompareArgs) -> Result<()> {
     if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!("--transient must be a non-negative number of seconds, was {}", args.transient);
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
     }
     if let Some(plot) = &args.plot {
         if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
@@ -178,16 +193,33 @@ pub fn compare_command(args: &CompareArgs) -> Result<()> {
     }
     let data = Measurement::read(&args.data)?;
     if args.transient >= data.duration() {
-        bail!("--transient {} s leaves nothing of {} ({} s long)", args.transient, data.path.display(), data.duration());
+        bail!(
+            "--transient {} s leaves nothing of {} ({} s long)",
+            args.transient,
+            data.path.display(),
+            data.duration()
+        );
     }
     let twin = Twin::load(args.twin.as_deref())?;
     let prediction = run_twin(&twin, &data, progress_bar())?;
     let (noise_variance, noise_source) = match twin.noise_variance {
         Some(v) => (v, "twin (calibrated)"),
-        None => ([0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])), "prior: 2 % of the measured variance"),
+        None => (
+            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
+            "prior: 2 % of the measured variance",
+        ),
     };
-    let options = CompareOptions { transient: args.transient, ..CompareOptions::default() };
-    let comparison = compare(&data.time, &data.acc, &prediction.acc, noise_variance, options);
+    let options = CompareOptions {
+        transient: args.transient,
+        ..CompareOptions::default()
+    };
+    let comparison = compare(
+        &data.time,
+        &data.acc,
+        &prediction.acc,
+        noise_variance,
+        options,
+    );
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
@@ -223,7 +255,12 @@ fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
     let mut w = csv::Writer::from_writer(f);
     w.write_record(["time", "acc1", "acc2", "acc3"])?;
     for k in 0..p.time.len() {
-        w.write_record([format!("{}", p.time[k]), format!("{:e}", p.acc[0][k]), format!("{:e}", p.acc[1][k]), format!("{:e}", p.acc[2][k])])?;
+        w.write_record([
+            format!("{}", p.time[k]),
+            format!("{:e}", p.acc[0][k]),
+            format!("{:e}", p.acc[1][k]),
+            format!("{:e}", p.acc[2][k]),
+        ])?;
     }
     w.flush()?;
     Ok(())
@@ -231,7 +268,12 @@ fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
 
 fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
     println!("twin: {}", twin.describe());
-    println!("data: {} ({} samples, {} Hz)", data.path.display(), data.len(), 1.0 / data.dt);
+    println!(
+        "data: {} ({} samples, {} Hz)",
+        data.path.display(),
+        data.len(),
+        1.0 / data.dt
+    );
     println!("{:<8} {:>10} {:>12}", "floor", "NMSE %", "noise sd");
     for f in 0..3 {
         println!("{:<8} {:>10.3} {:>12.4e}", f + 1, c.nmse[f], c.noise_sd[f]);
@@ -242,7 +284,15 @@ fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
         println!("failing windows ({}):", c.failing_windows.len());
         for w in &c.failing_windows {
             let floors: Vec<String> = w.floors.iter().map(|f| f.to_string()).collect();
-            println!("  {:>7.2}–{:<7.2} s  floors {:<6} NMSE {:.1} / {:.1} / {:.1} %", w.start, w.end, floors.join(","), w.nmse[0], w.nmse[1], w.nmse[2]);
+            println!(
+                "  {:>7.2}–{:<7.2} s  floors {:<6} NMSE {:.1} / {:.1} / {:.1} %",
+                w.start,
+                w.end,
+                floors.join(","),
+                w.nmse[0],
+                w.nmse[1],
+                w.nmse[2]
+            );
         }
     }
 }
@@ -250,17 +300,27 @@ fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
 /// NMSE per floor of `twin` on `data` after the transient.
 pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3]> {
     let prediction = run_twin(twin, data, |_, _| {})?;
-    let first = data.time.iter().position(|&t| t - data.time[0] >= transient).unwrap_or(data.len());
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= transient)
+        .unwrap_or(data.len());
     Ok([0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &prediction.acc[f][first..])))
 }
 
 pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
     use crate::calibrate::{calibrate, calibrated_twin, read_priors, CalibrationSetup};
     if args.twin.as_deref() == Some(args.out.as_path()) {
-        bail!("--out {} is the input twin; the old twin is kept, so write the new one elsewhere", args.out.display());
+        bail!(
+            "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
+            args.out.display()
+        );
     }
     if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!("--transient must be a non-negative number of seconds, was {}", args.transient);
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
     }
     if let Some(plot) = &args.plot {
         if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
@@ -268,9 +328,18 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
         }
     }
     let data = Measurement::read(&args.data)?;
-    let validation = args.validate.iter().map(|p| Measurement::read(p)).collect::<Result<Vec<_>, _>>()?;
+    let validation = args
+        .validate
+        .iter()
+        .map(|p| Measurement::read(p))
+        .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
-    let mut setup = CalibrationSetup { transient: args.transient, starts: args.starts, seed: args.seed, ..CalibrationSetup::default() };
+    let mut setup = CalibrationSetup {
+        transient: args.transient,
+        starts: args.starts,
+        seed: args.seed,
+        ..CalibrationSetup::default()
+    };
     if !args.params.is_empty() {
         setup.parameters = args.params.clone();
     }
@@ -281,7 +350,10 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
     let new_twin = calibrated_twin(&twin, &calibration)?;
     let mut validated = Vec::new();
     for v in &validation {
-        validated.push((v.path.display().to_string(), nmse_on(&new_twin, v, args.transient)?));
+        validated.push((
+            v.path.display().to_string(),
+            nmse_on(&new_twin, v, args.transient)?,
+        ));
     }
 
     // All computed: now write, each file atomically.
@@ -311,21 +383,54 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
     }
     if let Some(path) = &args.plot {
         let prediction = run_twin(&new_twin, &data, |_, _| {})?;
-        let options = CompareOptions { transient: args.transient, ..CompareOptions::default() };
-        let comparison = compare(&data.time, &data.acc, &prediction.acc, calibration.noise_variance, options);
+        let options = CompareOptions {
+            transient: args.transient,
+            ..CompareOptions::default()
+        };
+        let comparison = compare(
+            &data.time,
+            &data.acc,
+            &prediction.acc,
+            calibration.noise_variance,
+            options,
+        );
         let title = format!("calibrated on {}", data.path.display());
         crate::report::plot_comparison(&comparison, &data.force, &title, path, false)?;
     }
 
-    println!("calibrated on {} ({} starts, {} simulations, {:.2} s)", data.path.display(), calibration.starts.len(), calibration.simulations, calibration.seconds);
-    println!("{:<10} {:>12} {:>12} {:>14}", "parameter", "MAP", "sd", "prior mean");
+    println!(
+        "calibrated on {} ({} starts, {} simulations, {:.2} s)",
+        data.path.display(),
+        calibration.starts.len(),
+        calibration.simulations,
+        calibration.seconds
+    );
+    println!(
+        "{:<10} {:>12} {:>12} {:>14}",
+        "parameter", "MAP", "sd", "prior mean"
+    );
     for p in &calibration.parameters {
-        println!("{:<10} {:>12.4} {:>12.4} {:>14.4}", p.name, p.value, p.sd, p.prior.value(p.prior.mean));
+        println!(
+            "{:<10} {:>12.4} {:>12.4} {:>14.4}",
+            p.name,
+            p.value,
+            p.sd,
+            p.prior.value(p.prior.mean)
+        );
     }
     for f in 0..3 {
-        println!("noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})", f + 1, calibration.noise_variance[f], calibration.noise_log_sd[f]);
+        println!(
+            "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
+            f + 1,
+            calibration.noise_variance[f],
+            calibration.noise_log_sd[f]
+        );
     }
-    let names: Vec<&str> = calibration.parameters.iter().map(|p| p.name.as_str()).collect();
+    let names: Vec<&str> = calibration
+        .parameters
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
     let mut strongest = Vec::new();
     for a in 0..names.len() {
         for b in a + 1..names.len() {
@@ -333,9 +438,19 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
         }
     }
     strongest.sort_by(|x, y| y.0.abs().total_cmp(&x.0.abs()));
-    let shown: Vec<String> = strongest.iter().take(3).map(|(r, a, b)| format!("{a}–{b} {r:+.2}")).collect();
+    let shown: Vec<String> = strongest
+        .iter()
+        .take(3)
+        .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
+        .collect();
     println!("strongest correlations: {}", shown.join(", "));
-    println!("NMSE % on {}: {:.3} / {:.3} / {:.3}", data.path.display(), calibration.nmse[0], calibration.nmse[1], calibration.nmse[2]);
+    println!(
+        "NMSE % on {}: {:.3} / {:.3} / {:.3}",
+        data.path.display(),
+        calibration.nmse[0],
+        calibration.nmse[1],
+        calibration.nmse[2]
+    );
     for (p, n) in &validated {
         println!("NMSE % on {p}: {:.3} / {:.3} / {:.3}", n[0], n[1], n[2]);
     }

@@ -20,7 +20,11 @@ pub fn nmse(measured: &[f64], predicted: &[f64]) -> f64 {
     }
     let mean = measured.iter().sum::<f64>() / n;
     let var = measured.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n;
-    let sse: f64 = measured.iter().zip(predicted).map(|(y, p)| (y - p).powi(2)).sum();
+    let sse: f64 = measured
+        .iter()
+        .zip(predicted)
+        .map(|(y, p)| (y - p).powi(2))
+        .sum();
     100.0 * sse / (n * var)
 }
 
@@ -43,7 +47,11 @@ pub struct CompareOptions {
 
 impl Default for CompareOptions {
     fn default() -> Self {
-        CompareOptions { transient: DEFAULT_TRANSIENT, merge_gap: DEFAULT_MERGE_GAP, min_outliers: DEFAULT_MIN_OUTLIERS }
+        CompareOptions {
+            transient: DEFAULT_TRANSIENT,
+            merge_gap: DEFAULT_MERGE_GAP,
+            min_outliers: DEFAULT_MIN_OUTLIERS,
+        }
     }
 }
 
@@ -62,7 +70,11 @@ pub struct Comparison {
 
 impl Comparison {
     pub fn residual(&self, floor: usize) -> Vec<f64> {
-        self.measured[floor].iter().zip(&self.predicted[floor]).map(|(y, p)| y - p).collect()
+        self.measured[floor]
+            .iter()
+            .zip(&self.predicted[floor])
+            .map(|(y, p)| y - p)
+            .collect()
     }
 }
 
@@ -74,14 +86,21 @@ pub fn compare(
     options: CompareOptions,
 ) -> Comparison {
     let n = time.len();
-    let first = time.iter().position(|&t| t - time[0] >= options.transient).unwrap_or(n);
-    let nmse_floor = |f: usize, range: std::ops::Range<usize>| nmse(&measured[f][range.clone()], &predicted[f][range]);
+    let first = time
+        .iter()
+        .position(|&t| t - time[0] >= options.transient)
+        .unwrap_or(n);
+    let nmse_floor = |f: usize, range: std::ops::Range<usize>| {
+        nmse(&measured[f][range.clone()], &predicted[f][range])
+    };
     let overall = [0, 1, 2].map(|f| nmse_floor(f, first..n));
     let noise_sd = noise_variance.map(f64::sqrt);
 
     // Out-of-band samples per floor, after the transient.
     let outside = |f: usize, k: usize| (measured[f][k] - predicted[f][k]).abs() > 3.0 * noise_sd[f];
-    let out_samples: Vec<usize> = (first..n).filter(|&k| (0..3).any(|f| outside(f, k))).collect();
+    let out_samples: Vec<usize> = (first..n)
+        .filter(|&k| (0..3).any(|f| outside(f, k)))
+        .collect();
 
     // Group out-of-band samples into windows, merging stretches closer than merge_gap.
     let mut groups: Vec<Vec<usize>> = Vec::new();
@@ -96,8 +115,16 @@ pub fn compare(
         .filter(|g| g.len() >= options.min_outliers)
         .map(|g| {
             let (a, b) = (g[0], g[g.len() - 1]);
-            let floors = (0..3).filter(|&f| g.iter().any(|&k| outside(f, k))).map(|f| f + 1).collect();
-            FailingWindow { start: time[a], end: time[b], floors, nmse: [0, 1, 2].map(|f| nmse_floor(f, a..b + 1)) }
+            let floors = (0..3)
+                .filter(|&f| g.iter().any(|&k| outside(f, k)))
+                .map(|f| f + 1)
+                .collect();
+            FailingWindow {
+                start: time[a],
+                end: time[b],
+                floors,
+                nmse: [0, 1, 2].map(|f| nmse_floor(f, a..b + 1)),
+            }
         })
         .collect();
 
@@ -143,10 +170,19 @@ mod tests {
         }
         // One isolated outlier (noise-like) is not a window.
         measured[1][300] += 1.0;
-        let c = compare(&time, &measured, &predicted, [0.01; 3], CompareOptions::default());
+        let c = compare(
+            &time,
+            &measured,
+            &predicted,
+            [0.01; 3],
+            CompareOptions::default(),
+        );
         assert_eq!(c.failing_windows.len(), 2, "{:?}", c.failing_windows);
         let w = &c.failing_windows[0];
-        assert!((w.start - 5.0).abs() < 1e-9 && (w.end - 5.4).abs() < 1e-9, "{w:?}");
+        assert!(
+            (w.start - 5.0).abs() < 1e-9 && (w.end - 5.4).abs() < 1e-9,
+            "{w:?}"
+        );
         assert_eq!(w.floors, vec![3]);
         assert_eq!(w.nmse[0], 0.0);
         assert!(w.nmse[2] > 100.0);
@@ -160,7 +196,13 @@ mod tests {
         let y: Vec<f64> = time.iter().map(|t| t.sin()).collect();
         let mut measured = [y.clone(), y.clone(), y.clone()];
         measured[0][10] += 5.0; // inside the first 2 s
-        let c = compare(&time, &measured, &[y.clone(), y.clone(), y], [1e-4; 3], CompareOptions::default());
+        let c = compare(
+            &time,
+            &measured,
+            &[y.clone(), y.clone(), y],
+            [1e-4; 3],
+            CompareOptions::default(),
+        );
         assert_eq!(c.nmse[0], 0.0);
         assert!(c.failing_windows.is_empty());
         assert_eq!(c.first, 200);

@@ -38,13 +38,32 @@ impl Measurement {
     }
 
     pub fn read(path: &Path) -> Result<Self, DataError> {
-        let err = |line: Option<u64>, message: String| DataError { path: path.to_owned(), line, message };
+        let err = |line: Option<u64>, message: String| DataError {
+            path: path.to_owned(),
+            line,
+            message,
+        };
+        let bytes = std::fs::read(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
+        // Line numbers from byte offsets: the csv crate's own line count is off by one on CRLF files.
+        let line_at = |p: Option<&csv::Position>| {
+            p.map(|p| {
+                let mut at = (p.byte() as usize).min(bytes.len());
+                // A record's recorded start can sit on the line break before it.
+                while at < bytes.len() && (bytes[at] == b'\r' || bytes[at] == b'\n') {
+                    at += 1;
+                }
+                1 + bytes[..at].iter().filter(|&&b| b == b'\n').count() as u64
+            })
+        };
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
-            .from_path(path)
-            .map_err(|e| err(None, format!("cannot read: {e}")))?;
-        let header: Vec<String> =
-            reader.headers().map_err(|e| err(Some(1), format!("bad header: {e}")))?.iter().map(str::to_owned).collect();
+            .from_reader(bytes.as_slice());
+        let header: Vec<String> = reader
+            .headers()
+            .map_err(|e| err(Some(1), format!("bad header: {e}")))?
+            .iter()
+            .map(str::to_owned)
+            .collect();
         let mut index = HashMap::new();
         for (i, name) in header.iter().enumerate() {
             if index.insert(name.clone(), i).is_some() {
@@ -55,24 +74,36 @@ impl Measurement {
             if !index.contains_key(required) {
                 return Err(err(
                     Some(1),
-                    format!("missing column '{required}' (the header must have {})", REQUIRED_COLUMNS.join(",")),
+                    format!(
+                        "missing column '{required}' (the header must have {})",
+                        REQUIRED_COLUMNS.join(",")
+                    ),
                 ));
             }
         }
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
         for record in reader.records() {
-            let record = record.map_err(|e| {
-                let line = e.position().map(|p| p.line());
-                err(line, format!("malformed row: {e}"))
-            })?;
-            let line = record.position().map(|p| p.line());
+            let record =
+                record.map_err(|e| err(line_at(e.position()), format!("malformed row: {e}")))?;
+            let line = line_at(record.position());
             if record.len() != header.len() {
-                return Err(err(line, format!("{} fields, the header has {}", record.len(), header.len())));
+                return Err(err(
+                    line,
+                    format!("{} fields, the header has {}", record.len(), header.len()),
+                ));
             }
             for (i, field) in record.iter().enumerate() {
-                let value: f64 = field.parse().map_err(|_| err(line, format!("'{}' is not a number: '{field}'", header[i])))?;
+                let value: f64 = field.parse().map_err(|_| {
+                    err(line, format!("'{}' is not a number: '{field}'", header[i]))
+                })?;
                 if !value.is_finite() {
-                    return Err(err(line, format!("'{}' is {value}; only finite numbers are accepted", header[i])));
+                    return Err(err(
+                        line,
+                        format!(
+                            "'{}' is {value}; only finite numbers are accepted",
+                            header[i]
+                        ),
+                    ));
                 }
                 columns[i].push(value);
             }
@@ -84,20 +115,39 @@ impl Measurement {
         let time = std::mem::take(&mut columns[index["time"]]);
         for k in 1..n {
             if time[k] <= time[k - 1] {
-                return Err(err(Some(k as u64 + 2), format!("time {} does not increase (previous {})", time[k], time[k - 1])));
+                return Err(err(
+                    Some(k as u64 + 2),
+                    format!(
+                        "time {} does not increase (previous {})",
+                        time[k],
+                        time[k - 1]
+                    ),
+                ));
             }
         }
         let dt = uniform_step(&time).map_err(|(k, message)| err(Some(k as u64 + 2), message))?;
-        let take = |columns: &mut Vec<Vec<f64>>, name: &str| std::mem::take(&mut columns[index[name]]);
+        let take =
+            |columns: &mut Vec<Vec<f64>>, name: &str| std::mem::take(&mut columns[index[name]]);
         let force = take(&mut columns, "force");
-        let acc = [take(&mut columns, "acc1"), take(&mut columns, "acc2"), take(&mut columns, "acc3")];
+        let acc = [
+            take(&mut columns, "acc1"),
+            take(&mut columns, "acc2"),
+            take(&mut columns, "acc3"),
+        ];
         let extra = header
             .iter()
             .enumerate()
             .filter(|(_, name)| !REQUIRED_COLUMNS.contains(&name.as_str()))
             .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[i])))
             .collect();
-        Ok(Measurement { path: path.to_owned(), time, force, acc, dt, extra })
+        Ok(Measurement {
+            path: path.to_owned(),
+            time,
+            force,
+            acc,
+            dt,
+            extra,
+        })
     }
 }
 
@@ -112,7 +162,10 @@ fn uniform_step(time: &[f64]) -> Result<f64, (usize, String)> {
     for (k, t) in time.iter().enumerate() {
         let grid = time[0] + k as f64 * dt;
         if (t - grid).abs() > tolerance {
-            return Err((k, format!("non-uniform sampling: time {t} is off the {dt} s grid (expected {grid})")));
+            return Err((
+                k,
+                format!("non-uniform sampling: time {t} is off the {dt} s grid (expected {grid})"),
+            ));
         }
     }
     let rate = 1.0 / dt;
@@ -156,21 +209,49 @@ mod tests {
     #[test]
     fn refuses_bad_files_naming_file_line_and_problem() {
         let cases = [
-            ("time,force,acc1,acc2\n0,1,2,3\n1,1,2,3\n", None, "missing column 'acc3'"),
-            ("time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,NaN,3,4\n", Some(3), "only finite"),
-            ("time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,x,3,4\n", Some(3), "not a number"),
-            ("time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,2,3,4\n0.5,1,2,3,4\n", Some(4), "does not increase"),
-            ("time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,2,3,4\n3,1,2,3,4\n", Some(3), "non-uniform"),
+            (
+                "time,force,acc1,acc2\n0,1,2,3\n1,1,2,3\n",
+                None,
+                "missing column 'acc3'",
+            ),
+            (
+                "time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,NaN,3,4\n",
+                Some(3),
+                "only finite",
+            ),
+            (
+                "time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,x,3,4\n",
+                Some(3),
+                "not a number",
+            ),
+            (
+                "time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,2,3,4\n0.5,1,2,3,4\n",
+                Some(4),
+                "does not increase",
+            ),
+            (
+                "time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,2,3,4\n3,1,2,3,4\n",
+                Some(3),
+                "non-uniform",
+            ),
             ("time,force,acc1,acc2,acc3\n", None, "0 data rows"),
             ("", None, "missing column"),
             ("time,force,acc1,acc2,acc3\n0,1,2,3\n", Some(2), "fields"),
+            (
+                "time,force,acc1,acc2,acc3\r\n0,1,0,0,0\r\n0.5,NaN,2,3,4\r\n1,1,2,3,4\r\n",
+                Some(3),
+                "only finite",
+            ),
         ];
         for (text, line, needle) in cases {
             let f = file(text);
             let e = Measurement::read(f.path()).expect_err(needle);
             let shown = e.to_string();
             assert!(shown.contains(needle), "{needle}: {shown}");
-            assert!(shown.contains(&f.path().display().to_string()), "names the file: {shown}");
+            assert!(
+                shown.contains(&f.path().display().to_string()),
+                "names the file: {shown}"
+            );
             if let Some(l) = line {
                 assert_eq!(e.line, Some(l), "{shown}");
             }

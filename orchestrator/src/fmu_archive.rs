@@ -10,11 +10,17 @@ use zip::write::SimpleFileOptions;
 #[derive(Debug, thiserror::Error)]
 pub enum PackError {
     #[error("{path}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
     #[error("writing the archive {path}")]
-    Zip { path: PathBuf, source: zip::result::ZipError },
+    Zip {
+        path: PathBuf,
+        source: zip::result::ZipError,
+    },
 }
 
 /// What goes into one FMU.
@@ -28,7 +34,10 @@ pub struct FmuContents {
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PackError + '_ {
-    move |source| PackError::Io { path: path.to_owned(), source }
+    move |source| PackError::Io {
+        path: path.to_owned(),
+        source,
+    }
 }
 
 /// The `modelIdentifier` of the `CoSimulation` element of a modelDescription.
@@ -47,10 +56,16 @@ pub fn model_identifier(xml: &str, path: &Path) -> Result<String, PackError> {
                         return Ok(value.into_owned());
                     }
                 }
-                return Err(PackError::Invalid { path: path.to_owned(), message: "CoSimulation has no modelIdentifier".into() });
+                return Err(PackError::Invalid {
+                    path: path.to_owned(),
+                    message: "CoSimulation has no modelIdentifier".into(),
+                });
             }
             Ok(Event::Eof) => {
-                return Err(PackError::Invalid { path: path.to_owned(), message: "no CoSimulation element".into() })
+                return Err(PackError::Invalid {
+                    path: path.to_owned(),
+                    message: "no CoSimulation element".into(),
+                })
             }
             Err(err) => {
                 return Err(PackError::Invalid {
@@ -74,7 +89,11 @@ fn files_below(dir: &Path) -> Result<Vec<(PathBuf, String)>, PackError> {
             if path.is_dir() {
                 stack.push(path);
             } else {
-                let relative = path.strip_prefix(dir).unwrap_or(&path).to_string_lossy().replace('\\', "/");
+                let relative = path
+                    .strip_prefix(dir)
+                    .unwrap_or(&path)
+                    .to_string_lossy()
+                    .replace('\\', "/");
                 out.push((path, relative));
             }
         }
@@ -86,7 +105,8 @@ fn files_below(dir: &Path) -> Result<Vec<(PathBuf, String)>, PackError> {
 /// Pack an FMU into `out` (written to a temporary file beside it, then renamed: a failed pack
 /// leaves no half archive). Returns the model identifier.
 pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError> {
-    let xml = std::fs::read_to_string(&contents.model_description).map_err(io_err(&contents.model_description))?;
+    let xml = std::fs::read_to_string(&contents.model_description)
+        .map_err(io_err(&contents.model_description))?;
     let identifier = model_identifier(&xml, &contents.model_description)?;
     let mut library = Vec::new();
     File::open(&contents.library)
@@ -97,7 +117,10 @@ pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError>
         ("modelDescription.xml".into(), xml.into_bytes()),
         (format!("binaries/linux64/{identifier}.so"), library),
     ];
-    for (folder, dir) in [("documentation", &contents.documentation), ("resources", &contents.resources)] {
+    for (folder, dir) in [
+        ("documentation", &contents.documentation),
+        ("resources", &contents.resources),
+    ] {
         if let Some(dir) = dir {
             for (path, relative) in files_below(dir)? {
                 let bytes = std::fs::read(&path).map_err(io_err(&path))?;
@@ -106,19 +129,41 @@ pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError>
         }
     }
 
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     let tmp = tempfile::NamedTempFile::new_in(parent).map_err(io_err(parent))?;
-    let zip_err = |source| PackError::Zip { path: out.to_owned(), source };
+    let zip_err = |source| PackError::Zip {
+        path: out.to_owned(),
+        source,
+    };
     {
         let mut zip = zip::ZipWriter::new(tmp.as_file());
-        let options = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+        let options =
+            SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
         for (name, bytes) in &entries {
             zip.start_file(name.as_str(), options).map_err(zip_err)?;
             zip.write_all(bytes).map_err(io_err(out))?;
         }
         zip.finish().map_err(zip_err)?;
     }
-    tmp.persist(out).map_err(|e| PackError::Io { path: out.to_owned(), source: e.error })?;
+    persist_readable(tmp, out).map_err(|source| PackError::Io {
+        path: out.to_owned(),
+        source,
+    })?;
     Ok(identifier)
+}
+
+/// Move a finished temporary file into place as an ordinary readable file (0644), not with the
+/// temporary file's private 0600.
+pub fn persist_readable(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
 }

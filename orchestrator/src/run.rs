@@ -34,7 +34,10 @@ pub struct Progress<F: FnMut(u64, u64)> {
 
 impl<F: FnMut(u64, u64)> Progress<F> {
     pub fn new(report: F) -> Self {
-        Progress { started: Instant::now(), report }
+        Progress {
+            started: Instant::now(),
+            report,
+        }
     }
     pub fn tick(&mut self, done: u64, total: u64) {
         if self.started.elapsed() > Duration::from_secs(1) {
@@ -45,7 +48,11 @@ impl<F: FnMut(u64, u64)> Progress<F> {
 
 /// Run `twin` on `data`'s force (the control force, if the data has a `control` column and the
 /// twin takes it, is replayed too).
-pub fn run_twin(twin: &Twin, data: &Measurement, mut progress: impl FnMut(u64, u64)) -> Result<Prediction, RunError> {
+pub fn run_twin(
+    twin: &Twin,
+    data: &Measurement,
+    mut progress: impl FnMut(u64, u64),
+) -> Result<Prediction, RunError> {
     let start = data.time[0];
     let instances = twin.instantiate(start)?;
     let mut system = System::new();
@@ -83,18 +90,35 @@ pub fn run_twin(twin: &Twin, data: &Measurement, mut progress: impl FnMut(u64, u
     };
     let mut signals = std::collections::HashMap::new();
     for conn in &twin.connections {
-        let Some(end) = &conn.end_element else { continue };
-        let (_, to, inputs, _) = nodes.iter().find(|(n, ..)| n == end).ok_or_else(|| RunError::Wiring(format!("no component '{end}'")))?;
-        let port_index = inputs.iter().position(|i| *i == conn.end_connector).unwrap_or(0);
+        let Some(end) = &conn.end_element else {
+            continue;
+        };
+        let (_, to, inputs, _) = nodes
+            .iter()
+            .find(|(n, ..)| n == end)
+            .ok_or_else(|| RunError::Wiring(format!("no component '{end}'")))?;
+        let port_index = inputs
+            .iter()
+            .position(|i| *i == conn.end_connector)
+            .unwrap_or(0);
         let from = match &conn.start_element {
             None => {
-                let Some(samples) = signal_for(&conn.start_connector) else { continue };
-                *signals.entry(conn.start_connector.clone()).or_insert_with(|| system.add_signal(&conn.start_connector, samples))
+                let Some(samples) = signal_for(&conn.start_connector) else {
+                    continue;
+                };
+                *signals
+                    .entry(conn.start_connector.clone())
+                    .or_insert_with(|| system.add_signal(&conn.start_connector, samples))
             }
             Some(start_el) => {
-                let (_, from_id, _, outputs) =
-                    nodes.iter().find(|(n, ..)| n == start_el).ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
-                let p = outputs.iter().position(|o| *o == conn.start_connector).unwrap_or(0);
+                let (_, from_id, _, outputs) = nodes
+                    .iter()
+                    .find(|(n, ..)| n == start_el)
+                    .ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
+                let p = outputs
+                    .iter()
+                    .position(|o| *o == conn.start_connector)
+                    .unwrap_or(0);
                 Port::Output(*from_id, p)
             }
         };
@@ -106,11 +130,21 @@ pub fn run_twin(twin: &Twin, data: &Measurement, mut progress: impl FnMut(u64, u
             .connections
             .iter()
             .find(|c| c.end_element.is_none() && c.end_connector == output)
-            .ok_or_else(|| RunError::Wiring(format!("no connection feeds the system output '{output}'")))?;
-        let start_el = conn.start_element.as_ref().ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
-        let (_, id, _, outputs) =
-            nodes.iter().find(|(n, ..)| n == start_el).ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
-        let p = outputs.iter().position(|o| *o == conn.start_connector).unwrap_or(0);
+            .ok_or_else(|| {
+                RunError::Wiring(format!("no connection feeds the system output '{output}'"))
+            })?;
+        let start_el = conn
+            .start_element
+            .as_ref()
+            .ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
+        let (_, id, _, outputs) = nodes
+            .iter()
+            .find(|(n, ..)| n == start_el)
+            .ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
+        let p = outputs
+            .iter()
+            .position(|o| *o == conn.start_connector)
+            .unwrap_or(0);
         watched.push((output.to_owned(), Port::Output(*id, p)));
     }
     let mut recorder = Recorder::new(watched);
@@ -118,6 +152,11 @@ pub fn run_twin(twin: &Twin, data: &Measurement, mut progress: impl FnMut(u64, u
     system.run(clock, &mut [&mut recorder], &mut progress)?;
     drop(system);
     drop(loaded);
-    let [a1, a2, a3] = std::mem::take(&mut recorder.columns).try_into().map_err(|_| RunError::Wiring("three outputs".into()))?;
-    Ok(Prediction { time: recorder.time, acc: [a1, a2, a3] })
+    let [a1, a2, a3] = std::mem::take(&mut recorder.columns)
+        .try_into()
+        .map_err(|_| RunError::Wiring("three outputs".into()))?;
+    Ok(Prediction {
+        time: recorder.time,
+        acc: [a1, a2, a3],
+    })
 }

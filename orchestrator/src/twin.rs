@@ -33,6 +33,15 @@ pub enum TwinError {
     Import(#[from] ImportError),
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
+    #[error("{0}")]
+    Message(String),
+    #[error("{twin}: component '{component}' ({fmu}): {inner}")]
+    Component {
+        twin: String,
+        component: String,
+        fmu: String,
+        inner: Box<TwinError>,
+    },
     #[error("{path}")]
     Io {
         path: PathBuf,
@@ -178,14 +187,20 @@ impl Twin {
     }
 
     pub fn describe(&self) -> String {
-        self.source.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "default twin (shear FMU, default parameters)".into())
+        self.source
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "default twin (shear FMU, default parameters)".into())
     }
 
     // -----------------------------------------------------------------------------------------
     // Reading
 
     pub fn read(path: &Path) -> Result<Self, TwinError> {
-        let invalid = |message: String| TwinError::Invalid { path: path.to_owned(), message };
+        let invalid = |message: String| TwinError::Invalid {
+            path: path.to_owned(),
+            message,
+        };
         let unpacked = import::unpack(path, UnpackLimits::default())?;
         let ssd_path = unpacked.path().join("SystemStructure.ssd");
         let ssd = std::fs::read_to_string(&ssd_path)
@@ -197,30 +212,51 @@ impl Twin {
                 .source
                 .strip_prefix("resources/")
                 .filter(|n| !n.contains('/'))
-                .ok_or_else(|| invalid(format!("component '{}': source '{}' is not resources/<file>.fmu", c.name, c.source)))?
+                .ok_or_else(|| {
+                    invalid(format!(
+                        "component '{}': source '{}' is not resources/<file>.fmu",
+                        c.name, c.source
+                    ))
+                })?
                 .to_owned();
             let fmu_path = unpacked.path().join("resources").join(&fmu_name);
             if !fmu_path.is_file() {
-                return Err(invalid(format!("component '{}': {} is missing from the archive", c.name, c.source)));
+                return Err(invalid(format!(
+                    "component '{}': {} is missing from the archive",
+                    c.name, c.source
+                )));
             }
             let mut parameters = BTreeMap::new();
             for binding in c.bindings {
                 let ssv_path = unpacked.path().join(&binding);
-                let ssv = std::fs::read_to_string(&ssv_path).map_err(|e| invalid(format!("{binding}: {e}")))?;
-                for (name, value) in parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))? {
+                let ssv = std::fs::read_to_string(&ssv_path)
+                    .map_err(|e| invalid(format!("{binding}: {e}")))?;
+                for (name, value) in
+                    parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?
+                {
                     parameters.insert(name, value);
                 }
             }
-            components.push(Component { name: c.name, fmu_name, fmu_path, parameters });
+            components.push(Component {
+                name: c.name,
+                fmu_name,
+                fmu_path,
+                parameters,
+            });
         }
         let mut noise_variance = None;
         for binding in parsed.system_bindings {
-            let ssv = std::fs::read_to_string(unpacked.path().join(&binding)).map_err(|e| invalid(format!("{binding}: {e}")))?;
-            let values: BTreeMap<String, ParameterValue> =
-                parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?.into_iter().collect();
+            let ssv = std::fs::read_to_string(unpacked.path().join(&binding))
+                .map_err(|e| invalid(format!("{binding}: {e}")))?;
+            let values: BTreeMap<String, ParameterValue> = parse_ssv(&ssv)
+                .map_err(|m| invalid(format!("{binding}: {m}")))?
+                .into_iter()
+                .collect();
             let get = |i: usize| match values.get(&format!("noise_variance{i}")) {
                 Some(ParameterValue::Real(x)) if *x > 0.0 && x.is_finite() => Ok(*x),
-                Some(other) => Err(invalid(format!("{binding}: noise_variance{i} = {other} is not a positive real"))),
+                Some(other) => Err(invalid(format!(
+                    "{binding}: noise_variance{i} = {other} is not a positive real"
+                ))),
                 None => Err(invalid(format!("{binding}: noise_variance{i} is missing"))),
             };
             noise_variance = Some([get(1)?, get(2)?, get(3)?]);
@@ -240,42 +276,68 @@ impl Twin {
 
     /// Write the archive to `path` (through a temporary file: a failure leaves nothing half-written).
     pub fn write(&self, path: &Path) -> Result<(), TwinError> {
-        let io = |source| TwinError::Io { path: path.to_owned(), source };
-        let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let io = |source| TwinError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        let parent = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
         let tmp = tempfile::NamedTempFile::new_in(parent).map_err(io)?;
         {
             let mut zip = zip::ZipWriter::new(tmp.as_file());
-            let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
-            let zip_err = |e: zip::result::ZipError| TwinError::Invalid { path: path.to_owned(), message: format!("writing the archive: {e}") };
-            zip.start_file("SystemStructure.ssd", options).map_err(zip_err)?;
+            let options = zip::write::SimpleFileOptions::default()
+                .compression_method(zip::CompressionMethod::Deflated);
+            let zip_err = |e: zip::result::ZipError| TwinError::Invalid {
+                path: path.to_owned(),
+                message: format!("writing the archive: {e}"),
+            };
+            zip.start_file("SystemStructure.ssd", options)
+                .map_err(zip_err)?;
             zip.write_all(self.ssd_xml().as_bytes()).map_err(io)?;
             let mut written = Vec::new();
             for c in &self.components {
                 if !written.contains(&c.fmu_name) {
-                    let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io { path: c.fmu_path.clone(), source })?;
-                    zip.start_file(format!("resources/{}", c.fmu_name), options).map_err(zip_err)?;
+                    let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io {
+                        path: c.fmu_path.clone(),
+                        source,
+                    })?;
+                    zip.start_file(format!("resources/{}", c.fmu_name), options)
+                        .map_err(zip_err)?;
                     zip.write_all(&bytes).map_err(io)?;
                     written.push(c.fmu_name.clone());
                 }
-                zip.start_file(format!("resources/{}.ssv", c.name), options).map_err(zip_err)?;
-                zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes()).map_err(io)?;
+                zip.start_file(format!("resources/{}.ssv", c.name), options)
+                    .map_err(zip_err)?;
+                zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes())
+                    .map_err(io)?;
             }
             if let Some(nv) = self.noise_variance {
-                let values: BTreeMap<String, ParameterValue> =
-                    (0..3).map(|i| (format!("noise_variance{}", i + 1), ParameterValue::Real(nv[i]))).collect();
-                zip.start_file("resources/twin.ssv", options).map_err(zip_err)?;
-                zip.write_all(ssv_xml("twin", &values).as_bytes()).map_err(io)?;
+                let values: BTreeMap<String, ParameterValue> = (0..3)
+                    .map(|i| {
+                        (
+                            format!("noise_variance{}", i + 1),
+                            ParameterValue::Real(nv[i]),
+                        )
+                    })
+                    .collect();
+                zip.start_file("resources/twin.ssv", options)
+                    .map_err(zip_err)?;
+                zip.write_all(ssv_xml("twin", &values).as_bytes())
+                    .map_err(io)?;
             }
             zip.finish().map_err(zip_err)?;
         }
-        tmp.persist(path).map_err(|e| io(e.error))?;
+        crate::fmu_archive::persist_readable(tmp, path).map_err(io)?;
         Ok(())
     }
 
-    fn ssd_xml(&self, ) -> String {
+    fn ssd_xml(&self) -> String {
         let ok = "writing XML to memory cannot fail";
         let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
-        w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None))).expect(ok);
+        w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
+            .expect(ok);
         let mut root = BytesStart::new("ssd:SystemStructureDescription");
         root.push_attribute(("xmlns:ssd", NS_SSD));
         root.push_attribute(("xmlns:ssc", NS_SSC));
@@ -292,18 +354,23 @@ impl Twin {
             c.push_attribute(("name", name));
             c.push_attribute(("kind", kind));
             w.write_event(Event::Start(c)).expect(ok);
-            w.write_event(Event::Empty(BytesStart::new(format!("ssc:{ty}")))).expect(ok);
-            w.write_event(Event::End(BytesEnd::new("ssd:Connector"))).expect(ok);
+            w.write_event(Event::Empty(BytesStart::new(format!("ssc:{ty}"))))
+                .expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:Connector")))
+                .expect(ok);
         };
         let binding = |w: &mut Writer<Vec<u8>>, source: &str| {
-            w.write_event(Event::Start(BytesStart::new("ssd:ParameterBindings"))).expect(ok);
+            w.write_event(Event::Start(BytesStart::new("ssd:ParameterBindings")))
+                .expect(ok);
             let mut b = BytesStart::new("ssd:ParameterBinding");
             b.push_attribute(("source", source));
             w.write_event(Event::Empty(b)).expect(ok);
-            w.write_event(Event::End(BytesEnd::new("ssd:ParameterBindings"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:ParameterBindings")))
+                .expect(ok);
         };
 
-        w.write_event(Event::Start(BytesStart::new("ssd:Connectors"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
+            .expect(ok);
         for input in INPUTS {
             connector(&mut w, input, "input", "Real");
         }
@@ -315,19 +382,22 @@ impl Twin {
                 connector(&mut w, &format!("noise_variance{i}"), "parameter", "Real");
             }
         }
-        w.write_event(Event::End(BytesEnd::new("ssd:Connectors"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
+            .expect(ok);
         if self.noise_variance.is_some() {
             binding(&mut w, "resources/twin.ssv");
         }
 
-        w.write_event(Event::Start(BytesStart::new("ssd:Elements"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("ssd:Elements")))
+            .expect(ok);
         for c in &self.components {
             let mut e = BytesStart::new("ssd:Component");
             e.push_attribute(("name", c.name.as_str()));
             e.push_attribute(("type", "application/x-fmu-sharedlibrary"));
             e.push_attribute(("source", format!("resources/{}", c.fmu_name).as_str()));
             w.write_event(Event::Start(e)).expect(ok);
-            w.write_event(Event::Start(BytesStart::new("ssd:Connectors"))).expect(ok);
+            w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
+                .expect(ok);
             let mut listed: Vec<(&str, &str)> = Vec::new();
             for conn in &self.connections {
                 if conn.end_element.as_deref() == Some(&c.name) {
@@ -341,13 +411,17 @@ impl Twin {
             for (name, kind) in listed {
                 connector(&mut w, name, kind, "Real");
             }
-            w.write_event(Event::End(BytesEnd::new("ssd:Connectors"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
+                .expect(ok);
             binding(&mut w, &format!("resources/{}.ssv", c.name));
-            w.write_event(Event::End(BytesEnd::new("ssd:Component"))).expect(ok);
+            w.write_event(Event::End(BytesEnd::new("ssd:Component")))
+                .expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("ssd:Elements"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:Elements")))
+            .expect(ok);
 
-        w.write_event(Event::Start(BytesStart::new("ssd:Connections"))).expect(ok);
+        w.write_event(Event::Start(BytesStart::new("ssd:Connections")))
+            .expect(ok);
         for conn in &self.connections {
             let mut e = BytesStart::new("ssd:Connection");
             if let Some(s) = &conn.start_element {
@@ -360,9 +434,12 @@ impl Twin {
             e.push_attribute(("endConnector", conn.end_connector.as_str()));
             w.write_event(Event::Empty(e)).expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("ssd:Connections"))).expect(ok);
-        w.write_event(Event::End(BytesEnd::new("ssd:System"))).expect(ok);
-        w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:Connections")))
+            .expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:System")))
+            .expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription")))
+            .expect(ok);
         let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
         s.push('\n');
         s
@@ -373,33 +450,72 @@ impl Twin {
 
     /// Open every component's FMU, instantiate it, apply the twin's parameters and initialise.
     /// Returns the FMUs (keep them alive while the instances run) and the instances.
-    pub fn instantiate(&self, start_time: f64) -> Result<Vec<(Component, Fmu, Instance)>, TwinError> {
+    pub fn instantiate(
+        &self,
+        start_time: f64,
+    ) -> Result<Vec<(Component, Fmu, Instance)>, TwinError> {
         let mut out = Vec::new();
         for c in &self.components {
-            let fmu = Fmu::open(&c.fmu_path)?;
-            let mut instance = fmu.instantiate(&c.name)?;
-            instance.setup_experiment(start_time, None)?;
-            instance.enter_initialization_mode()?;
-            apply_parameters(&fmu, &mut instance, &c.parameters)?;
-            instance.exit_initialization_mode()?;
+            let open = || -> Result<(Fmu, Instance), TwinError> {
+                let fmu = Fmu::open(&c.fmu_path)?;
+                let mut instance = fmu.instantiate(&c.name)?;
+                instance.setup_experiment(start_time, None)?;
+                instance.enter_initialization_mode()?;
+                apply_parameters(&fmu, &mut instance, &c.parameters)?;
+                instance.exit_initialization_mode()?;
+                Ok((fmu, instance))
+            };
+            // Name the twin and the component, not the temporary directory the FMU sits in.
+            let (fmu, instance) = open().map_err(|e| TwinError::Component {
+                twin: self.describe(),
+                component: c.name.clone(),
+                fmu: format!("resources/{}", c.fmu_name),
+                inner: Box::new(strip_temporary_path(e, &c.fmu_path)),
+            })?;
             out.push((c.clone(), fmu, instance));
         }
         Ok(out)
     }
 }
 
+/// An error's text with the unpacked FMU's temporary path taken out (the caller names the
+/// component instead).
+fn strip_temporary_path(e: TwinError, fmu_path: &Path) -> TwinError {
+    let text = e.to_string();
+    let shown = fmu_path.display().to_string();
+    if text.contains(&shown) {
+        TwinError::Message(
+            text.replace(&format!("{shown}: "), "")
+                .replace(&shown, "the FMU"),
+        )
+    } else {
+        e
+    }
+}
+
 /// Set parameter values on an instance in initialization mode, by name.
-pub fn apply_parameters(fmu: &Fmu, instance: &mut Instance, parameters: &BTreeMap<String, ParameterValue>) -> Result<(), TwinError> {
+pub fn apply_parameters(
+    fmu: &Fmu,
+    instance: &mut Instance,
+    parameters: &BTreeMap<String, ParameterValue>,
+) -> Result<(), TwinError> {
     for (name, value) in parameters {
-        let variable = fmu.model_description.variable(name).ok_or_else(|| ImportError::UnknownVariable {
-            fmu: fmu.path.display().to_string(),
-            name: name.clone(),
-        })?;
+        let variable =
+            fmu.model_description
+                .variable(name)
+                .ok_or_else(|| ImportError::UnknownVariable {
+                    fmu: fmu.path.display().to_string(),
+                    name: name.clone(),
+                })?;
         let vr = [variable.value_reference];
         match (variable.scalar_type, value) {
             (ScalarType::Real, ParameterValue::Real(x)) => instance.set_real(&vr, &[*x])?,
-            (ScalarType::Integer | ScalarType::Enumeration, ParameterValue::Integer(i)) => instance.set_integer(&vr, &[*i])?,
-            (ScalarType::Boolean, ParameterValue::Boolean(b)) => instance.set_boolean(&vr, &[*b])?,
+            (ScalarType::Integer | ScalarType::Enumeration, ParameterValue::Integer(i)) => {
+                instance.set_integer(&vr, &[*i])?
+            }
+            (ScalarType::Boolean, ParameterValue::Boolean(b)) => {
+                instance.set_boolean(&vr, &[*b])?
+            }
             (ty, v) => {
                 return Err(TwinError::Invalid {
                     path: fmu.path.clone(),
@@ -414,13 +530,15 @@ pub fn apply_parameters(fmu: &Fmu, instance: &mut Instance, parameters: &BTreeMa
 fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String {
     let ok = "writing XML to memory cannot fail";
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
-    w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None))).expect(ok);
+    w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
+        .expect(ok);
     let mut root = BytesStart::new("ssv:ParameterSet");
     root.push_attribute(("xmlns:ssv", NS_SSV));
     root.push_attribute(("version", "1.0"));
     root.push_attribute(("name", name));
     w.write_event(Event::Start(root)).expect(ok);
-    w.write_event(Event::Start(BytesStart::new("ssv:Parameters"))).expect(ok);
+    w.write_event(Event::Start(BytesStart::new("ssv:Parameters")))
+        .expect(ok);
     for (pname, value) in parameters {
         let mut p = BytesStart::new("ssv:Parameter");
         p.push_attribute(("name", pname.as_str()));
@@ -433,10 +551,13 @@ fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String 
         let mut e = BytesStart::new(tag);
         e.push_attribute(("value", text.as_str()));
         w.write_event(Event::Empty(e)).expect(ok);
-        w.write_event(Event::End(BytesEnd::new("ssv:Parameter"))).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssv:Parameter")))
+            .expect(ok);
     }
-    w.write_event(Event::End(BytesEnd::new("ssv:Parameters"))).expect(ok);
-    w.write_event(Event::End(BytesEnd::new("ssv:ParameterSet"))).expect(ok);
+    w.write_event(Event::End(BytesEnd::new("ssv:Parameters")))
+        .expect(ok);
+    w.write_event(Event::End(BytesEnd::new("ssv:ParameterSet")))
+        .expect(ok);
     let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
     s.push('\n');
     s
@@ -460,7 +581,10 @@ fn attributes(e: &BytesStart) -> Result<BTreeMap<String, String>, String> {
     for attr in e.attributes() {
         let attr = attr.map_err(|e| e.to_string())?;
         let key = String::from_utf8_lossy(attr.key.local_name().as_ref()).into_owned();
-        let value = attr.unescape_value().map_err(|e| e.to_string())?.into_owned();
+        let value = attr
+            .unescape_value()
+            .map_err(|e| e.to_string())?
+            .into_owned();
         out.insert(key, value);
     }
     Ok(out)
@@ -469,12 +593,19 @@ fn attributes(e: &BytesStart) -> Result<BTreeMap<String, String>, String> {
 /// Read the parts of an SSD this product uses (namespace prefixes are ignored: local names).
 fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
     let mut reader = quick_xml::Reader::from_str(xml);
-    let mut parsed = ParsedSsd { name: String::new(), components: Vec::new(), connections: Vec::new(), system_bindings: Vec::new() };
+    let mut parsed = ParsedSsd {
+        name: String::new(),
+        components: Vec::new(),
+        connections: Vec::new(),
+        system_bindings: Vec::new(),
+    };
     let mut in_component = false;
     let mut depth_system = 0usize;
     let mut saw_root = false;
     loop {
-        let event = reader.read_event().map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
+        let event = reader
+            .read_event()
+            .map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
         match &event {
             Event::Start(e) | Event::Empty(e) => {
                 let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
@@ -484,7 +615,10 @@ fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
                     "SystemStructureDescription" => {
                         saw_root = true;
                         if attrs.get("version").map(String::as_str) != Some("1.0") {
-                            return Err(format!("version is {:?}; SSP 1.0 is expected", attrs.get("version")));
+                            return Err(format!(
+                                "version is {:?}; SSP 1.0 is expected",
+                                attrs.get("version")
+                            ));
                         }
                         parsed.name = attrs.get("name").cloned().unwrap_or_default();
                     }
@@ -495,13 +629,25 @@ fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
                         }
                     }
                     "Component" => {
-                        let name = attrs.get("name").cloned().ok_or("a Component has no name")?;
-                        let source = attrs.get("source").cloned().ok_or(format!("component '{name}' has no source"))?;
-                        parsed.components.push(ParsedComponent { name, source, bindings: Vec::new() });
+                        let name = attrs
+                            .get("name")
+                            .cloned()
+                            .ok_or("a Component has no name")?;
+                        let source = attrs
+                            .get("source")
+                            .cloned()
+                            .ok_or(format!("component '{name}' has no source"))?;
+                        parsed.components.push(ParsedComponent {
+                            name,
+                            source,
+                            bindings: Vec::new(),
+                        });
                         in_component = is_start;
                     }
                     "ParameterBinding" => {
-                        let source = attrs.get("source").cloned().ok_or("a ParameterBinding has no source (inline values are not supported)")?;
+                        let source = attrs.get("source").cloned().ok_or(
+                            "a ParameterBinding has no source (inline values are not supported)",
+                        )?;
                         match (in_component, parsed.components.last_mut()) {
                             (true, Some(c)) => c.bindings.push(source),
                             _ => parsed.system_bindings.push(source),
@@ -511,9 +657,11 @@ fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
                         let get = |k: &str| attrs.get(k).cloned();
                         parsed.connections.push(Connection {
                             start_element: get("startElement"),
-                            start_connector: get("startConnector").ok_or("a Connection has no startConnector")?,
+                            start_connector: get("startConnector")
+                                .ok_or("a Connection has no startConnector")?,
                             end_element: get("endElement"),
-                            end_connector: get("endConnector").ok_or("a Connection has no endConnector")?,
+                            end_connector: get("endConnector")
+                                .ok_or("a Connection has no endConnector")?,
                         });
                     }
                     _ => {}
@@ -539,19 +687,34 @@ fn parse_ssv(xml: &str) -> Result<Vec<(String, ParameterValue)>, String> {
     let mut out = Vec::new();
     let mut current: Option<String> = None;
     loop {
-        let event = reader.read_event().map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
+        let event = reader
+            .read_event()
+            .map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
         match &event {
             Event::Start(e) | Event::Empty(e) => {
                 let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
                 let attrs = attributes(e)?;
                 match local.as_str() {
-                    "Parameter" => current = Some(attrs.get("name").cloned().ok_or("a Parameter has no name")?),
+                    "Parameter" => {
+                        current = Some(
+                            attrs
+                                .get("name")
+                                .cloned()
+                                .ok_or("a Parameter has no name")?,
+                        )
+                    }
                     "Real" | "Integer" | "Boolean" if current.is_some() => {
                         let name = current.take().unwrap_or_default();
-                        let text = attrs.get("value").ok_or(format!("parameter '{name}' has no value"))?;
+                        let text = attrs
+                            .get("value")
+                            .ok_or(format!("parameter '{name}' has no value"))?;
                         let bad = || format!("parameter '{name}': '{text}' is not a valid {local}");
                         let value = match local.as_str() {
-                            "Real" => ParameterValue::Real(text.parse().map_err(|_| bad()).and_then(|x: f64| if x.is_finite() { Ok(x) } else { Err(bad()) })?),
+                            "Real" => {
+                                ParameterValue::Real(text.parse().map_err(|_| bad()).and_then(
+                                    |x: f64| if x.is_finite() { Ok(x) } else { Err(bad()) },
+                                )?)
+                            }
                             "Integer" => ParameterValue::Integer(text.parse().map_err(|_| bad())?),
                             _ => ParameterValue::Boolean(match text.as_str() {
                                 "true" | "1" => true,
@@ -580,9 +743,13 @@ mod tests {
         let mut p = BTreeMap::new();
         p.insert("k1".to_owned(), ParameterValue::Real(4321.125));
         p.insert("substeps".to_owned(), ParameterValue::Integer(16));
-        p.insert("contact23_enabled".to_owned(), ParameterValue::Boolean(true));
+        p.insert(
+            "contact23_enabled".to_owned(),
+            ParameterValue::Boolean(true),
+        );
         let xml = ssv_xml("physics", &p);
-        let back: BTreeMap<String, ParameterValue> = parse_ssv(&xml).expect("parses").into_iter().collect();
+        let back: BTreeMap<String, ParameterValue> =
+            parse_ssv(&xml).expect("parses").into_iter().collect();
         assert_eq!(back, p);
     }
 

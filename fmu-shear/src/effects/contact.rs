@@ -37,8 +37,27 @@ impl Contact {
     }
 }
 
+impl Contact {
+    /// Switch functions at drift `d`: `d − gap` when positive drift closes the gap, `d + gap`
+    /// when negative drift does; the force has a kink where one changes sign.
+    #[inline]
+    pub fn switches(&self, d: f64) -> [Option<f64>; 2] {
+        [
+            (self.side != SIDE_NEGATIVE).then_some(d - self.gap),
+            (self.side != SIDE_POSITIVE).then_some(d + self.gap),
+        ]
+    }
+}
+
 const PARAMS: &[RealParam] = &[
-    RealParam { suffix: "gap", unit: "m", start: 5e-4, min: 0.0, strictly: false, description: "clearance before contact" },
+    RealParam {
+        suffix: "gap",
+        unit: "m",
+        start: 5e-4,
+        min: 0.0,
+        strictly: false,
+        description: "clearance before contact",
+    },
     RealParam {
         suffix: "stiffness",
         unit: "N/m",
@@ -66,10 +85,20 @@ impl Effect for Contact {
         PARAMS
     }
     fn integer_params() -> &'static [(&'static str, i32, i32, i32, &'static str)] {
-        &[("side", SIDE_BOTH, -1, 1, "which drift closes the gap: 1 positive (upper floor ahead), -1 negative, 0 both")]
+        &[(
+            "side",
+            SIDE_BOTH,
+            -1,
+            1,
+            "which drift closes the gap: 1 positive (upper floor ahead), -1 negative, 0 both",
+        )]
     }
     fn at_start(_location: usize) -> Self {
-        Contact { gap: PARAMS[0].start, stiffness: PARAMS[1].start, side: SIDE_BOTH }
+        Contact {
+            gap: PARAMS[0].start,
+            stiffness: PARAMS[1].start,
+            side: SIDE_BOTH,
+        }
     }
     fn real(&self, index: usize) -> f64 {
         [self.gap, self.stiffness][index]
@@ -97,7 +126,11 @@ mod tests {
     use super::*;
 
     fn contact(side: i32) -> Contact {
-        Contact { gap: 1e-3, stiffness: 9000.0, side }
+        Contact {
+            gap: 1e-3,
+            stiffness: 9000.0,
+            side,
+        }
     }
 
     #[test]
@@ -115,7 +148,10 @@ mod tests {
         let eps = 1e-12;
         assert!(c.force_at(1e-3 + eps).abs() < 1e-8);
         assert!(c.force_at(-1e-3 - eps).abs() < 1e-8);
-        assert!((c.force_at(2e-3) - 9.0).abs() < 1e-12, "k·(d − gap) = 9000·1e-3");
+        assert!(
+            (c.force_at(2e-3) - 9.0).abs() < 1e-12,
+            "k·(d − gap) = 9000·1e-3"
+        );
         assert!((c.force_at(-2e-3) + 9.0).abs() < 1e-12);
     }
 
@@ -133,6 +169,9 @@ mod tests {
         let mut g = [0.0; 3];
         // storey 2 (floors 2–3): floor 3 ahead of floor 2 by 3 mm.
         c.add_force(2, &[0.0, 1e-3, 4e-3], &[0.0; 3], &mut g);
-        assert!((g[2] - 18.0).abs() < 1e-9 && (g[1] + 18.0).abs() < 1e-9 && g[0] == 0.0, "{g:?}");
+        assert!(
+            (g[2] - 18.0).abs() < 1e-9 && (g[1] + 18.0).abs() < 1e-9 && g[0] == 0.0,
+            "{g:?}"
+        );
     }
 }

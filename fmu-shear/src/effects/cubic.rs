@@ -32,7 +32,9 @@ impl Effect for Cubic {
         PARAMS
     }
     fn at_start(_location: usize) -> Self {
-        Cubic { stiffness: PARAMS[0].start }
+        Cubic {
+            stiffness: PARAMS[0].start,
+        }
     }
     fn real(&self, _index: usize) -> f64 {
         self.stiffness

@@ -13,7 +13,14 @@ pub struct Friction {
 }
 
 const PARAMS: &[RealParam] = &[
-    RealParam { suffix: "force", unit: "N", start: 0.1, min: 0.0, strictly: false, description: "Coulomb friction force" },
+    RealParam {
+        suffix: "force",
+        unit: "N",
+        start: 0.1,
+        min: 0.0,
+        strictly: false,
+        description: "Coulomb friction force",
+    },
     RealParam {
         suffix: "velocity_scale",
         unit: "m/s",
@@ -44,7 +51,10 @@ impl Effect for Friction {
         PARAMS
     }
     fn at_start(_location: usize) -> Self {
-        Friction { force: PARAMS[0].start, velocity_scale: PARAMS[1].start }
+        Friction {
+            force: PARAMS[0].start,
+            velocity_scale: PARAMS[1].start,
+        }
     }
     fn real(&self, index: usize) -> f64 {
         [self.force, self.velocity_scale][index]
@@ -67,9 +77,15 @@ mod tests {
 
     #[test]
     fn opposes_motion_is_zero_at_rest_and_saturates() {
-        let f = Friction { force: 0.5, velocity_scale: 1e-3 };
+        let f = Friction {
+            force: 0.5,
+            velocity_scale: 1e-3,
+        };
         assert_eq!(f.force_at(0.0), 0.0);
-        assert!(f.force_at(0.1) > 0.0 && f.force_at(-0.1) < 0.0, "g is on the left-hand side: it resists motion");
+        assert!(
+            f.force_at(0.1) > 0.0 && f.force_at(-0.1) < 0.0,
+            "g is on the left-hand side: it resists motion"
+        );
         assert!((f.force_at(0.1) - 0.5).abs() < 1e-12);
         // Continuous through zero: small velocity, small force.
         assert!(f.force_at(1e-9).abs() < 1e-6);

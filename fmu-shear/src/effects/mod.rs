@@ -73,7 +73,11 @@ pub struct Library<E> {
 
 impl<E: Effect> Library<E> {
     pub fn new(base_vr: u32) -> Self {
-        Library { base_vr, enabled: vec![false; E::LOCATIONS], effects: (0..E::LOCATIONS).map(E::at_start).collect() }
+        Library {
+            base_vr,
+            enabled: vec![false; E::LOCATIONS],
+            effects: (0..E::LOCATIONS).map(E::at_start).collect(),
+        }
     }
 
     pub fn variables(base_vr: u32) -> Vec<Variable> {
@@ -86,20 +90,40 @@ impl<E: Effect> Library<E> {
                     .describe(&format!("{} {}: switched on", E::KIND, E::where_(location))),
             );
             for (i, p) in E::real_params().iter().enumerate() {
-                let mut var =
-                    Variable::real_parameter(&format!("{prefix}_{}", p.suffix), vr0 + FIRST_REAL_SLOT + i as u32, p.unit, p.start)
-                        .describe(&format!("{} {}: {}", E::KIND, E::where_(location), p.description));
+                let mut var = Variable::real_parameter(
+                    &format!("{prefix}_{}", p.suffix),
+                    vr0 + FIRST_REAL_SLOT + i as u32,
+                    p.unit,
+                    p.start,
+                )
+                .describe(&format!(
+                    "{} {}: {}",
+                    E::KIND,
+                    E::where_(location),
+                    p.description
+                ));
                 if p.min > f64::MIN {
                     var = var.min(p.min);
                 }
                 vars.push(var);
             }
-            for (i, (suffix, start, min, max, description)) in E::integer_params().iter().enumerate() {
+            for (i, (suffix, start, min, max, description)) in
+                E::integer_params().iter().enumerate()
+            {
                 vars.push(
-                    Variable::integer_parameter(&format!("{prefix}_{suffix}"), vr0 + FIRST_INTEGER_SLOT + i as u32, *start)
-                        .min(f64::from(*min))
-                        .max(f64::from(*max))
-                        .describe(&format!("{} {}: {}", E::KIND, E::where_(location), description)),
+                    Variable::integer_parameter(
+                        &format!("{prefix}_{suffix}"),
+                        vr0 + FIRST_INTEGER_SLOT + i as u32,
+                        *start,
+                    )
+                    .min(f64::from(*min))
+                    .max(f64::from(*max))
+                    .describe(&format!(
+                        "{} {}: {}",
+                        E::KIND,
+                        E::where_(location),
+                        description
+                    )),
                 );
             }
         }
@@ -127,11 +151,19 @@ impl<E: Effect> Library<E> {
         let (location, slot) = self.locate(vr)?;
         let index = slot.checked_sub(FIRST_REAL_SLOT)? as usize;
         let p = E::real_params().get(index)?;
-        let ok = if p.strictly { value > p.min } else { value >= p.min };
+        let ok = if p.strictly {
+            value > p.min
+        } else {
+            value >= p.min
+        };
         if !ok {
             return Some(Err(ModelError::InvalidValue {
                 name: format!("{}_{}", E::prefix(location), p.suffix),
-                reason: format!("{value} must be {} {}", if p.strictly { ">" } else { "≥" }, p.min),
+                reason: format!(
+                    "{value} must be {} {}",
+                    if p.strictly { ">" } else { "≥" },
+                    p.min
+                ),
             }));
         }
         self.effects[location].set_real(index, value);
@@ -190,6 +222,13 @@ impl<E: Effect> Library<E> {
     }
 }
 
+/// Up to two switch values per contact location.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Switches {
+    pub values: [f64; 6],
+    pub len: usize,
+}
+
 /// Every effect kind of the library.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Effects {
@@ -224,6 +263,25 @@ impl Effects {
         self.contact.any_enabled() || self.cubic.any_enabled() || self.friction.any_enabled()
     }
 
+    /// The switch functions of the enabled effects: values whose sign change marks a kink in
+    /// `g` (a contact gap opening or closing). Smooth effects have none.
+    #[inline]
+    pub fn switches(&self, y: &Floors) -> Switches {
+        let mut out = Switches {
+            values: [0.0; 6],
+            len: 0,
+        };
+        for (location, contact) in self.contact.effects.iter().enumerate() {
+            if self.contact.enabled[location] {
+                for value in contact.switches(drift(y, location)).into_iter().flatten() {
+                    out.values[out.len] = value;
+                    out.len += 1;
+                }
+            }
+        }
+        out
+    }
+
     /// `g(y, ẏ)`: the sum of every enabled effect's force on each floor.
     #[inline]
     pub fn force(&self, y: &Floors, v: &Floors) -> Floors {
@@ -235,7 +293,10 @@ impl Effects {
     }
 
     pub fn get_real(&self, vr: u32) -> Option<f64> {
-        self.contact.get_real(vr).or_else(|| self.cubic.get_real(vr)).or_else(|| self.friction.get_real(vr))
+        self.contact
+            .get_real(vr)
+            .or_else(|| self.cubic.get_real(vr))
+            .or_else(|| self.friction.get_real(vr))
     }
     pub fn set_real(&mut self, vr: u32, value: f64) -> Option<Result<(), ModelError>> {
         self.contact
@@ -244,7 +305,10 @@ impl Effects {
             .or_else(|| self.friction.set_real(vr, value))
     }
     pub fn get_integer(&self, vr: u32) -> Option<i32> {
-        self.contact.get_integer(vr).or_else(|| self.cubic.get_integer(vr)).or_else(|| self.friction.get_integer(vr))
+        self.contact
+            .get_integer(vr)
+            .or_else(|| self.cubic.get_integer(vr))
+            .or_else(|| self.friction.get_integer(vr))
     }
     pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
         self.contact
@@ -253,7 +317,10 @@ impl Effects {
             .or_else(|| self.friction.set_integer(vr, value))
     }
     pub fn get_boolean(&self, vr: u32) -> Option<bool> {
-        self.contact.get_boolean(vr).or_else(|| self.cubic.get_boolean(vr)).or_else(|| self.friction.get_boolean(vr))
+        self.contact
+            .get_boolean(vr)
+            .or_else(|| self.cubic.get_boolean(vr))
+            .or_else(|| self.friction.get_boolean(vr))
     }
     pub fn set_boolean(&mut self, vr: u32, value: bool) -> Option<()> {
         self.contact

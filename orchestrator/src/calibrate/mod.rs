@@ -76,7 +76,9 @@ impl Default for CalibrationSetup {
             seed: 1,
             noise_fraction: 0.02,
             noise_log_variance: 1.0,
-            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+            threads: std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
         }
     }
 }
@@ -129,7 +131,10 @@ struct Target<'a> {
 
 impl Target<'_> {
     fn values(&self, z: &[f64]) -> Vec<f64> {
-        z.iter().zip(&self.priors).map(|(z, p)| p.value(p.mean + p.sd() * z)).collect()
+        z.iter()
+            .zip(&self.priors)
+            .map(|(z, p)| p.value(p.mean + p.sd() * z))
+            .collect()
     }
     fn n_used(&self) -> usize {
         self.data.len() - self.first
@@ -138,7 +143,12 @@ impl Target<'_> {
 
 /// Residuals `y − ŷ` after the transient for parameters `z`, or None if the FMU refused them
 /// (out of range, or the simulation diverged).
-fn raw_residuals(sim: &mut Simulator, target: &Target, z: &[f64], buf: &mut [Vec<f64>; 3]) -> Option<Vec<f64>> {
+fn raw_residuals(
+    sim: &mut Simulator,
+    target: &Target,
+    z: &[f64],
+    buf: &mut [Vec<f64>; 3],
+) -> Option<Vec<f64>> {
     let values = target.values(z);
     if values.iter().any(|v| !v.is_finite()) {
         return None;
@@ -155,7 +165,12 @@ fn raw_residuals(sim: &mut Simulator, target: &Target, z: &[f64], buf: &mut [Vec
 }
 
 fn sse_per_floor(r: &[f64], per_floor: usize) -> [f64; 3] {
-    [0, 1, 2].map(|f| r[f * per_floor..(f + 1) * per_floor].iter().map(|x| x * x).sum())
+    [0, 1, 2].map(|f| {
+        r[f * per_floor..(f + 1) * per_floor]
+            .iter()
+            .map(|x| x * x)
+            .sum()
+    })
 }
 
 /// The least-squares problem in `z` for fixed noise variances.
@@ -167,6 +182,8 @@ struct Problem<'s, 'a> {
     residuals: Option<DVector<f64>>,
     buf: RefCell<[Vec<f64>; 3]>,
     evaluations: RefCell<usize>,
+    /// Simulations this least-squares solve may use.
+    budget: usize,
 }
 
 impl Problem<'_, '_> {
@@ -190,6 +207,10 @@ impl Problem<'_, '_> {
 /// backs off instead of stopping.
 const REFUSED_RESIDUAL: f64 = 1e6;
 
+/// Simulations one start may use. Starts that reach the optimum need 350–800 on the examples
+/// (9 parameters); starts that wander in a flat region used up to 15,000 without improving.
+const SIMULATIONS_PER_START: usize = 1500;
+
 impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
     type ResidualStorage = Owned<f64, Dyn>;
     type JacobianStorage = Owned<f64, Dyn, Dyn>;
@@ -206,10 +227,18 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
 
     fn residuals(&self) -> Option<DVector<f64>> {
         let m = 3 * self.target.n_used() + self.z.len();
-        Some(self.residuals.clone().unwrap_or_else(|| DVector::from_element(m, REFUSED_RESIDUAL)))
+        Some(
+            self.residuals
+                .clone()
+                .unwrap_or_else(|| DVector::from_element(m, REFUSED_RESIDUAL)),
+        )
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        // A start that has not settled within its budget is abandoned (LM stops on None).
+        if *self.evaluations.borrow() > self.budget {
+            return None;
+        }
         let base = self.residuals.clone()?;
         let mut jac = DMatrix::zeros(base.len(), self.z.len());
         for j in 0..self.z.len() {
@@ -242,7 +271,9 @@ fn neg_log_posterior(target: &Target, sse: [f64; 3], s: [f64; 3], z: &[f64]) -> 
     let n = target.n_used() as f64;
     let mut j = 0.5 * z.iter().map(|x| x * x).sum::<f64>();
     for f in 0..3 {
-        j += n * s[f] / 2.0 + sse[f] * (-s[f]).exp() / 2.0 + (s[f] - target.noise_mean[f]).powi(2) / (2.0 * target.noise_var);
+        j += n * s[f] / 2.0
+            + sse[f] * (-s[f]).exp() / 2.0
+            + (s[f] - target.noise_mean[f]).powi(2) / (2.0 * target.noise_var);
     }
     j
 }
@@ -254,13 +285,17 @@ struct StartResult {
     evaluations: usize,
 }
 
-fn run_start<'a>(sim: &mut Simulator<'a>, target: &Target<'a>, z0: Vec<f64>) -> Option<StartResult> {
+fn run_start<'a>(
+    sim: &mut Simulator<'a>,
+    target: &Target<'a>,
+    z0: Vec<f64>,
+) -> Option<StartResult> {
     let per = target.n_used();
     let mut s = target.noise_mean;
     let mut z = z0;
     let mut evaluations = 0;
     let mut buf: [Vec<f64>; 3] = Default::default();
-    for _outer in 0..8 {
+    for _outer in 0..5 {
         let weights = s.map(|sf| (-sf / 2.0).exp());
         let mut problem = Problem {
             sim: RefCell::new(&mut *sim),
@@ -270,16 +305,29 @@ fn run_start<'a>(sim: &mut Simulator<'a>, target: &Target<'a>, z0: Vec<f64>) -> 
             residuals: None,
             buf: RefCell::new(Default::default()),
             evaluations: RefCell::new(0),
+            budget: SIMULATIONS_PER_START.saturating_sub(evaluations),
         };
         problem.set_params(&DVector::from_vec(z.clone()));
-        let (problem, _report) = LevenbergMarquardt::new().with_ftol(1e-10).with_xtol(1e-10).with_patience(60).minimize(problem);
+        let (problem, _report) = LevenbergMarquardt::new()
+            .with_ftol(1e-9)
+            .with_xtol(1e-9)
+            .with_patience(25)
+            .minimize(problem);
         evaluations += *problem.evaluations.borrow();
         z = problem.z.as_slice().to_vec();
         let r = raw_residuals(sim, target, &z, &mut buf)?;
         evaluations += 1;
         let sse = sse_per_floor(&r, per);
-        let s_new = [0, 1, 2].map(|f| optimal_log_noise(per as f64, sse[f], target.noise_mean[f], target.noise_var, s[f]));
-        let settled = (0..3).all(|f| (s_new[f] - s[f]).abs() < 1e-4);
+        let s_new = [0, 1, 2].map(|f| {
+            optimal_log_noise(
+                per as f64,
+                sse[f],
+                target.noise_mean[f],
+                target.noise_var,
+                s[f],
+            )
+        });
+        let settled = (0..3).all(|f| (s_new[f] - s[f]).abs() < 1e-3);
         s = s_new;
         if settled {
             break;
@@ -287,7 +335,12 @@ fn run_start<'a>(sim: &mut Simulator<'a>, target: &Target<'a>, z0: Vec<f64>) -> 
     }
     let r = raw_residuals(sim, target, &z, &mut buf)?;
     let objective = neg_log_posterior(target, sse_per_floor(&r, per), s, &z);
-    objective.is_finite().then_some(StartResult { z, s, objective, evaluations: evaluations + 1 })
+    objective.is_finite().then_some(StartResult {
+        z,
+        s,
+        objective,
+        evaluations: evaluations + 1,
+    })
 }
 
 /// The Laplace approximation at (z, s): covariance of (z, s).
@@ -333,13 +386,27 @@ fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Opti
 }
 
 /// Calibrate the physics component of `twin` on `data`.
-pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> Result<Calibration, CalibrateError> {
+pub fn calibrate(
+    twin: &Twin,
+    data: &Measurement,
+    setup: &CalibrationSetup,
+) -> Result<Calibration, CalibrateError> {
     let started = Instant::now();
-    let component = twin.component(PHYSICS).ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
-    let first = data.time.iter().position(|&t| t - data.time[0] >= setup.transient).unwrap_or(data.len());
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= setup.transient)
+        .unwrap_or(data.len());
     if data.len() - first < 10 {
-        return Err(CalibrateError::Setup(format!("the transient cut-off of {} s leaves {} samples", setup.transient, data.len() - first)));
+        return Err(CalibrateError::Setup(format!(
+            "the transient cut-off of {} s leaves {} samples",
+            setup.transient,
+            data.len() - first
+        )));
     }
     if setup.parameters.is_empty() {
         return Err(CalibrateError::Setup("no parameter to calibrate".into()));
@@ -347,18 +414,29 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
     let mut vrs = Vec::new();
     let mut priors = Vec::new();
     for name in &setup.parameters {
-        let var = fmu
-            .model_description
-            .variable(name)
-            .ok_or_else(|| CalibrateError::Setup(format!("{} has no parameter '{name}'", component.fmu_name)))?;
-        if var.scalar_type != ScalarType::Real || var.causality != crate::import::Causality::Parameter {
-            return Err(CalibrateError::Setup(format!("'{name}' is not a real parameter")));
+        let var = fmu.model_description.variable(name).ok_or_else(|| {
+            CalibrateError::Setup(format!("{} has no parameter '{name}'", component.fmu_name))
+        })?;
+        if var.scalar_type != ScalarType::Real
+            || var.causality != crate::import::Causality::Parameter
+        {
+            return Err(CalibrateError::Setup(format!(
+                "'{name}' is not a real parameter"
+            )));
         }
         let current = match component.parameters.get(name) {
             Some(ParameterValue::Real(x)) => *x,
-            _ => var.start.as_deref().and_then(|s| s.parse().ok()).unwrap_or(0.0),
+            _ => var
+                .start
+                .as_deref()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(0.0),
         };
-        let prior = setup.priors.get(name).copied().unwrap_or_else(|| default_prior(name, current));
+        let prior = setup
+            .priors
+            .get(name)
+            .copied()
+            .unwrap_or_else(|| default_prior(name, current));
         vrs.push(var.value_reference);
         priors.push(prior);
     }
@@ -367,35 +445,85 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
         let m = x.iter().sum::<f64>() / n;
         x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
     };
-    let noise_mean = [0, 1, 2].map(|f| (setup.noise_fraction * variance(&data.acc[f][first..])).ln());
+    let noise_mean =
+        [0, 1, 2].map(|f| (setup.noise_fraction * variance(&data.acc[f][first..])).ln());
     let mut base = component.parameters.clone();
     for name in &setup.parameters {
         base.remove(name);
     }
-    let target = Target { fmu: &fmu, base, data, first, vrs, priors, noise_mean, noise_var: setup.noise_log_variance };
+    let target = Target {
+        fmu: &fmu,
+        base,
+        data,
+        first,
+        vrs,
+        priors,
+        noise_mean,
+        noise_var: setup.noise_log_variance,
+    };
 
     // Starts: the prior mean, then draws from the prior widened ×3.
     let mut rng = StdRng::seed_from_u64(setup.seed);
     let p = setup.parameters.len();
     let starts: Vec<Vec<f64>> = (0..setup.starts.max(1))
-        .map(|i| if i == 0 { vec![0.0; p] } else { (0..p).map(|_| 3.0 * rng.sample::<f64, _>(StandardNormal)).collect() })
+        .map(|i| {
+            if i == 0 {
+                vec![0.0; p]
+            } else {
+                (0..p)
+                    .map(|_| 3.0 * rng.sample::<f64, _>(StandardNormal))
+                    .collect()
+            }
+        })
         .collect();
     let threads = setup.threads.clamp(1, starts.len());
-    let chunks: Vec<Vec<(usize, Vec<f64>)>> =
-        (0..threads).map(|t| starts.iter().cloned().enumerate().skip(t).step_by(threads).collect()).collect();
-    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = chunks
-            .into_iter()
-            .map(|chunk| {
-                let target = &target;
-                scope.spawn(move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
-                    let mut sim = Simulator::new(target.fmu, target.base.clone(), &target.data.force, target.data.time[0], target.data.dt, "calibration")?;
-                    Ok(chunk.into_iter().map(|(i, z0)| (i, run_start(&mut sim, target, z0))).collect())
+    let chunks: Vec<Vec<(usize, Vec<f64>)>> = (0..threads)
+        .map(|t| {
+            starts
+                .iter()
+                .cloned()
+                .enumerate()
+                .skip(t)
+                .step_by(threads)
+                .collect()
+        })
+        .collect();
+    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> =
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = chunks
+                .into_iter()
+                .map(|chunk| {
+                    let target = &target;
+                    scope.spawn(
+                        move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
+                            let mut sim = Simulator::new(
+                                target.fmu,
+                                target.base.clone(),
+                                &target.data.force,
+                                target.data.time[0],
+                                target.data.dt,
+                                "calibration",
+                            )?;
+                            Ok(chunk
+                                .into_iter()
+                                .map(|(i, z0)| (i, run_start(&mut sim, target, z0)))
+                                .collect())
+                        },
+                    )
                 })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|_| Err(TwinError::Invalid { path: "calibration".into(), message: "a worker thread panicked".into() }))).collect()
-    });
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(TwinError::Invalid {
+                            path: "calibration".into(),
+                            message: "a worker thread panicked".into(),
+                        })
+                    })
+                })
+                .collect()
+        });
     let mut outcomes = Vec::new();
     let mut best: Option<StartResult> = None;
     let mut simulations = 0;
@@ -403,7 +531,11 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
         for (i, res) in r? {
             if let Some(res) = res {
                 simulations += res.evaluations;
-                outcomes.push(StartOutcome { start: i, neg_log_posterior: res.objective, evaluations: res.evaluations });
+                outcomes.push(StartOutcome {
+                    start: i,
+                    neg_log_posterior: res.objective,
+                    evaluations: res.evaluations,
+                });
                 if best.as_ref().map_or(true, |b| res.objective < b.objective) {
                     best = Some(res);
                 }
@@ -413,9 +545,17 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
     outcomes.sort_by_key(|o| o.start);
     let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
 
-    let mut sim = Simulator::new(&fmu, target.base.clone(), &data.force, data.time[0], data.dt, "laplace")?;
-    let cov = laplace(&mut sim, &target, &best.z, best.s)
-        .ok_or_else(|| CalibrateError::Failed("the posterior Hessian at the optimum is singular".into()))?;
+    let mut sim = Simulator::new(
+        &fmu,
+        target.base.clone(),
+        &data.force,
+        data.time[0],
+        data.dt,
+        "laplace",
+    )?;
+    let cov = laplace(&mut sim, &target, &best.z, best.s).ok_or_else(|| {
+        CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
+    })?;
     let values = target.values(&best.z);
     let parameters: Vec<ParameterEstimate> = (0..p)
         .map(|j| {
@@ -425,10 +565,22 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
                 Space::Linear => sd_coordinate,
                 Space::Log => values[j] * sd_coordinate,
             };
-            ParameterEstimate { name: setup.parameters[j].clone(), value: values[j], prior, sd_coordinate, sd }
+            ParameterEstimate {
+                name: setup.parameters[j].clone(),
+                value: values[j],
+                prior,
+                sd_coordinate,
+                sd,
+            }
         })
         .collect();
-    let correlation = (0..p).map(|a| (0..p).map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt()).collect()).collect();
+    let correlation = (0..p)
+        .map(|a| {
+            (0..p)
+                .map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt())
+                .collect()
+        })
+        .collect();
     let mut buf: [Vec<f64>; 3] = Default::default();
     sim.simulate(&target.vrs, &values, &mut buf)?;
     let nmse = [0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
@@ -448,9 +600,13 @@ pub fn calibrate(twin: &Twin, data: &Measurement, setup: &CalibrationSetup) -> R
 /// A copy of `twin` with the calibrated values and noise variances.
 pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, CalibrateError> {
     let mut out = twin.duplicate();
-    let physics = out.component_mut(PHYSICS).ok_or_else(|| CalibrateError::Setup("no physics component".into()))?;
+    let physics = out
+        .component_mut(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup("no physics component".into()))?;
     for p in &calibration.parameters {
-        physics.parameters.insert(p.name.clone(), ParameterValue::Real(p.value));
+        physics
+            .parameters
+            .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
     out.noise_variance = Some(calibration.noise_variance);
     Ok(out)

@@ -24,10 +24,18 @@ pub struct Prior {
 
 impl Prior {
     pub fn linear(mean: f64, variance: f64) -> Self {
-        Prior { space: Space::Linear, mean, variance }
+        Prior {
+            space: Space::Linear,
+            mean,
+            variance,
+        }
     }
     pub fn log(mean: f64, variance: f64) -> Self {
-        Prior { space: Space::Log, mean, variance }
+        Prior {
+            space: Space::Log,
+            mean,
+            variance,
+        }
     }
     pub fn sd(&self) -> f64 {
         self.variance.sqrt()
@@ -51,7 +59,9 @@ impl Prior {
 /// The engineering priors of the reference paper's Table 1 for the shear model's parameters;
 /// for any other positive parameter, a wide log-normal prior around its current value.
 pub fn default_prior(name: &str, current: f64) -> Prior {
-    let storey = |prefix: char| name.len() == 2 && name.starts_with(prefix) && matches!(name.as_bytes()[1], b'1'..=b'3');
+    let storey = |prefix: char| {
+        name.len() == 2 && name.starts_with(prefix) && matches!(name.as_bytes()[1], b'1'..=b'3')
+    };
     if storey('m') {
         Prior::linear(5.2, 0.5)
     } else if storey('c') {
@@ -73,7 +83,10 @@ pub fn read_priors(path: &Path) -> Result<BTreeMap<String, Prior>, String> {
         serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
     for (name, p) in &priors {
         if !(p.mean.is_finite() && p.variance.is_finite() && p.variance > 0.0) {
-            return Err(format!("{}: prior of '{name}' needs a finite mean and a positive variance", path.display()));
+            return Err(format!(
+                "{}: prior of '{name}' needs a finite mean and a positive variance",
+                path.display()
+            ));
         }
     }
     Ok(priors)
@@ -91,6 +104,10 @@ mod tests {
         let gap = default_prior("contact23_gap", 5e-4);
         assert_eq!(gap.space, Space::Log);
         assert!((gap.value(gap.mean) - 5e-4).abs() < 1e-15);
-        assert_eq!(default_prior("k12", 1.0).space, Space::Log, "only k1..k3 take Table 1's stiffness prior");
+        assert_eq!(
+            default_prior("k12", 1.0).space,
+            Space::Log,
+            "only k1..k3 take Table 1's stiffness prior"
+        );
     }
 }

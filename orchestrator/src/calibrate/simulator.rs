@@ -31,13 +31,31 @@ impl<'a> Simulator<'a> {
     ) -> Result<Self, TwinError> {
         let instance = fmu.instantiate(name)?;
         let force_vr = fmu.value_reference("force")?;
-        let acc_vrs = [fmu.value_reference(OUTPUTS[0])?, fmu.value_reference(OUTPUTS[1])?, fmu.value_reference(OUTPUTS[2])?];
-        Ok(Simulator { fmu, instance, base, force_vr, acc_vrs, force, start, dt })
+        let acc_vrs = [
+            fmu.value_reference(OUTPUTS[0])?,
+            fmu.value_reference(OUTPUTS[1])?,
+            fmu.value_reference(OUTPUTS[2])?,
+        ];
+        Ok(Simulator {
+            fmu,
+            instance,
+            base,
+            force_vr,
+            acc_vrs,
+            force,
+            start,
+            dt,
+        })
     }
 
     /// Simulate with the real parameters `vrs` set to `values`; `out[f][k]` is floor f's
     /// acceleration at sample k.
-    pub fn simulate(&mut self, vrs: &[u32], values: &[f64], out: &mut [Vec<f64>; 3]) -> Result<(), TwinError> {
+    pub fn simulate(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        out: &mut [Vec<f64>; 3],
+    ) -> Result<(), TwinError> {
         let n = self.force.len();
         let inst = &mut self.instance;
         inst.reset()?;

@@ -18,7 +18,10 @@ pub struct UnpackLimits {
 impl Default for UnpackLimits {
     /// Far above any FMU of this project (a few MiB, a few files) and far below what fills a disk.
     fn default() -> Self {
-        UnpackLimits { max_entries: 10_000, max_total_bytes: 1 << 30 }
+        UnpackLimits {
+            max_entries: 10_000,
+            max_total_bytes: 1 << 30,
+        }
     }
 }
 
@@ -52,11 +55,18 @@ fn safe_relative_path(name: &str) -> Option<PathBuf> {
 }
 
 pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportError> {
-    let bad = |message: String| ImportError::Archive { path: archive.to_owned(), message };
+    let bad = |message: String| ImportError::Archive {
+        path: archive.to_owned(),
+        message,
+    };
     let file = File::open(archive).map_err(|e| bad(format!("cannot open: {e}")))?;
     let mut zip = zip::ZipArchive::new(file).map_err(|e| bad(format!("not a zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
-        return Err(bad(format!("{} entries, more than the limit of {}", zip.len(), limits.max_entries)));
+        return Err(bad(format!(
+            "{} entries, more than the limit of {}",
+            zip.len(),
+            limits.max_entries
+        )));
     }
     let dir = tempfile::Builder::new()
         .prefix("twin-unpack-")
@@ -64,10 +74,14 @@ pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportEr
         .map_err(|e| bad(format!("cannot create a temporary directory: {e}")))?;
     let mut total: u64 = 0;
     for index in 0..zip.len() {
-        let mut entry = zip.by_index(index).map_err(|e| bad(format!("entry {index}: {e}")))?;
+        let mut entry = zip
+            .by_index(index)
+            .map_err(|e| bad(format!("entry {index}: {e}")))?;
         let name = entry.name().to_owned();
         let Some(relative) = safe_relative_path(&name) else {
-            return Err(bad(format!("entry '{name}' has an absolute path or a '..' component (zip-slip); refused")));
+            return Err(bad(format!(
+                "entry '{name}' has an absolute path or a '..' component (zip-slip); refused"
+            )));
         };
         if entry.is_symlink() {
             return Err(bad(format!("entry '{name}' is a symbolic link; refused")));
@@ -87,12 +101,18 @@ pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportEr
             .map_err(|e| bad(format!("entry '{name}': {e}")))?;
         total += written;
         if total > limits.max_total_bytes {
-            return Err(bad(format!("unpacks to more than {} bytes (zip bomb?); refused", limits.max_total_bytes)));
+            return Err(bad(format!(
+                "unpacks to more than {} bytes (zip bomb?); refused",
+                limits.max_total_bytes
+            )));
         }
         #[cfg(unix)]
         if let Some(mode) = entry.unix_mode() {
             use std::os::unix::fs::PermissionsExt;
-            let _ = std::fs::set_permissions(&target, std::fs::Permissions::from_mode(mode & 0o755 | 0o600));
+            let _ = std::fs::set_permissions(
+                &target,
+                std::fs::Permissions::from_mode(mode & 0o755 | 0o600),
+            );
         }
     }
     Ok(Unpacked { dir })
@@ -107,7 +127,8 @@ mod tests {
         let file = tempfile::NamedTempFile::new().expect("temp file");
         let mut zip = zip::ZipWriter::new(file.reopen().expect("reopen"));
         for (name, bytes) in entries {
-            zip.start_file(*name, zip::write::SimpleFileOptions::default()).expect("start");
+            zip.start_file(*name, zip::write::SimpleFileOptions::default())
+                .expect("start");
             zip.write_all(bytes).expect("write");
         }
         zip.finish().expect("finish");
@@ -116,16 +137,24 @@ mod tests {
 
     #[test]
     fn unpacks_a_plain_archive() {
-        let z = write_zip(&[("modelDescription.xml", b"<x/>"), ("binaries/linux64/a.so", b"elf")]);
+        let z = write_zip(&[
+            ("modelDescription.xml", b"<x/>"),
+            ("binaries/linux64/a.so", b"elf"),
+        ]);
         let u = unpack(z.path(), UnpackLimits::default()).expect("unpacks");
-        assert_eq!(std::fs::read(u.path().join("binaries/linux64/a.so")).expect("file"), b"elf");
+        assert_eq!(
+            std::fs::read(u.path().join("binaries/linux64/a.so")).expect("file"),
+            b"elf"
+        );
     }
 
     #[test]
     fn refuses_zip_slip() {
         for name in ["../evil.txt", "/etc/evil", "a/../../evil"] {
             let z = write_zip(&[(name, b"x")]);
-            let err = unpack(z.path(), UnpackLimits::default()).expect_err(name).to_string();
+            let err = unpack(z.path(), UnpackLimits::default())
+                .expect_err(name)
+                .to_string();
             assert!(err.contains("zip-slip"), "{name}: {err}");
         }
     }
@@ -134,9 +163,23 @@ mod tests {
     fn refuses_bombs_by_size_and_count() {
         let big = vec![0u8; 10_000];
         let z = write_zip(&[("a", &big), ("b", &big)]);
-        let err = unpack(z.path(), UnpackLimits { max_entries: 10, max_total_bytes: 15_000 }).expect_err("too big");
+        let err = unpack(
+            z.path(),
+            UnpackLimits {
+                max_entries: 10,
+                max_total_bytes: 15_000,
+            },
+        )
+        .expect_err("too big");
         assert!(err.to_string().contains("zip bomb"), "{err}");
-        let err = unpack(z.path(), UnpackLimits { max_entries: 1, max_total_bytes: 1 << 20 }).expect_err("too many");
+        let err = unpack(
+            z.path(),
+            UnpackLimits {
+                max_entries: 1,
+                max_total_bytes: 1 << 20,
+            },
+        )
+        .expect_err("too many");
         assert!(err.to_string().contains("entries"), "{err}");
     }
 
@@ -144,7 +187,12 @@ mod tests {
     fn refuses_links() {
         let file = tempfile::NamedTempFile::new().expect("temp file");
         let mut zip = zip::ZipWriter::new(file.reopen().expect("reopen"));
-        zip.add_symlink("link", "/etc/passwd", zip::write::SimpleFileOptions::default()).expect("symlink");
+        zip.add_symlink(
+            "link",
+            "/etc/passwd",
+            zip::write::SimpleFileOptions::default(),
+        )
+        .expect("symlink");
         zip.finish().expect("finish");
         let err = unpack(file.path(), UnpackLimits::default()).expect_err("link");
         assert!(err.to_string().contains("symbolic link"), "{err}");

@@ -12,8 +12,17 @@ use fmi2::abi::*;
 use super::ImportError;
 
 extern "C" {
-    fn twin_set_log_sink(sink: unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char));
-    fn twin_fmi2_logger(env: *mut c_void, instance: *const c_char, status: c_int, category: *const c_char, format: *const c_char, ...);
+    fn twin_set_log_sink(
+        sink: unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char),
+    );
+    fn twin_fmi2_logger(
+        env: *mut c_void,
+        instance: *const c_char,
+        status: c_int,
+        category: *const c_char,
+        format: *const c_char,
+        ...
+    );
 }
 
 /// One message an FMU sent through the logger.
@@ -32,7 +41,13 @@ struct MessageLog {
     messages: Mutex<Vec<FmuMessage>>,
 }
 
-unsafe extern "C" fn log_sink(env: *mut c_void, _instance: *const c_char, status: c_int, category: *const c_char, message: *const c_char) {
+unsafe extern "C" fn log_sink(
+    env: *mut c_void,
+    _instance: *const c_char,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
     if env.is_null() {
         return;
     }
@@ -40,8 +55,18 @@ unsafe extern "C" fn log_sink(env: *mut c_void, _instance: *const c_char, status
     // `MessageLog` that lives until after fmi2FreeInstance. The strings are NUL-terminated
     // (the C shim guarantees it).
     let log = unsafe { &*(env as *const MessageLog) };
-    let text = |p: *const c_char| if p.is_null() { String::new() } else { unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned() };
-    let entry = FmuMessage { status: status as fmi2Status, category: text(category), text: text(message) };
+    let text = |p: *const c_char| {
+        if p.is_null() {
+            String::new()
+        } else {
+            unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+        }
+    };
+    let entry = FmuMessage {
+        status: status as fmi2Status,
+        category: text(category),
+        text: text(message),
+    };
     if std::env::var_os("TWIN_FMU_LOG").is_some() {
         eprintln!("[{}] {}: {}", log.instance, entry.category, entry.text);
     }
@@ -51,16 +76,51 @@ unsafe extern "C" fn log_sink(env: *mut c_void, _instance: *const c_char, status
 }
 
 type Fn0 = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
-type GetReal = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut fmi2Real) -> fmi2Status;
-type SetReal = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Real) -> fmi2Status;
-type GetInt = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut fmi2Integer) -> fmi2Status;
-type SetInt = unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Integer) -> fmi2Status;
+type GetReal = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2Real,
+) -> fmi2Status;
+type SetReal = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Real,
+) -> fmi2Status;
+type GetInt = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2Integer,
+) -> fmi2Status;
+type SetInt = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Integer,
+) -> fmi2Status;
 
 /// The functions of a loaded FMI 2.0 co-simulation library.
 struct Api {
-    instantiate: unsafe extern "C" fn(fmi2String, fmi2Type, fmi2String, fmi2String, *const fmi2CallbackFunctions, fmi2Boolean, fmi2Boolean) -> fmi2Component,
+    instantiate: unsafe extern "C" fn(
+        fmi2String,
+        fmi2Type,
+        fmi2String,
+        fmi2String,
+        *const fmi2CallbackFunctions,
+        fmi2Boolean,
+        fmi2Boolean,
+    ) -> fmi2Component,
     free_instance: unsafe extern "C" fn(fmi2Component),
-    setup_experiment: unsafe extern "C" fn(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, fmi2Real) -> fmi2Status,
+    setup_experiment: unsafe extern "C" fn(
+        fmi2Component,
+        fmi2Boolean,
+        fmi2Real,
+        fmi2Real,
+        fmi2Boolean,
+        fmi2Real,
+    ) -> fmi2Status,
     enter_initialization_mode: Fn0,
     exit_initialization_mode: Fn0,
     terminate: Fn0,
@@ -72,7 +132,15 @@ struct Api {
     get_boolean: GetInt,
     set_boolean: SetInt,
     do_step: unsafe extern "C" fn(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status,
-    set_real_input_derivatives: Option<unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const fmi2Integer, *const fmi2Real) -> fmi2Status>,
+    set_real_input_derivatives: Option<
+        unsafe extern "C" fn(
+            fmi2Component,
+            *const fmi2ValueReference,
+            usize,
+            *const fmi2Integer,
+            *const fmi2Real,
+        ) -> fmi2Status,
+    >,
     get_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
     set_fmu_state: Option<unsafe extern "C" fn(fmi2Component, fmi2FMUstate) -> fmi2Status>,
     free_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
@@ -93,10 +161,14 @@ impl Library {
     /// Load `path` (an unpacked `binaries/linux64/<id>.so`). `resources` is the unpacked
     /// `resources/` directory handed to instances as a `file:` URI.
     pub fn load(path: &Path, guid: &str, resources: &Path) -> Result<Self, ImportError> {
-        let bad = |message: String| ImportError::Library { path: path.to_owned(), message };
+        let bad = |message: String| ImportError::Library {
+            path: path.to_owned(),
+            message,
+        };
         // SAFETY: loading a shared library runs its initialisers; an FMU is code the user chose
         // to run, as any FMI tool does.
-        let library = unsafe { libloading::Library::new(path) }.map_err(|e| bad(format!("cannot load: {e}")))?;
+        let library = unsafe { libloading::Library::new(path) }
+            .map_err(|e| bad(format!("cannot load: {e}")))?;
         macro_rules! required {
             ($name:literal) => {
                 // SAFETY: the symbol is an FMI 2.0 function with the standard's signature.
@@ -107,7 +179,9 @@ impl Library {
         macro_rules! optional {
             ($name:literal) => {
                 // SAFETY: as above.
-                unsafe { library.get(concat!($name, "\0").as_bytes()) }.ok().map(|s| *s)
+                unsafe { library.get(concat!($name, "\0").as_bytes()) }
+                    .ok()
+                    .map(|s| *s)
             };
         }
         let api = Api {
@@ -132,19 +206,41 @@ impl Library {
             _library: library,
         };
         let resource_uri = format!("file://{}", resources.display()).replace(' ', "%20");
-        Ok(Library { api: Arc::new(api), path: path.to_owned(), guid: guid.to_owned(), resource_uri })
+        Ok(Library {
+            api: Arc::new(api),
+            path: path.to_owned(),
+            guid: guid.to_owned(),
+            resource_uri,
+        })
     }
 
     pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {
         // SAFETY: the sink is a plain function; setting it more than once is harmless.
         unsafe { twin_set_log_sink(log_sink) };
-        let log = Box::new(MessageLog { instance: instance_name.to_owned(), messages: Mutex::new(Vec::new()) });
+        let log = Box::new(MessageLog {
+            instance: instance_name.to_owned(),
+            messages: Mutex::new(Vec::new()),
+        });
         // SAFETY: the shim has the FMI logger's C-variadic signature; the transmute only names
         // its type as the ABI module declares it.
         let logger: fmi2CallbackLogger = Some(unsafe {
             std::mem::transmute::<
-                unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char, ...),
-                unsafe extern "C" fn(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...),
+                unsafe extern "C" fn(
+                    *mut c_void,
+                    *const c_char,
+                    c_int,
+                    *const c_char,
+                    *const c_char,
+                    ...
+                ),
+                unsafe extern "C" fn(
+                    fmi2ComponentEnvironment,
+                    fmi2String,
+                    fmi2Status,
+                    fmi2String,
+                    fmi2String,
+                    ...
+                ),
             >(twin_fmi2_logger)
         });
         let callbacks = Box::new(fmi2CallbackFunctions {
@@ -163,9 +259,24 @@ impl Library {
         // SAFETY: all strings are NUL-terminated and outlive the call; `callbacks` and `log` are
         // boxed and owned by the returned Instance, so they outlive the FMU instance.
         let component = unsafe {
-            (self.api.instantiate)(name.as_ptr(), fmi2CoSimulation, guid.as_ptr(), uri.as_ptr(), &*callbacks, fmi2False, fmi2False)
+            (self.api.instantiate)(
+                name.as_ptr(),
+                fmi2CoSimulation,
+                guid.as_ptr(),
+                uri.as_ptr(),
+                &*callbacks,
+                fmi2False,
+                fmi2False,
+            )
         };
-        let instance = Instance { api: self.api.clone(), component, states: Vec::new(), name: instance_name.to_owned(), log, _callbacks: callbacks };
+        let instance = Instance {
+            api: self.api.clone(),
+            component,
+            states: Vec::new(),
+            name: instance_name.to_owned(),
+            log,
+            _callbacks: callbacks,
+        };
         if component.is_null() {
             return Err(ImportError::Call {
                 instance: instance_name.to_owned(),
@@ -217,13 +328,26 @@ impl Instance {
     }
 
     fn take_messages_text(&self) -> String {
-        let messages = self.log.messages.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default();
-        messages.iter().map(|m| m.text.as_str()).collect::<Vec<_>>().join("; ")
+        let messages = self
+            .log
+            .messages
+            .lock()
+            .map(|mut m| std::mem::take(&mut *m))
+            .unwrap_or_default();
+        messages
+            .iter()
+            .map(|m| m.text.as_str())
+            .collect::<Vec<_>>()
+            .join("; ")
     }
 
     /// Messages the FMU logged so far (and clears them).
     pub fn take_messages(&self) -> Vec<FmuMessage> {
-        self.log.messages.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default()
+        self.log
+            .messages
+            .lock()
+            .map(|mut m| std::mem::take(&mut *m))
+            .unwrap_or_default()
     }
 
     /// FMI status → Result, in one place. Warnings pass (their text stays in the log).
@@ -246,10 +370,21 @@ impl Instance {
         }
     }
 
-    pub fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> Result<(), ImportError> {
+    pub fn setup_experiment(
+        &mut self,
+        start_time: f64,
+        stop_time: Option<f64>,
+    ) -> Result<(), ImportError> {
         // SAFETY: `component` is a live instance of this library.
         let status = unsafe {
-            (self.api.setup_experiment)(self.component, fmi2False, 0.0, start_time, stop_time.is_some() as fmi2Boolean, stop_time.unwrap_or(0.0))
+            (self.api.setup_experiment)(
+                self.component,
+                fmi2False,
+                0.0,
+                start_time,
+                stop_time.is_some() as fmi2Boolean,
+                stop_time.unwrap_or(0.0),
+            )
         };
         self.check("fmi2SetupExperiment", status)
     }
@@ -279,45 +414,77 @@ impl Instance {
     }
 
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), ImportError> {
-        assert_eq!(vrs.len(), values.len(), "set_real: one value per value reference");
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "set_real: one value per value reference"
+        );
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.set_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        let status = unsafe {
+            (self.api.set_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
         self.check("fmi2SetReal", status)
     }
 
     pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), ImportError> {
-        assert_eq!(vrs.len(), values.len(), "get_real: one slot per value reference");
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "get_real: one slot per value reference"
+        );
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.get_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr()) };
+        let status = unsafe {
+            (self.api.get_real)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
+        };
         self.check("fmi2GetReal", status)
     }
 
     pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), ImportError> {
-        assert_eq!(vrs.len(), values.len(), "set_integer: one value per value reference");
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "set_integer: one value per value reference"
+        );
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.set_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        let status = unsafe {
+            (self.api.set_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
         self.check("fmi2SetInteger", status)
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Result<(), ImportError> {
-        assert_eq!(vrs.len(), values.len(), "get_integer: one slot per value reference");
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "get_integer: one slot per value reference"
+        );
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.get_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr()) };
+        let status = unsafe {
+            (self.api.get_integer)(self.component, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
+        };
         self.check("fmi2GetInteger", status)
     }
 
     pub fn set_boolean(&mut self, vrs: &[u32], values: &[bool]) -> Result<(), ImportError> {
-        assert_eq!(vrs.len(), values.len(), "set_boolean: one value per value reference");
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "set_boolean: one value per value reference"
+        );
         let ints: Vec<fmi2Boolean> = values.iter().map(|&b| b as fmi2Boolean).collect();
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.set_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_ptr()) };
+        let status = unsafe {
+            (self.api.set_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_ptr())
+        };
         self.check("fmi2SetBoolean", status)
     }
 
     pub fn get_boolean(&mut self, vrs: &[u32], values: &mut [bool]) -> Result<(), ImportError> {
         let mut ints = vec![0 as fmi2Boolean; vrs.len()];
         // SAFETY: both slices have vrs.len() elements.
-        let status = unsafe { (self.api.get_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_mut_ptr()) };
+        let status = unsafe {
+            (self.api.get_boolean)(self.component, vrs.as_ptr(), vrs.len(), ints.as_mut_ptr())
+        };
         self.check("fmi2GetBoolean", status)?;
         for (slot, i) in values.iter_mut().zip(ints) {
             *slot = i != 0;
@@ -330,14 +497,29 @@ impl Instance {
     }
 
     /// First-order input derivatives for the next step.
-    pub fn set_real_input_derivatives(&mut self, vrs: &[u32], slopes: &[f64]) -> Result<(), ImportError> {
+    pub fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        slopes: &[f64],
+    ) -> Result<(), ImportError> {
         assert_eq!(vrs.len(), slopes.len(), "one slope per value reference");
         let Some(f) = self.api.set_real_input_derivatives else {
-            return Err(ImportError::Unsupported { instance: self.name.clone(), what: "fmi2SetRealInputDerivatives" });
+            return Err(ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2SetRealInputDerivatives",
+            });
         };
         let orders = vec![1 as fmi2Integer; vrs.len()];
         // SAFETY: all slices have vrs.len() elements.
-        let status = unsafe { f(self.component, vrs.as_ptr(), vrs.len(), orders.as_ptr(), slopes.as_ptr()) };
+        let status = unsafe {
+            f(
+                self.component,
+                vrs.as_ptr(),
+                vrs.len(),
+                orders.as_ptr(),
+                slopes.as_ptr(),
+            )
+        };
         self.check("fmi2SetRealInputDerivatives", status)
     }
 
@@ -349,7 +531,13 @@ impl Instance {
 
     /// Save the FMU state (for rollback); the handle stays valid until the instance drops.
     pub fn save_state(&mut self) -> Result<StateHandle, ImportError> {
-        let f = self.api.get_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2GetFMUstate" })?;
+        let f = self
+            .api
+            .get_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2GetFMUstate",
+            })?;
         let mut state: fmi2FMUstate = std::ptr::null_mut();
         // SAFETY: `state` is a valid slot; the FMU allocates the state.
         let status = unsafe { f(self.component, &mut state) };
@@ -360,7 +548,13 @@ impl Instance {
 
     /// Overwrite a saved state with the current one.
     pub fn update_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
-        let f = self.api.get_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2GetFMUstate" })?;
+        let f = self
+            .api
+            .get_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2GetFMUstate",
+            })?;
         let slot = &mut self.states[handle.0];
         // SAFETY: the slot holds a state of this instance; the FMU updates it in place.
         let status = unsafe { f(self.component, slot) };
@@ -368,7 +562,13 @@ impl Instance {
     }
 
     pub fn restore_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
-        let f = self.api.set_fmu_state.ok_or_else(|| ImportError::Unsupported { instance: self.name.clone(), what: "fmi2SetFMUstate" })?;
+        let f = self
+            .api
+            .set_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2SetFMUstate",
+            })?;
         // SAFETY: the handle indexes a state this instance made.
         let status = unsafe { f(self.component, self.states[handle.0]) };
         self.check("fmi2SetFMUstate", status)

@@ -20,9 +20,17 @@ pub enum ImportError {
     #[error("{path}: {message}")]
     Library { path: PathBuf, message: String },
     #[error("{instance}: {call} {status}{}", if messages.is_empty() { String::new() } else { format!(": {messages}") })]
-    Call { instance: String, call: &'static str, status: String, messages: String },
+    Call {
+        instance: String,
+        call: &'static str,
+        status: String,
+        messages: String,
+    },
     #[error("{instance}: the FMU does not provide {what}")]
-    Unsupported { instance: String, what: &'static str },
+    Unsupported {
+        instance: String,
+        what: &'static str,
+    },
     #[error("{fmu}: no variable named '{name}'")]
     UnknownVariable { fmu: String, name: String },
 }
@@ -53,23 +61,43 @@ impl Fmu {
         let binary = platform_dir.join(format!("{}.so", model_description.model_identifier));
         if !binary.is_file() {
             let present: Vec<String> = std::fs::read_dir(unpacked.path().join("binaries"))
-                .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+                .map(|d| {
+                    d.flatten()
+                        .map(|e| e.file_name().to_string_lossy().into_owned())
+                        .collect()
+                })
                 .unwrap_or_default();
             return Err(ImportError::Archive {
                 path: path.to_owned(),
                 message: format!(
                     "no binary binaries/linux64/{}.so for this platform (platforms present: {})",
                     model_description.model_identifier,
-                    if present.is_empty() { "none".to_owned() } else { present.join(", ") }
+                    if present.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        present.join(", ")
+                    }
                 ),
             });
         }
-        let library = Library::load(&binary, &model_description.guid, &unpacked.path().join("resources"))
-            .map_err(|e| match e {
-                ImportError::Library { message, .. } => ImportError::Library { path: path.to_owned(), message },
-                other => other,
-            })?;
-        Ok(Fmu { path: path.to_owned(), model_description, library, _unpacked: unpacked })
+        let library = Library::load(
+            &binary,
+            &model_description.guid,
+            &unpacked.path().join("resources"),
+        )
+        .map_err(|e| match e {
+            ImportError::Library { message, .. } => ImportError::Library {
+                path: path.to_owned(),
+                message,
+            },
+            other => other,
+        })?;
+        Ok(Fmu {
+            path: path.to_owned(),
+            model_description,
+            library,
+            _unpacked: unpacked,
+        })
     }
 
     pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {
@@ -77,9 +105,12 @@ impl Fmu {
     }
 
     pub fn value_reference(&self, name: &str) -> Result<u32, ImportError> {
-        self.model_description.variable(name).map(|v| v.value_reference).ok_or_else(|| ImportError::UnknownVariable {
-            fmu: self.path.display().to_string(),
-            name: name.to_owned(),
-        })
+        self.model_description
+            .variable(name)
+            .map(|v| v.value_reference)
+            .ok_or_else(|| ImportError::UnknownVariable {
+                fmu: self.path.display().to_string(),
+                name: name.to_owned(),
+            })
     }
 }

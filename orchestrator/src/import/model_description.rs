@@ -133,26 +133,44 @@ pub struct ModelDescription {
 
 impl ModelDescription {
     pub fn parse(xml: &str, path: &Path) -> Result<Self, ImportError> {
-        let bad = |message: String| ImportError::ModelDescription { path: path.to_owned(), message };
-        let raw: RawModelDescription = quick_xml::de::from_str(xml).map_err(|e| bad(format!("malformed: {e}")))?;
+        let bad = |message: String| ImportError::ModelDescription {
+            path: path.to_owned(),
+            message,
+        };
+        let raw: RawModelDescription =
+            quick_xml::de::from_str(xml).map_err(|e| bad(format!("malformed: {e}")))?;
         if !raw.fmi_version.starts_with("2.") {
-            return Err(bad(format!("fmiVersion is '{}'; only FMI 2.0 is supported", raw.fmi_version)));
+            return Err(bad(format!(
+                "fmiVersion is '{}'; only FMI 2.0 is supported",
+                raw.fmi_version
+            )));
         }
-        let cs = raw.co_simulation.ok_or_else(|| bad("no CoSimulation element: not a co-simulation FMU".into()))?;
+        let cs = raw
+            .co_simulation
+            .ok_or_else(|| bad("no CoSimulation element: not a co-simulation FMU".into()))?;
         if cs.model_identifier.is_empty() || cs.model_identifier.contains(['/', '\\', '.']) {
-            return Err(bad(format!("modelIdentifier '{}' is not a valid file stem", cs.model_identifier)));
+            return Err(bad(format!(
+                "modelIdentifier '{}' is not a valid file stem",
+                cs.model_identifier
+            )));
         }
         let mut variables = Vec::new();
         let mut by_name = HashMap::new();
         for v in raw.model_variables.map(|m| m.variables).unwrap_or_default() {
-            let (scalar_type, attrs) = match (&v.real, &v.integer, &v.boolean, &v.string, &v.enumeration) {
-                (Some(a), None, None, None, None) => (ScalarType::Real, a),
-                (None, Some(a), None, None, None) => (ScalarType::Integer, a),
-                (None, None, Some(a), None, None) => (ScalarType::Boolean, a),
-                (None, None, None, Some(a), None) => (ScalarType::String, a),
-                (None, None, None, None, Some(a)) => (ScalarType::Enumeration, a),
-                _ => return Err(bad(format!("variable '{}' must have exactly one type element", v.name))),
-            };
+            let (scalar_type, attrs) =
+                match (&v.real, &v.integer, &v.boolean, &v.string, &v.enumeration) {
+                    (Some(a), None, None, None, None) => (ScalarType::Real, a),
+                    (None, Some(a), None, None, None) => (ScalarType::Integer, a),
+                    (None, None, Some(a), None, None) => (ScalarType::Boolean, a),
+                    (None, None, None, Some(a), None) => (ScalarType::String, a),
+                    (None, None, None, None, Some(a)) => (ScalarType::Enumeration, a),
+                    _ => {
+                        return Err(bad(format!(
+                            "variable '{}' must have exactly one type element",
+                            v.name
+                        )))
+                    }
+                };
             let causality = match v.causality.as_deref().unwrap_or("local") {
                 "parameter" => Causality::Parameter,
                 "calculatedParameter" => Causality::CalculatedParameter,
@@ -160,7 +178,12 @@ impl ModelDescription {
                 "output" => Causality::Output,
                 "local" => Causality::Local,
                 "independent" => Causality::Independent,
-                other => return Err(bad(format!("variable '{}' has unknown causality '{other}'", v.name))),
+                other => {
+                    return Err(bad(format!(
+                        "variable '{}' has unknown causality '{other}'",
+                        v.name
+                    )))
+                }
             };
             if by_name.insert(v.name.clone(), variables.len()).is_some() {
                 return Err(bad(format!("variable name '{}' appears twice", v.name)));
@@ -198,11 +221,15 @@ impl ModelDescription {
     }
 
     pub fn outputs(&self) -> impl Iterator<Item = &ScalarVariable> {
-        self.variables.iter().filter(|v| v.causality == Causality::Output)
+        self.variables
+            .iter()
+            .filter(|v| v.causality == Causality::Output)
     }
 
     pub fn inputs(&self) -> impl Iterator<Item = &ScalarVariable> {
-        self.variables.iter().filter(|v| v.causality == Causality::Input)
+        self.variables
+            .iter()
+            .filter(|v| v.causality == Causality::Input)
     }
 }
 
@@ -225,18 +252,28 @@ mod tests {
         let md = ModelDescription::parse(MINIMAL, Path::new("m.xml")).expect("parses");
         assert_eq!(md.guid, "{g}");
         assert!(md.can_interpolate_inputs);
-        assert_eq!(md.variable("y").map(|v| v.causality), Some(Causality::Output));
-        assert_eq!(md.variable("on").map(|v| v.scalar_type), Some(ScalarType::Boolean));
+        assert_eq!(
+            md.variable("y").map(|v| v.causality),
+            Some(Causality::Output)
+        );
+        assert_eq!(
+            md.variable("on").map(|v| v.scalar_type),
+            Some(ScalarType::Boolean)
+        );
         assert_eq!(md.inputs().count(), 1);
     }
 
     #[test]
     fn refuses_malformed_and_unsupported() {
-        let err = ModelDescription::parse("<fmiModelDescription", Path::new("x.xml")).expect_err("malformed");
+        let err = ModelDescription::parse("<fmiModelDescription", Path::new("x.xml"))
+            .expect_err("malformed");
         assert!(err.to_string().contains("x.xml"), "{err}");
         let fmi3 = MINIMAL.replace("fmiVersion=\"2.0\"", "fmiVersion=\"3.0\"");
         assert!(ModelDescription::parse(&fmi3, Path::new("x.xml")).is_err());
-        let me = MINIMAL.replace("<CoSimulation modelIdentifier=\"m\" canInterpolateInputs=\"true\"/>", "");
+        let me = MINIMAL.replace(
+            "<CoSimulation modelIdentifier=\"m\" canInterpolateInputs=\"true\"/>",
+            "",
+        );
         let err = ModelDescription::parse(&me, Path::new("x.xml")).expect_err("no CS");
         assert!(err.to_string().contains("co-simulation"), "{err}");
         let dup = MINIMAL.replace("name=\"y\"", "name=\"u\"");

@@ -26,10 +26,8 @@ pub enum MasterError {
     Block { block: String, message: String },
     #[error("system: {0}")]
     Config(String),
-    #[error("at t = {time}: {source}")]
-    AtTime {
-        time: f64,
-        #[source]
-        source: Box<MasterError>,
-    },
+    /// The message carries the inner error's text; it is deliberately not also a `source`, so
+    /// an error chain does not print it twice.
+    #[error("at t = {time} s: {inner}")]
+    AtTime { time: f64, inner: Box<MasterError> },
 }

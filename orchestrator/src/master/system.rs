@@ -10,7 +10,11 @@ pub trait Slave {
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), MasterError>;
     fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), MasterError>;
     /// Only called when `can_interpolate_inputs`.
-    fn set_real_input_derivatives(&mut self, vrs: &[u32], slopes: &[f64]) -> Result<(), MasterError>;
+    fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        slopes: &[f64],
+    ) -> Result<(), MasterError>;
     fn can_interpolate_inputs(&self) -> bool;
     fn do_step(&mut self, time: f64, step: f64) -> Result<(), MasterError>;
 }
@@ -22,7 +26,11 @@ impl Slave for Instance {
     fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), MasterError> {
         Ok(Instance::get_real(self, vrs, values)?)
     }
-    fn set_real_input_derivatives(&mut self, vrs: &[u32], slopes: &[f64]) -> Result<(), MasterError> {
+    fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        slopes: &[f64],
+    ) -> Result<(), MasterError> {
         Ok(Instance::set_real_input_derivatives(self, vrs, slopes)?)
     }
     fn can_interpolate_inputs(&self) -> bool {
@@ -33,13 +41,25 @@ impl Slave for Instance {
     }
 }
 
-/// A function of its inputs evaluated in zero simulated time (the LQR, the supervisor).
+/// A function of its inputs evaluated in zero simulated time (the LQR, the supervisor). Its
+/// outputs must depend only on its inputs (and the time): the master skips a call whose inputs
+/// did not change within a communication point.
 pub trait Block {
-    fn evaluate(&mut self, time: f64, inputs: &[f64], outputs: &mut [f64]) -> Result<(), MasterError>;
+    fn evaluate(
+        &mut self,
+        time: f64,
+        inputs: &[f64],
+        outputs: &mut [f64],
+    ) -> Result<(), MasterError>;
 }
 
 impl<F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), MasterError>> Block for F {
-    fn evaluate(&mut self, time: f64, inputs: &[f64], outputs: &mut [f64]) -> Result<(), MasterError> {
+    fn evaluate(
+        &mut self,
+        time: f64,
+        inputs: &[f64],
+        outputs: &mut [f64],
+    ) -> Result<(), MasterError> {
         self(time, inputs, outputs)
     }
 }
@@ -69,7 +89,11 @@ pub enum Algorithm {
 }
 
 enum Kind {
-    Slave { slave: Box<dyn Slave>, input_vrs: Vec<u32>, output_vrs: Vec<u32> },
+    Slave {
+        slave: Box<dyn Slave>,
+        input_vrs: Vec<u32>,
+        output_vrs: Vec<u32>,
+    },
     Block(Box<dyn Block>),
 }
 
@@ -98,22 +122,53 @@ impl Default for System {
 
 impl System {
     pub fn new() -> Self {
-        System { nodes: Vec::new(), signals: Vec::new(), algorithm: Algorithm::default() }
+        System {
+            nodes: Vec::new(),
+            signals: Vec::new(),
+            algorithm: Algorithm::default(),
+        }
     }
 
     /// Add a slave whose input ports are `input_vrs` and output ports `output_vrs` (value
     /// references). Nodes are evaluated in the order they are added.
-    pub fn add_slave(&mut self, name: &str, slave: Box<dyn Slave>, input_vrs: Vec<u32>, output_vrs: Vec<u32>) -> NodeId {
+    pub fn add_slave(
+        &mut self,
+        name: &str,
+        slave: Box<dyn Slave>,
+        input_vrs: Vec<u32>,
+        output_vrs: Vec<u32>,
+    ) -> NodeId {
         let (n_in, n_out) = (input_vrs.len(), output_vrs.len());
-        self.push(name, Kind::Slave { slave, input_vrs, output_vrs }, n_in, n_out)
+        self.push(
+            name,
+            Kind::Slave {
+                slave,
+                input_vrs,
+                output_vrs,
+            },
+            n_in,
+            n_out,
+        )
     }
 
-    pub fn add_block(&mut self, name: &str, block: Box<dyn Block>, n_inputs: usize, n_outputs: usize) -> NodeId {
+    pub fn add_block(
+        &mut self,
+        name: &str,
+        block: Box<dyn Block>,
+        n_inputs: usize,
+        n_outputs: usize,
+    ) -> NodeId {
         self.push(name, Kind::Block(block), n_inputs, n_outputs)
     }
 
     fn push(&mut self, name: &str, kind: Kind, n_in: usize, n_out: usize) -> NodeId {
-        self.nodes.push(Node { name: name.to_owned(), kind, sources: vec![None; n_in], inputs: vec![0.0; n_in], outputs: vec![0.0; n_out] });
+        self.nodes.push(Node {
+            name: name.to_owned(),
+            kind,
+            sources: vec![None; n_in],
+            inputs: vec![0.0; n_in],
+            outputs: vec![0.0; n_out],
+        });
         NodeId(self.nodes.len() - 1)
     }
 
@@ -125,17 +180,30 @@ impl System {
 
     pub fn connect(&mut self, from: Port, to: NodeId, input: usize) -> Result<(), MasterError> {
         match from {
-            Port::Output(NodeId(n), p) if n >= self.nodes.len() || p >= self.nodes[n].outputs.len() => {
-                return Err(MasterError::Config(format!("no output port {p} on node {n}")))
+            Port::Output(NodeId(n), p)
+                if n >= self.nodes.len() || p >= self.nodes[n].outputs.len() =>
+            {
+                return Err(MasterError::Config(format!(
+                    "no output port {p} on node {n}"
+                )))
             }
-            Port::Signal(s) if s >= self.signals.len() => return Err(MasterError::Config(format!("no signal {s}"))),
+            Port::Signal(s) if s >= self.signals.len() => {
+                return Err(MasterError::Config(format!("no signal {s}")))
+            }
             _ => {}
         }
-        let node = self.nodes.get_mut(to.0).ok_or_else(|| MasterError::Config(format!("no node {}", to.0)))?;
+        let node = self
+            .nodes
+            .get_mut(to.0)
+            .ok_or_else(|| MasterError::Config(format!("no node {}", to.0)))?;
         let name = node.name.clone();
-        let slot = node.sources.get_mut(input).ok_or_else(|| MasterError::Config(format!("node '{name}' has no input port {input}")))?;
+        let slot = node.sources.get_mut(input).ok_or_else(|| {
+            MasterError::Config(format!("node '{name}' has no input port {input}"))
+        })?;
         if slot.is_some() {
-            return Err(MasterError::Config(format!("input {input} of '{name}' is already connected")));
+            return Err(MasterError::Config(format!(
+                "input {input} of '{name}' is already connected"
+            )));
         }
         *slot = Some(from);
         Ok(())
@@ -160,8 +228,14 @@ impl System {
         let node = &mut self.nodes[i];
         let before = node.outputs.clone();
         match &mut node.kind {
-            Kind::Slave { slave, input_vrs, output_vrs } => {
-                let connected: Vec<usize> = (0..input_vrs.len()).filter(|&p| node.sources[p].is_some()).collect();
+            Kind::Slave {
+                slave,
+                input_vrs,
+                output_vrs,
+            } => {
+                let connected: Vec<usize> = (0..input_vrs.len())
+                    .filter(|&p| node.sources[p].is_some())
+                    .collect();
                 if !connected.is_empty() {
                     let vrs: Vec<u32> = connected.iter().map(|&p| input_vrs[p]).collect();
                     let values: Vec<f64> = connected.iter().map(|&p| node.inputs[p]).collect();
@@ -171,21 +245,34 @@ impl System {
                     slave.get_real(output_vrs, &mut node.outputs)?;
                 }
             }
-            Kind::Block(block) => block.evaluate(time, &node.inputs, &mut node.outputs).map_err(|e| match e {
-                MasterError::Block { .. } => e,
-                other => MasterError::Block { block: node.name.clone(), message: other.to_string() },
-            })?,
+            Kind::Block(block) => block
+                .evaluate(time, &node.inputs, &mut node.outputs)
+                .map_err(|e| match e {
+                    MasterError::Block { .. } => e,
+                    other => MasterError::Block {
+                        block: node.name.clone(),
+                        message: other.to_string(),
+                    },
+                })?,
         }
-        Ok(node.outputs.iter().zip(&before).any(|(a, b)| a.to_bits() != b.to_bits()))
+        Ok(node
+            .outputs
+            .iter()
+            .zip(&before)
+            .any(|(a, b)| a.to_bits() != b.to_bits()))
     }
 
-    fn gather_inputs(&mut self, i: usize, k: usize) {
+    /// Copy node `i`'s connected inputs; true if any changed.
+    fn gather_inputs(&mut self, i: usize, k: usize) -> bool {
+        let mut changed = false;
         for p in 0..self.nodes[i].sources.len() {
             if let Some(port) = self.nodes[i].sources[p] {
                 let v = self.value(port, k);
+                changed |= self.nodes[i].inputs[p].to_bits() != v.to_bits();
                 self.nodes[i].inputs[p] = v;
             }
         }
+        changed
     }
 
     /// Zero-time evaluation of every node at communication point `k`.
@@ -194,17 +281,23 @@ impl System {
             Algorithm::GaussSeidel => {
                 // Each pass can settle one more link of a chain through non-feedthrough outputs;
                 // more passes than nodes means an algebraic loop that does not converge.
-                for _pass in 0..=self.nodes.len() + 1 {
+                for pass in 0..=self.nodes.len() + 1 {
                     let mut changed = false;
                     for i in 0..self.nodes.len() {
-                        self.gather_inputs(i, k);
-                        changed |= self.evaluate_node(i, time)?;
+                        // Outputs are functions of the inputs at a fixed point in time: a node
+                        // whose inputs did not move since the last pass needs no new call.
+                        let inputs_moved = self.gather_inputs(i, k);
+                        if pass == 0 || inputs_moved {
+                            changed |= self.evaluate_node(i, time)?;
+                        }
                     }
                     if !changed {
                         return Ok(());
                     }
                 }
-                Err(MasterError::Config("outputs do not settle at a communication point: an algebraic loop?".into()))
+                Err(MasterError::Config(
+                    "outputs do not settle at a communication point: an algebraic loop?".into(),
+                ))
             }
             Algorithm::Jacobi => {
                 for i in 0..self.nodes.len() {
@@ -223,15 +316,23 @@ impl System {
     fn set_input_derivatives(&mut self, k: usize, step: f64) -> Result<(), MasterError> {
         for i in 0..self.nodes.len() {
             let slopes: Vec<(u32, f64)> = match &self.nodes[i].kind {
-                Kind::Slave { slave, input_vrs, .. } if slave.can_interpolate_inputs() => self.nodes[i]
+                Kind::Slave {
+                    slave, input_vrs, ..
+                } if slave.can_interpolate_inputs() => self.nodes[i]
                     .sources
                     .iter()
                     .enumerate()
                     .filter_map(|(p, src)| match src {
                         Some(Port::Signal(s)) => {
                             let samples = &self.signals[*s].1;
-                            let next = samples.get(k + 1).copied().unwrap_or(samples[k.min(samples.len() - 1)]);
-                            Some((input_vrs[p], (next - samples[k.min(samples.len() - 1)]) / step))
+                            let next = samples
+                                .get(k + 1)
+                                .copied()
+                                .unwrap_or(samples[k.min(samples.len() - 1)]);
+                            Some((
+                                input_vrs[p],
+                                (next - samples[k.min(samples.len() - 1)]) / step,
+                            ))
                         }
                         Some(Port::Output(..)) => Some((input_vrs[p], 0.0)),
                         None => None,
@@ -271,14 +372,20 @@ impl System {
         for (i, node) in self.nodes.iter().enumerate() {
             if let Some(p) = node.sources.iter().position(Option::is_none) {
                 if matches!(node.kind, Kind::Block(_)) {
-                    return Err(MasterError::Config(format!("input {p} of block '{}' (node {i}) is not connected", node.name)));
+                    return Err(MasterError::Config(format!(
+                        "input {p} of block '{}' (node {i}) is not connected",
+                        node.name
+                    )));
                 }
             }
         }
         let mut buffer = Vec::new();
         for k in 0..=clock.steps {
             let time = clock.time(k);
-            let at = |e: MasterError| MasterError::AtTime { time, source: Box::new(e) };
+            let at = |e: MasterError| MasterError::AtTime {
+                time,
+                inner: Box::new(e),
+            };
             self.propagate(k as usize, time).map_err(at)?;
             for observer in observers.iter_mut() {
                 buffer.clear();
@@ -288,7 +395,8 @@ impl System {
             if k == clock.steps {
                 break;
             }
-            self.set_input_derivatives(k as usize, clock.step).map_err(at)?;
+            self.set_input_derivatives(k as usize, clock.step)
+                .map_err(at)?;
             for node in &mut self.nodes {
                 if let Kind::Slave { slave, .. } = &mut node.kind {
                     slave.do_step(time, clock.step).map_err(at)?;
@@ -312,11 +420,19 @@ impl Recorder {
     pub fn new(watched: Vec<(String, Port)>) -> Self {
         let (names, ports): (Vec<String>, Vec<Port>) = watched.into_iter().unzip();
         let columns = vec![Vec::new(); ports.len()];
-        Recorder { ports, names, time: Vec::new(), columns }
+        Recorder {
+            ports,
+            names,
+            time: Vec::new(),
+            columns,
+        }
     }
 
     pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.names.iter().position(|n| n == name).map(|i| self.columns[i].as_slice())
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
     }
 
     /// `time,<names…>` with full precision.
@@ -363,7 +479,13 @@ mod tests {
 
     impl Integrator {
         fn new(interpolate: bool) -> Self {
-            Integrator { x: 0.0, u: 0.0, slope: 0.0, interpolate, steps: Vec::new() }
+            Integrator {
+                x: 0.0,
+                u: 0.0,
+                slope: 0.0,
+                interpolate,
+                steps: Vec::new(),
+            }
         }
     }
 
@@ -382,7 +504,11 @@ mod tests {
             }
             Ok(())
         }
-        fn set_real_input_derivatives(&mut self, _vrs: &[u32], slopes: &[f64]) -> Result<(), MasterError> {
+        fn set_real_input_derivatives(
+            &mut self,
+            _vrs: &[u32],
+            slopes: &[f64],
+        ) -> Result<(), MasterError> {
             self.slope = slopes[0];
             Ok(())
         }
@@ -399,11 +525,18 @@ mod tests {
 
     fn run_integrator(interpolate: bool, samples: Vec<f64>, steps: u64, h: f64) -> Vec<f64> {
         let mut system = System::new();
-        let n = system.add_slave("int", Box::new(Integrator::new(interpolate)), vec![10], vec![0]);
+        let n = system.add_slave(
+            "int",
+            Box::new(Integrator::new(interpolate)),
+            vec![10],
+            vec![0],
+        );
         let s = system.add_signal("u", samples);
         system.connect(s, n, 0).expect("connect");
         let mut rec = Recorder::new(vec![("x".into(), Port::Output(n, 0))]);
-        system.run(Clock::new(0.0, h, steps), &mut [&mut rec], |_, _| {}).expect("runs");
+        system
+            .run(Clock::new(0.0, h, steps), &mut [&mut rec], |_, _| {})
+            .expect("runs");
         rec.columns[0].clone()
     }
 
@@ -419,7 +552,12 @@ mod tests {
         }
         // Without interpolation the input is held: a zero-order hold lags by h/2·t.
         let held = run_integrator(false, samples, 4, h);
-        assert!((x[4] - held[4] - 0.5).abs() < 1e-12, "hold loses h·t_end/2 = 0.5: {} vs {}", x[4], held[4]);
+        assert!(
+            (x[4] - held[4] - 0.5).abs() < 1e-12,
+            "hold loses h·t_end/2 = 0.5: {} vs {}",
+            x[4],
+            held[4]
+        );
     }
 
     #[test]
@@ -449,7 +587,9 @@ mod tests {
             system.connect(s, a, 0).expect("connect");
             system.connect(Port::Output(a, 0), b, 0).expect("connect");
             let mut rec = Recorder::new(vec![("b.u".into(), Port::Output(b, 0))]);
-            system.run(Clock::new(0.0, 1.0, 3), &mut [&mut rec], |_, _| {}).expect("runs");
+            system
+                .run(Clock::new(0.0, 1.0, 3), &mut [&mut rec], |_, _| {})
+                .expect("runs");
             rec.columns[0].clone()
         };
         assert_eq!(run(Algorithm::GaussSeidel), vec![0.0, 1.0, 2.0, 3.0]);
@@ -475,10 +615,16 @@ mod tests {
         // sees x + u, so u = 1 − (x + u) → u = (1 − x)/2 is an algebraic loop; GS iterates it
         // and must report that it does not settle bit-exactly... unless it converges; here the
         // iteration u ← 1 − x − u oscillates, so an error is expected.
-        system.connect(Port::Output(slave, 0), gain, 0).expect("connect");
-        system.connect(Port::Output(gain, 0), slave, 0).expect("connect");
+        system
+            .connect(Port::Output(slave, 0), gain, 0)
+            .expect("connect");
+        system
+            .connect(Port::Output(gain, 0), slave, 0)
+            .expect("connect");
         let mut rec = Recorder::new(vec![("x".into(), Port::Output(slave, 0))]);
-        let err = system.run(Clock::new(0.0, 0.1, 10), &mut [&mut rec], |_, _| {}).expect_err("algebraic loop");
+        let err = system
+            .run(Clock::new(0.0, 0.1, 10), &mut [&mut rec], |_, _| {})
+            .expect_err("algebraic loop");
         assert!(err.to_string().contains("algebraic loop"), "{err}");
     }
 
@@ -497,15 +643,25 @@ mod tests {
             1,
             1,
         );
-        system.connect(Port::Output(slave, 0), block, 0).expect("connect");
-        system.connect(Port::Output(block, 0), slave, 0).expect("connect");
+        system
+            .connect(Port::Output(slave, 0), block, 0)
+            .expect("connect");
+        system
+            .connect(Port::Output(block, 0), slave, 0)
+            .expect("connect");
         let h = 0.01;
         let mut rec = Recorder::new(vec![("x".into(), Port::Output(slave, 0))]);
-        system.run(Clock::new(0.0, h, 100), &mut [&mut rec], |_, _| {}).expect("runs");
+        system
+            .run(Clock::new(0.0, h, 100), &mut [&mut rec], |_, _| {})
+            .expect("runs");
         // Explicit Euler of ẋ = 1 − x: x_k = 1 − (1 − h)^k, exactly, if the control is applied
         // at the same point (no one-step delay).
         let expected = 1.0 - (1.0f64 - h).powi(100);
-        assert!((rec.columns[0][100] - expected).abs() < 1e-12, "{} vs {expected}", rec.columns[0][100]);
+        assert!(
+            (rec.columns[0][100] - expected).abs() < 1e-12,
+            "{} vs {expected}",
+            rec.columns[0][100]
+        );
     }
 
     #[test]
@@ -516,9 +672,14 @@ mod tests {
         assert!(system.connect(Port::Signal(3), a, 0).is_err());
         let s = system.add_signal("u", vec![0.0; 2]);
         system.connect(s, a, 0).expect("first");
-        assert!(system.connect(s, a, 0).is_err(), "an input takes one connection");
+        assert!(
+            system.connect(s, a, 0).is_err(),
+            "an input takes one connection"
+        );
         let mut rec = Recorder::new(vec![]);
-        let err = system.run(Clock::new(0.0, 1.0, 5), &mut [&mut rec], |_, _| {}).expect_err("short signal");
+        let err = system
+            .run(Clock::new(0.0, 1.0, 5), &mut [&mut rec], |_, _| {})
+            .expect_err("short signal");
         assert!(err.to_string().contains("samples"), "{err}");
     }
 }

@@ -1,0 +1,262 @@
+//! How `ShearModel::advance` integrates one communication step, always as RK4 with `substeps`
+//! sub-steps, in one of two ways:
+//!
+//! - **No effect enabled** (the linear model): RK4 applied to a linear system with an input
+//!   that is linear in time is itself an affine map of the state and of the input's value and
+//!   slope. That map (`LinearStepMap`: a 6×6 matrix and two columns) is computed once per
+//!   (parameters, step size) by running the very same RK4 sub-steps on unit states and inputs,
+//!   then each step is one small matrix–vector product. Equal to stepping RK4 directly up to
+//!   rounding (the tests check 1e-12), and an order of magnitude cheaper.
+//! - **Effects enabled**: RK4 sub-steps, split where a contact gap opens or closes. The contact
+//!   force has a kink there, and an RK4 step across a kink loses its order (errors of tens of
+//!   percent with frequent contact at 8 sub-steps); splitting the step at the crossing, located
+//!   by regula falsi on the switch function, restores it.
+
+use numerics::ode::{rk4_step, rk4_substeps};
+
+use crate::model::{ShearModel, ShearParameters};
+
+pub type State = [f64; 6];
+
+/// One communication step of the linear model: `x' = Φ x + g₀ u + g₁ u̇`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearStepMap {
+    pub step: f64,
+    pub params: ShearParameters,
+    phi: [[f64; 6]; 6],
+    g0: State,
+    g1: State,
+}
+
+impl LinearStepMap {
+    pub fn new(model: &ShearModel, step: f64) -> Self {
+        let run = |x0: &State, u0: f64, slope: f64| -> State {
+            rk4_substeps(
+                |tau, x: &State| rhs(model, x, u0 + slope * tau),
+                0.0,
+                x0,
+                step,
+                model.params.substeps,
+            )
+        };
+        let mut phi = [[0.0; 6]; 6];
+        for j in 0..6 {
+            let mut e = [0.0; 6];
+            e[j] = 1.0;
+            let column = run(&e, 0.0, 0.0);
+            for i in 0..6 {
+                phi[i][j] = column[i];
+            }
+        }
+        LinearStepMap {
+            step,
+            params: model.params.clone(),
+            phi,
+            g0: run(&[0.0; 6], 1.0, 0.0),
+            g1: run(&[0.0; 6], 0.0, 1.0),
+        }
+    }
+
+    pub fn fits(&self, params: &ShearParameters, step: f64) -> bool {
+        self.step == step && self.params == *params
+    }
+
+    #[inline]
+    pub fn apply(&self, x: &State, u0: f64, slope: f64) -> State {
+        std::array::from_fn(|i| {
+            let row = &self.phi[i];
+            row[0] * x[0]
+                + row[1] * x[1]
+                + row[2] * x[2]
+                + row[3] * x[3]
+                + row[4] * x[4]
+                + row[5] * x[5]
+                + self.g0[i] * u0
+                + self.g1[i] * slope
+        })
+    }
+}
+
+/// `ẋ` for the state `[y, ẏ]` and a net input force on floor 1.
+#[inline]
+pub fn rhs(model: &ShearModel, x: &State, input: f64) -> State {
+    let y = [x[0], x[1], x[2]];
+    let v = [x[3], x[4], x[5]];
+    let a = model.acceleration(&y, &v, input);
+    [v[0], v[1], v[2], a[0], a[1], a[2]]
+}
+
+/// At most this many splits inside one sub-step; past it the rest is taken as one RK4 step.
+const MAX_SPLITS: usize = 16;
+
+/// RK4 sub-steps over `[0, h]` from `x`, split at every switch of the effects (contact kinks).
+pub fn rk4_with_events(
+    model: &ShearModel,
+    x: &State,
+    u0: f64,
+    slope: f64,
+    h: f64,
+    substeps: u32,
+) -> State {
+    let f = |tau: f64, x: &State| rhs(model, x, u0 + slope * tau);
+    let switches = |x: &State| model.effects.switches(&[x[0], x[1], x[2]]);
+    let n = substeps.max(1);
+    let dt = h / f64::from(n);
+    let mut state = *x;
+    for i in 0..n {
+        let mut tau = f64::from(i) * dt;
+        let end = f64::from(i + 1) * dt;
+        for _split in 0..=MAX_SPLITS {
+            let remaining = end - tau;
+            if remaining <= 1e-14 * dt {
+                break;
+            }
+            let next = rk4_step(f, tau, &state, remaining);
+            let (s0, s1) = (switches(&state), switches(&next));
+            // The earliest crossing among the switches that change sign.
+            let mut theta = 1.0f64;
+            for j in 0..s0.len {
+                let (a, b) = (s0.values[j], s1.values[j]);
+                if a != 0.0 && a.signum() != b.signum() {
+                    let g = |th: f64| switches(&rk4_step(f, tau, &state, th * remaining)).values[j];
+                    theta = theta.min(locate(g, a, b));
+                }
+            }
+            if theta >= 1.0 {
+                state = next;
+                break;
+            }
+            // Step to just past the crossing, then go on from there.
+            state = rk4_step(f, tau, &state, theta * remaining);
+            tau += theta * remaining;
+        }
+    }
+    state
+}
+
+/// The smallest θ ∈ (0, 1] past the sign change of `g` (g(0) = a, g(1) = b, opposite signs):
+/// Illinois-modified regula falsi, returning the end of the final bracket on the far side.
+fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+    let (mut lo, mut hi, mut g_lo, mut g_hi) = (0.0f64, 1.0f64, a, b);
+    let mut side = 0i8;
+    for _ in 0..60 {
+        if hi - lo < 1e-12 {
+            break;
+        }
+        let mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+        let mid = if mid > lo && mid < hi {
+            mid
+        } else {
+            0.5 * (lo + hi)
+        };
+        let g_mid = g(mid);
+        if g_mid == 0.0 {
+            return mid;
+        }
+        if g_mid.signum() == g_lo.signum() {
+            lo = mid;
+            g_lo = g_mid;
+            if side == -1 {
+                g_hi *= 0.5;
+            }
+            side = -1;
+        } else {
+            hi = mid;
+            g_hi = g_mid;
+            if side == 1 {
+                g_lo *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    hi
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Effects;
+
+    /// The affine step map is the RK4 sub-steps themselves, rearranged: over a long random-ish
+    /// run the two agree to rounding (bound 1e-12 of the peak).
+    #[test]
+    fn the_linear_step_map_equals_stepping_rk4_directly() {
+        let mut params = ShearParameters::default();
+        params.mass = [4.6, 5.3, 4.9];
+        params.damping = [8.1, 3.7, 2.6];
+        params.stiffness = [3850.0, 4100.0, 4680.0];
+        params.substeps = 16;
+        let model = ShearModel::new(params, Effects::default());
+        let h = 1.0 / 51.2;
+        let map = LinearStepMap::new(&model, h);
+        let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+        let mut peak = 0.0f64;
+        let mut worst = 0.0f64;
+        for k in 0..2000 {
+            let u0 = (0.37 * k as f64).sin() + 0.5 * (1.3 * k as f64).cos();
+            let u1 = (0.37 * (k + 1) as f64).sin() + 0.5 * (1.3 * (k + 1) as f64).cos();
+            let slope = (u1 - u0) / h;
+            a = map.apply(&a, u0, slope);
+            b = rk4_substeps(
+                |tau, x: &State| rhs(&model, x, u0 + slope * tau),
+                0.0,
+                &b,
+                h,
+                16,
+            );
+            for i in 0..6 {
+                peak = peak.max(b[i].abs());
+                worst = worst.max((a[i] - b[i]).abs());
+            }
+        }
+        assert!(peak > 1e-4, "the run moves: peak {peak:e}");
+        assert!(
+            worst <= 1e-12 * peak,
+            "map vs direct RK4: {worst:e} of {peak:e}"
+        );
+    }
+
+    /// Splitting at the gap keeps RK4's fourth order with contact: doubling the sub-steps cuts
+    /// the error about 16× (measured 15.1× and 15.5× between 16, 32 and 64 sub-steps).
+    #[test]
+    fn steps_split_at_contact_converge_at_fourth_order() {
+        let run = |substeps: u32| {
+            let mut params = ShearParameters::default();
+            params.damping = [1.0; 3];
+            params.substeps = substeps;
+            let mut effects = Effects::default();
+            effects.contact.enable(2, true);
+            effects.contact.effect_mut(2).gap = 2e-4;
+            let model = ShearModel::new(params, effects);
+            let h = 1.0 / 51.2;
+            let mut x = [0.0; 6];
+            for k in 0..400 {
+                let u0 = 2.0 * (0.9 * k as f64).sin();
+                let u1 = 2.0 * (0.9 * (k + 1) as f64).sin();
+                x = rk4_with_events(&model, &x, u0, (u1 - u0) / h, h, substeps);
+            }
+            x
+        };
+        let reference = run(1024);
+        let error = |n: u32| {
+            let x = run(n);
+            (0..6)
+                .map(|i| (x[i] - reference[i]).abs())
+                .fold(0.0, f64::max)
+        };
+        let (e16, e32, e64) = (error(16), error(32), error(64));
+        println!(
+            "errors: 16 {e16:e}, 32 {e32:e}, 64 {e64:e}; ratios {} {}",
+            e16 / e32,
+            e32 / e64
+        );
+        assert!(e16 > 0.0 && e32 > 0.0);
+        for (coarse, fine) in [(e16, e32), (e32, e64)] {
+            let ratio = coarse / fine;
+            assert!(
+                (10.0..25.0).contains(&ratio),
+                "error ratio per doubling {ratio} (16: {e16:e}, 32: {e32:e}, 64: {e64:e})"
+            );
+        }
+    }
+}

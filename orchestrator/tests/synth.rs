@@ -1,0 +1,941 @@
+//! `twin synth`, the synthetic physical twin: reproducibility, the file format, the physics
+//! (linear record = linear model, effects act only where they should, changes only after their
+//! time), the force (band limit, amplitude windows), the truth file and bad input.
+//!
+//! Measured figures (printed with `--nocapture`; the tolerances below are set from them):
+//! see each test's comment.
+
+#![allow(clippy::needless_range_loop)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use fmu_shear::{effects::Effects, ShearModel, ShearParameters};
+use orchestrator::data::Measurement;
+use orchestrator::synth::{
+    band_limited_force, csv_text, format_g9, synth_record, BetweenSamples, Change, ChangeHow,
+    EffectSpec, ForceWindow, NoiseSpec, ParamKind, ParamName, Scenario, SynthRecord,
+};
+use rustfft::{num_complex::Complex, FftPlanner};
+use serde_json::Value;
+
+fn twin(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args(args)
+        .output()
+        .expect("twin runs")
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "twin failed:\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn p(dir: &Path, name: &str) -> String {
+    dir.join(name).display().to_string()
+}
+
+fn record(s: &Scenario) -> SynthRecord {
+    synth_record(s).expect("synth").0
+}
+
+/// A noise-free scenario.
+fn quiet(seed: u64) -> Scenario {
+    Scenario {
+        seed,
+        noise: NoiseSpec::none(),
+        ..Scenario::default()
+    }
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+fn nmse(measured: &[f64], predicted: &[f64]) -> f64 {
+    let n = measured.len() as f64;
+    let mean = measured.iter().sum::<f64>() / n;
+    let var = measured.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    100.0 / (n * var)
+        * measured
+            .iter()
+            .zip(predicted)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+}
+
+/// Fraction of the power of `x` (one period of a periodic signal sampled every `dt`) at
+/// frequencies ≥ `f`.
+fn power_fraction_above(x: &[f64], dt: f64, f: f64) -> f64 {
+    let n = x.len();
+    let mut spectrum: Vec<Complex<f64>> = x.iter().map(|&v| Complex::new(v, 0.0)).collect();
+    FftPlanner::<f64>::new()
+        .plan_fft_forward(n)
+        .process(&mut spectrum);
+    let period = n as f64 * dt;
+    let (mut above, mut total) = (0.0, 0.0);
+    for (k, c) in spectrum.iter().enumerate() {
+        let freq = k.min(n - k) as f64 / period;
+        total += c.norm_sqr();
+        if freq >= f {
+            above += c.norm_sqr();
+        }
+    }
+    above / total
+}
+
+#[test]
+fn the_same_seed_gives_identical_files_and_another_seed_different_ones() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run = |seed: &str, name: &str| {
+        let out = twin(&[
+            "synth",
+            "--out",
+            &p(dir.path(), &format!("{name}.csv")),
+            "--truth",
+            &p(dir.path(), &format!("{name}.json")),
+            "--seed",
+            seed,
+            "--effect",
+            "contact@2-3",
+            "--force-window",
+            "13:17:3",
+        ]);
+        ok(&out);
+        let csv = std::fs::read(dir.path().join(format!("{name}.csv"))).expect("csv");
+        let truth = std::fs::read(dir.path().join(format!("{name}.json"))).expect("truth");
+        (csv, truth)
+    };
+    let a = run("5", "a");
+    let b = run("5", "b");
+    let c = run("6", "c");
+    assert!(a.0 == b.0, "same seed, same CSV bit for bit");
+    assert!(a.1 == b.1, "same seed, same truth");
+    assert!(a.0 != c.0, "another seed, another record");
+    // The in-process API makes the same bytes as the CLI.
+    let mut s = Scenario {
+        seed: 5,
+        ..Scenario::default()
+    };
+    s.effects.push(EffectSpec::Contact {
+        lower: 2,
+        gap: 5e-4,
+        stiffness: 9000.0,
+        side: 0,
+    });
+    s.force.windows.push(ForceWindow {
+        start: 13.0,
+        end: 17.0,
+        gain: 3.0,
+        ramp: 0.5,
+    });
+    assert!(
+        csv_text(&record(&s).measurement).as_bytes() == a.0.as_slice(),
+        "library and CLI agree"
+    );
+}
+
+#[test]
+fn the_csv_reads_back_exactly_and_has_the_five_columns_only() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("d.csv");
+    ok(&twin(&[
+        "synth",
+        "--out",
+        &csv.display().to_string(),
+        "--seed",
+        "11",
+        "--effect",
+        "contact@2-3:gap=2e-4",
+        "--effect",
+        "friction@1",
+    ]));
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time,force,acc1,acc2,acc3"),
+        "header: the five columns, nothing else"
+    );
+    for line in lines {
+        assert_eq!(line.split(',').count(), 5, "row {line:?}");
+        assert!(
+            !line.contains('#') && !line.contains('"'),
+            "no comments: {line:?}"
+        );
+    }
+    let m = Measurement::read(&csv).expect("reads as a measurement");
+    assert_eq!(m.len(), 1024, "20 s at 51.2 Hz");
+    assert_eq!(m.dt, 1.0 / 51.2);
+    assert!(m.extra.is_empty());
+    // The dataset's number format: times with 6 decimals, values with 9 significant digits.
+    let row = text.lines().nth(2).expect("row");
+    assert!(row.starts_with("0.019531,"), "{row}");
+    for field in row.split(',').skip(1) {
+        let digits: String = field
+            .split('e')
+            .next()
+            .unwrap_or("")
+            .chars()
+            .filter(|c| c.is_ascii_digit())
+            .collect();
+        assert!(digits.trim_start_matches('0').len() <= 9, "{field}");
+    }
+    // The in-process record is exactly what the file holds.
+    let mut s = Scenario {
+        seed: 11,
+        ..Scenario::default()
+    };
+    s.effects.push(EffectSpec::Contact {
+        lower: 2,
+        gap: 2e-4,
+        stiffness: 9000.0,
+        side: 0,
+    });
+    s.effects.push(EffectSpec::Friction {
+        floor: 1,
+        force: 0.1,
+        velocity_scale: 1e-3,
+    });
+    let r = record(&s).measurement;
+    assert_eq!(r.time, m.time);
+    assert_eq!(r.force, m.force);
+    assert_eq!(r.acc, m.acc);
+    assert_eq!(r.dt, m.dt);
+    // The format follows %.9g.
+    assert_eq!(format_g9(5.70246556e-05), "5.70246556e-05");
+    assert_eq!(format_g9(0.000646862542), "0.000646862542");
+    assert_eq!(format_g9(-0.0067), "-0.0067");
+    assert_eq!(format_g9(123.0), "123");
+    assert_eq!(format_g9(1.5e10), "1.5e+10");
+}
+
+/// The defaults are close to the structure of data/dataset1.csv: its force RMS (0.2495 N) and
+/// its acceleration RMS. Measured: dataset1 acc RMS 0.120 / 0.077 / 0.083 m/s²; synthetic (seeds
+/// 1..4) within ±20 % of these.
+#[test]
+fn the_default_record_looks_like_dataset1() {
+    let data =
+        Measurement::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/dataset1.csv"))
+            .expect("dataset1");
+    let data_acc = [rms(&data.acc[0]), rms(&data.acc[1]), rms(&data.acc[2])];
+    println!(
+        "dataset1: force RMS {:.4} N, acc RMS {data_acc:.4?}",
+        rms(&data.force)
+    );
+    for seed in 1..=4 {
+        let r = record(&Scenario {
+            seed,
+            ..Scenario::default()
+        })
+        .measurement;
+        let acc = [rms(&r.acc[0]), rms(&r.acc[1]), rms(&r.acc[2])];
+        println!(
+            "seed {seed}: force RMS {:.4} N, acc RMS {acc:.4?}",
+            rms(&r.force)
+        );
+        assert!((rms(&r.force) - 0.25).abs() < 1e-6, "force RMS as asked");
+        for f in 0..3 {
+            let ratio = acc[f] / data_acc[f];
+            assert!(
+                (0.7..1.4).contains(&ratio),
+                "seed {seed} floor {}: acc RMS ratio {ratio}",
+                f + 1
+            );
+        }
+    }
+}
+
+/// An independent reference for the linear structure: the exact discretisation of
+/// `ẋ = A x + B u` with `u` linear on each step, `exp` of the augmented 8×8 matrix (Taylor
+/// series with scaling and squaring).
+fn exact_linear_response(
+    p: &ShearParameters,
+    force: &[f64],
+    h: f64,
+    every: usize,
+    samples: usize,
+) -> [Vec<f64>; 3] {
+    let (m, c, k) = (p.mass, p.damping, p.stiffness);
+    // Stiffness and damping matrices of the shear frame.
+    let matrix = |s: [f64; 3]| {
+        [
+            [s[0] + s[1], -s[1], 0.0],
+            [-s[1], s[1] + s[2], -s[2]],
+            [0.0, -s[2], s[2]],
+        ]
+    };
+    let (km, cm) = (matrix(k), matrix(c));
+    let mut a = [[0.0f64; 8]; 8];
+    for i in 0..3 {
+        a[i][3 + i] = 1.0;
+        for j in 0..3 {
+            a[3 + i][j] = -km[i][j] / m[i];
+            a[3 + i][3 + j] = -cm[i][j] / m[i];
+        }
+    }
+    a[3][6] = 1.0 / m[0]; // force on floor 1
+    a[6][7] = 1.0; // u' = slope
+    let mul = |x: &[[f64; 8]; 8], y: &[[f64; 8]; 8]| {
+        let mut z = [[0.0; 8]; 8];
+        for i in 0..8 {
+            for j in 0..8 {
+                z[i][j] = (0..8).map(|l| x[i][l] * y[l][j]).sum();
+            }
+        }
+        z
+    };
+    let squarings = 6;
+    let hs = h / f64::from(1 << squarings);
+    let mut e = [[0.0; 8]; 8];
+    let mut term = [[0.0; 8]; 8];
+    for i in 0..8 {
+        e[i][i] = 1.0;
+        term[i][i] = 1.0;
+    }
+    let ah = a.map(|row| row.map(|v| v * hs));
+    for n in 1..=20 {
+        term = mul(&term, &ah).map(|row| row.map(|v| v / n as f64));
+        for i in 0..8 {
+            for j in 0..8 {
+                e[i][j] += term[i][j];
+            }
+        }
+    }
+    for _ in 0..squarings {
+        e = mul(&e, &e);
+    }
+    let mut x = [0.0; 6];
+    let mut out: [Vec<f64>; 3] = Default::default();
+    for s in 0..samples {
+        let j0 = s * every;
+        let f = force[j0];
+        let y = [x[0], x[1], x[2]];
+        let v = [x[3], x[4], x[5]];
+        for i in 0..3 {
+            let ky: f64 = (0..3).map(|j| km[i][j] * y[j] + cm[i][j] * v[j]).sum();
+            out[i].push((if i == 0 { f } else { 0.0 } - ky) / m[i]);
+        }
+        if s + 1 == samples {
+            break;
+        }
+        for j in j0..j0 + every {
+            let z = [
+                x[0],
+                x[1],
+                x[2],
+                x[3],
+                x[4],
+                x[5],
+                force[j],
+                (force[j + 1] - force[j]) / h,
+            ];
+            for i in 0..6 {
+                x[i] = (0..8).map(|l| e[i][l] * z[l]).sum();
+            }
+        }
+    }
+    out
+}
+
+/// The twin's view: `ShearModel` stepped at the sample interval with the force linear between
+/// the written samples, `substeps` RK4 sub-steps.
+fn twin_view(p: &ShearParameters, force: &[f64], dt: f64, substeps: u32) -> [Vec<f64>; 3] {
+    let mut model = ShearModel::new(
+        ShearParameters {
+            substeps,
+            ..p.clone()
+        },
+        Effects::default(),
+    );
+    let mut out: [Vec<f64>; 3] = Default::default();
+    for k in 0..force.len() {
+        let a = model.acceleration(&model.displacement, &model.velocity, force[k]);
+        for f in 0..3 {
+            out[f].push(a[f]);
+        }
+        if k + 1 < force.len() {
+            model.force.value = force[k];
+            model.force.slope = (force[k + 1] - force[k]) / dt;
+            model.advance(dt);
+        }
+    }
+    out
+}
+
+/// Without effects or noise the record is the linear shear model's response to the force.
+/// Measured (seed 21): against the exact discretisation on the fine grid, max |Δÿ| / RMS(ÿ) =
+/// 2.4e-8 / 4.0e-8 / 2.3e-8 (RK4 at h = dt/64; limit 2e-7). Oversample 64 against 256: 4.1e-5 /
+/// 5.1e-5 / 3.1e-5 of the RMS (limit 2e-4): the default fine step is converged to that. Against
+/// the twin's view (RK4 at dt with 64 sub-steps, the force linear between the 51.2 Hz samples):
+/// NMSE 0.30 / 0.53 / 0.22 % per floor with the band-limited force (limit 1 %; the same for
+/// bands 12.8–25.6 Hz: linear interpolation at 51.2 Hz is coarse at the structure's modes), and
+/// 3e-16 % with `between_samples: linear` (limit 1e-8 %).
+#[test]
+fn a_linear_record_is_the_linear_models_response() {
+    let s = quiet(21);
+    let (r, truth) = synth_record(&s).expect("synth");
+    let params = ShearParameters {
+        mass: s.mass,
+        damping: s.damping,
+        stiffness: s.stiffness,
+        substeps: 1,
+    };
+    let exact = exact_linear_response(
+        &params,
+        &r.fine_force,
+        r.fine_step,
+        s.oversample as usize,
+        1024,
+    );
+    for f in 0..3 {
+        let rel = max_abs_diff(&r.clean_acc[f], &exact[f]) / rms(&exact[f]);
+        println!("floor {}: max |synth − exact| / RMS = {rel:.2e}", f + 1);
+        assert!(rel < 2e-7, "floor {}: {rel:e}", f + 1);
+        // The written values are the clean ones rounded to 9 digits (no noise asked for).
+        let written = max_abs_diff(&r.measurement.acc[f], &r.clean_acc[f]) / rms(&exact[f]);
+        assert!(written < 1e-7, "{written:e}");
+    }
+    assert_eq!(truth.noise.acc_sd, [0.0; 3]);
+    let view = twin_view(&params, &r.measurement.force, r.measurement.dt, 64);
+    for f in 0..3 {
+        let e = nmse(&r.measurement.acc[f][102..], &view[f][102..]);
+        println!(
+            "floor {}: NMSE of the twin's view (linear force between samples) = {e:.3} %",
+            f + 1
+        );
+        assert!(e < 1.0, "floor {}: {e}", f + 1);
+    }
+    // The fine step is converged: oversample 64 vs 256.
+    let finer = record(&Scenario {
+        oversample: 256,
+        ..s.clone()
+    });
+    assert!(
+        max_abs_diff(&finer.clean_force, &r.clean_force) < 1e-12,
+        "the force does not depend on oversample"
+    );
+    for f in 0..3 {
+        let rel = max_abs_diff(&finer.clean_acc[f], &r.clean_acc[f]) / rms(&finer.clean_acc[f]);
+        println!("floor {}: oversample 64 vs 256: {rel:.2e}", f + 1);
+        assert!(rel < 2e-4, "{rel:e}");
+    }
+    // With the force linear between samples the twin's view is the record.
+    let mut held = s.clone();
+    held.force.between_samples = BetweenSamples::Linear;
+    let h = record(&held);
+    assert_eq!(
+        h.measurement.force, r.measurement.force,
+        "the same force samples"
+    );
+    let view = twin_view(&params, &h.measurement.force, h.measurement.dt, 64);
+    for f in 0..3 {
+        let e = nmse(&h.measurement.acc[f][102..], &view[f][102..]);
+        println!(
+            "floor {}: NMSE of the twin's view, force linear between samples = {e:.1e} %",
+            f + 1
+        );
+        assert!(e < 1e-8, "floor {}: {e}", f + 1);
+    }
+}
+
+/// Measured: on the fine grid the force's power at ≥ band_hz is ~1e-31 of the total (rounding);
+/// with band_hz = 10, the written 51.2 Hz samples' power above 10 Hz is ~1e-18 (the 9-digit
+/// rounding).
+#[test]
+fn the_force_has_no_power_above_its_band() {
+    for band in [25.6, 10.0] {
+        let mut s = quiet(3);
+        s.force.between_samples = BetweenSamples::BandLimited;
+        s.force.band_hz = Some(band);
+        let (fine, bins) = band_limited_force(&s).expect("force");
+        let hf = 1.0 / (51.2 * 64.0);
+        let fine_above = power_fraction_above(&fine, hf, band);
+        let r = record(&s);
+        let samples_above = if band < 25.6 {
+            power_fraction_above(&r.measurement.force, 1.0 / 51.2, band)
+        } else {
+            0.0
+        };
+        println!("band {band} Hz ({bins} bins): power above the band: fine grid {fine_above:.1e}, samples {samples_above:.1e}");
+        assert!(fine_above < 1e-20, "{fine_above:e}");
+        assert!(samples_above < 1e-12, "{samples_above:e}");
+        // Power fills the band: no more than 30 % of it in any quarter.
+        let quarters: Vec<f64> = (0..4)
+            .map(|q| {
+                power_fraction_above(&fine, hf, band * q as f64 / 4.0)
+                    - power_fraction_above(&fine, hf, band * (q + 1) as f64 / 4.0)
+            })
+            .collect();
+        println!("  power in the band's quarters: {quarters:.3?}");
+        assert!(
+            quarters.iter().all(|&q| (0.18..0.32).contains(&q)),
+            "{quarters:?}"
+        );
+    }
+}
+
+/// Measured, gain 3, seeds 1..6: force RMS inside the window's plateau over outside it 2.74–3.22
+/// (limit ±10 %); inside the plateau, over the same seed's record without the window, 2.91–3.11
+/// (limit ±5 %).
+#[test]
+fn an_amplitude_window_raises_the_force_rms_by_its_gain() {
+    for seed in 1..=6 {
+        let mut s = quiet(seed);
+        s.force.windows.push(ForceWindow {
+            start: 13.0,
+            end: 17.0,
+            gain: 3.0,
+            ramp: 0.5,
+        });
+        let (r, truth) = synth_record(&s).expect("synth");
+        let m = &r.measurement;
+        let pick = |keep: &dyn Fn(f64) -> bool| -> Vec<f64> {
+            (0..m.len())
+                .filter(|&k| keep(m.time[k]))
+                .map(|k| m.force[k])
+                .collect()
+        };
+        let inside = rms(&pick(&|t| (13.25..=16.75).contains(&t)));
+        let outside = rms(&pick(&|t| !(12.75..=17.25).contains(&t)));
+        let ratio = inside / outside;
+        println!("seed {seed}: RMS inside {inside:.4} N, outside {outside:.4} N, ratio {ratio:.3}");
+        assert!(
+            (ratio / 3.0 - 1.0).abs() < 0.1,
+            "seed {seed}: ratio {ratio}"
+        );
+        assert!(
+            (outside / 0.25 - 1.0).abs() < 0.1,
+            "the level outside is the asked RMS: {outside}"
+        );
+        assert_eq!(truth.force.rms_in_windows.len(), 1);
+        let plain = record(&quiet(seed)).measurement;
+        let plateau = |x: &[f64]| -> Vec<f64> {
+            (0..x.len())
+                .filter(|&k| (13.25..=16.75).contains(&m.time[k]))
+                .map(|k| x[k])
+                .collect()
+        };
+        let same_seed = rms(&plateau(&m.force)) / rms(&plateau(&plain.force));
+        println!("        inside, against the same seed without the window: {same_seed:.3}");
+        assert!(
+            (same_seed / 3.0 - 1.0).abs() < 0.05,
+            "seed {seed}: {same_seed}"
+        );
+    }
+}
+
+/// A contact with a gap wider than any drift changes nothing (bit for bit); with a small gap the
+/// record is the linear one until the first contact, and differs after it.
+#[test]
+fn a_contact_acts_only_once_the_drift_exceeds_the_gap() {
+    let mut s = quiet(8);
+    s.force.between_samples = BetweenSamples::BandLimited;
+    s.force.windows.push(ForceWindow {
+        start: 13.0,
+        end: 17.0,
+        gain: 3.0,
+        ramp: 0.5,
+    });
+    let (linear, linear_truth) = synth_record(&s).expect("linear");
+    let max_drift = linear_truth.response.max_abs_drift[2];
+    println!("linear record: max |drift| of storey 3 (floors 2–3) = {max_drift:.3e} m");
+
+    let mut wide = s.clone();
+    wide.effects.push(EffectSpec::Contact {
+        lower: 2,
+        gap: 1.0,
+        stiffness: 9000.0,
+        side: 0,
+    });
+    let (w, wt) = synth_record(&wide).expect("wide gap");
+    // The structure without effects steps by the linear model's affine step map and the one with
+    // a contact by direct RK4 sub-steps: the same arithmetic up to rounding (measured ≤ 1e-13 of
+    // the peak), so "nothing changes" is checked to 1e-11 of the peak.
+    for f in 0..3 {
+        let peak = linear.clean_acc[f]
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        let worst = w.clean_acc[f]
+            .iter()
+            .zip(&linear.clean_acc[f])
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            worst <= 1e-11 * peak,
+            "a gap never closed changes nothing: floor {}: {worst:e} of {peak:e}",
+            f + 1
+        );
+    }
+    assert_eq!(wt.effects[0].contact_events, Some(0));
+
+    let mut tight = s.clone();
+    let gap = 0.5 * max_drift;
+    tight.effects.push(EffectSpec::Contact {
+        lower: 2,
+        gap,
+        stiffness: 9000.0,
+        side: 0,
+    });
+    let (c, ct) = synth_record(&tight).expect("small gap");
+    let e = &ct.effects[0];
+    let events = e.contact_events.expect("contact counts");
+    let first = e.first_contact.expect("contact happens");
+    println!(
+        "gap {gap:.3e} m: {events} contact events, {:.3} s in contact, first at {first:.4} s",
+        e.time_in_contact.unwrap_or(0.0)
+    );
+    assert!(events > 0);
+    assert_eq!(e.fmu_prefix, "contact23");
+    let before = (0..1024).filter(|&k| (k as f64) / 51.2 < first).count();
+    for f in 0..3 {
+        // Equal up to rounding: the linear structure steps by its affine step map, the one with
+        // a contact by direct RK4 sub-steps (see the wide-gap check above).
+        let peak = linear.clean_acc[f]
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        let before_diff = max_abs_diff(&c.clean_acc[f][..before], &linear.clean_acc[f][..before]);
+        assert!(
+            before_diff <= 1e-11 * peak,
+            "floor {}: identical before the first contact ({before_diff:e})",
+            f + 1
+        );
+        let after = max_abs_diff(&c.clean_acc[f][before..], &linear.clean_acc[f][before..]);
+        assert!(
+            after > 1e-3 * rms(&linear.clean_acc[f]),
+            "floor {}: the contact shows after it ({after:e})",
+            f + 1
+        );
+    }
+}
+
+/// A drop of k2 at 8 s: the record equals the unchanged one up to 8 s, and differs after.
+#[test]
+fn a_stiffness_change_shifts_the_response_only_after_its_time() {
+    let s = quiet(4);
+    let base = record(&s);
+    let mut changed = s.clone();
+    changed.changes.push(Change {
+        at: 8.0,
+        parameter: ParamName {
+            kind: ParamKind::Stiffness,
+            index: 1,
+        },
+        how: ChangeHow::Factor(0.85),
+    });
+    let (r, truth) = synth_record(&changed).expect("changed");
+    let first_after = (0..1024)
+        .find(|&k| k as f64 / 51.2 > 8.0)
+        .expect("after 8 s");
+    for f in 0..3 {
+        assert_eq!(
+            r.clean_acc[f][..first_after],
+            base.clean_acc[f][..first_after],
+            "floor {}: nothing moves before 8 s",
+            f + 1
+        );
+        let late = nmse(
+            &base.clean_acc[f][first_after + 100..],
+            &r.clean_acc[f][first_after + 100..],
+        );
+        println!(
+            "floor {}: NMSE between the records after 10 s: {late:.1} %",
+            f + 1
+        );
+        assert!(late > 1.0, "floor {}: {late}", f + 1);
+    }
+    assert_eq!(truth.changes.len(), 1);
+    assert_eq!(truth.changes[0].before, s.stiffness[1]);
+    assert!((truth.changes[0].after - 0.85 * s.stiffness[1]).abs() < 1e-9);
+    assert_eq!(truth.structure.final_k[1], truth.changes[0].after);
+}
+
+/// Cubic stiffness and friction change the response too.
+#[test]
+fn cubic_stiffness_and_friction_change_the_response() {
+    let s = quiet(9);
+    let base = record(&s);
+    for effect in [
+        EffectSpec::Cubic {
+            storey: 2,
+            stiffness: 5e9,
+        },
+        EffectSpec::Friction {
+            floor: 1,
+            force: 0.2,
+            velocity_scale: 1e-3,
+        },
+    ] {
+        let mut e = s.clone();
+        e.effects.push(effect.clone());
+        let r = record(&e);
+        let change = nmse(&base.clean_acc[0][102..], &r.clean_acc[0][102..]);
+        println!(
+            "{}: NMSE against the linear record, floor 1: {change:.2} %",
+            effect.fmu_prefix()
+        );
+        assert!(change > 0.1, "{effect:?}: {change}");
+    }
+}
+
+#[test]
+fn the_truth_records_everything_and_replays() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scenario = dir.path().join("s.json");
+    std::fs::write(
+        &scenario,
+        r#"{"seed": 7, "duration": 20.0, "sample_rate": 51.2,
+            "parameters": {"m": [5.0, 5.2, 5.1], "c": [2.0, 1.0, 0.5], "k": [4000, 4300, 4900]},
+            "force": {"rms": 1.0, "band_hz": 25.6, "windows": [{"start": 13, "end": 17, "gain": 3.0}]},
+            "noise": {"fraction": 0.03},
+            "effects": [{"kind": "contact", "location": [2, 3], "gap": 5e-4, "stiffness": 9000, "side": "both"},
+                        {"kind": "cubic", "location": [2], "stiffness": 5e9},
+                        {"kind": "friction", "location": [1], "force": 0.2, "velocity_scale": 1e-3}],
+            "changes": [{"at": 8.0, "parameter": "k2", "factor": 0.85}]}"#,
+    )
+    .expect("scenario");
+    let (csv, truth) = (dir.path().join("d.csv"), dir.path().join("t.json"));
+    let out = twin(&[
+        "synth",
+        "--scenario",
+        &scenario.display().to_string(),
+        "--out",
+        &csv.display().to_string(),
+        "--truth",
+        &truth.display().to_string(),
+        "--effect",
+        "contact@0-1:gap=0.01,side=positive",
+    ]);
+    ok(&out);
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let t: Value =
+        serde_json::from_str(&std::fs::read_to_string(&truth).expect("truth")).expect("json");
+    let sc = &t["scenario"];
+    assert_eq!(sc["seed"], 7);
+    assert_eq!(sc["parameters"]["k"][2], 4900.0);
+    assert_eq!(sc["force"]["windows"][0]["gain"], 3.0);
+    assert_eq!(
+        sc["force"]["windows"][0]["ramp"], 0.5,
+        "defaults are filled in"
+    );
+    assert_eq!(sc["noise"]["fraction"][1], 0.03);
+    assert_eq!(sc["changes"][0]["parameter"], "k2");
+    assert_eq!(
+        sc["effects"].as_array().map(Vec::len),
+        Some(4),
+        "the file's three effects and the flag's"
+    );
+    let effects = t["effects"].as_array().expect("effects");
+    let prefixes: Vec<&str> = effects
+        .iter()
+        .map(|e| e["fmu_prefix"].as_str().unwrap_or(""))
+        .collect();
+    assert_eq!(prefixes, ["contact23", "cubic2", "friction1", "contact01"]);
+    assert_eq!(effects[0]["location"], serde_json::json!([2, 3]));
+    assert_eq!(effects[0]["parameters"]["gap"], 5e-4);
+    assert_eq!(effects[3]["parameters"]["side"], "positive");
+    assert!(effects[0]["contact_events"].as_u64().is_some());
+    assert_eq!(t["changes"][0]["before"], 4300.0);
+    assert!(t["noise"]["acc_sd"][0].as_f64().is_some_and(|sd| sd > 0.0));
+    assert_eq!(t["record"]["samples"], 1024);
+    assert!(t["random_numbers"]
+        .as_str()
+        .is_some_and(|r| r.contains("seed_from_u64(7)")));
+    // The truth's scenario replays to the same record.
+    let replay_scenario = dir.path().join("replay.json");
+    std::fs::write(&replay_scenario, sc.to_string()).expect("write");
+    let replay = dir.path().join("replay.csv");
+    ok(&twin(&[
+        "synth",
+        "--scenario",
+        &replay_scenario.display().to_string(),
+        "--out",
+        &replay.display().to_string(),
+    ]));
+    assert!(
+        std::fs::read(&replay).expect("replay") == std::fs::read(&csv).expect("csv"),
+        "the truth replays bit for bit"
+    );
+    let parsed = Scenario::from_json(sc, "truth").expect("reads back");
+    assert_eq!(parsed.to_json(), *sc);
+}
+
+#[test]
+fn bad_scenarios_and_flags_are_refused_naming_the_file_and_field() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cases = [
+        ("{\"seed\": 1,", "not valid JSON"),
+        (r#"{"seedz": 1}"#, "`seedz`"),
+        (r#"{"seed": -1}"#, "`seed`"),
+        (r#"{"force": {"rms": "big"}}"#, "`force.rms`"),
+        (r#"{"force": {"band_hz": 40}}"#, "`force.band_hz`"),
+        (
+            r#"{"force": {"windows": [{"start": 17, "end": 13, "gain": 3}]}}"#,
+            "`force.windows[0].end`",
+        ),
+        (
+            r#"{"force": {"windows": [{"start": 13, "gain": 3}]}}"#,
+            "`force.windows[0].end`",
+        ),
+        (r#"{"parameters": {"k": [1, 2]}}"#, "`parameters.k`"),
+        (r#"{"parameters": {"m": [1, 0, 2]}}"#, "`parameters.m[1]`"),
+        (r#"{"noise": {"fraction": -0.1}}"#, "`noise.fraction[0]`"),
+        (r#"{"noise": {"fraction": 0.1, "sd": 0.1}}"#, "`noise`"),
+        (
+            r#"{"effects": [{"kind": "contact", "location": [2, 4]}]}"#,
+            "`effects[0].location`",
+        ),
+        (
+            r#"{"effects": [{"kind": "magnet", "location": [1]}]}"#,
+            "`effects[0].kind`",
+        ),
+        (
+            r#"{"effects": [{"kind": "contact", "location": [1, 2], "side": "up"}]}"#,
+            "`effects[0].side`",
+        ),
+        (
+            r#"{"effects": [{"kind": "friction", "location": [1], "velocity_scale": 0}]}"#,
+            "`effects[0].velocity_scale`",
+        ),
+        (
+            r#"{"effects": [{"kind": "cubic", "location": [2]}, {"kind": "cubic", "location": [1, 2]}]}"#,
+            "`effects[1]`",
+        ),
+        (
+            r#"{"changes": [{"at": 30, "parameter": "k2", "factor": 0.8}]}"#,
+            "`changes[0].at`",
+        ),
+        (
+            r#"{"changes": [{"at": 3, "parameter": "k7", "factor": 0.8}]}"#,
+            "`changes[0].parameter`",
+        ),
+        (
+            r#"{"changes": [{"at": 3, "parameter": "k2"}]}"#,
+            "`changes[0]`",
+        ),
+        (r#"{"duration": 0.01}"#, "`duration`"),
+        (r#"{"oversample": 0}"#, "`oversample`"),
+        (r#"[1, 2]"#, "expected an object"),
+    ];
+    for (i, (text, needle)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("bad{i}.json"));
+        std::fs::write(&path, text).expect("write");
+        let out = twin(&[
+            "synth",
+            "--scenario",
+            &path.display().to_string(),
+            "--out",
+            &p(dir.path(), "x.csv"),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{text} is refused");
+        assert!(
+            err.contains(&path.display().to_string()),
+            "names the file: {err}"
+        );
+        assert!(err.contains(needle), "{text}: expected {needle:?} in {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let missing = dir.path().join("missing.json");
+    let out = twin(&[
+        "synth",
+        "--scenario",
+        &missing.display().to_string(),
+        "--out",
+        &p(dir.path(), "x.csv"),
+    ]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("missing.json"));
+    let flags: [(&[&str], &str); 6] = [
+        (&["--effect", "contact@3-4"], "contact@3-4"),
+        (&["--effect", "contact2-3"], "KIND@LOCATION"),
+        (&["--effect", "cubic@2:stiffness=lots"], "stiffness"),
+        (&["--force-window", "13:17"], "--force-window"),
+        (&["--change", "k2@8"], "--change"),
+        (
+            &["--noise-fraction", "0.1", "--noise-sd", "0.01"],
+            "not both",
+        ),
+    ];
+    for (args, needle) in flags {
+        let mut all = vec!["synth", "--out"];
+        let out_path = p(dir.path(), "x.csv");
+        all.push(&out_path);
+        all.extend_from_slice(args);
+        let out = twin(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} is refused");
+        assert!(
+            err.contains(needle),
+            "{args:?}: expected {needle:?} in {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    assert!(
+        !dir.path().join("x.csv").exists(),
+        "nothing is written on error"
+    );
+}
+
+#[test]
+fn a_diverging_structure_is_an_error_not_a_panic() {
+    let s = Scenario {
+        stiffness: [1e12; 3],
+        oversample: 1,
+        ..quiet(1)
+    };
+    let err = synth_record(&s).expect_err("diverges").to_string();
+    assert!(err.contains("diverged"), "{err}");
+}
+
+#[test]
+fn the_cli_flags_of_the_brief_work() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (csv, truth) = (p(dir.path(), "d.csv"), p(dir.path(), "t.json"));
+    ok(&twin(&[
+        "synth",
+        "--out",
+        &csv,
+        "--truth",
+        &truth,
+        "--effect",
+        "contact@2-3",
+        "--effect",
+        "cubic@2",
+        "--seed",
+        "3",
+        "--force-rms",
+        "1.2",
+        "--force-window",
+        "13:17:3",
+        "--change",
+        "k2@8:0.85",
+        "--change",
+        "m3@5=6",
+    ]));
+    let t: Value =
+        serde_json::from_str(&std::fs::read_to_string(&truth).expect("truth")).expect("json");
+    assert_eq!(t["scenario"]["seed"], 3);
+    assert_eq!(t["scenario"]["force"]["rms"], 1.2);
+    assert_eq!(
+        t["effects"][1]["description"],
+        "cubic of storey 2 (between floors 1 and 2)"
+    );
+    assert_eq!(
+        t["changes"][0]["parameter"], "m3",
+        "changes apply in time order"
+    );
+    assert_eq!(t["changes"][0]["after"], 6.0);
+    assert_eq!(t["changes"][1]["parameter"], "k2");
+    assert!(Measurement::read(Path::new(&csv)).is_ok());
+    let _: PathBuf = PathBuf::from(csv);
+}
