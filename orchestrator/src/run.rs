@@ -88,19 +88,22 @@ pub fn run_twin(
             _ => None,
         }
     };
+    // Ports by name: (node, index of the named connector among its inputs or outputs).
+    let find_node = |name: &str| {
+        nodes
+            .iter()
+            .find(|(n, ..)| n == name)
+            .ok_or_else(|| RunError::Wiring(format!("no component '{name}'")))
+    };
+    let port_of =
+        |names: &[String], connector: &str| names.iter().position(|c| c == connector).unwrap_or(0);
     let mut signals = std::collections::HashMap::new();
     for conn in &twin.connections {
         let Some(end) = &conn.end_element else {
             continue;
         };
-        let (_, to, inputs, _) = nodes
-            .iter()
-            .find(|(n, ..)| n == end)
-            .ok_or_else(|| RunError::Wiring(format!("no component '{end}'")))?;
-        let port_index = inputs
-            .iter()
-            .position(|i| *i == conn.end_connector)
-            .unwrap_or(0);
+        let (_, to, inputs, _) = find_node(end)?;
+        let port_index = port_of(inputs, &conn.end_connector);
         let from = match &conn.start_element {
             None => {
                 let Some(samples) = signal_for(&conn.start_connector) else {
@@ -111,15 +114,8 @@ pub fn run_twin(
                     .or_insert_with(|| system.add_signal(&conn.start_connector, samples))
             }
             Some(start_el) => {
-                let (_, from_id, _, outputs) = nodes
-                    .iter()
-                    .find(|(n, ..)| n == start_el)
-                    .ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
-                let p = outputs
-                    .iter()
-                    .position(|o| *o == conn.start_connector)
-                    .unwrap_or(0);
-                Port::Output(*from_id, p)
+                let (_, from_id, _, outputs) = find_node(start_el)?;
+                Port::Output(*from_id, port_of(outputs, &conn.start_connector))
             }
         };
         system.connect(from, *to, port_index)?;
@@ -137,15 +133,11 @@ pub fn run_twin(
             .start_element
             .as_ref()
             .ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
-        let (_, id, _, outputs) = nodes
-            .iter()
-            .find(|(n, ..)| n == start_el)
-            .ok_or_else(|| RunError::Wiring(format!("no component '{start_el}'")))?;
-        let p = outputs
-            .iter()
-            .position(|o| *o == conn.start_connector)
-            .unwrap_or(0);
-        watched.push((output.to_owned(), Port::Output(*id, p)));
+        let (_, id, _, outputs) = find_node(start_el)?;
+        watched.push((
+            output.to_owned(),
+            Port::Output(*id, port_of(outputs, &conn.start_connector)),
+        ));
     }
     let mut recorder = Recorder::new(watched);
     let clock = Clock::new(start, data.dt, (data.len() - 1) as u64);
