@@ -85,20 +85,21 @@ impl Measurement {
         for record in reader.records() {
             let record =
                 record.map_err(|e| err(line_at(e.position()), format!("malformed row: {e}")))?;
-            let line = line_at(record.position());
+            // Worked out only for an error: counting lines is linear in the file.
+            let line = || line_at(record.position());
             if record.len() != header.len() {
                 return Err(err(
-                    line,
+                    line(),
                     format!("{} fields, the header has {}", record.len(), header.len()),
                 ));
             }
             for (i, field) in record.iter().enumerate() {
                 let value: f64 = field.parse().map_err(|_| {
-                    err(line, format!("'{}' is not a number: '{field}'", header[i]))
+                    err(line(), format!("'{}' is not a number: '{field}'", header[i]))
                 })?;
                 if !value.is_finite() {
                     return Err(err(
-                        line,
+                        line(),
                         format!(
                             "'{}' is {value}; only finite numbers are accepted",
                             header[i]
