@@ -144,7 +144,14 @@ pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError>
         let options =
             SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
         for (name, bytes) in &entries {
-            zip.start_file(name.as_str(), options).map_err(zip_err)?;
+            // The shared library is stored, not deflated: inflating it was most of the time a
+            // host spends opening the FMU, and it barely compresses below a third anyway.
+            let entry_options = if name.starts_with("binaries/") {
+                options.compression_method(zip::CompressionMethod::Stored)
+            } else {
+                options
+            };
+            zip.start_file(name.as_str(), entry_options).map_err(zip_err)?;
             zip.write_all(bytes).map_err(io_err(out))?;
         }
         zip.finish().map_err(zip_err)?;

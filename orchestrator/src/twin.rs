@@ -303,7 +303,10 @@ impl Twin {
                         path: c.fmu_path.clone(),
                         source,
                     })?;
-                    zip.start_file(format!("resources/{}", c.fmu_name), options)
+                    // Stored: an FMU is itself an archive, and opening the twin should not
+                    // inflate it twice.
+                    let stored = options.compression_method(zip::CompressionMethod::Stored);
+                    zip.start_file(format!("resources/{}", c.fmu_name), stored)
                         .map_err(zip_err)?;
                     zip.write_all(&bytes).map_err(io)?;
                     written.push(c.fmu_name.clone());
