@@ -6,12 +6,19 @@ cd "$root"
 target_dir=${CARGO_TARGET_DIR:-$root/target}
 
 # crate name : modelIdentifier
-fmus=("fmu-shear:fmu_shear")
+fmus=("fmu-shear:fmu_shear" "fmu-gp-corrector:fmu_gp_corrector")
 
 packages=()
-for entry in "${fmus[@]}"; do packages+=(-p "${entry%%:*}"); done
-cargo build --release --quiet "${packages[@]}"
+features=()
+for entry in "${fmus[@]}"; do
+  packages+=(-p "${entry%%:*}")
+  features+=("${entry%%:*}/exports")
+done
+# The packer first: it links the FMU crates as ordinary libraries, without `exports`.
 cargo build --release --quiet -p orchestrator --bin twin
+# `exports` gives the fmi2* functions their C names in the shared libraries (fmi2::export_fmu!);
+# built last, so these are the libraries that get packaged.
+cargo build --release --quiet "${packages[@]}" --features "$(IFS=,; echo "${features[*]}")"
 
 mkdir -p "$target_dir/fmu"
 for entry in "${fmus[@]}"; do

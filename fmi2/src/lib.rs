@@ -20,9 +20,14 @@ pub use variables::{
     Causality, DefaultExperiment, ModelInfo, Start, Unit, VarType, Variability, Variable,
 };
 
-/// Define the 34 FMI 2.0 co-simulation C functions for a model type, in the calling crate
-/// (which must be built as a `cdylib`). Every signature is checked against the standard's
-/// headers (through `fmi-sys`) by this crate's tests.
+/// Define the 34 FMI 2.0 co-simulation C functions for a model type, in the calling crate.
+/// Every signature is checked against the standard's headers (through `fmi-sys`) by this crate's
+/// tests.
+///
+/// The functions get their unmangled `fmi2*` names only when the calling crate is built with its
+/// `exports` feature (what `scripts/build-fmus.sh` does for the `.so` in the FMU). Without it
+/// they are ordinary Rust functions, so several FMU crates can be linked into one program (the
+/// orchestrator uses their model code) without clashing symbols.
 #[macro_export]
 macro_rules! export_fmu {
     ($model:ty) => {
@@ -33,15 +38,15 @@ macro_rules! export_fmu {
             use $crate::export as x;
             type Model = $model;
 
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2GetTypesPlatform() -> fmi2String {
                 x::get_types_platform()
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2GetVersion() -> fmi2String {
                 x::get_version()
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetDebugLogging(
                 c: fmi2Component,
                 logging_on: fmi2Boolean,
@@ -50,7 +55,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_debug_logging::<Model>(c, logging_on, n, categories) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2Instantiate(
                 instance_name: fmi2String,
                 fmu_type: fmi2Type,
@@ -72,11 +77,11 @@ macro_rules! export_fmu {
                     )
                 }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2FreeInstance(c: fmi2Component) {
                 unsafe { x::free_instance::<Model>(c) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2SetupExperiment(
                 c: fmi2Component,
                 tolerance_defined: fmi2Boolean,
@@ -94,23 +99,23 @@ macro_rules! export_fmu {
                     stop_time,
                 )
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2EnterInitializationMode(c: fmi2Component) -> fmi2Status {
                 x::enter_initialization_mode::<Model>(c)
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2ExitInitializationMode(c: fmi2Component) -> fmi2Status {
                 x::exit_initialization_mode::<Model>(c)
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2Terminate(c: fmi2Component) -> fmi2Status {
                 x::terminate::<Model>(c)
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2Reset(c: fmi2Component) -> fmi2Status {
                 x::reset::<Model>(c)
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetReal(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -119,7 +124,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_real::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetInteger(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -128,7 +133,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_integer::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetBoolean(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -137,7 +142,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_boolean::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetString(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -146,7 +151,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_string::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetReal(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -155,7 +160,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_real::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetInteger(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -164,7 +169,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_integer::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetBoolean(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -173,7 +178,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_boolean::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetString(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -182,28 +187,28 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_string::<Model>(c, vr, n, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetFMUstate(
                 c: fmi2Component,
                 state: *mut fmi2FMUstate,
             ) -> fmi2Status {
                 unsafe { x::get_fmu_state::<Model>(c, state) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetFMUstate(
                 c: fmi2Component,
                 state: fmi2FMUstate,
             ) -> fmi2Status {
                 unsafe { x::set_fmu_state::<Model>(c, state) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2FreeFMUstate(
                 c: fmi2Component,
                 state: *mut fmi2FMUstate,
             ) -> fmi2Status {
                 unsafe { x::free_fmu_state::<Model>(c, state) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
                 c: fmi2Component,
                 state: fmi2FMUstate,
@@ -211,7 +216,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::serialized_fmu_state_size::<Model>(c, state, size) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SerializeFMUstate(
                 c: fmi2Component,
                 state: fmi2FMUstate,
@@ -220,7 +225,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::serialize_fmu_state::<Model>(c, state, bytes, size) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
                 c: fmi2Component,
                 bytes: *const fmi2Byte,
@@ -229,7 +234,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::deserialize_fmu_state::<Model>(c, bytes, size, state) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
                 c: fmi2Component,
                 unknown: *const fmi2ValueReference,
@@ -245,7 +250,7 @@ macro_rules! export_fmu {
                     )
                 }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -255,7 +260,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::set_real_input_derivatives::<Model>(c, vr, n, order, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
                 c: fmi2Component,
                 vr: *const fmi2ValueReference,
@@ -265,7 +270,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_real_output_derivatives::<Model>(c, vr, n, order, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2DoStep(
                 c: fmi2Component,
                 current_communication_point: fmi2Real,
@@ -279,11 +284,11 @@ macro_rules! export_fmu {
                     no_set_fmu_state_prior,
                 )
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub extern "C" fn fmi2CancelStep(c: fmi2Component) -> fmi2Status {
                 x::cancel_step::<Model>(c)
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetStatus(
                 c: fmi2Component,
                 kind: fmi2StatusKind,
@@ -291,7 +296,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_status::<Model>(c, kind, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetRealStatus(
                 c: fmi2Component,
                 kind: fmi2StatusKind,
@@ -299,7 +304,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_real_status::<Model>(c, kind, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetIntegerStatus(
                 c: fmi2Component,
                 kind: fmi2StatusKind,
@@ -307,7 +312,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_integer_status::<Model>(c, kind, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetBooleanStatus(
                 c: fmi2Component,
                 kind: fmi2StatusKind,
@@ -315,7 +320,7 @@ macro_rules! export_fmu {
             ) -> fmi2Status {
                 unsafe { x::get_boolean_status::<Model>(c, kind, value) }
             }
-            #[no_mangle]
+            #[cfg_attr(feature = "exports", no_mangle)]
             pub unsafe extern "C" fn fmi2GetStringStatus(
                 c: fmi2Component,
                 kind: fmi2StatusKind,

@@ -1,3 +1,4 @@
 //! Numerics for the twin, with no FFI and no I/O.
 
+pub mod gp;
 pub mod ode;

@@ -29,6 +29,8 @@ pub enum Command {
     Compare(CompareArgs),
     /// MAP calibration of the physics parameters and noise variances on a measurement.
     Calibrate(CalibrateArgs),
+    /// Train the Gaussian-process bias corrector on a record and put it behind the physics FMU.
+    Train(TrainArgs),
     /// Package a built FMU library and its modelDescription.xml into a .fmu archive.
     PackFmu(PackArgs),
     /// Write the default twin (the shear FMU, default parameters) as an SSP archive.
@@ -38,6 +40,8 @@ pub enum Command {
     },
     /// Make a synthetic measurement record (the synthetic physical twin) and its truth JSON.
     Synth(crate::synth::SynthArgs),
+    /// Stream-based active learning of the GP corrector over records (paper Algorithm 1).
+    Learn(crate::learn::LearnArgs),
 }
 
 #[derive(clap::Args)]
@@ -102,6 +106,35 @@ pub struct CalibrateArgs {
 }
 
 #[derive(clap::Args)]
+pub struct TrainArgs {
+    /// The twin (.ssp) whose physics the corrector corrects; the default twin when absent.
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// Measurement CSV to train on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The twin with the corrector (.ssp) to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Lags q: the GP's inputs are the current and q previous physics accelerations and forces.
+    #[arg(long, default_value_t = fmu_gp_corrector::DEFAULT_LAGS)]
+    pub lags: usize,
+    /// What the GP models: the discrepancy measured − physics (default), or the measured
+    /// acceleration itself (the reference paper's zero-mean form).
+    #[arg(long, default_value = "discrepancy", value_parser = ["discrepancy", "measured"])]
+    pub target: String,
+    /// Seconds at the start of the record not used for training.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    /// Train on every n-th sample after the transient (a GP fit costs O(N³)).
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// JSON report of the training.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
 pub struct PackArgs {
     #[arg(long)]
     pub model_description: PathBuf,
@@ -123,6 +156,7 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Compare(args) => compare_command(&args),
         Command::Calibrate(args) => calibrate_command(&args),
+        Command::Train(args) => train_command(&args),
         Command::PackFmu(a) => {
             let contents = crate::fmu_archive::FmuContents {
                 model_description: a.model_description,
@@ -140,6 +174,7 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Synth(args) => crate::synth::synth_command(&args),
+        Command::Learn(args) => crate::learn::learn_command(&args),
     }
 }
 
@@ -218,6 +253,7 @@ pub fn compare_command(args: &CompareArgs) -> Result<()> {
         &data.acc,
         &prediction.acc,
         noise_variance,
+        prediction.sd.as_ref(),
         options,
     );
 
@@ -251,16 +287,27 @@ pub fn compare_command(args: &CompareArgs) -> Result<()> {
     Ok(())
 }
 
+/// `time,acc1,acc2,acc3`, then the corrector's `latent_var1..3,sd1..3` when the twin has one.
 fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
     let mut w = csv::Writer::from_writer(f);
-    w.write_record(["time", "acc1", "acc2", "acc3"])?;
+    let mut header: Vec<String> = ["time", "acc1", "acc2", "acc3"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let mut columns: Vec<&Vec<f64>> = p.acc.iter().collect();
+    for (prefix, triple) in [("latent_var", &p.latent_var), ("sd", &p.sd)] {
+        if let Some(values) = triple {
+            for (f, column) in values.iter().enumerate() {
+                header.push(format!("{prefix}{}", f + 1));
+                columns.push(column);
+            }
+        }
+    }
+    w.write_record(&header)?;
     for k in 0..p.time.len() {
-        w.write_record([
-            format!("{}", p.time[k]),
-            format!("{:e}", p.acc[0][k]),
-            format!("{:e}", p.acc[1][k]),
-            format!("{:e}", p.acc[2][k]),
-        ])?;
+        let mut row = vec![format!("{}", p.time[k])];
+        row.extend(columns.iter().map(|c| format!("{:e}", c[k])));
+        w.write_record(&row)?;
     }
     w.flush()?;
     Ok(())
@@ -392,6 +439,7 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
             &data.acc,
             &prediction.acc,
             calibration.noise_variance,
+            prediction.sd.as_ref(),
             options,
         );
         let title = format!("calibrated on {}", data.path.display());
@@ -454,6 +502,74 @@ pub fn calibrate_command(args: &CalibrateArgs) -> Result<()> {
     for (p, n) in &validated {
         println!("NMSE % on {p}: {:.3} / {:.3} / {:.3}", n[0], n[1], n[2]);
     }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+pub fn train_command(args: &TrainArgs) -> Result<()> {
+    use crate::train::{train, TrainOptions};
+    use fmu_gp_corrector::TargetForm;
+    if args.twin.as_deref() == Some(args.out.as_path()) {
+        bail!(
+            "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
+            args.out.display()
+        );
+    }
+    if !(args.transient >= 0.0 && args.transient.is_finite()) {
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
+    }
+    let data = Measurement::read(&args.data)?;
+    let twin = Twin::load(args.twin.as_deref())?;
+    let target = if args.target == "measured" {
+        TargetForm::Measured
+    } else {
+        TargetForm::Discrepancy
+    };
+    if args.stride == 0 {
+        bail!("--stride must be at least 1");
+    }
+    let options = TrainOptions {
+        lags: args.lags,
+        target,
+        transient: args.transient,
+        stride: args.stride,
+    };
+    let (trained, summary) = train(&twin, &data, &options)?;
+    let nmse = nmse_on(&trained, &data, args.transient)?;
+    trained.write(&args.out)?;
+    if let Some(path) = &args.report {
+        let report = json!({
+            "twin": twin.describe(),
+            "data": data.path.display().to_string(),
+            "out": args.out.display().to_string(),
+            "training": summary,
+            "nmse": nmse,
+        });
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    println!(
+        "trained the corrector on {}: {} points, {} inputs ({} lags), target {}, {:.2} s",
+        data.path.display(),
+        summary.points,
+        summary.inputs,
+        summary.lags,
+        summary.target,
+        summary.seconds
+    );
+    println!(
+        "NMSE % of the corrected twin on {}: {:.3} / {:.3} / {:.3}",
+        data.path.display(),
+        nmse[0],
+        nmse[1],
+        nmse[2]
+    );
     println!("wrote {}", args.out.display());
     Ok(())
 }

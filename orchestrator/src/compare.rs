@@ -60,8 +60,10 @@ pub struct Comparison {
     pub time: Vec<f64>,
     pub measured: [Vec<f64>; 3],
     pub predicted: [Vec<f64>; 3],
-    /// Noise standard deviation per floor: the band is predicted ± 3σ.
+    /// Noise standard deviation per floor: the band is predicted ± 3σ …
     pub noise_sd: [f64; 3],
+    /// … unless the twin gives a predictive sd per sample (its GP corrector): then that.
+    pub band_sd: Option<[Vec<f64>; 3]>,
     /// Index of the first sample after the transient cut-off.
     pub first: usize,
     pub nmse: [f64; 3],
@@ -69,6 +71,14 @@ pub struct Comparison {
 }
 
 impl Comparison {
+    /// The σ of the ±3σ band on `floor` at sample `k`.
+    pub fn sd_at(&self, floor: usize, k: usize) -> f64 {
+        match &self.band_sd {
+            Some(sd) => sd[floor][k],
+            None => self.noise_sd[floor],
+        }
+    }
+
     pub fn residual(&self, floor: usize) -> Vec<f64> {
         self.measured[floor]
             .iter()
@@ -83,6 +93,7 @@ pub fn compare(
     measured: &[Vec<f64>; 3],
     predicted: &[Vec<f64>; 3],
     noise_variance: [f64; 3],
+    band_sd: Option<&[Vec<f64>; 3]>,
     options: CompareOptions,
 ) -> Comparison {
     let n = time.len();
@@ -97,7 +108,8 @@ pub fn compare(
     let noise_sd = noise_variance.map(f64::sqrt);
 
     // Out-of-band samples per floor, after the transient.
-    let outside = |f: usize, k: usize| (measured[f][k] - predicted[f][k]).abs() > 3.0 * noise_sd[f];
+    let sd = |f: usize, k: usize| band_sd.map_or(noise_sd[f], |b| b[f][k]);
+    let outside = |f: usize, k: usize| (measured[f][k] - predicted[f][k]).abs() > 3.0 * sd(f, k);
     let out_samples: Vec<usize> = (first..n)
         .filter(|&k| (0..3).any(|f| outside(f, k)))
         .collect();
@@ -133,6 +145,7 @@ pub fn compare(
         measured: measured.clone(),
         predicted: predicted.clone(),
         noise_sd,
+        band_sd: band_sd.cloned(),
         first,
         nmse: overall,
         failing_windows,
@@ -175,6 +188,7 @@ mod tests {
             &measured,
             &predicted,
             [0.01; 3],
+            None,
             CompareOptions::default(),
         );
         assert_eq!(c.failing_windows.len(), 2, "{:?}", c.failing_windows);
@@ -201,6 +215,7 @@ mod tests {
             &measured,
             &[y.clone(), y.clone(), y],
             [1e-4; 3],
+            None,
             CompareOptions::default(),
         );
         assert_eq!(c.nmse[0], 0.0);

@@ -95,7 +95,10 @@ impl Measurement {
             }
             for (i, field) in record.iter().enumerate() {
                 let value: f64 = field.parse().map_err(|_| {
-                    err(line(), format!("'{}' is not a number: '{field}'", header[i]))
+                    err(
+                        line(),
+                        format!("'{}' is not a number: '{field}'", header[i]),
+                    )
                 })?;
                 if !value.is_finite() {
                     return Err(err(

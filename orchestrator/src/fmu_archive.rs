@@ -151,7 +151,8 @@ pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError>
             } else {
                 options
             };
-            zip.start_file(name.as_str(), entry_options).map_err(zip_err)?;
+            zip.start_file(name.as_str(), entry_options)
+                .map_err(zip_err)?;
             zip.write_all(bytes).map_err(io_err(out))?;
         }
         zip.finish().map_err(zip_err)?;

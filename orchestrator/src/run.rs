@@ -23,6 +23,10 @@ pub enum RunError {
 pub struct Prediction {
     pub time: Vec<f64>,
     pub acc: [Vec<f64>; 3],
+    /// The corrector's latent variance V(f) per floor, when the twin has a corrector.
+    pub latent_var: Option<[Vec<f64>; 3]>,
+    /// The corrector's predictive standard deviation per floor, likewise.
+    pub sd: Option<[Vec<f64>; 3]>,
 }
 
 /// Calls `on_progress(done, total)`, but only once a run has lasted more than a second, so short
@@ -121,11 +125,24 @@ pub fn run_twin(
         system.connect(from, *to, port_index)?;
     }
     let mut watched = Vec::new();
-    for output in OUTPUTS {
+    let system_outputs = twin.system_outputs();
+    let optional = [
+        "latent_var1",
+        "latent_var2",
+        "latent_var3",
+        "sd1",
+        "sd2",
+        "sd3",
+    ];
+    for output in OUTPUTS.iter().chain(
+        optional
+            .iter()
+            .filter(|o| system_outputs.iter().any(|s| s == *o)),
+    ) {
         let conn = twin
             .connections
             .iter()
-            .find(|c| c.end_element.is_none() && c.end_connector == output)
+            .find(|c| c.end_element.is_none() && c.end_connector == *output)
             .ok_or_else(|| {
                 RunError::Wiring(format!("no connection feeds the system output '{output}'"))
             })?;
@@ -135,7 +152,7 @@ pub fn run_twin(
             .ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
         let (_, id, _, outputs) = find_node(start_el)?;
         watched.push((
-            output.to_owned(),
+            (*output).to_owned(),
             Port::Output(*id, port_of(outputs, &conn.start_connector)),
         ));
     }
@@ -144,11 +161,20 @@ pub fn run_twin(
     system.run(clock, &mut [&mut recorder], &mut progress)?;
     drop(system);
     drop(loaded);
-    let [a1, a2, a3] = std::mem::take(&mut recorder.columns)
-        .try_into()
-        .map_err(|_| RunError::Wiring("three outputs".into()))?;
+    let column = |name: &str| recorder.column(name).map(<[f64]>::to_vec);
+    let triple = |prefix: &str| -> Option<[Vec<f64>; 3]> {
+        Some([
+            column(&format!("{prefix}1"))?,
+            column(&format!("{prefix}2"))?,
+            column(&format!("{prefix}3"))?,
+        ])
+    };
+    let acc = triple("acc")
+        .ok_or_else(|| RunError::Wiring("the accelerations were not recorded".into()))?;
     Ok(Prediction {
-        time: recorder.time,
-        acc: [a1, a2, a3],
+        time: recorder.time.clone(),
+        acc,
+        latent_var: triple("latent_var"),
+        sd: triple("sd"),
     })
 }

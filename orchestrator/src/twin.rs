@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
-use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits, Unpacked};
+use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 
 const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescription";
 const NS_SSC: &str = "http://ssp-standard.org/SSP1/SystemStructureCommon";
@@ -96,8 +96,9 @@ pub struct Twin {
     pub noise_variance: Option<[f64; 3]>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
-    /// Keeps the unpacked archive (and so `fmu_path`s) alive, shared by duplicates.
-    _unpacked: Option<std::sync::Arc<Unpacked>>,
+    /// Keeps what `fmu_path`s point into (the unpacked archive, a trained FMU's scratch
+    /// directory) alive, shared by duplicates.
+    keep_alive: Vec<std::sync::Arc<dyn std::any::Any + Send + Sync>>,
 }
 
 /// Where the built FMUs are: `$TWIN_FMU_DIR`, `<exe dir>/../fmu` (the `target/fmu` beside a
@@ -154,7 +155,7 @@ impl Twin {
             connections,
             noise_variance: None,
             source: None,
-            _unpacked: None,
+            keep_alive: Vec::new(),
         })
     }
 
@@ -174,8 +175,36 @@ impl Twin {
             connections: self.connections.clone(),
             noise_variance: self.noise_variance,
             source: self.source.clone(),
-            _unpacked: self._unpacked.clone(),
+            keep_alive: self.keep_alive.clone(),
         }
+    }
+
+    /// Keep `resource` alive as long as this twin (and its duplicates): for files its
+    /// components point into.
+    pub fn keep_alive(&mut self, resource: std::sync::Arc<dyn std::any::Any + Send + Sync>) {
+        self.keep_alive.push(resource);
+    }
+
+    /// The system's input connectors: the standard inputs plus any a connection starts from.
+    pub fn system_inputs(&self) -> Vec<String> {
+        let mut names: Vec<String> = INPUTS.iter().map(|s| s.to_string()).collect();
+        for c in &self.connections {
+            if c.start_element.is_none() && !names.contains(&c.start_connector) {
+                names.push(c.start_connector.clone());
+            }
+        }
+        names
+    }
+
+    /// The system's output connectors: those a connection ends at.
+    pub fn system_outputs(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for c in &self.connections {
+            if c.end_element.is_none() && !names.contains(&c.end_connector) {
+                names.push(c.end_connector.clone());
+            }
+        }
+        names
     }
 
     pub fn component(&self, name: &str) -> Option<&Component> {
@@ -267,7 +296,7 @@ impl Twin {
             connections: parsed.connections,
             noise_variance,
             source: Some(path.to_owned()),
-            _unpacked: Some(std::sync::Arc::new(unpacked)),
+            keep_alive: vec![std::sync::Arc::new(unpacked)],
         })
     }
 
@@ -374,11 +403,11 @@ impl Twin {
 
         w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
             .expect(ok);
-        for input in INPUTS {
-            connector(&mut w, input, "input", "Real");
+        for input in self.system_inputs() {
+            connector(&mut w, &input, "input", "Real");
         }
-        for output in OUTPUTS {
-            connector(&mut w, output, "output", "Real");
+        for output in self.system_outputs() {
+            connector(&mut w, &output, "output", "Real");
         }
         if self.noise_variance.is_some() {
             for i in 1..=3 {

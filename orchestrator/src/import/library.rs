@@ -155,6 +155,9 @@ pub struct Library {
     path: PathBuf,
     guid: String,
     resource_uri: String,
+    /// `canInterpolateInputs` of the modelDescription: an FMU may export
+    /// fmi2SetRealInputDerivatives and still not support it.
+    interpolates: bool,
 }
 
 impl Library {
@@ -211,7 +214,14 @@ impl Library {
             path: path.to_owned(),
             guid: guid.to_owned(),
             resource_uri,
+            interpolates: false,
         })
+    }
+
+    /// Declare whether the FMU can interpolate inputs (its `canInterpolateInputs`).
+    pub fn with_input_interpolation(mut self, interpolates: bool) -> Self {
+        self.interpolates = interpolates;
+        self
     }
 
     pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {
@@ -271,6 +281,7 @@ impl Library {
         };
         let instance = Instance {
             api: self.api.clone(),
+            interpolates: self.interpolates && self.api.set_real_input_derivatives.is_some(),
             component,
             states: Vec::new(),
             name: instance_name.to_owned(),
@@ -311,6 +322,7 @@ pub struct StateHandle(usize);
 /// One instance of an FMU. Not `Sync`: FMI allows one call at a time per instance.
 pub struct Instance {
     api: Arc<Api>,
+    interpolates: bool,
     component: fmi2Component,
     states: Vec<fmi2FMUstate>,
     name: String,
@@ -493,7 +505,7 @@ impl Instance {
     }
 
     pub fn can_interpolate_inputs(&self) -> bool {
-        self.api.set_real_input_derivatives.is_some()
+        self.interpolates
     }
 
     /// First-order input derivatives for the next step.

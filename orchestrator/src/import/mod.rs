@@ -85,6 +85,7 @@ impl Fmu {
             &model_description.guid,
             &unpacked.path().join("resources"),
         )
+        .map(|l| l.with_input_interpolation(model_description.can_interpolate_inputs))
         .map_err(|e| match e {
             ImportError::Library { message, .. } => ImportError::Library {
                 path: path.to_owned(),

@@ -421,14 +421,18 @@ fn draw_floor(
     let measured = &c.measured[floor];
     let predicted = &c.predicted[floor];
     let residual = c.residual(floor);
-    let band = 3.0 * c.noise_sd[floor];
-    let band = if band.is_finite() { band } else { 0.0 };
+    // ±3σ at each sample: the noise σ, or the corrector's predictive σ where the twin has one.
+    let band: Vec<f64> = (0..n)
+        .map(|k| 3.0 * c.sd_at(floor, k))
+        .map(|b| if b.is_finite() { b } else { 0.0 })
+        .collect();
     let (lo, hi) = padded_range(
-        measured
-            .iter()
-            .chain(&residual)
-            .copied()
-            .chain(predicted.iter().flat_map(|p| [p - band, p + band])),
+        measured.iter().chain(&residual).copied().chain(
+            predicted
+                .iter()
+                .zip(&band)
+                .flat_map(|(p, b)| [p - b, p + b]),
+        ),
         0.04,
     );
 
@@ -498,9 +502,10 @@ fn draw_floor(
             )))
             .map_err(text)?;
     }
-    if band > 0.0 {
-        let upper = points(&c.time, predicted.iter().map(|p| p + band));
-        let lower: Vec<(f64, f64)> = points(&c.time, predicted.iter().map(|p| p - band)).collect();
+    if band.iter().any(|&b| b > 0.0) {
+        let upper = points(&c.time, predicted.iter().zip(&band).map(|(p, b)| p + b));
+        let lower: Vec<(f64, f64)> =
+            points(&c.time, predicted.iter().zip(&band).map(|(p, b)| p - b)).collect();
         let outline: Vec<(f64, f64)> = upper.chain(lower.into_iter().rev()).collect();
         chart
             .draw_series(std::iter::once(Polygon::new(
@@ -669,6 +674,7 @@ mod tests {
             measured,
             predicted,
             noise_sd: [0.03; 3],
+            band_sd: None,
             first: 103,
             nmse: [0.26, 2.44, 2.94],
             failing_windows,
@@ -925,6 +931,7 @@ mod tests {
             &m.acc,
             &predicted,
             noise_variance,
+            None,
             CompareOptions::default(),
         );
         assert!(

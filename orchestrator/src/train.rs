@@ -1,0 +1,270 @@
+//! `twin train`: fit the Gaussian-process bias corrector (reference paper §4.2) on a record and
+//! put it, connected behind the physics FMU, into the twin.
+//!
+//! The corrector FMU's own code builds the training set (`lagged_inputs`, the target form) and
+//! fits the three GPs (`Floors::from_training`: type-II ML, the floors in parallel), so what is
+//! trained here is exactly what the FMU computes when it runs. The fitted set, with its
+//! hyperparameters, goes into a copy of the corrector FMU as `resources/training.json`.
+
+use std::io::{Read, Write};
+use std::path::Path;
+use std::sync::Arc;
+
+use fmu_gp_corrector::{lagged_inputs, Floors, Sample, Settings, TargetForm, TrainingFile};
+
+use crate::data::Measurement;
+use crate::run::{run_twin, RunError};
+use crate::twin::{
+    find_fmu, Component, Connection, ParameterValue, Twin, TwinError, OUTPUTS, PHYSICS,
+};
+
+/// The corrector component's name and its FMU file in the twin.
+pub const CORRECTOR: &str = "corrector";
+pub const CORRECTOR_FMU: &str = "fmu_gp_corrector.fmu";
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Run(#[from] RunError),
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    #[error("train: {0}")]
+    Setup(String),
+}
+
+#[derive(Debug, Clone)]
+pub struct TrainOptions {
+    pub lags: usize,
+    pub target: TargetForm,
+    /// Seconds at the start of the record not used for training (the physics model starts at rest).
+    pub transient: f64,
+    /// Use every `stride`-th sample after the transient (1: all). A GP fit costs O(N³).
+    pub stride: usize,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            lags: fmu_gp_corrector::DEFAULT_LAGS,
+            target: TargetForm::Discrepancy,
+            transient: crate::compare::DEFAULT_TRANSIENT,
+            stride: 1,
+        }
+    }
+}
+
+/// What training produced, for the report.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TrainSummary {
+    pub points: usize,
+    pub lags: usize,
+    pub inputs: usize,
+    pub target: &'static str,
+    /// Per floor: signal variance, noise variance, the three shortest length scales.
+    pub hyperparameters: Vec<serde_json::Value>,
+    pub seconds: f64,
+}
+
+/// The physics-only version of a twin (a trained twin's corrector taken out).
+pub fn physics_only(twin: &Twin) -> Twin {
+    let mut out = twin.duplicate();
+    out.components.retain(|c| c.name != CORRECTOR);
+    out.connections.retain(|c| {
+        c.start_element.as_deref() != Some(CORRECTOR) && c.end_element.as_deref() != Some(CORRECTOR)
+    });
+    for output in OUTPUTS {
+        if !out
+            .connections
+            .iter()
+            .any(|c| c.end_element.is_none() && c.end_connector == output)
+        {
+            out.connections.push(Connection {
+                start_element: Some(PHYSICS.into()),
+                start_connector: output.into(),
+                end_element: None,
+                end_connector: output.into(),
+            });
+        }
+    }
+    out
+}
+
+/// Fit the corrector on `data` and return the twin with it.
+pub fn train(
+    twin: &Twin,
+    data: &Measurement,
+    options: &TrainOptions,
+) -> Result<(Twin, TrainSummary), TrainError> {
+    let started = std::time::Instant::now();
+    let physics = physics_only(twin);
+    let prediction = run_twin(&physics, data, |_, _| {})?;
+    let samples: Vec<Sample> = (0..data.len())
+        .map(|k| {
+            [
+                prediction.acc[0][k],
+                prediction.acc[1][k],
+                prediction.acc[2][k],
+                data.force[k],
+            ]
+        })
+        .collect();
+    let inputs = lagged_inputs(&samples, options.lags);
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= options.transient)
+        .unwrap_or(data.len())
+        .max(options.lags);
+    if data.len() <= first + 10 {
+        return Err(TrainError::Setup(format!(
+            "{}: too few samples after the {} s transient",
+            data.path.display(),
+            options.transient
+        )));
+    }
+    let used: Vec<usize> = (first..data.len()).step_by(options.stride.max(1)).collect();
+    let file = TrainingFile {
+        lags: options.lags,
+        target: options.target,
+        inputs: used.iter().map(|&k| inputs[k].clone()).collect(),
+        targets: used
+            .iter()
+            .map(|&k| {
+                [0, 1, 2].map(|f| options.target.target(data.acc[f][k], prediction.acc[f][k]))
+            })
+            .collect(),
+        hyperparameters: None,
+    };
+    file.check().map_err(TrainError::Setup)?;
+    let settings = Settings {
+        lags: options.lags,
+        target: options.target,
+        ..Settings::default()
+    };
+    let floors = Floors::from_training(&file, &settings)
+        .map_err(|e| TrainError::Setup(format!("fitting the GPs: {e}")))?;
+    let trained = floors.to_training_file(options.lags, options.target);
+
+    let summary = TrainSummary {
+        points: trained.inputs.len(),
+        lags: options.lags,
+        inputs: trained.input_dimension(),
+        target: options.target.name(),
+        hyperparameters: trained
+            .hyperparameters
+            .iter()
+            .flatten()
+            .map(|h| {
+                let mut ls = h.length_scales.clone();
+                ls.sort_by(f64::total_cmp);
+                serde_json::json!({"signal_variance": h.signal_variance, "noise_variance": h.noise_variance, "shortest_length_scales": &ls[..ls.len().min(3)]})
+            })
+            .collect(),
+        seconds: started.elapsed().as_secs_f64(),
+    };
+
+    // A copy of the corrector FMU carrying the training set.
+    let scratch = tempfile::Builder::new()
+        .prefix("twin-train-")
+        .tempdir()
+        .map_err(|e| TrainError::Setup(format!("temporary directory: {e}")))?;
+    let fmu_path = scratch.path().join(CORRECTOR_FMU);
+    let json = serde_json::to_vec(&trained)
+        .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
+    with_resource(
+        &find_fmu(CORRECTOR_FMU)?,
+        &fmu_path,
+        "resources/training.json",
+        &json,
+    )?;
+
+    let mut out = physics.duplicate();
+    out.keep_alive(Arc::new(scratch));
+    let mut parameters = std::collections::BTreeMap::new();
+    parameters.insert(
+        "lags".to_owned(),
+        ParameterValue::Integer(options.lags as i32),
+    );
+    parameters.insert(
+        "target".to_owned(),
+        ParameterValue::Integer(options.target.code()),
+    );
+    out.components.push(Component {
+        name: CORRECTOR.into(),
+        fmu_name: CORRECTOR_FMU.into(),
+        fmu_path,
+        parameters,
+    });
+    // The corrector's outputs replace the physics accelerations as the twin's outputs.
+    out.connections
+        .retain(|c| !(c.end_element.is_none() && OUTPUTS.contains(&c.end_connector.as_str())));
+    let link = |from: Option<&str>, a: &str, to: Option<&str>, b: &str| Connection {
+        start_element: from.map(str::to_owned),
+        start_connector: a.into(),
+        end_element: to.map(str::to_owned),
+        end_connector: b.into(),
+    };
+    out.connections
+        .push(link(None, "force", Some(CORRECTOR), "force"));
+    for f in 1..=3 {
+        out.connections.push(link(
+            Some(PHYSICS),
+            &format!("acc{f}"),
+            Some(CORRECTOR),
+            &format!("physics_acc{f}"),
+        ));
+        out.connections.push(link(
+            Some(CORRECTOR),
+            &format!("acc{f}"),
+            None,
+            &format!("acc{f}"),
+        ));
+        out.connections.push(link(
+            Some(CORRECTOR),
+            &format!("latent_var{f}"),
+            None,
+            &format!("latent_var{f}"),
+        ));
+        out.connections.push(link(
+            Some(CORRECTOR),
+            &format!("sd{f}"),
+            None,
+            &format!("sd{f}"),
+        ));
+    }
+    Ok((out, summary))
+}
+
+/// Copy the FMU at `source` to `target` with one resource file added (or replaced).
+fn with_resource(source: &Path, target: &Path, name: &str, bytes: &[u8]) -> Result<(), TrainError> {
+    let bad = |m: String| TrainError::Setup(format!("{}: {m}", source.display()));
+    let file = std::fs::File::open(source).map_err(|e| bad(e.to_string()))?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
+    let out = std::fs::File::create(target).map_err(|e| bad(e.to_string()))?;
+    let mut zip = zip::ZipWriter::new(out);
+    for i in 0..archive.len() {
+        let mut entry = archive.by_index(i).map_err(|e| bad(e.to_string()))?;
+        if entry.name() == name || entry.is_dir() {
+            continue;
+        }
+        let options =
+            zip::write::SimpleFileOptions::default().compression_method(entry.compression());
+        let entry_name = entry.name().to_owned();
+        let mut content = Vec::new();
+        entry
+            .read_to_end(&mut content)
+            .map_err(|e| bad(e.to_string()))?;
+        zip.start_file(entry_name, options)
+            .map_err(|e| bad(e.to_string()))?;
+        zip.write_all(&content).map_err(|e| bad(e.to_string()))?;
+    }
+    zip.start_file(
+        name,
+        zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated),
+    )
+    .map_err(|e| bad(e.to_string()))?;
+    zip.write_all(bytes).map_err(|e| bad(e.to_string()))?;
+    zip.finish().map_err(|e| bad(e.to_string()))?;
+    Ok(())
+}
