@@ -25,6 +25,18 @@ for n in 1 2 3; do
 done
 
 echo
+echo "== twin train: the GP bias corrector on dataset1, behind the calibrated physics =="
+"$twin" train --twin "$out/calibrated.ssp" --data data/dataset1.csv --out "$out/corrected.ssp" \
+  --stride 2 --report "$out/train-dataset1.json"
+for n in 2 3; do
+  echo
+  echo "== twin compare with the corrector on dataset$n (latent variance in the predictions CSV) =="
+  "$twin" compare --twin "$out/corrected.ssp" --data "data/dataset$n.csv" \
+    --report "$out/compare-corrected-dataset$n.json" \
+    --predictions "$out/predictions-corrected-dataset$n.csv" --plot "$out/compare-corrected-dataset$n.svg"
+done
+
+echo
 echo "== twin calibrate on dataset3: recalibrating on contact data biases the parameters =="
 "$twin" calibrate --data data/dataset3.csv --out "$out/calibrated-dataset3.ssp" \
   --validate data/dataset1.csv data/dataset2.csv --report "$out/calibrate-dataset3.json"
