@@ -518,7 +518,8 @@ pub fn run_mode(
             .map(|t| [t; 3])
             .unwrap_or_else(|| default_threshold(options.target, first)),
         Mode::Adaptive(_) => {
-            let xs = &first.inputs[first.first..initial_end];
+            // Held out: the initial points themselves are interpolated (V(f) ≈ 0 there).
+            let xs = &first.inputs[initial_end..(initial_end + options.initial).min(first.len())];
             let mut t = [0.0; 3];
             for (f, t) in t.iter_mut().enumerate() {
                 *t = latent_variances(&floors.gps[f], xs)?

@@ -1,0 +1,247 @@
+//! `twin learn` (active learning, reference paper Algorithm 1) on the bundled records with the
+//! physics calibrated on dataset1 (calibrated here through the CLI, `--starts 2` to keep it
+//! short in debug builds). To keep each test near a minute in debug builds, the GPs use 3 lags
+//! instead of 9 (the CLI default); everything else is the CLI's default.
+//!
+//! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use orchestrator::data::Measurement;
+use orchestrator::learn::{change_flags, prepare, run_modes, LearnOptions, Mode, Supervisor};
+use orchestrator::master::Block;
+use orchestrator::twin::Twin;
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace")
+        .to_owned()
+}
+
+fn fmu_dir() -> PathBuf {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join("target"));
+    let dir = target.join("fmu");
+    assert!(
+        dir.join("fmu_shear.fmu").is_file(),
+        "{} has no FMUs: run scripts/build-fmus.sh",
+        dir.display()
+    );
+    dir
+}
+
+/// The twin calibrated on dataset1, made once per test binary.
+fn calibrated() -> &'static Path {
+    static CAL: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    let (_, path) = CAL.get_or_init(|| {
+        std::env::set_var("TWIN_FMU_DIR", fmu_dir());
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let out = dir.path().join("cal.ssp");
+        let status = Command::new(env!("CARGO_BIN_EXE_twin"))
+            .args(["calibrate", "--starts", "2", "--data"])
+            .arg(workspace().join("data/dataset1.csv"))
+            .arg("--out")
+            .arg(&out)
+            .env("TWIN_FMU_DIR", fmu_dir())
+            .output()
+            .expect("twin runs");
+        assert!(
+            status.status.success(),
+            "calibrate failed: {}",
+            String::from_utf8_lossy(&status.stderr)
+        );
+        (dir, out)
+    });
+    path
+}
+
+fn records() -> Vec<Measurement> {
+    (1..=3)
+        .map(|k| {
+            Measurement::read(&workspace().join(format!("data/dataset{k}.csv")))
+                .expect("bundled record")
+        })
+        .collect()
+}
+
+#[test]
+fn fixed_threshold_queries_more_than_adaptive_mostly_on_dataset3_and_lowers_its_nmse() {
+    let twin = Twin::load(Some(calibrated())).expect("calibrated twin");
+    let options = LearnOptions {
+        lags: 3,
+        ..LearnOptions::default()
+    };
+    let streams = prepare(&twin, &records(), &options).expect("physics runs");
+    let results =
+        run_modes(&streams, &[Mode::Fixed, Mode::Adaptive(1.0)], &options).expect("learning runs");
+    let (fixed, adaptive) = (&results[0], &results[1]);
+    let queries = |r: &orchestrator::learn::ModeResult| {
+        r.records.iter().map(|x| x.queries).collect::<Vec<_>>()
+    };
+    eprintln!(
+        "fixed {:?}, adaptive f_f=1 {:?}",
+        queries(fixed),
+        queries(adaptive)
+    );
+    assert!(
+        fixed.total_queries > adaptive.total_queries,
+        "fixed {:?} vs adaptive {:?}",
+        queries(fixed),
+        queries(adaptive)
+    );
+    assert!(
+        fixed.records[2].queries > fixed.records[0].queries,
+        "{:?}",
+        queries(fixed)
+    );
+    for r in &results {
+        let d3 = &r.records[2];
+        for f in 0..3 {
+            assert!(
+                d3.final_nmse[f] < d3.nmse_physics[f],
+                "{}: floor {}: {} vs physics {}",
+                r.mode,
+                f + 1,
+                d3.final_nmse[f],
+                d3.nmse_physics[f]
+            );
+        }
+        // The contact in dataset3 shows as a long run of queries: the hand-off to the diagnosis.
+        assert!(
+            !d3.structure_may_have_changed.is_empty(),
+            "{}: no change flagged on dataset3",
+            r.mode
+        );
+        // One NMSE point per query plus the one before any query.
+        assert_eq!(d3.nmse_after_updates.len(), d3.queries + 1);
+        assert_eq!(d3.query_times.len(), d3.queries);
+    }
+}
+
+#[test]
+fn the_supervisor_block_decides() {
+    let mut out = [0.0; Supervisor::OUTPUTS];
+    let mut fixed = Supervisor::new(Mode::Fixed, [1.0, 2.0, 3.0], 25);
+    fixed
+        .evaluate(0.0, &[0.5, 1.9, 2.9], &mut out)
+        .expect("evaluates");
+    assert_eq!(out, [0.0, 1.0, 2.0, 3.0]);
+    fixed
+        .evaluate(0.0, &[0.5, 2.1, 2.9], &mut out)
+        .expect("evaluates");
+    assert_eq!(out[0], 1.0);
+    // Fixed: a reported maximum does not move the threshold.
+    fixed.update_threshold([9.0; 3]);
+    assert_eq!(fixed.threshold(), [1.0, 2.0, 3.0]);
+
+    // Adaptive: forgetting applies before the comparison, the update replaces the threshold.
+    let mut adaptive = Supervisor::new(Mode::Adaptive(0.5), [1.0; 3], 25);
+    adaptive
+        .evaluate(0.0, &[0.6, 0.0, 0.0], &mut out)
+        .expect("evaluates");
+    assert_eq!(out, [1.0, 0.5, 0.5, 0.5]);
+    adaptive.update_threshold([4.0; 3]);
+    adaptive
+        .evaluate(0.0, &[1.9, 1.9, 1.9], &mut out)
+        .expect("evaluates");
+    assert_eq!(out, [0.0, 2.0, 2.0, 2.0]);
+
+    // Uniform: every 25th point of a record, whatever the variances.
+    let mut uniform = Supervisor::new(Mode::Uniform, [f64::INFINITY; 3], 25);
+    let flags: Vec<usize> = (1..=60)
+        .filter(|_| {
+            uniform
+                .evaluate(0.0, &[1e9; 3], &mut out)
+                .expect("evaluates");
+            out[0] == 1.0
+        })
+        .collect();
+    assert_eq!(flags, vec![25, 50]);
+    uniform.start_record();
+    for _ in 0..24 {
+        uniform
+            .evaluate(0.0, &[0.0; 3], &mut out)
+            .expect("evaluates");
+        assert_eq!(out[0], 0.0);
+    }
+    uniform
+        .evaluate(0.0, &[0.0; 3], &mut out)
+        .expect("evaluates");
+    assert_eq!(out[0], 1.0);
+
+    // Wrong port counts are an error, not a panic.
+    assert!(fixed.evaluate(0.0, &[1.0], &mut out).is_err());
+}
+
+#[test]
+fn runs_of_consecutive_queries_are_flagged() {
+    let time: Vec<f64> = (0..100).map(|k| k as f64 * 0.5).collect();
+    let mut queries: Vec<usize> = vec![1, 3, 5];
+    queries.extend(10..30); // 20 in a row
+    queries.extend(40..59); // 19 in a row
+    let flags = change_flags(&queries, &time, 20);
+    assert_eq!(flags.len(), 1);
+    assert_eq!(
+        (flags[0].start, flags[0].end, flags[0].samples),
+        (5.0, 14.5, 20)
+    );
+}
+
+#[test]
+fn the_cli_writes_the_report_and_a_plot_per_mode() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let data = workspace().join("data");
+    let output = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args(["learn", "--mode", "uniform", "--lags", "2", "--twin"])
+        .arg(calibrated())
+        .arg("--data")
+        .arg(data.join("dataset1.csv"))
+        .arg(data.join("dataset2.csv"))
+        .arg("--out-dir")
+        .arg(dir.path())
+        .env("TWIN_FMU_DIR", fmu_dir())
+        .output()
+        .expect("twin runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(stdout.contains("uniform"), "{stdout}");
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("learn.json")).expect("report"),
+    )
+    .expect("JSON");
+    let records = report["modes"][0]["records"].as_array().expect("records");
+    assert_eq!(records.len(), 2);
+    // Dataset1 streams 1024 − 102 (transient) − 75 (initial) = 847 points: 33 uniform queries;
+    // dataset2 streams 922: 36.
+    assert_eq!(records[0]["queries"], 33);
+    assert_eq!(records[1]["queries"], 36);
+    let svg = std::fs::read_to_string(dir.path().join("learn-uniform.svg")).expect("plot");
+    assert!(
+        svg.starts_with("<svg") && svg.contains("NMSE"),
+        "not the plot"
+    );
+
+    let bad = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args([
+            "learn",
+            "--mode",
+            "adaptive",
+            "--forgetting",
+            "1.5",
+            "--data",
+        ])
+        .arg(data.join("dataset1.csv"))
+        .env("TWIN_FMU_DIR", fmu_dir())
+        .output()
+        .expect("twin runs");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--forgetting"));
+}
