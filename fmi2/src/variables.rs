@@ -387,6 +387,36 @@ impl ModelInfo {
         self.render_xml()
     }
 
+    /// Check that the committed modelDescription at `path` is exactly what this table generates
+    /// (and so carries the GUID `fmi2Instantiate` checks). With `UPDATE_MODEL_DESCRIPTION` set in
+    /// the environment it is rewritten first: regeneration is on purpose only. For the FMU
+    /// crates' tests.
+    pub fn check_committed_model_description(&self, path: &std::path::Path) -> Result<(), String> {
+        let generated = self.render_xml();
+        if std::env::var_os("UPDATE_MODEL_DESCRIPTION").is_some() {
+            std::fs::write(path, &generated).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
+        let committed = std::fs::read_to_string(path).map_err(|e| {
+            format!(
+                "{}: {e}; regenerate with UPDATE_MODEL_DESCRIPTION=1",
+                path.display()
+            )
+        })?;
+        if committed != generated {
+            return Err(format!(
+                "{} differs from the variable table; regenerate with UPDATE_MODEL_DESCRIPTION=1 and review the diff",
+                path.display()
+            ));
+        }
+        if !committed.contains(&format!("guid=\"{}\"", self.guid)) {
+            return Err(format!(
+                "{} does not carry the GUID the code checks",
+                path.display()
+            ));
+        }
+        Ok(())
+    }
+
     fn render_xml(&self) -> String {
         // Writing to a Vec<u8> cannot fail; the expect documents that.
         let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
