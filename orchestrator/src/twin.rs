@@ -472,9 +472,7 @@ impl Twin {
             .expect(ok);
         w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription")))
             .expect(ok);
-        let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
-        s.push('\n');
-        s
+        finish_xml(w)
     }
 
     // -----------------------------------------------------------------------------------------
@@ -590,7 +588,12 @@ fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String 
         .expect(ok);
     w.write_event(Event::End(BytesEnd::new("ssv:ParameterSet")))
         .expect(ok);
-    let mut s = String::from_utf8(w.into_inner()).expect("UTF-8");
+    finish_xml(w)
+}
+
+/// The written document as text, ending with a newline.
+fn finish_xml(w: Writer<Vec<u8>>) -> String {
+    let mut s = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
     s.push('\n');
     s
 }
