@@ -1,5 +1,6 @@
 //! `twin synth`: the synthetic physical twin. It makes measurement records of a simulated
-//! three-storey shear frame — any set of effects from the shear FMU's library, parameter changes
+//! three-storey shear frame — any set of effects from the shear FMU's library (and one kind the
+//! library deliberately lacks, Bouc–Wen hysteresis, for hidden-effect tests), parameter changes
 //! at given times, a band-limited random force with optional amplitude windows, and Gaussian
 //! sensor noise — for tests, demos and teaching.
 //!
@@ -13,6 +14,12 @@
 //!   `h = 1 / (sample_rate · oversample)` (default 64 steps per sample interval), independent of the
 //!   FMU's `substeps`. The force is linear between the fine samples. Parameter changes take effect
 //!   exactly at their time (the fine step is split there). The record starts from rest.
+//! * **Hysteresis** (not in the FMU's library): each `hysteresis` effect adds a state `z` (m,
+//!   starting at 0) to the RK4 state, integrated at the same fine step together with the
+//!   structure (and, per effect, the work `∫ k_h z dδ`). Its steps are split where a storey's
+//!   `δ̇·z` changes sign (the Bouc–Wen law switches branch there), as the library's contact is
+//!   split where its gap closes. Records without hysteresis are made exactly as before (the
+//!   structure alone, by [`fmu_shear::ShearModel::advance`]).
 //! * **Force**: white Gaussian noise on a generator grid of 8 points per sample interval,
 //!   multiplied by the amplitude envelope (1 outside windows, `gain` inside, raised-cosine ramps of
 //!   `ramp` seconds centred on each window edge; overlapping windows multiply), then low-passed by
@@ -66,7 +73,9 @@
 //!   "effects": [
 //!     {"kind": "contact", "location": [2, 3], "gap": 5e-4, "stiffness": 9000, "side": "both"},
 //!     {"kind": "cubic", "location": [2], "stiffness": 5e9},
-//!     {"kind": "friction", "location": [1], "force": 0.2, "velocity_scale": 1e-3}
+//!     {"kind": "friction", "location": [1], "force": 0.2, "velocity_scale": 1e-3},
+//!     {"kind": "hysteresis", "location": [2], "stiffness": 1000, "yield": 5e-4,
+//!      "beta": 0.5, "gamma": 0.5, "exponent": 2}
 //!   ],
 //!   "changes": [{"at": 8.0, "parameter": "k2", "factor": 0.85}]
 //! }
@@ -79,6 +88,19 @@
 //!   the FMU's `cubic1..3`) or `[lower, upper]`; `stiffness` N/m³ (default 1e9; negative softens).
 //! * `friction`: `location` = `[floor]` (1..3); `force` N (default 0.1), `velocity_scale` m/s
 //!   (default 1e-3).
+//! * `hysteresis` (**not** in the shear FMU's library: no twin configuration reproduces it):
+//!   a Bouc–Wen hysteretic restoring force in a storey. `location` = `[storey]` or
+//!   `[lower, upper]` as for `cubic`; `stiffness` k_h N/m (default 1000, > 0), `yield` z_y m
+//!   (default 5e-4, > 0), `beta` and `gamma` (default 0.5 each, β + γ > 0), `exponent` n
+//!   (default 2, ≥ 1). With δ the storey drift (upper floor minus lower, 0 = the ground) and the
+//!   hysteretic variable z (m, 0 at the start), `ż = δ̇ · (1 − (β·sign(δ̇·z) + γ)·|z/z_y|^n)`,
+//!   and the storey carries the force `k_h·z`, applied as a storey spring of extension δ would
+//!   be (positive resists a positive drift, like `cubic`). For |z| ≪ z_y it is an extra linear
+//!   storey stiffness k_h; |z| saturates at `z_y·(1/(β+γ))^(1/n)`; the loops dissipate energy.
+//!   Several may be given, one per storey. The truth reports, per hysteresis effect,
+//!   `in_library: false`, `z_saturation`, `max_abs_z` and `hysteretic_work` (`∫ k_h z dδ` over
+//!   the record, J: the energy dissipated plus what z stores at the end, `k_h·z²/2`
+//!   when β = γ); [`SynthRecord::hysteresis`] has z, δ and that work at the sample times.
 //! * `changes`: `parameter` one of `m1..m3`, `c1..c3`, `k1..k3`; either `factor` (multiplies the
 //!   value in force at that time) or `value`; `at` in s, inside the record. Changes apply in time
 //!   order.
@@ -90,7 +112,8 @@
 //!
 //! Flags override the scenario's values and extend its lists: `--seed 3 --force-rms 1.2
 //! --force-window 13:17:3[:RAMP] --effect contact@2-3[:gap=5e-4,stiffness=9000,side=both]
-//! --effect cubic@2:stiffness=5e9 --effect friction@1:force=0.2 --change k2@8:0.85` (factor) or
+//! --effect cubic@2:stiffness=5e9 --effect friction@1:force=0.2
+//! --effect hysteresis@2:stiffness=1500,yield=3e-4 --change k2@8:0.85` (factor) or
 //! `--change k2@8=3500` (value), `--mass/--damping/--stiffness A,B,C`, `--noise-fraction`,
 //! `--noise-sd`, `--force-noise-fraction`, `--band-hz`, `--low-hz`,
 //! `--force-between-samples band-limited|linear`, `--duration`,
@@ -99,8 +122,8 @@
 //! # Library
 //!
 //! [`synth_record`] makes a record in-process from a [`Scenario`]: the [`Measurement`] exactly as
-//! the written CSV reads back, the noise-free accelerations and the fine-grid force, and the
-//! [`Truth`].
+//! the written CSV reads back, the noise-free accelerations and the fine-grid force (and the
+//! hysteresis states, if any), and the [`Truth`].
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -108,7 +131,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use fmu_shear::effects::contact::{SIDE_BOTH, SIDE_NEGATIVE, SIDE_POSITIVE};
-use fmu_shear::effects::{drift, Contact, Cubic, Effects, Friction};
+use fmu_shear::effects::{add_storey_force, drift, Contact, Cubic, Effects, Floors, Friction};
 use fmu_shear::{ShearModel, ShearParameters};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -137,6 +160,12 @@ pub const DEFAULT_DAMPING: [f64; 3] = [8.14, 3.65, 2.56];
 pub const DEFAULT_STIFFNESS: [f64; 3] = [3850.0, 4100.0, 4681.0];
 /// White-noise points per sample interval on which the force is generated.
 pub const GENERATOR_OVERSAMPLE: usize = 8;
+/// Defaults of the `hysteresis` effect (Bouc–Wen): k_h N/m, z_y m, β, γ, n.
+pub const DEFAULT_HYSTERESIS_STIFFNESS: f64 = 1000.0;
+pub const DEFAULT_HYSTERESIS_YIELD: f64 = 5e-4;
+pub const DEFAULT_HYSTERESIS_BETA: f64 = 0.5;
+pub const DEFAULT_HYSTERESIS_GAMMA: f64 = 0.5;
+pub const DEFAULT_HYSTERESIS_EXPONENT: f64 = 2.0;
 /// Fine steps in one record at most (memory and time guard).
 const MAX_FINE_POINTS: usize = 1 << 26;
 const MAX_OVERSAMPLE: u32 = 100_000;
@@ -245,6 +274,19 @@ pub enum EffectSpec {
         floor: usize,
         force: f64,
         velocity_scale: f64,
+    },
+    /// Bouc–Wen hysteresis of storey `storey` (1..3), **not** in the FMU's library:
+    /// `ż = δ̇ (1 − (β sign(δ̇ z) + γ) |z / z_y|ⁿ)`, storey force `k_h z` (see the module docs).
+    Hysteresis {
+        storey: usize,
+        /// k_h, N/m.
+        stiffness: f64,
+        /// z_y, m (the JSON's `yield`).
+        yield_drift: f64,
+        beta: f64,
+        gamma: f64,
+        /// n.
+        exponent: f64,
     },
 }
 
@@ -366,14 +408,21 @@ impl EffectSpec {
             EffectSpec::Contact { .. } => "contact",
             EffectSpec::Cubic { .. } => "cubic",
             EffectSpec::Friction { .. } => "friction",
+            EffectSpec::Hysteresis { .. } => "hysteresis",
         }
     }
-    /// 0-based location in the FMU's effect library.
+    /// Whether the shear FMU's effect library has this kind (hysteresis: no).
+    pub fn in_library(&self) -> bool {
+        !matches!(self, EffectSpec::Hysteresis { .. })
+    }
+    /// 0-based location in the FMU's effect library (for hysteresis, which the library lacks,
+    /// the 0-based storey).
     pub fn library_location(&self) -> usize {
         match *self {
             EffectSpec::Contact { lower, .. } => lower,
             EffectSpec::Cubic { storey, .. } => storey - 1,
             EffectSpec::Friction { floor, .. } => floor - 1,
+            EffectSpec::Hysteresis { storey, .. } => storey - 1,
         }
     }
     /// The location as the scenario writes it.
@@ -382,6 +431,7 @@ impl EffectSpec {
             EffectSpec::Contact { lower, .. } => vec![lower, lower + 1],
             EffectSpec::Cubic { storey, .. } => vec![storey],
             EffectSpec::Friction { floor, .. } => vec![floor],
+            EffectSpec::Hysteresis { storey, .. } => vec![storey],
         }
     }
     /// Where, in words: "between floors 2 and 3", "of storey 2 (floors 1–2)", "on floor 1".
@@ -395,16 +445,20 @@ impl EffectSpec {
         };
         match *self {
             EffectSpec::Contact { lower, .. } => storey(lower),
-            EffectSpec::Cubic { storey: s, .. } => format!("of storey {s} ({})", storey(s - 1)),
+            EffectSpec::Cubic { storey: s, .. } | EffectSpec::Hysteresis { storey: s, .. } => {
+                format!("of storey {s} ({})", storey(s - 1))
+            }
             EffectSpec::Friction { floor, .. } => format!("on floor {floor}"),
         }
     }
-    /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`.
+    /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`. Hysteresis is not in
+    /// the library: its `hysteresis2` names no FMU variable (see [`EffectSpec::in_library`]).
     pub fn fmu_prefix(&self) -> String {
         match *self {
             EffectSpec::Contact { lower, .. } => format!("contact{}{}", lower, lower + 1),
             EffectSpec::Cubic { storey, .. } => format!("cubic{storey}"),
             EffectSpec::Friction { floor, .. } => format!("friction{floor}"),
+            EffectSpec::Hysteresis { storey, .. } => format!("hysteresis{storey}"),
         }
     }
     fn to_json(&self) -> Value {
@@ -427,6 +481,17 @@ impl EffectSpec {
                 velocity_scale,
             } => json!({
                 "kind": "friction", "location": [floor], "force": force, "velocity_scale": velocity_scale,
+            }),
+            EffectSpec::Hysteresis {
+                storey,
+                stiffness,
+                yield_drift,
+                beta,
+                gamma,
+                exponent,
+            } => json!({
+                "kind": "hysteresis", "location": [storey], "stiffness": stiffness,
+                "yield": yield_drift, "beta": beta, "gamma": gamma, "exponent": exponent,
             }),
         }
     }
@@ -818,6 +883,39 @@ impl Scenario {
                     positive(at.field("force"), force, false)?;
                     positive(at.field("velocity_scale"), velocity_scale, true)?;
                 }
+                EffectSpec::Hysteresis {
+                    storey,
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                } => {
+                    if !(1..=3).contains(&storey) {
+                        return Err(at
+                            .field("location")
+                            .error(format!("storey {storey} is not 1, 2 or 3")));
+                    }
+                    positive(at.field("stiffness"), stiffness, true)?;
+                    positive(at.field("yield"), yield_drift, true)?;
+                    for (name, x) in [("beta", beta), ("gamma", gamma)] {
+                        if !x.is_finite() {
+                            return Err(at
+                                .field(name)
+                                .error(format!("{x} is not a finite number")));
+                        }
+                    }
+                    if beta + gamma <= 0.0 {
+                        return Err(at.field("gamma").error(format!(
+                            "beta + gamma = {beta} + {gamma} must be > 0 (|z| saturates at yield · (1/(beta + gamma))^(1/exponent))"
+                        )));
+                    }
+                    if !(exponent.is_finite() && exponent >= 1.0) {
+                        return Err(at
+                            .field("exponent")
+                            .error(format!("{exponent} must be a finite number ≥ 1")));
+                    }
+                }
             }
             if let Some(j) = self.effects[..i]
                 .iter()
@@ -951,8 +1049,37 @@ fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
                 velocity_scale: number_or("velocity_scale", 1e-3)?,
             })
         }
+        "hysteresis" => {
+            at.known_keys(
+                o,
+                &[
+                    "kind",
+                    "location",
+                    "stiffness",
+                    "yield",
+                    "beta",
+                    "gamma",
+                    "exponent",
+                ],
+            )?;
+            let storey = match location[..] {
+                [s] if (1..=3).contains(&s) => small(s),
+                [a, b] if b == a + 1 && b <= 3 => small(b),
+                _ => return Err(loc.error(format!(
+                    "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
+                ))),
+            };
+            Ok(EffectSpec::Hysteresis {
+                storey,
+                stiffness: number_or("stiffness", DEFAULT_HYSTERESIS_STIFFNESS)?,
+                yield_drift: number_or("yield", DEFAULT_HYSTERESIS_YIELD)?,
+                beta: number_or("beta", DEFAULT_HYSTERESIS_BETA)?,
+                gamma: number_or("gamma", DEFAULT_HYSTERESIS_GAMMA)?,
+                exponent: number_or("exponent", DEFAULT_HYSTERESIS_EXPONENT)?,
+            })
+        }
         other => Err(kind_at.error(format!(
-            "unknown effect kind {other:?}; expected \"contact\", \"cubic\" or \"friction\""
+            "unknown effect kind {other:?}; expected \"contact\", \"cubic\", \"friction\" or \"hysteresis\""
         ))),
     }
 }
@@ -1091,6 +1218,23 @@ pub struct SynthRecord {
     /// points (one period of the force). The structure sees it linearly interpolated.
     pub fine_force: Vec<f64>,
     pub fine_step: f64,
+    /// One per `hysteresis` effect, in the scenario's order: its states at the sample times.
+    pub hysteresis: Vec<HysteresisTrace>,
+}
+
+/// A hysteresis effect's noise-free internals at the sample times `k / sample_rate`.
+#[derive(Debug, Clone)]
+pub struct HysteresisTrace {
+    /// Index in the scenario's effects.
+    pub effect: usize,
+    /// 1..3.
+    pub storey: usize,
+    /// The hysteretic variable z, m (the storey force is `k_h · z`).
+    pub z: Vec<f64>,
+    /// The storey drift δ (upper floor minus lower), m.
+    pub drift: Vec<f64>,
+    /// `∫₀ᵗ k_h z dδ`, J, integrated with the structure on the fine grid.
+    pub work: Vec<f64>,
 }
 
 /// How the record was made: the resolved scenario and what came out of it.
@@ -1146,9 +1290,12 @@ pub struct EffectTruth {
     /// The floors the effect acts between / on (0 = the ground).
     pub floors: Vec<usize>,
     pub description: String,
-    /// The shear FMU's variable prefix, e.g. `contact23`.
+    /// The shear FMU's variable prefix, e.g. `contact23` (for an effect not in the library, as
+    /// `hysteresis2`, no FMU variable has it).
     pub fmu_prefix: String,
-    /// 0-based location in the FMU's effect library.
+    /// Whether the shear FMU's effect library has this kind (false for hysteresis).
+    pub in_library: bool,
+    /// 0-based location in the FMU's effect library (hysteresis: the 0-based storey).
     pub library_location: usize,
     pub parameters: Value,
     /// Contact only: closings of the gap (open → closed on the fine grid).
@@ -1163,6 +1310,16 @@ pub struct EffectTruth {
     pub max_penetration: Option<f64>,
     /// Largest |drift| (storey effects) or |velocity| (friction) over the record.
     pub max_drift_or_velocity: f64,
+    /// Hysteresis only: the bound of |z|, `yield · (1/(beta + gamma))^(1/exponent)`, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub z_saturation: Option<f64>,
+    /// Hysteresis only: largest |z| on the fine grid, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_abs_z: Option<f64>,
+    /// Hysteresis only: `∫ k_h z dδ` over the record, J (dissipated, plus what z stores at the
+    /// end).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hysteretic_work: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -1348,8 +1505,11 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
                     velocity_scale,
                 };
             }
+            // Not in the library: integrated here, beside the model (see `Hysteretic`).
+            EffectSpec::Hysteresis { .. } => {}
         }
     }
+    let hysteretic = Hysteretic::new(&s.effects);
     let params = ShearParameters {
         mass: s.mass,
         damping: s.damping,
@@ -1385,16 +1545,35 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
     let mut stats = Stats::new(&s.effects);
     let mut clean_acc = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
     let mut clean_force = vec![0.0; n];
+    let mut hysteretic = hysteretic;
+    let mut traces: Vec<HysteresisTrace> = hysteretic
+        .laws
+        .iter()
+        .map(|law| HysteresisTrace {
+            effect: law.effect,
+            storey: law.storey + 1,
+            z: Vec::with_capacity(n),
+            drift: Vec::with_capacity(n),
+            work: Vec::with_capacity(n),
+        })
+        .collect();
     for k in 0..n {
         let j0 = k * os;
         while next_change < changes.len() && changes[next_change].at <= j0 as f64 * hf {
             apply(&mut model, changes[next_change]);
             next_change += 1;
         }
-        let a = model.acceleration(&model.displacement, &model.velocity, fine_force[j0]);
+        let a = hysteretic.acceleration(&model, fine_force[j0]);
         for f in 0..3 {
             clean_acc[f][k] = a[f];
             stats.max_acc[f] = stats.max_acc[f].max(a[f].abs());
+        }
+        for (i, trace) in traces.iter_mut().enumerate() {
+            trace.z.push(hysteretic.z[i]);
+            trace
+                .drift
+                .push(drift(&model.displacement, trace.storey - 1));
+            trace.work.push(hysteretic.work[i]);
         }
         clean_force[k] = fine_force[j0];
         if k + 1 == n {
@@ -1413,19 +1592,20 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
             while next_change < changes.len() && changes[next_change].at <= t1 {
                 let at = changes[next_change].at;
                 if at > t {
-                    model.advance(at - t);
+                    hysteretic.advance(&mut model, at - t);
                     t = at;
                 }
                 apply(&mut model, changes[next_change]);
                 next_change += 1;
             }
             if t1 > t {
-                model.advance(t1 - t);
+                hysteretic.advance(&mut model, t1 - t);
             }
             let finite = model
                 .displacement
                 .iter()
                 .chain(&model.velocity)
+                .chain(&hysteretic.z)
                 .all(|x| x.is_finite());
             if !finite {
                 bail!(
@@ -1434,6 +1614,7 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
                 );
             }
             stats.observe(&model, t1, hf);
+            hysteretic.observe();
         }
     }
 
@@ -1495,8 +1676,24 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
         .effects
         .iter()
         .enumerate()
-        .map(|(i, e)| stats.effect_truth(i, e))
+        .map(|(i, e)| {
+            let mut truth = stats.effect_truth(i, e);
+            if let Some(h) = hysteretic.laws.iter().position(|law| law.effect == i) {
+                truth.z_saturation = Some(hysteretic.laws[h].saturation());
+                truth.max_abs_z = Some(hysteretic.max_abs_z[h]);
+                truth.hysteretic_work = Some(hysteretic.work[h]);
+            }
+            truth
+        })
         .collect();
+    let mut integrator = String::from(
+        "fmu_shear::ShearModel, classical RK4 at the fine step, force linear between fine samples",
+    );
+    if !hysteretic.laws.is_empty() {
+        integrator.push_str(
+            "; with each hysteresis effect's Bouc–Wen z (and its work) in the same RK4 state, steps split where a storey's drift rate × z or a contact's gap changes sign",
+        );
+    }
     let truth = Truth {
         generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
         scenario: s.to_json(),
@@ -1509,7 +1706,7 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
             last_time: (n - 1) as f64 * dt,
             fine_step: hf,
             oversample: s.oversample,
-            integrator: "fmu_shear::ShearModel, classical RK4 at the fine step, force linear between fine samples".into(),
+            integrator,
             initial_state: "at rest (zero displacements and velocities)".into(),
             sampling: "point samples of the force and of ÿ at each sample time (no anti-aliasing filter); 6-decimal times, 9 significant digits".into(),
         },
@@ -1559,8 +1756,280 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
         clean_force,
         fine_force,
         fine_step: hf,
+        hysteresis: traces,
     };
     Ok((record, truth))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hysteresis (Bouc–Wen): not in the FMU's library, integrated here beside the model
+// ---------------------------------------------------------------------------------------------
+
+/// One storey's Bouc–Wen law (see the module documentation).
+#[derive(Clone, Copy, Debug)]
+struct BoucWen {
+    /// Index in the scenario's effects.
+    effect: usize,
+    /// 0-based storey (0 = ground–floor 1).
+    storey: usize,
+    stiffness: f64,
+    yield_drift: f64,
+    beta: f64,
+    gamma: f64,
+    exponent: f64,
+}
+
+impl BoucWen {
+    /// `ż = δ̇ (1 − (β sign(δ̇ z) + γ) |z / z_y|ⁿ)`.
+    #[inline]
+    fn z_rate(&self, drift_rate: f64, z: f64) -> f64 {
+        let product = drift_rate * z;
+        let sign = if product > 0.0 {
+            1.0
+        } else if product < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        let ratio = (z / self.yield_drift).abs();
+        let power = if self.exponent == 2.0 {
+            ratio * ratio
+        } else {
+            ratio.powf(self.exponent)
+        };
+        drift_rate * (1.0 - (self.beta * sign + self.gamma) * power)
+    }
+    /// The bound of |z|: `z_y (1 / (β + γ))^(1/n)`.
+    fn saturation(&self) -> f64 {
+        self.yield_drift * (1.0 / (self.beta + self.gamma)).powf(1.0 / self.exponent)
+    }
+}
+
+/// At most one hysteresis effect per storey (validation refuses two at one storey).
+const MAX_LAWS: usize = 3;
+/// The state with hysteresis: `[y1..y3, ẏ1..ẏ3, z per law, ∫ k_h z dδ per law]`.
+type HState = [f64; 6 + 2 * MAX_LAWS];
+const Z0: usize = 6;
+const W0: usize = 6 + MAX_LAWS;
+/// At most this many splits inside one fine step (as `fmu_shear::integrate`'s contact steps).
+const MAX_SPLITS: usize = 16;
+
+/// The hysteresis effects' states, and the structure's steps with them. Without hysteresis it
+/// steps the model by [`ShearModel::advance`], exactly as before it existed.
+struct Hysteretic {
+    laws: Vec<BoucWen>,
+    z: [f64; MAX_LAWS],
+    work: [f64; MAX_LAWS],
+    max_abs_z: [f64; MAX_LAWS],
+}
+
+impl Hysteretic {
+    fn new(effects: &[EffectSpec]) -> Self {
+        let laws = effects
+            .iter()
+            .enumerate()
+            .filter_map(|(effect, e)| match *e {
+                EffectSpec::Hysteresis {
+                    storey,
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                } => Some(BoucWen {
+                    effect,
+                    storey: storey - 1,
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                }),
+                _ => None,
+            })
+            .take(MAX_LAWS)
+            .collect();
+        Hysteretic {
+            laws,
+            z: [0.0; MAX_LAWS],
+            work: [0.0; MAX_LAWS],
+            max_abs_z: [0.0; MAX_LAWS],
+        }
+    }
+
+    /// Subtract the hysteretic storey forces `k_h z` from the accelerations `a`.
+    #[inline]
+    fn add_to(&self, model: &ShearModel, z: &[f64], a: &mut Floors) {
+        let mut g = [0.0; 3];
+        for (law, &z) in self.laws.iter().zip(z) {
+            add_storey_force(law.storey, law.stiffness * z, &mut g);
+        }
+        for f in 0..3 {
+            a[f] -= g[f] / model.params.mass[f];
+        }
+    }
+
+    /// The floor accelerations of the model's state and these z.
+    fn acceleration(&self, model: &ShearModel, input: f64) -> Floors {
+        let mut a = model.acceleration(&model.displacement, &model.velocity, input);
+        if !self.laws.is_empty() {
+            self.add_to(model, &self.z, &mut a);
+        }
+        a
+    }
+
+    #[inline]
+    fn rhs(&self, model: &ShearModel, x: &HState, input: f64) -> HState {
+        let y = [x[0], x[1], x[2]];
+        let v = [x[3], x[4], x[5]];
+        let mut a = model.acceleration(&y, &v, input);
+        self.add_to(model, &x[Z0..Z0 + self.laws.len()], &mut a);
+        let mut dx = [0.0; 6 + 2 * MAX_LAWS];
+        dx[..3].copy_from_slice(&v);
+        dx[3..6].copy_from_slice(&a);
+        for (i, law) in self.laws.iter().enumerate() {
+            let z = x[Z0 + i];
+            let rate = drift(&v, law.storey);
+            dx[Z0 + i] = law.z_rate(rate, z);
+            dx[W0 + i] = law.stiffness * z * rate;
+        }
+        dx
+    }
+
+    /// Where the vector field has kinks: the contacts' gaps and each law's `δ̇ z`.
+    fn switches(&self, model: &ShearModel, x: &HState) -> ([f64; 6 + MAX_LAWS], usize) {
+        let contact = model.effects.switches(&[x[0], x[1], x[2]]);
+        let mut out = [0.0; 6 + MAX_LAWS];
+        out[..contact.len].copy_from_slice(&contact.values[..contact.len]);
+        let mut len = contact.len;
+        for (i, law) in self.laws.iter().enumerate() {
+            out[len] = drift(&[x[3], x[4], x[5]], law.storey) * x[Z0 + i];
+            len += 1;
+        }
+        (out, len)
+    }
+
+    /// RK4 over `[0, h]` with the input `u0 + slope·τ`, `substeps` sub-steps, each split just
+    /// past every sign change of a switch (the scheme of `fmu_shear::integrate::rk4_with_events`).
+    fn step(&self, model: &ShearModel, x: &HState, u0: f64, slope: f64, h: f64) -> HState {
+        let f = |tau: f64, x: &HState| self.rhs(model, x, u0 + slope * tau);
+        let n = model.params.substeps.max(1);
+        let dt = h / f64::from(n);
+        let mut state = *x;
+        for i in 0..n {
+            let mut tau = f64::from(i) * dt;
+            let end = f64::from(i + 1) * dt;
+            for _split in 0..=MAX_SPLITS {
+                let remaining = end - tau;
+                if remaining <= 1e-14 * dt {
+                    break;
+                }
+                let next = rk4(&f, tau, &state, remaining);
+                let ((s0, len), (s1, _)) =
+                    (self.switches(model, &state), self.switches(model, &next));
+                let mut theta = 1.0f64;
+                for j in 0..len {
+                    let (a, b) = (s0[j], s1[j]);
+                    if a != 0.0 && a.signum() != b.signum() {
+                        let g = |th: f64| {
+                            self.switches(model, &rk4(&f, tau, &state, th * remaining))
+                                .0[j]
+                        };
+                        theta = theta.min(locate(g, a, b));
+                    }
+                }
+                if theta >= 1.0 {
+                    state = next;
+                    break;
+                }
+                state = rk4(&f, tau, &state, theta * remaining);
+                tau += theta * remaining;
+            }
+        }
+        state
+    }
+
+    /// [`ShearModel::advance`] with the hysteresis: the same inputs, the same end-of-step
+    /// bookkeeping (the input ends at its ramp's end value, slope 0).
+    fn advance(&mut self, model: &mut ShearModel, h: f64) {
+        if self.laws.is_empty() {
+            model.advance(h);
+            return;
+        }
+        let u0 = model.force.value - model.control_force.value;
+        let slope = model.force.slope - model.control_force.slope;
+        let mut x = [0.0; 6 + 2 * MAX_LAWS];
+        x[..3].copy_from_slice(&model.displacement);
+        x[3..6].copy_from_slice(&model.velocity);
+        x[Z0..W0].copy_from_slice(&self.z);
+        x[W0..].copy_from_slice(&self.work);
+        let x = self.step(model, &x, u0, slope, h);
+        model.displacement = [x[0], x[1], x[2]];
+        model.velocity = [x[3], x[4], x[5]];
+        self.z.copy_from_slice(&x[Z0..W0]);
+        self.work.copy_from_slice(&x[W0..]);
+        for input in [&mut model.force, &mut model.control_force] {
+            input.value += input.slope * h;
+            input.slope = 0.0;
+        }
+    }
+
+    fn observe(&mut self) {
+        for i in 0..self.laws.len() {
+            self.max_abs_z[i] = self.max_abs_z[i].max(self.z[i].abs());
+        }
+    }
+}
+
+/// One classical RK4 step.
+#[inline]
+fn rk4(f: &impl Fn(f64, &HState) -> HState, t: f64, x: &HState, h: f64) -> HState {
+    let axpy =
+        |a: &HState, s: f64, b: &HState| -> HState { std::array::from_fn(|i| a[i] + s * b[i]) };
+    let k1 = f(t, x);
+    let k2 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k1));
+    let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));
+    let k4 = f(t + h, &axpy(x, h, &k3));
+    std::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
+}
+
+/// The smallest θ ∈ (0, 1] just past the sign change of `g` (g(0) = a, g(1) = b, opposite
+/// signs): Illinois regula falsi, the end of the final bracket on the far side (as
+/// `fmu_shear::integrate`'s).
+fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+    let (mut lo, mut hi, mut g_lo, mut g_hi) = (0.0f64, 1.0f64, a, b);
+    let mut side = 0i8;
+    for _ in 0..60 {
+        if hi - lo < 1e-12 {
+            break;
+        }
+        let mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+        let mid = if mid > lo && mid < hi {
+            mid
+        } else {
+            0.5 * (lo + hi)
+        };
+        let g_mid = g(mid);
+        if g_mid == 0.0 {
+            return mid;
+        }
+        if g_mid.signum() == g_lo.signum() {
+            lo = mid;
+            g_lo = g_mid;
+            if side == -1 {
+                g_hi *= 0.5;
+            }
+            side = -1;
+        } else {
+            hi = mid;
+            g_hi = g_mid;
+            if side == 1 {
+                g_lo *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    hi
 }
 
 /// What the fine grid saw: drifts, contacts.
@@ -1666,6 +2135,21 @@ impl Stats {
                 json!({"force": force, "velocity_scale": velocity_scale}),
                 self.max_vel[floor - 1],
             ),
+            EffectSpec::Hysteresis {
+                storey,
+                stiffness,
+                yield_drift,
+                beta,
+                gamma,
+                exponent,
+            } => (
+                vec![storey - 1, storey],
+                json!({
+                    "stiffness": stiffness, "yield": yield_drift, "beta": beta, "gamma": gamma,
+                    "exponent": exponent,
+                }),
+                self.max_drift[storey - 1],
+            ),
         };
         let contact = self.contacts.iter().find(|c| c.effect == i);
         EffectTruth {
@@ -1674,6 +2158,7 @@ impl Stats {
             floors,
             description: format!("{} {}", e.kind(), e.describe_location()),
             fmu_prefix: e.fmu_prefix(),
+            in_library: e.in_library(),
             library_location: e.library_location(),
             parameters,
             contact_events: contact.map(|c| c.events),
@@ -1681,6 +2166,9 @@ impl Stats {
             first_contact: contact.and_then(|c| c.first),
             max_penetration: contact.map(|c| c.max_penetration),
             max_drift_or_velocity: max,
+            z_saturation: None,
+            max_abs_z: None,
+            hysteretic_work: None,
         }
     }
 }
@@ -1748,10 +2236,13 @@ Scenario JSON (every field optional; see the orchestrator::synth documentation):
    \"noise\": {\"fraction\": 0.03 | \"sd\": [3], \"force_fraction\": 0},
    \"effects\": [{\"kind\": \"contact\", \"location\": [2, 3], \"gap\": 5e-4, \"stiffness\": 9000, \"side\": \"both\"},
                {\"kind\": \"cubic\", \"location\": [2], \"stiffness\": 5e9},
-               {\"kind\": \"friction\", \"location\": [1], \"force\": 0.2, \"velocity_scale\": 1e-3}],
+               {\"kind\": \"friction\", \"location\": [1], \"force\": 0.2, \"velocity_scale\": 1e-3},
+               {\"kind\": \"hysteresis\", \"location\": [2], \"stiffness\": 1000, \"yield\": 5e-4,
+                \"beta\": 0.5, \"gamma\": 0.5, \"exponent\": 2}],
    \"changes\": [{\"at\": 8.0, \"parameter\": \"k2\", \"factor\": 0.85}]}
-Locations: contact [lower, upper] floors (0 = ground); cubic [storey] (1 = ground-floor 1);
-friction [floor]. Flags override the scenario and extend its lists.";
+Locations: contact [lower, upper] floors (0 = ground); cubic and hysteresis [storey]
+(1 = ground-floor 1); friction [floor]. Hysteresis (Bouc-Wen) is NOT in the shear FMU's
+library. Flags override the scenario and extend its lists.";
 
 #[derive(clap::Args, Debug, Default, Clone)]
 #[command(after_help = AFTER_HELP)]
@@ -1811,7 +2302,8 @@ pub struct SynthArgs {
     #[arg(long)]
     pub force_noise_fraction: Option<f64>,
     /// Effect (repeatable): contact@2-3[:gap=5e-4,stiffness=9000,side=both], cubic@2[:stiffness=5e9],
-    /// friction@1[:force=0.2,velocity_scale=1e-3].
+    /// friction@1[:force=0.2,velocity_scale=1e-3],
+    /// hysteresis@2[:stiffness=1000,yield=5e-4,beta=0.5,gamma=0.5,exponent=2] (not in the FMU).
     #[arg(long = "effect", value_name = "KIND@LOCATION[:KEY=VALUE,...]")]
     pub effects: Vec<String>,
     /// Parameter change (repeatable): k2@8:0.85 (factor) or k2@8=3500 (value).
@@ -1922,7 +2414,8 @@ impl SynthArgs {
     }
 }
 
-/// `contact@2-3:gap=5e-4,stiffness=9000,side=both`, `cubic@2`, `friction@1:force=0.2`.
+/// `contact@2-3:gap=5e-4,stiffness=9000,side=both`, `cubic@2`, `friction@1:force=0.2`,
+/// `hysteresis@2:stiffness=1500,yield=3e-4`.
 pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
     let bad = |why: String| anyhow!("--effect {text:?}: {why}");
     let (head, params) = match text.split_once(':') {
@@ -2032,7 +2525,14 @@ pub fn synth_command(args: &SynthArgs) -> Result<()> {
                 e.parameters["gap"],
                 e.time_in_contact.unwrap_or(0.0)
             ),
-            None => println!("  {}", e.description),
+            None => match (e.max_abs_z, e.z_saturation) {
+                (Some(z), Some(bound)) => println!(
+                    "  {} (not in the FMU's library): max |z| {z:.3e} m of {bound:.3e} m, work ∫k·z dδ {:.3e} J",
+                    e.description,
+                    e.hysteretic_work.unwrap_or(0.0)
+                ),
+                _ => println!("  {}", e.description),
+            },
         }
     }
     for c in &truth.changes {
