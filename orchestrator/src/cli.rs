@@ -42,6 +42,11 @@ pub enum Command {
     Synth(crate::synth::SynthArgs),
     /// Stream-based active learning of the GP corrector over records (paper Algorithm 1).
     Learn(crate::learn::LearnArgs),
+    /// Diagnose a failing twin: none, recalibrate, add physics (which effect, where, how
+    /// strong) or update the data-based model, with the evidence.
+    Diagnose(crate::diagnose::command::DiagnoseArgs),
+    /// Switch an effect of the shear FMU's library on, estimate its parameters, write the twin.
+    AddPhysics(crate::diagnose::command::AddPhysicsArgs),
 }
 
 #[derive(clap::Args)]
@@ -175,6 +180,8 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Synth(args) => crate::synth::synth_command(&args),
         Command::Learn(args) => crate::learn::learn_command(&args),
+        Command::Diagnose(args) => crate::diagnose::command::diagnose_command(&args),
+        Command::AddPhysics(args) => crate::diagnose::command::add_physics_command(&args),
     }
 }
 

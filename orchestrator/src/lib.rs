@@ -5,6 +5,7 @@ pub mod calibrate;
 pub mod cli;
 pub mod compare;
 pub mod data;
+pub mod diagnose;
 pub mod fmu_archive;
 pub mod import;
 pub mod learn;

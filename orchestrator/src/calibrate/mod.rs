@@ -64,6 +64,11 @@ pub struct CalibrationSetup {
     /// …with this variance (of the log).
     pub noise_log_variance: f64,
     pub threads: usize,
+    /// Samples the likelihood uses (after the transient): all when `None`; otherwise
+    /// `mask[k]` says whether sample k counts (the rest is held out, e.g. for validation).
+    pub mask: Option<Vec<bool>>,
+    /// Simulations one start may use before it is abandoned.
+    pub simulations_per_start: usize,
 }
 
 impl Default for CalibrationSetup {
@@ -79,6 +84,8 @@ impl Default for CalibrationSetup {
             threads: std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
+            mask: None,
+            simulations_per_start: SIMULATIONS_PER_START,
         }
     }
 }
@@ -110,6 +117,14 @@ pub struct Calibration {
     /// Posterior sd of log σ²_f.
     pub noise_log_sd: [f64; 3],
     pub neg_log_posterior: f64,
+    /// Laplace approximation of the log evidence `log p(D)` of the model with these calibrated
+    /// parameters, up to a constant that depends only on the record and the noise prior (so
+    /// differences between calibrations of one record with different parameter sets are
+    /// log Bayes factors): `−J(MAP) + ½ log det Σ`, with `Σ` the posterior covariance of the
+    /// standardised parameters and the log noise variances.
+    pub log_evidence: f64,
+    /// Samples the likelihood used.
+    pub samples_used: usize,
     /// NMSE per floor on the calibration record, after the transient.
     pub nmse: [f64; 3],
     pub starts: Vec<StartOutcome>,
@@ -122,11 +137,13 @@ struct Target<'a> {
     fmu: &'a Fmu,
     base: BTreeMap<String, ParameterValue>,
     data: &'a Measurement,
-    first: usize,
+    /// Sample indices the likelihood uses.
+    used: Vec<usize>,
     vrs: Vec<u32>,
     priors: Vec<Prior>,
     noise_mean: [f64; 3],
     noise_var: f64,
+    budget: usize,
 }
 
 impl Target<'_> {
@@ -137,7 +154,7 @@ impl Target<'_> {
             .collect()
     }
     fn n_used(&self) -> usize {
-        self.data.len() - self.first
+        self.used.len()
     }
 }
 
@@ -154,10 +171,9 @@ fn raw_residuals(
         return None;
     }
     sim.simulate(&target.vrs, &values, buf).ok()?;
-    let n = target.data.len();
     let mut r = Vec::with_capacity(3 * target.n_used());
     for f in 0..3 {
-        for k in target.first..n {
+        for &k in &target.used {
             r.push(target.data.acc[f][k] - buf[f][k]);
         }
     }
@@ -207,9 +223,9 @@ impl Problem<'_, '_> {
 /// backs off instead of stopping.
 const REFUSED_RESIDUAL: f64 = 1e6;
 
-/// Simulations one start may use. Starts that reach the optimum need 350–800 on the examples
+/// Simulations one start may use by default. Starts that reach the optimum need 350–800 on the examples
 /// (9 parameters); starts that wander in a flat region used up to 15,000 without improving.
-const SIMULATIONS_PER_START: usize = 1500;
+pub const SIMULATIONS_PER_START: usize = 1500;
 
 impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
     type ResidualStorage = Owned<f64, Dyn>;
@@ -305,7 +321,7 @@ fn run_start<'a>(
             residuals: None,
             buf: RefCell::new(Default::default()),
             evaluations: RefCell::new(0),
-            budget: SIMULATIONS_PER_START.saturating_sub(evaluations),
+            budget: target.budget.saturating_sub(evaluations),
         };
         problem.set_params(&DVector::from_vec(z.clone()));
         let (problem, _report) = LevenbergMarquardt::new()
@@ -401,11 +417,23 @@ pub fn calibrate(
         .iter()
         .position(|&t| t - data.time[0] >= setup.transient)
         .unwrap_or(data.len());
-    if data.len() - first < 10 {
+    if let Some(mask) = &setup.mask {
+        if mask.len() != data.len() {
+            return Err(CalibrateError::Setup(format!(
+                "the sample mask has {} entries for a record of {} samples",
+                mask.len(),
+                data.len()
+            )));
+        }
+    }
+    let used: Vec<usize> = (first..data.len())
+        .filter(|&k| setup.mask.as_ref().map_or(true, |m| m[k]))
+        .collect();
+    if used.len() < 10 {
         return Err(CalibrateError::Setup(format!(
-            "the transient cut-off of {} s leaves {} samples",
+            "the transient cut-off of {} s and the sample mask leave {} samples",
             setup.transient,
-            data.len() - first
+            used.len()
         )));
     }
     if setup.parameters.is_empty() {
@@ -445,8 +473,10 @@ pub fn calibrate(
         let m = x.iter().sum::<f64>() / n;
         x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
     };
-    let noise_mean =
-        [0, 1, 2].map(|f| (setup.noise_fraction * variance(&data.acc[f][first..])).ln());
+    let noise_mean = [0, 1, 2].map(|f| {
+        let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
+        (setup.noise_fraction * variance(&y)).ln()
+    });
     let mut base = component.parameters.clone();
     for name in &setup.parameters {
         base.remove(name);
@@ -455,11 +485,12 @@ pub fn calibrate(
         fmu: &fmu,
         base,
         data,
-        first,
+        used,
         vrs,
         priors,
         noise_mean,
         noise_var: setup.noise_log_variance,
+        budget: setup.simulations_per_start.max(1),
     };
 
     // Starts: the prior mean, then draws from the prior widened ×3.
@@ -581,6 +612,14 @@ pub fn calibrate(
                 .collect()
         })
         .collect();
+    let log_evidence = match cov.clone().cholesky() {
+        Some(chol) => {
+            let log_det: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
+            -best.objective + 0.5 * log_det
+        }
+        None => f64::NEG_INFINITY,
+    };
+    let samples_used = target.n_used();
     let mut buf: [Vec<f64>; 3] = Default::default();
     sim.simulate(&target.vrs, &values, &mut buf)?;
     let nmse = [0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
@@ -590,6 +629,8 @@ pub fn calibrate(
         noise_variance: best.s.map(f64::exp),
         noise_log_sd: [0, 1, 2].map(|f| cov[(p + f, p + f)].max(0.0).sqrt()),
         neg_log_posterior: best.objective,
+        log_evidence,
+        samples_used,
         nmse,
         starts: outcomes,
         simulations: simulations + 2 * p + 2,
@@ -610,4 +651,66 @@ pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, C
     }
     out.noise_variance = Some(calibration.noise_variance);
     Ok(out)
+}
+
+/// The log evidence of the twin's physics as it is (no parameter calibrated), on the same
+/// footing as [`Calibration::log_evidence`] for the same record, mask and noise prior: the noise
+/// variances at their MAP and integrated out by Laplace. Differences with a calibration's
+/// `log_evidence` are log Bayes factors of "re-estimate these parameters" against "keep them".
+pub fn fixed_log_evidence(
+    twin: &Twin,
+    data: &Measurement,
+    setup: &CalibrationSetup,
+) -> Result<f64, CalibrateError> {
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= setup.transient)
+        .unwrap_or(data.len());
+    let used: Vec<usize> = (first..data.len())
+        .filter(|&k| {
+            setup
+                .mask
+                .as_ref()
+                .map_or(true, |m| m.get(k) == Some(&true))
+        })
+        .collect();
+    if used.len() < 10 {
+        return Err(CalibrateError::Setup(format!(
+            "the transient cut-off and the sample mask leave {} samples",
+            used.len()
+        )));
+    }
+    let mut sim = Simulator::new(
+        &fmu,
+        component.parameters.clone(),
+        &data.force,
+        data.time[0],
+        data.dt,
+        "evidence",
+    )?;
+    let mut buf: [Vec<f64>; 3] = Default::default();
+    sim.simulate(&[], &[], &mut buf)?;
+    let n = used.len() as f64;
+    let mut log_evidence = 0.0;
+    for f in 0..3 {
+        let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
+        let mean = y.iter().sum::<f64>() / n;
+        let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        let noise_mean = (setup.noise_fraction * var).ln();
+        let sse: f64 = used
+            .iter()
+            .map(|&k| (data.acc[f][k] - buf[f][k]).powi(2))
+            .sum();
+        let v = setup.noise_log_variance;
+        let s = optimal_log_noise(n, sse, noise_mean, v, noise_mean);
+        let j = n * s / 2.0 + sse * (-s).exp() / 2.0 + (s - noise_mean).powi(2) / (2.0 * v);
+        let curvature = sse * (-s).exp() / 2.0 + 1.0 / v;
+        log_evidence += -j - 0.5 * curvature.ln();
+    }
+    Ok(log_evidence)
 }

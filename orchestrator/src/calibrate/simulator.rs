@@ -56,6 +56,19 @@ impl<'a> Simulator<'a> {
         values: &[f64],
         out: &mut [Vec<f64>; 3],
     ) -> Result<(), TwinError> {
+        let acc_vrs = self.acc_vrs;
+        self.record(vrs, values, &acc_vrs, out)
+    }
+
+    /// Like [`Simulator::simulate`], but records the real outputs `outputs` (value
+    /// references): `out[i][k]` is output i at sample k.
+    pub fn record(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        outputs: &[u32],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), TwinError> {
         let n = self.force.len();
         let inst = &mut self.instance;
         inst.reset()?;
@@ -67,13 +80,13 @@ impl<'a> Simulator<'a> {
         for o in out.iter_mut() {
             o.resize(n, 0.0);
         }
-        let mut acc = [0.0; 3];
+        let mut read = vec![0.0; outputs.len()];
         for k in 0..n {
             let time = self.start + k as f64 * self.dt;
             inst.set_real(&[self.force_vr], &[self.force[k]])?;
-            inst.get_real(&self.acc_vrs, &mut acc)?;
-            for f in 0..3 {
-                out[f][k] = acc[f];
+            inst.get_real(outputs, &mut read)?;
+            for (o, v) in out.iter_mut().zip(&read) {
+                o[k] = *v;
             }
             if k + 1 < n {
                 let slope = (self.force[k + 1] - self.force[k]) / self.dt;

@@ -1,0 +1,297 @@
+//! The candidates of the shear FMU's effect library: what each one is called, which FMU
+//! parameters switch it on and which are estimated, and the priors they are estimated under.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::calibrate::Prior;
+use crate::twin::ParameterValue;
+
+/// The kinds of effect the shear FMU's library has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    Contact,
+    Cubic,
+    Friction,
+}
+
+impl Kind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Contact => "contact",
+            Kind::Cubic => "cubic",
+            Kind::Friction => "friction",
+        }
+    }
+}
+
+/// Which drift closes a contact gap (the FMU's `contactXY_side`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    Both,
+    Positive,
+    Negative,
+}
+
+impl Side {
+    pub const ALL: [Side; 3] = [Side::Both, Side::Positive, Side::Negative];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Both => "both",
+            Side::Positive => "positive",
+            Side::Negative => "negative",
+        }
+    }
+
+    pub fn code(self) -> i32 {
+        match self {
+            Side::Both => 0,
+            Side::Positive => 1,
+            Side::Negative => -1,
+        }
+    }
+
+    pub fn parse(text: &str) -> Option<Side> {
+        match text {
+            "both" | "0" => Some(Side::Both),
+            "positive" | "1" => Some(Side::Positive),
+            "negative" | "-1" => Some(Side::Negative),
+            _ => None,
+        }
+    }
+}
+
+/// One effect at one place: contact across storey `at` (between floors `at − 1` and `at`, 0 the
+/// ground) on one side; cubic stiffness of storey `at`; friction on floor `at`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    pub kind: Kind,
+    /// Storey (contact, cubic) or floor (friction), 1..=3.
+    pub at: usize,
+    /// Contact only.
+    pub side: Side,
+}
+
+/// What the candidates' priors are scaled by: the calibrated twin's storey stiffness, and the
+/// RMS of its storey drifts, floor velocities and of the force on the record.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Scales {
+    pub stiffness: [f64; 3],
+    pub drift_rms: [f64; 3],
+    pub velocity_rms: [f64; 3],
+    pub force_rms: f64,
+}
+
+impl Candidate {
+    /// Every candidate of the library: contact at each storey and side, cubic per storey,
+    /// friction per floor (15).
+    pub fn library() -> Vec<Candidate> {
+        let mut all = Vec::new();
+        for at in 1..=3 {
+            for side in Side::ALL {
+                all.push(Candidate {
+                    kind: Kind::Contact,
+                    at,
+                    side,
+                });
+            }
+        }
+        for kind in [Kind::Cubic, Kind::Friction] {
+            for at in 1..=3 {
+                all.push(Candidate {
+                    kind,
+                    at,
+                    side: Side::Both,
+                });
+            }
+        }
+        all
+    }
+
+    /// `contact@2-3:positive`, `cubic@2`, `friction@1`: the form `--effect` takes.
+    pub fn label(&self) -> String {
+        match self.kind {
+            Kind::Contact => format!("contact@{}-{}:{}", self.at - 1, self.at, self.side.name()),
+            Kind::Cubic => format!("cubic@{}", self.at),
+            Kind::Friction => format!("friction@{}", self.at),
+        }
+    }
+
+    /// Parse `KIND@LOCATION[:SIDE]`: `contact@2-3[:both|positive|negative]` (adjacent floors, 0
+    /// the ground; side both by default), `cubic@2` (storey) and `friction@1` (floor).
+    pub fn parse(text: &str) -> Result<Candidate, String> {
+        let usage =
+            "expected contact@L-U[:both|positive|negative] (adjacent floors, 0 the ground), \
+                     cubic@S (storey 1..3) or friction@F (floor 1..3)";
+        let (kind, rest) = text
+            .split_once('@')
+            .ok_or_else(|| format!("effect '{text}': {usage}"))?;
+        let (location, side) = match rest.split_once(':') {
+            Some((l, s)) => (
+                l,
+                Some(Side::parse(s).ok_or_else(|| {
+                    format!("effect '{text}': side '{s}' is not both, positive or negative")
+                })?),
+            ),
+            None => (rest, None),
+        };
+        let number = |s: &str| -> Result<usize, String> {
+            s.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("effect '{text}': '{s}' is not a floor number; {usage}"))
+        };
+        let candidate = match kind {
+            "contact" => {
+                let (a, b) = location
+                    .split_once('-')
+                    .ok_or_else(|| format!("effect '{text}': {usage}"))?;
+                let (a, b) = (number(a)?, number(b)?);
+                if b != a + 1 || b > 3 {
+                    return Err(format!(
+                        "effect '{text}': contact acts between adjacent floors 0-1, 1-2 or 2-3"
+                    ));
+                }
+                Candidate {
+                    kind: Kind::Contact,
+                    at: b,
+                    side: side.unwrap_or(Side::Both),
+                }
+            }
+            "cubic" | "friction" => {
+                if side.is_some() {
+                    return Err(format!("effect '{text}': only contact has a side"));
+                }
+                let at = number(location)?;
+                if !(1..=3).contains(&at) {
+                    return Err(format!("effect '{text}': {kind} is at 1, 2 or 3"));
+                }
+                Candidate {
+                    kind: if kind == "cubic" {
+                        Kind::Cubic
+                    } else {
+                        Kind::Friction
+                    },
+                    at,
+                    side: Side::Both,
+                }
+            }
+            _ => return Err(format!("effect '{text}': unknown kind '{kind}'; {usage}")),
+        };
+        Ok(candidate)
+    }
+
+    /// The report's location: contact `[lower, upper]`, cubic `[storey]`, friction `[floor]`.
+    pub fn location(&self) -> Vec<usize> {
+        match self.kind {
+            Kind::Contact => vec![self.at - 1, self.at],
+            _ => vec![self.at],
+        }
+    }
+
+    /// The FMU's name prefix of this effect's parameters.
+    pub fn prefix(&self) -> String {
+        match self.kind {
+            Kind::Contact => format!("contact{}{}", self.at - 1, self.at),
+            Kind::Cubic => format!("cubic{}", self.at),
+            Kind::Friction => format!("friction{}", self.at),
+        }
+    }
+
+    /// The parameters that switch the effect on (and pick the contact's side).
+    pub fn switches(&self) -> BTreeMap<String, ParameterValue> {
+        let p = self.prefix();
+        let mut out = BTreeMap::new();
+        out.insert(format!("{p}_enabled"), ParameterValue::Boolean(true));
+        if self.kind == Kind::Contact {
+            out.insert(
+                format!("{p}_side"),
+                ParameterValue::Integer(self.side.code()),
+            );
+        }
+        out
+    }
+
+    /// The estimated parameters (FMU names, short names) and their priors.
+    ///
+    /// - contact: gap, log-normal around 0.7 × the storey's drift RMS (contact needs a gap the
+    ///   drift reaches), a factor e per sd; stiffness, log-normal around the storey's stiffness,
+    ///   a factor e² per sd.
+    /// - cubic: k₃ (N/m³), normal, mean 0, sd `k / drift_rms²` (at the drift RMS the cubic force
+    ///   would equal the linear one: a wide prior), either sign.
+    /// - friction: force, log-normal around 5 % of the force RMS, a factor e² per sd; velocity
+    ///   scale, log-normal around 10 % of the floor's velocity RMS, a factor e per sd.
+    pub fn parameters(&self, scales: &Scales) -> Vec<(String, &'static str, Prior)> {
+        let p = self.prefix();
+        let i = self.at - 1;
+        let positive = |x: f64| if x > 0.0 && x.is_finite() { x } else { 1.0 };
+        match self.kind {
+            Kind::Contact => vec![
+                (
+                    format!("{p}_gap"),
+                    "gap",
+                    Prior::log((0.7 * positive(scales.drift_rms[i])).ln(), 1.0),
+                ),
+                (
+                    format!("{p}_stiffness"),
+                    "stiffness",
+                    Prior::log(positive(scales.stiffness[i]).ln(), 4.0),
+                ),
+            ],
+            Kind::Cubic => {
+                let sd = positive(scales.stiffness[i]) / positive(scales.drift_rms[i]).powi(2);
+                vec![(
+                    format!("{p}_stiffness"),
+                    "stiffness",
+                    Prior::linear(0.0, sd * sd),
+                )]
+            }
+            Kind::Friction => vec![
+                (
+                    format!("{p}_force"),
+                    "force",
+                    Prior::log((0.05 * positive(scales.force_rms)).ln(), 4.0),
+                ),
+                (
+                    format!("{p}_velocity_scale"),
+                    "velocity_scale",
+                    Prior::log((0.1 * positive(scales.velocity_rms[i])).ln(), 1.0),
+                ),
+            ],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_parse_back() {
+        for c in Candidate::library() {
+            assert_eq!(Candidate::parse(&c.label()), Ok(c), "{}", c.label());
+        }
+        assert_eq!(Candidate::library().len(), 15);
+        let c = Candidate::parse("contact@0-1").unwrap();
+        assert_eq!((c.at, c.side, c.location()), (1, Side::Both, vec![0, 1]));
+        assert_eq!(c.prefix(), "contact01");
+    }
+
+    #[test]
+    fn bad_effects_are_refused_with_the_reason() {
+        for (text, says) in [
+            ("contact@1-3", "adjacent"),
+            ("contact@2-3:up", "side 'up'"),
+            ("cubic@4", "1, 2 or 3"),
+            ("friction@1:both", "only contact"),
+            ("hysteresis@2", "unknown kind"),
+            ("cubic", "expected"),
+            ("friction@x", "'x' is not a floor number"),
+        ] {
+            let e = Candidate::parse(text).unwrap_err();
+            assert!(e.contains(says) && e.contains(text), "{text}: {e}");
+        }
+    }
+}

@@ -1,0 +1,223 @@
+//! The `twin diagnose` and `twin add-physics` commands.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+
+use super::{add_physics, diagnose, effect_from_report, Candidate, DiagnoseOptions, Diagnosis};
+use crate::cli::write_atomically;
+use crate::data::Measurement;
+use crate::twin::Twin;
+
+#[derive(clap::Args)]
+pub struct DiagnoseArgs {
+    /// The twin (.ssp) to diagnose, made by `twin calibrate` (its noise variances set the
+    /// noise level).
+    #[arg(long)]
+    pub twin: PathBuf,
+    /// Measurement CSV: time,force,acc1,acc2,acc3.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// JSON report (the contract: nmse_before, action, effect, nmse_after, candidates).
+    #[arg(long)]
+    pub report: PathBuf,
+    /// Plot (.svg): before/after per floor, failing windows, the winning effect's evidence.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Candidates to try, KIND@LOCATION[:SIDE] (default: the whole library).
+    #[arg(long, num_args = 1..)]
+    pub effects: Vec<String>,
+    /// Seconds at the start left out of every error measure and fit.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    /// Length (s) of the alternating fitted / held-out blocks.
+    #[arg(long, default_value_t = 1.0)]
+    pub block: f64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Fit the alternatives even when the error is within the noise.
+    #[arg(long)]
+    pub always_fit: bool,
+}
+
+#[derive(clap::Args)]
+pub struct AddPhysicsArgs {
+    /// The twin (.ssp) to extend.
+    #[arg(long)]
+    pub twin: PathBuf,
+    /// The effect, KIND@LOCATION[:SIDE]: contact@2-3[:both|positive|negative], cubic@2,
+    /// friction@1.
+    #[arg(
+        long,
+        conflicts_with = "diagnosis",
+        required_unless_present = "diagnosis"
+    )]
+    pub effect: Option<String>,
+    /// Take the effect from a `twin diagnose` report instead.
+    #[arg(long)]
+    pub diagnosis: Option<PathBuf>,
+    /// The record its parameters are estimated on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The new twin (.ssp).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Refine the nine physics parameters jointly with the effect's.
+    #[arg(long)]
+    pub refine: bool,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+fn check_transient(transient: f64) -> Result<()> {
+    if !(transient >= 0.0 && transient.is_finite()) {
+        bail!("--transient must be a non-negative number of seconds, was {transient}");
+    }
+    Ok(())
+}
+
+fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
+    check_transient(transient)?;
+    let mut o = DiagnoseOptions {
+        transient,
+        ..DiagnoseOptions::default()
+    };
+    if let Some(t) = threads {
+        if t == 0 {
+            bail!("--threads must be at least 1");
+        }
+        o.threads = t;
+    }
+    Ok(o)
+}
+
+pub fn diagnose_command(args: &DiagnoseArgs) -> Result<()> {
+    let mut o = options(args.transient, args.threads)?;
+    o.block = args.block;
+    o.always_fit = args.always_fit;
+    if !args.effects.is_empty() {
+        o.candidates = args
+            .effects
+            .iter()
+            .map(|e| Candidate::parse(e).map_err(anyhow::Error::msg))
+            .collect::<Result<_>>()?;
+    }
+    let data = Measurement::read(&args.data)?;
+    let twin = Twin::load(Some(&args.twin))?;
+    let d = diagnose(&twin, &data, &o)?;
+    // Draw before writing anything: a failed plot leaves no half-written output.
+    let plot = match &args.plot {
+        Some(path) => Some((path, super::plot::draw_diagnosis(&d)?)),
+        None => None,
+    };
+    write_atomically(&args.report, |f| {
+        serde_json::to_writer_pretty(&mut *f, &d)?;
+        f.write_all(b"\n")?;
+        Ok(())
+    })?;
+    if let Some((path, svg)) = plot {
+        write_atomically(path, |f| Ok(f.write_all(svg.as_bytes())?))?;
+    }
+    print!("{}", summary(&d));
+    Ok(())
+}
+
+/// What `twin diagnose` prints.
+pub fn summary(d: &Diagnosis) -> String {
+    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    let mut s = String::new();
+    s += &format!("record        {}\n", d.record);
+    s += &format!("NMSE before   {}\n", pct(&d.nmse_before));
+    s += &format!("noise level   {}\n", pct(&d.noise_nmse));
+    if !d.failing_windows.is_empty() {
+        let w: Vec<String> = d
+            .failing_windows
+            .iter()
+            .map(|w| format!("{:.2}–{:.2} s", w.start, w.end))
+            .collect();
+        s += &format!("failing       {}\n", w.join(", "));
+    }
+    if let Some(r) = &d.recalibration {
+        s += &format!(
+            "recalibration {} (held out {}), evidence {:.1}\n",
+            pct(&r.nmse_after),
+            pct(&r.nmse_held_out),
+            r.evidence
+        );
+    }
+    if !d.candidates.is_empty() {
+        s += "candidates (best evidence first; * passes the gates)\n";
+        for c in &d.candidates {
+            s += &format!(
+                "  {} {:<22} evidence {:>12.1}  held-out NMSE {}\n",
+                if c.passes { '*' } else { ' ' },
+                c.label,
+                c.evidence,
+                pct(&c.nmse_held_out)
+            );
+        }
+    }
+    s += &format!("action        {}\n", d.action.name());
+    if let Some(e) = &d.effect {
+        let params: Vec<String> = e
+            .parameters
+            .iter()
+            .filter(|(k, _)| k.as_str() != "side")
+            .map(|(k, v)| {
+                format!(
+                    "{k} = {v:.4e} ± {:.2e}",
+                    e.sd.get(k).copied().unwrap_or(0.0)
+                )
+            })
+            .collect();
+        s += &format!("effect        {}: {}\n", e.label, params.join(", "));
+    }
+    s += &format!("NMSE after    {}\n", pct(&d.nmse_after));
+    s += &format!("why           {}\n", d.reason);
+    s += &format!("time          {:.1} s\n", d.seconds);
+    s
+}
+
+pub fn add_physics_command(args: &AddPhysicsArgs) -> Result<()> {
+    let o = options(args.transient, args.threads)?;
+    let candidate = match (&args.effect, &args.diagnosis) {
+        (Some(e), _) => Candidate::parse(e).map_err(anyhow::Error::msg)?,
+        (None, Some(path)) => effect_from_report(path)?,
+        (None, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
+    };
+    let data = Measurement::read(&args.data)?;
+    let twin = Twin::load(Some(&args.twin))?;
+    let (new_twin, report) = add_physics(&twin, &data, &candidate, args.refine, &o)?;
+    new_twin.write(&args.out)?;
+    if let Some(path) = &args.report {
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    println!("effect        {}", report.effect.label);
+    for (k, v) in &report.effect.parameters {
+        if k != "side" {
+            println!(
+                "  {k:<14} {v:.4e} ± {:.2e}",
+                report.effect.sd.get(k).copied().unwrap_or(0.0)
+            );
+        }
+    }
+    for p in &report.refined_physics {
+        println!("  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+    }
+    println!("NMSE before   {}", pct(&report.nmse_before));
+    println!("NMSE after    {}", pct(&report.nmse_after));
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

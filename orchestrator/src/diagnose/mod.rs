@@ -1,0 +1,1167 @@
+//! `twin diagnose` and `twin add-physics`: when a twin fails on a record, decide what to do —
+//! nothing, recalibrate, add physics, or leave it to the data-based corrector — and, when
+//! physics is missing, which effect of the shear FMU's library, where, and how strong.
+//!
+//! # How a record is diagnosed
+//!
+//! 1. **Compare.** The twin as given runs on the record (FMI): NMSE per floor after the
+//!    transient, failing windows, and the corrector's latent variance when it has one. The
+//!    physics alone runs too, recording the storey drifts and floor velocities.
+//! 2. **Noise level.** The twin's calibrated noise variances `σ²_f` say how much NMSE noise
+//!    alone explains on this record: `100 σ²_f / var(ÿ_f)`. When every floor's NMSE is within
+//!    [`Gates::none_factor`] (2) of it, the action is `none` and nothing is fitted.
+//! 3. **Held-out blocks.** The record after the transient is cut into blocks of
+//!    [`DiagnoseOptions::block`] (1 s); even blocks are fitted, odd ones held out. Every
+//!    fitted alternative is scored on the held-out blocks, so an extra parameter that only fits
+//!    noise is not rewarded, and contact that only happens late in the record still falls in
+//!    both halves.
+//! 4. **Alternatives, in parallel threads**, each a MAP fit through FMI (`calibrate`, Laplace
+//!    posterior) on the fitted blocks:
+//!    - *recalibration*: the nine physics parameters under the paper's priors;
+//!    - *each candidate of the effect library* ([`Candidate::library`]: contact at ground–1,
+//!      1–2, 2–3, each side or both; cubic stiffness per storey; friction per floor), only its
+//!      own parameters estimated, the physics held at the twin's values.
+//!
+//!    Evidence: the Laplace log evidence of each fit minus that of the twin as it is, i.e. a log
+//!    Bayes factor against "no change" (positive favours the alternative).
+//! 5. **Decide** (worst floor, held-out NMSE): the residuals of a wrong or incomplete model are
+//!    coloured, not white, so evidence alone rewards tiny spurious effects (a friction of a
+//!    milli-newton "wins" on a record with no change). The decision is gated on how far the
+//!    error falls, and the evidence only ranks the alternatives that pass:
+//!    - an effect passes when it cuts the error by [`Gates::required_cut`] (4×) and beats
+//!      recalibration by [`Gates::beat_recalibration`] (2×): `add_physics`, the passing
+//!      candidate of highest evidence wins;
+//!    - else, recalibration, when it cuts the error by 4× and brings every floor within
+//!      [`Gates::recalibration_noise_factor`] (3) of the noise level: `recalibrate`, with the
+//!      parameters that moved;
+//!    - else `update_data_model`: nothing in the library explains the error; the corrector
+//!      should learn it (no effect is named).
+//! 6. **Localise**: the residual acceleration times the floor masses is the force the model
+//!    misses on each floor; summed from the top it is the storey shear the model misses, which
+//!    is correlated with each storey's drift (linear, cubic) and each floor's velocity sign
+//!    (friction). Reported as evidence beside the fits.
+//!
+//! `twin add-physics` switches the chosen effect on, estimates its parameters on the whole
+//! record (more starts), optionally refines the physics parameters jointly, and writes the new
+//! twin.
+
+pub mod candidate;
+pub mod command;
+pub mod plot;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde::Serialize;
+
+use crate::calibrate::simulator::Simulator;
+use crate::calibrate::{
+    calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior, DEFAULT_PARAMETERS,
+};
+use crate::compare::{compare, nmse, CompareOptions, FailingWindow};
+use crate::data::Measurement;
+use crate::import::Fmu;
+use crate::run::run_twin;
+use crate::train::physics_only;
+use crate::twin::{ParameterValue, Twin, PHYSICS};
+pub use candidate::{Candidate, Kind, Scales, Side};
+
+/// The decision thresholds (see the module documentation).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Gates {
+    /// `none` when every floor's NMSE ≤ this × the NMSE noise alone explains.
+    pub none_factor: f64,
+    /// An alternative must cut the worst-floor held-out NMSE by at least this factor.
+    pub required_cut: f64,
+    /// An effect must beat recalibration's worst-floor held-out NMSE by this factor.
+    pub beat_recalibration: f64,
+    /// Recalibration explains the error when every floor's held-out NMSE is within this factor
+    /// of the noise level.
+    pub recalibration_noise_factor: f64,
+}
+
+impl Default for Gates {
+    fn default() -> Self {
+        Gates {
+            none_factor: 2.0,
+            required_cut: 4.0,
+            beat_recalibration: 2.0,
+            recalibration_noise_factor: 3.0,
+        }
+    }
+}
+
+/// Sub-steps while fitting candidates. With an effect on, the shear FMU integrates every
+/// sub-step (no step map), so a fit's cost is proportional to them. The convergence study of
+/// the shear FMU (`fmu-shear/tests/convergence.rs`) puts the worst-floor NMSE error of contact at
+/// 2.4e-4 % with 32 sub-steps, falling 16× per doubling, so about 4e-3 % at 16: three orders
+/// below the differences the decision gates look at (factors of 2 and 4 on NMSEs of 0.1 % and
+/// up). The fitted parameters are then scored at the twin's own sub-steps (64 by default).
+pub const FIT_SUBSTEPS: i32 = 16;
+
+#[derive(Clone, Debug)]
+pub struct DiagnoseOptions {
+    pub transient: f64,
+    /// Length (s) of the alternating fitted and held-out blocks.
+    pub block: f64,
+    pub gates: Gates,
+    /// The candidates tried (default: the whole library).
+    pub candidates: Vec<Candidate>,
+    /// Optimiser starts per candidate, and for the recalibration.
+    pub starts: usize,
+    pub recalibration_starts: usize,
+    /// Simulations one start of a candidate fit may use.
+    pub simulations_per_start: usize,
+    pub threads: usize,
+    pub seed: u64,
+    /// Fit every alternative even when the error is within the noise (`none`).
+    pub always_fit: bool,
+    /// RK4 sub-steps of the shear FMU while candidates are fitted (its `substeps`); each fit is
+    /// then scored at the twin's own sub-steps. `None`: the twin's own throughout.
+    pub fit_substeps: Option<i32>,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            transient: crate::compare::DEFAULT_TRANSIENT,
+            block: 1.0,
+            gates: Gates::default(),
+            candidates: Candidate::library(),
+            starts: 3,
+            recalibration_starts: 8,
+            simulations_per_start: 250,
+            threads: std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
+            seed: 1,
+            always_fit: false,
+            fit_substeps: Some(FIT_SUBSTEPS),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Action {
+    None,
+    Recalibrate,
+    AddPhysics,
+    UpdateDataModel,
+}
+
+impl Action {
+    pub fn name(self) -> &'static str {
+        match self {
+            Action::None => "none",
+            Action::Recalibrate => "recalibrate",
+            Action::AddPhysics => "add_physics",
+            Action::UpdateDataModel => "update_data_model",
+        }
+    }
+}
+
+/// An estimated parameter: its short name, value and posterior sd.
+#[derive(Clone, Debug, Serialize)]
+pub struct Estimate {
+    pub name: String,
+    pub value: f64,
+    pub sd: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EffectReport {
+    pub kind: Kind,
+    pub location: Vec<usize>,
+    /// Contact only: "both", "positive" or "negative".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub side: Option<&'static str>,
+    /// `KIND@LOCATION[:SIDE]`, what `twin add-physics --effect` takes.
+    pub label: String,
+    pub parameters: BTreeMap<String, f64>,
+    pub sd: BTreeMap<String, f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CandidateReport {
+    pub kind: Kind,
+    pub location: Vec<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub side: Option<&'static str>,
+    pub label: String,
+    /// Log Bayes factor (Laplace) against the twin as it is, on the fitted blocks.
+    pub evidence: f64,
+    /// NMSE per floor over the whole record after the transient.
+    pub nmse_after: [f64; 3],
+    /// NMSE per floor on the held-out blocks.
+    pub nmse_held_out: [f64; 3],
+    pub parameters: Vec<Estimate>,
+    /// Cut the error by the required factor and beat recalibration.
+    pub passes: bool,
+    pub simulations: usize,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MovedParameter {
+    pub name: String,
+    pub before: f64,
+    pub after: f64,
+    pub sd: f64,
+    /// `(after − before) / sd`.
+    pub change_in_sd: f64,
+    pub relative_change: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct RecalibrationReport {
+    pub evidence: f64,
+    pub nmse_after: [f64; 3],
+    pub nmse_held_out: [f64; 3],
+    /// Every parameter, largest move (in posterior sd) first.
+    pub parameters: Vec<MovedParameter>,
+    pub noise_variance: [f64; 3],
+    pub simulations: usize,
+    pub seconds: f64,
+}
+
+/// Correlations of the missing storey shear with storey drift, and of the missing floor force
+/// with the sign of the floor's velocity.
+#[derive(Clone, Debug, Serialize)]
+pub struct Localisation {
+    /// Per storey 1..3: corr(missing shear, drift).
+    pub shear_vs_drift: [f64; 3],
+    /// Per storey: corr(missing shear, drift³).
+    pub shear_vs_drift_cubed: [f64; 3],
+    /// Per storey: corr(missing shear, the part of the drift beyond its 80th percentile of |drift|,
+    /// the shape of a contact force).
+    pub shear_vs_drift_beyond: [f64; 3],
+    /// Per floor 1..3: corr(missing floor force, sign of the floor's velocity).
+    pub force_vs_velocity_sign: [f64; 3],
+    /// The storey or floor with the largest |correlation| of any kind, e.g. "storey 3".
+    pub strongest: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct LatentVariance {
+    pub max: [f64; 3],
+    pub mean: [f64; 3],
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnosis {
+    pub record: String,
+    pub twin: String,
+    pub nmse_before: [f64; 3],
+    /// NMSE per floor that the twin's noise variances alone explain on this record.
+    pub noise_nmse: [f64; 3],
+    pub nmse_before_held_out: [f64; 3],
+    pub noise_nmse_held_out: [f64; 3],
+    pub failing_windows: Vec<FailingWindow>,
+    /// The corrector's latent variance V(f) on the record, when the twin has one.
+    pub latent_variance: Option<LatentVariance>,
+    pub action: Action,
+    /// Why, in a sentence with the numbers.
+    pub reason: String,
+    pub effect: Option<EffectReport>,
+    pub nmse_after: [f64; 3],
+    pub recalibration: Option<RecalibrationReport>,
+    /// Best evidence first.
+    pub candidates: Vec<CandidateReport>,
+    pub localisation: Localisation,
+    pub gates: Gates,
+    pub block_seconds: f64,
+    pub seconds: f64,
+    /// For the plot (not in the JSON).
+    #[serde(skip)]
+    pub series: Series,
+}
+
+/// Time series the plot draws.
+#[derive(Clone, Debug, Default)]
+pub struct Series {
+    pub time: Vec<f64>,
+    pub first: usize,
+    pub measured: [Vec<f64>; 3],
+    pub before: [Vec<f64>; 3],
+    pub after: [Vec<f64>; 3],
+    pub drift: [Vec<f64>; 3],
+    /// Missing storey shear per storey (N): from the residual of the twin as given; for the
+    /// winning effect's storey, the shear the linear part misses along the fitted model.
+    pub missing_shear: [Vec<f64>; 3],
+    /// The winning effect's storey force (N) for its storey, when one won.
+    pub effect_force: Option<Vec<f64>>,
+}
+
+/// One physics run: accelerations, storey drifts and floor velocities.
+struct PhysicsRun {
+    acc: [Vec<f64>; 3],
+    drift: [Vec<f64>; 3],
+    velocity: [Vec<f64>; 3],
+}
+
+const RECORDED: [&str; 9] = [
+    "acc1", "acc2", "acc3", "drift1", "drift2", "drift3", "vel1", "vel2", "vel3",
+];
+
+/// Run the physics component of `twin` with `extra` parameters (and `values` for `names`).
+fn run_physics(
+    twin: &Twin,
+    data: &Measurement,
+    extra: &BTreeMap<String, ParameterValue>,
+    names: &[String],
+    values: &[f64],
+) -> Result<PhysicsRun> {
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+    let fmu = Fmu::open(&component.fmu_path)?;
+    let mut base = component.parameters.clone();
+    base.extend(extra.clone());
+    for n in names {
+        base.remove(n);
+    }
+    let vrs = names
+        .iter()
+        .map(|n| fmu.value_reference(n))
+        .collect::<Result<Vec<u32>, _>>()?;
+    let outputs = RECORDED
+        .iter()
+        .map(|n| fmu.value_reference(n))
+        .collect::<Result<Vec<u32>, _>>()?;
+    let mut sim = Simulator::new(&fmu, base, &data.force, data.time[0], data.dt, "diagnose")?;
+    let mut out: Vec<Vec<f64>> = vec![Vec::new(); RECORDED.len()];
+    sim.record(&vrs, values, &outputs, &mut out)?;
+    let mut it = out.into_iter();
+    let mut three = || -> [Vec<f64>; 3] { [(); 3].map(|_| it.next().unwrap_or_default()) };
+    Ok(PhysicsRun {
+        acc: three(),
+        drift: three(),
+        velocity: three(),
+    })
+}
+
+/// A real parameter of the physics component: the twin's value, else the FMU's start value.
+fn physics_real(twin: &Twin, name: &str) -> Result<f64> {
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+    if let Some(ParameterValue::Real(x)) = component.parameters.get(name) {
+        return Ok(*x);
+    }
+    let fmu = Fmu::open(&component.fmu_path)?;
+    fmu.model_description
+        .variable(name)
+        .and_then(|v| v.start.as_deref())
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| anyhow!("{}: no value for '{name}'", component.fmu_name))
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+fn variance(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let m = x.iter().sum::<f64>() / n;
+    x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
+}
+
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+/// NMSE per floor over the samples `idx`.
+fn nmse_on(measured: &[Vec<f64>; 3], predicted: &[Vec<f64>; 3], idx: &[usize]) -> [f64; 3] {
+    [0, 1, 2].map(|f| {
+        let y: Vec<f64> = idx.iter().map(|&k| measured[f][k]).collect();
+        let p: Vec<f64> = idx.iter().map(|&k| predicted[f][k]).collect();
+        nmse(&y, &p)
+    })
+}
+
+fn worst(x: &[f64; 3]) -> f64 {
+    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// What one alternative's fit gives.
+struct Fitted {
+    calibration: Calibration,
+    evidence: f64,
+    nmse_after: [f64; 3],
+    nmse_held_out: [f64; 3],
+    run: PhysicsRun,
+}
+
+/// The physics twin with a candidate's switches on.
+fn with_switches(physics: &Twin, candidate: Option<&Candidate>) -> Result<Twin> {
+    let mut out = physics.duplicate();
+    if let Some(c) = candidate {
+        let component = out
+            .component_mut(PHYSICS)
+            .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        component.parameters.extend(c.switches());
+    }
+    Ok(out)
+}
+
+/// Fit `parameters` (with `priors`) of `twin`'s physics on the masked samples and score the
+/// fit on the whole record and on the held-out samples.
+#[allow(clippy::too_many_arguments)]
+fn fit(
+    twin: &Twin,
+    data: &Measurement,
+    parameters: Vec<String>,
+    priors: BTreeMap<String, Prior>,
+    mask: &[bool],
+    held_out: &[usize],
+    first: usize,
+    starts: usize,
+    simulations_per_start: usize,
+    options: &DiagnoseOptions,
+    baseline_evidence: f64,
+) -> Result<Fitted> {
+    let setup = CalibrationSetup {
+        parameters: parameters.clone(),
+        priors,
+        transient: options.transient,
+        starts,
+        seed: options.seed,
+        threads: 1,
+        mask: Some(mask.to_vec()),
+        simulations_per_start,
+        ..CalibrationSetup::default()
+    };
+    let calibration = match options.fit_substeps {
+        Some(substeps) => {
+            let mut coarse = twin.duplicate();
+            coarse
+                .component_mut(PHYSICS)
+                .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?
+                .parameters
+                .insert("substeps".into(), ParameterValue::Integer(substeps));
+            calibrate(&coarse, data, &setup)?
+        }
+        None => calibrate(twin, data, &setup)?,
+    };
+    let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
+    let run = run_physics(twin, data, &BTreeMap::new(), &parameters, &values)?;
+    let after: Vec<usize> = (first..data.len()).collect();
+    Ok(Fitted {
+        evidence: calibration.log_evidence - baseline_evidence,
+        nmse_after: nmse_on(&data.acc, &run.acc, &after),
+        nmse_held_out: nmse_on(&data.acc, &run.acc, held_out),
+        run,
+        calibration,
+    })
+}
+
+/// Run `jobs` on `threads` worker threads, results in job order.
+fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, work: impl Fn(&J) -> T + Sync) -> Vec<T> {
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= jobs.len() {
+                    break;
+                }
+                let r = work(&jobs[i]);
+                if let Ok(mut all) = results.lock() {
+                    all[i] = Some(r);
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap_or_default()
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
+}
+
+/// The fitted and held-out samples: after the transient, alternate blocks of `block` seconds.
+pub fn blocks(time: &[f64], first: usize, block: f64) -> (Vec<bool>, Vec<usize>) {
+    let mut mask = vec![false; time.len()];
+    let mut held = Vec::new();
+    let t0 = time.get(first).copied().unwrap_or(0.0);
+    for k in first..time.len() {
+        let b = ((time[k] - t0) / block).floor() as i64;
+        if b % 2 == 0 {
+            mask[k] = true;
+        } else {
+            held.push(k);
+        }
+    }
+    (mask, held)
+}
+
+enum Job {
+    Recalibrate,
+    Effect(Candidate),
+}
+
+/// Diagnose `twin` on `data` (see the module documentation).
+pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
+    let started = Instant::now();
+    let noise_variance = twin.noise_variance.ok_or_else(|| {
+        anyhow!(
+            "the twin has no noise variances, so the noise level is unknown: diagnose a twin \
+             made by `twin calibrate`"
+        )
+    })?;
+    if !(options.block > 0.0 && options.block.is_finite()) {
+        bail!(
+            "the block length must be a positive number of seconds, was {}",
+            options.block
+        );
+    }
+    let n = data.len();
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= options.transient)
+        .unwrap_or(n);
+    if n - first < 20 {
+        bail!(
+            "{}: {} samples after the {} s transient; a diagnosis needs more",
+            data.path.display(),
+            n - first,
+            options.transient
+        );
+    }
+    let (mask, held_out) = blocks(&data.time, first, options.block);
+    let after: Vec<usize> = (first..n).collect();
+
+    // 1. The twin as given, and its physics alone with drifts and velocities.
+    let prediction = run_twin(twin, data, |_, _| {})
+        .with_context(|| format!("running the twin on {}", data.path.display()))?;
+    let comparison = compare(
+        &data.time,
+        &data.acc,
+        &prediction.acc,
+        noise_variance,
+        prediction.sd.as_ref(),
+        CompareOptions {
+            transient: options.transient,
+            ..CompareOptions::default()
+        },
+    );
+    let physics = physics_only(twin);
+    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
+    let nmse_before = comparison.nmse;
+    let nmse_before_held_out = nmse_on(&data.acc, &prediction.acc, &held_out);
+    let noise_nmse_on = |idx: &[usize]| {
+        [0, 1, 2].map(|f| {
+            let y: Vec<f64> = idx.iter().map(|&k| data.acc[f][k]).collect();
+            100.0 * noise_variance[f] / variance(&y)
+        })
+    };
+    let noise_nmse = noise_nmse_on(&after);
+    let noise_nmse_held_out = noise_nmse_on(&held_out);
+    let latent_variance = prediction.latent_var.as_ref().map(|v| LatentVariance {
+        max: [0, 1, 2].map(|f| v[f][first..].iter().copied().fold(0.0, f64::max)),
+        mean: [0, 1, 2].map(|f| v[f][first..].iter().sum::<f64>() / (n - first) as f64),
+    });
+
+    // Scales of the candidates' priors.
+    let mass = [0, 1, 2]
+        .map(|f| physics_real(&physics, &format!("m{}", f + 1)))
+        .into_iter()
+        .collect::<Result<Vec<f64>>>()?;
+    let stiffness = [0, 1, 2]
+        .map(|f| physics_real(&physics, &format!("k{}", f + 1)))
+        .into_iter()
+        .collect::<Result<Vec<f64>>>()?;
+    let scales = Scales {
+        stiffness: [stiffness[0], stiffness[1], stiffness[2]],
+        drift_rms: [0, 1, 2].map(|s| rms(&base_run.drift[s][first..])),
+        velocity_rms: [0, 1, 2].map(|f| rms(&base_run.velocity[f][first..])),
+        force_rms: rms(&data.force[first..]),
+    };
+
+    // Localisation from the residual of the twin as given.
+    let floor_force: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+        (0..n)
+            .map(|k| mass[f] * (data.acc[f][k] - prediction.acc[f][k]))
+            .collect()
+    });
+    let missing_shear: [Vec<f64>; 3] = [0, 1, 2].map(|s| {
+        (0..n)
+            .map(|k| (s..3).map(|j| floor_force[j][k]).sum())
+            .collect()
+    });
+    let localisation = localise(&missing_shear, &floor_force, &base_run, first);
+
+    let mut diagnosis = Diagnosis {
+        record: data.path.display().to_string(),
+        twin: twin
+            .source
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "(default twin)".into()),
+        nmse_before,
+        noise_nmse,
+        nmse_before_held_out,
+        noise_nmse_held_out,
+        failing_windows: comparison.failing_windows.clone(),
+        latent_variance,
+        action: Action::None,
+        reason: String::new(),
+        effect: None,
+        nmse_after: nmse_before,
+        recalibration: None,
+        candidates: Vec::new(),
+        localisation,
+        gates: options.gates,
+        block_seconds: options.block,
+        seconds: 0.0,
+        series: Series {
+            time: data.time.clone(),
+            first,
+            measured: data.acc.clone(),
+            before: prediction.acc.clone(),
+            after: prediction.acc.clone(),
+            drift: base_run.drift.clone(),
+            missing_shear,
+            effect_force: None,
+        },
+    };
+
+    // 2. Within the noise?
+    let gates = options.gates;
+    let noise_ratio = [0, 1, 2].map(|f| nmse_before[f] / noise_nmse[f]);
+    let within_noise = noise_ratio.iter().all(|r| *r <= gates.none_factor);
+    if within_noise && !options.always_fit {
+        diagnosis.action = Action::None;
+        diagnosis.reason = format!(
+            "every floor's NMSE ({}) is within {}× of what the twin's noise variances explain on \
+             this record ({}): nothing to do",
+            triple(&nmse_before),
+            gates.none_factor,
+            triple(&noise_nmse)
+        );
+        diagnosis.seconds = started.elapsed().as_secs_f64();
+        return Ok(diagnosis);
+    }
+
+    // 3–4. The alternatives, in parallel.
+    let evidence_setup = CalibrationSetup {
+        transient: options.transient,
+        mask: Some(mask.clone()),
+        ..CalibrationSetup::default()
+    };
+    let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
+    let mut jobs = vec![Job::Recalibrate];
+    jobs.extend(options.candidates.iter().map(|c| Job::Effect(*c)));
+    let results = parallel(&jobs, options.threads, |job| -> Result<(Fitted, f64)> {
+        let t = Instant::now();
+        let fitted = match job {
+            Job::Recalibrate => fit(
+                &physics,
+                data,
+                DEFAULT_PARAMETERS.iter().map(|s| s.to_string()).collect(),
+                BTreeMap::new(),
+                &mask,
+                &held_out,
+                first,
+                options.recalibration_starts,
+                crate::calibrate::SIMULATIONS_PER_START,
+                options,
+                baseline_evidence,
+            ),
+            Job::Effect(c) => {
+                let twin = with_switches(&physics, Some(c))?;
+                let params = c.parameters(&scales);
+                fit(
+                    &twin,
+                    data,
+                    params.iter().map(|p| p.0.clone()).collect(),
+                    params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+                    &mask,
+                    &held_out,
+                    first,
+                    options.starts,
+                    options.simulations_per_start,
+                    options,
+                    baseline_evidence,
+                )
+            }
+        }?;
+        Ok((fitted, t.elapsed().as_secs_f64()))
+    });
+    let mut results = results.into_iter();
+    let (recal, recal_seconds) = results
+        .next()
+        .ok_or_else(|| anyhow!("no recalibration result"))?
+        .context("recalibrating")?;
+    let before_worst = worst(&nmse_before_held_out);
+    let recal_worst = worst(&recal.nmse_held_out);
+    let mut moved: Vec<MovedParameter> = recal
+        .calibration
+        .parameters
+        .iter()
+        .map(|p| {
+            let before = physics_real(&physics, &p.name).unwrap_or(f64::NAN);
+            MovedParameter {
+                name: p.name.clone(),
+                before,
+                after: p.value,
+                sd: p.sd,
+                change_in_sd: (p.value - before) / p.sd,
+                relative_change: (p.value - before) / before,
+            }
+        })
+        .collect();
+    moved.sort_by(|a, b| b.change_in_sd.abs().total_cmp(&a.change_in_sd.abs()));
+    diagnosis.recalibration = Some(RecalibrationReport {
+        evidence: recal.evidence,
+        nmse_after: recal.nmse_after,
+        nmse_held_out: recal.nmse_held_out,
+        parameters: moved,
+        noise_variance: recal.calibration.noise_variance,
+        simulations: recal.calibration.simulations,
+        seconds: recal_seconds,
+    });
+
+    let mut fitted_candidates = Vec::new();
+    for (c, r) in options.candidates.iter().zip(results) {
+        let (fitted, seconds) = r.with_context(|| format!("fitting {}", c.label()))?;
+        let w = worst(&fitted.nmse_held_out);
+        let passes =
+            w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst;
+        let short = c.parameters(&scales);
+        diagnosis.candidates.push(CandidateReport {
+            kind: c.kind,
+            location: c.location(),
+            side: (c.kind == Kind::Contact).then_some(c.side.name()),
+            label: c.label(),
+            evidence: fitted.evidence,
+            nmse_after: fitted.nmse_after,
+            nmse_held_out: fitted.nmse_held_out,
+            parameters: fitted
+                .calibration
+                .parameters
+                .iter()
+                .zip(&short)
+                .map(|(p, s)| Estimate {
+                    name: s.1.to_string(),
+                    value: p.value,
+                    sd: p.sd,
+                })
+                .collect(),
+            passes,
+            simulations: fitted.calibration.simulations,
+            seconds,
+        });
+        fitted_candidates.push((*c, fitted));
+    }
+    let mut order: Vec<usize> = (0..diagnosis.candidates.len()).collect();
+    order.sort_by(|&a, &b| {
+        diagnosis.candidates[b]
+            .evidence
+            .total_cmp(&diagnosis.candidates[a].evidence)
+    });
+    let winner = order
+        .iter()
+        .copied()
+        .find(|&i| diagnosis.candidates[i].passes);
+
+    // 5. Decide.
+    let recal_explains = recal_worst * gates.required_cut <= before_worst
+        && (0..3).all(|f| {
+            recal.nmse_held_out[f] <= gates.recalibration_noise_factor * noise_nmse_held_out[f]
+        });
+    if within_noise {
+        diagnosis.action = Action::None;
+        diagnosis.reason = format!(
+            "every floor's NMSE ({}) is within {}× of what the twin's noise variances explain ({})",
+            triple(&nmse_before),
+            gates.none_factor,
+            triple(&noise_nmse)
+        );
+    } else if let Some(i) = winner {
+        let (c, fitted) = &fitted_candidates[i];
+        let report = &diagnosis.candidates[i];
+        diagnosis.action = Action::AddPhysics;
+        diagnosis.reason = format!(
+            "{} cuts the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×), beats \
+             recalibration ({:.3} %) by {:.1}×, and has the highest evidence ({:.1}) of the {} \
+             candidates that pass",
+            c.label(),
+            before_worst,
+            worst(&report.nmse_held_out),
+            before_worst / worst(&report.nmse_held_out),
+            recal_worst,
+            recal_worst / worst(&report.nmse_held_out),
+            report.evidence,
+            diagnosis.candidates.iter().filter(|c| c.passes).count()
+        );
+        diagnosis.effect = Some(effect_report(c, &fitted.calibration, &scales));
+        diagnosis.nmse_after = fitted.nmse_after;
+        diagnosis.series.after = fitted.run.acc.clone();
+        // The evidence: along the fitted model's drift (which follows the structure), the
+        // storey shear the linear part misses = the effect's force plus what is still missed.
+        if let Some(force) = effect_force(c, &fitted.calibration, &fitted.run) {
+            let s = c.at - 1;
+            diagnosis.series.drift = fitted.run.drift.clone();
+            diagnosis.series.missing_shear[s] = (0..n)
+                .map(|k| {
+                    let still: f64 = (s..3)
+                        .map(|j| mass[j] * (data.acc[j][k] - fitted.run.acc[j][k]))
+                        .sum();
+                    still - force[k]
+                })
+                .collect();
+            diagnosis.series.effect_force = Some(force);
+        }
+    } else if recal_explains {
+        diagnosis.action = Action::Recalibrate;
+        let top: Vec<String> = diagnosis
+            .recalibration
+            .iter()
+            .flat_map(|r| r.parameters.iter().take(3))
+            .map(|p| {
+                format!(
+                    "{} {:+.1} % ({:+.1} sd)",
+                    p.name,
+                    100.0 * p.relative_change,
+                    p.change_in_sd
+                )
+            })
+            .collect();
+        diagnosis.reason = format!(
+            "recalibration cuts the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×), \
+             within {}× of the noise level on every floor, and no effect beats it by {}×; moved \
+             most: {}",
+            before_worst,
+            recal_worst,
+            before_worst / recal_worst,
+            gates.recalibration_noise_factor,
+            gates.beat_recalibration,
+            top.join(", ")
+        );
+        diagnosis.nmse_after = recal.nmse_after;
+        diagnosis.series.after = recal.run.acc.clone();
+    } else {
+        diagnosis.action = Action::UpdateDataModel;
+        let best = order.first().map(|&i| &diagnosis.candidates[i]);
+        diagnosis.reason = format!(
+            "neither recalibration (worst-floor held-out NMSE {:.3} % from {:.3} %) nor any \
+             effect of the library (best: {}) explains the error: the corrector should learn it",
+            recal_worst,
+            before_worst,
+            best.map(|b| format!("{} at {:.3} %", b.label, worst(&b.nmse_held_out)))
+                .unwrap_or_else(|| "none tried".into())
+        );
+    }
+    diagnosis.candidates = order
+        .into_iter()
+        .map(|i| diagnosis.candidates[i].clone())
+        .collect();
+    diagnosis.seconds = started.elapsed().as_secs_f64();
+    Ok(diagnosis)
+}
+
+fn triple(x: &[f64; 3]) -> String {
+    format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2])
+}
+
+fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> EffectReport {
+    let short = c.parameters(scales);
+    let mut parameters = BTreeMap::new();
+    let mut sd = BTreeMap::new();
+    for (p, s) in calibration.parameters.iter().zip(&short) {
+        parameters.insert(s.1.to_string(), p.value);
+        sd.insert(s.1.to_string(), p.sd);
+    }
+    if c.kind == Kind::Contact {
+        parameters.insert("side".into(), c.side.code() as f64);
+    }
+    EffectReport {
+        kind: c.kind,
+        location: c.location(),
+        side: (c.kind == Kind::Contact).then_some(c.side.name()),
+        label: c.label(),
+        parameters,
+        sd,
+    }
+}
+
+/// The fitted effect's storey force along the base run's drift (contact and cubic), or its
+/// floor force along the velocity (friction): what the evidence panel draws.
+fn effect_force(c: &Candidate, calibration: &Calibration, run: &PhysicsRun) -> Option<Vec<f64>> {
+    let v = |i: usize| calibration.parameters.get(i).map(|p| p.value);
+    let i = c.at - 1;
+    Some(match c.kind {
+        Kind::Contact => {
+            let (gap, k) = (v(0)?, v(1)?);
+            run.drift[i]
+                .iter()
+                .map(|&d| {
+                    let pos = c.side != Side::Negative && d > gap;
+                    let neg = c.side != Side::Positive && d < -gap;
+                    if pos {
+                        k * (d - gap)
+                    } else if neg {
+                        k * (d + gap)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        }
+        Kind::Cubic => {
+            let k3 = v(0)?;
+            run.drift[i].iter().map(|&d| k3 * d * d * d).collect()
+        }
+        Kind::Friction => {
+            let (f, s) = (v(0)?, v(1)?);
+            run.velocity[i]
+                .iter()
+                .map(|&u| f * (u / s).tanh())
+                .collect()
+        }
+    })
+}
+
+fn localise(
+    missing_shear: &[Vec<f64>; 3],
+    floor_force: &[Vec<f64>; 3],
+    run: &PhysicsRun,
+    first: usize,
+) -> Localisation {
+    let cut = |x: &[f64]| x[first..].to_vec();
+    let shear_vs_drift =
+        [0, 1, 2].map(|s| correlation(&cut(&missing_shear[s]), &cut(&run.drift[s])));
+    let shear_vs_drift_cubed = [0, 1, 2].map(|s| {
+        let d3: Vec<f64> = run.drift[s][first..].iter().map(|d| d * d * d).collect();
+        correlation(&cut(&missing_shear[s]), &d3)
+    });
+    let shear_vs_drift_beyond = [0, 1, 2].map(|s| {
+        let d = &run.drift[s][first..];
+        let mut abs: Vec<f64> = d.iter().map(|x| x.abs()).collect();
+        abs.sort_by(f64::total_cmp);
+        let g = abs[(abs.len() * 8) / 10];
+        let beyond: Vec<f64> = d
+            .iter()
+            .map(|&x| {
+                if x > g {
+                    x - g
+                } else if x < -g {
+                    x + g
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        correlation(&cut(&missing_shear[s]), &beyond)
+    });
+    let force_vs_velocity_sign = [0, 1, 2].map(|f| {
+        let sign: Vec<f64> = run.velocity[f][first..]
+            .iter()
+            .map(|v| v.signum())
+            .collect();
+        correlation(&cut(&floor_force[f]), &sign)
+    });
+    let mut strongest = (0.0, String::new());
+    for s in 0..3 {
+        for c in [
+            shear_vs_drift[s],
+            shear_vs_drift_cubed[s],
+            shear_vs_drift_beyond[s],
+        ] {
+            if c.abs() > strongest.0 {
+                strongest = (c.abs(), format!("storey {}", s + 1));
+            }
+        }
+        if force_vs_velocity_sign[s].abs() > strongest.0 {
+            strongest = (force_vs_velocity_sign[s].abs(), format!("floor {}", s + 1));
+        }
+    }
+    Localisation {
+        shear_vs_drift,
+        shear_vs_drift_cubed,
+        shear_vs_drift_beyond,
+        force_vs_velocity_sign,
+        strongest: strongest.1,
+    }
+}
+
+/// What `twin add-physics` did.
+#[derive(Clone, Debug, Serialize)]
+pub struct AddPhysicsReport {
+    pub record: String,
+    pub effect: EffectReport,
+    pub refined_physics: Vec<Estimate>,
+    pub nmse_before: [f64; 3],
+    pub nmse_after: [f64; 3],
+    pub evidence: f64,
+    pub noise_variance: [f64; 3],
+    pub seconds: f64,
+}
+
+/// Switch `candidate` on in `twin`'s physics, estimate its parameters on the whole of `data`
+/// (after the transient), with `refine` also the nine physics parameters jointly, and return
+/// the new twin (the corrector, if any, is left out: it learned the old physics' errors).
+pub fn add_physics(
+    twin: &Twin,
+    data: &Measurement,
+    candidate: &Candidate,
+    refine: bool,
+    options: &DiagnoseOptions,
+) -> Result<(Twin, AddPhysicsReport)> {
+    let started = Instant::now();
+    let physics = physics_only(twin);
+    let n = data.len();
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= options.transient)
+        .unwrap_or(n);
+    if n - first < 20 {
+        bail!(
+            "{}: too few samples after the transient",
+            data.path.display()
+        );
+    }
+    let after: Vec<usize> = (first..n).collect();
+    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
+    let stiffness = [0, 1, 2]
+        .map(|f| physics_real(&physics, &format!("k{}", f + 1)))
+        .into_iter()
+        .collect::<Result<Vec<f64>>>()?;
+    let scales = Scales {
+        stiffness: [stiffness[0], stiffness[1], stiffness[2]],
+        drift_rms: [0, 1, 2].map(|s| rms(&base_run.drift[s][first..])),
+        velocity_rms: [0, 1, 2].map(|f| rms(&base_run.velocity[f][first..])),
+        force_rms: rms(&data.force[first..]),
+    };
+    let switched = with_switches(&physics, Some(candidate))?;
+    let effect_params = candidate.parameters(&scales);
+    let mut names: Vec<String> = effect_params.iter().map(|p| p.0.clone()).collect();
+    let mut priors: BTreeMap<String, Prior> =
+        effect_params.iter().map(|p| (p.0.clone(), p.2)).collect();
+    let mask = vec![true; n];
+    let evidence_setup = CalibrationSetup {
+        transient: options.transient,
+        ..CalibrationSetup::default()
+    };
+    let baseline = fixed_log_evidence(&physics, data, &evidence_setup)?;
+    // Stage 1: the effect alone, the physics held.
+    let stage1 = fit(
+        &switched,
+        data,
+        names.clone(),
+        priors.clone(),
+        &mask,
+        &after,
+        first,
+        options.starts.max(8),
+        options.simulations_per_start,
+        &DiagnoseOptions {
+            threads: options.threads,
+            ..options.clone()
+        },
+        baseline,
+    )?;
+    let mut result = stage1;
+    let mut chosen = switched.duplicate();
+    if refine {
+        // Stage 2: effect and physics jointly, the effect's prior centred on stage 1.
+        for (p, e) in result.calibration.parameters.iter().zip(&effect_params) {
+            let prior = match e.2.space {
+                crate::calibrate::Space::Log => Prior::log(p.value.ln(), e.2.variance),
+                crate::calibrate::Space::Linear => Prior::linear(p.value, e.2.variance),
+            };
+            priors.insert(e.0.clone(), prior);
+        }
+        names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
+        result = fit(
+            &switched,
+            data,
+            names.clone(),
+            priors,
+            &mask,
+            &after,
+            first,
+            options.recalibration_starts,
+            crate::calibrate::SIMULATIONS_PER_START,
+            options,
+            baseline,
+        )?;
+    }
+    let component = chosen
+        .component_mut(PHYSICS)
+        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+    for p in &result.calibration.parameters {
+        component
+            .parameters
+            .insert(p.name.clone(), ParameterValue::Real(p.value));
+    }
+    chosen.noise_variance = Some(result.calibration.noise_variance);
+    let before = run_twin(twin, data, |_, _| {})?;
+    let report = AddPhysicsReport {
+        record: data.path.display().to_string(),
+        effect: effect_report(candidate, &result.calibration, &scales),
+        refined_physics: result
+            .calibration
+            .parameters
+            .iter()
+            .skip(effect_params.len())
+            .map(|p| Estimate {
+                name: p.name.clone(),
+                value: p.value,
+                sd: p.sd,
+            })
+            .collect(),
+        nmse_before: nmse_on(&data.acc, &before.acc, &after),
+        nmse_after: result.nmse_after,
+        evidence: result.evidence,
+        noise_variance: result.calibration.noise_variance,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    Ok((chosen, report))
+}
+
+/// `contact@2-3[:side]` or the winner of a diagnosis report (`--diagnosis R.json`).
+pub fn effect_from_report(path: &PathBuf) -> Result<Candidate> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading the diagnosis {}", path.display()))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let label = value
+        .get("effect")
+        .and_then(|e| e.get("label"))
+        .and_then(|l| l.as_str())
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: the diagnosis names no effect (action {})",
+                path.display(),
+                value.get("action").unwrap_or(&serde_json::Value::Null)
+            )
+        })?;
+    Candidate::parse(label).map_err(|e| anyhow!("{}: {e}", path.display()))
+}

@@ -1,0 +1,221 @@
+//! The diagnosis plot: per floor, the residual before and after the chosen action with the
+//! failing windows shaded; then the evidence: the storey shear the twin misses against the
+//! storey's drift, with the fitted effect's force (for a contact, the kink at the gap).
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+
+use super::{Action, Diagnosis, Kind};
+
+const BEFORE: RGBColor = RGBColor(0xD5, 0x5E, 0x00);
+const AFTER: RGBColor = RGBColor(0x00, 0x72, 0xB2);
+const FAILING: RGBColor = RGBColor(0xD6, 0x27, 0x28);
+const EFFECT: RGBColor = RGBColor(0x00, 0x9E, 0x73);
+const SIZE: (u32, u32) = (1400, 1200);
+
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = 0.05 * (hi - lo).max(1e-12);
+    (lo - pad, hi + pad)
+}
+
+/// Draw the plot of `d` as an SVG document.
+pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
+    let s = &d.series;
+    if s.time.len() < 2 {
+        return Err(anyhow!("the diagnosis plot needs at least 2 samples"));
+    }
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        let err = |e: &dyn std::fmt::Display| anyhow!("drawing the diagnosis plot: {e}");
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let title = format!(
+            "{} — action: {}{}",
+            d.record,
+            d.action.name(),
+            d.effect
+                .as_ref()
+                .map(|e| format!(" ({})", e.label))
+                .unwrap_or_default()
+        );
+        let root = root
+            .titled(&title, ("sans-serif", 22))
+            .map_err(|e| err(&e))?;
+        let (top, bottom) = root.split_vertically(SIZE.1 * 62 / 100);
+        let rows = top.split_evenly((3, 1));
+        let t = &s.time[s.first..];
+        let after_label = match d.action {
+            Action::AddPhysics => "residual after adding the effect",
+            Action::Recalibrate => "residual after recalibration",
+            _ => "residual (unchanged)",
+        };
+        for (f, area) in rows.iter().enumerate() {
+            let before: Vec<f64> = (s.first..s.time.len())
+                .map(|k| s.measured[f][k] - s.before[f][k])
+                .collect();
+            let after: Vec<f64> = (s.first..s.time.len())
+                .map(|k| s.measured[f][k] - s.after[f][k])
+                .collect();
+            let (lo, hi) = range(before.iter().chain(&after).copied());
+            let mut chart = ChartBuilder::on(area)
+                .margin(8)
+                .x_label_area_size(28)
+                .y_label_area_size(70)
+                .caption(
+                    format!(
+                        "floor {}: NMSE {:.3} % → {:.3} %",
+                        f + 1,
+                        d.nmse_before[f],
+                        d.nmse_after[f]
+                    ),
+                    ("sans-serif", 16),
+                )
+                .build_cartesian_2d(t[0]..t[t.len() - 1], lo..hi)
+                .map_err(|e| err(&e))?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("residual (m/s²)")
+                .light_line_style(WHITE)
+                .draw()
+                .map_err(|e| err(&e))?;
+            for w in d
+                .failing_windows
+                .iter()
+                .filter(|w| w.floors.contains(&(f + 1)))
+            {
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(w.start, lo), (w.end, hi)],
+                        FAILING.mix(0.15).filled(),
+                    )))
+                    .map_err(|e| err(&e))?;
+            }
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().copied().zip(before.iter().copied()),
+                    BEFORE.stroke_width(1),
+                ))
+                .map_err(|e| err(&e))?
+                .label("residual before")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BEFORE));
+            chart
+                .draw_series(LineSeries::new(
+                    t.iter().copied().zip(after.iter().copied()),
+                    AFTER.stroke_width(1),
+                ))
+                .map_err(|e| err(&e))?
+                .label(after_label)
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], AFTER));
+            if f == 0 {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(|e| err(&e))?;
+            }
+        }
+
+        // The evidence panel: the winning effect's storey (or floor), else the storey the
+        // localisation points at.
+        let (storey, what) = match &d.effect {
+            Some(e) => (e.location.last().copied().unwrap_or(1).clamp(1, 3), e.kind),
+            None => {
+                let n = d
+                    .localisation
+                    .strongest
+                    .rsplit(' ')
+                    .next()
+                    .and_then(|x| x.parse().ok())
+                    .unwrap_or(1usize)
+                    .clamp(1, 3);
+                (n, Kind::Contact)
+            }
+        };
+        let i = storey - 1;
+        let x: Vec<f64> = s.drift[i][s.first..].to_vec();
+        let y: Vec<f64> = s.missing_shear[i][s.first..].to_vec();
+        let (xlo, xhi) = range(x.iter().copied());
+        let mut ys: Vec<f64> = y.clone();
+        if let Some(fe) = &s.effect_force {
+            ys.extend(fe[s.first..].iter().map(|v| -v));
+        }
+        let (ylo, yhi) = range(ys.into_iter());
+        let (x_desc, caption) = if what == Kind::Friction {
+            (
+                format!("velocity of floor {storey} is not drawn; drift of storey {storey} (m)"),
+                format!("evidence: force the twin misses at storey {storey} against its drift"),
+            )
+        } else {
+            (
+                format!("drift of storey {storey} (m)"),
+                format!(
+                    "evidence: storey {storey} shear the twin misses (Σ mⱼ·residualⱼ above it) \
+                     against the storey's drift"
+                ),
+            )
+        };
+        let mut chart = ChartBuilder::on(&bottom)
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(70)
+            .caption(caption, ("sans-serif", 16))
+            .build_cartesian_2d(xlo..xhi, ylo..yhi)
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc("missing shear (N)")
+            .light_line_style(WHITE)
+            .draw()
+            .map_err(|e| err(&e))?;
+        chart
+            .draw_series(
+                x.iter()
+                    .zip(&y)
+                    .map(|(a, b)| Circle::new((*a, *b), 2, BEFORE.mix(0.5).filled())),
+            )
+            .map_err(|e| err(&e))?
+            .label(if s.effect_force.is_some() {
+                "storey shear the linear part misses, along the fitted model"
+            } else {
+                "missing shear, twin as given"
+            })
+            .legend(|(x, y)| Circle::new((x + 10, y), 3, BEFORE.filled()));
+        if let (Some(fe), Some(e)) = (&s.effect_force, &d.effect) {
+            if what != Kind::Friction {
+                let mut pts: Vec<(f64, f64)> = x
+                    .iter()
+                    .copied()
+                    .zip(fe[s.first..].iter().map(|v| -v))
+                    .collect();
+                pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                chart
+                    .draw_series(LineSeries::new(pts, EFFECT.stroke_width(3)))
+                    .map_err(|e| err(&e))?
+                    .label(format!(
+                        "fitted {} force (restoring, sign flipped)",
+                        e.label
+                    ))
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EFFECT));
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+    }
+    Ok(svg)
+}
