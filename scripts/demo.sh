@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The demo on the bundled example data: build the FMUs and the twin CLI, calibrate the twin on
-# dataset1, then compare it with the three records (dataset3 has contact the twin does not know
-# about). Reports, predictions and plots go to out/demo/.
+# dataset1, compare it with the three records (dataset3 has contact the twin does not know
+# about), train the GP corrector, then diagnose dataset3, add the physics the diagnosis names
+# and compare again. Reports, predictions and plots go to out/demo/.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -37,7 +38,24 @@ for n in 2 3; do
 done
 
 echo
-echo "== twin calibrate on dataset3: recalibrating on contact data biases the parameters =="
+echo "== twin diagnose on dataset3: which action, which effect, where, how strong =="
+"$twin" diagnose --twin "$out/calibrated.ssp" --data data/dataset3.csv \
+  --report "$out/diagnose-dataset3.json" --plot "$out/diagnose-dataset3.svg"
+
+echo
+echo "== twin add-physics: switch the diagnosed effect on, estimate it on dataset3 =="
+"$twin" add-physics --twin "$out/calibrated.ssp" --diagnosis "$out/diagnose-dataset3.json" \
+  --data data/dataset3.csv --out "$out/with-contact.ssp" --report "$out/add-physics-dataset3.json"
+
+for n in 1 2 3; do
+  echo
+  echo "== twin compare with the added physics on dataset$n =="
+  "$twin" compare --twin "$out/with-contact.ssp" --data "data/dataset$n.csv" \
+    --report "$out/compare-with-contact-dataset$n.json" --plot "$out/compare-with-contact-dataset$n.svg"
+done
+
+echo
+echo "== for contrast: recalibrating on dataset3 instead biases the parameters =="
 "$twin" calibrate --data data/dataset3.csv --out "$out/calibrated-dataset3.ssp" \
   --validate data/dataset1.csv data/dataset2.csv --report "$out/calibrate-dataset3.json"
 echo

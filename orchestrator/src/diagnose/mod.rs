@@ -1121,7 +1121,9 @@ pub fn add_physics(
             .parameters
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
-    chosen.noise_variance = Some(result.calibration.noise_variance);
+    // The sensors did not change: the twin keeps its noise variances (the fit's own, which
+    // also hold what the new model still misses on this record, are in the report).
+    chosen.noise_variance = twin.noise_variance.or(Some(result.calibration.noise_variance));
     let before = run_twin(twin, data, |_, _| {})?;
     let report = AddPhysicsReport {
         record: data.path.display().to_string(),
