@@ -397,3 +397,73 @@ fn dataset3_contact_between_floors_2_and_3_is_found_and_added_through_the_cli() 
     let nmse = triple(&c["nmse"]);
     assert!(worst(&nmse) < 5.0, "compare after add-physics: {nmse:?}");
 }
+
+/// Run `twin` expecting failure; its stderr.
+fn cli_fails(args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args(args)
+        .env("TWIN_FMU_DIR", fmu_dir())
+        .output()
+        .expect("twin runs");
+    assert!(!out.status.success(), "twin {args:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn bad_requests_are_refused_with_the_reason_and_write_nothing() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let default = dir.path().join("default.ssp");
+    cli(&["init", "--out"], &[&default], &[], &[]);
+    let ds3 = workspace().join("data/dataset3.csv");
+    let report = dir.path().join("r.json");
+    let out = dir.path().join("o.ssp");
+    let os = |s: &'static str| std::ffi::OsStr::new(s);
+    // An uncalibrated twin has no noise level to judge against.
+    let e = cli_fails(&[
+        os("diagnose"),
+        os("--twin"),
+        default.as_os_str(),
+        os("--data"),
+        ds3.as_os_str(),
+        os("--report"),
+        report.as_os_str(),
+    ]);
+    assert!(
+        e.contains("noise variances") && e.contains("twin calibrate"),
+        "{e}"
+    );
+    assert!(!report.exists());
+    // Effects outside the grammar, and a diagnosis that names none.
+    for (effect, says) in [("contact@1-3", "adjacent"), ("magnet@2", "unknown kind")] {
+        let e = cli_fails(&[
+            os("add-physics"),
+            os("--twin"),
+            default.as_os_str(),
+            os("--effect"),
+            os(effect),
+            os("--data"),
+            ds3.as_os_str(),
+            os("--out"),
+            out.as_os_str(),
+        ]);
+        assert!(e.contains(says) && e.contains(effect), "{e}");
+    }
+    let none = dir.path().join("none.json");
+    std::fs::write(&none, r#"{"action": "none", "effect": null}"#).expect("write");
+    let e = cli_fails(&[
+        os("add-physics"),
+        os("--twin"),
+        default.as_os_str(),
+        os("--diagnosis"),
+        none.as_os_str(),
+        os("--data"),
+        ds3.as_os_str(),
+        os("--out"),
+        out.as_os_str(),
+    ]);
+    assert!(
+        e.contains("names no effect") && e.contains("none.json"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
