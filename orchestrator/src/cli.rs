@@ -69,6 +69,13 @@ pub struct CompareArgs {
     /// Also draw the frequency-response view.
     #[arg(long)]
     pub frf: bool,
+    /// Threshold line of the latent-variance view (`<plot>-latent.svg`, drawn when the twin has
+    /// a corrector), (m/s²)², every floor. Default: each floor's sensor-noise variance from the
+    /// twin's calibration — above it the GP is less sure of the bias than a single measurement
+    /// is, so the point would be worth learning; for an uncalibrated twin, `twin learn`'s
+    /// fixed threshold, 1e-3 × each floor's measured variance on this record.
+    #[arg(long)]
+    pub latent_threshold: Option<f64>,
     /// Seconds at the start left out of the error measures.
     #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
     pub transient: f64,
@@ -233,6 +240,11 @@ pub fn compare_command(args: &CompareArgs) -> Result<()> {
             bail!("{}: only .svg plots are supported", plot.display());
         }
     }
+    if let Some(t) = args.latent_threshold {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--latent-threshold must be a positive number, was {t}");
+        }
+    }
     let data = Measurement::read(&args.data)?;
     if args.transient >= data.duration() {
         bail!(
@@ -289,6 +301,16 @@ pub fn compare_command(args: &CompareArgs) -> Result<()> {
     if let Some(path) = &args.plot {
         let title = format!("{} on {}", twin.describe(), data.path.display());
         crate::report::plot_comparison(&comparison, &data.force, &title, path, args.frf)?;
+        if let Some(latent) = &prediction.latent_var {
+            let threshold = match (args.latent_threshold, twin.noise_variance) {
+                (Some(t), _) => [t; 3],
+                (None, Some(v)) => v,
+                (None, None) => [0, 1, 2].map(|f| {
+                    crate::learn::PAPER_THRESHOLD * variance(&data.acc[f][comparison.first..])
+                }),
+            };
+            crate::report::plot_latent_variance(&comparison, latent, threshold, &title, path)?;
+        }
     }
     print_summary(&twin, &data, &comparison);
     Ok(())

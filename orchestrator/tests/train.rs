@@ -109,6 +109,8 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         &p("gp2.json"),
         "--predictions",
         &p("gp2.csv"),
+        "--plot",
+        &p("gp2.svg"),
     ]);
     twin(&[
         "compare",
@@ -118,6 +120,8 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         &data(3),
         "--predictions",
         &p("gp3.csv"),
+        "--plot",
+        &p("gp3.svg"),
     ]);
 
     let (physics, corrected) = (
@@ -173,5 +177,31 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
     assert!(
         contact > 5.0 * quiet,
         "the corrector is unsure where contact happens: {contact:e} vs {quiet:e}"
+    );
+
+    // The latent-variance view beside each plot, the threshold the twin's noise variances:
+    // samples above it per floor, read from the panel captions.
+    let above = |name: &str| -> usize {
+        let svg = std::fs::read_to_string(dir.path().join(name)).expect("latent view");
+        assert!(svg.contains("latent variance V(f)"), "{name}");
+        svg.match_indices(" samples above ")
+            .map(|(i, _)| {
+                let head = &svg[..i];
+                let of = head.rfind(" of ").expect("'X of N'");
+                let colon = head[..of].rfind(": ").expect("'floor k: X'");
+                head[colon + 2..of]
+                    .trim()
+                    .parse::<usize>()
+                    .expect("a count")
+            })
+            .sum()
+    };
+    let (quiet_above, contact_above) = (above("gp2-latent.svg"), above("gp3-latent.svg"));
+    println!("samples above the threshold: dataset2 {quiet_above}, dataset3 {contact_above}");
+    // Measured: 0 on dataset2, 137 on dataset3 (3 lags, every 3rd sample); the bound asks for
+    // 50 more, a margin of 2.7.
+    assert!(
+        contact_above > quiet_above + 50,
+        "{contact_above} vs {quiet_above} samples above the threshold"
     );
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 pub mod plot;
 
-pub use plot::{plot_comparison, welch_h1, FrequencyResponse, FRF_SEGMENT};
+pub use plot::{plot_comparison, plot_latent_variance, welch_h1, FrequencyResponse, FRF_SEGMENT};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {

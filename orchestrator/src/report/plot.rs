@@ -169,6 +169,145 @@ pub fn plot_comparison(
     Ok(())
 }
 
+/// The corrector's latent variance `V(f)` per floor on a log axis, with the threshold above
+/// which active learning would query a point (the reference paper's Figures 7–8, lower panels),
+/// written to `<dir>/<stem>-latent.svg` beside `path`. Samples above the threshold after the
+/// transient are marked.
+pub fn plot_latent_variance(
+    c: &Comparison,
+    latent: &[Vec<f64>; 3],
+    threshold: [f64; 3],
+    title: &str,
+    path: &Path,
+) -> Result<PathBuf, ReportError> {
+    let out = sibling(path, "latent");
+    let bad_input = |message: String| ReportError::BadInput {
+        path: out.clone(),
+        message,
+    };
+    let n = c.time.len();
+    if n < 2 {
+        return Err(bad_input(format!("{n} samples; a plot needs at least 2")));
+    }
+    if latent.iter().any(|v| v.len() != n) {
+        return Err(bad_input(format!(
+            "{} / {} / {} latent variances for {n} samples",
+            latent[0].len(),
+            latent[1].len(),
+            latent[2].len()
+        )));
+    }
+    if threshold.iter().any(|t| !(*t > 0.0 && t.is_finite())) {
+        return Err(bad_input(format!(
+            "thresholds {threshold:?}: must be positive"
+        )));
+    }
+    let svg =
+        draw_latent_view(c, latent, threshold, title).map_err(|message| ReportError::Draw {
+            path: out.clone(),
+            message,
+        })?;
+    write_atomically(&out, &svg)?;
+    Ok(out)
+}
+
+fn draw_latent_view(
+    c: &Comparison,
+    latent: &[Vec<f64>; 3],
+    threshold: [f64; 3],
+    title: &str,
+) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, FRF_VIEW_SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .titled(&format!("{title}: latent variance V(f)"), (FONT, 22))
+            .map_err(text)?;
+        let (key, panels) = root.split_vertically(30);
+        draw_key(
+            &key,
+            &[
+                KeyItem::Line(MEASURED, "latent variance V(f)"),
+                KeyItem::Line(FAILING, "threshold"),
+                KeyItem::Area(PREDICTED, 0.5, "above the threshold"),
+            ],
+            PANEL_LEFT as i32 + 10,
+        )?;
+        let n = c.time.len();
+        let (t0, t1) = (c.time[0], c.time[n - 1]);
+        for (floor, area) in panels.split_evenly((1, 3)).iter().enumerate() {
+            let v = &latent[floor];
+            let positive = v.iter().copied().filter(|x| *x > 0.0 && x.is_finite());
+            let (lo, hi) = positive
+                .chain(std::iter::once(threshold[floor]))
+                .fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
+            let (lo, hi) = (lo / 2.0, hi * 2.0);
+            let above = (c.first..n).filter(|&k| v[k] > threshold[floor]).count();
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!(
+                        "floor {}: {above} of {} samples above {:.2e}",
+                        floor + 1,
+                        n - c.first,
+                        threshold[floor]
+                    ),
+                    (FONT, 15),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(PANEL_LEFT)
+                .build_cartesian_2d(t0..t1, (lo..hi).log_scale())
+                .map_err(text)?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("V(f) ((m/s²)²)")
+                .y_label_formatter(&|y| format!("{y:.0e}"))
+                .x_labels(6)
+                .y_labels(5)
+                .label_style((FONT, 12))
+                .light_line_style(BLACK.mix(0.04))
+                .bold_line_style(BLACK.mix(0.10))
+                .draw()
+                .map_err(text)?;
+            chart
+                .draw_series((c.first..n).filter(|&k| v[k] > threshold[floor]).map(|k| {
+                    Rectangle::new(
+                        [(c.time[k], lo), (c.time[k] + sampling_interval(c), hi)],
+                        PREDICTED.mix(0.5).filled(),
+                    )
+                }))
+                .map_err(text)?;
+            chart
+                .draw_series(LineSeries::new(
+                    (0..n)
+                        .filter(|&k| v[k] > 0.0 && v[k].is_finite())
+                        .map(|k| (c.time[k], v[k])),
+                    MEASURED.stroke_width(1),
+                ))
+                .map_err(text)?;
+            chart
+                .draw_series(LineSeries::new(
+                    [(t0, threshold[floor]), (t1, threshold[floor])],
+                    FAILING.stroke_width(2),
+                ))
+                .map_err(text)?;
+        }
+        root.present().map_err(text)?;
+    }
+    Ok(svg)
+}
+
+/// `<dir>/<stem>-<suffix>.svg` beside `<dir>/<stem>.svg`.
+fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!("{stem}-{suffix}.svg"))
+}
+
 /// `<dir>/<stem>-frf.svg` beside `<dir>/<stem>.svg`.
 fn frf_path(path: &Path) -> PathBuf {
     let stem = path
