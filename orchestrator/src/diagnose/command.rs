@@ -164,6 +164,9 @@ pub fn summary(d: &Diagnosis) -> String {
             );
         }
     }
+    for (label, error) in &d.failed_candidates {
+        s += &format!("  failed {label}: {error}\n");
+    }
     s += &format!("action        {}\n", d.action.name());
     if let Some(e) = &d.effect {
         let params: Vec<String> = e

@@ -272,6 +272,9 @@ pub struct Diagnosis {
     pub recalibration: Option<RecalibrationReport>,
     /// Best evidence first.
     pub candidates: Vec<CandidateReport>,
+    /// Candidates whose fit failed (no start converged, the FMU refused every value): label
+    /// and error. They take no part in the decision.
+    pub failed_candidates: Vec<(String, String)>,
     pub localisation: Localisation,
     pub gates: Gates,
     pub block_seconds: f64,
@@ -634,6 +637,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         nmse_after: nmse_before,
         recalibration: None,
         candidates: Vec::new(),
+        failed_candidates: Vec::new(),
         localisation,
         gates: options.gates,
         block_seconds: options.block,
@@ -748,7 +752,15 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
 
     let mut fitted_candidates = Vec::new();
     for (c, r) in options.candidates.iter().zip(results) {
-        let (fitted, seconds) = r.with_context(|| format!("fitting {}", c.label()))?;
+        let (fitted, seconds) = match r {
+            Ok(x) => x,
+            Err(e) => {
+                diagnosis
+                    .failed_candidates
+                    .push((c.label(), format!("{e:#}")));
+                continue;
+            }
+        };
         let w = worst(&fitted.nmse_held_out);
         let passes =
             w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst;
@@ -1123,7 +1135,9 @@ pub fn add_physics(
     }
     // The sensors did not change: the twin keeps its noise variances (the fit's own, which
     // also hold what the new model still misses on this record, are in the report).
-    chosen.noise_variance = twin.noise_variance.or(Some(result.calibration.noise_variance));
+    chosen.noise_variance = twin
+        .noise_variance
+        .or(Some(result.calibration.noise_variance));
     let before = run_twin(twin, data, |_, _| {})?;
     let report = AddPhysicsReport {
         record: data.path.display().to_string(),
