@@ -136,7 +136,9 @@ pub fn rk4_with_events(
 
 /// The smallest θ ∈ (0, 1] past the sign change of `g` (g(0) = a, g(1) = b, opposite signs):
 /// Illinois-modified regula falsi, returning the end of the final bracket on the far side.
-fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+/// Public for the synthetic structure of `twin synth`, which locates its own switches the same
+/// way.
+pub fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
     let (mut lo, mut hi, mut g_lo, mut g_hi) = (0.0f64, 1.0f64, a, b);
     let mut side = 0i8;
     for _ in 0..60 {

@@ -1935,7 +1935,7 @@ impl Hysteretic {
                             self.switches(model, &rk4(&f, tau, &state, th * remaining))
                                 .0[j]
                         };
-                        theta = theta.min(locate(g, a, b));
+                        theta = theta.min(fmu_shear::integrate::locate(g, a, b));
                     }
                 }
                 if theta >= 1.0 {
@@ -1991,45 +1991,6 @@ fn rk4(f: &impl Fn(f64, &HState) -> HState, t: f64, x: &HState, h: f64) -> HStat
     let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));
     let k4 = f(t + h, &axpy(x, h, &k3));
     std::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
-}
-
-/// The smallest θ ∈ (0, 1] just past the sign change of `g` (g(0) = a, g(1) = b, opposite
-/// signs): Illinois regula falsi, the end of the final bracket on the far side (as
-/// `fmu_shear::integrate`'s).
-fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
-    let (mut lo, mut hi, mut g_lo, mut g_hi) = (0.0f64, 1.0f64, a, b);
-    let mut side = 0i8;
-    for _ in 0..60 {
-        if hi - lo < 1e-12 {
-            break;
-        }
-        let mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
-        let mid = if mid > lo && mid < hi {
-            mid
-        } else {
-            0.5 * (lo + hi)
-        };
-        let g_mid = g(mid);
-        if g_mid == 0.0 {
-            return mid;
-        }
-        if g_mid.signum() == g_lo.signum() {
-            lo = mid;
-            g_lo = g_mid;
-            if side == -1 {
-                g_hi *= 0.5;
-            }
-            side = -1;
-        } else {
-            hi = mid;
-            g_hi = g_mid;
-            if side == 1 {
-                g_lo *= 0.5;
-            }
-            side = 1;
-        }
-    }
-    hi
 }
 
 /// What the fine grid saw: drifts, contacts.

@@ -8,14 +8,13 @@
 //! and, between the two calibrations, k1 3850 → 3549 N/m, k2 4100 → 3751 N/m (posterior sd
 //! 4 and 56 N/m), c2 3.65 → 0.009 N s/m. Thresholds below leave a margin of 3× or more.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use serde_json::Value;
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+mod common;
+use common::workspace;
 
 fn calibrate(data: &str, validate: &[&str], dir: &Path) -> Value {
     let fmu_dir = workspace().join("target/fmu");

@@ -7,30 +7,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod common;
+use common::{fmu_dir, workspace};
+
 /// The examples' sampling interval, 1/51.2 s = 5/256 s: exact in binary.
 const STEP: f64 = 1.0 / 51.2;
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the orchestrator crate sits in the workspace")
-        .to_owned()
-}
-
-/// `target/fmu` as `scripts/build-fmus.sh` fills it (under `CARGO_TARGET_DIR` when set).
-fn fmu_dir() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join("target"));
-    let dir = target.join("fmu");
-    let fmu = dir.join("fmu_shear.fmu");
-    assert!(
-        fmu.is_file(),
-        "{} is missing: run scripts/build-fmus.sh",
-        fmu.display()
-    );
-    dir
-}
 
 fn twin(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_twin"))

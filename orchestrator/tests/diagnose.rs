@@ -11,7 +11,7 @@
 //!
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::sync::OnceLock;
 
@@ -23,27 +23,10 @@ use orchestrator::synth::{
 };
 use orchestrator::twin::Twin;
 
+mod common;
+use common::{fmu_dir, workspace};
+
 const NOISE_SD: f64 = 0.003;
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("workspace")
-        .to_owned()
-}
-
-fn fmu_dir() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join("target"));
-    let dir = target.join("fmu");
-    assert!(
-        dir.join("fmu_shear.fmu").is_file(),
-        "{} has no FMUs: run scripts/build-fmus.sh",
-        dir.display()
-    );
-    dir
-}
 
 fn base_scenario(seed: u64) -> Scenario {
     let mut s = Scenario {

@@ -12,26 +12,8 @@ use std::process::{Command, Output};
 use orchestrator::import::{Fmu, ImportError, UnpackLimits};
 use zip::write::SimpleFileOptions;
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the orchestrator crate sits in the workspace")
-        .to_owned()
-}
-
-fn fmu_dir() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join("target"));
-    let dir = target.join("fmu");
-    let fmu = dir.join("fmu_shear.fmu");
-    assert!(
-        fmu.is_file(),
-        "{} is missing: run scripts/build-fmus.sh",
-        fmu.display()
-    );
-    dir
-}
+mod common;
+use common::{fmu_dir, workspace};
 
 fn shear_fmu() -> PathBuf {
     fmu_dir().join("fmu_shear.fmu")

@@ -17,17 +17,13 @@ use std::process::Command;
 
 use orchestrator::import::{Fmu, Instance};
 
+mod common;
+use common::workspace;
+
 /// The examples' sampling interval, 1/51.2 s: exact in binary.
 const STEP: f64 = 1.0 / 51.2;
 /// Set in the child processes that run the Python-hosting tests.
 const CHILD: &str = "TWIN_THIRD_PARTY_CHILD";
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the orchestrator crate sits in the workspace")
-        .to_owned()
-}
 
 fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")

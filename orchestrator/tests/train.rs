@@ -5,12 +5,11 @@
 //! Run with 3 lags on every 3rd sample (307 points, 16 inputs) to keep the GP fits quick in a
 //! test; the measured figures are in the comments at the assertions.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+mod common;
+use common::workspace;
 
 fn twin(args: &[&str]) -> String {
     let fmu_dir = workspace().join("target/fmu");

@@ -401,17 +401,12 @@ fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Opti
     hess.try_inverse()
 }
 
-/// Calibrate the physics component of `twin` on `data`.
-pub fn calibrate(
-    twin: &Twin,
+/// The samples the likelihood uses: after the transient, where the mask (if any) is set.
+/// Also the first sample after the transient.
+fn used_samples(
     data: &Measurement,
     setup: &CalibrationSetup,
-) -> Result<Calibration, CalibrateError> {
-    let started = Instant::now();
-    let component = twin
-        .component(PHYSICS)
-        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
+) -> Result<(usize, Vec<usize>), CalibrateError> {
     let first = data
         .time
         .iter()
@@ -436,6 +431,21 @@ pub fn calibrate(
             used.len()
         )));
     }
+    Ok((first, used))
+}
+
+/// Calibrate the physics component of `twin` on `data`.
+pub fn calibrate(
+    twin: &Twin,
+    data: &Measurement,
+    setup: &CalibrationSetup,
+) -> Result<Calibration, CalibrateError> {
+    let started = Instant::now();
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
+    let (first, used) = used_samples(data, setup)?;
     if setup.parameters.is_empty() {
         return Err(CalibrateError::Setup("no parameter to calibrate".into()));
     }
@@ -666,25 +676,7 @@ pub fn fixed_log_evidence(
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
-    let first = data
-        .time
-        .iter()
-        .position(|&t| t - data.time[0] >= setup.transient)
-        .unwrap_or(data.len());
-    let used: Vec<usize> = (first..data.len())
-        .filter(|&k| {
-            setup
-                .mask
-                .as_ref()
-                .map_or(true, |m| m.get(k) == Some(&true))
-        })
-        .collect();
-    if used.len() < 10 {
-        return Err(CalibrateError::Setup(format!(
-            "the transient cut-off and the sample mask leave {} samples",
-            used.len()
-        )));
-    }
+    let (_, used) = used_samples(data, setup)?;
     let mut sim = Simulator::new(
         &fmu,
         component.parameters.clone(),
