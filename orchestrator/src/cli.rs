@@ -141,6 +141,14 @@ pub struct TrainArgs {
     /// Train on every n-th sample after the transient (a GP fit costs O(N³)).
     #[arg(long, default_value_t = 1)]
     pub stride: usize,
+    /// Choose the lags among these (e.g. 1,3,5,7,9,11) by the lowest total negative log
+    /// marginal likelihood of the three GPs, fitted on every `--selection-stride`-th sample;
+    /// overrides --lags.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    pub select_lags: Vec<usize>,
+    /// Every n-th sample for the lag selection's fits.
+    #[arg(long, default_value_t = 4)]
+    pub selection_stride: usize,
     /// JSON report of the training.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -560,12 +568,50 @@ pub fn train_command(args: &TrainArgs) -> Result<()> {
     if args.stride == 0 {
         bail!("--stride must be at least 1");
     }
-    let options = TrainOptions {
+    let mut options = TrainOptions {
         lags: args.lags,
         target,
         transient: args.transient,
         stride: args.stride,
     };
+    let mut selection = Vec::new();
+    if !args.select_lags.is_empty() {
+        if args
+            .select_lags
+            .iter()
+            .any(|&q| q == 0 || q > fmu_gp_corrector::training::MAX_LAGS)
+        {
+            bail!(
+                "--select-lags: each count must be in 1..={}, got {:?}",
+                fmu_gp_corrector::training::MAX_LAGS,
+                args.select_lags
+            );
+        }
+        if args.selection_stride == 0 {
+            bail!("--selection-stride must be at least 1");
+        }
+        selection = crate::train::select_lags(
+            &twin,
+            &data,
+            &args.select_lags,
+            &TrainOptions {
+                stride: args.selection_stride,
+                ..options.clone()
+            },
+        )?;
+        println!("lags   NLML (floors 1 / 2 / 3)                 total");
+        for s in &selection {
+            println!(
+                "{:>4}   {:>11.1} / {:>11.1} / {:>11.1}   {:>11.1}",
+                s.lags, s.nlml[0], s.nlml[1], s.nlml[2], s.total
+            );
+        }
+        options.lags = selection[0].lags;
+        println!(
+            "chosen: {} lags (lowest negative log marginal likelihood)",
+            options.lags
+        );
+    }
     let (trained, summary) = train(&twin, &data, &options)?;
     let nmse = nmse_on(&trained, &data, args.transient)?;
     trained.write(&args.out)?;
@@ -575,6 +621,7 @@ pub fn train_command(args: &TrainArgs) -> Result<()> {
             "data": data.path.display().to_string(),
             "out": args.out.display().to_string(),
             "training": summary,
+            "lag_selection": selection,
             "nmse": nmse,
         });
         write_atomically(path, |f| {

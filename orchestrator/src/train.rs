@@ -89,26 +89,15 @@ pub fn physics_only(twin: &Twin) -> Twin {
     out
 }
 
-/// Fit the corrector on `data` and return the twin with it.
-pub fn train(
-    twin: &Twin,
+/// The GP inputs (lags of `samples`) and targets after the transient, every `stride`-th sample,
+/// and the three GPs fitted on them.
+fn fit_floors(
     data: &Measurement,
+    samples: &[Sample],
+    physics: &[Vec<f64>; 3],
     options: &TrainOptions,
-) -> Result<(Twin, TrainSummary), TrainError> {
-    let started = std::time::Instant::now();
-    let physics = physics_only(twin);
-    let prediction = run_twin(&physics, data, |_, _| {})?;
-    let samples: Vec<Sample> = (0..data.len())
-        .map(|k| {
-            [
-                prediction.acc[0][k],
-                prediction.acc[1][k],
-                prediction.acc[2][k],
-                data.force[k],
-            ]
-        })
-        .collect();
-    let inputs = lagged_inputs(&samples, options.lags);
+) -> Result<Floors, TrainError> {
+    let inputs = lagged_inputs(samples, options.lags);
     let first = data
         .time
         .iter()
@@ -129,9 +118,7 @@ pub fn train(
         inputs: used.iter().map(|&k| inputs[k].clone()).collect(),
         targets: used
             .iter()
-            .map(|&k| {
-                [0, 1, 2].map(|f| options.target.target(data.acc[f][k], prediction.acc[f][k]))
-            })
+            .map(|&k| [0, 1, 2].map(|f| options.target.target(data.acc[f][k], physics[f][k])))
             .collect(),
         hyperparameters: None,
     };
@@ -141,8 +128,80 @@ pub fn train(
         target: options.target,
         ..Settings::default()
     };
-    let floors = Floors::from_training(&file, &settings)
-        .map_err(|e| TrainError::Setup(format!("fitting the GPs: {e}")))?;
+    Floors::from_training(&file, &settings)
+        .map_err(|e| TrainError::Setup(format!("fitting the GPs ({} lags): {e}", options.lags)))
+}
+
+/// One candidate lag count and the fit it gave.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LagScore {
+    pub lags: usize,
+    /// Negative log marginal likelihood per floor at the type-II ML hyperparameters.
+    pub nlml: [f64; 3],
+    pub total: f64,
+}
+
+/// Choose the number of lags as the reference paper did: fit the three GPs for each candidate
+/// `q` on the same samples and targets (only the inputs differ, so the marginal likelihoods are
+/// comparable) and take the lowest total negative log marginal likelihood. Returns the scores,
+/// best first.
+pub fn select_lags(
+    twin: &Twin,
+    data: &Measurement,
+    candidates: &[usize],
+    options: &TrainOptions,
+) -> Result<Vec<LagScore>, TrainError> {
+    if candidates.is_empty() {
+        return Err(TrainError::Setup("no lag count to choose from".into()));
+    }
+    let physics = physics_only(twin);
+    let prediction = run_twin(&physics, data, |_, _| {})?;
+    let samples = physics_samples(data, &prediction.acc);
+    // The same samples for every q: the transient cut at the largest q.
+    let largest = candidates.iter().copied().max().unwrap_or(1);
+    let mut scores = Vec::new();
+    for &q in candidates {
+        let floors = fit_floors(
+            data,
+            &samples,
+            &prediction.acc,
+            &TrainOptions {
+                lags: q,
+                transient: options.transient.max(largest as f64 * data.dt),
+                ..options.clone()
+            },
+        )?;
+        let nlml = [0, 1, 2].map(|f| match &floors.gps[f] {
+            fmu_gp_corrector::FloorGp::Trained(gp) => gp.negative_log_marginal_likelihood(),
+            fmu_gp_corrector::FloorGp::Prior(_) => f64::INFINITY,
+        });
+        scores.push(LagScore {
+            lags: q,
+            nlml,
+            total: nlml.iter().sum(),
+        });
+    }
+    scores.sort_by(|a, b| a.total.total_cmp(&b.total));
+    Ok(scores)
+}
+
+fn physics_samples(data: &Measurement, acc: &[Vec<f64>; 3]) -> Vec<Sample> {
+    (0..data.len())
+        .map(|k| [acc[0][k], acc[1][k], acc[2][k], data.force[k]])
+        .collect()
+}
+
+/// Fit the corrector on `data` and return the twin with it.
+pub fn train(
+    twin: &Twin,
+    data: &Measurement,
+    options: &TrainOptions,
+) -> Result<(Twin, TrainSummary), TrainError> {
+    let started = std::time::Instant::now();
+    let physics = physics_only(twin);
+    let prediction = run_twin(&physics, data, |_, _| {})?;
+    let samples = physics_samples(data, &prediction.acc);
+    let floors = fit_floors(data, &samples, &prediction.acc, options)?;
     let trained = floors.to_training_file(options.lags, options.target);
 
     let summary = TrainSummary {
