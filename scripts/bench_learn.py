@@ -8,15 +8,24 @@ same GP inputs (lags of the three physics accelerations and the force, channel b
 oldest first, the missing lags padded with the first sample), the same discrepancy targets
 (measured - physics), the same transient cut-off (2 s), the same initial set (first 75 points
 after it), the same default fixed threshold (1e-3 x each floor's measured variance on the first
-record, after the transient), the same refit schedule (every 25 queries, warm-started L-BFGS-B,
-at most 100 iterations) and the same NMSE after each query (means over the whole record).
+record, after the transient) and the same NMSE after each query (means over the whole record).
+
+The GP fits as ours do (numerics::gp::fit): NLML/N and its gradient in log-hyperparameters,
+L-BFGS-B in the same data-based box (log l_d in [log(1e-3 sd_d), log(1e3 sd_d sqrt(d))],
+sigma_f^2 in [1e-6 v, 1e3 v], sigma_n^2 in [1e-8 v, 10 v], v the targets' variance), the same
+stopping tests (projected gradient 1e-5, relative reduction 1e-9); the initial fit takes the
+best of three starts (the data-based one and two N(0, 1) perturbations of it in every log
+coordinate; ours draws them from its own seeded generator, so the perturbed starts differ);
+refits follow the same schedule (`twin learn`'s defaults: at least 25 queries and a third of
+the training set at the last fit since it, warm-started, at most 100 iterations up to 512 points,
+100 (512/n)^3 but at least 10 beyond).
 
 Differences, on purpose (it is the straightforward implementation): each query refactors
-K (O(n^3)) instead of appending a row to the Cholesky factor (O(n^2)); the initial fit is one
-L-BFGS-B run from the data-based start (ours: three starts); every point's latent variance is
-a fresh triangular solve. Timed: the learning loop only (not reading the files).
+K (O(n^3)) instead of appending a row to the Cholesky factor (O(n^2)); every point's latent
+variance is a fresh triangular solve. Timed: the learning loop only (not reading the files).
 
     bench_learn.py --data D1.csv D2.csv D3.csv --predictions P1.csv P2.csv P3.csv [--lags 9]
+                   [--refit-every 25] [--refit-growth 0.3333] [--refit-iterations 100]
                    [--json out.json]
 """
 import argparse
@@ -80,21 +89,50 @@ def nlml_grad(theta, x, y):
     return nll / n, g / n
 
 
+def target_scale(y):
+    v = y.var()
+    if v > 0 and np.isfinite(v):
+        return v
+    m2 = y.mean() ** 2
+    return m2 if m2 > 0 and np.isfinite(m2) else 1.0
+
+
+def feature_scales(x):
+    sd = x.std(0)
+    return np.where((sd > 0) & np.isfinite(sd), sd, 1.0)
+
+
+def box(x, y, noise_floor=1e-8):
+    """numerics::gp::Bounds::from_data."""
+    sd, v, dim = feature_scales(x), target_scale(y), x.shape[1]
+    lower = np.concatenate([np.log(1e-3 * sd), [np.log(1e-6 * v), np.log(noise_floor * v)]])
+    upper = np.concatenate([np.log(1e3 * sd * np.sqrt(dim)), [np.log(1e3 * v), np.log(10 * v)]])
+    return lower, upper
+
+
 def data_start(x, y):
     dim = x.shape[1]
-    sd = np.maximum(x.std(0), 1e-12)
-    v = max(y.var(), 1e-300)
-    return np.concatenate([np.log(sd * np.sqrt(dim)), [np.log(v), np.log(1e-2 * v)]])
+    v = target_scale(y)
+    return np.concatenate([np.log(feature_scales(x) * np.sqrt(dim)), [np.log(v), np.log(1e-2 * v)]])
 
 
-def fit(x, y, theta0, maxiter):
-    dim = x.shape[1]
-    v = max(y.var(), 1e-300)
-    bounds = [(-20, 20)] * dim + [(np.log(v) - 20, np.log(v) + 20), (np.log(1e-8 * v), np.log(v) + 20)]
-    theta0 = np.clip(theta0, [b[0] for b in bounds], [b[1] for b in bounds])
-    res = minimize(nlml_grad, theta0, args=(x, y), jac=True, method="L-BFGS-B", bounds=bounds,
-                   options={"maxiter": maxiter, "gtol": 1e-5, "ftol": 1e-9})
-    return res.x
+def fit(x, y, starts, maxiter):
+    """Best of L-BFGS-B runs from `starts` (clamped into the box)."""
+    lower, upper = box(x, y)
+    best = None
+    for theta0 in starts:
+        theta0 = np.clip(theta0, lower, upper)
+        res = minimize(nlml_grad, theta0, args=(x, y), jac=True, method="L-BFGS-B",
+                       bounds=list(zip(lower, upper)),
+                       options={"maxiter": maxiter, "gtol": 1e-5, "ftol": 1e-9})
+        if best is None or res.fun < best.fun:
+            best = res
+    return best.x
+
+
+def initial_starts(x, y, rng):
+    base = data_start(x, y)
+    return [base] + [base + rng.standard_normal(base.shape) for _ in range(2)]
 
 
 class Gp:
@@ -123,7 +161,14 @@ def nmse(y, p):
     return 100.0 * np.sum((y - p) ** 2) / (len(y) * y.var())
 
 
-def run(records, lags, transient, initial, refit_every):
+def iterations(most, points, full_until=512, fewest=10):
+    """`twin learn`'s refit_iterations: all up to `full_until` points, then the same work."""
+    if points <= full_until:
+        return most
+    return int(min(most, max(min(fewest, most), np.ceil(most * (full_until / points) ** 3))))
+
+
+def run(records, lags, transient, initial, refit_every, refit_growth, refit_iterations):
     streams = []
     for d, p in records:
         samples = np.column_stack([p["acc1"], p["acc2"], p["acc3"], d["force"]])
@@ -136,12 +181,13 @@ def run(records, lags, transient, initial, refit_every):
     threshold = 1e-3 * meas[first:].var(0)
     started = time.perf_counter()
     end = first + initial
+    rng = np.random.default_rng(0)
     gps = []
     for f in range(3):
         xs, ys = x[first:end], y[first:end, f]
-        gps.append(Gp(xs, ys, fit(xs, ys, data_start(xs, ys), 200)))
+        gps.append(Gp(xs, ys, fit(xs, ys, initial_starts(xs, ys, rng), 200)))
     out = []
-    since_refit = 0
+    since_refit, points_at_fit = 0, initial
     for r, (t, x, y, meas, phys, first) in enumerate(streams):
         start = end if r == 0 else first
         queries, curve = [], []
@@ -151,14 +197,16 @@ def run(records, lags, transient, initial, refit_every):
                 continue
             queries.append(float(t[k]))
             since_refit += 1
+            refit = (refit_every > 0 and since_refit >= refit_every
+                     and since_refit >= refit_growth * points_at_fit)
             for f, gp in enumerate(gps):
                 gp.x = np.vstack([gp.x, x[k]])
                 gp.y = np.append(gp.y, y[k, f])
-                if since_refit >= refit_every:
-                    gp.theta = fit(gp.x, gp.y, gp.theta, 100)
+                if refit:
+                    gp.theta = fit(gp.x, gp.y, [gp.theta], iterations(refit_iterations, len(gp.y)))
                 gp.factor()
-            if since_refit >= refit_every:
-                since_refit = 0
+            if refit:
+                since_refit, points_at_fit = 0, len(gps[0].y)
             curve.append([nmse(meas[first:, f], phys[first:, f] + gps[f].mean(x[first:])) for f in range(3)])
         final = [nmse(meas[first:, f], phys[first:, f] + gps[f].mean(x[first:])) for f in range(3)]
         out.append({"queries": len(queries), "query_times": queries, "final_nmse": final})
@@ -173,10 +221,13 @@ def main():
     ap.add_argument("--transient", type=float, default=2.0)
     ap.add_argument("--initial", type=int, default=75)
     ap.add_argument("--refit-every", type=int, default=25)
+    ap.add_argument("--refit-growth", type=float, default=1 / 3)
+    ap.add_argument("--refit-iterations", type=int, default=100)
     ap.add_argument("--json")
     a = ap.parse_args()
     records = [(read_csv(d), read_csv(p)) for d, p in zip(a.data, a.predictions)]
-    seconds, out = run(records, a.lags, a.transient, a.initial, a.refit_every)
+    seconds, out = run(records, a.lags, a.transient, a.initial, a.refit_every, a.refit_growth,
+                       a.refit_iterations)
     result = {"seconds": seconds, "records": out}
     print(json.dumps({"seconds": seconds, "queries": [r["queries"] for r in out],
                       "final_nmse": [[round(v, 3) for v in r["final_nmse"]] for r in out]}))

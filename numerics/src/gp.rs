@@ -13,7 +13,8 @@
 //! hyperparameters) → [`GaussianProcess::predict`] / [`GaussianProcess::predict_point`] →
 //! [`GaussianProcess::append`] / [`GaussianProcess::remove`] as the training set changes →
 //! [`GaussianProcess::refit`] (warm-started from the current hyperparameters) when the
-//! hyperparameters should follow. Every entry point validates its arguments before any linear
+//! hyperparameters should follow. [`TrackedPoints`] keeps latent variances and means at a fixed
+//! set of points in step with a changing model (`O(n m)` per append or removal). Every entry point validates its arguments before any linear
 //! algebra runs and answers bad input (NaN, mismatched lengths, no points) with a [`GpError`].
 //!
 //! Dense linear algebra runs on faer: at N = 1000 its blocked Cholesky and Cholesky-based
@@ -25,13 +26,15 @@ mod lbfgs;
 mod likelihood;
 mod model;
 mod synthetic;
+mod tracked;
 
 use serde::{Deserialize, Serialize};
 
 pub use fit::{Bounds, FitOptions, FitReport, StartOutcome};
 pub use likelihood::{negative_log_marginal_likelihood, nlml_with_gradient, LikelihoodGradient};
-pub use model::{GaussianProcess, PointPrediction, Predictions, BATCH_THRESHOLD};
+pub use model::{GaussianProcess, PendingAppend, PointPrediction, Predictions, BATCH_THRESHOLD};
 pub use synthetic::{benchmark_problem, BENCHMARK_NOISE_SD};
+pub use tracked::{TrackedPoints, Tracking};
 
 /// Everything that can go wrong; nothing in this module panics on user data.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -4,6 +4,15 @@
 //! The factor is kept as packed rows of the lower triangle (row `i` holds `L_i0..L_ii`), so that
 //! appending a point pushes one row without moving the others, the forward solve of a
 //! prediction reads each row contiguously, and removing a point compacts the rows in one pass.
+//!
+//! Every state of a model has a version, unique in the process (a clone shares it: same
+//! state), and the model keeps a short log of its last incremental changes: the new factor row
+//! of an append, the rotations of a removal. A [`super::TrackedPoints`] reads that log to follow
+//! the model in `O(n m)` per change instead of solving again in `O(n² m)`.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Mat, Par};
@@ -25,8 +34,90 @@ pub struct GaussianProcess {
     factor: Vec<f64>,
     /// `L⁻¹ y`, kept so that appending a point extends it by one entry.
     whitened: Vec<f64>,
-    /// `K⁻¹ y`.
-    alpha: Vec<f64>,
+    /// `K⁻¹ y`, solved on first use after a change (a learning loop that reads means through
+    /// [`super::TrackedPoints`] never needs it).
+    alpha: OnceLock<Vec<f64>>,
+    /// This state's version (see the module doc).
+    version: u64,
+    /// A second buffer for the factor, so that a removal writes the compacted, rotated rows in
+    /// one pass (not copied with the model).
+    spare: Spare,
+    /// The last incremental changes, oldest first, each from the version before the next
+    /// (the last one's from the version before the current).
+    log: VecDeque<LoggedChange>,
+}
+
+/// Scratch space that a clone does not copy.
+#[derive(Default)]
+struct Spare(Vec<f64>);
+
+impl Clone for Spare {
+    fn clone(&self) -> Self {
+        Spare(Vec::new())
+    }
+}
+
+impl std::fmt::Debug for Spare {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Spare({})", self.0.capacity())
+    }
+}
+
+/// Changes a model remembers: a learning step appends, and at the size limit also removes, so
+/// a follower that syncs after every step needs two; eight leave room.
+const CHANGE_LOG: usize = 8;
+
+/// A fresh version number.
+fn next_version() -> u64 {
+    static VERSIONS: AtomicU64 = AtomicU64::new(1);
+    VERSIONS.fetch_add(1, Ordering::Relaxed)
+}
+
+/// One incremental change of a model, as a follower needs it.
+#[derive(Clone, Debug)]
+pub(crate) enum Change {
+    /// A point `x` appended: the new factor row is `[wᵀ, d]` and `whitened` the new entry of
+    /// `L⁻¹ y`.
+    Appended {
+        x: Vec<f64>,
+        w: Vec<f64>,
+        d: f64,
+        whitened: f64,
+    },
+    /// Point `index` removed: the rows of `L` below it were rotated with `rotations`
+    /// (cos, sin), in order, against the removed column (see [`GaussianProcess::remove`]);
+    /// `leftover` is what the rotations left of the removed entry of `L⁻¹y`.
+    Removed {
+        index: usize,
+        rotations: Vec<(f64, f64)>,
+        leftover: f64,
+    },
+}
+
+#[derive(Clone, Debug)]
+pub(crate) struct LoggedChange {
+    pub(crate) from: u64,
+    pub(crate) change: Change,
+}
+
+/// An append computed but not yet made: [`GaussianProcess::plan_append`] does the fallible
+/// `O(n²)` work on a shared reference, [`GaussianProcess::commit`] applies it, so that several
+/// models can be updated all or none.
+#[derive(Clone, Debug)]
+pub struct PendingAppend {
+    /// The version the plan was made from.
+    from: u64,
+    x: Vec<f64>,
+    y: f64,
+    kind: PendingKind,
+}
+
+#[derive(Clone, Debug)]
+enum PendingKind {
+    /// The new factor row `[wᵀ, d]` and the new entry of `L⁻¹ y`.
+    Row { w: Vec<f64>, d: f64, whitened: f64 },
+    /// The whole model refactored with jitter (the new pivot was rounding noise).
+    Rebuilt(Box<GaussianProcess>),
 }
 
 /// Mean and variances at one point.
@@ -81,10 +172,12 @@ impl GaussianProcess {
             jitter,
             factor,
             whitened: Vec::new(),
-            alpha: Vec::new(),
+            alpha: OnceLock::new(),
+            version: next_version(),
+            spare: Spare::default(),
+            log: VecDeque::new(),
         };
         model.whitened = model.forward_solve(&model.targets);
-        model.alpha = model.backward_solve(&model.whitened);
         Ok(model)
     }
 
@@ -121,7 +214,8 @@ impl GaussianProcess {
 
     /// `K⁻¹ y` (`K` with noise and jitter).
     pub fn alpha(&self) -> &[f64] {
-        &self.alpha
+        self.alpha
+            .get_or_init(|| self.backward_solve(&self.whitened))
     }
 
     /// Eq. (12) at the model's hyperparameters, from the factor it holds (`O(n)`).
@@ -138,7 +232,7 @@ impl GaussianProcess {
         check_len("test point", self.dim(), x.len())?;
         check_finite("test point", x)?;
         let k_star = self.cross_covariance(x);
-        let mean = dot(&k_star, &self.alpha);
+        let mean = dot(&k_star, self.alpha());
         let v = self.forward_solve(&k_star);
         let explained = dot(&v, &v);
         let latent_variance = (self.hyper.signal_variance() - explained).max(0.0);
@@ -171,21 +265,13 @@ impl GaussianProcess {
             return Ok(out);
         }
         let n = self.len();
-        let mut factor = Mat::zeros(n, n);
-        for i in 0..n {
-            for (j, l) in self.factor[row_start(i)..row_start(i) + i + 1]
-                .iter()
-                .enumerate()
-            {
-                factor[(i, j)] = *l;
-            }
-        }
+        let factor = self.dense_factor();
         // Column j: k(x_i, x*_j) for every training point i, then L⁻¹ of it.
         let mut v = Mat::zeros(n, m);
         let mut mean = Vec::with_capacity(m);
         for (j, x) in points.rows().enumerate() {
             let k_star = self.cross_covariance(x);
-            mean.push(dot(&k_star, &self.alpha));
+            mean.push(dot(&k_star, self.alpha()));
             v.col_as_slice_mut(j).copy_from_slice(&k_star);
         }
         solve_lower_triangular_in_place(factor.as_ref(), v.as_mut(), Par::Seq);
@@ -212,6 +298,14 @@ impl GaussianProcess {
     /// the whole factor is recomputed with jitter instead (`O(n³)`, seen in
     /// [`GaussianProcess::jitter`]).
     pub fn append(&mut self, x: &[f64], y: f64) -> Result<(), GpError> {
+        let plan = self.plan_append(x, y)?;
+        self.commit(plan)
+    }
+
+    /// The work of [`GaussianProcess::append`] without changing the model: checks the point and
+    /// computes the new factor row (or, on the jitter path, the refactored model). Everything
+    /// that can fail happens here.
+    pub fn plan_append(&self, x: &[f64], y: f64) -> Result<PendingAppend, GpError> {
         check_len("new point", self.dim(), x.len())?;
         check_finite("new point", x)?;
         check_finite("new target", &[y])?;
@@ -222,24 +316,82 @@ impl GaussianProcess {
         let schur = diagonal - dot(&w, &w);
         // The same test as `factorise` applies to a new pivot (mean diagonal = `diagonal`).
         let smallest_pivot = (n + 1) as f64 * f64::EPSILON * diagonal;
-        if schur > smallest_pivot && schur.is_finite() {
+        let kind = if schur > smallest_pivot && schur.is_finite() {
             let d = schur.sqrt();
-            let projected = dot(&w, &self.whitened);
-            self.inputs.push(x);
-            self.targets.push(y);
-            self.factor.extend_from_slice(&w);
-            self.factor.push(d);
-            self.whitened.push((y - projected) / d);
-            self.alpha = self.backward_solve(&self.whitened);
+            let whitened = (y - dot(&w, &self.whitened)) / d;
+            PendingKind::Row { w, d, whitened }
         } else {
-            // Built aside, so that a failure leaves the model as it was.
             let mut inputs = self.inputs.clone();
             inputs.push(x);
             let mut targets = self.targets.clone();
             targets.push(y);
-            *self = Self::with_first_jitter(inputs, targets, self.hyper.clone(), self.jitter)?;
+            PendingKind::Rebuilt(Box::new(Self::with_first_jitter(
+                inputs,
+                targets,
+                self.hyper.clone(),
+                self.jitter,
+            )?))
+        };
+        Ok(PendingAppend {
+            from: self.version,
+            x: x.to_vec(),
+            y,
+            kind,
+        })
+    }
+
+    /// Applies a plan of [`GaussianProcess::plan_append`]: `O(n²)` for the new `α`, and
+    /// infallible when the model has not changed since the plan. A plan made from another state
+    /// is not applied: the point is appended afresh (which can fail as `append` can).
+    pub fn commit(&mut self, plan: PendingAppend) -> Result<(), GpError> {
+        if plan.from != self.version {
+            return self.append(&plan.x, plan.y);
+        }
+        match plan.kind {
+            PendingKind::Row { w, d, whitened } => {
+                self.inputs.push(&plan.x);
+                self.targets.push(plan.y);
+                self.factor.extend_from_slice(&w);
+                self.factor.push(d);
+                self.whitened.push(whitened);
+                self.alpha = OnceLock::new();
+                self.record(Change::Appended {
+                    x: plan.x,
+                    w,
+                    d,
+                    whitened,
+                });
+            }
+            PendingKind::Rebuilt(model) => *self = *model,
         }
         Ok(())
+    }
+
+    /// A new version, reached from the current one by `change`.
+    fn record(&mut self, change: Change) {
+        let to = next_version();
+        if self.log.len() == CHANGE_LOG {
+            self.log.pop_front();
+        }
+        self.log.push_back(LoggedChange {
+            from: self.version,
+            change,
+        });
+        self.version = to;
+    }
+
+    /// This state's version (see the module doc).
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// The logged changes from `version` to the current one, if the log reaches back to it.
+    pub(crate) fn changes_since(
+        &self,
+        version: u64,
+    ) -> Option<impl Iterator<Item = &LoggedChange>> {
+        let start = self.log.iter().position(|c| c.from == version)?;
+        Some(self.log.iter().skip(start))
     }
 
     /// Removes training point `index` (for forgetting) in `O(n²)` at fixed hyperparameters.
@@ -247,8 +399,11 @@ impl GaussianProcess {
     /// Deleting row and column `k` of `K` leaves the rows of `L` above `k` as they are; the
     /// trailing block must satisfy `L₂₂' L₂₂'ᵀ = L₂₂ L₂₂ᵀ + l l ᵀ` with `l` the removed column
     /// below the diagonal, a rank-one *update* (never a downdate, so it cannot lose
-    /// definiteness), done with Givens-like rotations in `O((n − k)²)`. `L⁻¹y` and `α` are then
-    /// solved again (`O(n²)`).
+    /// definiteness), done with Givens rotations in `O((n − k)²)`: `[L₂₂ | l] Q = [L₂₂' | 0]`.
+    /// The same rotations take `L⁻¹y` along (`O(n)`): its trailing part becomes the first
+    /// entries of `Qᵀ [(L⁻¹y)₂; (L⁻¹y)_k]`. The rows are read once and written once, compacted
+    /// and rotated, into a second buffer kept for the purpose (with room for the next append),
+    /// and `α` is solved again when next needed.
     pub fn remove(&mut self, index: usize) -> Result<(), GpError> {
         let n = self.len();
         if index >= n {
@@ -257,47 +412,49 @@ impl GaussianProcess {
         if n == 1 {
             return Err(GpError::LastPoint);
         }
-        // The removed column below the diagonal.
-        let mut update: Vec<f64> = (index + 1..n)
-            .map(|i| self.factor[row_start(i) + index])
-            .collect();
-        // Compact the packed rows: drop row `index` and entry `index` of every later row.
-        let mut packed = Vec::with_capacity(row_start(n - 1));
-        packed.extend_from_slice(&self.factor[..row_start(index)]);
-        for i in index + 1..n {
-            let row = &self.factor[row_start(i)..row_start(i) + i + 1];
-            packed.extend_from_slice(&row[..index]);
-            packed.extend_from_slice(&row[index + 1..]);
+        let mut out = std::mem::take(&mut self.spare.0);
+        let rotations = remove_and_rotate(&self.factor, n, index, &mut out);
+        self.spare.0 = std::mem::replace(&mut self.factor, out);
+        // L⁻¹y: rows above `index` keep their entries; the rest rotate against the removed one.
+        let mut leftover = self.whitened.remove(index);
+        for (v, (c, s)) in self.whitened[index..].iter_mut().zip(&rotations) {
+            let (a, b) = (*v, leftover);
+            *v = c * a + s * b;
+            leftover = c * b - s * a;
         }
-        // Rank-one update of the trailing block, row by row: row `a` of the block applies the
-        // rotations of the columns before it, then makes its own from its diagonal entry.
-        // Each rotation is (c, s, 1/c), so that the chain through `xi` holds no division.
-        let m = n - 1 - index;
-        let mut rotations: Vec<(f64, f64, f64)> = Vec::with_capacity(m);
-        for (a, x) in update.iter_mut().enumerate() {
-            let i = index + a;
-            let row = &mut packed[row_start(i)..row_start(i) + i + 1];
-            let mut xi = *x;
-            for (l, (c, s, inv_c)) in row[index..index + a].iter_mut().zip(&rotations) {
-                let updated = (*l + s * xi) * inv_c;
-                xi = c * xi - s * updated;
-                *l = updated;
-            }
-            let diag = row[i];
-            let r = diag.hypot(xi);
-            rotations.push((r / diag, xi / diag, diag / r));
-            row[i] = r;
-        }
-        self.factor = packed;
         self.inputs.remove(index);
         self.targets.remove(index);
-        self.whitened = self.forward_solve(&self.targets);
-        self.alpha = self.backward_solve(&self.whitened);
+        self.alpha = OnceLock::new();
+        self.record(Change::Removed {
+            index,
+            rotations,
+            leftover,
+        });
         Ok(())
     }
 
+    /// `L⁻¹ y`.
+    pub(crate) fn whitened(&self) -> &[f64] {
+        &self.whitened
+    }
+
+    /// The factor as a dense lower-triangular faer matrix (`O(n²)`).
+    pub(crate) fn dense_factor(&self) -> Mat<f64> {
+        let n = self.len();
+        let mut factor = Mat::zeros(n, n);
+        for i in 0..n {
+            for (j, l) in self.factor[row_start(i)..row_start(i) + i + 1]
+                .iter()
+                .enumerate()
+            {
+                factor[(i, j)] = *l;
+            }
+        }
+        factor
+    }
+
     /// `k(x, x_i)` for every training point.
-    fn cross_covariance(&self, x: &[f64]) -> Vec<f64> {
+    pub(crate) fn cross_covariance(&self, x: &[f64]) -> Vec<f64> {
         let inv_l = self.hyper.inverse_lengthscales();
         let signal_variance = self.hyper.signal_variance();
         self.inputs
@@ -307,7 +464,7 @@ impl GaussianProcess {
     }
 
     /// `L⁻¹ b` (rows of the packed factor are contiguous).
-    fn forward_solve(&self, b: &[f64]) -> Vec<f64> {
+    pub(crate) fn forward_solve(&self, b: &[f64]) -> Vec<f64> {
         let mut x = Vec::with_capacity(b.len());
         for (i, bi) in b.iter().enumerate() {
             let row = &self.factor[row_start(i)..row_start(i) + i + 1];
@@ -329,6 +486,91 @@ impl GaussianProcess {
         }
         x
     }
+}
+
+/// Packed factor `src` (`n` rows) without row and column `index`, the rows below rotated
+/// (the rank-one update of [`GaussianProcess::remove`]), written to `out`; returns the
+/// rotations (cos, sin) in order. Rotation `a` combines column `a` of the trailing block with
+/// what is left of the removed column, `(cos, sin) = (L_aa, x_a) / r`, `L_aa ← r`.
+///
+/// Each entry of a row goes through the rotations of the columns before it, a chain of
+/// dependent operations; four rows go through the shared columns together, so that four
+/// independent chains keep the floating-point units busy. One pass over the factor.
+fn remove_and_rotate(src: &[f64], n: usize, index: usize, out: &mut Vec<f64>) -> Vec<(f64, f64)> {
+    out.clear();
+    out.reserve(row_start(n));
+    out.extend_from_slice(&src[..row_start(index)]);
+    out.resize(row_start(n - 1), 0.0);
+    let m = n - 1 - index;
+    let mut rotations: Vec<(f64, f64)> = Vec::with_capacity(m);
+    // New row index + a is old row index + 1 + a.
+    let old = |a: usize| row_start(index + 1 + a);
+    let new = |a: usize| row_start(index + a);
+    let mut a = 0;
+    while a < m {
+        let group = 4.min(m - a);
+        let mut xi = [0.0f64; 4];
+        for (g, x) in xi.iter_mut().enumerate().take(group) {
+            let (o, w) = (old(a + g), new(a + g));
+            out[w..w + index].copy_from_slice(&src[o..o + index]);
+            *x = src[o + index];
+        }
+        // The columns before the group's first row, shared by the whole group.
+        if group == 4 {
+            let o = [0, 1, 2, 3].map(|g| old(a + g) + index + 1);
+            let (s0, s1, s2, s3) = (
+                &src[o[0]..o[0] + a],
+                &src[o[1]..o[1] + a],
+                &src[o[2]..o[2] + a],
+                &src[o[3]..o[3] + a],
+            );
+            // The group's new rows are consecutive: split them off one after the other.
+            let block = &mut out[new(a) + index..];
+            let (d0, rest) = block.split_at_mut(a + index + 1);
+            let (d1, rest) = rest.split_at_mut(a + index + 2);
+            let (d2, rest) = rest.split_at_mut(a + index + 3);
+            let (d0, d1, d2, d3) = (&mut d0[..a], &mut d1[..a], &mut d2[..a], &mut rest[..a]);
+            let [mut x0, mut x1, mut x2, mut x3] = xi;
+            for (col, (c, s)) in rotations.iter().enumerate() {
+                let (l0, l1, l2, l3) = (s0[col], s1[col], s2[col], s3[col]);
+                d0[col] = c * l0 + s * x0;
+                d1[col] = c * l1 + s * x1;
+                d2[col] = c * l2 + s * x2;
+                d3[col] = c * l3 + s * x3;
+                x0 = c * x0 - s * l0;
+                x1 = c * x1 - s * l1;
+                x2 = c * x2 - s * l2;
+                x3 = c * x3 - s * l3;
+            }
+            xi = [x0, x1, x2, x3];
+        } else {
+            for (col, (c, s)) in rotations.iter().enumerate() {
+                for g in 0..group {
+                    let l = src[old(a + g) + index + 1 + col];
+                    out[new(a + g) + index + col] = c * l + s * xi[g];
+                    xi[g] = c * xi[g] - s * l;
+                }
+            }
+        }
+        // Within the group, one row after the other: row g takes the rotations of the rows
+        // before it in the group, then makes its own from its diagonal.
+        for g in 0..group {
+            let (o, w) = (old(a + g), new(a + g));
+            let mut x = xi[g];
+            for col in a..a + g {
+                let (c, s) = rotations[col];
+                let l = src[o + index + 1 + col];
+                out[w + index + col] = c * l + s * x;
+                x = c * x - s * l;
+            }
+            let diag = src[o + index + 1 + a + g];
+            let r = diag.hypot(x);
+            rotations.push((diag / r, x / r));
+            out[w + index + a + g] = r;
+        }
+        a += group;
+    }
+    rotations
 }
 
 /// The lower triangle of a column-major faer matrix as packed rows.

@@ -342,6 +342,8 @@ fn serialisation_round_trip_gives_identical_predictions() {
 fn models_can_move_between_threads() {
     fn send_sync<T: Send + Sync>() {}
     send_sync::<GaussianProcess>();
+    send_sync::<TrackedPoints>();
+    send_sync::<PendingAppend>();
     send_sync::<Inputs>();
     send_sync::<FitReport>();
 }
@@ -444,4 +446,186 @@ fn bad_input_is_an_error_not_a_panic() {
             "accepted {json}"
         );
     }
+}
+
+/// Largest gap between tracked values and fresh predictions: variances relative to σ_f², means
+/// relative to the targets' largest magnitude.
+fn tracking_gap(tracked: &TrackedPoints, model: &GaussianProcess) -> f64 {
+    let fresh = model.predict(tracked.points()).expect("prediction");
+    let var_scale = model.hyperparameters().signal_variance();
+    let mean_scale = model.targets().iter().fold(0.0f64, |m, y| m.max(y.abs()));
+    let latent = tracked.latent_variances();
+    (0..tracked.len()).fold(0.0f64, |gap, j| {
+        gap.max((latent[j] - fresh.latent_variance[j]).abs() / var_scale)
+            .max((tracked.means()[j] - fresh.mean[j]).abs() / mean_scale)
+    })
+}
+
+/// Appends, removals at the front, middle and end, several changes between syncs, a
+/// refactorisation with jitter and a refit: the tracked values follow the model to rounding,
+/// incrementally while the change log reaches, by solving again otherwise.
+#[test]
+fn tracked_points_follow_appends_removals_and_refits() {
+    let (inputs, targets) = synthetic(21, 160, 3, 0.1, smooth);
+    let h = hyper(&[0.9, 1.1, 3.0], 0.7, 0.02);
+    let first = 40;
+    let head =
+        Inputs::from_row_major(3, inputs.as_row_major()[..first * 3].to_vec()).expect("rows");
+    let mut model =
+        GaussianProcess::new(head, targets[..first].to_vec(), h.clone()).expect("model");
+    // Beyond BLOCK points, so that the rebuild solves in several blocks.
+    let points = test_points(22, 300, 3);
+    let mut tracked = TrackedPoints::new(&model, points).expect("tracked");
+    assert_eq!(tracked.rebuilds(), 1);
+    assert!(tracking_gap(&tracked, &model) < 1e-12);
+    for (i, y) in targets.iter().enumerate().skip(first) {
+        model.append(inputs.row(i), *y).expect("append");
+        match i % 4 {
+            // A learning step at the size limit: append, then drop the oldest.
+            0 => model.remove(0).expect("remove"),
+            1 => model.remove(model.len() / 2).expect("remove"),
+            2 if i % 8 == 2 => model.remove(model.len() - 1).expect("remove"),
+            _ => {}
+        }
+        // Sync after every step, or every third step (several changes at once).
+        if i % 3 != 1 {
+            assert_eq!(tracked.sync(&model).expect("sync"), Tracking::Updated);
+            let gap = tracking_gap(&tracked, &model);
+            assert!(gap < 1e-10, "step {i}: tracked values differ by {gap:e}");
+        }
+    }
+    assert_eq!(tracked.rebuilds(), 1, "the log covered every step");
+    assert_eq!(tracked.sync(&model).expect("sync"), Tracking::Current);
+    // The model itself after all those steps: as if factored from scratch.
+    let scratch = GaussianProcess::new(model.inputs().clone(), model.targets().to_vec(), h.clone())
+        .expect("model");
+    let gap = prediction_gap(&model, &scratch, tracked.points());
+    assert!(
+        gap < 1e-10,
+        "appends and removals differ from a refactor by {gap:e}"
+    );
+
+    // More changes than the log holds: solved again.
+    for i in 0..20 {
+        model
+            .append(&[0.01 * i as f64, -0.5, 0.3], 0.1)
+            .expect("append");
+    }
+    assert_eq!(tracked.sync(&model).expect("sync"), Tracking::Rebuilt);
+    assert!(tracking_gap(&tracked, &model) < 1e-12);
+
+    // New hyperparameters: solved again.
+    model
+        .refit(&FitOptions {
+            starts: 1,
+            max_iterations: 5,
+            ..FitOptions::default()
+        })
+        .expect("refit");
+    assert_eq!(tracked.sync(&model).expect("sync"), Tracking::Rebuilt);
+    assert!(tracking_gap(&tracked, &model) < 1e-12);
+
+    // A duplicate with almost no noise takes the jitter path (a refactorisation): solved again.
+    let rows = [[0.0, 1.0, 0.5], [0.5, -0.3, 0.2]];
+    let mut tiny = GaussianProcess::new(
+        Inputs::from_rows(&rows).expect("rows"),
+        vec![0.3, -0.1],
+        hyper(&[0.7, 0.9, 1.0], 1.0, 1e-100),
+    )
+    .expect("model");
+    let mut near = TrackedPoints::new(&tiny, test_points(23, 10, 3)).expect("tracked");
+    tiny.append(&rows[0], 0.3).expect("append duplicate");
+    assert!(tiny.jitter() > 0.0);
+    assert_eq!(near.sync(&tiny).expect("sync"), Tracking::Rebuilt);
+    assert!(tracking_gap(&near, &tiny) < 1e-9);
+
+    // Another model's state is not mistaken for this one's.
+    let other = GaussianProcess::new(
+        Inputs::from_rows(&[[0.0, 0.0, 0.0]]).expect("rows"),
+        vec![1.0],
+        h,
+    )
+    .expect("model");
+    assert_eq!(tracked.sync(&other).expect("sync"), Tracking::Rebuilt);
+    assert!(tracking_gap(&tracked, &other) < 1e-12);
+    assert!(tracked.sync(&tiny).is_ok());
+    let wrong = GaussianProcess::new(
+        Inputs::from_rows(&[[0.0, 0.0]]).expect("rows"),
+        vec![1.0],
+        hyper(&[1.0, 1.0], 1.0, 0.1),
+    )
+    .expect("model");
+    assert!(tracked.sync(&wrong).is_err());
+    assert!(TrackedPoints::new(&wrong, test_points(24, 3, 3)).is_err());
+}
+
+/// Plans for several models, then commits: the same as appending; a plan made from another
+/// state is appended afresh; a refused plan changes nothing.
+#[test]
+fn planned_appends_commit_like_appends() {
+    let (inputs, targets) = synthetic(25, 31, 3, 0.1, smooth);
+    let h = hyper(&[0.9, 1.1, 3.0], 0.7, 0.02);
+    let head = Inputs::from_row_major(3, inputs.as_row_major()[..30 * 3].to_vec()).expect("rows");
+    let base = GaussianProcess::new(head, targets[..30].to_vec(), h).expect("model");
+    let mut appended = base.clone();
+    appended
+        .append(inputs.row(30), targets[30])
+        .expect("append");
+    let mut planned = base.clone();
+    let plan = planned
+        .plan_append(inputs.row(30), targets[30])
+        .expect("plan");
+    assert_eq!(planned.len(), 30, "planning changes nothing");
+    planned.commit(plan.clone()).expect("commit");
+    let points = test_points(26, 20, 3);
+    assert_eq!(
+        appended.predict(&points).expect("prediction"),
+        planned.predict(&points).expect("prediction")
+    );
+    // Stale: the model moved on since the plan.
+    let mut moved = base.clone();
+    moved.remove(0).expect("remove");
+    moved.commit(plan).expect("commit afresh");
+    assert_eq!(moved.len(), 30);
+    assert_eq!(moved.inputs().row(29), inputs.row(30));
+    assert!(base.plan_append(&[0.0, f64::NAN, 0.0], 1.0).is_err());
+}
+
+/// Points added to a tracked set, one at a time or as a block, after the model moved on: the
+/// same values as tracking them from the start.
+#[test]
+fn tracked_points_can_be_extended() {
+    let (inputs, targets) = synthetic(27, 60, 3, 0.1, smooth);
+    let h = hyper(&[0.9, 1.1, 3.0], 0.7, 0.02);
+    let head = Inputs::from_row_major(3, inputs.as_row_major()[..40 * 3].to_vec()).expect("rows");
+    let mut model = GaussianProcess::new(head, targets[..40].to_vec(), h).expect("model");
+    let none = Inputs::from_row_major(3, Vec::new()).expect("no points");
+    let mut tracked = TrackedPoints::new(&model, none).expect("tracked");
+    assert!(tracked.is_empty());
+    let few = test_points(28, 3, 3);
+    let many = test_points(29, 40, 3);
+    for (i, y) in targets.iter().enumerate().take(50).skip(40) {
+        model.append(inputs.row(i), *y).expect("append");
+    }
+    model.remove(0).expect("remove");
+    // The model changed more than the log holds: extending solves again first.
+    assert_eq!(
+        tracked.extend(&model, &few).expect("extend"),
+        Tracking::Rebuilt
+    );
+    assert_eq!(tracked.len(), 3);
+    assert!(tracking_gap(&tracked, &model) < 1e-12);
+    for (i, y) in targets.iter().enumerate().take(55).skip(50) {
+        model.append(inputs.row(i), *y).expect("append");
+        assert_eq!(tracked.sync(&model).expect("sync"), Tracking::Updated);
+    }
+    model.append(inputs.row(55), targets[55]).expect("append");
+    assert_eq!(
+        tracked.extend(&model, &many).expect("extend"),
+        Tracking::Updated
+    );
+    assert_eq!(tracked.len(), 43);
+    assert!(tracking_gap(&tracked, &model) < 1e-10);
+    let wrong = Inputs::from_rows(&[[0.0, 1.0]]).expect("rows");
+    assert!(tracked.extend(&model, &wrong).is_err());
 }
