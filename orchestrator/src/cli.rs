@@ -72,8 +72,8 @@ pub struct CompareArgs {
     /// Threshold line of the latent-variance view (`<plot>-latent.svg`, drawn when the twin has
     /// a corrector), (m/s²)², every floor. Default: each floor's sensor-noise variance from the
     /// twin's calibration — above it the GP is less sure of the bias than a single measurement
-    /// is, so the point would be worth learning; for an uncalibrated twin, `twin learn`'s
-    /// fixed threshold, 1e-3 × each floor's measured variance on this record.
+    /// is, so the point would be worth learning; for an uncalibrated twin, 1e-3 × each floor's
+    /// measured variance on this record.
     #[arg(long)]
     pub latent_threshold: Option<f64>,
     /// Seconds at the start left out of the error measures.
