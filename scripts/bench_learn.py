@@ -157,6 +157,16 @@ class Gp:
         return kernel(xs, self.x, self.ls, self.sf2) @ self.alpha
 
 
+def describe(gps, record, query, end_of_record):
+    """A refit as `twin learn` reports it: NLML (not divided by N), sigma_f^2, sigma_n^2."""
+    dim = gps[0].x.shape[1]
+    return {"record": record, "query": query, "end_of_record": end_of_record,
+            "training_points": len(gps[0].y),
+            "nlml_after": [len(gp.y) * nlml_grad(gp.theta, gp.x, gp.y)[0] for gp in gps],
+            "signal_variance": [float(np.exp(gp.theta[dim])) for gp in gps],
+            "noise_variance": [float(np.exp(gp.theta[dim + 1])) for gp in gps]}
+
+
 def nmse(y, p):
     return 100.0 * np.sum((y - p) ** 2) / (len(y) * y.var())
 
@@ -188,6 +198,7 @@ def run(records, lags, transient, initial, refit_every, refit_growth, refit_iter
         gps.append(Gp(xs, ys, fit(xs, ys, initial_starts(xs, ys, rng), 200)))
     out = []
     since_refit, points_at_fit = 0, initial
+    refits = []
     for r, (t, x, y, meas, phys, first) in enumerate(streams):
         start = end if r == 0 else first
         queries, curve = [], []
@@ -207,10 +218,18 @@ def run(records, lags, transient, initial, refit_every, refit_growth, refit_iter
                 gp.factor()
             if refit:
                 since_refit, points_at_fit = 0, len(gps[0].y)
+                refits.append(describe(gps, r, len(queries), False))
             curve.append([nmse(meas[first:, f], phys[first:, f] + gps[f].mean(x[first:])) for f in range(3)])
+        if refit_every > 0 and since_refit > 0:
+            # As `twin learn`: the record's final GPs refitted to all that was learned in it.
+            for gp in gps:
+                gp.theta = fit(gp.x, gp.y, [gp.theta], iterations(refit_iterations, len(gp.y)))
+                gp.factor()
+            since_refit, points_at_fit = 0, len(gps[0].y)
+            refits.append(describe(gps, r, len(queries), True))
         final = [nmse(meas[first:, f], phys[first:, f] + gps[f].mean(x[first:])) for f in range(3)]
         out.append({"queries": len(queries), "query_times": queries, "final_nmse": final})
-    return time.perf_counter() - started, out
+    return time.perf_counter() - started, out, refits
 
 
 def main():
@@ -226,9 +245,9 @@ def main():
     ap.add_argument("--json")
     a = ap.parse_args()
     records = [(read_csv(d), read_csv(p)) for d, p in zip(a.data, a.predictions)]
-    seconds, out = run(records, a.lags, a.transient, a.initial, a.refit_every, a.refit_growth,
-                       a.refit_iterations)
-    result = {"seconds": seconds, "records": out}
+    seconds, out, refits = run(records, a.lags, a.transient, a.initial, a.refit_every,
+                               a.refit_growth, a.refit_iterations)
+    result = {"seconds": seconds, "records": out, "refits": refits}
     print(json.dumps({"seconds": seconds, "queries": [r["queries"] for r in out],
                       "final_nmse": [[round(v, 3) for v in r["final_nmse"]] for r in out]}))
     if a.json:
