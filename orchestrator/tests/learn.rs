@@ -13,8 +13,8 @@ use std::sync::OnceLock;
 use fmu_gp_corrector::TargetForm;
 use orchestrator::data::Measurement;
 use orchestrator::learn::{
-    change_flags, corrected, initial_floors, prepare, refit_iterations, run_modes, LearnOptions,
-    Mode, ModeResult, RefitSchedule, Supervisor,
+    change_flags, corrected, fixed_threshold, initial_floors, prepare, refit_iterations, run_modes,
+    LearnOptions, Mode, ModeResult, RefitSchedule, Supervisor,
 };
 use orchestrator::master::Block;
 use orchestrator::twin::Twin;
@@ -203,6 +203,41 @@ fn in_the_discrepancy_form_the_fixed_threshold_is_relative_and_learns_the_contac
             d3.nmse_physics[f]
         );
     }
+}
+
+#[test]
+fn with_one_record_the_reference_gp_learns_its_first_half_and_is_tested_on_what_follows() {
+    let twin = Twin::load(Some(calibrated())).expect("calibrated twin");
+    let options = LearnOptions {
+        target: TargetForm::Measured,
+        lags: 3,
+        ..LearnOptions::default()
+    };
+    let streams = prepare(&twin, &records()[..1], &options).expect("physics runs");
+    let rule = fixed_threshold(&streams, &options).expect("a threshold");
+    assert_eq!(rule.rule, "reference GP");
+    let (trained, tested) = (
+        rule.trained_on.as_ref().expect("trained"),
+        rule.tested_on.as_ref().expect("tested"),
+    );
+    assert!(trained.record.ends_with("dataset1.csv") && tested.record == trained.record);
+    // The first half after the transient (2–11 s), every 2nd sample; the 100 samples after it.
+    assert!(trained.from >= 2.0 && trained.to < tested.from, "{rule:?}");
+    assert!((9.0..13.0).contains(&tested.from), "{rule:?}");
+    assert_eq!(tested.points, 100);
+    assert!((200..=240).contains(&trained.points), "{rule:?}");
+    assert!(
+        rule.values.iter().all(|v| *v > 0.0 && v.is_finite()),
+        "{rule:?}"
+    );
+
+    let given = LearnOptions {
+        threshold: Some(2e-6),
+        ..options
+    };
+    let rule = fixed_threshold(&streams, &given).expect("given");
+    assert_eq!((rule.rule.as_str(), rule.values), ("given", [2e-6; 3]));
+    assert!(rule.trained_on.is_none());
 }
 
 #[test]
