@@ -416,8 +416,8 @@ impl Floors {
 /// same either way.
 const PARALLEL_LEARNING: usize = 1024;
 
-/// Run `work` for floors 0, 1, 2 in three threads.
-fn per_floor<T: Send>(work: impl Fn(usize) -> T + Sync) -> [T; 3] {
+/// Run `work` for floors 0, 1, 2 in three threads (a panic in one is resumed in the caller).
+pub fn per_floor<T: Send>(work: impl Fn(usize) -> T + Sync) -> [T; 3] {
     std::thread::scope(|scope| {
         let work = &work;
         let h1 = scope.spawn(move || work(1));

@@ -104,7 +104,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use fmu_gp_corrector::model::{FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking};
+use fmu_gp_corrector::model::{
+    per_floor, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
+};
 use fmu_gp_corrector::{
     lagged_inputs, FloorGp, Floors, Sample, Settings, TargetForm, TrainingFile,
 };
@@ -446,22 +448,12 @@ pub fn reference_threshold(streams: &[Stream], options: &LearnOptions) -> Result
             first.name
         );
     }
-    let file = TrainingFile {
-        lags: options.lags,
-        target: options.target,
-        inputs: picked.iter().map(|&k| first.inputs[k].clone()).collect(),
-        targets: picked.iter().map(|&k| first.targets[k]).collect(),
-        hyperparameters: None,
-    };
-    file.check()
-        .map_err(|e| anyhow::anyhow!("the fixed threshold's reference training set: {e}"))?;
-    let settings = Settings {
-        lags: options.lags,
-        target: options.target,
-        ..Settings::default()
-    };
-    let floors = Floors::from_training(&file, &settings)
-        .map_err(|e| anyhow::anyhow!("fitting the fixed threshold's reference GPs: {e}"))?;
+    let floors = fit_floors(
+        picked.iter().map(|&k| first.inputs[k].clone()).collect(),
+        picked.iter().map(|&k| first.targets[k]).collect(),
+        options,
+    )
+    .context("the fixed threshold's reference GPs")?;
     let mut values = [0.0f64; 3];
     for (f, value) in values.iter_mut().enumerate() {
         let gp = trained(&floors.gps[f])?;
@@ -648,21 +640,6 @@ fn sync(tracked: &mut [TrackedPoints; 3], floors: &Floors, parallel: bool) -> Re
         }
     }
     Ok(rebuilt)
-}
-
-/// Run `work` for floors 0, 1, 2 in three threads.
-fn per_floor<T: Send>(work: impl Fn(usize) -> T + Sync) -> [T; 3] {
-    std::thread::scope(|scope| {
-        let work = &work;
-        let h1 = scope.spawn(move || work(1));
-        let h2 = scope.spawn(move || work(2));
-        let r0 = work(0);
-        let join = |h: std::thread::ScopedJoinHandle<'_, T>| match h.join() {
-            Ok(r) => r,
-            Err(payload) => std::panic::resume_unwind(payload),
-        };
-        [r0, join(h1), join(h2)]
-    })
 }
 
 /// When the hyperparameters are refitted (see the module doc).
@@ -855,22 +832,35 @@ pub fn initial_floors(streams: &[Stream], options: &LearnOptions) -> Result<Floo
             options.initial
         );
     }
+    fit_floors(
+        first.inputs[first.first..end].to_vec(),
+        first.targets[first.first..end].to_vec(),
+        options,
+    )
+    .context("the initial GPs")
+}
+
+/// The three floors' GPs fitted (type-II ML, the corrector's initial fit) on a training set.
+fn fit_floors(
+    inputs: Vec<Vec<f64>>,
+    targets: Vec<[f64; 3]>,
+    options: &LearnOptions,
+) -> Result<Floors> {
     let file = TrainingFile {
         lags: options.lags,
         target: options.target,
-        inputs: first.inputs[first.first..end].to_vec(),
-        targets: first.targets[first.first..end].to_vec(),
+        inputs,
+        targets,
         hyperparameters: None,
     };
     file.check()
-        .map_err(|e| anyhow::anyhow!("initial training set: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("training set: {e}"))?;
     let settings = Settings {
         lags: options.lags,
         target: options.target,
         ..Settings::default()
     };
-    Floors::from_training(&file, &settings)
-        .map_err(|e| anyhow::anyhow!("fitting the initial GPs: {e}"))
+    Floors::from_training(&file, &settings).map_err(|e| anyhow::anyhow!("fitting: {e}"))
 }
 
 /// The adaptive threshold's reference set (Algorithm 1, line 12): every point streamed so far,
