@@ -1394,6 +1394,28 @@ pub fn learn_command(args: &LearnArgs) -> Result<()> {
     let seconds = started.elapsed().as_secs_f64();
 
     print!("{}", table(&results));
+    if let Some(fixed) = results.iter().find_map(|r| r.fixed_threshold.as_ref()) {
+        let stretch = |s: &Option<Stretch>| {
+            s.as_ref().map_or(String::new(), |s| {
+                format!(
+                    "{} {:.1}–{:.1} s ({} points)",
+                    s.record, s.from, s.to, s.points
+                )
+            })
+        };
+        let how = match (&fixed.trained_on, &fixed.tested_on) {
+            (Some(_), Some(_)) => format!(
+                ": trained on {}, largest V(f) on {}",
+                stretch(&fixed.trained_on),
+                stretch(&fixed.tested_on)
+            ),
+            _ => String::new(),
+        };
+        println!(
+            "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
+            fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
+        );
+    }
     for r in &results {
         for (k, rec) in r.records.iter().enumerate() {
             for flag in &rec.structure_may_have_changed {
