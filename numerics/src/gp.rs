@@ -14,8 +14,9 @@
 //! [`GaussianProcess::append`] / [`GaussianProcess::remove`] as the training set changes →
 //! [`GaussianProcess::refit`] (warm-started from the current hyperparameters) when the
 //! hyperparameters should follow. [`TrackedPoints`] keeps latent variances and means at a fixed
-//! set of points in step with a changing model (`O(n m)` per append or removal). Every entry point validates its arguments before any linear
-//! algebra runs and answers bad input (NaN, mismatched lengths, no points) with a [`GpError`].
+//! set of points in step with a changing model (`O(n m)` per append or removal). Every entry
+//! point validates its arguments before any linear algebra runs and answers bad input (NaN,
+//! mismatched lengths, no points) with a [`GpError`].
 //!
 //! Dense linear algebra runs on faer: at N = 1000 its blocked Cholesky and Cholesky-based
 //! inverse were several times faster than nalgebra's (benches/gp.rs measures both).
