@@ -6,6 +6,8 @@
 //!
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -19,25 +21,7 @@ use orchestrator::learn::{
 use orchestrator::master::Block;
 use orchestrator::twin::Twin;
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("workspace")
-        .to_owned()
-}
-
-fn fmu_dir() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join("target"));
-    let dir = target.join("fmu");
-    assert!(
-        dir.join("fmu_shear.fmu").is_file(),
-        "{} has no FMUs: run scripts/build-fmus.sh",
-        dir.display()
-    );
-    dir
-}
+use common::{fmu_dir, workspace};
 
 /// The twin calibrated on dataset1, made once per test binary.
 fn calibrated() -> &'static Path {
