@@ -84,12 +84,12 @@ fn assert_effect(
     assert_eq!(d.action, Action::AddPhysics, "{}", d.reason);
     let e = d.effect.as_ref().expect("an effect");
     assert_eq!(
-        (e.kind, e.location.as_slice()),
+        (e.name.kind, e.name.location.as_slice()),
         (kind, location),
         "{}",
         d.reason
     );
-    assert_eq!(e.side, side, "{}", d.reason);
+    assert_eq!(e.name.side, side, "{}", d.reason);
     for (name, value) in truth {
         let got = e.parameters[*name];
         assert!(
@@ -263,11 +263,15 @@ fn a_record_without_change_needs_nothing_and_no_candidate_passes() {
     assert_eq!(d.nmse_after, d.nmse_before);
     assert_eq!(d.candidates.len(), 15);
     for c in &d.candidates {
-        assert!(!c.passes, "{} passes on a record without change", c.label);
+        assert!(
+            !c.passes,
+            "{} passes on a record without change",
+            c.name.label
+        );
         assert!(
             worst(&c.nmse_held_out) > 0.5 * worst(&d.nmse_before_held_out),
             "{}: {:?}",
-            c.label,
+            c.name.label,
             c.nmse_held_out
         );
     }

@@ -158,7 +158,7 @@ pub fn summary(d: &Diagnosis) -> String {
             s += &format!(
                 "  {} {:<22} evidence {:>12.1}  held-out NMSE {}\n",
                 if c.passes { '*' } else { ' ' },
-                c.label,
+                c.name.label,
                 c.evidence,
                 pct(&c.nmse_held_out)
             );
@@ -180,7 +180,7 @@ pub fn summary(d: &Diagnosis) -> String {
                 )
             })
             .collect();
-        s += &format!("effect        {}: {}\n", e.label, params.join(", "));
+        s += &format!("effect        {}: {}\n", e.name.label, params.join(", "));
     }
     s += &format!("NMSE after    {}\n", pct(&d.nmse_after));
     s += &format!("why           {}\n", d.reason);
@@ -207,7 +207,7 @@ pub fn add_physics_command(args: &AddPhysicsArgs) -> Result<()> {
         })?;
     }
     let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
-    println!("effect        {}", report.effect.label);
+    println!("effect        {}", report.effect.name.label);
     for (k, v) in &report.effect.parameters {
         if k != "side" {
             println!(

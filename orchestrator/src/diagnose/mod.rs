@@ -175,6 +175,15 @@ pub struct Estimate {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct EffectReport {
+    #[serde(flatten)]
+    pub name: EffectName,
+    pub parameters: BTreeMap<String, f64>,
+    pub sd: BTreeMap<String, f64>,
+}
+
+/// Which effect, where: what the named effect and every candidate of a report share.
+#[derive(Clone, Debug, Serialize)]
+pub struct EffectName {
     pub kind: Kind,
     pub location: Vec<usize>,
     /// Contact only: "both", "positive" or "negative".
@@ -182,17 +191,23 @@ pub struct EffectReport {
     pub side: Option<&'static str>,
     /// `KIND@LOCATION[:SIDE]`, what `twin add-physics --effect` takes.
     pub label: String,
-    pub parameters: BTreeMap<String, f64>,
-    pub sd: BTreeMap<String, f64>,
+}
+
+impl EffectName {
+    fn of(c: &Candidate) -> Self {
+        EffectName {
+            kind: c.kind,
+            location: c.location(),
+            side: (c.kind == Kind::Contact).then_some(c.side.name()),
+            label: c.label(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CandidateReport {
-    pub kind: Kind,
-    pub location: Vec<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub side: Option<&'static str>,
-    pub label: String,
+    #[serde(flatten)]
+    pub name: EffectName,
     /// Log Bayes factor (Laplace) against the twin as it is, on the fitted blocks.
     pub evidence: f64,
     /// NMSE per floor over the whole record after the transient.
@@ -766,10 +781,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst;
         let short = c.parameters(&scales);
         diagnosis.candidates.push(CandidateReport {
-            kind: c.kind,
-            location: c.location(),
-            side: (c.kind == Kind::Contact).then_some(c.side.name()),
-            label: c.label(),
+            name: EffectName::of(c),
             evidence: fitted.evidence,
             nmse_after: fitted.nmse_after,
             nmse_held_out: fitted.nmse_held_out,
@@ -885,7 +897,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
              effect of the library (best: {}) explains the error: the corrector should learn it",
             recal_worst,
             before_worst,
-            best.map(|b| format!("{} at {:.3} %", b.label, worst(&b.nmse_held_out)))
+            best.map(|b| format!("{} at {:.3} %", b.name.label, worst(&b.nmse_held_out)))
                 .unwrap_or_else(|| "none tried".into())
         );
     }
@@ -913,10 +925,7 @@ fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> E
         parameters.insert("side".into(), c.side.code() as f64);
     }
     EffectReport {
-        kind: c.kind,
-        location: c.location(),
-        side: (c.kind == Kind::Contact).then_some(c.side.name()),
-        label: c.label(),
+        name: EffectName::of(c),
         parameters,
         sd,
     }

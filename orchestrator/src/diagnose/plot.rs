@@ -43,7 +43,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             d.action.name(),
             d.effect
                 .as_ref()
-                .map(|e| format!(" ({})", e.label))
+                .map(|e| format!(" ({})", e.name.label))
                 .unwrap_or_default()
         );
         let root = root
@@ -128,7 +128,10 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
         // The evidence panel: the winning effect's storey (or floor), else the storey the
         // localisation points at.
         let (storey, what) = match &d.effect {
-            Some(e) => (e.location.last().copied().unwrap_or(1).clamp(1, 3), e.kind),
+            Some(e) => (
+                e.name.location.last().copied().unwrap_or(1).clamp(1, 3),
+                e.name.kind,
+            ),
             None => {
                 let n = d
                     .localisation
@@ -204,7 +207,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                     .map_err(|e| err(&e))?
                     .label(format!(
                         "fitted {} force (restoring, sign flipped)",
-                        e.label
+                        e.name.label
                     ))
                     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EFFECT));
             }
