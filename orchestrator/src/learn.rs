@@ -780,6 +780,13 @@ pub struct ModeResult {
     pub seconds: f64,
     /// The initial fit, shared by the modes run together (not in `seconds`).
     pub initial_fit_seconds: f64,
+    /// NMSE % per floor of the GPs at the end of the last record on every record (what the
+    /// learned corrector does to the records learned before: `final_nmse` of a record is taken
+    /// at its own end).
+    pub final_gps_nmse: Vec<[f64; 3]>,
+    /// The GPs at the end of the last record (what `--out` puts into the twin).
+    #[serde(skip)]
+    pub final_gps: Floors,
 }
 
 /// One hyperparameter refit of the three floors.
@@ -1161,6 +1168,11 @@ pub fn run_mode(
         timing,
         seconds,
         initial_fit_seconds: 0.0,
+        final_gps_nmse: streams
+            .iter()
+            .map(|stream| Ok(stream.nmse(&corrected(&floors, stream, options.target)?)))
+            .collect::<Result<_>>()?,
+        final_gps: floors,
     })
 }
 
@@ -1271,6 +1283,18 @@ pub fn table(results: &[ModeResult]) -> String {
         }
         out.push('\n');
     }
+    out.push_str("\nNMSE % of the GPs at the end on every record\n");
+    for k in 0..records {
+        out.push_str(&format!(
+            "{:<12}{:>width$}",
+            format!("record {}", k + 1),
+            ""
+        ));
+        for r in results {
+            out.push_str(&format!("{:>width$}", fmt(&r.final_gps_nmse[k])));
+        }
+        out.push('\n');
+    }
     out
 }
 
@@ -1298,6 +1322,10 @@ pub struct LearnArgs {
     /// JSON report.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Write the twin with the corrector as learned (its final training set and
+    /// hyperparameters) behind the physics; one mode only.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Fixed threshold on the latent variance, (m/s²)², every floor. Default, per floor: with
     /// --target measured, the largest latent variance that GPs trained on the whole first record
     /// show on the first 100 samples of the second (how the reference paper set its 1e-3,
@@ -1353,6 +1381,17 @@ pub fn learn_command(args: &LearnArgs) -> Result<()> {
     if let Some(t) = args.threshold {
         if !(t > 0.0 && t.is_finite()) {
             bail!("--threshold must be a positive number, was {t}");
+        }
+    }
+    if let Some(out) = &args.out {
+        if args.modes.is_some() {
+            bail!("--out keeps the corrector of one mode: give --mode, not --modes all");
+        }
+        if args.twin.as_deref() == Some(out.as_path()) {
+            bail!(
+                "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
+                out.display()
+            );
         }
     }
     let target = if args.target == "measured" {
@@ -1436,6 +1475,17 @@ pub fn learn_command(args: &LearnArgs) -> Result<()> {
         results.len()
     );
 
+    if let (Some(path), [result]) = (&args.out, results.as_slice()) {
+        let trained = result
+            .final_gps
+            .to_training_file(options.lags, options.target);
+        crate::train::with_corrector(&twin, &trained)?.write(path)?;
+        println!(
+            "wrote {} (the corrector as learned: {} points)",
+            path.display(),
+            trained.inputs.len()
+        );
+    }
     let report_path = args
         .report
         .clone()

@@ -222,6 +222,14 @@ pub fn train(
         seconds: started.elapsed().as_secs_f64(),
     };
 
+    Ok((with_corrector(twin, &trained)?, summary))
+}
+
+/// `twin`'s physics with a corrector behind it that carries `trained` (training set and
+/// hyperparameters) in a copy of the corrector FMU: its outputs become the twin's `acc1..3`,
+/// `latent_var1..3` and `sd1..3`. A corrector already in `twin` is replaced.
+pub fn with_corrector(twin: &Twin, trained: &TrainingFile) -> Result<Twin, TrainError> {
+    let physics = physics_only(twin);
     // A copy of the corrector FMU carrying the training set.
     let scratch = tempfile::Builder::new()
         .prefix("twin-train-")
@@ -242,11 +250,11 @@ pub fn train(
     let mut parameters = std::collections::BTreeMap::new();
     parameters.insert(
         "lags".to_owned(),
-        ParameterValue::Integer(options.lags as i32),
+        ParameterValue::Integer(trained.lags as i32),
     );
     parameters.insert(
         "target".to_owned(),
-        ParameterValue::Integer(options.target.code()),
+        ParameterValue::Integer(trained.target.code()),
     );
     out.components.push(Component {
         name: CORRECTOR.into(),
@@ -291,7 +299,7 @@ pub fn train(
             &format!("sd{f}"),
         ));
     }
-    Ok((out, summary))
+    Ok(out)
 }
 
 /// Copy the FMU at `source` to `target` with one resource file added (or replaced).

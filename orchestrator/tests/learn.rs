@@ -23,6 +23,18 @@ use orchestrator::twin::Twin;
 
 use common::{fmu_dir, workspace};
 
+/// NMSE % per floor after the default transient of a twin's prediction on a record.
+fn records_nmse(prediction: &orchestrator::run::Prediction, record: &Path) -> [f64; 3] {
+    let data = Measurement::read(record).expect("record");
+    let first = data
+        .time
+        .iter()
+        .position(|t| t - data.time[0] >= orchestrator::compare::DEFAULT_TRANSIENT)
+        .expect("samples after the transient");
+    [0, 1, 2]
+        .map(|f| orchestrator::compare::nmse(&data.acc[f][first..], &prediction.acc[f][first..]))
+}
+
 /// The twin calibrated on dataset1, made once per test binary.
 fn calibrated() -> &'static Path {
     static CAL: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
@@ -150,6 +162,12 @@ fn in_the_papers_form_the_fixed_threshold_queries_more_than_adaptive_mostly_on_d
                 benign.record,
                 benign.structure_may_have_changed
             );
+        }
+        // The final GPs on the last record are the last record's final state.
+        assert_eq!(r.final_gps_nmse.len(), 3);
+        for f in 0..3 {
+            let (a, b) = (r.final_gps_nmse[2][f], d3.final_nmse[f]);
+            assert!((a - b).abs() <= 1e-9 * b, "{}: {a} vs {b}", r.mode);
         }
         // One NMSE point per query plus the one before any query.
         assert_eq!(d3.nmse_after_updates.len(), d3.queries + 1);
@@ -337,6 +355,8 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
         .arg(data.join("dataset2.csv"))
         .arg("--out-dir")
         .arg(dir.path())
+        .arg("--out")
+        .arg(dir.path().join("learned.ssp"))
         .env("TWIN_FMU_DIR", fmu_dir())
         .output()
         .expect("twin runs");
@@ -362,6 +382,36 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
         svg.starts_with("<svg") && svg.contains("NMSE"),
         "not the plot"
     );
+    // The learned corrector, in a twin: its predictions on dataset2 are the final GPs' own.
+    let learned = Twin::load(Some(&dir.path().join("learned.ssp"))).expect("the learned twin");
+    let prediction = orchestrator::run::run_twin(
+        &learned,
+        &Measurement::read(&data.join("dataset2.csv")).expect("record"),
+        |_, _| {},
+    )
+    .expect("the learned twin runs");
+    assert!(prediction.latent_var.is_some(), "no corrector in the twin");
+    let reported = &report["modes"][0]["final_gps_nmse"][1];
+    let streams = records_nmse(&prediction, &data.join("dataset2.csv"));
+    for f in 0..3 {
+        let r = reported[f].as_f64().expect("number");
+        assert!(
+            (streams[f] - r).abs() <= 1e-6 * r.max(1e-3),
+            "floor {}: twin {} vs report {r}",
+            f + 1,
+            streams[f]
+        );
+    }
+    let refused = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args(["learn", "--modes", "all", "--out"])
+        .arg(dir.path().join("x.ssp"))
+        .arg("--data")
+        .arg(data.join("dataset1.csv"))
+        .env("TWIN_FMU_DIR", fmu_dir())
+        .output()
+        .expect("twin runs");
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--out"));
 
     let bad = Command::new(env!("CARGO_BIN_EXE_twin"))
         .args([
