@@ -86,10 +86,13 @@
 //!   first ones are all learned, so the reference set stays empty), and within tens to
 //!   hundreds of samples for 0.99 and 0.999. That is Algorithm 1 on this GP, not a defect of
 //!   the implementation; with `--target measured` (the paper's form, where `σ_n²` is
-//!   identified at the sensor-noise level) f_f = 0.9 queries 1061 of the 2688.
+//!   identified at the sensor-noise level) f_f = 0.9 queries 1030 of the 2688.
 //! - **NMSE after each update** (Figs 9–10): after every `nmse_every`-th query (default every
 //!   one), the corrected prediction over the whole current record from the tracked means,
 //!   scored after the transient. Entry 0 of each record is its score before any query in it.
+//!   The report also scores the GPs at the end on every record (`final_gps_nmse`), which shows
+//!   what learning a later record did to the earlier ones (after dataset3's contact they are
+//!   worse than the physics alone on datasets 1 and 2); `--out` writes the twin with them.
 //! - **Possible change of the structure**: a run of at least `change_run` (50) consecutive
 //!   streamed samples all queried (about 1 s at 51.2 Hz: the GP keeps being surprised) is
 //!   reported with its times, the hand-off to the diagnosis (see [`CHANGE_RUN`] for why 50).
