@@ -223,6 +223,18 @@ impl Floors {
         }
     }
 
+    /// The GPs of a training file, checked first, with the default settings for its lags and
+    /// target form (what `twin train` and `twin learn` fit).
+    pub fn fit_training(file: &TrainingFile) -> Result<Self, String> {
+        file.check()?;
+        let settings = Settings {
+            lags: file.lags,
+            target: file.target,
+            ..Settings::default()
+        };
+        Self::from_training(file, &settings).map_err(|e| e.to_string())
+    }
+
     /// The GPs of a checked training file: conditioned on its hyperparameters, or fitted.
     pub fn from_training(file: &TrainingFile, settings: &Settings) -> Result<Self, GpError> {
         let dimension = file.input_dimension();

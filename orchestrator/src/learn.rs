@@ -110,9 +110,7 @@ use anyhow::{bail, Context, Result};
 use fmu_gp_corrector::model::{
     per_floor, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
 };
-use fmu_gp_corrector::{
-    lagged_inputs, FloorGp, Floors, Sample, Settings, TargetForm, TrainingFile,
-};
+use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Sample, TargetForm, TrainingFile};
 use plotters::style::RGBColor;
 use serde::Serialize;
 
@@ -856,21 +854,14 @@ fn fit_floors(
     targets: Vec<[f64; 3]>,
     options: &LearnOptions,
 ) -> Result<Floors> {
-    let file = TrainingFile {
+    Floors::fit_training(&TrainingFile {
         lags: options.lags,
         target: options.target,
         inputs,
         targets,
         hyperparameters: None,
-    };
-    file.check()
-        .map_err(|e| anyhow::anyhow!("training set: {e}"))?;
-    let settings = Settings {
-        lags: options.lags,
-        target: options.target,
-        ..Settings::default()
-    };
-    Floors::from_training(&file, &settings).map_err(|e| anyhow::anyhow!("fitting: {e}"))
+    })
+    .map_err(|e| anyhow::anyhow!(e))
 }
 
 /// The adaptive threshold's reference set (Algorithm 1, line 12): every point streamed so far,

@@ -10,7 +10,7 @@ use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::Arc;
 
-use fmu_gp_corrector::{lagged_inputs, Floors, Sample, Settings, TargetForm, TrainingFile};
+use fmu_gp_corrector::{lagged_inputs, Floors, Sample, TargetForm, TrainingFile};
 
 use crate::data::Measurement;
 use crate::run::{run_twin, RunError};
@@ -122,13 +122,7 @@ fn fit_floors(
             .collect(),
         hyperparameters: None,
     };
-    file.check().map_err(TrainError::Setup)?;
-    let settings = Settings {
-        lags: options.lags,
-        target: options.target,
-        ..Settings::default()
-    };
-    Floors::from_training(&file, &settings)
+    Floors::fit_training(&file)
         .map_err(|e| TrainError::Setup(format!("fitting the GPs ({} lags): {e}", options.lags)))
 }
 
