@@ -934,12 +934,12 @@ impl Reference {
 
 /// Algorithm 1 over all records in one mode, from the initial GPs.
 /// One mode over the records from the initial GPs; `fixed` is the fixed mode's threshold (see
-/// [`fixed_threshold`]; not read by the other modes).
+/// [`fixed_threshold`]; needed by the fixed mode only).
 pub fn run_mode(
     streams: &[Stream],
     initial: &Floors,
     mode: Mode,
-    fixed: &FixedThreshold,
+    fixed: Option<&FixedThreshold>,
     options: &LearnOptions,
 ) -> Result<ModeResult> {
     let started = std::time::Instant::now();
@@ -961,7 +961,10 @@ pub fn run_mode(
     timing.tracking_setup += clock.elapsed().as_secs_f64();
     timing.rebuilds += 3;
     let initial_threshold = match mode {
-        Mode::Fixed => fixed.values,
+        Mode::Fixed => match fixed {
+            Some(fixed) => fixed.values,
+            None => bail!("the fixed mode needs its threshold"),
+        },
         Mode::Adaptive(_) => {
             // Held out: the initial points themselves are interpolated (V(f) ≈ 0 there).
             let held_out = (initial_end - first.first)
@@ -1155,7 +1158,7 @@ pub fn run_mode(
             _ => None,
         },
         initial_threshold,
-        fixed_threshold: (mode == Mode::Fixed).then(|| fixed.clone()),
+        fixed_threshold: fixed.filter(|_| mode == Mode::Fixed).cloned(),
         total_queries: total,
         records,
         refits,
@@ -1201,20 +1204,15 @@ pub fn run_modes(
     let initial = initial_floors(streams, options)?;
     let initial_fit_seconds = clock.elapsed().as_secs_f64();
     let fixed = if modes.contains(&Mode::Fixed) {
-        fixed_threshold(streams, options)?
+        Some(fixed_threshold(streams, options)?)
     } else {
-        FixedThreshold {
-            values: [f64::NAN; 3],
-            rule: "unused".into(),
-            trained_on: None,
-            tested_on: None,
-        }
+        None
     };
     std::thread::scope(|scope| {
         let handles: Vec<_> = modes
             .iter()
             .map(|&mode| {
-                let (initial, fixed) = (&initial, &fixed);
+                let (initial, fixed) = (&initial, fixed.as_ref());
                 scope.spawn(move || run_mode(streams, initial, mode, fixed, options))
             })
             .collect();
