@@ -21,15 +21,8 @@ shift || true
 lags=9
 if [[ "${1:-}" == "--lags" ]]; then lags=$2; fi
 
-scripts/setup-python.sh >/dev/null
-[[ -f "$target_dir/fmu/fmu_shear.fmu" && -f "$target_dir/fmu/fmu_gp_corrector.fmu" ]] || scripts/build-fmus.sh
-cargo build --release --quiet -p orchestrator --bin twin
-twin="$target_dir/release/twin"
-export TWIN_FMU_DIR="$target_dir/fmu"
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-
-"$twin" calibrate --data data/dataset1.csv --out "$work/cal.ssp" >/dev/null
+# shellcheck source=scripts/bench-twin.sh
+source scripts/bench-twin.sh
 for k in 1 2 3; do
   "$twin" compare --twin "$work/cal.ssp" --data "data/dataset$k.csv" --predictions "$work/p$k.csv" >/dev/null
 done

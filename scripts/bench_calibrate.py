@@ -73,6 +73,8 @@ import numpy as np
 import scipy
 from scipy.optimize import minimize
 
+from bench_records import Record
+
 ROOT = Path(__file__).resolve().parents[1]
 SUBSTEPS = 64
 TRANSIENT = 2.0
@@ -100,26 +102,11 @@ def z_of(values: np.ndarray) -> np.ndarray:
     return (u - PRIOR_MEAN) / PRIOR_SD
 
 
-class Problem:
+class Problem(Record):
     """Dataset, transient, noise-prior centres, and the shear model's simulation."""
 
     def __init__(self, data: Path, transient: float = TRANSIENT):
-        table = np.genfromtxt(data, delimiter=",", names=True)
-        names = table.dtype.names or ()
-        for column in ("time", "force", "acc1", "acc2", "acc3"):
-            if column not in names:
-                raise SystemExit(f"{data}: no '{column}' column")
-        self.time = np.asarray(table["time"], dtype=float)
-        self.force = np.asarray(table["force"], dtype=float)
-        self.acc = np.stack([table["acc1"], table["acc2"], table["acc3"]]).astype(float)
-        self.n = len(self.force)
-        # The step as the twin reads it: from the ends of the time column, snapped to a round
-        # rate in mHz when that moves the end of the grid by at most 1 µs (51.2 Hz → 1/51.2 s).
-        dt = (self.time[-1] - self.time[0]) / (self.n - 1)
-        snapped = round(1000.0 / dt) / 1000.0
-        self.dt = 1.0 / snapped if abs(1.0 / snapped - dt) * (self.n - 1) <= 1e-6 else dt
-        hits = np.nonzero(self.time - self.time[0] >= transient)[0]
-        self.first = int(hits[0]) if len(hits) else self.n
+        super().__init__(data, transient)
         self.used = self.n - self.first
         if self.used < 10:
             raise SystemExit(f"{data}: the transient of {transient} s leaves {self.used} samples")

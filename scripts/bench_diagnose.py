@@ -86,6 +86,8 @@ from fmpy.fmi2 import (
     free,
 )
 
+import bench_records
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # DiagnoseOptions::default(), Gates::default(), CalibrationSetup::default().
@@ -185,21 +187,10 @@ def read_ssp(path: Path) -> tuple[dict, np.ndarray]:
     return physics, np.array([twin[f"noise_variance{f}"] for f in (1, 2, 3)])
 
 
-class Record:
+class Record(bench_records.Record):
     def __init__(self, path: Path):
-        table = np.genfromtxt(path, delimiter=",", names=True)
-        self.time = np.asarray(table["time"], dtype=float)
-        self.force = np.asarray(table["force"], dtype=float)
-        self.acc = np.stack([table["acc1"], table["acc2"], table["acc3"]]).astype(float)
-        self.n = len(self.force)
-        # data.rs: the step from the ends of the time column, snapped to a round rate in mHz when
-        # that moves the end of the grid by at most 1 µs (51.2 Hz → 1/51.2 s).
-        dt = (self.time[-1] - self.time[0]) / (self.n - 1)
-        snapped = round(1000.0 / dt) / 1000.0
-        self.dt = 1.0 / snapped if abs(1.0 / snapped - dt) * (self.n - 1) <= 1e-6 else dt
+        super().__init__(path, TRANSIENT)
         self.slope = np.diff(self.force) / self.dt
-        hits = np.nonzero(self.time - self.time[0] >= TRANSIENT)[0]
-        self.first = int(hits[0]) if len(hits) else self.n
         # blocks(): after the transient, even blocks of BLOCK s fitted, odd ones held out.
         block = np.floor((self.time[self.first:] - self.time[self.first]) / BLOCK).astype(int)
         after = np.arange(self.first, self.n)
