@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# The test command: Python venv with fmpy and the third-party tools, the FMUs, then every
-# Rust test of the workspace and the Python cross-checks.
+# The test command: the machine's prerequisites (checked in seconds; as root with apt-get the
+# missing Debian packages are installed, otherwise it stops with the command to run), the
+# Python venv with fmpy and the third-party tools, the FMUs, then every Rust test of the
+# workspace and the Python cross-checks.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
+scripts/prerequisites.sh
 scripts/setup-python.sh
 scripts/build-fmus.sh
 scripts/make-third-party-fmus.sh
