@@ -11,5 +11,6 @@ scripts/prerequisites.sh
 scripts/setup-python.sh
 scripts/build-fmus.sh
 scripts/make-third-party-fmus.sh
+scripts/make-c-fmus.sh
 cargo test --workspace --no-fail-fast
 .venv/bin/python -m pytest tests/python -q

@@ -47,6 +47,8 @@ pub enum Command {
     Diagnose(crate::diagnose::command::DiagnoseArgs),
     /// Switch an effect of the shear FMU's library on, estimate its parameters, write the twin.
     AddPhysics(crate::diagnose::command::AddPhysicsArgs),
+    /// Run any FMI 2.0 co-simulation FMU or SSP system and record its outputs as CSV.
+    Run(crate::cli_run::RunArgs),
 }
 
 #[derive(clap::Args)]
@@ -197,6 +199,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Learn(args) => crate::learn::learn_command(&args),
         Command::Diagnose(args) => crate::diagnose::command::diagnose_command(&args),
         Command::AddPhysics(args) => crate::diagnose::command::add_physics_command(&args),
+        Command::Run(args) => crate::cli_run::run_command(&args),
     }
 }
 
@@ -224,7 +227,7 @@ fn variance(x: &[f64]) -> f64 {
     x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n
 }
 
-fn progress_bar() -> impl FnMut(u64, u64) {
+pub fn progress_bar() -> impl FnMut(u64, u64) {
     let mut bar: Option<indicatif::ProgressBar> = None;
     let mut progress = Progress::new(move |done, total| {
         let b = bar.get_or_insert_with(|| indicatif::ProgressBar::new(total));

@@ -3,7 +3,9 @@
 
 pub mod calibrate;
 pub mod cli;
+pub mod cli_run;
 pub mod compare;
+pub mod cosim;
 pub mod data;
 pub mod diagnose;
 pub mod fmu_archive;

@@ -13,6 +13,8 @@ use std::path::{Path, PathBuf};
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
+use crate::cosim::ssp::{self, parse_ssd, SsvValue};
+pub use crate::cosim::ssp::Connection;
 use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 
 const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescription";
@@ -76,15 +78,6 @@ pub struct Component {
     /// Where the FMU file is on disk now.
     pub fmu_path: PathBuf,
     pub parameters: BTreeMap<String, ParameterValue>,
-}
-
-/// A connection between system connectors (`element` None) and component connectors.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Connection {
-    pub start_element: Option<String>,
-    pub start_connector: String,
-    pub end_element: Option<String>,
-    pub end_connector: String,
 }
 
 #[derive(Debug)]
@@ -598,175 +591,25 @@ fn finish_xml(w: Writer<Vec<u8>>) -> String {
     s
 }
 
-struct ParsedComponent {
-    name: String,
-    source: String,
-    bindings: Vec<String>,
-}
-
-struct ParsedSsd {
-    name: String,
-    components: Vec<ParsedComponent>,
-    connections: Vec<Connection>,
-    system_bindings: Vec<String>,
-}
-
-fn attributes(e: &BytesStart) -> Result<BTreeMap<String, String>, String> {
-    let mut out = BTreeMap::new();
-    for attr in e.attributes() {
-        let attr = attr.map_err(|e| e.to_string())?;
-        let key = String::from_utf8_lossy(attr.key.local_name().as_ref()).into_owned();
-        let value = attr
-            .unescape_value()
-            .map_err(|e| e.to_string())?
-            .into_owned();
-        out.insert(key, value);
-    }
-    Ok(out)
-}
-
-/// Read the parts of an SSD this product uses (namespace prefixes are ignored: local names).
-fn parse_ssd(xml: &str) -> Result<ParsedSsd, String> {
-    let mut reader = quick_xml::Reader::from_str(xml);
-    let mut parsed = ParsedSsd {
-        name: String::new(),
-        components: Vec::new(),
-        connections: Vec::new(),
-        system_bindings: Vec::new(),
-    };
-    let mut in_component = false;
-    let mut depth_system = 0usize;
-    let mut saw_root = false;
-    loop {
-        let event = reader
-            .read_event()
-            .map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
-        match &event {
-            Event::Start(e) | Event::Empty(e) => {
-                let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
-                let attrs = attributes(e)?;
-                let is_start = matches!(event, Event::Start(_));
-                match local.as_str() {
-                    "SystemStructureDescription" => {
-                        saw_root = true;
-                        if attrs.get("version").map(String::as_str) != Some("1.0") {
-                            return Err(format!(
-                                "version is {:?}; SSP 1.0 is expected",
-                                attrs.get("version")
-                            ));
-                        }
-                        parsed.name = attrs.get("name").cloned().unwrap_or_default();
-                    }
-                    "System" => {
-                        depth_system += 1;
-                        if depth_system > 1 {
-                            return Err("nested systems are not supported".into());
-                        }
-                    }
-                    "Component" => {
-                        let name = attrs
-                            .get("name")
-                            .cloned()
-                            .ok_or("a Component has no name")?;
-                        let source = attrs
-                            .get("source")
-                            .cloned()
-                            .ok_or(format!("component '{name}' has no source"))?;
-                        parsed.components.push(ParsedComponent {
-                            name,
-                            source,
-                            bindings: Vec::new(),
-                        });
-                        in_component = is_start;
-                    }
-                    "ParameterBinding" => {
-                        let source = attrs.get("source").cloned().ok_or(
-                            "a ParameterBinding has no source (inline values are not supported)",
-                        )?;
-                        match (in_component, parsed.components.last_mut()) {
-                            (true, Some(c)) => c.bindings.push(source),
-                            _ => parsed.system_bindings.push(source),
-                        }
-                    }
-                    "Connection" => {
-                        let get = |k: &str| attrs.get(k).cloned();
-                        parsed.connections.push(Connection {
-                            start_element: get("startElement"),
-                            start_connector: get("startConnector")
-                                .ok_or("a Connection has no startConnector")?,
-                            end_element: get("endElement"),
-                            end_connector: get("endConnector")
-                                .ok_or("a Connection has no endConnector")?,
-                        });
-                    }
-                    _ => {}
-                }
-            }
-            Event::End(e) => {
-                if e.local_name().as_ref() == b"Component" {
-                    in_component = false;
-                }
-            }
-            Event::Eof => break,
-            _ => {}
-        }
-    }
-    if !saw_root {
-        return Err("no SystemStructureDescription element".into());
-    }
-    Ok(parsed)
-}
-
+/// An `.ssv` parameter set as twin parameters: Real, Integer and Boolean values.
 fn parse_ssv(xml: &str) -> Result<Vec<(String, ParameterValue)>, String> {
-    let mut reader = quick_xml::Reader::from_str(xml);
-    let mut out = Vec::new();
-    let mut current: Option<String> = None;
-    loop {
-        let event = reader
-            .read_event()
-            .map_err(|e| format!("malformed XML at byte {}: {e}", reader.error_position()))?;
-        match &event {
-            Event::Start(e) | Event::Empty(e) => {
-                let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
-                let attrs = attributes(e)?;
-                match local.as_str() {
-                    "Parameter" => {
-                        current = Some(
-                            attrs
-                                .get("name")
-                                .cloned()
-                                .ok_or("a Parameter has no name")?,
-                        )
-                    }
-                    "Real" | "Integer" | "Boolean" if current.is_some() => {
-                        let name = current.take().unwrap_or_default();
-                        let text = attrs
-                            .get("value")
-                            .ok_or(format!("parameter '{name}' has no value"))?;
-                        let bad = || format!("parameter '{name}': '{text}' is not a valid {local}");
-                        let value = match local.as_str() {
-                            "Real" => {
-                                ParameterValue::Real(text.parse().map_err(|_| bad()).and_then(
-                                    |x: f64| if x.is_finite() { Ok(x) } else { Err(bad()) },
-                                )?)
-                            }
-                            "Integer" => ParameterValue::Integer(text.parse().map_err(|_| bad())?),
-                            _ => ParameterValue::Boolean(match text.as_str() {
-                                "true" | "1" => true,
-                                "false" | "0" => false,
-                                _ => return Err(bad()),
-                            }),
-                        };
-                        out.push((name, value));
-                    }
-                    _ => {}
+    ssp::parse_ssv(xml)?
+        .into_iter()
+        .map(|(name, value)| {
+            let value = match value {
+                SsvValue::Real(x) => ParameterValue::Real(x),
+                SsvValue::Integer(i) => ParameterValue::Integer(i),
+                SsvValue::Boolean(b) => ParameterValue::Boolean(b),
+                other => {
+                    return Err(format!(
+                        "parameter '{name}': {other:?} is not a Real, Integer or Boolean, the \
+                         values a twin's components take"
+                    ))
                 }
-            }
-            Event::Eof => break,
-            _ => {}
-        }
-    }
-    Ok(out)
+            };
+            Ok((name, value))
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -100,6 +100,18 @@ type SetInt = unsafe extern "C" fn(
     usize,
     *const fmi2Integer,
 ) -> fmi2Status;
+type GetString = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2String,
+) -> fmi2Status;
+type SetString = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2String,
+) -> fmi2Status;
 
 /// The functions of a loaded FMI 2.0 co-simulation library.
 struct Api {
@@ -131,6 +143,12 @@ struct Api {
     set_integer: SetInt,
     get_boolean: GetInt,
     set_boolean: SetInt,
+    get_string: GetString,
+    set_string: SetString,
+    get_boolean_status:
+        Option<unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status>,
+    get_real_status:
+        Option<unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Real) -> fmi2Status>,
     do_step: unsafe extern "C" fn(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status,
     set_real_input_derivatives: Option<
         unsafe extern "C" fn(
@@ -153,6 +171,8 @@ struct Api {
 pub struct Library {
     api: Arc<Api>,
     path: PathBuf,
+    /// What messages name: the `.fmu` the library came from (the library itself until told).
+    source: PathBuf,
     guid: String,
     resource_uri: String,
     /// `canInterpolateInputs` of the modelDescription: an FMU may export
@@ -201,6 +221,10 @@ impl Library {
             set_integer: required!("fmi2SetInteger"),
             get_boolean: required!("fmi2GetBoolean"),
             set_boolean: required!("fmi2SetBoolean"),
+            get_string: required!("fmi2GetString"),
+            set_string: required!("fmi2SetString"),
+            get_boolean_status: optional!("fmi2GetBooleanStatus"),
+            get_real_status: optional!("fmi2GetRealStatus"),
             do_step: required!("fmi2DoStep"),
             set_real_input_derivatives: optional!("fmi2SetRealInputDerivatives"),
             get_fmu_state: optional!("fmi2GetFMUstate"),
@@ -208,14 +232,26 @@ impl Library {
             free_fmu_state: optional!("fmi2FreeFMUstate"),
             _library: library,
         };
-        let resource_uri = format!("file://{}", resources.display()).replace(' ', "%20");
+        let resource_uri = file_uri(resources);
         Ok(Library {
             api: Arc::new(api),
             path: path.to_owned(),
+            source: path.to_owned(),
             guid: guid.to_owned(),
             resource_uri,
             interpolates: false,
         })
+    }
+
+    /// Name `fmu` (the archive the library was unpacked from) in every message of its instances.
+    pub fn with_source(mut self, fmu: &Path) -> Self {
+        self.source = fmu.to_owned();
+        self
+    }
+
+    /// The URI handed to instances as `fmuResourceLocation`.
+    pub fn resource_uri(&self) -> &str {
+        &self.resource_uri
     }
 
     /// Declare whether the FMU can interpolate inputs (its `canInterpolateInputs`).
@@ -285,12 +321,14 @@ impl Library {
             component,
             states: Vec::new(),
             name: instance_name.to_owned(),
+            source: self.source.display().to_string(),
             log,
             _callbacks: callbacks,
         };
         if component.is_null() {
             return Err(ImportError::Call {
                 instance: instance_name.to_owned(),
+                fmu: instance.source.clone(),
                 call: "fmi2Instantiate",
                 status: "returned NULL".into(),
                 messages: instance.take_messages_text(),
@@ -315,6 +353,29 @@ extern "C" {
     fn libc_free(p: *mut c_void);
 }
 
+/// How a communication step ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StepEnd {
+    Completed,
+    /// The FMU ended the simulation itself; `at` is its last successful time.
+    Terminated { at: f64 },
+}
+
+/// `path` as a `file:` URI, every byte outside RFC 3986's unreserved set and `/`
+/// percent-encoded (spaces, `%`, `#`, `?`, non-ASCII…), as Python's `Path.as_uri` writes it.
+pub fn file_uri(path: &Path) -> String {
+    use std::os::unix::ffi::OsStrExt;
+    let mut uri = String::from("file://");
+    for &b in path.as_os_str().as_bytes() {
+        if b.is_ascii_alphanumeric() || matches!(b, b'-' | b'.' | b'_' | b'~' | b'/') {
+            uri.push(b as char);
+        } else {
+            uri.push_str(&format!("%{b:02X}"));
+        }
+    }
+    uri
+}
+
 /// A saved FMU state, owned by the instance that made it (freed with it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StateHandle(usize);
@@ -326,6 +387,8 @@ pub struct Instance {
     component: fmi2Component,
     states: Vec<fmi2FMUstate>,
     name: String,
+    /// The `.fmu` it came from, for messages.
+    source: String,
     log: Box<MessageLog>,
     _callbacks: Box<fmi2CallbackFunctions>,
 }
@@ -368,6 +431,7 @@ impl Instance {
             fmi2OK | fmi2Warning => Ok(()),
             other => Err(ImportError::Call {
                 instance: self.name.clone(),
+                fmu: self.source.clone(),
                 call,
                 status: match other {
                     fmi2Discard => "fmi2Discard",
@@ -536,9 +600,103 @@ impl Instance {
     }
 
     pub fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ImportError> {
+        match self.step(time, step_size)? {
+            StepEnd::Completed => Ok(()),
+            StepEnd::Terminated { .. } => Err(ImportError::Call {
+                instance: self.name.clone(),
+                fmu: self.source.clone(),
+                call: "fmi2DoStep",
+                status: "fmi2Discard (the FMU ended the simulation)".into(),
+                messages: self.take_messages_text(),
+            }),
+        }
+    }
+
+    /// One communication step. An FMU that ends the simulation itself (`fmi2Discard`, then
+    /// `fmi2GetBooleanStatus(fmi2Terminated)` true) gives `Terminated` at its last successful
+    /// time, as fmpy treats it; any other refusal is an error carrying the FMU's messages.
+    pub fn step(&mut self, time: f64, step_size: f64) -> Result<StepEnd, ImportError> {
         // SAFETY: as above.
         let status = unsafe { (self.api.do_step)(self.component, time, step_size, fmi2True) };
-        self.check("fmi2DoStep", status)
+        if status == fmi2Discard && self.boolean_status(fmi2Terminated) == Some(true) {
+            let at = self
+                .real_status(fmi2LastSuccessfulTime)
+                .unwrap_or(time + step_size);
+            return Ok(StepEnd::Terminated { at });
+        }
+        self.check("fmi2DoStep", status)?;
+        Ok(StepEnd::Completed)
+    }
+
+    /// `fmi2GetBooleanStatus`; None when the FMU lacks it or refuses.
+    fn boolean_status(&mut self, kind: fmi2StatusKind) -> Option<bool> {
+        let f = self.api.get_boolean_status?;
+        let mut value: fmi2Boolean = fmi2False;
+        // SAFETY: `value` is a valid slot for one fmi2Boolean.
+        let status = unsafe { f(self.component, kind, &mut value) };
+        matches!(status, fmi2OK | fmi2Warning).then_some(value != fmi2False)
+    }
+
+    /// `fmi2GetRealStatus`; None when the FMU lacks it or refuses.
+    fn real_status(&mut self, kind: fmi2StatusKind) -> Option<f64> {
+        let f = self.api.get_real_status?;
+        let mut value: fmi2Real = 0.0;
+        // SAFETY: `value` is a valid slot for one fmi2Real.
+        let status = unsafe { f(self.component, kind, &mut value) };
+        matches!(status, fmi2OK | fmi2Warning).then_some(value)
+    }
+
+    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), ImportError> {
+        assert_eq!(
+            vrs.len(),
+            values.len(),
+            "set_string: one value per value reference"
+        );
+        let owned = values
+            .iter()
+            .map(|v| CString::new(*v))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|_| ImportError::Call {
+                instance: self.name.clone(),
+                fmu: self.source.clone(),
+                call: "fmi2SetString",
+                status: "not called: a value contains a NUL byte".into(),
+                messages: String::new(),
+            })?;
+        let pointers: Vec<fmi2String> = owned.iter().map(|c| c.as_ptr()).collect();
+        // SAFETY: both slices have vrs.len() elements; the strings outlive the call (the FMU
+        // copies what it keeps, as the standard requires).
+        let status = unsafe {
+            (self.api.set_string)(self.component, vrs.as_ptr(), vrs.len(), pointers.as_ptr())
+        };
+        self.check("fmi2SetString", status)
+    }
+
+    /// The strings are copied out at once: the FMU's buffers are only valid until its next call.
+    pub fn get_string(&mut self, vrs: &[u32]) -> Result<Vec<String>, ImportError> {
+        let mut pointers: Vec<fmi2String> = vec![std::ptr::null(); vrs.len()];
+        // SAFETY: both slices have vrs.len() elements.
+        let status = unsafe {
+            (self.api.get_string)(
+                self.component,
+                vrs.as_ptr(),
+                vrs.len(),
+                pointers.as_mut_ptr(),
+            )
+        };
+        self.check("fmi2GetString", status)?;
+        Ok(pointers
+            .iter()
+            .map(|&p| {
+                if p.is_null() {
+                    String::new()
+                } else {
+                    // SAFETY: a non-null fmi2String is NUL-terminated and valid until the next
+                    // call into the FMU; it is copied here.
+                    unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+                }
+            })
+            .collect())
     }
 
     /// Save the FMU state (for rollback); the handle stays valid until the instance drops.
@@ -600,5 +758,21 @@ impl Drop for Instance {
         }
         // SAFETY: the component is live and freed exactly once; the log and callbacks outlive it.
         unsafe { (self.api.free_instance)(self.component) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::file_uri;
+    use std::path::Path;
+
+    #[test]
+    fn resource_uris_are_percent_encoded_per_rfc_3986() {
+        assert_eq!(file_uri(Path::new("/tmp/a/resources")), "file:///tmp/a/resources");
+        assert_eq!(
+            file_uri(Path::new("/tmp/my dir/100%/#1?/résumé/resources")),
+            "file:///tmp/my%20dir/100%25/%231%3F/r%C3%A9sum%C3%A9/resources"
+        );
+        assert_eq!(file_uri(Path::new("/a~b_c-d.e")), "file:///a~b_c-d.e");
     }
 }

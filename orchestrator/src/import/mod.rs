@@ -8,7 +8,7 @@ pub mod model_description;
 use std::path::{Path, PathBuf};
 
 pub use archive::{unpack, UnpackLimits, Unpacked};
-pub use library::{FmuMessage, Instance, Library, StateHandle};
+pub use library::{file_uri, FmuMessage, Instance, Library, StateHandle, StepEnd};
 pub use model_description::{Causality, ModelDescription, ScalarType, ScalarVariable};
 
 #[derive(Debug, thiserror::Error)]
@@ -19,9 +19,11 @@ pub enum ImportError {
     ModelDescription { path: PathBuf, message: String },
     #[error("{path}: {message}")]
     Library { path: PathBuf, message: String },
-    #[error("{instance}: {call} {status}{}", if messages.is_empty() { String::new() } else { format!(": {messages}") })]
+    #[error("{instance} ({fmu}): {call} {status}{}", if messages.is_empty() { String::new() } else { format!(": {messages}") })]
     Call {
         instance: String,
+        /// The `.fmu` the instance came from.
+        fmu: String,
         call: &'static str,
         status: String,
         messages: String,
@@ -35,16 +37,15 @@ pub enum ImportError {
     UnknownVariable { fmu: String, name: String },
 }
 
-/// An FMU unpacked and loaded, ready to instantiate.
-pub struct Fmu {
+/// An FMU unpacked and its modelDescription read, its code not yet loaded: what a run's
+/// configuration is checked against before any FMU code runs.
+pub struct UnpackedFmu {
     pub path: PathBuf,
     pub model_description: ModelDescription,
-    library: Library,
-    // Dropped after `library`, so the .so file outlives its mapping.
-    _unpacked: Unpacked,
+    unpacked: Unpacked,
 }
 
-impl Fmu {
+impl UnpackedFmu {
     pub fn open(path: &Path) -> Result<Self, ImportError> {
         Self::open_with_limits(path, UnpackLimits::default())
     }
@@ -57,8 +58,42 @@ impl Fmu {
             message: format!("no readable modelDescription.xml: {e}"),
         })?;
         let model_description = ModelDescription::parse(&xml, path)?;
+        Ok(UnpackedFmu {
+            path: path.to_owned(),
+            model_description,
+            unpacked,
+        })
+    }
+
+    /// Load the library for this platform (the FMU's code runs from here on).
+    pub fn load(self) -> Result<Fmu, ImportError> {
+        let UnpackedFmu { path, model_description, unpacked } = self;
+        let path = path.as_path();
         let platform_dir = unpacked.path().join("binaries/linux64");
         let binary = platform_dir.join(format!("{}.so", model_description.model_identifier));
+        if platform_dir.is_dir() && !binary.is_file() {
+            let mut present: Vec<String> = std::fs::read_dir(&platform_dir)
+                .map(|d| {
+                    d.flatten()
+                        .map(|e| e.file_name().to_string_lossy().into_owned())
+                        .collect()
+                })
+                .unwrap_or_default();
+            present.sort();
+            return Err(ImportError::Archive {
+                path: path.to_owned(),
+                message: format!(
+                    "binaries/linux64/ is there but has no {}.so, the library the modelIdentifier \
+                     names (it has: {})",
+                    model_description.model_identifier,
+                    if present.is_empty() {
+                        "nothing".to_owned()
+                    } else {
+                        present.join(", ")
+                    }
+                ),
+            });
+        }
         if !binary.is_file() {
             let present: Vec<String> = std::fs::read_dir(unpacked.path().join("binaries"))
                 .map(|d| {
@@ -85,7 +120,10 @@ impl Fmu {
             &model_description.guid,
             &unpacked.path().join("resources"),
         )
-        .map(|l| l.with_input_interpolation(model_description.can_interpolate_inputs))
+        .map(|l| {
+            l.with_input_interpolation(model_description.can_interpolate_inputs)
+                .with_source(path)
+        })
         .map_err(|e| match e {
             ImportError::Library { message, .. } => ImportError::Library {
                 path: path.to_owned(),
@@ -99,6 +137,26 @@ impl Fmu {
             library,
             _unpacked: unpacked,
         })
+    }
+
+}
+
+/// An FMU unpacked and loaded, ready to instantiate.
+pub struct Fmu {
+    pub path: PathBuf,
+    pub model_description: ModelDescription,
+    library: Library,
+    // Dropped after `library`, so the .so file outlives its mapping.
+    _unpacked: Unpacked,
+}
+
+impl Fmu {
+    pub fn open(path: &Path) -> Result<Self, ImportError> {
+        Self::open_with_limits(path, UnpackLimits::default())
+    }
+
+    pub fn open_with_limits(path: &Path, limits: UnpackLimits) -> Result<Self, ImportError> {
+        UnpackedFmu::open_with_limits(path, limits)?.load()
     }
 
     pub fn instantiate(&self, instance_name: &str) -> Result<Instance, ImportError> {

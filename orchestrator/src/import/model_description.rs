@@ -64,6 +64,8 @@ struct RawScalarVariable {
     causality: Option<String>,
     #[serde(rename = "@variability", default)]
     variability: Option<String>,
+    #[serde(rename = "@initial", default)]
+    initial: Option<String>,
     #[serde(rename = "Real")]
     real: Option<RawTypeAttrs>,
     #[serde(rename = "Integer")]
@@ -110,6 +112,8 @@ pub struct ScalarVariable {
     pub scalar_type: ScalarType,
     pub causality: Causality,
     pub variability: String,
+    /// `exact`, `approx` or `calculated`, when the modelDescription says.
+    pub initial: Option<String>,
     pub start: Option<String>,
     pub unit: Option<String>,
 }
@@ -194,6 +198,7 @@ impl ModelDescription {
                 scalar_type,
                 causality,
                 variability: v.variability.unwrap_or_else(|| "continuous".into()),
+                initial: v.initial,
                 start: attrs.start.clone(),
                 unit: attrs.unit.clone(),
             });

@@ -16,7 +16,10 @@ mod clock;
 mod system;
 
 pub use clock::Clock;
-pub use system::{Algorithm, Block, NodeId, Observer, Port, Recorder, Slave, System};
+pub use system::{
+    Algorithm, Block, NodeId, Observer, Port, PortType, Recorder, Recording, RunEnd, Slave, System,
+    TypedPort,
+};
 
 #[derive(Debug, thiserror::Error)]
 pub enum MasterError {

@@ -1,14 +1,72 @@
 //! Nodes, connections and the stepping loop.
 
 use super::{Clock, MasterError};
-use crate::import::Instance;
+use crate::import::{Instance, StepEnd};
+
+/// The FMI type a slave's port carries. Enumerations travel as `Integer`, as FMI 2.0 gets and
+/// sets them. Real, Integer and Boolean values move through the master as `f64` (exact for
+/// every `i32` and for 0/1); String values beside them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PortType {
+    #[default]
+    Real,
+    Integer,
+    Boolean,
+    String,
+}
+
+const PORT_TYPES: [PortType; 4] = [
+    PortType::Real,
+    PortType::Integer,
+    PortType::Boolean,
+    PortType::String,
+];
+
+/// One port of a slave: the value reference and its type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TypedPort {
+    pub vr: u32,
+    pub ty: PortType,
+}
+
+impl TypedPort {
+    pub fn real(vr: u32) -> Self {
+        TypedPort {
+            vr,
+            ty: PortType::Real,
+        }
+    }
+}
+
+fn unsupported(what: &str) -> MasterError {
+    MasterError::Config(format!("this slave has no {what} variables"))
+}
 
 /// Something that advances in simulated time: an FMU instance, or a mock in tests.
-/// Call order: `set_real`/`set_real_input_derivatives` → `get_real` (any number, zero time) →
-/// `do_step(t_k, h)` → … with `t_k` the end of the previous step.
+/// Call order: `set_*`/`set_real_input_derivatives` → `get_*` (any number, zero time) →
+/// `do_step(t_k, h)` → … with `t_k` the end of the previous step. Only Real is required; the
+/// other types default to an error, for slaves that have none.
 pub trait Slave {
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), MasterError>;
     fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), MasterError>;
+    fn set_integer(&mut self, _vrs: &[u32], _values: &[i32]) -> Result<(), MasterError> {
+        Err(unsupported("Integer"))
+    }
+    fn get_integer(&mut self, _vrs: &[u32], _values: &mut [i32]) -> Result<(), MasterError> {
+        Err(unsupported("Integer"))
+    }
+    fn set_boolean(&mut self, _vrs: &[u32], _values: &[bool]) -> Result<(), MasterError> {
+        Err(unsupported("Boolean"))
+    }
+    fn get_boolean(&mut self, _vrs: &[u32], _values: &mut [bool]) -> Result<(), MasterError> {
+        Err(unsupported("Boolean"))
+    }
+    fn set_string(&mut self, _vrs: &[u32], _values: &[&str]) -> Result<(), MasterError> {
+        Err(unsupported("String"))
+    }
+    fn get_string(&mut self, _vrs: &[u32]) -> Result<Vec<String>, MasterError> {
+        Err(unsupported("String"))
+    }
     /// Only called when `can_interpolate_inputs`.
     fn set_real_input_derivatives(
         &mut self,
@@ -17,6 +75,10 @@ pub trait Slave {
     ) -> Result<(), MasterError>;
     fn can_interpolate_inputs(&self) -> bool;
     fn do_step(&mut self, time: f64, step: f64) -> Result<(), MasterError>;
+    /// A step that may end the simulation (an FMU's `fmi2Discard` + `fmi2Terminated`).
+    fn step(&mut self, time: f64, step: f64) -> Result<StepEnd, MasterError> {
+        self.do_step(time, step).map(|()| StepEnd::Completed)
+    }
 }
 
 impl Slave for Instance {
@@ -25,6 +87,24 @@ impl Slave for Instance {
     }
     fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), MasterError> {
         Ok(Instance::get_real(self, vrs, values)?)
+    }
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), MasterError> {
+        Ok(Instance::set_integer(self, vrs, values)?)
+    }
+    fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Result<(), MasterError> {
+        Ok(Instance::get_integer(self, vrs, values)?)
+    }
+    fn set_boolean(&mut self, vrs: &[u32], values: &[bool]) -> Result<(), MasterError> {
+        Ok(Instance::set_boolean(self, vrs, values)?)
+    }
+    fn get_boolean(&mut self, vrs: &[u32], values: &mut [bool]) -> Result<(), MasterError> {
+        Ok(Instance::get_boolean(self, vrs, values)?)
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), MasterError> {
+        Ok(Instance::set_string(self, vrs, values)?)
+    }
+    fn get_string(&mut self, vrs: &[u32]) -> Result<Vec<String>, MasterError> {
+        Ok(Instance::get_string(self, vrs)?)
     }
     fn set_real_input_derivatives(
         &mut self,
@@ -38,6 +118,9 @@ impl Slave for Instance {
     }
     fn do_step(&mut self, time: f64, step: f64) -> Result<(), MasterError> {
         Ok(Instance::do_step(self, time, step)?)
+    }
+    fn step(&mut self, time: f64, step: f64) -> Result<StepEnd, MasterError> {
+        Ok(Instance::step(self, time, step)?)
     }
 }
 
@@ -66,9 +149,15 @@ impl<F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), MasterError>> Block for F {
 
 /// Records values at each communication point.
 pub trait Observer {
-    /// `values[i]` is the current value of the i-th port this observer watches.
+    /// `values[i]` is the current value of the i-th port this observer watches (NaN for a
+    /// String port: those come through `record_text`).
     fn record(&mut self, time: f64, values: &[f64]);
     fn ports(&self) -> &[Port];
+    /// String ports to watch; their values are handed to `record_text` after each `record`.
+    fn text_ports(&self) -> &[Port] {
+        &[]
+    }
+    fn record_text(&mut self, _values: &[&str]) {}
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -88,11 +177,43 @@ pub enum Algorithm {
     Jacobi,
 }
 
+/// When observers see a communication point `t_k` (k ≥ 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Recording {
+    /// After the point's inputs are applied and the outputs evaluated (the twin's
+    /// convention: a feedthrough output reflects the input measured at `t_k`).
+    #[default]
+    AfterInputs,
+    /// As the step left the slaves, before the point's inputs are applied: fmpy's
+    /// `simulate_fmu` convention (SPEC §5). Point 0 is recorded after the inputs either way.
+    BeforeInputs,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunEnd {
+    /// Every step of the clock was taken.
+    Completed,
+    /// A slave ended the simulation itself at `at` (recorded as the last point).
+    Terminated { at: f64, node: String },
+}
+
+/// A slave's ports of one type: their indices among the slave's ports and value references.
+#[derive(Default)]
+struct Group {
+    ports: Vec<usize>,
+    vrs: Vec<u32>,
+}
+
 enum Kind {
     Slave {
         slave: Box<dyn Slave>,
         input_vrs: Vec<u32>,
-        output_vrs: Vec<u32>,
+        input_types: Vec<PortType>,
+        /// Output ports by type (fixed at `add`).
+        output_groups: [Group; 4],
+        /// Connected input ports by type (fixed when the run starts).
+        input_groups: [Group; 4],
     },
     Block(Box<dyn Block>),
 }
@@ -104,6 +225,124 @@ struct Node {
     sources: Vec<Option<Port>>,
     inputs: Vec<f64>,
     outputs: Vec<f64>,
+    /// String values, per port (empty for the other types).
+    text_inputs: Vec<String>,
+    text_outputs: Vec<String>,
+    /// Scratch for typed get/set.
+    ints: Vec<i32>,
+    bools: Vec<bool>,
+    reals: Vec<f64>,
+}
+
+fn groups(ports: &[TypedPort], keep: impl Fn(usize) -> bool) -> [Group; 4] {
+    let mut out: [Group; 4] = Default::default();
+    for (i, p) in ports.iter().enumerate() {
+        if keep(i) {
+            let g = &mut out[PORT_TYPES.iter().position(|t| *t == p.ty).unwrap_or(0)];
+            g.ports.push(i);
+            g.vrs.push(p.vr);
+        }
+    }
+    out
+}
+
+impl Node {
+    /// Read every output of a slave into `outputs` / `text_outputs`.
+    fn read_outputs(&mut self) -> Result<(), MasterError> {
+        let Kind::Slave {
+            slave,
+            output_groups,
+            ..
+        } = &mut self.kind
+        else {
+            return Ok(());
+        };
+        let [real, int, boolean, text] = output_groups;
+        if !real.vrs.is_empty() {
+            if real.ports.len() == self.outputs.len() {
+                // All outputs Real, in port order: read in place.
+                slave.get_real(&real.vrs, &mut self.outputs)?;
+            } else {
+                self.reals.resize(real.vrs.len(), 0.0);
+                slave.get_real(&real.vrs, &mut self.reals)?;
+                for (&p, &v) in real.ports.iter().zip(&self.reals) {
+                    self.outputs[p] = v;
+                }
+            }
+        }
+        if !int.vrs.is_empty() {
+            self.ints.resize(int.vrs.len(), 0);
+            slave.get_integer(&int.vrs, &mut self.ints)?;
+            for (&p, &v) in int.ports.iter().zip(&self.ints) {
+                self.outputs[p] = f64::from(v);
+            }
+        }
+        if !boolean.vrs.is_empty() {
+            self.bools.resize(boolean.vrs.len(), false);
+            slave.get_boolean(&boolean.vrs, &mut self.bools)?;
+            for (&p, &v) in boolean.ports.iter().zip(&self.bools) {
+                self.outputs[p] = if v { 1.0 } else { 0.0 };
+            }
+        }
+        if !text.vrs.is_empty() {
+            let values = slave.get_string(&text.vrs)?;
+            for (&p, v) in text.ports.iter().zip(values) {
+                self.text_outputs[p] = v;
+            }
+        }
+        Ok(())
+    }
+
+    /// Set a slave's connected inputs from `inputs` / `text_inputs`.
+    fn write_inputs(&mut self) -> Result<(), MasterError> {
+        let Kind::Slave {
+            slave,
+            input_groups,
+            ..
+        } = &mut self.kind
+        else {
+            return Ok(());
+        };
+        let [real, int, boolean, text] = input_groups;
+        if !real.vrs.is_empty() {
+            self.reals.clear();
+            self.reals.extend(real.ports.iter().map(|&p| self.inputs[p]));
+            slave.set_real(&real.vrs, &self.reals)?;
+        }
+        if !int.vrs.is_empty() {
+            self.ints.clear();
+            for &p in &int.ports {
+                self.ints.push(integer_value(self.inputs[p], &self.name, p)?);
+            }
+            slave.set_integer(&int.vrs, &self.ints)?;
+        }
+        if !boolean.vrs.is_empty() {
+            self.bools.clear();
+            self.bools
+                .extend(boolean.ports.iter().map(|&p| self.inputs[p] != 0.0));
+            slave.set_boolean(&boolean.vrs, &self.bools)?;
+        }
+        if !text.vrs.is_empty() {
+            let values: Vec<&str> = text
+                .ports
+                .iter()
+                .map(|&p| self.text_inputs[p].as_str())
+                .collect();
+            slave.set_string(&text.vrs, &values)?;
+        }
+        Ok(())
+    }
+}
+
+/// An Integer input's value: refused unless it is a whole number in `i32`'s range.
+fn integer_value(v: f64, node: &str, port: usize) -> Result<i32, MasterError> {
+    if v.fract() == 0.0 && v >= f64::from(i32::MIN) && v <= f64::from(i32::MAX) {
+        Ok(v as i32)
+    } else {
+        Err(MasterError::Config(format!(
+            "input {port} of '{node}' is an Integer but receives {v}"
+        )))
+    }
 }
 
 /// A co-simulation system. Build it, then `run`.
@@ -112,6 +351,7 @@ pub struct System {
     /// Replayed signals: one sample per communication point.
     signals: Vec<(String, Vec<f64>)>,
     pub algorithm: Algorithm,
+    pub recording: Recording,
 }
 
 impl Default for System {
@@ -126,11 +366,12 @@ impl System {
             nodes: Vec::new(),
             signals: Vec::new(),
             algorithm: Algorithm::default(),
+            recording: Recording::default(),
         }
     }
 
     /// Add a slave whose input ports are `input_vrs` and output ports `output_vrs` (value
-    /// references). Nodes are evaluated in the order they are added.
+    /// references of Real variables). Nodes are evaluated in the order they are added.
     pub fn add_slave(
         &mut self,
         name: &str,
@@ -138,17 +379,28 @@ impl System {
         input_vrs: Vec<u32>,
         output_vrs: Vec<u32>,
     ) -> NodeId {
-        let (n_in, n_out) = (input_vrs.len(), output_vrs.len());
-        self.push(
-            name,
-            Kind::Slave {
-                slave,
-                input_vrs,
-                output_vrs,
-            },
-            n_in,
-            n_out,
-        )
+        let inputs = input_vrs.into_iter().map(TypedPort::real).collect();
+        let outputs = output_vrs.into_iter().map(TypedPort::real).collect();
+        self.add_typed_slave(name, slave, inputs, outputs)
+    }
+
+    /// Add a slave with ports of any FMI type.
+    pub fn add_typed_slave(
+        &mut self,
+        name: &str,
+        slave: Box<dyn Slave>,
+        inputs: Vec<TypedPort>,
+        outputs: Vec<TypedPort>,
+    ) -> NodeId {
+        let (n_in, n_out) = (inputs.len(), outputs.len());
+        let kind = Kind::Slave {
+            slave,
+            input_vrs: inputs.iter().map(|p| p.vr).collect(),
+            input_types: inputs.iter().map(|p| p.ty).collect(),
+            output_groups: groups(&outputs, |_| true),
+            input_groups: Default::default(),
+        };
+        self.push(name, kind, n_in, n_out)
     }
 
     pub fn add_block(
@@ -168,6 +420,11 @@ impl System {
             sources: vec![None; n_in],
             inputs: vec![0.0; n_in],
             outputs: vec![0.0; n_out],
+            text_inputs: vec![String::new(); n_in],
+            text_outputs: vec![String::new(); n_out],
+            ints: Vec::new(),
+            bools: Vec::new(),
+            reals: Vec::new(),
         });
         NodeId(self.nodes.len() - 1)
     }
@@ -176,6 +433,20 @@ impl System {
     pub fn add_signal(&mut self, name: &str, samples: Vec<f64>) -> Port {
         self.signals.push((name.to_owned(), samples));
         Port::Signal(self.signals.len() - 1)
+    }
+
+    fn output_type(&self, port: Port) -> PortType {
+        match port {
+            Port::Output(NodeId(n), p) => match &self.nodes[n].kind {
+                Kind::Slave { output_groups, .. } => PORT_TYPES
+                    .into_iter()
+                    .zip(output_groups.iter())
+                    .find(|(_, g)| g.ports.contains(&p))
+                    .map_or(PortType::Real, |(t, _)| t),
+                Kind::Block(_) => PortType::Real,
+            },
+            Port::Signal(_) => PortType::Real,
+        }
     }
 
     pub fn connect(&mut self, from: Port, to: NodeId, input: usize) -> Result<(), MasterError> {
@@ -192,11 +463,22 @@ impl System {
             }
             _ => {}
         }
+        let from_type = self.output_type(from);
         let node = self
             .nodes
             .get_mut(to.0)
             .ok_or_else(|| MasterError::Config(format!("no node {}", to.0)))?;
         let name = node.name.clone();
+        let to_type = match &node.kind {
+            Kind::Slave { input_types, .. } => input_types.get(input).copied(),
+            Kind::Block(_) => Some(PortType::Real),
+        }
+        .unwrap_or_default();
+        if (from_type == PortType::String) != (to_type == PortType::String) {
+            return Err(MasterError::Config(format!(
+                "input {input} of '{name}' is {to_type:?} but its source is {from_type:?}"
+            )));
+        }
         let slot = node.sources.get_mut(input).ok_or_else(|| {
             MasterError::Config(format!("node '{name}' has no input port {input}"))
         })?;
@@ -223,27 +505,24 @@ impl System {
         }
     }
 
+    fn text(&self, port: Port) -> &str {
+        match port {
+            Port::Output(NodeId(n), p) => &self.nodes[n].text_outputs[p],
+            Port::Signal(_) => "",
+        }
+    }
+
     /// Set node `i`'s inputs from `inputs` and compute its outputs at `time`.
     fn evaluate_node(&mut self, i: usize, time: f64) -> Result<bool, MasterError> {
         let node = &mut self.nodes[i];
         let before = node.outputs.clone();
+        let has_text = node.text_outputs.len() > 0
+            && matches!(&node.kind, Kind::Slave { output_groups, .. } if !output_groups[3].vrs.is_empty());
+        let texts_before = has_text.then(|| node.text_outputs.clone());
         match &mut node.kind {
-            Kind::Slave {
-                slave,
-                input_vrs,
-                output_vrs,
-            } => {
-                let connected: Vec<usize> = (0..input_vrs.len())
-                    .filter(|&p| node.sources[p].is_some())
-                    .collect();
-                if !connected.is_empty() {
-                    let vrs: Vec<u32> = connected.iter().map(|&p| input_vrs[p]).collect();
-                    let values: Vec<f64> = connected.iter().map(|&p| node.inputs[p]).collect();
-                    slave.set_real(&vrs, &values)?;
-                }
-                if !output_vrs.is_empty() {
-                    slave.get_real(output_vrs, &mut node.outputs)?;
-                }
+            Kind::Slave { .. } => {
+                node.write_inputs()?;
+                node.read_outputs()?;
             }
             Kind::Block(block) => block
                 .evaluate(time, &node.inputs, &mut node.outputs)
@@ -255,11 +534,13 @@ impl System {
                     },
                 })?,
         }
-        Ok(node
-            .outputs
-            .iter()
-            .zip(&before)
-            .any(|(a, b)| a.to_bits() != b.to_bits()))
+        let texts_changed = texts_before.is_some_and(|t| t != node.text_outputs);
+        Ok(texts_changed
+            || node
+                .outputs
+                .iter()
+                .zip(&before)
+                .any(|(a, b)| a.to_bits() != b.to_bits()))
     }
 
     /// Copy node `i`'s connected inputs; true if any changed.
@@ -270,11 +551,16 @@ impl System {
                 let v = self.value(port, k);
                 changed |= self.nodes[i].inputs[p].to_bits() != v.to_bits();
                 self.nodes[i].inputs[p] = v;
+                let is_text = matches!(&self.nodes[i].kind,
+                    Kind::Slave { input_types, .. } if input_types[p] == PortType::String);
+                if is_text && self.text(port) != self.nodes[i].text_inputs[p] {
+                    self.nodes[i].text_inputs[p] = self.text(port).to_owned();
+                    changed = true;
+                }
             }
         }
         changed
     }
-
     /// Zero-time evaluation of every node at communication point `k`.
     fn propagate(&mut self, k: usize, time: f64) -> Result<(), MasterError> {
         match self.algorithm {
@@ -314,14 +600,19 @@ impl System {
     /// Input slopes over `[t_k, t_{k+1}]` for slaves that interpolate: the replayed signals'
     /// segments. Values coming from other nodes are held (slope 0).
     fn set_input_derivatives(&mut self, k: usize, step: f64) -> Result<(), MasterError> {
+        // Only Real inputs are interpolated; the others are held.
         for i in 0..self.nodes.len() {
             let slopes: Vec<(u32, f64)> = match &self.nodes[i].kind {
                 Kind::Slave {
-                    slave, input_vrs, ..
+                    slave,
+                    input_vrs,
+                    input_types,
+                    ..
                 } if slave.can_interpolate_inputs() => self.nodes[i]
                     .sources
                     .iter()
                     .enumerate()
+                    .filter(|(p, _)| input_types[*p] == PortType::Real)
                     .filter_map(|(p, src)| match src {
                         Some(Port::Signal(s)) => {
                             let samples = &self.signals[*s].1;
@@ -357,19 +648,39 @@ impl System {
         &mut self,
         clock: Clock,
         observers: &mut [&mut dyn Observer],
-        mut progress: impl FnMut(u64, u64),
-    ) -> Result<(), MasterError> {
+        progress: impl FnMut(u64, u64),
+    ) -> Result<RunEnd, MasterError> {
+        self.run_points(clock.steps, |k| clock.time(k), observers, progress)
+    }
+
+    /// Run through the communication points `times` (increasing; signals have one sample per
+    /// point), for schedules that are not uniform (input events).
+    pub fn run_at(
+        &mut self,
+        times: &[f64],
+        observers: &mut [&mut dyn Observer],
+        progress: impl FnMut(u64, u64),
+    ) -> Result<RunEnd, MasterError> {
+        if times.is_empty() || times.windows(2).any(|w| !(w[1] > w[0])) {
+            return Err(MasterError::Config(
+                "the communication points must be at least one, strictly increasing".into(),
+            ));
+        }
+        self.run_points((times.len() - 1) as u64, |k| times[k as usize], observers, progress)
+    }
+
+    fn check_wiring(&mut self, steps: u64) -> Result<(), MasterError> {
         for (name, samples) in &self.signals {
-            if (samples.len() as u64) < clock.steps + 1 {
+            if (samples.len() as u64) < steps + 1 {
                 return Err(MasterError::Config(format!(
                     "signal '{name}' has {} samples; {} communication points need {}",
                     samples.len(),
-                    clock.steps + 1,
-                    clock.steps + 1
+                    steps + 1,
+                    steps + 1
                 )));
             }
         }
-        for (i, node) in self.nodes.iter().enumerate() {
+        for (i, node) in self.nodes.iter_mut().enumerate() {
             if let Some(p) = node.sources.iter().position(Option::is_none) {
                 if matches!(node.kind, Kind::Block(_)) {
                     return Err(MasterError::Config(format!(
@@ -378,33 +689,90 @@ impl System {
                     )));
                 }
             }
+            let sources = &node.sources;
+            if let Kind::Slave {
+                input_vrs,
+                input_types,
+                input_groups,
+                ..
+            } = &mut node.kind
+            {
+                let ports: Vec<TypedPort> = input_vrs
+                    .iter()
+                    .zip(input_types.iter())
+                    .map(|(&vr, &ty)| TypedPort { vr, ty })
+                    .collect();
+                *input_groups = groups(&ports, |p| sources[p].is_some());
+            }
         }
+        Ok(())
+    }
+
+    fn observe(&self, observers: &mut [&mut dyn Observer], time: f64, k: usize, buffer: &mut Vec<f64>) {
+        for observer in observers.iter_mut() {
+            buffer.clear();
+            buffer.extend(observer.ports().iter().map(|&p| self.value(p, k)));
+            observer.record(time, buffer);
+            if !observer.text_ports().is_empty() {
+                let texts: Vec<&str> = observer.text_ports().iter().map(|&p| self.text(p)).collect();
+                observer.record_text(&texts);
+            }
+        }
+    }
+
+    fn run_points(
+        &mut self,
+        steps: u64,
+        time_of: impl Fn(u64) -> f64,
+        observers: &mut [&mut dyn Observer],
+        mut progress: impl FnMut(u64, u64),
+    ) -> Result<RunEnd, MasterError> {
+        self.check_wiring(steps)?;
         let mut buffer = Vec::new();
-        for k in 0..=clock.steps {
-            let time = clock.time(k);
+        for k in 0..=steps {
+            let time = time_of(k);
             let at = |e: MasterError| MasterError::AtTime {
                 time,
                 inner: Box::new(e),
             };
-            self.propagate(k as usize, time).map_err(at)?;
-            for observer in observers.iter_mut() {
-                buffer.clear();
-                buffer.extend(observer.ports().iter().map(|&p| self.value(p, k as usize)));
-                observer.record(time, &buffer);
+            if k > 0 && self.recording == Recording::BeforeInputs {
+                for node in &mut self.nodes {
+                    node.read_outputs().map_err(at)?;
+                }
+                self.observe(observers, time, k as usize, &mut buffer);
+                self.propagate(k as usize, time).map_err(at)?;
+            } else {
+                self.propagate(k as usize, time).map_err(at)?;
+                self.observe(observers, time, k as usize, &mut buffer);
             }
-            if k == clock.steps {
+            if k == steps {
                 break;
             }
-            self.set_input_derivatives(k as usize, clock.step)
-                .map_err(at)?;
-            for node in &mut self.nodes {
-                if let Kind::Slave { slave, .. } = &mut node.kind {
-                    slave.do_step(time, clock.step).map_err(at)?;
+            let step = time_of(k + 1) - time;
+            self.set_input_derivatives(k as usize, step).map_err(at)?;
+            for i in 0..self.nodes.len() {
+                let Kind::Slave { slave, .. } = &mut self.nodes[i].kind else {
+                    continue;
+                };
+                if let StepEnd::Terminated { at: end } = slave.step(time, step).map_err(at)? {
+                    // The slave's last successful time is the run's last point, recorded as
+                    // the step left it.
+                    for node in &mut self.nodes {
+                        node.read_outputs().map_err(|e| MasterError::AtTime {
+                            time: end,
+                            inner: Box::new(e),
+                        })?;
+                    }
+                    self.observe(observers, end, k as usize + 1, &mut buffer);
+                    return Ok(RunEnd::Terminated {
+                        at: end,
+                        node: self.nodes[i].name.clone(),
+                    });
                 }
             }
-            progress(k + 1, clock.steps);
+            progress(k + 1, steps);
         }
-        Ok(())
+        Ok(RunEnd::Completed)
     }
 }
 

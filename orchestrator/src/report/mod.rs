@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 pub mod plot;
+pub mod run_plot;
 
 pub use plot::{plot_comparison, plot_latent_variance, welch_h1, FrequencyResponse, FRF_SEGMENT};
 

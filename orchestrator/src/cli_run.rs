@@ -1,0 +1,88 @@
+//! `twin run`: the command over `cosim::run`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::cosim::run::{run, RunOptions};
+
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// The FMI 2.0 co-simulation FMU (.fmu) or SSP system (.ssp) to run.
+    pub model: PathBuf,
+    /// Start time (s); default: the model's DefaultExperiment, else 0.
+    #[arg(long)]
+    pub start: Option<f64>,
+    /// Stop time (s); default: the model's DefaultExperiment, else start + 1.
+    #[arg(long)]
+    pub stop: Option<f64>,
+    /// Communication step (s); default: the DefaultExperiment's stepSize (a system: the
+    /// smallest of its FMUs'), else a round step giving 500 to 1000 points.
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Input CSV: a `time` column, then columns named like the model's inputs (a system: its
+    /// input connectors or `component.variable`).
+    #[arg(long)]
+    pub input: Option<PathBuf>,
+    /// A start value, NAME=VALUE (repeat); in a system NAME is `component.variable`.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub sets: Vec<String>,
+    /// The recorded values as CSV: time, then every output in modelDescription order.
+    #[arg(long)]
+    pub output: PathBuf,
+    /// Also record the local variables.
+    #[arg(long)]
+    pub output_all: bool,
+    /// Plot (.svg) of every recorded numeric column against time.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+pub fn run_command(args: &RunArgs) -> Result<()> {
+    if let Some(plot) = &args.plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            anyhow::bail!("--plot {}: only .svg is supported", plot.display());
+        }
+    }
+    let options = RunOptions {
+        start: args.start,
+        stop: args.stop,
+        step: args.step,
+        input: args.input.clone(),
+        sets: args.sets.clone(),
+        output_all: args.output_all,
+    };
+    let result = run(&args.model, &options, crate::cli::progress_bar())?;
+    crate::cli::write_atomically(&args.output, |f| {
+        result.write_csv(f).map_err(anyhow::Error::from)
+    })?;
+    println!(
+        "{}: {} points from {} to {} s (step {} s), {} columns → {}",
+        args.model.display(),
+        result.time.len(),
+        result.start,
+        result.time.last().copied().unwrap_or(result.start),
+        result.step,
+        result.columns.len(),
+        args.output.display()
+    );
+    if let Some((component, at)) = &result.terminated {
+        println!("{component} ended the simulation itself at t = {at} s");
+    }
+    if let Some(plot) = &args.plot {
+        let title = args
+            .model
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let svg = crate::report::run_plot::plot_run(&result, &title)
+            .map_err(|m| anyhow::anyhow!("cannot draw {}: {m}", plot.display()))?;
+        crate::cli::write_atomically(plot, |f| {
+            use std::io::Write;
+            f.write_all(svg.as_bytes())
+                .with_context(|| format!("writing {}", plot.display()))
+        })?;
+        println!("wrote {}", plot.display());
+    }
+    Ok(())
+}
