@@ -11,14 +11,14 @@ pub struct RunArgs {
     /// The FMI 2.0 co-simulation FMU (.fmu) or SSP system (.ssp) to run.
     pub model: PathBuf,
     /// Start time (s); default: the model's DefaultExperiment, else 0.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub start: Option<f64>,
     /// Stop time (s); default: the model's DefaultExperiment, else start + 1.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub stop: Option<f64>,
     /// Communication step (s); default: the DefaultExperiment's stepSize (a system: the
     /// smallest of its FMUs'), else a round step giving 500 to 1000 points.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub step: Option<f64>,
     /// Input CSV: a `time` column, then columns named like the model's inputs (a system: its
     /// input connectors or `component.variable`).

@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
-use crate::cosim::ssp::{self, parse_ssd, SsvValue};
 pub use crate::cosim::ssp::Connection;
+use crate::cosim::ssp::{self, parse_ssd, SsvValue};
 use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 
 const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescription";

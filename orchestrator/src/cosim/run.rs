@@ -207,14 +207,14 @@ impl Model {
                     "component '{}' ({}): {}",
                     c.name,
                     c.source,
-                    e.to_string().replace(&fmu_path.display().to_string(), "the FMU")
+                    e.to_string()
+                        .replace(&fmu_path.display().to_string(), "the FMU")
                 ))
             })?;
             let mut bound = Vec::new();
             for binding in &c.bindings {
                 bound.extend(
-                    ssp::parse_ssv(&read(binding)?)
-                        .map_err(|m| bad(format!("{binding}: {m}")))?,
+                    ssp::parse_ssv(&read(binding)?).map_err(|m| bad(format!("{binding}: {m}")))?,
                 );
             }
             components.push(Component {
@@ -386,7 +386,11 @@ fn port_type(t: ScalarType) -> PortType {
     }
 }
 
-fn set_value(instance: &mut Instance, v: &ScalarVariable, value: &Value) -> Result<(), ImportError> {
+fn set_value(
+    instance: &mut Instance,
+    v: &ScalarVariable,
+    value: &Value,
+) -> Result<(), ImportError> {
     let vr = [v.value_reference];
     match (v.scalar_type, value) {
         (ScalarType::String, Value::Text(s)) => instance.set_string(&vr, &[s.as_str()]),
@@ -451,9 +455,8 @@ impl InputTable {
                 ),
             ));
         }
-        let drivable = |v: &ScalarVariable| {
-            v.causality == Causality::Input || v.variability == "tunable"
-        };
+        let drivable =
+            |v: &ScalarVariable| v.causality == Causality::Input || v.variability == "tunable";
         let mut columns = Vec::new();
         for name in header.iter().skip(1) {
             let targets = match model.find(name).filter(|(_, v)| drivable(v)) {
@@ -511,7 +514,10 @@ impl InputTable {
                 .ok_or_else(|| at(line, format!("time '{}' is not a number", &record[0])))?;
             if let Some(&last) = time.last() {
                 if t < last {
-                    return Err(at(line, format!("time {t} is before the previous row's {last}")));
+                    return Err(at(
+                        line,
+                        format!("time {t} is before the previous row's {last}"),
+                    ));
                 }
             }
             time.push(t);
@@ -757,9 +763,9 @@ fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError> {
         }
     }
     for set in &options.sets {
-        let (name, text) = set.split_once('=').ok_or_else(|| {
-            RunError::Config(format!("--set '{set}': expected NAME=VALUE"))
-        })?;
+        let (name, text) = set
+            .split_once('=')
+            .ok_or_else(|| RunError::Config(format!("--set '{set}': expected NAME=VALUE")))?;
         let name = name.trim();
         let (i, variable) = model
             .find(name)

@@ -251,9 +251,7 @@ pub fn parse_ssv(xml: &str) -> Result<Vec<(String, SsvValue)>, String> {
                                     .filter(|x| x.is_finite())
                                     .ok_or_else(bad)?,
                             ),
-                            "Integer" => {
-                                SsvValue::Integer(text.trim().parse().map_err(|_| bad())?)
-                            }
+                            "Integer" => SsvValue::Integer(text.trim().parse().map_err(|_| bad())?),
                             "Boolean" => SsvValue::Boolean(match text.trim() {
                                 "true" | "1" => true,
                                 "false" | "0" => false,

@@ -358,7 +358,9 @@ extern "C" {
 pub enum StepEnd {
     Completed,
     /// The FMU ended the simulation itself; `at` is its last successful time.
-    Terminated { at: f64 },
+    Terminated {
+        at: f64,
+    },
 }
 
 /// `path` as a `file:` URI, every byte outside RFC 3986's unreserved set and `/`
@@ -768,7 +770,10 @@ mod tests {
 
     #[test]
     fn resource_uris_are_percent_encoded_per_rfc_3986() {
-        assert_eq!(file_uri(Path::new("/tmp/a/resources")), "file:///tmp/a/resources");
+        assert_eq!(
+            file_uri(Path::new("/tmp/a/resources")),
+            "file:///tmp/a/resources"
+        );
         assert_eq!(
             file_uri(Path::new("/tmp/my dir/100%/#1?/résumé/resources")),
             "file:///tmp/my%20dir/100%25/%231%3F/r%C3%A9sum%C3%A9/resources"

@@ -67,7 +67,11 @@ impl UnpackedFmu {
 
     /// Load the library for this platform (the FMU's code runs from here on).
     pub fn load(self) -> Result<Fmu, ImportError> {
-        let UnpackedFmu { path, model_description, unpacked } = self;
+        let UnpackedFmu {
+            path,
+            model_description,
+            unpacked,
+        } = self;
         let path = path.as_path();
         let platform_dir = unpacked.path().join("binaries/linux64");
         let binary = platform_dir.join(format!("{}.so", model_description.model_identifier));
@@ -138,7 +142,6 @@ impl UnpackedFmu {
             _unpacked: unpacked,
         })
     }
-
 }
 
 /// An FMU unpacked and loaded, ready to instantiate.

@@ -205,6 +205,9 @@ struct Group {
     vrs: Vec<u32>,
 }
 
+// A slave carries its port groups inline: there are a handful of nodes, and the stepping loop
+// reads them at every point.
+#[allow(clippy::large_enum_variant)]
 enum Kind {
     Slave {
         slave: Box<dyn Slave>,
@@ -306,13 +309,15 @@ impl Node {
         let [real, int, boolean, text] = input_groups;
         if !real.vrs.is_empty() {
             self.reals.clear();
-            self.reals.extend(real.ports.iter().map(|&p| self.inputs[p]));
+            self.reals
+                .extend(real.ports.iter().map(|&p| self.inputs[p]));
             slave.set_real(&real.vrs, &self.reals)?;
         }
         if !int.vrs.is_empty() {
             self.ints.clear();
             for &p in &int.ports {
-                self.ints.push(integer_value(self.inputs[p], &self.name, p)?);
+                self.ints
+                    .push(integer_value(self.inputs[p], &self.name, p)?);
             }
             slave.set_integer(&int.vrs, &self.ints)?;
         }
@@ -516,8 +521,8 @@ impl System {
     fn evaluate_node(&mut self, i: usize, time: f64) -> Result<bool, MasterError> {
         let node = &mut self.nodes[i];
         let before = node.outputs.clone();
-        let has_text = node.text_outputs.len() > 0
-            && matches!(&node.kind, Kind::Slave { output_groups, .. } if !output_groups[3].vrs.is_empty());
+        let has_text = matches!(&node.kind,
+            Kind::Slave { output_groups, .. } if !output_groups[3].vrs.is_empty());
         let texts_before = has_text.then(|| node.text_outputs.clone());
         match &mut node.kind {
             Kind::Slave { .. } => {
@@ -661,12 +666,21 @@ impl System {
         observers: &mut [&mut dyn Observer],
         progress: impl FnMut(u64, u64),
     ) -> Result<RunEnd, MasterError> {
-        if times.is_empty() || times.windows(2).any(|w| !(w[1] > w[0])) {
+        if times.is_empty()
+            || times
+                .windows(2)
+                .any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
+        {
             return Err(MasterError::Config(
                 "the communication points must be at least one, strictly increasing".into(),
             ));
         }
-        self.run_points((times.len() - 1) as u64, |k| times[k as usize], observers, progress)
+        self.run_points(
+            (times.len() - 1) as u64,
+            |k| times[k as usize],
+            observers,
+            progress,
+        )
     }
 
     fn check_wiring(&mut self, steps: u64) -> Result<(), MasterError> {
@@ -708,13 +722,23 @@ impl System {
         Ok(())
     }
 
-    fn observe(&self, observers: &mut [&mut dyn Observer], time: f64, k: usize, buffer: &mut Vec<f64>) {
+    fn observe(
+        &self,
+        observers: &mut [&mut dyn Observer],
+        time: f64,
+        k: usize,
+        buffer: &mut Vec<f64>,
+    ) {
         for observer in observers.iter_mut() {
             buffer.clear();
             buffer.extend(observer.ports().iter().map(|&p| self.value(p, k)));
             observer.record(time, buffer);
             if !observer.text_ports().is_empty() {
-                let texts: Vec<&str> = observer.text_ports().iter().map(|&p| self.text(p)).collect();
+                let texts: Vec<&str> = observer
+                    .text_ports()
+                    .iter()
+                    .map(|&p| self.text(p))
+                    .collect();
                 observer.record_text(&texts);
             }
         }

@@ -27,11 +27,18 @@ pub fn plot_run(result: &RunResult, title: &str) -> Result<String, String> {
     }
     let shown = &numeric[..numeric.len().min(MAX_PANELS)];
     let title = if shown.len() < numeric.len() {
-        format!("{title} (first {} of {} columns)", shown.len(), numeric.len())
+        format!(
+            "{title} (first {} of {} columns)",
+            shown.len(),
+            numeric.len()
+        )
     } else {
         title.to_owned()
     };
-    let (t0, t1) = (result.time[0], *result.time.last().unwrap_or(&result.time[0]));
+    let (t0, t1) = (
+        result.time[0],
+        *result.time.last().unwrap_or(&result.time[0]),
+    );
     let t1 = if t1 > t0 { t1 } else { t0 + 1.0 };
     let height = 50 + PANEL_HEIGHT * shown.len() as u32 + 40;
     let mut svg = String::new();
@@ -46,7 +53,9 @@ pub fn plot_run(result: &RunResult, title: &str) -> Result<String, String> {
             let (mut lo, mut hi) = values
                 .iter()
                 .filter(|v| v.is_finite())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                });
             if !lo.is_finite() {
                 (lo, hi) = (-1.0, 1.0);
             }
