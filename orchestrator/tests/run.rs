@@ -43,10 +43,37 @@ fn python() -> PathBuf {
 }
 
 fn twin(args: &[&str]) -> Output {
+    twin_with_env(args, &[])
+}
+
+fn twin_with_env(args: &[&str], env: &[(String, String)]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_twin"))
         .args(args)
+        .envs(env.iter().map(|(k, v)| (k, v)))
         .output()
         .expect("twin runs")
+}
+
+/// What a non-Python host needs to run a pythonfmu FMU: libpython preloaded and PYTHONHOME
+/// (target/third-party/python-runtime.env, written by scripts/make-third-party-fmus.sh).
+fn python_runtime() -> Vec<(String, String)> {
+    let path = target_dir().join("third-party/python-runtime.env");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}: run scripts/make-third-party-fmus.sh",
+            path.display()
+        )
+    });
+    let value = |key: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(&format!("{key}=")))
+            .unwrap_or_else(|| panic!("{}: no {key}", path.display()))
+            .to_owned()
+    };
+    vec![
+        ("LD_PRELOAD".to_owned(), value("LIBPYTHON")),
+        ("PYTHONHOME".to_owned(), value("PYTHONHOME")),
+    ]
 }
 
 fn ok(output: Output, what: &str) -> String {
@@ -108,13 +135,22 @@ impl Table {
 /// difference over every value fmpy records (fmpy does not record Strings), after checking
 /// that both have the same rows at the same times.
 fn against_fmpy(fmu: &Path, twin_args: &[&str], fmpy_args: &[&str]) -> (Table, f64) {
+    against_fmpy_with_env(fmu, twin_args, fmpy_args, &[])
+}
+
+fn against_fmpy_with_env(
+    fmu: &Path,
+    twin_args: &[&str],
+    fmpy_args: &[&str],
+    env: &[(String, String)],
+) -> (Table, f64) {
     let dir = tempfile::tempdir().expect("temp dir");
     let ours = dir.path().join("twin.csv");
     let theirs = dir.path().join("fmpy.csv");
     let fmu_text = fmu.to_str().expect("utf-8 path");
     let mut args = vec!["run", fmu_text, "--output", ours.to_str().expect("utf-8")];
     args.extend_from_slice(twin_args);
-    ok(twin(&args), "twin run");
+    ok(twin_with_env(&args, env), "twin run");
     let mut command = Command::new(python());
     command
         .arg(workspace().join("scripts/fmpy_run.py"))
@@ -350,6 +386,56 @@ fn a_container_made_by_another_tool_runs_as_under_fmpy() {
         table.column("acc3").iter().any(|a| a.abs() > 1e-3),
         "the structure moved"
     );
+}
+
+#[test]
+fn fmus_made_by_pythonfmu_and_by_a_sequential_container_run_as_under_fmpy() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // A step input and a ramp: u is held over each step by both hosts.
+    let u = dir.path().join("u.csv");
+    std::fs::write(&u, "time,u\n0,0\n0.25,1\n0.5,1\n1,-0.5\n").expect("write");
+    let low_pass = target_dir().join("third-party/LowPass.fmu");
+    assert!(
+        low_pass.is_file(),
+        "{} is missing: run scripts/make-third-party-fmus.sh",
+        low_pass.display()
+    );
+    let (table, worst) = against_fmpy_with_env(
+        &low_pass,
+        &[
+            "--input",
+            u.to_str().expect("utf-8"),
+            "--stop",
+            "1",
+            "--step",
+            "0.01",
+            "--set",
+            "time_constant=0.05",
+        ],
+        &[],
+        &python_runtime(),
+    );
+    assert_eq!(worst, 0.0, "LowPass: {worst:e} from fmpy");
+    assert_eq!(table.rows.len(), 101);
+    // The sequential container: the shear FMU's acc3 through LowPass inside one FMU.
+    let container = target_dir().join("third-party/shear_low_pass.fmu");
+    let force = dir.path().join("force.csv");
+    std::fs::write(&force, "time,force\n0,0\n0.5,2\n1,-1\n2,0\n").expect("write");
+    let (table, worst) = against_fmpy_with_env(
+        &container,
+        &[
+            "--input",
+            force.to_str().expect("utf-8"),
+            "--stop",
+            "2",
+            "--step",
+            "0.01953125",
+        ],
+        &[],
+        &python_runtime(),
+    );
+    assert_eq!(worst, 0.0, "shear_low_pass: {worst:e} from fmpy");
+    assert!(table.column("acc3_filtered").iter().any(|a| a.abs() > 1e-6));
 }
 
 #[test]
@@ -614,4 +700,176 @@ fn ten_thousand_load_instantiate_free_unload_cycles_leak_nothing() {
         rss1 < rss0 + 8 * 1024,
         "resident memory grew from {rss0} kB to {rss1} kB over 10,000 cycles"
     );
+}
+
+/// An SSP archive: `SystemStructure.ssd` and the given files (the FMUs, `.ssv` sets).
+fn write_ssp(path: &Path, ssd: &str, files: &[(&str, Vec<u8>)]) {
+    use std::io::Write;
+    let mut writer = zip::ZipWriter::new(std::fs::File::create(path).expect("create"));
+    let options = zip::write::SimpleFileOptions::default();
+    writer
+        .start_file("SystemStructure.ssd", options)
+        .expect("start");
+    writer.write_all(ssd.as_bytes()).expect("write");
+    for (name, bytes) in files {
+        writer.start_file(*name, options).expect("start");
+        writer.write_all(bytes).expect("write");
+    }
+    writer.finish().expect("finish");
+}
+
+const BALL_AND_GAIN: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" version="1.0" name="ball-and-gain">
+  <ssd:System name="ball-and-gain">
+    <ssd:Connectors>
+      <ssd:Connector name="offset" kind="input"><ssc:Real/></ssd:Connector>
+      <ssd:Connector name="height" kind="output"><ssc:Real/></ssd:Connector>
+    </ssd:Connectors>
+    <ssd:Elements>
+      <ssd:Component name="ball" type="application/x-fmu-sharedlibrary" source="resources/BouncingBall.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="h" kind="output"><ssc:Real/></ssd:Connector>
+        </ssd:Connectors>
+        <ssd:ParameterBindings><ssd:ParameterBinding source="resources/ball.ssv"/></ssd:ParameterBindings>
+      </ssd:Component>
+      <ssd:Component name="gain" type="application/x-fmu-sharedlibrary" source="resources/NoInterp.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+        </ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="shifted" type="application/x-fmu-sharedlibrary" source="resources/Table.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+        </ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="ball" startConnector="h" endElement="gain" endConnector="u"/>
+      <ssd:Connection startElement="ball" startConnector="h" endConnector="height"/>
+      <ssd:Connection startConnector="offset" endElement="shifted" endConnector="u"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="2"/>
+</ssd:SystemStructureDescription>
+"#;
+
+const BALL_SSV: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" version="1.0" name="ball">
+  <ssv:Parameters>
+    <ssv:Parameter name="e"><ssv:Real value="0.5"/></ssv:Parameter>
+  </ssv:Parameters>
+</ssv:ParameterSet>
+"#;
+
+#[test]
+fn ssp_systems_run_with_connections_bindings_and_system_inputs() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let ssp = dir.path().join("system.ssp");
+    let read = |name: &str| std::fs::read(c_fmu(name)).expect("read");
+    write_ssp(
+        &ssp,
+        BALL_AND_GAIN,
+        &[
+            ("resources/BouncingBall.fmu", read("BouncingBall")),
+            ("resources/NoInterp.fmu", read("NoInterp")),
+            ("resources/Table.fmu", read("Table")),
+            ("resources/ball.ssv", BALL_SSV.as_bytes().to_vec()),
+        ],
+    );
+    let offset = dir.path().join("offset.csv");
+    std::fs::write(&offset, "time,offset\n0,0\n2,4\n").expect("write");
+    let out = dir.path().join("system.csv");
+    ok(
+        twin(&[
+            "run",
+            ssp.to_str().expect("utf-8"),
+            "--step",
+            "0.01",
+            "--input",
+            offset.to_str().expect("utf-8"),
+            "--output",
+            out.to_str().expect("utf-8"),
+        ]),
+        "twin run system.ssp",
+    );
+    let system = Table::read(&out);
+    assert_eq!(
+        system.header,
+        [
+            "time",
+            "ball.h",
+            "ball.v",
+            "ball.bounces",
+            "gain.y",
+            "gain.integral",
+            "shifted.y",
+            "shifted.y_plus_u"
+        ]
+    );
+    // The binding's e = 0.5: the ball alone with --set e=0.5 gives the same heights.
+    let alone = dir.path().join("alone.csv");
+    ok(
+        twin(&[
+            "run",
+            c_fmu("BouncingBall").to_str().expect("utf-8"),
+            "--set",
+            "e=0.5",
+            "--stop",
+            "2",
+            "--step",
+            "0.01",
+            "--output",
+            alone.to_str().expect("utf-8"),
+        ]),
+        "twin run BouncingBall",
+    );
+    let h = system.column("ball.h");
+    assert_eq!(h, Table::read(&alone).column("h"), "the bound restitution");
+    // The connection: gain.u = ball.h, applied at each point after it is recorded, so the
+    // recorded gain.y = 3·h one point earlier (the first point is after the inputs).
+    let y = system.column("gain.y");
+    assert_eq!(y[0], 3.0 * h[0]);
+    for k in 1..h.len() {
+        assert_eq!(y[k], 3.0 * h[k - 1], "point {k}");
+    }
+    // The system input `offset` drives shifted.u: y_plus_u − y is the offset ramp, 2t, one
+    // point late.
+    let (t, shifted, plus) = (
+        system.column("time"),
+        system.column("shifted.y"),
+        system.column("shifted.y_plus_u"),
+    );
+    for k in 1..t.len() {
+        assert!(
+            (plus[k] - shifted[k] - 2.0 * t[k - 1]).abs() < 1e-12,
+            "point {k}"
+        );
+    }
+    // --set overrides the binding, by component.variable; a wrong name gets the closest.
+    let changed = dir.path().join("changed.csv");
+    ok(
+        twin(&[
+            "run",
+            ssp.to_str().expect("utf-8"),
+            "--set",
+            "ball.e=0.8",
+            "--output",
+            changed.to_str().expect("utf-8"),
+        ]),
+        "twin run --set ball.e",
+    );
+    assert_ne!(Table::read(&changed).column("ball.h"), h);
+    let stderr = refused(
+        twin(&[
+            "run",
+            ssp.to_str().expect("utf-8"),
+            "--set",
+            "bal.e=0.8",
+            "--output",
+            changed.to_str().expect("utf-8"),
+        ]),
+        "a misspelt component",
+    );
+    assert!(stderr.contains("closest: ball.e"), "{stderr}");
 }
