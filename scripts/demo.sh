@@ -2,7 +2,9 @@
 # The demo on the bundled example data: build the FMUs and the twin CLI, calibrate the twin on
 # dataset1, compare it with the three records (dataset3 has contact the twin does not know
 # about), train the GP corrector, run active learning over the three records in every query
-# mode, then diagnose dataset3, add the physics the diagnosis names and compare again. Reports, predictions and plots go to out/demo/.
+# mode, then diagnose dataset3, add the physics the diagnosis names and compare again, and run
+# the resulting twin with `twin run` as any SSP system. Reports, predictions and plots go to
+# out/demo/.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -59,6 +61,12 @@ for n in 1 2 3; do
   "$twin" compare --twin "$out/with-contact.ssp" --data "data/dataset$n.csv" \
     --report "$out/compare-with-contact-dataset$n.json" --plot "$out/compare-with-contact-dataset$n.svg"
 done
+
+echo
+echo "== twin run: the twin with the added physics is an SSP system any FMI master runs; run it as one =="
+cut -d, -f1,2 data/dataset3.csv >"$out/force-dataset3.csv"
+"$twin" run "$out/with-contact.ssp" --input "$out/force-dataset3.csv" --stop 20 --step 0.01953125 \
+  --output "$out/run-with-contact-dataset3.csv" --plot "$out/run-with-contact-dataset3.svg"
 
 echo
 echo "== for contrast: recalibrating on dataset3 instead biases the parameters =="

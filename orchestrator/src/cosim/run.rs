@@ -89,11 +89,11 @@ impl RunResult {
         let mut row = Vec::with_capacity(header.len());
         for (k, t) in self.time.iter().enumerate() {
             row.clear();
-            row.push(format!("{t}"));
+            row.push(real_text(*t));
             for (c, column) in self.columns.iter().enumerate() {
                 row.push(match column.scalar_type {
                     ScalarType::String => self.texts[&c][k].clone(),
-                    ScalarType::Real => format!("{}", self.values[c][k]),
+                    ScalarType::Real => real_text(self.values[c][k]),
                     _ => format!("{}", self.values[c][k] as i64),
                 });
             }
@@ -108,6 +108,17 @@ impl RunResult {
             .iter()
             .position(|c| c.name == name)
             .map(|i| self.values[i].as_slice())
+    }
+}
+
+/// The shortest text that reads back to the same `f64`: plain for magnitudes from 1e-4 to
+/// 1e15, scientific beyond (Rust's `{:e}` is shortest round-trip too).
+fn real_text(x: f64) -> String {
+    let a = x.abs();
+    if a == 0.0 || (1e-4..1e15).contains(&a) || !a.is_finite() {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
     }
 }
 
@@ -1045,6 +1056,29 @@ mod tests {
         assert_eq!(times.len(), 11);
         assert_eq!(times[3], 3.0 * 0.1);
         assert_eq!(times[10], 1.0);
+    }
+
+    #[test]
+    fn reals_are_written_to_read_back_exactly() {
+        for x in [
+            0.0,
+            -0.0,
+            1.0 / 3.0,
+            6.766057429708043e-10,
+            -2.5e300,
+            123456.789,
+            1e15,
+            1e-4,
+        ] {
+            let text = real_text(x);
+            assert_eq!(
+                text.parse::<f64>().expect("a number").to_bits(),
+                x.to_bits(),
+                "{text}"
+            );
+        }
+        assert_eq!(real_text(6.766057429708043e-10), "6.766057429708043e-10");
+        assert_eq!(real_text(0.25), "0.25");
     }
 
     #[test]

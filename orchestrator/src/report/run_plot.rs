@@ -100,3 +100,63 @@ pub fn plot_run(result: &RunResult, title: &str) -> Result<String, String> {
     }
     Ok(svg)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cosim::run::Column;
+
+    fn result(names: &[(&str, ScalarType)]) -> RunResult {
+        let time: Vec<f64> = (0..50).map(|k| k as f64 * 0.1).collect();
+        RunResult {
+            columns: names
+                .iter()
+                .map(|(n, t)| Column {
+                    name: (*n).to_owned(),
+                    scalar_type: *t,
+                })
+                .collect(),
+            values: names
+                .iter()
+                .enumerate()
+                .map(|(i, _)| time.iter().map(|t| (t * (i + 1) as f64).sin()).collect())
+                .collect(),
+            time,
+            texts: Default::default(),
+            start: 0.0,
+            stop: 4.9,
+            step: 0.1,
+            terminated: None,
+        }
+    }
+
+    #[test]
+    fn one_panel_per_numeric_column_with_its_name() {
+        let r = result(&[("h", ScalarType::Real), ("bounces", ScalarType::Integer)]);
+        let svg = plot_run(&r, "ball").expect("draws");
+        assert!(svg.starts_with("<svg") && svg.contains("ball"));
+        assert!(
+            svg.contains(">\nh\n</text>") && svg.contains(">\nbounces\n</text>"),
+            "panel captions"
+        );
+        // Each series is one polyline through all 50 points (the step drawing doubles them).
+        let longest = svg
+            .split("<polyline")
+            .skip(1)
+            .map(|p| {
+                p.split("points=\"")
+                    .nth(1)
+                    .map_or(0, |q| q.split('"').next().unwrap_or("").split(' ').count())
+            })
+            .max()
+            .unwrap_or(0);
+        assert!(longest >= 50, "the longest line has {longest} points");
+    }
+
+    #[test]
+    fn strings_only_cannot_be_plotted() {
+        let mut r = result(&[("label", ScalarType::String)]);
+        r.texts.insert(0, vec![String::new(); 50]);
+        assert!(plot_run(&r, "x").is_err());
+    }
+}
