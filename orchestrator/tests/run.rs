@@ -873,3 +873,36 @@ fn ssp_systems_run_with_connections_bindings_and_system_inputs() {
     );
     assert!(stderr.contains("closest: ball.e"), "{stderr}");
 }
+
+#[test]
+fn output_all_records_the_locals_too() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (outputs, all) = (dir.path().join("outputs.csv"), dir.path().join("all.csv"));
+    let ball = c_fmu("BouncingBall");
+    let ball = ball.to_str().expect("utf-8");
+    ok(
+        twin(&["run", ball, "--output", outputs.to_str().expect("utf-8")]),
+        "twin run",
+    );
+    ok(
+        twin(&[
+            "run",
+            ball,
+            "--output-all",
+            "--output",
+            all.to_str().expect("utf-8"),
+        ]),
+        "twin run --output-all",
+    );
+    assert_eq!(Table::read(&outputs).header, ["time", "h", "v", "bounces"]);
+    let all = Table::read(&all);
+    assert_eq!(all.header, ["time", "h", "v", "bounces", "energy"]);
+    let (h, v, energy) = (all.column("h"), all.column("v"), all.column("energy"));
+    for k in 0..h.len() {
+        assert_eq!(
+            energy[k],
+            9.81 * h[k] + 0.5 * v[k] * v[k],
+            "the local at row {k}"
+        );
+    }
+}

@@ -2,6 +2,7 @@
  * BouncingBall: a ball falling under gravity and bouncing on the ground h = 0.
  *
  *   dh/dt = v, dv/dt = -g; at h = 0 with v < 0: v := -e v, bounces += 1;
+ *   energy (a local) = g h + v^2 / 2;
  *   an impact that leaves the ball slower than V_REST = 0.1 m/s puts it to rest (h = v = 0 for good).
  *
  * fmi2DoStep advances in sub-steps of at most SUBSTEP (the communication step split evenly), each
@@ -10,8 +11,8 @@
  * from the ground. Any communication step size is accepted.
  */
 #define MODEL_GUID "{2ad5abc6-3519-4706-a5cd-144b29652500}"
-#define N_VARIABLES 5
-#define N_REALS 4
+#define N_VARIABLES 6
+#define N_REALS 5
 #define N_INTEGERS 1
 #define N_BOOLEANS 0
 #define N_STRINGS 0
@@ -24,7 +25,7 @@ typedef struct {
 
 #include "../common.h"
 
-enum { R_H, R_V, R_G, R_E };
+enum { R_H, R_V, R_G, R_E, R_ENERGY };
 enum { I_BOUNCES };
 
 static const Variable VARIABLES[N_VARIABLES] = {
@@ -33,6 +34,7 @@ static const Variable VARIABLES[N_VARIABLES] = {
     {"g", T_REAL, C_PARAMETER, V_FIXED, I_EXACT, R_G},
     {"e", T_REAL, C_PARAMETER, V_FIXED, I_EXACT, R_E},
     {"bounces", T_INTEGER, C_OUTPUT, V_DISCRETE, I_CALCULATED, I_BOUNCES},
+    {"energy", T_REAL, C_LOCAL, V_CONTINUOUS, I_CALCULATED, R_ENERGY},
 };
 
 #define SUBSTEP 1e-3
@@ -64,7 +66,11 @@ static fmi2Status model_exit_initialization(Instance *c) {
     return fmi2OK;
 }
 
-static void model_calculate(Instance *c) { (void)c; }
+/* The local `energy`: mechanical energy per unit mass, g h + v^2 / 2 (falls at each impact). */
+static void model_calculate(Instance *c) {
+    double *r = c->m.r;
+    r[R_ENERGY] = r[R_G] * r[R_H] + 0.5 * r[R_V] * r[R_V];
+}
 
 static double height_after(double h, double v, double g, double tau) { return h + v * tau - 0.5 * g * tau * tau; }
 
