@@ -130,8 +130,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use fmu_shear::effects::contact::{SIDE_BOTH, SIDE_NEGATIVE, SIDE_POSITIVE};
-use fmu_shear::effects::{add_storey_force, drift, Contact, Cubic, Effects, Floors, Friction};
+use fmu_shear::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
+use fmu_shear::effects::{
+    add_storey_force, drift, Contact, Cubic, Effects, Floors, Friction, Kind, Law, Side,
+};
 use fmu_shear::{ShearModel, ShearParameters};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -403,17 +405,100 @@ impl ParamName {
 }
 
 impl EffectSpec {
+    /// The effect as the shear FMU's library describes it: its kind, 0-based location and force
+    /// law. `None` for hysteresis, which the library lacks.
+    pub fn library(&self) -> Option<(Kind, usize, Law)> {
+        let law = match *self {
+            EffectSpec::Contact {
+                gap,
+                stiffness,
+                side,
+                ..
+            } => Law::Contact(Contact {
+                gap,
+                stiffness,
+                side,
+            }),
+            EffectSpec::Cubic { stiffness, .. } => Law::Cubic(Cubic { stiffness }),
+            EffectSpec::Friction {
+                force,
+                velocity_scale,
+                ..
+            } => Law::Friction(Friction {
+                force,
+                velocity_scale,
+            }),
+            EffectSpec::Hysteresis { .. } => return None,
+        };
+        Some((law.kind(), self.library_location(), law))
+    }
+    /// A library effect at a 0-based location (`lower` floor of a contact, storey − 1, floor − 1).
+    pub fn from_library(location: usize, law: Law) -> EffectSpec {
+        match law {
+            Law::Contact(c) => EffectSpec::Contact {
+                lower: location,
+                gap: c.gap,
+                stiffness: c.stiffness,
+                side: c.side,
+            },
+            Law::Cubic(c) => EffectSpec::Cubic {
+                storey: location + 1,
+                stiffness: c.stiffness,
+            },
+            Law::Friction(f) => EffectSpec::Friction {
+                floor: location + 1,
+                force: f.force,
+                velocity_scale: f.velocity_scale,
+            },
+        }
+    }
     pub fn kind(&self) -> &'static str {
-        match self {
-            EffectSpec::Contact { .. } => "contact",
-            EffectSpec::Cubic { .. } => "cubic",
-            EffectSpec::Friction { .. } => "friction",
-            EffectSpec::Hysteresis { .. } => "hysteresis",
+        match self.library() {
+            Some((kind, ..)) => kind.name(),
+            None => "hysteresis",
         }
     }
     /// Whether the shear FMU's effect library has this kind (hysteresis: no).
     pub fn in_library(&self) -> bool {
         !matches!(self, EffectSpec::Hysteresis { .. })
+    }
+    /// The parameters by their JSON names (the library's parameter names; contact's side by
+    /// name).
+    fn parameters_json(&self) -> Map<String, Value> {
+        let mut o = Map::new();
+        match (self.library(), self) {
+            (Some((kind, _, law)), _) => {
+                for (p, x) in kind.real_params().iter().zip(law.reals()) {
+                    o.insert(p.suffix.into(), json!(x));
+                }
+                if let Law::Contact(c) = law {
+                    o.insert("side".into(), json!(side_name(c.side)));
+                }
+            }
+            (
+                None,
+                &EffectSpec::Hysteresis {
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                    ..
+                },
+            ) => {
+                for (key, x) in [
+                    ("stiffness", stiffness),
+                    ("yield", yield_drift),
+                    ("beta", beta),
+                    ("gamma", gamma),
+                    ("exponent", exponent),
+                ] {
+                    o.insert(key.into(), json!(x));
+                }
+            }
+            (None, _) => {}
+        }
+        o
     }
     /// 0-based location in the FMU's effect library (for hysteresis, which the library lacks,
     /// the 0-based storey).
@@ -454,55 +539,22 @@ impl EffectSpec {
     /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`. Hysteresis is not in
     /// the library: its `hysteresis2` names no FMU variable (see [`EffectSpec::in_library`]).
     pub fn fmu_prefix(&self) -> String {
-        match *self {
-            EffectSpec::Contact { lower, .. } => format!("contact{}{}", lower, lower + 1),
-            EffectSpec::Cubic { storey, .. } => format!("cubic{storey}"),
-            EffectSpec::Friction { floor, .. } => format!("friction{floor}"),
-            EffectSpec::Hysteresis { storey, .. } => format!("hysteresis{storey}"),
+        match self.library() {
+            Some((kind, location, _)) => kind.prefix(location),
+            None => format!("hysteresis{}", self.library_location() + 1),
         }
     }
     fn to_json(&self) -> Value {
-        match *self {
-            EffectSpec::Contact {
-                lower,
-                gap,
-                stiffness,
-                side,
-            } => json!({
-                "kind": "contact", "location": [lower, lower + 1], "gap": gap, "stiffness": stiffness,
-                "side": side_name(side),
-            }),
-            EffectSpec::Cubic { storey, stiffness } => {
-                json!({"kind": "cubic", "location": [storey], "stiffness": stiffness})
-            }
-            EffectSpec::Friction {
-                floor,
-                force,
-                velocity_scale,
-            } => json!({
-                "kind": "friction", "location": [floor], "force": force, "velocity_scale": velocity_scale,
-            }),
-            EffectSpec::Hysteresis {
-                storey,
-                stiffness,
-                yield_drift,
-                beta,
-                gamma,
-                exponent,
-            } => json!({
-                "kind": "hysteresis", "location": [storey], "stiffness": stiffness,
-                "yield": yield_drift, "beta": beta, "gamma": gamma, "exponent": exponent,
-            }),
-        }
+        let mut o = Map::new();
+        o.insert("kind".into(), json!(self.kind()));
+        o.insert("location".into(), json!(self.location()));
+        o.extend(self.parameters_json());
+        Value::Object(o)
     }
 }
 
 fn side_name(side: i32) -> &'static str {
-    match side {
-        SIDE_POSITIVE => "positive",
-        SIDE_NEGATIVE => "negative",
-        _ => "both",
-    }
+    Side::from_code(side).unwrap_or(Side::Both).name()
 }
 
 impl Change {
@@ -840,48 +892,30 @@ impl Scenario {
         for (i, e) in self.effects.iter().enumerate() {
             let at = at.field("effects").index(i);
             match *e {
-                EffectSpec::Contact {
-                    lower,
-                    gap,
-                    stiffness,
-                    side,
-                } => {
+                EffectSpec::Contact { lower, side, .. } => {
                     if lower > 2 {
                         return Err(at.field("location").error(format!(
                             "[{lower}, {}] is not a storey; expected [0, 1], [1, 2] or [2, 3]",
                             lower + 1
                         )));
                     }
-                    positive(at.field("gap"), gap, false)?;
-                    positive(at.field("stiffness"), stiffness, false)?;
-                    if ![SIDE_BOTH, SIDE_POSITIVE, SIDE_NEGATIVE].contains(&side) {
+                    if Side::from_code(side).is_none() {
                         return Err(at.field("side").error(format!("{side} is not -1, 0 or 1")));
                     }
                 }
-                EffectSpec::Cubic { storey, stiffness } => {
+                EffectSpec::Cubic { storey, .. } => {
                     if !(1..=3).contains(&storey) {
                         return Err(at
                             .field("location")
                             .error(format!("storey {storey} is not 1, 2 or 3")));
                     }
-                    if !stiffness.is_finite() {
-                        return Err(at
-                            .field("stiffness")
-                            .error(format!("{stiffness} is not a finite number")));
-                    }
                 }
-                EffectSpec::Friction {
-                    floor,
-                    force,
-                    velocity_scale,
-                } => {
+                EffectSpec::Friction { floor, .. } => {
                     if !(1..=3).contains(&floor) {
                         return Err(at
                             .field("location")
                             .error(format!("floor {floor} is not 1, 2 or 3")));
                     }
-                    positive(at.field("force"), force, false)?;
-                    positive(at.field("velocity_scale"), velocity_scale, true)?;
                 }
                 EffectSpec::Hysteresis {
                     storey,
@@ -914,6 +948,23 @@ impl Scenario {
                         return Err(at
                             .field("exponent")
                             .error(format!("{exponent} must be a finite number ≥ 1")));
+                    }
+                }
+            }
+            // A library effect's parameters: the ranges the FMU accepts.
+            if let Some((kind, _, law)) = e.library() {
+                for (p, x) in kind.real_params().iter().zip(law.reals()) {
+                    let at = at.field(p.suffix);
+                    if p.min == 0.0 {
+                        positive(at, x, p.strictly)?;
+                    } else if !x.is_finite() {
+                        return Err(at.error(format!("{x} is not a finite number")));
+                    } else if x < p.min || (p.strictly && x == p.min) {
+                        return Err(at.error(format!(
+                            "{x} must be {} {}",
+                            if p.strictly { ">" } else { "≥" },
+                            p.min
+                        )));
                     }
                 }
             }
@@ -980,75 +1031,74 @@ fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
         }
     };
     let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
-    match kind {
-        "contact" => {
-            at.known_keys(o, &["kind", "location", "gap", "stiffness", "side"])?;
-            let lower = match location[..] {
+    let storey_or_adjacent = |location: &[u64]| match location[..] {
+        [s] if (1..=3).contains(&s) => Ok(small(s)),
+        [a, b] if b == a + 1 && b <= 3 => Ok(small(b)),
+        _ => Err(loc.error(format!(
+            "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
+        ))),
+    };
+    // The library's kinds: their parameters, defaults and side come from its description.
+    if let Some(library_kind) = Kind::parse(kind) {
+        let mut known = vec!["kind", "location"];
+        known.extend(library_kind.real_params().iter().map(|p| p.suffix));
+        if library_kind.has_side() {
+            known.push("side");
+        }
+        at.known_keys(o, &known)?;
+        // 0-based, as the library counts.
+        let location = match library_kind {
+            Kind::Contact => match location[..] {
                 [a, b] if b == a + 1 && b <= 3 => small(a),
                 _ => return Err(loc.error(format!(
                     "{location:?} is not a storey; expected two adjacent floors [lower, upper] with 0 = the ground: [0, 1], [1, 2] or [2, 3]"
                 ))),
-            };
-            let side = match o.get("side") {
-                None => SIDE_BOTH,
-                Some(Value::String(s)) => match s.as_str() {
-                    "both" => SIDE_BOTH,
-                    "positive" => SIDE_POSITIVE,
-                    "negative" => SIDE_NEGATIVE,
-                    _ => {
-                        return Err(at.field("side").error(format!(
-                            "{s:?} is not \"both\", \"positive\" or \"negative\""
-                        )))
-                    }
-                },
-                Some(v @ Value::Number(_)) => match v.as_i64() {
-                    Some(x @ -1..=1) => x as i32,
-                    _ => return Err(at.field("side").error(format!("{v} is not -1, 0 or 1"))),
-                },
-                Some(other) => {
-                    return Err(at.field("side").error(format!(
-                        "expected \"both\", \"positive\" or \"negative\", found {}",
-                        shown(other)
-                    )))
-                }
-            };
-            Ok(EffectSpec::Contact {
-                lower,
-                gap: number_or("gap", 5e-4)?,
-                stiffness: number_or("stiffness", 9000.0)?,
-                side,
-            })
-        }
-        "cubic" => {
-            at.known_keys(o, &["kind", "location", "stiffness"])?;
-            let storey = match location[..] {
-                [s] if (1..=3).contains(&s) => small(s),
-                [a, b] if b == a + 1 && b <= 3 => small(b),
-                _ => return Err(loc.error(format!(
-                    "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
-                ))),
-            };
-            Ok(EffectSpec::Cubic {
-                storey,
-                stiffness: number_or("stiffness", 1e9)?,
-            })
-        }
-        "friction" => {
-            at.known_keys(o, &["kind", "location", "force", "velocity_scale"])?;
-            let floor = match location[..] {
-                [f] if (1..=3).contains(&f) => small(f),
+            },
+            Kind::Cubic => storey_or_adjacent(&location)? - 1,
+            Kind::Friction => match location[..] {
+                [f] if (1..=3).contains(&f) => small(f) - 1,
                 _ => {
                     return Err(loc.error(format!(
                         "{location:?} is not a floor; expected [1], [2] or [3]"
                     )))
                 }
-            };
-            Ok(EffectSpec::Friction {
-                floor,
-                force: number_or("force", 0.1)?,
-                velocity_scale: number_or("velocity_scale", 1e-3)?,
-            })
-        }
+            },
+        };
+        let side = match o.get("side") {
+            None => Side::Both,
+            Some(Value::String(s)) => match s.as_str() {
+                "both" => Side::Both,
+                "positive" => Side::Positive,
+                "negative" => Side::Negative,
+                _ => {
+                    return Err(at.field("side").error(format!(
+                        "{s:?} is not \"both\", \"positive\" or \"negative\""
+                    )))
+                }
+            },
+            Some(v @ Value::Number(_)) => {
+                match v.as_i64().and_then(|x| i32::try_from(x).ok()).and_then(Side::from_code) {
+                    Some(side) => side,
+                    None => return Err(at.field("side").error(format!("{v} is not -1, 0 or 1"))),
+                }
+            }
+            Some(other) => {
+                return Err(at.field("side").error(format!(
+                    "expected \"both\", \"positive\" or \"negative\", found {}",
+                    shown(other)
+                )))
+            }
+        };
+        let reals = library_kind
+            .real_params()
+            .iter()
+            .map(|p| number_or(p.suffix, p.start))
+            .collect::<Result<Vec<f64>>>()?;
+        let law = Law::new(library_kind, &reals, side)
+            .ok_or_else(|| at.error(format!("too few parameters for {kind}")))?;
+        return Ok(EffectSpec::from_library(location, law));
+    }
+    match kind {
         "hysteresis" => {
             at.known_keys(
                 o,
@@ -1062,13 +1112,7 @@ fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
                     "exponent",
                 ],
             )?;
-            let storey = match location[..] {
-                [s] if (1..=3).contains(&s) => small(s),
-                [a, b] if b == a + 1 && b <= 3 => small(b),
-                _ => return Err(loc.error(format!(
-                    "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
-                ))),
-            };
+            let storey = storey_or_adjacent(&location)?;
             Ok(EffectSpec::Hysteresis {
                 storey,
                 stiffness: number_or("stiffness", DEFAULT_HYSTERESIS_STIFFNESS)?,
@@ -1475,38 +1519,9 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
     // The structure.
     let mut effects = Effects::default();
     for e in &s.effects {
-        let at = e.library_location();
-        match *e {
-            EffectSpec::Contact {
-                gap,
-                stiffness,
-                side,
-                ..
-            } => {
-                effects.contact.enable(at, true);
-                *effects.contact.effect_mut(at) = Contact {
-                    gap,
-                    stiffness,
-                    side,
-                };
-            }
-            EffectSpec::Cubic { stiffness, .. } => {
-                effects.cubic.enable(at, true);
-                *effects.cubic.effect_mut(at) = Cubic { stiffness };
-            }
-            EffectSpec::Friction {
-                force,
-                velocity_scale,
-                ..
-            } => {
-                effects.friction.enable(at, true);
-                *effects.friction.effect_mut(at) = Friction {
-                    force,
-                    velocity_scale,
-                };
-            }
-            // Not in the library: integrated here, beside the model (see `Hysteretic`).
-            EffectSpec::Hysteresis { .. } => {}
+        // Hysteresis is not in the library: integrated here, beside the model (see `Hysteretic`).
+        if let Some((_, location, law)) = e.library() {
+            effects.switch_on(location, law);
         }
     }
     let hysteretic = Hysteretic::new(&s.effects);
@@ -2071,47 +2086,18 @@ impl Stats {
     }
 
     fn effect_truth(&self, i: usize, e: &EffectSpec) -> EffectTruth {
-        let (floors, parameters, max) = match *e {
-            EffectSpec::Contact {
-                lower,
-                gap,
-                stiffness,
-                side,
-            } => (
-                vec![lower, lower + 1],
-                json!({"gap": gap, "stiffness": stiffness, "side": side_name(side), "side_fmu": side}),
-                self.max_drift[lower],
-            ),
-            EffectSpec::Cubic { storey, stiffness } => (
-                vec![storey - 1, storey],
-                json!({"stiffness": stiffness}),
-                self.max_drift[storey - 1],
-            ),
-            EffectSpec::Friction {
-                floor,
-                force,
-                velocity_scale,
-            } => (
-                vec![floor],
-                json!({"force": force, "velocity_scale": velocity_scale}),
-                self.max_vel[floor - 1],
-            ),
-            EffectSpec::Hysteresis {
-                storey,
-                stiffness,
-                yield_drift,
-                beta,
-                gamma,
-                exponent,
-            } => (
-                vec![storey - 1, storey],
-                json!({
-                    "stiffness": stiffness, "yield": yield_drift, "beta": beta, "gamma": gamma,
-                    "exponent": exponent,
-                }),
-                self.max_drift[storey - 1],
-            ),
+        let (floors, max) = match *e {
+            EffectSpec::Contact { lower, .. } => (vec![lower, lower + 1], self.max_drift[lower]),
+            EffectSpec::Cubic { storey, .. } | EffectSpec::Hysteresis { storey, .. } => {
+                (vec![storey - 1, storey], self.max_drift[storey - 1])
+            }
+            EffectSpec::Friction { floor, .. } => (vec![floor], self.max_vel[floor - 1]),
         };
+        let mut parameters = e.parameters_json();
+        if let EffectSpec::Contact { side, .. } = *e {
+            parameters.insert("side_fmu".into(), json!(side));
+        }
+        let parameters = Value::Object(parameters);
         let contact = self.contacts.iter().find(|c| c.effect == i);
         EffectTruth {
             kind: e.kind().into(),

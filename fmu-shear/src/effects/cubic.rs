@@ -10,6 +10,14 @@ pub struct Cubic {
     pub stiffness: f64,
 }
 
+impl Cubic {
+    /// Storey force at drift `d`.
+    #[inline]
+    pub fn force_at(&self, d: f64) -> f64 {
+        self.stiffness * d * d * d
+    }
+}
+
 const PARAMS: &[RealParam] = &[RealParam {
     suffix: "stiffness",
     unit: "N/m3",
@@ -44,8 +52,7 @@ impl Effect for Cubic {
     }
     #[inline]
     fn add_force(&self, location: usize, y: &Floors, _v: &Floors, g: &mut Floors) {
-        let d = drift(y, location);
-        add_storey_force(location, self.stiffness * d * d * d, g);
+        add_storey_force(location, self.force_at(drift(y, location)), g);
     }
 }
 

@@ -8,6 +8,7 @@
 pub mod contact;
 pub mod cubic;
 pub mod friction;
+pub mod kind;
 
 use fmi2::{ModelError, Variable};
 use serde::{Deserialize, Serialize};
@@ -15,6 +16,7 @@ use serde::{Deserialize, Serialize};
 pub use contact::Contact;
 pub use cubic::Cubic;
 pub use friction::Friction;
+pub use kind::{Kind, Law, Placement, Side};
 
 /// Displacements and velocities of floors 1..3 (ground excluded).
 pub type Floors = [f64; 3];
@@ -257,6 +259,24 @@ impl Effects {
         vars.extend(Library::<Cubic>::variables(CUBIC_BASE_VR));
         vars.extend(Library::<Friction>::variables(FRICTION_BASE_VR));
         vars
+    }
+
+    /// Switch on the effect `law` at `location` (0-based storey or floor).
+    pub fn switch_on(&mut self, location: usize, law: Law) {
+        match law {
+            Law::Contact(e) => {
+                *self.contact.effect_mut(location) = e;
+                self.contact.enable(location, true);
+            }
+            Law::Cubic(e) => {
+                *self.cubic.effect_mut(location) = e;
+                self.cubic.enable(location, true);
+            }
+            Law::Friction(e) => {
+                *self.friction.effect_mut(location) = e;
+                self.friction.enable(location, true);
+            }
+        }
     }
 
     pub fn any_enabled(&self) -> bool {

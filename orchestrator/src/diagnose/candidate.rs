@@ -5,64 +5,11 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+pub use fmu_shear::effects::{Kind, Side};
+use fmu_shear::effects::Placement;
+
 use crate::calibrate::Prior;
 use crate::twin::ParameterValue;
-
-/// The kinds of effect the shear FMU's library has.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Kind {
-    Contact,
-    Cubic,
-    Friction,
-}
-
-impl Kind {
-    pub fn name(self) -> &'static str {
-        match self {
-            Kind::Contact => "contact",
-            Kind::Cubic => "cubic",
-            Kind::Friction => "friction",
-        }
-    }
-}
-
-/// Which drift closes a contact gap (the FMU's `contactXY_side`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Side {
-    Both,
-    Positive,
-    Negative,
-}
-
-impl Side {
-    pub const ALL: [Side; 3] = [Side::Both, Side::Positive, Side::Negative];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Side::Both => "both",
-            Side::Positive => "positive",
-            Side::Negative => "negative",
-        }
-    }
-
-    pub fn code(self) -> i32 {
-        match self {
-            Side::Both => 0,
-            Side::Positive => 1,
-            Side::Negative => -1,
-        }
-    }
-
-    pub fn parse(text: &str) -> Option<Side> {
-        match text {
-            "both" | "0" => Some(Side::Both),
-            "positive" | "1" => Some(Side::Positive),
-            "negative" | "-1" => Some(Side::Negative),
-            _ => None,
-        }
-    }
-}
 
 /// One effect at one place: contact across storey `at` (between floors `at − 1` and `at`, 0 the
 /// ground) on one side; cubic stiffness of storey `at`; friction on floor `at`.
@@ -90,22 +37,16 @@ impl Candidate {
     /// friction per floor (15).
     pub fn library() -> Vec<Candidate> {
         let mut all = Vec::new();
-        for at in 1..=3 {
-            for side in Side::ALL {
-                all.push(Candidate {
-                    kind: Kind::Contact,
-                    at,
-                    side,
-                });
-            }
-        }
-        for kind in [Kind::Cubic, Kind::Friction] {
-            for at in 1..=3 {
-                all.push(Candidate {
-                    kind,
-                    at,
-                    side: Side::Both,
-                });
+        for kind in Kind::ALL {
+            let sides: &[Side] = if kind.has_side() {
+                &Side::ALL
+            } else {
+                &[Side::Both]
+            };
+            for at in 1..=kind.locations() {
+                for &side in sides {
+                    all.push(Candidate { kind, at, side });
+                }
             }
         }
         all
@@ -187,17 +128,18 @@ impl Candidate {
     pub fn location(&self) -> Vec<usize> {
         match self.kind {
             Kind::Contact => vec![self.at - 1, self.at],
-            _ => vec![self.at],
+            Kind::Cubic | Kind::Friction => vec![self.at],
         }
+    }
+
+    /// Where the effect sits and what its force is a function of (the library's description).
+    pub fn placement(&self) -> Placement {
+        self.kind.placement()
     }
 
     /// The FMU's name prefix of this effect's parameters.
     pub fn prefix(&self) -> String {
-        match self.kind {
-            Kind::Contact => format!("contact{}{}", self.at - 1, self.at),
-            Kind::Cubic => format!("cubic{}", self.at),
-            Kind::Friction => format!("friction{}", self.at),
-        }
+        self.kind.prefix(self.at - 1)
     }
 
     /// The parameters that switch the effect on (and pick the contact's side).
@@ -205,7 +147,7 @@ impl Candidate {
         let p = self.prefix();
         let mut out = BTreeMap::new();
         out.insert(format!("{p}_enabled"), ParameterValue::Boolean(true));
-        if self.kind == Kind::Contact {
+        if self.kind.has_side() {
             out.insert(
                 format!("{p}_side"),
                 ParameterValue::Integer(self.side.code()),
@@ -227,40 +169,27 @@ impl Candidate {
         let p = self.prefix();
         let i = self.at - 1;
         let positive = |x: f64| if x > 0.0 && x.is_finite() { x } else { 1.0 };
-        match self.kind {
+        // In the order of the library's parameter list.
+        let priors = match self.kind {
             Kind::Contact => vec![
-                (
-                    format!("{p}_gap"),
-                    "gap",
-                    Prior::log((0.7 * positive(scales.drift_rms[i])).ln(), 1.0),
-                ),
-                (
-                    format!("{p}_stiffness"),
-                    "stiffness",
-                    Prior::log(positive(scales.stiffness[i]).ln(), 4.0),
-                ),
+                Prior::log((0.7 * positive(scales.drift_rms[i])).ln(), 1.0),
+                Prior::log(positive(scales.stiffness[i]).ln(), 4.0),
             ],
             Kind::Cubic => {
                 let sd = positive(scales.stiffness[i]) / positive(scales.drift_rms[i]).powi(2);
-                vec![(
-                    format!("{p}_stiffness"),
-                    "stiffness",
-                    Prior::linear(0.0, sd * sd),
-                )]
+                vec![Prior::linear(0.0, sd * sd)]
             }
             Kind::Friction => vec![
-                (
-                    format!("{p}_force"),
-                    "force",
-                    Prior::log((0.05 * positive(scales.force_rms)).ln(), 4.0),
-                ),
-                (
-                    format!("{p}_velocity_scale"),
-                    "velocity_scale",
-                    Prior::log((0.1 * positive(scales.velocity_rms[i])).ln(), 1.0),
-                ),
+                Prior::log((0.05 * positive(scales.force_rms)).ln(), 4.0),
+                Prior::log((0.1 * positive(scales.velocity_rms[i])).ln(), 1.0),
             ],
-        }
+        };
+        self.kind
+            .real_params()
+            .iter()
+            .zip(priors)
+            .map(|(param, prior)| (format!("{p}_{}", param.suffix), param.suffix, prior))
+            .collect()
     }
 }
 

@@ -56,6 +56,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
+use fmu_shear::effects::{Law, Placement};
 use serde::Serialize;
 
 use crate::calibrate::simulator::Simulator;
@@ -198,7 +199,7 @@ impl EffectName {
         EffectName {
             kind: c.kind,
             location: c.location(),
-            side: (c.kind == Kind::Contact).then_some(c.side.name()),
+            side: c.kind.has_side().then_some(c.side.name()),
             label: c.label(),
         }
     }
@@ -921,8 +922,8 @@ fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> E
         parameters.insert(s.1.to_string(), p.value);
         sd.insert(s.1.to_string(), p.sd);
     }
-    if c.kind == Kind::Contact {
-        parameters.insert("side".into(), c.side.code() as f64);
+    if c.kind.has_side() {
+        parameters.insert("side".into(), f64::from(c.side.code()));
     }
     EffectReport {
         name: EffectName::of(c),
@@ -932,40 +933,16 @@ fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> E
 }
 
 /// The fitted effect's storey force along the base run's drift (contact and cubic), or its
-/// floor force along the velocity (friction): what the evidence panel draws.
+/// floor force along the velocity (friction): what the evidence panel draws. The force law is
+/// the library's own.
 fn effect_force(c: &Candidate, calibration: &Calibration, run: &PhysicsRun) -> Option<Vec<f64>> {
-    let v = |i: usize| calibration.parameters.get(i).map(|p| p.value);
-    let i = c.at - 1;
-    Some(match c.kind {
-        Kind::Contact => {
-            let (gap, k) = (v(0)?, v(1)?);
-            run.drift[i]
-                .iter()
-                .map(|&d| {
-                    let pos = c.side != Side::Negative && d > gap;
-                    let neg = c.side != Side::Positive && d < -gap;
-                    if pos {
-                        k * (d - gap)
-                    } else if neg {
-                        k * (d + gap)
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        }
-        Kind::Cubic => {
-            let k3 = v(0)?;
-            run.drift[i].iter().map(|&d| k3 * d * d * d).collect()
-        }
-        Kind::Friction => {
-            let (f, s) = (v(0)?, v(1)?);
-            run.velocity[i]
-                .iter()
-                .map(|&u| f * (u / s).tanh())
-                .collect()
-        }
-    })
+    let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
+    let law = Law::new(c.kind, &values, c.side)?;
+    let along = match c.placement() {
+        Placement::Storey => &run.drift[c.at - 1],
+        Placement::Floor => &run.velocity[c.at - 1],
+    };
+    Some(along.iter().map(|&x| law.force_at(x)).collect())
 }
 
 fn localise(

@@ -1,0 +1,259 @@
+//! The library described as data, for code outside the FMU (the diagnosis, the synthetic
+//! structure): which kinds there are, where each sits, its parameters with their defaults, and
+//! its force law as a function. It reads the kinds' own files, so it cannot drift from the model.
+
+use serde::{Deserialize, Serialize};
+
+use super::contact::{SIDE_BOTH, SIDE_NEGATIVE, SIDE_POSITIVE};
+use super::{Contact, Cubic, Effect, Friction, RealParam};
+
+/// The kinds of effect the library has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    Contact,
+    Cubic,
+    Friction,
+}
+
+/// Where a kind sits, and what its force is a function of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Placement {
+    /// In a storey (0 = ground–floor 1): a force of the storey drift, pushing its two floors
+    /// apart (see [`super::add_storey_force`]).
+    Storey,
+    /// On a floor: a force of the floor's velocity, on that floor.
+    Floor,
+}
+
+/// Which drift closes a contact gap (the FMU's `contactXY_side`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Side {
+    Both,
+    Positive,
+    Negative,
+}
+
+impl Side {
+    pub const ALL: [Side; 3] = [Side::Both, Side::Positive, Side::Negative];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Both => "both",
+            Side::Positive => "positive",
+            Side::Negative => "negative",
+        }
+    }
+
+    /// The FMU's integer: 0 both, 1 positive, −1 negative.
+    pub fn code(self) -> i32 {
+        match self {
+            Side::Both => SIDE_BOTH,
+            Side::Positive => SIDE_POSITIVE,
+            Side::Negative => SIDE_NEGATIVE,
+        }
+    }
+
+    pub fn from_code(code: i32) -> Option<Side> {
+        Side::ALL.into_iter().find(|s| s.code() == code)
+    }
+
+    /// A name or the FMU's integer written out: `both`/`0`, `positive`/`1`, `negative`/`-1`.
+    pub fn parse(text: &str) -> Option<Side> {
+        match text {
+            "both" | "0" => Some(Side::Both),
+            "positive" | "1" => Some(Side::Positive),
+            "negative" | "-1" => Some(Side::Negative),
+            _ => None,
+        }
+    }
+}
+
+impl Kind {
+    pub const ALL: [Kind; 3] = [Kind::Contact, Kind::Cubic, Kind::Friction];
+
+    /// "contact", "cubic", "friction".
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Contact => Contact::KIND,
+            Kind::Cubic => Cubic::KIND,
+            Kind::Friction => Friction::KIND,
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Kind> {
+        Kind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    pub fn placement(self) -> Placement {
+        match self {
+            Kind::Contact | Kind::Cubic => Placement::Storey,
+            Kind::Friction => Placement::Floor,
+        }
+    }
+
+    /// How many locations the kind has (3 storeys or 3 floors).
+    pub fn locations(self) -> usize {
+        match self {
+            Kind::Contact => Contact::LOCATIONS,
+            Kind::Cubic => Cubic::LOCATIONS,
+            Kind::Friction => Friction::LOCATIONS,
+        }
+    }
+
+    /// Whether the kind has a side (only contact).
+    pub fn has_side(self) -> bool {
+        self == Kind::Contact
+    }
+
+    /// The real parameters, in the order [`Law::new`] takes them, with their start values.
+    pub fn real_params(self) -> &'static [RealParam] {
+        match self {
+            Kind::Contact => Contact::real_params(),
+            Kind::Cubic => Cubic::real_params(),
+            Kind::Friction => Friction::real_params(),
+        }
+    }
+
+    /// The FMU variables' prefix at `location` (0-based), e.g. "contact23", "cubic2".
+    pub fn prefix(self, location: usize) -> String {
+        match self {
+            Kind::Contact => Contact::prefix(location),
+            Kind::Cubic => Cubic::prefix(location),
+            Kind::Friction => Friction::prefix(location),
+        }
+    }
+
+    /// The location in words: "between floors 2 and 3", "of storey 2", "on floor 1".
+    pub fn where_(self, location: usize) -> String {
+        match self {
+            Kind::Contact => Contact::where_(location),
+            Kind::Cubic => Cubic::where_(location),
+            Kind::Friction => Friction::where_(location),
+        }
+    }
+}
+
+/// One effect with its parameter values: the force law of its kind.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Law {
+    Contact(Contact),
+    Cubic(Cubic),
+    Friction(Friction),
+}
+
+impl Law {
+    /// The law of `kind` with the real parameters `reals` (in [`Kind::real_params`]'s order) and,
+    /// for contact, `side`. `None` when `reals` is shorter than the kind's parameter list.
+    pub fn new(kind: Kind, reals: &[f64], side: Side) -> Option<Law> {
+        let mut law = Law::at_start(kind);
+        if reals.len() < kind.real_params().len() {
+            return None;
+        }
+        for (i, &x) in reals.iter().take(kind.real_params().len()).enumerate() {
+            law.set_real(i, x);
+        }
+        if let Law::Contact(c) = &mut law {
+            c.side = side.code();
+        }
+        Some(law)
+    }
+
+    /// Every parameter at its start value (contact: both sides).
+    pub fn at_start(kind: Kind) -> Law {
+        match kind {
+            Kind::Contact => Law::Contact(Contact::at_start(0)),
+            Kind::Cubic => Law::Cubic(Cubic::at_start(0)),
+            Kind::Friction => Law::Friction(Friction::at_start(0)),
+        }
+    }
+
+    pub fn kind(&self) -> Kind {
+        match self {
+            Law::Contact(_) => Kind::Contact,
+            Law::Cubic(_) => Kind::Cubic,
+            Law::Friction(_) => Kind::Friction,
+        }
+    }
+
+    fn set_real(&mut self, index: usize, value: f64) {
+        match self {
+            Law::Contact(e) => e.set_real(index, value),
+            Law::Cubic(e) => e.set_real(index, value),
+            Law::Friction(e) => e.set_real(index, value),
+        }
+    }
+
+    /// The real parameters, in [`Kind::real_params`]'s order.
+    pub fn reals(&self) -> Vec<f64> {
+        let n = self.kind().real_params().len();
+        (0..n)
+            .map(|i| match self {
+                Law::Contact(e) => e.real(i),
+                Law::Cubic(e) => e.real(i),
+                Law::Friction(e) => e.real(i),
+            })
+            .collect()
+    }
+
+    /// The force of the law: of the storey drift (contact, cubic; positive resists a positive
+    /// drift) or of the floor velocity (friction; positive resists a positive velocity).
+    #[inline]
+    pub fn force_at(&self, x: f64) -> f64 {
+        match self {
+            Law::Contact(e) => e.force_at(x),
+            Law::Cubic(e) => e.force_at(x),
+            Law::Friction(e) => e.force_at(x),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Effects;
+
+    /// The law of each kind is the force the model adds: at a location, along its drift or
+    /// velocity.
+    #[test]
+    fn each_law_is_the_models_force() {
+        let y = [1e-3, -2e-3, 4e-3];
+        let v = [0.02, -0.01, 0.005];
+        for kind in Kind::ALL {
+            for location in 0..kind.locations() {
+                let reals: Vec<f64> = kind.real_params().iter().map(|p| 2.0 * p.start).collect();
+                let law = Law::new(kind, &reals, Side::Negative).expect("enough parameters");
+                assert_eq!(law.reals(), reals);
+                let mut effects = Effects::default();
+                let mut g = [0.0; 3];
+                let expected = match kind.placement() {
+                    Placement::Storey => {
+                        let f = law.force_at(super::super::drift(&y, location));
+                        super::super::add_storey_force(location, f, &mut g);
+                        g
+                    }
+                    Placement::Floor => {
+                        g[location] = law.force_at(v[location]);
+                        g
+                    }
+                };
+                effects.switch_on(location, law);
+                assert_eq!(effects.force(&y, &v), expected, "{kind:?} at {location}");
+            }
+        }
+    }
+
+    #[test]
+    fn names_and_sides_read_back() {
+        for kind in Kind::ALL {
+            assert_eq!(Kind::parse(kind.name()), Some(kind));
+        }
+        for side in Side::ALL {
+            assert_eq!(Side::parse(side.name()), Some(side));
+            assert_eq!(Side::from_code(side.code()), Some(side));
+        }
+        assert_eq!(Kind::Contact.prefix(2), "contact23");
+        assert!(Law::new(Kind::Friction, &[0.1], Side::Both).is_none());
+    }
+}
