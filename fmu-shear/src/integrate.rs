@@ -12,8 +12,9 @@
 //!   percent with frequent contact at 8 sub-steps); splitting the step at the crossing, located
 //!   by regula falsi on the switch function, restores it.
 
-use numerics::ode::{rk4_step, rk4_substeps};
+use numerics::ode::{self, rk4_substeps};
 
+use crate::effects::Switches;
 use crate::model::{ShearModel, ShearParameters};
 
 pub type State = [f64; 6];
@@ -86,10 +87,15 @@ pub fn rhs(model: &ShearModel, x: &State, input: f64) -> State {
     [v[0], v[1], v[2], a[0], a[1], a[2]]
 }
 
-/// At most this many splits inside one sub-step; past it the rest is taken as one RK4 step.
-const MAX_SPLITS: usize = 16;
+/// The switch values as numerics' stepper reads them.
+impl AsRef<[f64]> for Switches {
+    fn as_ref(&self) -> &[f64] {
+        &self.values[..self.len]
+    }
+}
 
-/// RK4 sub-steps over `[0, h]` from `x`, split at every switch of the effects (contact kinks).
+/// RK4 sub-steps over `[0, h]` from `x`, split at every switch of the effects (contact kinks):
+/// [`numerics::ode::rk4_with_events`] on the model's right-hand side.
 pub fn rk4_with_events(
     model: &ShearModel,
     x: &State,
@@ -98,80 +104,13 @@ pub fn rk4_with_events(
     h: f64,
     substeps: u32,
 ) -> State {
-    let f = |tau: f64, x: &State| rhs(model, x, u0 + slope * tau);
-    let switches = |x: &State| model.effects.switches(&[x[0], x[1], x[2]]);
-    let n = substeps.max(1);
-    let dt = h / f64::from(n);
-    let mut state = *x;
-    for i in 0..n {
-        let mut tau = f64::from(i) * dt;
-        let end = f64::from(i + 1) * dt;
-        for _split in 0..=MAX_SPLITS {
-            let remaining = end - tau;
-            if remaining <= 1e-14 * dt {
-                break;
-            }
-            let next = rk4_step(f, tau, &state, remaining);
-            let (s0, s1) = (switches(&state), switches(&next));
-            // The earliest crossing among the switches that change sign.
-            let mut theta = 1.0f64;
-            for j in 0..s0.len {
-                let (a, b) = (s0.values[j], s1.values[j]);
-                if a != 0.0 && a.signum() != b.signum() {
-                    let g = |th: f64| switches(&rk4_step(f, tau, &state, th * remaining)).values[j];
-                    theta = theta.min(locate(g, a, b));
-                }
-            }
-            if theta >= 1.0 {
-                state = next;
-                break;
-            }
-            // Step to just past the crossing, then go on from there.
-            state = rk4_step(f, tau, &state, theta * remaining);
-            tau += theta * remaining;
-        }
-    }
-    state
-}
-
-/// The smallest θ ∈ (0, 1] past the sign change of `g` (g(0) = a, g(1) = b, opposite signs):
-/// Illinois-modified regula falsi, returning the end of the final bracket on the far side.
-/// Public for the synthetic structure of `twin synth`, which locates its own switches the same
-/// way.
-pub fn locate(g: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
-    let (mut lo, mut hi, mut g_lo, mut g_hi) = (0.0f64, 1.0f64, a, b);
-    let mut side = 0i8;
-    for _ in 0..60 {
-        if hi - lo < 1e-12 {
-            break;
-        }
-        let mid = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
-        let mid = if mid > lo && mid < hi {
-            mid
-        } else {
-            0.5 * (lo + hi)
-        };
-        let g_mid = g(mid);
-        if g_mid == 0.0 {
-            return mid;
-        }
-        if g_mid.signum() == g_lo.signum() {
-            lo = mid;
-            g_lo = g_mid;
-            if side == -1 {
-                g_hi *= 0.5;
-            }
-            side = -1;
-        } else {
-            hi = mid;
-            g_hi = g_mid;
-            if side == 1 {
-                g_lo *= 0.5;
-            }
-            side = 1;
-        }
-    }
-    hi
+    ode::rk4_with_events(
+        |tau, x: &State| rhs(model, x, u0 + slope * tau),
+        |x: &State| model.effects.switches(&[x[0], x[1], x[2]]),
+        x,
+        h,
+        substeps,
+    )
 }
 
 #[cfg(test)]

@@ -135,6 +135,7 @@ use fmu_shear::effects::{
     add_storey_force, drift, Contact, Cubic, Effects, Floors, Friction, Kind, Law, Side,
 };
 use fmu_shear::{ShearModel, ShearParameters};
+use numerics::ode::rk4_with_events;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -1826,8 +1827,6 @@ const MAX_LAWS: usize = 3;
 type HState = [f64; 6 + 2 * MAX_LAWS];
 const Z0: usize = 6;
 const W0: usize = 6 + MAX_LAWS;
-/// At most this many splits inside one fine step (as `fmu_shear::integrate`'s contact steps).
-const MAX_SPLITS: usize = 16;
 
 /// The hysteresis effects' states, and the structure's steps with them. Without hysteresis it
 /// steps the model by [`ShearModel::advance`], exactly as before it existed.
@@ -1925,43 +1924,18 @@ impl Hysteretic {
     }
 
     /// RK4 over `[0, h]` with the input `u0 + slope·τ`, `substeps` sub-steps, each split just
-    /// past every sign change of a switch (the scheme of `fmu_shear::integrate::rk4_with_events`).
+    /// past every sign change of a switch (numerics' stepper, as the shear FMU's contact steps).
     fn step(&self, model: &ShearModel, x: &HState, u0: f64, slope: f64, h: f64) -> HState {
-        let f = |tau: f64, x: &HState| self.rhs(model, x, u0 + slope * tau);
-        let n = model.params.substeps.max(1);
-        let dt = h / f64::from(n);
-        let mut state = *x;
-        for i in 0..n {
-            let mut tau = f64::from(i) * dt;
-            let end = f64::from(i + 1) * dt;
-            for _split in 0..=MAX_SPLITS {
-                let remaining = end - tau;
-                if remaining <= 1e-14 * dt {
-                    break;
-                }
-                let next = rk4(&f, tau, &state, remaining);
-                let ((s0, len), (s1, _)) =
-                    (self.switches(model, &state), self.switches(model, &next));
-                let mut theta = 1.0f64;
-                for j in 0..len {
-                    let (a, b) = (s0[j], s1[j]);
-                    if a != 0.0 && a.signum() != b.signum() {
-                        let g = |th: f64| {
-                            self.switches(model, &rk4(&f, tau, &state, th * remaining))
-                                .0[j]
-                        };
-                        theta = theta.min(fmu_shear::integrate::locate(g, a, b));
-                    }
-                }
-                if theta >= 1.0 {
-                    state = next;
-                    break;
-                }
-                state = rk4(&f, tau, &state, theta * remaining);
-                tau += theta * remaining;
-            }
-        }
-        state
+        rk4_with_events(
+            |tau: f64, x: &HState| self.rhs(model, x, u0 + slope * tau),
+            |x: &HState| {
+                let (values, len) = self.switches(model, x);
+                SwitchList { values, len }
+            },
+            x,
+            h,
+            model.params.substeps,
+        )
     }
 
     /// [`ShearModel::advance`] with the hysteresis: the same inputs, the same end-of-step
@@ -1996,16 +1970,16 @@ impl Hysteretic {
     }
 }
 
-/// One classical RK4 step.
-#[inline]
-fn rk4(f: &impl Fn(f64, &HState) -> HState, t: f64, x: &HState, h: f64) -> HState {
-    let axpy =
-        |a: &HState, s: f64, b: &HState| -> HState { std::array::from_fn(|i| a[i] + s * b[i]) };
-    let k1 = f(t, x);
-    let k2 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k1));
-    let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));
-    let k4 = f(t + h, &axpy(x, h, &k3));
-    std::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
+/// The switch values of [`Hysteretic::switches`], as numerics' stepper reads them.
+struct SwitchList {
+    values: [f64; 6 + MAX_LAWS],
+    len: usize,
+}
+
+impl AsRef<[f64]> for SwitchList {
+    fn as_ref(&self) -> &[f64] {
+        &self.values[..self.len]
+    }
 }
 
 /// What the fine grid saw: drifts, contacts.
