@@ -1,0 +1,53 @@
+//! The measurement CSV as `data/` has it.
+
+use crate::data::Measurement;
+
+/// A value as the CSV writes it (9 significant digits), read back.
+pub(super) fn round9(x: f64) -> f64 {
+    format_g9(x).parse().unwrap_or(x)
+}
+
+pub(super) fn round_time(t: f64) -> f64 {
+    format!("{t:.6}").parse().unwrap_or(t)
+}
+
+/// `%.9g`: 9 significant digits, trailing zeros removed, exponent form below 1e-4 or from 1e9.
+pub fn format_g9(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return if x == 0.0 { "0".into() } else { format!("{x}") };
+    }
+    let e = format!("{x:.8e}");
+    let (mantissa, exponent) = e.split_once('e').unwrap_or((&e, "0"));
+    let exponent: i32 = exponent.parse().unwrap_or(0);
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if !(-4..9).contains(&exponent) {
+        let sign = if exponent < 0 { '-' } else { '+' };
+        format!("{}e{sign}{:02}", trim(mantissa), exponent.abs())
+    } else {
+        let decimals = (8 - exponent) as usize;
+        trim(&format!("{x:.decimals$}"))
+    }
+}
+
+/// The record as CSV text: `time,force,acc1,acc2,acc3`.
+pub fn csv_text(m: &Measurement) -> String {
+    let mut text = String::with_capacity(64 * (m.len() + 1));
+    text.push_str("time,force,acc1,acc2,acc3\n");
+    for k in 0..m.len() {
+        text.push_str(&format!(
+            "{:.6},{},{},{},{}\n",
+            m.time[k],
+            format_g9(m.force[k]),
+            format_g9(m.acc[0][k]),
+            format_g9(m.acc[1][k]),
+            format_g9(m.acc[2][k])
+        ));
+    }
+    text
+}

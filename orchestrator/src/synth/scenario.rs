@@ -1,0 +1,1090 @@
+//! The scenario: its types, defaults, JSON form and checks.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Context, Result};
+use fmu_shear::effects::{Contact, Cubic, Friction, Kind, Law, Side};
+use fmu_shear::ShearParameters;
+use serde::Serialize;
+use serde_json::{json, Map, Value};
+
+use super::force::in_band;
+use super::{
+    DEFAULT_DAMPING, DEFAULT_DURATION, DEFAULT_FORCE_RMS, DEFAULT_HYSTERESIS_BETA,
+    DEFAULT_HYSTERESIS_EXPONENT, DEFAULT_HYSTERESIS_GAMMA, DEFAULT_HYSTERESIS_STIFFNESS,
+    DEFAULT_HYSTERESIS_YIELD, DEFAULT_MASS, DEFAULT_NOISE_FRACTION, DEFAULT_OVERSAMPLE,
+    DEFAULT_SAMPLE_RATE, DEFAULT_STIFFNESS, DEFAULT_WINDOW_RAMP, GENERATOR_OVERSAMPLE,
+    MAX_FINE_POINTS, MAX_OVERSAMPLE,
+};
+
+// ---------------------------------------------------------------------------------------------
+// The scenario
+// ---------------------------------------------------------------------------------------------
+
+/// Everything that defines a synthetic record. [`Scenario::default`] is a gentle, linear record
+/// like `data/dataset1.csv`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    pub seed: u64,
+    pub duration: f64,
+    pub sample_rate: f64,
+    pub oversample: u32,
+    pub mass: [f64; 3],
+    pub damping: [f64; 3],
+    pub stiffness: [f64; 3],
+    pub force: ForceSpec,
+    pub noise: NoiseSpec,
+    pub effects: Vec<EffectSpec>,
+    pub changes: Vec<Change>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForceSpec {
+    /// RMS at envelope 1, N.
+    pub rms: f64,
+    /// Upper band edge, Hz; `None` = half the sample rate.
+    pub band_hz: Option<f64>,
+    pub low_hz: f64,
+    /// What the structure sees between the sample times.
+    pub between_samples: BetweenSamples,
+    pub windows: Vec<ForceWindow>,
+}
+
+/// The force between the sample times. The written samples are the same either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BetweenSamples {
+    /// The band-limited signal itself (a physical force: smooth between samples).
+    #[default]
+    BandLimited,
+    /// Linear between the sample values: exactly what a twin with first-order input hold at the
+    /// sample rate (the shear FMU driven by the record) assumes, so its linear model fits the
+    /// noise-free record to rounding. Use it when the force's representation must not count as
+    /// model error (the examples in `data/` fit a first-order hold that well).
+    Linear,
+}
+
+impl BetweenSamples {
+    pub fn name(self) -> &'static str {
+        match self {
+            BetweenSamples::BandLimited => "band-limited",
+            BetweenSamples::Linear => "linear",
+        }
+    }
+    pub fn parse(text: &str) -> Option<Self> {
+        match text {
+            "band-limited" => Some(BetweenSamples::BandLimited),
+            "linear" => Some(BetweenSamples::Linear),
+            _ => None,
+        }
+    }
+}
+
+/// The force amplitude is multiplied by `gain` between `start` and `end` (s), with raised-cosine
+/// ramps of `ramp` seconds centred on both edges.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ForceWindow {
+    pub start: f64,
+    pub end: f64,
+    pub gain: f64,
+    pub ramp: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum NoiseLevel {
+    /// Of each floor's noise-free response RMS.
+    Fraction([f64; 3]),
+    /// Absolute, m/s².
+    Sd([f64; 3]),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct NoiseSpec {
+    pub level: NoiseLevel,
+    pub force_fraction: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum EffectSpec {
+    /// Gap contact across the storey between floors `lower` and `lower + 1` (0 = the ground).
+    Contact {
+        lower: usize,
+        gap: f64,
+        stiffness: f64,
+        side: i32,
+    },
+    /// Cubic stiffness of storey `storey` (1..3; storey 1 is ground–floor 1).
+    Cubic { storey: usize, stiffness: f64 },
+    /// Coulomb friction on floor `floor` (1..3).
+    Friction {
+        floor: usize,
+        force: f64,
+        velocity_scale: f64,
+    },
+    /// Bouc–Wen hysteresis of storey `storey` (1..3), **not** in the FMU's library:
+    /// `ż = δ̇ (1 − (β sign(δ̇ z) + γ) |z / z_y|ⁿ)`, storey force `k_h z` (see the module docs).
+    Hysteresis {
+        storey: usize,
+        /// k_h, N/m.
+        stiffness: f64,
+        /// z_y, m (the JSON's `yield`).
+        yield_drift: f64,
+        beta: f64,
+        gamma: f64,
+        /// n.
+        exponent: f64,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamKind {
+    Mass,
+    Damping,
+    Stiffness,
+}
+
+/// A structural parameter: `m1..m3`, `c1..c3`, `k1..k3`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamName {
+    pub kind: ParamKind,
+    /// 0-based floor (mass) or storey (damping, stiffness).
+    pub index: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ChangeHow {
+    Factor(f64),
+    Value(f64),
+}
+
+/// A step change of a structural parameter at time `at`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Change {
+    pub at: f64,
+    pub parameter: ParamName,
+    pub how: ChangeHow,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Scenario {
+            seed: 0,
+            duration: DEFAULT_DURATION,
+            sample_rate: DEFAULT_SAMPLE_RATE,
+            oversample: DEFAULT_OVERSAMPLE,
+            mass: DEFAULT_MASS,
+            damping: DEFAULT_DAMPING,
+            stiffness: DEFAULT_STIFFNESS,
+            force: ForceSpec::default(),
+            noise: NoiseSpec::default(),
+            effects: Vec::new(),
+            changes: Vec::new(),
+        }
+    }
+}
+
+impl Default for ForceSpec {
+    fn default() -> Self {
+        ForceSpec {
+            rms: DEFAULT_FORCE_RMS,
+            band_hz: None,
+            between_samples: BetweenSamples::Linear,
+            low_hz: 0.0,
+            windows: Vec::new(),
+        }
+    }
+}
+
+impl Default for NoiseSpec {
+    fn default() -> Self {
+        NoiseSpec {
+            level: NoiseLevel::Fraction([DEFAULT_NOISE_FRACTION; 3]),
+            force_fraction: 0.0,
+        }
+    }
+}
+
+impl NoiseSpec {
+    /// No noise at all.
+    pub fn none() -> Self {
+        NoiseSpec {
+            level: NoiseLevel::Fraction([0.0; 3]),
+            force_fraction: 0.0,
+        }
+    }
+}
+
+impl ParamName {
+    pub fn parse(text: &str) -> Option<ParamName> {
+        let mut chars = text.chars();
+        let kind = match chars.next()? {
+            'm' => ParamKind::Mass,
+            'c' => ParamKind::Damping,
+            'k' => ParamKind::Stiffness,
+            _ => return None,
+        };
+        let index = match chars.as_str() {
+            "1" => 0,
+            "2" => 1,
+            "3" => 2,
+            _ => return None,
+        };
+        Some(ParamName { kind, index })
+    }
+    pub fn name(&self) -> String {
+        let letter = match self.kind {
+            ParamKind::Mass => 'm',
+            ParamKind::Damping => 'c',
+            ParamKind::Stiffness => 'k',
+        };
+        format!("{letter}{}", self.index + 1)
+    }
+    pub(super) fn slot<'a>(&self, p: &'a mut ShearParameters) -> &'a mut f64 {
+        match self.kind {
+            ParamKind::Mass => &mut p.mass[self.index],
+            ParamKind::Damping => &mut p.damping[self.index],
+            ParamKind::Stiffness => &mut p.stiffness[self.index],
+        }
+    }
+}
+
+impl EffectSpec {
+    /// The effect as the shear FMU's library describes it: its kind, 0-based location and force
+    /// law. `None` for hysteresis, which the library lacks.
+    pub fn library(&self) -> Option<(Kind, usize, Law)> {
+        let law = match *self {
+            EffectSpec::Contact {
+                gap,
+                stiffness,
+                side,
+                ..
+            } => Law::Contact(Contact {
+                gap,
+                stiffness,
+                side,
+            }),
+            EffectSpec::Cubic { stiffness, .. } => Law::Cubic(Cubic { stiffness }),
+            EffectSpec::Friction {
+                force,
+                velocity_scale,
+                ..
+            } => Law::Friction(Friction {
+                force,
+                velocity_scale,
+            }),
+            EffectSpec::Hysteresis { .. } => return None,
+        };
+        Some((law.kind(), self.library_location(), law))
+    }
+    /// A library effect at a 0-based location (`lower` floor of a contact, storey − 1, floor − 1).
+    pub fn from_library(location: usize, law: Law) -> EffectSpec {
+        match law {
+            Law::Contact(c) => EffectSpec::Contact {
+                lower: location,
+                gap: c.gap,
+                stiffness: c.stiffness,
+                side: c.side,
+            },
+            Law::Cubic(c) => EffectSpec::Cubic {
+                storey: location + 1,
+                stiffness: c.stiffness,
+            },
+            Law::Friction(f) => EffectSpec::Friction {
+                floor: location + 1,
+                force: f.force,
+                velocity_scale: f.velocity_scale,
+            },
+        }
+    }
+    pub fn kind(&self) -> &'static str {
+        match self.library() {
+            Some((kind, ..)) => kind.name(),
+            None => "hysteresis",
+        }
+    }
+    /// Whether the shear FMU's effect library has this kind (hysteresis: no).
+    pub fn in_library(&self) -> bool {
+        !matches!(self, EffectSpec::Hysteresis { .. })
+    }
+    /// The parameters by their JSON names (the library's parameter names; contact's side by
+    /// name).
+    pub(super) fn parameters_json(&self) -> Map<String, Value> {
+        let mut o = Map::new();
+        match (self.library(), self) {
+            (Some((kind, _, law)), _) => {
+                for (p, x) in kind.real_params().iter().zip(law.reals()) {
+                    o.insert(p.suffix.into(), json!(x));
+                }
+                if let Law::Contact(c) = law {
+                    o.insert("side".into(), json!(side_name(c.side)));
+                }
+            }
+            (
+                None,
+                &EffectSpec::Hysteresis {
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                    ..
+                },
+            ) => {
+                for (key, x) in [
+                    ("stiffness", stiffness),
+                    ("yield", yield_drift),
+                    ("beta", beta),
+                    ("gamma", gamma),
+                    ("exponent", exponent),
+                ] {
+                    o.insert(key.into(), json!(x));
+                }
+            }
+            (None, _) => {}
+        }
+        o
+    }
+    /// 0-based location in the FMU's effect library (for hysteresis, which the library lacks,
+    /// the 0-based storey).
+    pub fn library_location(&self) -> usize {
+        match *self {
+            EffectSpec::Contact { lower, .. } => lower,
+            EffectSpec::Cubic { storey, .. } => storey - 1,
+            EffectSpec::Friction { floor, .. } => floor - 1,
+            EffectSpec::Hysteresis { storey, .. } => storey - 1,
+        }
+    }
+    /// The location as the scenario writes it.
+    pub fn location(&self) -> Vec<usize> {
+        match *self {
+            EffectSpec::Contact { lower, .. } => vec![lower, lower + 1],
+            EffectSpec::Cubic { storey, .. } => vec![storey],
+            EffectSpec::Friction { floor, .. } => vec![floor],
+            EffectSpec::Hysteresis { storey, .. } => vec![storey],
+        }
+    }
+    /// Where, in words: "between floors 2 and 3", "of storey 2 (floors 1–2)", "on floor 1".
+    pub fn describe_location(&self) -> String {
+        let storey = |lower: usize| {
+            if lower == 0 {
+                "between the ground and floor 1".to_string()
+            } else {
+                format!("between floors {} and {}", lower, lower + 1)
+            }
+        };
+        match *self {
+            EffectSpec::Contact { lower, .. } => storey(lower),
+            EffectSpec::Cubic { storey: s, .. } | EffectSpec::Hysteresis { storey: s, .. } => {
+                format!("of storey {s} ({})", storey(s - 1))
+            }
+            EffectSpec::Friction { floor, .. } => format!("on floor {floor}"),
+        }
+    }
+    /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`. Hysteresis is not in
+    /// the library: its `hysteresis2` names no FMU variable (see [`EffectSpec::in_library`]).
+    pub fn fmu_prefix(&self) -> String {
+        match self.library() {
+            Some((kind, location, _)) => kind.prefix(location),
+            None => format!("hysteresis{}", self.library_location() + 1),
+        }
+    }
+    fn to_json(&self) -> Value {
+        let mut o = Map::new();
+        o.insert("kind".into(), json!(self.kind()));
+        o.insert("location".into(), json!(self.location()));
+        o.extend(self.parameters_json());
+        Value::Object(o)
+    }
+}
+
+fn side_name(side: i32) -> &'static str {
+    Side::from_code(side).unwrap_or(Side::Both).name()
+}
+
+impl Change {
+    fn to_json(&self) -> Value {
+        let mut v = json!({"at": self.at, "parameter": self.parameter.name()});
+        match self.how {
+            ChangeHow::Factor(f) => v["factor"] = json!(f),
+            ChangeHow::Value(x) => v["value"] = json!(x),
+        }
+        v
+    }
+}
+
+impl Scenario {
+    /// Number of samples in the record: `round(duration · sample_rate)`.
+    pub fn samples(&self) -> usize {
+        let n = (self.duration * self.sample_rate).round();
+        if n.is_finite() && n >= 0.0 {
+            if n < 1e15 {
+                n as usize
+            } else {
+                usize::MAX
+            }
+        } else {
+            0
+        }
+    }
+    pub fn dt(&self) -> f64 {
+        1.0 / self.sample_rate
+    }
+    /// The force's upper band edge, Hz.
+    pub fn band_hz(&self) -> f64 {
+        self.force.band_hz.unwrap_or(0.5 * self.sample_rate)
+    }
+
+    /// Read and check a scenario file. Errors name the file and the field.
+    pub fn load(path: &Path) -> Result<Scenario> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{origin}: cannot read the scenario"))?;
+        let value: Value =
+            serde_json::from_str(&text).map_err(|e| anyhow!("{origin}: not valid JSON: {e}"))?;
+        let scenario = Scenario::from_json(&value, &origin)?;
+        scenario.validate(&origin)?;
+        Ok(scenario)
+    }
+
+    /// The scenario in a JSON value (types and names checked; ranges are [`Scenario::validate`]'s).
+    pub fn from_json(value: &Value, origin: &str) -> Result<Scenario> {
+        let at = Loc {
+            origin,
+            path: String::new(),
+        };
+        let obj = at.object(value)?;
+        at.known_keys(
+            obj,
+            &[
+                "seed",
+                "duration",
+                "sample_rate",
+                "oversample",
+                "parameters",
+                "force",
+                "noise",
+                "effects",
+                "changes",
+            ],
+        )?;
+        let mut s = Scenario::default();
+        if let Some(v) = obj.get("seed") {
+            s.seed = at.field("seed").u64(v)?;
+        }
+        if let Some(v) = obj.get("duration") {
+            s.duration = at.field("duration").number(v)?;
+        }
+        if let Some(v) = obj.get("sample_rate") {
+            s.sample_rate = at.field("sample_rate").number(v)?;
+        }
+        if let Some(v) = obj.get("oversample") {
+            let o = at.field("oversample").u64(v)?;
+            s.oversample = u32::try_from(o)
+                .map_err(|_| at.field("oversample").error(format!("{o} is too large")))?;
+        }
+        if let Some(v) = obj.get("parameters") {
+            let at = at.field("parameters");
+            let p = at.object(v)?;
+            at.known_keys(p, &["m", "c", "k"])?;
+            if let Some(v) = p.get("m") {
+                s.mass = at.field("m").three(v, false)?;
+            }
+            if let Some(v) = p.get("c") {
+                s.damping = at.field("c").three(v, false)?;
+            }
+            if let Some(v) = p.get("k") {
+                s.stiffness = at.field("k").three(v, false)?;
+            }
+        }
+        if let Some(v) = obj.get("force") {
+            let at = at.field("force");
+            let f = at.object(v)?;
+            at.known_keys(
+                f,
+                &["rms", "band_hz", "low_hz", "between_samples", "windows"],
+            )?;
+            if let Some(v) = f.get("rms") {
+                s.force.rms = at.field("rms").number(v)?;
+            }
+            if let Some(v) = f.get("band_hz") {
+                s.force.band_hz = Some(at.field("band_hz").number(v)?);
+            }
+            if let Some(v) = f.get("low_hz") {
+                s.force.low_hz = at.field("low_hz").number(v)?;
+            }
+            if let Some(v) = f.get("between_samples") {
+                let at = at.field("between_samples");
+                let name = at.string(v)?;
+                s.force.between_samples = BetweenSamples::parse(name).ok_or_else(|| {
+                    at.error(format!("{name:?} is not \"band-limited\" or \"linear\""))
+                })?;
+            }
+            if let Some(v) = f.get("windows") {
+                let at = at.field("windows");
+                for (i, w) in at.array(v)?.iter().enumerate() {
+                    let at = at.index(i);
+                    let o = at.object(w)?;
+                    at.known_keys(o, &["start", "end", "gain", "ramp"])?;
+                    let ramp = match o.get("ramp") {
+                        Some(v) => at.field("ramp").number(v)?,
+                        None => DEFAULT_WINDOW_RAMP,
+                    };
+                    s.force.windows.push(ForceWindow {
+                        start: at.field("start").number(at.required(o, "start")?)?,
+                        end: at.field("end").number(at.required(o, "end")?)?,
+                        gain: at.field("gain").number(at.required(o, "gain")?)?,
+                        ramp,
+                    });
+                }
+            }
+        }
+        if let Some(v) = obj.get("noise") {
+            let at = at.field("noise");
+            let n = at.object(v)?;
+            at.known_keys(n, &["fraction", "sd", "force_fraction"])?;
+            match (n.get("fraction"), n.get("sd")) {
+                (Some(_), Some(_)) => {
+                    return Err(at.error("give either `fraction` or `sd`, not both".into()))
+                }
+                (Some(v), None) => {
+                    s.noise.level = NoiseLevel::Fraction(at.field("fraction").three(v, true)?)
+                }
+                (None, Some(v)) => s.noise.level = NoiseLevel::Sd(at.field("sd").three(v, true)?),
+                (None, None) => {}
+            }
+            if let Some(v) = n.get("force_fraction") {
+                s.noise.force_fraction = at.field("force_fraction").number(v)?;
+            }
+        }
+        if let Some(v) = obj.get("effects") {
+            let at = at.field("effects");
+            for (i, e) in at.array(v)?.iter().enumerate() {
+                s.effects.push(parse_effect(&at.index(i), e)?);
+            }
+        }
+        if let Some(v) = obj.get("changes") {
+            let at = at.field("changes");
+            for (i, c) in at.array(v)?.iter().enumerate() {
+                let at = at.index(i);
+                let o = at.object(c)?;
+                at.known_keys(o, &["at", "parameter", "factor", "value"])?;
+                let time = at.field("at").number(at.required(o, "at")?)?;
+                let name_at = at.field("parameter");
+                let name = name_at.string(at.required(o, "parameter")?)?;
+                let parameter = ParamName::parse(name).ok_or_else(|| {
+                    name_at.error(format!(
+                        "unknown parameter {name:?}; expected m1..m3, c1..c3 or k1..k3"
+                    ))
+                })?;
+                let how = match (o.get("factor"), o.get("value")) {
+                    (Some(v), None) => ChangeHow::Factor(at.field("factor").number(v)?),
+                    (None, Some(v)) => ChangeHow::Value(at.field("value").number(v)?),
+                    _ => return Err(at.error("give exactly one of `factor` and `value`".into())),
+                };
+                s.changes.push(Change {
+                    at: time,
+                    parameter,
+                    how,
+                });
+            }
+        }
+        Ok(s)
+    }
+
+    /// The scenario as JSON, every default filled in: [`Scenario::from_json`] reads it back equal.
+    pub fn to_json(&self) -> Value {
+        let noise = match &self.noise.level {
+            NoiseLevel::Fraction(f) => {
+                json!({"fraction": f, "force_fraction": self.noise.force_fraction})
+            }
+            NoiseLevel::Sd(sd) => json!({"sd": sd, "force_fraction": self.noise.force_fraction}),
+        };
+        json!({
+            "seed": self.seed,
+            "duration": self.duration,
+            "sample_rate": self.sample_rate,
+            "oversample": self.oversample,
+            "parameters": {"m": self.mass, "c": self.damping, "k": self.stiffness},
+            "force": {
+                "rms": self.force.rms,
+                "band_hz": self.band_hz(),
+                "low_hz": self.force.low_hz,
+                "between_samples": self.force.between_samples.name(),
+                "windows": self.force.windows,
+            },
+            "noise": noise,
+            "effects": self.effects.iter().map(EffectSpec::to_json).collect::<Vec<_>>(),
+            "changes": self.changes.iter().map(Change::to_json).collect::<Vec<_>>(),
+        })
+    }
+
+    /// Check the ranges; `origin` names the source (a file, or "scenario") in the errors.
+    pub fn validate(&self, origin: &str) -> Result<()> {
+        let at = Loc {
+            origin,
+            path: String::new(),
+        };
+        let positive = |loc: Loc, x: f64, strictly: bool| -> Result<()> {
+            let ok = x.is_finite() && if strictly { x > 0.0 } else { x >= 0.0 };
+            if ok {
+                Ok(())
+            } else {
+                Err(loc.error(format!(
+                    "{x} must be a finite number {} 0",
+                    if strictly { ">" } else { "≥" }
+                )))
+            }
+        };
+        positive(at.field("sample_rate"), self.sample_rate, true)?;
+        positive(at.field("duration"), self.duration, true)?;
+        if !(1..=MAX_OVERSAMPLE).contains(&self.oversample) {
+            return Err(at.field("oversample").error(format!(
+                "{} is outside [1, {MAX_OVERSAMPLE}]",
+                self.oversample
+            )));
+        }
+        let n = self.samples();
+        if n < 2 {
+            return Err(at.field("duration").error(format!(
+                "{} s at {} Hz gives {n} samples; at least 2 are needed",
+                self.duration, self.sample_rate
+            )));
+        }
+        if n.saturating_mul(GENERATOR_OVERSAMPLE) > MAX_FINE_POINTS {
+            return Err(at.field("duration").error(format!(
+                "{:?} s at {:?} Hz is too long a record (at most {} samples)",
+                self.duration,
+                self.sample_rate,
+                MAX_FINE_POINTS / GENERATOR_OVERSAMPLE
+            )));
+        }
+        if n.saturating_mul(self.oversample as usize) > MAX_FINE_POINTS {
+            return Err(at.field("oversample").error(format!(
+                "{n} samples × {} fine steps is more than the {MAX_FINE_POINTS} fine points allowed",
+                self.oversample
+            )));
+        }
+        let p = at.field("parameters");
+        for i in 0..3 {
+            positive(p.field("m").index(i), self.mass[i], true)?;
+            positive(p.field("c").index(i), self.damping[i], false)?;
+            positive(p.field("k").index(i), self.stiffness[i], false)?;
+        }
+        let f = at.field("force");
+        positive(f.field("rms"), self.force.rms, false)?;
+        positive(f.field("low_hz"), self.force.low_hz, false)?;
+        let band = self.band_hz();
+        let nyquist = 0.5 * self.sample_rate;
+        positive(f.field("band_hz"), band, true)?;
+        if band > nyquist * (1.0 + 1e-12) {
+            return Err(f.field("band_hz").error(format!(
+                "{band} Hz is above the Nyquist frequency {nyquist} Hz of the {} Hz sampling",
+                self.sample_rate
+            )));
+        }
+        let record = n as f64 / self.sample_rate;
+        let bins = (1..=n * GENERATOR_OVERSAMPLE / 2)
+            .filter(|&k| in_band(k as f64 / record, self.force.low_hz, band))
+            .count();
+        if bins == 0 {
+            return Err(f.error(format!(
+                "no frequency of the {record} s record (resolution {} Hz) lies strictly between low_hz {} and band_hz {band}",
+                1.0 / record,
+                self.force.low_hz
+            )));
+        }
+        for (i, w) in self.force.windows.iter().enumerate() {
+            let at = f.field("windows").index(i);
+            for (name, x) in [
+                ("start", w.start),
+                ("end", w.end),
+                ("gain", w.gain),
+                ("ramp", w.ramp),
+            ] {
+                if !x.is_finite() {
+                    return Err(at.field(name).error(format!("{x} is not a finite number")));
+                }
+            }
+            if w.end <= w.start {
+                return Err(at
+                    .field("end")
+                    .error(format!("{} must be after start {}", w.end, w.start)));
+            }
+            positive(at.field("gain"), w.gain, false)?;
+            positive(at.field("ramp"), w.ramp, false)?;
+            if w.ramp > w.end - w.start {
+                return Err(at.field("ramp").error(format!(
+                    "{} s is longer than the window ({} s); the ramps are centred on its edges",
+                    w.ramp,
+                    w.end - w.start
+                )));
+            }
+        }
+        let noise = at.field("noise");
+        let (name, levels) = match &self.noise.level {
+            NoiseLevel::Fraction(x) => ("fraction", x),
+            NoiseLevel::Sd(x) => ("sd", x),
+        };
+        for (i, &x) in levels.iter().enumerate() {
+            positive(noise.field(name).index(i), x, false)?;
+        }
+        positive(
+            noise.field("force_fraction"),
+            self.noise.force_fraction,
+            false,
+        )?;
+        for (i, e) in self.effects.iter().enumerate() {
+            let at = at.field("effects").index(i);
+            match *e {
+                EffectSpec::Contact { lower, side, .. } => {
+                    if lower > 2 {
+                        return Err(at.field("location").error(format!(
+                            "[{lower}, {}] is not a storey; expected [0, 1], [1, 2] or [2, 3]",
+                            lower + 1
+                        )));
+                    }
+                    if Side::from_code(side).is_none() {
+                        return Err(at.field("side").error(format!("{side} is not -1, 0 or 1")));
+                    }
+                }
+                EffectSpec::Cubic { storey, .. } => {
+                    if !(1..=3).contains(&storey) {
+                        return Err(at
+                            .field("location")
+                            .error(format!("storey {storey} is not 1, 2 or 3")));
+                    }
+                }
+                EffectSpec::Friction { floor, .. } => {
+                    if !(1..=3).contains(&floor) {
+                        return Err(at
+                            .field("location")
+                            .error(format!("floor {floor} is not 1, 2 or 3")));
+                    }
+                }
+                EffectSpec::Hysteresis {
+                    storey,
+                    stiffness,
+                    yield_drift,
+                    beta,
+                    gamma,
+                    exponent,
+                } => {
+                    if !(1..=3).contains(&storey) {
+                        return Err(at
+                            .field("location")
+                            .error(format!("storey {storey} is not 1, 2 or 3")));
+                    }
+                    positive(at.field("stiffness"), stiffness, true)?;
+                    positive(at.field("yield"), yield_drift, true)?;
+                    for (name, x) in [("beta", beta), ("gamma", gamma)] {
+                        if !x.is_finite() {
+                            return Err(at
+                                .field(name)
+                                .error(format!("{x} is not a finite number")));
+                        }
+                    }
+                    if beta + gamma <= 0.0 {
+                        return Err(at.field("gamma").error(format!(
+                            "beta + gamma = {beta} + {gamma} must be > 0 (|z| saturates at yield · (1/(beta + gamma))^(1/exponent))"
+                        )));
+                    }
+                    if !(exponent.is_finite() && exponent >= 1.0) {
+                        return Err(at
+                            .field("exponent")
+                            .error(format!("{exponent} must be a finite number ≥ 1")));
+                    }
+                }
+            }
+            // A library effect's parameters: the ranges the FMU accepts.
+            if let Some((kind, _, law)) = e.library() {
+                for (p, x) in kind.real_params().iter().zip(law.reals()) {
+                    let at = at.field(p.suffix);
+                    if p.min == 0.0 {
+                        positive(at, x, p.strictly)?;
+                    } else if !x.is_finite() {
+                        return Err(at.error(format!("{x} is not a finite number")));
+                    } else if x < p.min || (p.strictly && x == p.min) {
+                        return Err(at.error(format!(
+                            "{x} must be {} {}",
+                            if p.strictly { ">" } else { "≥" },
+                            p.min
+                        )));
+                    }
+                }
+            }
+            if let Some(j) = self.effects[..i]
+                .iter()
+                .position(|o| o.kind() == e.kind() && o.library_location() == e.library_location())
+            {
+                return Err(at.error(format!(
+                    "{} {} is already given as effects[{j}]; one effect of a kind per location",
+                    e.kind(),
+                    e.describe_location()
+                )));
+            }
+        }
+        let last = (n - 1) as f64 / self.sample_rate;
+        for (i, c) in self.changes.iter().enumerate() {
+            let at = at.field("changes").index(i);
+            if !(c.at.is_finite() && c.at >= 0.0 && c.at <= last) {
+                return Err(at
+                    .field("at")
+                    .error(format!("{} s is outside the record [0, {last}] s", c.at)));
+            }
+            let strictly = c.parameter.kind == ParamKind::Mass;
+            match c.how {
+                ChangeHow::Factor(x) => positive(at.field("factor"), x, strictly)?,
+                ChangeHow::Value(x) => positive(at.field("value"), x, strictly)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
+    let o = at.object(value)?;
+    let kind_at = at.field("kind");
+    let kind = kind_at.string(at.required(o, "kind")?)?;
+    let location: Vec<u64> = {
+        let loc = at.field("location");
+        let v = at.required(o, "location")?;
+        match v {
+            Value::Array(items) => items
+                .iter()
+                .enumerate()
+                .map(|(i, x)| loc.index(i).u64(x))
+                .collect::<Result<_>>()?,
+            Value::Number(_) => vec![loc.u64(v)?],
+            other => {
+                return Err(loc.error(format!(
+                    "expected a list of floor numbers, found {}",
+                    shown(other)
+                )))
+            }
+        }
+    };
+    let loc = at.field("location");
+    let number_or = |key: &str, default: f64| -> Result<f64> {
+        match o.get(key) {
+            Some(v) => at.field(key).number(v),
+            None => Ok(default),
+        }
+    };
+    let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
+    let storey_or_adjacent = |location: &[u64]| {
+        match location[..] {
+        [s] if (1..=3).contains(&s) => Ok(small(s)),
+        [a, b] if b == a + 1 && b <= 3 => Ok(small(b)),
+        _ => Err(loc.error(format!(
+            "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
+        ))),
+    }
+    };
+    // The library's kinds: their parameters, defaults and side come from its description.
+    if let Some(library_kind) = Kind::parse(kind) {
+        let mut known = vec!["kind", "location"];
+        known.extend(library_kind.real_params().iter().map(|p| p.suffix));
+        if library_kind.has_side() {
+            known.push("side");
+        }
+        at.known_keys(o, &known)?;
+        // 0-based, as the library counts.
+        let location = match library_kind {
+            Kind::Contact => match location[..] {
+                [a, b] if b == a + 1 && b <= 3 => small(a),
+                _ => return Err(loc.error(format!(
+                    "{location:?} is not a storey; expected two adjacent floors [lower, upper] with 0 = the ground: [0, 1], [1, 2] or [2, 3]"
+                ))),
+            },
+            Kind::Cubic => storey_or_adjacent(&location)? - 1,
+            Kind::Friction => match location[..] {
+                [f] if (1..=3).contains(&f) => small(f) - 1,
+                _ => {
+                    return Err(loc.error(format!(
+                        "{location:?} is not a floor; expected [1], [2] or [3]"
+                    )))
+                }
+            },
+        };
+        let side = match o.get("side") {
+            None => Side::Both,
+            Some(Value::String(s)) => match s.as_str() {
+                "both" => Side::Both,
+                "positive" => Side::Positive,
+                "negative" => Side::Negative,
+                _ => {
+                    return Err(at.field("side").error(format!(
+                        "{s:?} is not \"both\", \"positive\" or \"negative\""
+                    )))
+                }
+            },
+            Some(v @ Value::Number(_)) => {
+                match v
+                    .as_i64()
+                    .and_then(|x| i32::try_from(x).ok())
+                    .and_then(Side::from_code)
+                {
+                    Some(side) => side,
+                    None => return Err(at.field("side").error(format!("{v} is not -1, 0 or 1"))),
+                }
+            }
+            Some(other) => {
+                return Err(at.field("side").error(format!(
+                    "expected \"both\", \"positive\" or \"negative\", found {}",
+                    shown(other)
+                )))
+            }
+        };
+        let reals = library_kind
+            .real_params()
+            .iter()
+            .map(|p| number_or(p.suffix, p.start))
+            .collect::<Result<Vec<f64>>>()?;
+        let law = Law::new(library_kind, &reals, side)
+            .ok_or_else(|| at.error(format!("too few parameters for {kind}")))?;
+        return Ok(EffectSpec::from_library(location, law));
+    }
+    match kind {
+        "hysteresis" => {
+            at.known_keys(
+                o,
+                &[
+                    "kind",
+                    "location",
+                    "stiffness",
+                    "yield",
+                    "beta",
+                    "gamma",
+                    "exponent",
+                ],
+            )?;
+            let storey = storey_or_adjacent(&location)?;
+            Ok(EffectSpec::Hysteresis {
+                storey,
+                stiffness: number_or("stiffness", DEFAULT_HYSTERESIS_STIFFNESS)?,
+                yield_drift: number_or("yield", DEFAULT_HYSTERESIS_YIELD)?,
+                beta: number_or("beta", DEFAULT_HYSTERESIS_BETA)?,
+                gamma: number_or("gamma", DEFAULT_HYSTERESIS_GAMMA)?,
+                exponent: number_or("exponent", DEFAULT_HYSTERESIS_EXPONENT)?,
+            })
+        }
+        other => Err(kind_at.error(format!(
+            "unknown effect kind {other:?}; expected \"contact\", \"cubic\", \"friction\" or \"hysteresis\""
+        ))),
+    }
+}
+
+/// Where a value sits: the file and the field path, for error messages.
+#[derive(Clone)]
+pub(super) struct Loc<'a> {
+    pub(super) origin: &'a str,
+    pub(super) path: String,
+}
+
+fn shown(v: &Value) -> String {
+    let kind = match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "a list",
+        Value::Object(_) => "an object",
+    };
+    let mut text = v.to_string();
+    if text.len() > 40 {
+        let mut cut = 37;
+        while !text.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        text.truncate(cut);
+        text.push_str("...");
+    }
+    format!("{kind} ({text})")
+}
+
+impl<'a> Loc<'a> {
+    fn field(&self, name: &str) -> Loc<'a> {
+        let path = if self.path.is_empty() {
+            name.to_string()
+        } else {
+            format!("{}.{name}", self.path)
+        };
+        Loc {
+            origin: self.origin,
+            path,
+        }
+    }
+    fn index(&self, i: usize) -> Loc<'a> {
+        Loc {
+            origin: self.origin,
+            path: format!("{}[{i}]", self.path),
+        }
+    }
+    fn error(&self, message: String) -> anyhow::Error {
+        if self.path.is_empty() {
+            anyhow!("{}: {message}", self.origin)
+        } else {
+            anyhow!("{}: field `{}`: {message}", self.origin, self.path)
+        }
+    }
+    fn object<'v>(&self, v: &'v Value) -> Result<&'v Map<String, Value>> {
+        v.as_object()
+            .ok_or_else(|| self.error(format!("expected an object, found {}", shown(v))))
+    }
+    fn array<'v>(&self, v: &'v Value) -> Result<&'v Vec<Value>> {
+        v.as_array()
+            .ok_or_else(|| self.error(format!("expected a list, found {}", shown(v))))
+    }
+    fn string<'v>(&self, v: &'v Value) -> Result<&'v str> {
+        v.as_str()
+            .ok_or_else(|| self.error(format!("expected a string, found {}", shown(v))))
+    }
+    fn number(&self, v: &Value) -> Result<f64> {
+        match v.as_f64() {
+            Some(x) if x.is_finite() => Ok(x),
+            _ => Err(self.error(format!("expected a number, found {}", shown(v)))),
+        }
+    }
+    fn u64(&self, v: &Value) -> Result<u64> {
+        if let Some(x) = v.as_u64() {
+            return Ok(x);
+        }
+        match v.as_f64() {
+            Some(x) if x >= 0.0 && x.fract() == 0.0 && x < 2f64.powi(53) => Ok(x as u64),
+            _ => Err(self.error(format!(
+                "expected a non-negative whole number, found {}",
+                shown(v)
+            ))),
+        }
+    }
+    /// Three numbers; with `scalar`, a single number stands for all three.
+    fn three(&self, v: &Value, scalar: bool) -> Result<[f64; 3]> {
+        match v {
+            Value::Number(_) if scalar => Ok([self.number(v)?; 3]),
+            Value::Array(items) if items.len() == 3 => Ok([
+                self.index(0).number(&items[0])?,
+                self.index(1).number(&items[1])?,
+                self.index(2).number(&items[2])?,
+            ]),
+            _ => Err(self.error(format!(
+                "expected {}a list of 3 numbers (floors/storeys 1..3), found {}",
+                if scalar { "a number or " } else { "" },
+                shown(v)
+            ))),
+        }
+    }
+    fn required<'v>(&self, o: &'v Map<String, Value>, key: &str) -> Result<&'v Value> {
+        o.get(key)
+            .ok_or_else(|| self.field(key).error("is missing".into()))
+    }
+    fn known_keys(&self, o: &Map<String, Value>, known: &[&str]) -> Result<()> {
+        for key in o.keys() {
+            if !known.contains(&key.as_str()) {
+                return Err(self.field(key).error(format!(
+                    "unknown field; expected one of {}",
+                    known.join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+}
