@@ -906,3 +906,62 @@ fn output_all_records_the_locals_too() {
         );
     }
 }
+
+#[test]
+fn an_ssp_reaching_outside_its_archive_or_naming_a_component_twice_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let ball = std::fs::read(c_fmu("BouncingBall")).expect("read");
+    let outside = c_fmu("BouncingBall");
+    let cases = [
+        (
+            outside.to_str().expect("utf-8").to_owned(),
+            "is not in the archive",
+        ),
+        (
+            "resources/../resources/BouncingBall.fmu".to_owned(),
+            "is not in the archive",
+        ),
+        (
+            "file:///tmp/BouncingBall.fmu".to_owned(),
+            "is not in the archive",
+        ),
+    ];
+    for (source, expected) in cases {
+        let ssd = format!(
+            r#"<SystemStructureDescription version="1.0" name="s"><System name="s"><Elements>
+               <Component name="ball" source="{source}"/></Elements></System></SystemStructureDescription>"#
+        );
+        let ssp = dir.path().join("outside.ssp");
+        write_ssp(&ssp, &ssd, &[("resources/BouncingBall.fmu", ball.clone())]);
+        let out = dir.path().join("out.csv");
+        let stderr = refused(
+            twin(&[
+                "run",
+                ssp.to_str().expect("utf-8"),
+                "--output",
+                out.to_str().expect("utf-8"),
+            ]),
+            &source,
+        );
+        assert!(stderr.contains(expected), "{source}: {stderr}");
+    }
+    let twice = r#"<SystemStructureDescription version="1.0" name="s"><System name="s"><Elements>
+        <Component name="ball" source="resources/BouncingBall.fmu"/>
+        <Component name="ball" source="resources/BouncingBall.fmu"/></Elements></System></SystemStructureDescription>"#;
+    let ssp = dir.path().join("twice.ssp");
+    write_ssp(&ssp, twice, &[("resources/BouncingBall.fmu", ball)]);
+    let out = dir.path().join("out.csv");
+    let stderr = refused(
+        twin(&[
+            "run",
+            ssp.to_str().expect("utf-8"),
+            "--output",
+            out.to_str().expect("utf-8"),
+        ]),
+        "two components named ball",
+    );
+    assert!(
+        stderr.contains("two components are named 'ball'"),
+        "{stderr}"
+    );
+}

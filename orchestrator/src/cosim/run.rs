@@ -205,9 +205,16 @@ impl Model {
         let ssd = ssp::parse_ssd(&read("SystemStructure.ssd")?)
             .map_err(|m| bad(format!("SystemStructure.ssd: {m}")))?;
         let mut components = Vec::new();
-        for c in &ssd.components {
+        for (i, c) in ssd.components.iter().enumerate() {
+            if ssd.components[..i].iter().any(|d| d.name == c.name) {
+                return Err(bad(format!("two components are named '{}'", c.name)));
+            }
+            // A source is a path inside the archive: nothing absolute, no '..', no other scheme.
+            let inside = !c.source.starts_with('/')
+                && !c.source.contains(':')
+                && !c.source.split('/').any(|part| part == "..");
             let fmu_path = archive.path().join(&c.source);
-            if c.source.contains("..") || !fmu_path.is_file() {
+            if !inside || !fmu_path.is_file() {
                 return Err(bad(format!(
                     "component '{}': its source '{}' is not in the archive",
                     c.name, c.source

@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-pub use fmu_shear::effects::{Kind, Side};
 use fmu_shear::effects::Placement;
+pub use fmu_shear::effects::{Kind, Side};
 
 use crate::calibrate::Prior;
 use crate::twin::ParameterValue;
