@@ -2,8 +2,7 @@
 //! comparisons and reports, and the `twin` CLI's commands.
 
 pub mod calibrate;
-pub mod cli;
-pub mod cli_run;
+pub mod commands;
 pub mod compare;
 pub mod cosim;
 pub mod data;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    match orchestrator::cli::run(orchestrator::cli::Cli::parse()) {
+    match orchestrator::commands::run(orchestrator::commands::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("twin: error: {err:#}");

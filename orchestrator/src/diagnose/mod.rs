@@ -46,7 +46,6 @@
 //! twin.
 
 pub mod candidate;
-pub mod command;
 pub mod plot;
 
 use std::collections::BTreeMap;

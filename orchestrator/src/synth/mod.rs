@@ -125,14 +125,14 @@
 //! the written CSV reads back, the noise-free accelerations and the fine-grid force (and the
 //! hysteresis states, if any), and the [`Truth`].
 
-mod cli;
 mod csv;
+mod flags;
 mod force;
 mod scenario;
 mod structure;
 mod truth;
 
-pub use cli::{parse_change_flag, parse_effect_flag, synth_command, SynthArgs};
+pub use flags::{parse_change_flag, parse_effect_flag};
 pub use csv::{csv_text, format_g9};
 pub use force::{band_limited_force, envelope};
 pub use scenario::{

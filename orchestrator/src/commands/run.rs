@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::cosim::run::{run, RunOptions};
+use crate::cosim::run::RunOptions;
 
 #[derive(clap::Args)]
 pub struct RunArgs {
@@ -38,7 +38,7 @@ pub struct RunArgs {
     pub plot: Option<PathBuf>,
 }
 
-pub fn run_command(args: &RunArgs) -> Result<()> {
+pub fn run(args: &RunArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
             anyhow::bail!("--plot {}: only .svg is supported", plot.display());
@@ -52,8 +52,8 @@ pub fn run_command(args: &RunArgs) -> Result<()> {
         sets: args.sets.clone(),
         output_all: args.output_all,
     };
-    let result = run(&args.model, &options, crate::cli::progress_bar())?;
-    crate::cli::write_atomically(&args.output, |f| {
+    let result = crate::cosim::run::run(&args.model, &options, super::progress_bar())?;
+    super::write_atomically(&args.output, |f| {
         result.write_csv(f).map_err(anyhow::Error::from)
     })?;
     println!(
@@ -77,7 +77,7 @@ pub fn run_command(args: &RunArgs) -> Result<()> {
             .unwrap_or_default();
         let svg = crate::report::run_plot::plot_run(&result, &title)
             .map_err(|m| anyhow::anyhow!("cannot draw {}: {m}", plot.display()))?;
-        crate::cli::write_atomically(plot, |f| {
+        super::write_atomically(plot, |f| {
             use std::io::Write;
             f.write_all(svg.as_bytes())
                 .with_context(|| format!("writing {}", plot.display()))

@@ -1,13 +1,14 @@
-//! The `twin diagnose` and `twin add-physics` commands.
+//! `twin diagnose`: diagnose a failing twin (none, recalibrate, add physics or update the
+//! data-based model), with the evidence; a summary, a JSON report and a plot.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::{add_physics, diagnose, effect_from_report, Candidate, DiagnoseOptions, Diagnosis};
-use crate::cli::write_atomically;
+use super::write_atomically;
 use crate::data::Measurement;
+use crate::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis};
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -42,40 +43,6 @@ pub struct DiagnoseArgs {
     pub always_fit: bool,
 }
 
-#[derive(clap::Args)]
-pub struct AddPhysicsArgs {
-    /// The twin (.ssp) to extend.
-    #[arg(long)]
-    pub twin: PathBuf,
-    /// The effect, KIND@LOCATION[:SIDE]: contact@2-3[:both|positive|negative], cubic@2,
-    /// friction@1.
-    #[arg(
-        long,
-        conflicts_with = "diagnosis",
-        required_unless_present = "diagnosis"
-    )]
-    pub effect: Option<String>,
-    /// Take the effect from a `twin diagnose` report instead.
-    #[arg(long)]
-    pub diagnosis: Option<PathBuf>,
-    /// The record its parameters are estimated on.
-    #[arg(long)]
-    pub data: PathBuf,
-    /// The new twin (.ssp).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Refine the nine physics parameters jointly with the effect's.
-    #[arg(long)]
-    pub refine: bool,
-    /// JSON report.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
-    pub transient: f64,
-    #[arg(long)]
-    pub threads: Option<usize>,
-}
-
 fn check_transient(transient: f64) -> Result<()> {
     if !(transient >= 0.0 && transient.is_finite()) {
         bail!("--transient must be a non-negative number of seconds, was {transient}");
@@ -83,7 +50,7 @@ fn check_transient(transient: f64) -> Result<()> {
     Ok(())
 }
 
-fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
+pub(super) fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
     check_transient(transient)?;
     let mut o = DiagnoseOptions {
         transient,
@@ -98,7 +65,7 @@ fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
     Ok(o)
 }
 
-pub fn diagnose_command(args: &DiagnoseArgs) -> Result<()> {
+pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = options(args.transient, args.threads)?;
     o.block = args.block;
     o.always_fit = args.always_fit;
@@ -114,7 +81,7 @@ pub fn diagnose_command(args: &DiagnoseArgs) -> Result<()> {
     let d = diagnose(&twin, &data, &o)?;
     // Draw before writing anything: a failed plot leaves no half-written output.
     let plot = match &args.plot {
-        Some(path) => Some((path, super::plot::draw_diagnosis(&d)?)),
+        Some(path) => Some((path, crate::diagnose::plot::draw_diagnosis(&d)?)),
         None => None,
     };
     write_atomically(&args.report, |f| {
@@ -186,41 +153,4 @@ pub fn summary(d: &Diagnosis) -> String {
     s += &format!("why           {}\n", d.reason);
     s += &format!("time          {:.1} s\n", d.seconds);
     s
-}
-
-pub fn add_physics_command(args: &AddPhysicsArgs) -> Result<()> {
-    let o = options(args.transient, args.threads)?;
-    let candidate = match (&args.effect, &args.diagnosis) {
-        (Some(e), _) => Candidate::parse(e).map_err(anyhow::Error::msg)?,
-        (None, Some(path)) => effect_from_report(path)?,
-        (None, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
-    };
-    let data = Measurement::read(&args.data)?;
-    let twin = Twin::load(Some(&args.twin))?;
-    let (new_twin, report) = add_physics(&twin, &data, &candidate, args.refine, &o)?;
-    new_twin.write(&args.out)?;
-    if let Some(path) = &args.report {
-        write_atomically(path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
-    }
-    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
-    println!("effect        {}", report.effect.name.label);
-    for (k, v) in &report.effect.parameters {
-        if k != "side" {
-            println!(
-                "  {k:<14} {v:.4e} ± {:.2e}",
-                report.effect.sd.get(k).copied().unwrap_or(0.0)
-            );
-        }
-    }
-    for p in &report.refined_physics {
-        println!("  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
-    }
-    println!("NMSE before   {}", pct(&report.nmse_before));
-    println!("NMSE after    {}", pct(&report.nmse_after));
-    println!("wrote {}", args.out.display());
-    Ok(())
 }

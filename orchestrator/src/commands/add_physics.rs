@@ -1,0 +1,84 @@
+//! `twin add-physics`: switch an effect of the shear FMU's library on, estimate its parameters
+//! and write the new twin.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+
+use super::diagnose::options;
+use super::write_atomically;
+use crate::data::Measurement;
+use crate::diagnose::{add_physics, effect_from_report, Candidate};
+use crate::twin::Twin;
+
+#[derive(clap::Args)]
+pub struct AddPhysicsArgs {
+    /// The twin (.ssp) to extend.
+    #[arg(long)]
+    pub twin: PathBuf,
+    /// The effect, KIND@LOCATION[:SIDE]: contact@2-3[:both|positive|negative], cubic@2,
+    /// friction@1.
+    #[arg(
+        long,
+        conflicts_with = "diagnosis",
+        required_unless_present = "diagnosis"
+    )]
+    pub effect: Option<String>,
+    /// Take the effect from a `twin diagnose` report instead.
+    #[arg(long)]
+    pub diagnosis: Option<PathBuf>,
+    /// The record its parameters are estimated on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The new twin (.ssp).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Refine the nine physics parameters jointly with the effect's.
+    #[arg(long)]
+    pub refine: bool,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+pub fn run(args: &AddPhysicsArgs) -> Result<()> {
+    let o = options(args.transient, args.threads)?;
+    let candidate = match (&args.effect, &args.diagnosis) {
+        (Some(e), _) => Candidate::parse(e).map_err(anyhow::Error::msg)?,
+        (None, Some(path)) => effect_from_report(path)?,
+        (None, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
+    };
+    let data = Measurement::read(&args.data)?;
+    let twin = Twin::load(Some(&args.twin))?;
+    let (new_twin, report) = add_physics(&twin, &data, &candidate, args.refine, &o)?;
+    new_twin.write(&args.out)?;
+    if let Some(path) = &args.report {
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    println!("effect        {}", report.effect.name.label);
+    for (k, v) in &report.effect.parameters {
+        if k != "side" {
+            println!(
+                "  {k:<14} {v:.4e} ± {:.2e}",
+                report.effect.sd.get(k).copied().unwrap_or(0.0)
+            );
+        }
+    }
+    for p in &report.refined_physics {
+        println!("  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+    }
+    println!("NMSE before   {}", pct(&report.nmse_before));
+    println!("NMSE after    {}", pct(&report.nmse_after));
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

@@ -1,0 +1,200 @@
+//! `twin calibrate`: MAP calibration of the physics parameters and noise variances.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use serde_json::json;
+
+use super::{nmse_on, write_atomically};
+use crate::compare::{compare, CompareOptions};
+use crate::data::Measurement;
+use crate::run::run_twin;
+use crate::twin::Twin;
+
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// Measurement CSV to calibrate on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The twin to start from (.ssp); the default twin when absent. It is not modified.
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// The calibrated twin (.ssp) to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// A real parameter of the physics FMU to calibrate (repeat); default m1..3, c1..3, k1..3.
+    #[arg(long = "param")]
+    pub params: Vec<String>,
+    /// JSON file of priors overriding the defaults: {"k1": {"space": "linear", "mean": 4021, "variance": 10000}}.
+    #[arg(long)]
+    pub priors: Option<PathBuf>,
+    /// Seconds at the start of the record left out of the likelihood.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    /// Optimiser starts (the prior mean plus draws from the widened prior).
+    #[arg(long, default_value_t = 12)]
+    pub starts: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Other records to report the calibrated twin's NMSE on.
+    #[arg(long, num_args = 1..)]
+    pub validate: Vec<PathBuf>,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Plot (.svg) of the calibrated twin on the calibration record.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+pub fn run(args: &CalibrateArgs) -> Result<()> {
+    use crate::calibrate::{calibrate, calibrated_twin, read_priors, CalibrationSetup};
+    if args.twin.as_deref() == Some(args.out.as_path()) {
+        bail!(
+            "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
+            args.out.display()
+        );
+    }
+    if !(args.transient >= 0.0 && args.transient.is_finite()) {
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
+    }
+    if let Some(plot) = &args.plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            bail!("{}: only .svg plots are supported", plot.display());
+        }
+    }
+    let data = Measurement::read(&args.data)?;
+    let validation = args
+        .validate
+        .iter()
+        .map(|p| Measurement::read(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let twin = Twin::load(args.twin.as_deref())?;
+    let mut setup = CalibrationSetup {
+        transient: args.transient,
+        starts: args.starts,
+        seed: args.seed,
+        ..CalibrationSetup::default()
+    };
+    if !args.params.is_empty() {
+        setup.parameters = args.params.clone();
+    }
+    if let Some(path) = &args.priors {
+        setup.priors = read_priors(path).map_err(anyhow::Error::msg)?;
+    }
+    let calibration = calibrate(&twin, &data, &setup)?;
+    let new_twin = calibrated_twin(&twin, &calibration)?;
+    let mut validated = Vec::new();
+    for v in &validation {
+        validated.push((
+            v.path.display().to_string(),
+            nmse_on(&new_twin, v, args.transient)?,
+        ));
+    }
+
+    // All computed: now write, each file atomically.
+    new_twin.write(&args.out)?;
+    if let Some(path) = &args.report {
+        let report = json!({
+            "twin": twin.describe(),
+            "out": args.out.display().to_string(),
+            "data": data.path.display().to_string(),
+            "transient": args.transient,
+            "parameters": calibration.parameters,
+            "correlation": calibration.correlation,
+            "noise_variance": calibration.noise_variance,
+            "noise_log_sd": calibration.noise_log_sd,
+            "neg_log_posterior": calibration.neg_log_posterior,
+            "nmse": calibration.nmse,
+            "validation": validated.iter().map(|(p, n)| json!({"data": p, "nmse": n})).collect::<Vec<_>>(),
+            "starts": calibration.starts,
+            "simulations": calibration.simulations,
+            "seconds": calibration.seconds,
+        });
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    if let Some(path) = &args.plot {
+        let prediction = run_twin(&new_twin, &data, |_, _| {})?;
+        let options = CompareOptions {
+            transient: args.transient,
+            ..CompareOptions::default()
+        };
+        let comparison = compare(
+            &data.time,
+            &data.acc,
+            &prediction.acc,
+            calibration.noise_variance,
+            prediction.sd.as_ref(),
+            options,
+        );
+        let title = format!("calibrated on {}", data.path.display());
+        crate::report::plot_comparison(&comparison, &data.force, &title, path, false)?;
+    }
+
+    println!(
+        "calibrated on {} ({} starts, {} simulations, {:.2} s)",
+        data.path.display(),
+        calibration.starts.len(),
+        calibration.simulations,
+        calibration.seconds
+    );
+    println!(
+        "{:<10} {:>12} {:>12} {:>14}",
+        "parameter", "MAP", "sd", "prior mean"
+    );
+    for p in &calibration.parameters {
+        println!(
+            "{:<10} {:>12.4} {:>12.4} {:>14.4}",
+            p.name,
+            p.value,
+            p.sd,
+            p.prior.value(p.prior.mean)
+        );
+    }
+    for f in 0..3 {
+        println!(
+            "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
+            f + 1,
+            calibration.noise_variance[f],
+            calibration.noise_log_sd[f]
+        );
+    }
+    let names: Vec<&str> = calibration
+        .parameters
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    let mut strongest = Vec::new();
+    for a in 0..names.len() {
+        for b in a + 1..names.len() {
+            strongest.push((calibration.correlation[a][b], names[a], names[b]));
+        }
+    }
+    strongest.sort_by(|x, y| y.0.abs().total_cmp(&x.0.abs()));
+    let shown: Vec<String> = strongest
+        .iter()
+        .take(3)
+        .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
+        .collect();
+    println!("strongest correlations: {}", shown.join(", "));
+    println!(
+        "NMSE % on {}: {:.3} / {:.3} / {:.3}",
+        data.path.display(),
+        calibration.nmse[0],
+        calibration.nmse[1],
+        calibration.nmse[2]
+    );
+    for (p, n) in &validated {
+        println!("NMSE % on {p}: {:.3} / {:.3} / {:.3}", n[0], n[1], n[2]);
+    }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

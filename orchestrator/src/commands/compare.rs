@@ -1,0 +1,201 @@
+//! `twin compare`: run the twin on a record's force and compare its accelerations with the
+//! measured ones; a summary, and optionally a JSON report, the predictions and plots.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use serde_json::json;
+
+use super::{progress_bar, write_atomically};
+use crate::compare::{compare, CompareOptions, Comparison};
+use crate::data::Measurement;
+use crate::run::{run_twin, Prediction};
+use crate::twin::Twin;
+
+#[derive(clap::Args)]
+pub struct CompareArgs {
+    /// The twin (.ssp); the default twin when absent.
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// Measurement CSV: time,force,acc1,acc2,acc3.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Predicted accelerations as CSV (time,acc1,acc2,acc3).
+    #[arg(long)]
+    pub predictions: Option<PathBuf>,
+    /// Plot (.svg): measured, predicted, ±3σ band, residual, failing windows.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Also draw the frequency-response view.
+    #[arg(long)]
+    pub frf: bool,
+    /// Threshold line of the latent-variance view (`<plot>-latent.svg`, drawn when the twin has
+    /// a corrector), (m/s²)², every floor. Default: each floor's sensor-noise variance from the
+    /// twin's calibration — above it the GP is less sure of the bias than a single measurement
+    /// is, so the point would be worth learning; for an uncalibrated twin, 1e-3 × each floor's
+    /// measured variance on this record.
+    #[arg(long)]
+    pub latent_threshold: Option<f64>,
+    /// Seconds at the start left out of the error measures.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+}
+
+/// Noise variance when the twin has none (not calibrated): 2 % of each floor's measured
+/// variance, the centre the calibration's noise prior uses.
+pub const PRIOR_NOISE_FRACTION: f64 = 0.02;
+
+fn variance(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n
+}
+
+pub fn run(args: &CompareArgs) -> Result<()> {
+    if !(args.transient >= 0.0 && args.transient.is_finite()) {
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
+    }
+    if let Some(plot) = &args.plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            bail!("{}: only .svg plots are supported", plot.display());
+        }
+    }
+    if let Some(t) = args.latent_threshold {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--latent-threshold must be a positive number, was {t}");
+        }
+    }
+    let data = Measurement::read(&args.data)?;
+    if args.transient >= data.duration() {
+        bail!(
+            "--transient {} s leaves nothing of {} ({} s long)",
+            args.transient,
+            data.path.display(),
+            data.duration()
+        );
+    }
+    let twin = Twin::load(args.twin.as_deref())?;
+    let prediction = run_twin(&twin, &data, progress_bar())?;
+    let (noise_variance, noise_source) = match twin.noise_variance {
+        Some(v) => (v, "twin (calibrated)"),
+        None => (
+            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
+            "prior: 2 % of the measured variance",
+        ),
+    };
+    let options = CompareOptions {
+        transient: args.transient,
+        ..CompareOptions::default()
+    };
+    let comparison = compare(
+        &data.time,
+        &data.acc,
+        &prediction.acc,
+        noise_variance,
+        prediction.sd.as_ref(),
+        options,
+    );
+
+    // Everything is computed before anything is written: a failure leaves no partial output.
+    if let Some(path) = &args.predictions {
+        write_atomically(path, |f| write_predictions(f, &prediction))?;
+    }
+    if let Some(path) = &args.report {
+        let report = json!({
+            "twin": twin.describe(),
+            "data": data.path.display().to_string(),
+            "nmse": comparison.nmse,
+            "failing_windows": comparison.failing_windows,
+            "noise_variance": noise_variance,
+            "noise_variance_source": noise_source,
+            "transient": args.transient,
+            "samples": data.len(),
+            "sample_interval": data.dt,
+        });
+        write_atomically(path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            f.write_all(b"\n")?;
+            Ok(())
+        })?;
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{} on {}", twin.describe(), data.path.display());
+        crate::report::plot_comparison(&comparison, &data.force, &title, path, args.frf)?;
+        if let Some(latent) = &prediction.latent_var {
+            let threshold = match (args.latent_threshold, twin.noise_variance) {
+                (Some(t), _) => [t; 3],
+                (None, Some(v)) => v,
+                (None, None) => [0, 1, 2].map(|f| {
+                    crate::learn::PAPER_THRESHOLD * variance(&data.acc[f][comparison.first..])
+                }),
+            };
+            crate::report::plot_latent_variance(&comparison, latent, threshold, &title, path)?;
+        }
+    }
+    print_summary(&twin, &data, &comparison);
+    Ok(())
+}
+
+/// `time,acc1,acc2,acc3`, then the corrector's `latent_var1..3,sd1..3` when the twin has one.
+fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
+    let mut w = csv::Writer::from_writer(f);
+    let mut header: Vec<String> = ["time", "acc1", "acc2", "acc3"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let mut columns: Vec<&Vec<f64>> = p.acc.iter().collect();
+    for (prefix, triple) in [("latent_var", &p.latent_var), ("sd", &p.sd)] {
+        if let Some(values) = triple {
+            for (f, column) in values.iter().enumerate() {
+                header.push(format!("{prefix}{}", f + 1));
+                columns.push(column);
+            }
+        }
+    }
+    w.write_record(&header)?;
+    for k in 0..p.time.len() {
+        let mut row = vec![format!("{}", p.time[k])];
+        row.extend(columns.iter().map(|c| format!("{:e}", c[k])));
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
+    println!("twin: {}", twin.describe());
+    println!(
+        "data: {} ({} samples, {} Hz)",
+        data.path.display(),
+        data.len(),
+        1.0 / data.dt
+    );
+    println!("{:<8} {:>10} {:>12}", "floor", "NMSE %", "noise sd");
+    for f in 0..3 {
+        println!("{:<8} {:>10.3} {:>12.4e}", f + 1, c.nmse[f], c.noise_sd[f]);
+    }
+    if c.failing_windows.is_empty() {
+        println!("failing windows: none (the residual stays inside ±3σ)");
+    } else {
+        println!("failing windows ({}):", c.failing_windows.len());
+        for w in &c.failing_windows {
+            let floors: Vec<String> = w.floors.iter().map(|f| f.to_string()).collect();
+            println!(
+                "  {:>7.2}–{:<7.2} s  floors {:<6} NMSE {:.1} / {:.1} / {:.1} %",
+                w.start,
+                w.end,
+                floors.join(","),
+                w.nmse[0],
+                w.nmse[1],
+                w.nmse[2]
+            );
+        }
+    }
+}

@@ -1,0 +1,254 @@
+//! `twin learn`: stream-based active learning of the GP corrector over records (the paper's
+//! Algorithm 1), its table, plots and report.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use fmu_gp_corrector::TargetForm;
+
+use super::write_atomically;
+use crate::data::Measurement;
+use crate::learn::{
+    plot_mode, prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN,
+    N_INITIAL, REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
+};
+use crate::twin::Twin;
+
+#[derive(clap::Args)]
+pub struct LearnArgs {
+    /// The twin (.ssp) whose physics the GPs correct (e.g. from `twin calibrate`); the default
+    /// twin when absent. Only its physics is used.
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// Measurement CSVs, streamed in this order; the training set carries over.
+    #[arg(long, num_args = 1.., required = true)]
+    pub data: Vec<PathBuf>,
+    /// Query decision: uniform (every 25th point), fixed threshold, adaptive threshold.
+    #[arg(long, default_value = "adaptive", value_parser = ["uniform", "fixed", "adaptive"])]
+    pub mode: String,
+    /// Forgetting factor f_f of the adaptive mode, in (0, 1]; 1 = plain adaptive.
+    #[arg(long, default_value_t = 1.0)]
+    pub forgetting: f64,
+    /// `all`: uniform, fixed, adaptive f_f = 1, 0.999, 0.99, 0.9 (overrides --mode).
+    #[arg(long, value_parser = ["all"])]
+    pub modes: Option<String>,
+    /// Directory for the plots (one SVG per mode) and the JSON report when --report is absent.
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write the twin with the corrector as learned (its final training set and
+    /// hyperparameters) behind the physics; one mode only.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Fixed threshold on the latent variance, (m/s²)², every floor. Default, per floor: with
+    /// --target measured, the largest latent variance that GPs trained on the whole first record
+    /// show on the first 100 samples of the second (how the reference paper set its 1e-3,
+    /// Fig. 8); with the discrepancy target, 1e-3 × the floor's measured variance on the first
+    /// record.
+    #[arg(long)]
+    pub threshold: Option<f64>,
+    #[arg(long, default_value_t = fmu_gp_corrector::DEFAULT_LAGS)]
+    pub lags: usize,
+    #[arg(long, default_value = "discrepancy", value_parser = ["discrepancy", "measured"])]
+    pub target: String,
+    /// Seconds at the start of each record neither streamed nor scored.
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    pub transient: f64,
+    /// N_initial: points of the first record in the initial training set.
+    #[arg(long, default_value_t = N_INITIAL)]
+    pub initial: usize,
+    /// At least this many queries between hyperparameter refits (warm-started); 0: never.
+    #[arg(long, default_value_t = REFIT_EVERY)]
+    pub refit_every: u32,
+    /// Refit once the queries since the last fit reach this fraction of the training set at
+    /// that fit (0: every --refit-every queries).
+    #[arg(long, default_value_t = REFIT_GROWTH)]
+    pub refit_growth: f64,
+    /// L-BFGS iterations of a warm-started refit up to 512 training points; beyond, the same
+    /// work (an iteration costs O(n³)), but at least 10.
+    #[arg(long, default_value_t = REFIT_ITERATIONS)]
+    pub refit_iterations: u64,
+    /// Recompute the NMSE over the record after every this many queries.
+    #[arg(long, default_value_t = 1)]
+    pub nmse_every: usize,
+    /// Consecutive queried samples that flag a possible change of the structure.
+    #[arg(long, default_value_t = CHANGE_RUN)]
+    pub change_run: usize,
+}
+
+pub fn run(args: &LearnArgs) -> Result<()> {
+    if !(args.transient >= 0.0 && args.transient.is_finite()) {
+        bail!(
+            "--transient must be a non-negative number of seconds, was {}",
+            args.transient
+        );
+    }
+    if !(args.forgetting > 0.0 && args.forgetting <= 1.0) {
+        bail!("--forgetting must be in (0, 1], was {}", args.forgetting);
+    }
+    if !(args.refit_growth >= 0.0 && args.refit_growth.is_finite()) {
+        bail!(
+            "--refit-growth must be a non-negative fraction, was {}",
+            args.refit_growth
+        );
+    }
+    if let Some(t) = args.threshold {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--threshold must be a positive number, was {t}");
+        }
+    }
+    if let Some(out) = &args.out {
+        if args.modes.is_some() {
+            bail!("--out keeps the corrector of one mode: give --mode, not --modes all");
+        }
+        if args.twin.as_deref() == Some(out.as_path()) {
+            bail!(
+                "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
+                out.display()
+            );
+        }
+    }
+    let target = if args.target == "measured" {
+        TargetForm::Measured
+    } else {
+        TargetForm::Discrepancy
+    };
+    let options = LearnOptions {
+        lags: args.lags,
+        target,
+        transient: args.transient,
+        initial: args.initial,
+        threshold: args.threshold,
+        refit_every: args.refit_every,
+        refit_growth: args.refit_growth,
+        refit_iterations: args.refit_iterations,
+        nmse_every: args.nmse_every.max(1),
+        change_run: args.change_run,
+        ..LearnOptions::default()
+    };
+    let modes = if args.modes.is_some() {
+        Mode::all()
+    } else {
+        match args.mode.as_str() {
+            "uniform" => vec![Mode::Uniform],
+            "fixed" => vec![Mode::Fixed],
+            _ => vec![Mode::Adaptive(args.forgetting)],
+        }
+    };
+    let records = args
+        .data
+        .iter()
+        .map(|p| Measurement::read(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let twin = Twin::load(args.twin.as_deref())?;
+    let started = std::time::Instant::now();
+    let streams = prepare(&twin, &records, &options)?;
+    let results = run_modes(&streams, &modes, &options)?;
+    let seconds = started.elapsed().as_secs_f64();
+
+    print!("{}", table(&results));
+    if let Some(fixed) = results.iter().find_map(|r| r.fixed_threshold.as_ref()) {
+        let stretch = |s: &Option<Stretch>| {
+            s.as_ref().map_or(String::new(), |s| {
+                format!(
+                    "{} {:.1}–{:.1} s ({} points)",
+                    s.record, s.from, s.to, s.points
+                )
+            })
+        };
+        let how = match (&fixed.trained_on, &fixed.tested_on) {
+            (Some(_), Some(_)) => format!(
+                ": trained on {}, largest V(f) on {}",
+                stretch(&fixed.trained_on),
+                stretch(&fixed.tested_on)
+            ),
+            _ => String::new(),
+        };
+        println!(
+            "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
+            fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
+        );
+    }
+    for r in &results {
+        for (k, rec) in r.records.iter().enumerate() {
+            for flag in &rec.structure_may_have_changed {
+                println!(
+                    "{}: record {}: {} consecutive queries {:.2}–{:.2} s: the structure may have changed",
+                    r.mode,
+                    k + 1,
+                    flag.samples,
+                    flag.start,
+                    flag.end
+                );
+            }
+        }
+    }
+    println!(
+        "{:.2} s ({} modes in parallel threads)",
+        seconds,
+        results.len()
+    );
+
+    if let (Some(path), [result]) = (&args.out, results.as_slice()) {
+        let trained = result
+            .final_gps
+            .to_training_file(options.lags, options.target);
+        crate::train::with_corrector(&twin, &trained)?.write(path)?;
+        println!(
+            "wrote {} (the corrector as learned: {} points)",
+            path.display(),
+            trained.inputs.len()
+        );
+    }
+    let report_path = args
+        .report
+        .clone()
+        .or_else(|| args.out_dir.as_ref().map(|d| d.join("learn.json")));
+    if let Some(dir) = &args.out_dir {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        for r in &results {
+            let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
+            let svg = plot_mode(r).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            write_atomically(&path, |f| Ok(f.write_all(svg.as_bytes())?))?;
+            println!("wrote {}", path.display());
+        }
+    }
+    if let Some(path) = report_path {
+        let report = serde_json::json!({
+            "twin": twin.describe(),
+            "records": args.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "lags": options.lags,
+            "target": options.target.name(),
+            "transient": options.transient,
+            "initial": options.initial,
+            "uniform_every": options.uniform_every,
+            "refit_every_queries": options.refit_every,
+            "refit_growth": options.refit_growth,
+            "refit_iterations": options.refit_iterations,
+            "nmse_every_queries": options.nmse_every,
+            "change_run": options.change_run,
+            "threshold_option": options.threshold,
+            "seconds": seconds,
+            "modes": results,
+        });
+        write_atomically(&path, |f| {
+            serde_json::to_writer_pretty(&mut *f, &report)?;
+            Ok(())
+        })?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+impl ModeResult {
+    fn mode_tag(&self) -> String {
+        match self.forgetting_factor {
+            Some(f) => Mode::Adaptive(f).tag(),
+            None => self.mode.clone(),
+        }
+    }
+}

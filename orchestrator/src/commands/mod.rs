@@ -1,0 +1,115 @@
+//! The `twin` commands: arguments → validated configuration → work → files written atomically.
+//! One file per subcommand; everything that parses arguments, prints or writes a report lives
+//! here, and the library underneath returns typed errors.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+
+use crate::data::Measurement;
+use crate::run::{run_twin, Progress};
+use crate::twin::Twin;
+
+pub mod add_physics;
+pub mod calibrate;
+pub mod compare;
+pub mod diagnose;
+pub mod init;
+pub mod learn;
+pub mod pack_fmu;
+pub mod run;
+pub mod synth;
+pub mod train;
+
+#[derive(Parser)]
+#[command(
+    name = "twin",
+    version,
+    about = "shear-twin: an operational digital twin of a shear frame, on FMI 2.0"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run the twin on a measurement's force and compare its accelerations with the measured ones.
+    Compare(compare::CompareArgs),
+    /// MAP calibration of the physics parameters and noise variances on a measurement.
+    Calibrate(calibrate::CalibrateArgs),
+    /// Train the Gaussian-process bias corrector on a record and put it behind the physics FMU.
+    Train(train::TrainArgs),
+    /// Package a built FMU library and its modelDescription.xml into a .fmu archive.
+    PackFmu(pack_fmu::PackArgs),
+    /// Write the default twin (the shear FMU, default parameters) as an SSP archive.
+    Init(init::InitArgs),
+    /// Make a synthetic measurement record (the synthetic physical twin) and its truth JSON.
+    Synth(synth::SynthArgs),
+    /// Stream-based active learning of the GP corrector over records (paper Algorithm 1).
+    Learn(learn::LearnArgs),
+    /// Diagnose a failing twin: none, recalibrate, add physics (which effect, where, how
+    /// strong) or update the data-based model, with the evidence.
+    Diagnose(diagnose::DiagnoseArgs),
+    /// Switch an effect of the shear FMU's library on, estimate its parameters, write the twin.
+    AddPhysics(add_physics::AddPhysicsArgs),
+    /// Run any FMI 2.0 co-simulation FMU or SSP system and record its outputs as CSV.
+    Run(run::RunArgs),
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Compare(args) => compare::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
+        Command::Train(args) => train::run(&args),
+        Command::PackFmu(args) => pack_fmu::run(args),
+        Command::Init(args) => init::run(&args),
+        Command::Synth(args) => synth::run(&args),
+        Command::Learn(args) => learn::run(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
+        Command::AddPhysics(args) => add_physics::run(&args),
+        Command::Run(args) => run::run(&args),
+    }
+}
+
+/// Write through a temporary file in the same directory, then rename: a failure leaves no
+/// partial file.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<()> {
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(parent)
+        .with_context(|| format!("{}: cannot create a temporary file", parent.display()))?;
+    write(tmp.as_file_mut()).with_context(|| format!("writing {}", path.display()))?;
+    crate::fmu_archive::persist_readable(tmp, path)
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(())
+}
+
+pub(crate) fn progress_bar() -> impl FnMut(u64, u64) {
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut progress = Progress::new(move |done, total| {
+        let b = bar.get_or_insert_with(|| indicatif::ProgressBar::new(total));
+        b.set_position(done);
+        if done == total {
+            b.finish_and_clear();
+        }
+    });
+    move |done, total| progress.tick(done, total)
+}
+
+/// NMSE per floor of `twin` on `data` after the transient.
+pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3]> {
+    let prediction = run_twin(twin, data, |_, _| {})?;
+    let first = data
+        .time
+        .iter()
+        .position(|&t| t - data.time[0] >= transient)
+        .unwrap_or(data.len());
+    Ok([0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &prediction.acc[f][first..])))
+}
