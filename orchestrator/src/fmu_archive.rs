@@ -157,21 +157,9 @@ pub fn pack_fmu(contents: &FmuContents, out: &Path) -> Result<String, PackError>
         }
         zip.finish().map_err(zip_err)?;
     }
-    persist_readable(tmp, out).map_err(|source| PackError::Io {
+    crate::fsutil::persist_readable(tmp, out).map_err(|source| PackError::Io {
         path: out.to_owned(),
         source,
     })?;
     Ok(identifier)
-}
-
-/// Move a finished temporary file into place as an ordinary readable file (0644), not with the
-/// temporary file's private 0600.
-pub fn persist_readable(tmp: tempfile::NamedTempFile, path: &Path) -> std::io::Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))?;
-    }
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
 }

@@ -8,6 +8,7 @@ pub mod cosim;
 pub mod data;
 pub mod diagnose;
 pub mod fmu_archive;
+pub mod fsutil;
 pub mod import;
 pub mod learn;
 pub mod master;

@@ -354,7 +354,7 @@ impl Twin {
             }
             zip.finish().map_err(zip_err)?;
         }
-        crate::fmu_archive::persist_readable(tmp, path).map_err(io)?;
+        crate::fsutil::persist_readable(tmp, path).map_err(io)?;
         Ok(())
     }
 

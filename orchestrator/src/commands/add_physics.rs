@@ -1,13 +1,12 @@
 //! `twin add-physics`: switch an effect of the shear FMU's library on, estimate its parameters
 //! and write the new twin.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
 use super::diagnose::options;
-use super::write_atomically;
+use super::write_json;
 use crate::data::Measurement;
 use crate::diagnose::{add_physics, effect_from_report, Candidate};
 use crate::twin::Twin;
@@ -58,11 +57,7 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
     let (new_twin, report) = add_physics(&twin, &data, &candidate, args.refine, &o)?;
     new_twin.write(&args.out)?;
     if let Some(path) = &args.report {
-        write_atomically(path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
+        write_json(path, &report)?;
     }
     let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
     println!("effect        {}", report.effect.name.label);

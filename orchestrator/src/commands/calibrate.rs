@@ -1,12 +1,11 @@
 //! `twin calibrate`: MAP calibration of the physics parameters and noise variances.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{nmse_on, write_atomically};
+use super::{nmse_on, write_json};
 use crate::compare::{compare, CompareOptions};
 use crate::data::Measurement;
 use crate::run::run_twin;
@@ -115,11 +114,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             "simulations": calibration.simulations,
             "seconds": calibration.seconds,
         });
-        write_atomically(path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
+        write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
         let prediction = run_twin(&new_twin, &data, |_, _| {})?;

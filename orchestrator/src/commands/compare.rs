@@ -1,13 +1,12 @@
 //! `twin compare`: run the twin on a record's force and compare its accelerations with the
 //! measured ones; a summary, and optionally a JSON report, the predictions and plots.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{progress_bar, write_atomically};
+use super::{progress_bar, write_atomically, write_json};
 use crate::compare::{compare, CompareOptions, Comparison};
 use crate::data::Measurement;
 use crate::run::{run_twin, Prediction};
@@ -119,11 +118,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             "samples": data.len(),
             "sample_interval": data.dt,
         });
-        write_atomically(path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
+        write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
         let title = format!("{} on {}", twin.describe(), data.path.display());
@@ -144,7 +139,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 }
 
 /// `time,acc1,acc2,acc3`, then the corrector's `latent_var1..3,sd1..3` when the twin has one.
-fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> Result<()> {
+fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(f);
     let mut header: Vec<String> = ["time", "acc1", "acc2", "acc3"]
         .iter()

@@ -1,12 +1,11 @@
 //! `twin diagnose`: diagnose a failing twin (none, recalibrate, add physics or update the
 //! data-based model), with the evidence; a summary, a JSON report and a plot.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::write_atomically;
+use super::{write_json, write_text_atomically};
 use crate::data::Measurement;
 use crate::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis};
 use crate::twin::Twin;
@@ -84,13 +83,9 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         Some(path) => Some((path, crate::diagnose::plot::draw_diagnosis(&d)?)),
         None => None,
     };
-    write_atomically(&args.report, |f| {
-        serde_json::to_writer_pretty(&mut *f, &d)?;
-        f.write_all(b"\n")?;
-        Ok(())
-    })?;
+    write_json(&args.report, &d)?;
     if let Some((path, svg)) = plot {
-        write_atomically(path, |f| Ok(f.write_all(svg.as_bytes())?))?;
+        write_text_atomically(path, &svg)?;
     }
     print!("{}", summary(&d));
     Ok(())

@@ -1,13 +1,12 @@
 //! `twin learn`: stream-based active learning of the GP corrector over records (the paper's
 //! Algorithm 1), its table, plots and report.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use fmu_gp_corrector::TargetForm;
 
-use super::write_atomically;
+use super::{write_json, write_text_atomically};
 use crate::data::Measurement;
 use crate::learn::{
     plot_mode, prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN,
@@ -213,7 +212,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         for r in &results {
             let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
             let svg = plot_mode(r).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            write_atomically(&path, |f| Ok(f.write_all(svg.as_bytes())?))?;
+            write_text_atomically(&path, &svg)?;
             println!("wrote {}", path.display());
         }
     }
@@ -235,10 +234,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             "seconds": seconds,
             "modes": results,
         });
-        write_atomically(&path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            Ok(())
-        })?;
+        write_json(&path, &report)?;
         println!("wrote {}", path.display());
     }
     Ok(())

@@ -2,9 +2,10 @@
 //! One file per subcommand; everything that parses arguments, prints or writes a report lives
 //! here, and the library underneath returns typed errors.
 
+use std::io::Write;
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 use crate::data::Measurement;
@@ -73,21 +74,14 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// Write through a temporary file in the same directory, then rename: a failure leaves no
-/// partial file.
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
-) -> Result<()> {
-    let parent = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(parent)
-        .with_context(|| format!("{}: cannot create a temporary file", parent.display()))?;
-    write(tmp.as_file_mut()).with_context(|| format!("writing {}", path.display()))?;
-    crate::fmu_archive::persist_readable(tmp, path)
-        .with_context(|| format!("{}: cannot write", path.display()))?;
+pub(crate) use crate::fsutil::{write_atomically, write_text_atomically};
+
+/// `value` as pretty JSON and a newline, written atomically.
+pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    write_atomically(path, |f| {
+        serde_json::to_writer_pretty(&mut *f, value)?;
+        f.write_all(b"\n")
+    })?;
     Ok(())
 }
 

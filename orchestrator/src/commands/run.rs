@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use crate::cosim::run::RunOptions;
 
@@ -53,9 +53,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         output_all: args.output_all,
     };
     let result = crate::cosim::run::run(&args.model, &options, super::progress_bar())?;
-    super::write_atomically(&args.output, |f| {
-        result.write_csv(f).map_err(anyhow::Error::from)
-    })?;
+    super::write_atomically(&args.output, |f| Ok(result.write_csv(f)?))?;
     println!(
         "{}: {} points from {} to {} s (step {} s), {} columns → {}",
         args.model.display(),
@@ -77,11 +75,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .unwrap_or_default();
         let svg = crate::report::run_plot::plot_run(&result, &title)
             .map_err(|m| anyhow::anyhow!("cannot draw {}: {m}", plot.display()))?;
-        super::write_atomically(plot, |f| {
-            use std::io::Write;
-            f.write_all(svg.as_bytes())
-                .with_context(|| format!("writing {}", plot.display()))
-        })?;
+        super::write_text_atomically(plot, &svg)?;
         println!("wrote {}", plot.display());
     }
     Ok(())

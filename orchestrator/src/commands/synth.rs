@@ -1,12 +1,11 @@
 //! `twin synth`: make a synthetic measurement record and its truth JSON (see
 //! [`crate::synth`] for the scenario and how a record is made).
 
-use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 
-use super::write_atomically;
+use super::{write_json, write_text_atomically};
 use crate::synth::{
     csv_text, parse_change_flag, parse_effect_flag, synth_record, BetweenSamples, ForceWindow,
     NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
@@ -206,17 +205,9 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     let elapsed = started.elapsed();
     // Everything is computed before anything is written.
     let text = csv_text(&record.measurement);
-    write_atomically(&args.out, |f| {
-        f.write_all(text.as_bytes())?;
-        Ok(())
-    })?;
+    write_text_atomically(&args.out, &text)?;
     if let Some(path) = &args.truth {
-        let json = serde_json::to_string_pretty(&truth).context("serialising the truth")?;
-        write_atomically(path, |f| {
-            f.write_all(json.as_bytes())?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
+        write_json(path, &truth)?;
     }
     println!(
         "wrote {} ({} samples at {} Hz, seed {}, force RMS {:.4} N, made in {:.0} ms)",

@@ -1,12 +1,11 @@
 //! `twin train`: train the GP bias corrector on a record and put it behind the physics FMU.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{nmse_on, write_atomically};
+use super::{nmse_on, write_json};
 use crate::data::Measurement;
 use crate::twin::Twin;
 
@@ -128,11 +127,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             "lag_selection": selection,
             "nmse": nmse,
         });
-        write_atomically(path, |f| {
-            serde_json::to_writer_pretty(&mut *f, &report)?;
-            f.write_all(b"\n")?;
-            Ok(())
-        })?;
+        write_json(path, &report)?;
     }
     println!(
         "trained the corrector on {}: {} points, {} inputs ({} lags), target {}, {:.2} s",

@@ -18,10 +18,6 @@ pub enum ReportError {
     BadInput { path: PathBuf, message: String },
     #[error("cannot draw {}: {message}", path.display())]
     Draw { path: PathBuf, message: String },
-    #[error("cannot write {}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Write(#[from] crate::fsutil::WriteError),
 }

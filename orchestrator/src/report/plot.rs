@@ -3,7 +3,6 @@
 
 use std::f64::consts::PI;
 use std::fmt::Display;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
@@ -14,6 +13,7 @@ use rustfft::FftPlanner;
 
 use super::ReportError;
 use crate::compare::Comparison;
+use crate::fsutil::write_text_atomically;
 
 /// Samples per Welch segment of the frequency view: at 51.2 Hz, 5 s and 0.2 Hz resolution.
 pub const FRF_SEGMENT: usize = 256;
@@ -164,7 +164,7 @@ pub fn plot_comparison(
         files.push((frf_path, svg));
     }
     for (path, svg) in &files {
-        write_atomically(path, svg)?;
+        write_text_atomically(path, svg)?;
     }
     Ok(())
 }
@@ -207,7 +207,7 @@ pub fn plot_latent_variance(
             path: out.clone(),
             message,
         })?;
-    write_atomically(&out, &svg)?;
+    write_text_atomically(&out, &svg)?;
     Ok(out)
 }
 
@@ -370,30 +370,6 @@ fn floor_responses(c: &Comparison, force: &[f64]) -> Result<[[FrequencyResponse;
         ])
     });
     Ok([first?, second?, third?])
-}
-
-fn write_atomically(path: &Path, contents: &str) -> Result<(), ReportError> {
-    let io = |source| ReportError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => dir,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".plot-").suffix(".tmp");
-    // A report is for reading: not the owner-only mode temporary files are created with.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    let mut file = builder.tempfile_in(dir).map_err(io)?;
-    file.write_all(contents.as_bytes()).map_err(io)?;
-    file.flush().map_err(io)?;
-    file.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
 }
 
 fn text(e: impl Display) -> String {
