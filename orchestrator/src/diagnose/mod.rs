@@ -64,7 +64,7 @@ use crate::calibrate::{
 };
 use crate::compare::{compare, nmse, CompareOptions, FailingWindow};
 use crate::data::Measurement;
-use crate::import::Fmu;
+use crate::import::{Fmu, ModelDescription};
 use crate::run::run_twin;
 use crate::train::physics_only;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -363,20 +363,36 @@ fn run_physics(
     })
 }
 
-/// A real parameter of the physics component: the twin's value, else the FMU's start value.
-fn physics_real(twin: &Twin, name: &str) -> Result<f64> {
-    let component = twin
-        .component(PHYSICS)
-        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
-    if let Some(ParameterValue::Real(x)) = component.parameters.get(name) {
-        return Ok(*x);
+/// The physics component's real parameters: the twin's value, else the FMU's start value, read
+/// from its modelDescription, which is opened once.
+struct PhysicsReals {
+    given: BTreeMap<String, ParameterValue>,
+    model_description: ModelDescription,
+    fmu_name: String,
+}
+
+impl PhysicsReals {
+    fn of(twin: &Twin) -> Result<Self> {
+        let component = twin
+            .component(PHYSICS)
+            .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        Ok(PhysicsReals {
+            given: component.parameters.clone(),
+            model_description: Fmu::open(&component.fmu_path)?.model_description,
+            fmu_name: component.fmu_name.clone(),
+        })
     }
-    let fmu = Fmu::open(&component.fmu_path)?;
-    fmu.model_description
-        .variable(name)
-        .and_then(|v| v.start.as_deref())
-        .and_then(|s| s.parse().ok())
-        .ok_or_else(|| anyhow!("{}: no value for '{name}'", component.fmu_name))
+
+    fn get(&self, name: &str) -> Result<f64> {
+        if let Some(ParameterValue::Real(x)) = self.given.get(name) {
+            return Ok(*x);
+        }
+        self.model_description
+            .variable(name)
+            .and_then(|v| v.start.as_deref())
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| anyhow!("{}: no value for '{name}'", self.fmu_name))
+    }
 }
 
 fn rms(x: &[f64]) -> f64 {
@@ -605,12 +621,13 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     });
 
     // Scales of the candidates' priors.
+    let reals = PhysicsReals::of(&physics)?;
     let mass = [0, 1, 2]
-        .map(|f| physics_real(&physics, &format!("m{}", f + 1)))
+        .map(|f| reals.get(&format!("m{}", f + 1)))
         .into_iter()
         .collect::<Result<Vec<f64>>>()?;
     let stiffness = [0, 1, 2]
-        .map(|f| physics_real(&physics, &format!("k{}", f + 1)))
+        .map(|f| reals.get(&format!("k{}", f + 1)))
         .into_iter()
         .collect::<Result<Vec<f64>>>()?;
     let scales = Scales {
@@ -743,7 +760,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .parameters
         .iter()
         .map(|p| {
-            let before = physics_real(&physics, &p.name).unwrap_or(f64::NAN);
+            let before = reals.get(&p.name).unwrap_or(f64::NAN);
             MovedParameter {
                 name: p.name.clone(),
                 before,
@@ -1046,8 +1063,9 @@ pub fn add_physics(
     }
     let after: Vec<usize> = (first..n).collect();
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
+    let reals = PhysicsReals::of(&physics)?;
     let stiffness = [0, 1, 2]
-        .map(|f| physics_real(&physics, &format!("k{}", f + 1)))
+        .map(|f| reals.get(&format!("k{}", f + 1)))
         .into_iter()
         .collect::<Result<Vec<f64>>>()?;
     let scales = Scales {
