@@ -5,8 +5,10 @@ use std::path::Path;
 use anyhow::{anyhow, Context, Result};
 use fmu_shear::effects::{Contact, Cubic, Friction, Kind, Law, Side};
 use fmu_shear::ShearParameters;
-use serde::Serialize;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Map, Value};
+use serde_path_to_error::Segment;
 
 use super::force::in_band;
 use super::{
@@ -51,7 +53,8 @@ pub struct ForceSpec {
 }
 
 /// The force between the sample times. The written samples are the same either way.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum BetweenSamples {
     /// The band-limited signal itself (a physical force: smooth between samples).
     #[default]
@@ -451,141 +454,70 @@ impl Scenario {
             origin,
             path: String::new(),
         };
-        let obj = at.object(value)?;
-        at.known_keys(
-            obj,
-            &[
-                "seed",
-                "duration",
-                "sample_rate",
-                "oversample",
-                "parameters",
-                "force",
-                "noise",
-                "effects",
-                "changes",
-            ],
-        )?;
+        let file: ScenarioFile = read(&at, value)?;
         let mut s = Scenario::default();
-        if let Some(v) = obj.get("seed") {
-            s.seed = at.field("seed").u64(v)?;
+        s.seed = file.seed.unwrap_or(s.seed);
+        s.duration = file.duration.unwrap_or(s.duration);
+        s.sample_rate = file.sample_rate.unwrap_or(s.sample_rate);
+        s.oversample = file.oversample.unwrap_or(s.oversample);
+        if let Some(p) = file.parameters {
+            s.mass = p.m.unwrap_or(s.mass);
+            s.damping = p.c.unwrap_or(s.damping);
+            s.stiffness = p.k.unwrap_or(s.stiffness);
         }
-        if let Some(v) = obj.get("duration") {
-            s.duration = at.field("duration").number(v)?;
+        if let Some(f) = file.force {
+            s.force.rms = f.rms.unwrap_or(s.force.rms);
+            s.force.band_hz = f.band_hz.or(s.force.band_hz);
+            s.force.low_hz = f.low_hz.unwrap_or(s.force.low_hz);
+            s.force.between_samples = f.between_samples.unwrap_or(s.force.between_samples);
+            s.force.windows = f
+                .windows
+                .unwrap_or_default()
+                .into_iter()
+                .map(|w| ForceWindow {
+                    start: w.start,
+                    end: w.end,
+                    gain: w.gain,
+                    ramp: w.ramp.unwrap_or(DEFAULT_WINDOW_RAMP),
+                })
+                .collect();
         }
-        if let Some(v) = obj.get("sample_rate") {
-            s.sample_rate = at.field("sample_rate").number(v)?;
-        }
-        if let Some(v) = obj.get("oversample") {
-            let o = at.field("oversample").u64(v)?;
-            s.oversample = u32::try_from(o)
-                .map_err(|_| at.field("oversample").error(format!("{o} is too large")))?;
-        }
-        if let Some(v) = obj.get("parameters") {
-            let at = at.field("parameters");
-            let p = at.object(v)?;
-            at.known_keys(p, &["m", "c", "k"])?;
-            if let Some(v) = p.get("m") {
-                s.mass = at.field("m").three(v, false)?;
-            }
-            if let Some(v) = p.get("c") {
-                s.damping = at.field("c").three(v, false)?;
-            }
-            if let Some(v) = p.get("k") {
-                s.stiffness = at.field("k").three(v, false)?;
-            }
-        }
-        if let Some(v) = obj.get("force") {
-            let at = at.field("force");
-            let f = at.object(v)?;
-            at.known_keys(
-                f,
-                &["rms", "band_hz", "low_hz", "between_samples", "windows"],
-            )?;
-            if let Some(v) = f.get("rms") {
-                s.force.rms = at.field("rms").number(v)?;
-            }
-            if let Some(v) = f.get("band_hz") {
-                s.force.band_hz = Some(at.field("band_hz").number(v)?);
-            }
-            if let Some(v) = f.get("low_hz") {
-                s.force.low_hz = at.field("low_hz").number(v)?;
-            }
-            if let Some(v) = f.get("between_samples") {
-                let at = at.field("between_samples");
-                let name = at.string(v)?;
-                s.force.between_samples = BetweenSamples::parse(name).ok_or_else(|| {
-                    at.error(format!("{name:?} is not \"band-limited\" or \"linear\""))
-                })?;
-            }
-            if let Some(v) = f.get("windows") {
-                let at = at.field("windows");
-                for (i, w) in at.array(v)?.iter().enumerate() {
-                    let at = at.index(i);
-                    let o = at.object(w)?;
-                    at.known_keys(o, &["start", "end", "gain", "ramp"])?;
-                    let ramp = match o.get("ramp") {
-                        Some(v) => at.field("ramp").number(v)?,
-                        None => DEFAULT_WINDOW_RAMP,
-                    };
-                    s.force.windows.push(ForceWindow {
-                        start: at.field("start").number(at.required(o, "start")?)?,
-                        end: at.field("end").number(at.required(o, "end")?)?,
-                        gain: at.field("gain").number(at.required(o, "gain")?)?,
-                        ramp,
-                    });
-                }
-            }
-        }
-        if let Some(v) = obj.get("noise") {
-            let at = at.field("noise");
-            let n = at.object(v)?;
-            at.known_keys(n, &["fraction", "sd", "force_fraction"])?;
-            match (n.get("fraction"), n.get("sd")) {
+        if let Some(n) = file.noise {
+            match (n.fraction, n.sd) {
                 (Some(_), Some(_)) => {
-                    return Err(at.error("give either `fraction` or `sd`, not both".into()))
+                    return Err(at
+                        .field("noise")
+                        .error("give either `fraction` or `sd`, not both".into()))
                 }
-                (Some(v), None) => {
-                    s.noise.level = NoiseLevel::Fraction(at.field("fraction").three(v, true)?)
-                }
-                (None, Some(v)) => s.noise.level = NoiseLevel::Sd(at.field("sd").three(v, true)?),
+                (Some(x), None) => s.noise.level = NoiseLevel::Fraction(x.three()),
+                (None, Some(x)) => s.noise.level = NoiseLevel::Sd(x.three()),
                 (None, None) => {}
             }
-            if let Some(v) = n.get("force_fraction") {
-                s.noise.force_fraction = at.field("force_fraction").number(v)?;
-            }
+            s.noise.force_fraction = n.force_fraction.unwrap_or(s.noise.force_fraction);
         }
-        if let Some(v) = obj.get("effects") {
-            let at = at.field("effects");
-            for (i, e) in at.array(v)?.iter().enumerate() {
-                s.effects.push(parse_effect(&at.index(i), e)?);
-            }
+        let effects = at.field("effects");
+        for (i, e) in file.effects.unwrap_or_default().iter().enumerate() {
+            s.effects.push(parse_effect(&effects.index(i), e)?);
         }
-        if let Some(v) = obj.get("changes") {
-            let at = at.field("changes");
-            for (i, c) in at.array(v)?.iter().enumerate() {
-                let at = at.index(i);
-                let o = at.object(c)?;
-                at.known_keys(o, &["at", "parameter", "factor", "value"])?;
-                let time = at.field("at").number(at.required(o, "at")?)?;
-                let name_at = at.field("parameter");
-                let name = name_at.string(at.required(o, "parameter")?)?;
-                let parameter = ParamName::parse(name).ok_or_else(|| {
-                    name_at.error(format!(
-                        "unknown parameter {name:?}; expected m1..m3, c1..c3 or k1..k3"
-                    ))
-                })?;
-                let how = match (o.get("factor"), o.get("value")) {
-                    (Some(v), None) => ChangeHow::Factor(at.field("factor").number(v)?),
-                    (None, Some(v)) => ChangeHow::Value(at.field("value").number(v)?),
-                    _ => return Err(at.error("give exactly one of `factor` and `value`".into())),
-                };
-                s.changes.push(Change {
-                    at: time,
-                    parameter,
-                    how,
-                });
-            }
+        let changes = at.field("changes");
+        for (i, c) in file.changes.unwrap_or_default().into_iter().enumerate() {
+            let at = changes.index(i);
+            let parameter = ParamName::parse(&c.parameter).ok_or_else(|| {
+                at.field("parameter").error(format!(
+                    "unknown parameter {:?}; expected m1..m3, c1..c3 or k1..k3",
+                    c.parameter
+                ))
+            })?;
+            let how = match (c.factor, c.value) {
+                (Some(x), None) => ChangeHow::Factor(x),
+                (None, Some(x)) => ChangeHow::Value(x),
+                _ => return Err(at.error("give exactly one of `factor` and `value`".into())),
+            };
+            s.changes.push(Change {
+                at: c.at,
+                parameter,
+                how,
+            });
         }
         Ok(s)
     }
@@ -840,35 +772,12 @@ impl Scenario {
     }
 }
 
+/// One effect of the scenario's `effects` list (also what `--effect` becomes). The library's
+/// kinds take their parameter names, defaults and side from its description.
 pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
-    let o = at.object(value)?;
-    let kind_at = at.field("kind");
-    let kind = kind_at.string(at.required(o, "kind")?)?;
-    let location: Vec<u64> = {
-        let loc = at.field("location");
-        let v = at.required(o, "location")?;
-        match v {
-            Value::Array(items) => items
-                .iter()
-                .enumerate()
-                .map(|(i, x)| loc.index(i).u64(x))
-                .collect::<Result<_>>()?,
-            Value::Number(_) => vec![loc.u64(v)?],
-            other => {
-                return Err(loc.error(format!(
-                    "expected a list of floor numbers, found {}",
-                    shown(other)
-                )))
-            }
-        }
-    };
+    let head: EffectHead = read(at, value)?;
     let loc = at.field("location");
-    let number_or = |key: &str, default: f64| -> Result<f64> {
-        match o.get(key) {
-            Some(v) => at.field(key).number(v),
-            None => Ok(default),
-        }
-    };
+    let location = head.location.floors();
     let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
     let storey_or_adjacent = |location: &[u64]| {
         match location[..] {
@@ -879,98 +788,239 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
         ))),
     }
     };
-    // The library's kinds: their parameters, defaults and side come from its description.
-    if let Some(library_kind) = Kind::parse(kind) {
-        let mut known = vec!["kind", "location"];
-        known.extend(library_kind.real_params().iter().map(|p| p.suffix));
-        if library_kind.has_side() {
-            known.push("side");
-        }
-        at.known_keys(o, &known)?;
-        // 0-based, as the library counts.
-        let location = match library_kind {
-            Kind::Contact => match location[..] {
-                [a, b] if b == a + 1 && b <= 3 => small(a),
-                _ => return Err(loc.error(format!(
-                    "{location:?} is not a storey; expected two adjacent floors [lower, upper] with 0 = the ground: [0, 1], [1, 2] or [2, 3]"
-                ))),
-            },
-            Kind::Cubic => storey_or_adjacent(&location)? - 1,
-            Kind::Friction => match location[..] {
-                [f] if (1..=3).contains(&f) => small(f) - 1,
-                _ => {
-                    return Err(loc.error(format!(
-                        "{location:?} is not a floor; expected [1], [2] or [3]"
-                    )))
-                }
-            },
-        };
-        let side = match o.get("side") {
-            None => Side::Both,
-            Some(Value::String(s)) => match s.as_str() {
-                "both" => Side::Both,
-                "positive" => Side::Positive,
-                "negative" => Side::Negative,
-                _ => {
-                    return Err(at.field("side").error(format!(
-                        "{s:?} is not \"both\", \"positive\" or \"negative\""
-                    )))
-                }
-            },
-            Some(v @ Value::Number(_)) => {
-                match v
-                    .as_i64()
-                    .and_then(|x| i32::try_from(x).ok())
-                    .and_then(Side::from_code)
-                {
-                    Some(side) => side,
-                    None => return Err(at.field("side").error(format!("{v} is not -1, 0 or 1"))),
-                }
-            }
-            Some(other) => {
-                return Err(at.field("side").error(format!(
-                    "expected \"both\", \"positive\" or \"negative\", found {}",
-                    shown(other)
+    if head.kind == "hysteresis" {
+        let h: HysteresisFile = read(at, value)?;
+        return Ok(EffectSpec::Hysteresis {
+            storey: storey_or_adjacent(&location)?,
+            stiffness: h.stiffness.unwrap_or(DEFAULT_HYSTERESIS_STIFFNESS),
+            yield_drift: h.yield_drift.unwrap_or(DEFAULT_HYSTERESIS_YIELD),
+            beta: h.beta.unwrap_or(DEFAULT_HYSTERESIS_BETA),
+            gamma: h.gamma.unwrap_or(DEFAULT_HYSTERESIS_GAMMA),
+            exponent: h.exponent.unwrap_or(DEFAULT_HYSTERESIS_EXPONENT),
+        });
+    }
+    let Some(kind) = Kind::parse(&head.kind) else {
+        return Err(at.field("kind").error(format!(
+            "unknown effect kind {:?}; expected \"contact\", \"cubic\", \"friction\" or \"hysteresis\"",
+            head.kind
+        )));
+    };
+    // The rest of the object: the kind's parameters (and contact's side), nothing else.
+    let fields: Map<String, Value> = read(at, value)?;
+    let mut known = vec!["kind", "location"];
+    known.extend(kind.real_params().iter().map(|p| p.suffix));
+    if kind.has_side() {
+        known.push("side");
+    }
+    if let Some(key) = fields.keys().find(|k| !known.contains(&k.as_str())) {
+        return Err(at.field(key).error(format!(
+            "unknown field; expected one of {}",
+            known.join(", ")
+        )));
+    }
+    // 0-based, as the library counts.
+    let location = match kind {
+        Kind::Contact => match location[..] {
+            [a, b] if b == a + 1 && b <= 3 => small(a),
+            _ => return Err(loc.error(format!(
+                "{location:?} is not a storey; expected two adjacent floors [lower, upper] with 0 = the ground: [0, 1], [1, 2] or [2, 3]"
+            ))),
+        },
+        Kind::Cubic => storey_or_adjacent(&location)? - 1,
+        Kind::Friction => match location[..] {
+            [f] if (1..=3).contains(&f) => small(f) - 1,
+            _ => {
+                return Err(loc.error(format!(
+                    "{location:?} is not a floor; expected [1], [2] or [3]"
                 )))
             }
-        };
-        let reals = library_kind
-            .real_params()
-            .iter()
-            .map(|p| number_or(p.suffix, p.start))
-            .collect::<Result<Vec<f64>>>()?;
-        let law = Law::new(library_kind, &reals, side)
-            .ok_or_else(|| at.error(format!("too few parameters for {kind}")))?;
-        return Ok(EffectSpec::from_library(location, law));
-    }
-    match kind {
-        "hysteresis" => {
-            at.known_keys(
-                o,
-                &[
-                    "kind",
-                    "location",
-                    "stiffness",
-                    "yield",
-                    "beta",
-                    "gamma",
-                    "exponent",
-                ],
-            )?;
-            let storey = storey_or_adjacent(&location)?;
-            Ok(EffectSpec::Hysteresis {
-                storey,
-                stiffness: number_or("stiffness", DEFAULT_HYSTERESIS_STIFFNESS)?,
-                yield_drift: number_or("yield", DEFAULT_HYSTERESIS_YIELD)?,
-                beta: number_or("beta", DEFAULT_HYSTERESIS_BETA)?,
-                gamma: number_or("gamma", DEFAULT_HYSTERESIS_GAMMA)?,
-                exponent: number_or("exponent", DEFAULT_HYSTERESIS_EXPONENT)?,
-            })
+        },
+    };
+    let side = match fields.get("side") {
+        None => Side::Both,
+        Some(v) => match read::<SideFile>(&at.field("side"), v)? {
+            SideFile::Name(side) => side,
+            SideFile::Code(code) => Side::from_code(code)
+                .ok_or_else(|| at.field("side").error(format!("{code} is not -1, 0 or 1")))?,
+        },
+    };
+    let reals = kind
+        .real_params()
+        .iter()
+        .map(|p| match fields.get(p.suffix) {
+            Some(v) => read::<f64>(&at.field(p.suffix), v),
+            None => Ok(p.start),
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    let law = Law::new(kind, &reals, side)
+        .ok_or_else(|| at.error(format!("too few parameters for {}", kind.name())))?;
+    Ok(EffectSpec::from_library(location, law))
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scenario file as written: every field optional, unknown fields refused
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct ScenarioFile {
+    seed: Option<u64>,
+    duration: Option<f64>,
+    sample_rate: Option<f64>,
+    oversample: Option<u32>,
+    parameters: Option<ParametersFile>,
+    force: Option<ForceFile>,
+    noise: Option<NoiseFile>,
+    /// Read one by one by [`parse_effect`], whose fields depend on the kind.
+    effects: Option<Vec<Value>>,
+    changes: Option<Vec<ChangeFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct ParametersFile {
+    m: Option<[f64; 3]>,
+    c: Option<[f64; 3]>,
+    k: Option<[f64; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct ForceFile {
+    rms: Option<f64>,
+    band_hz: Option<f64>,
+    low_hz: Option<f64>,
+    between_samples: Option<BetweenSamples>,
+    windows: Option<Vec<WindowFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct WindowFile {
+    start: f64,
+    end: f64,
+    gain: f64,
+    ramp: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct NoiseFile {
+    fraction: Option<OneOrThree>,
+    sd: Option<OneOrThree>,
+    force_fraction: Option<f64>,
+}
+
+/// A number for all three floors, or one per floor.
+#[derive(Deserialize)]
+#[serde(untagged, expecting = "expected a number or a list of 3 numbers (floors 1..3)")]
+enum OneOrThree {
+    One(f64),
+    Three([f64; 3]),
+}
+
+impl OneOrThree {
+    fn three(self) -> [f64; 3] {
+        match self {
+            OneOrThree::One(x) => [x; 3],
+            OneOrThree::Three(x) => x,
         }
-        other => Err(kind_at.error(format!(
-            "unknown effect kind {other:?}; expected \"contact\", \"cubic\", \"friction\" or \"hysteresis\""
-        ))),
     }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct ChangeFile {
+    at: f64,
+    parameter: String,
+    factor: Option<f64>,
+    value: Option<f64>,
+}
+
+/// What every effect has; the rest depends on the kind.
+#[derive(Deserialize)]
+#[serde(expecting = "an object")]
+struct EffectHead {
+    kind: String,
+    location: LocationFile,
+}
+
+/// Floor numbers, or a single number.
+#[derive(Deserialize)]
+#[serde(untagged, expecting = "expected a list of floor numbers")]
+enum LocationFile {
+    One(u64),
+    Many(Vec<u64>),
+}
+
+impl LocationFile {
+    fn floors(self) -> Vec<u64> {
+        match self {
+            LocationFile::One(x) => vec![x],
+            LocationFile::Many(x) => x,
+        }
+    }
+}
+
+/// A contact's side by name or by the FMU's integer.
+#[derive(Deserialize)]
+#[serde(
+    untagged,
+    expecting = "expected \"both\", \"positive\" or \"negative\" (or 0, 1, -1)"
+)]
+enum SideFile {
+    Name(Side),
+    Code(i32),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct HysteresisFile {
+    #[allow(dead_code)]
+    kind: String,
+    #[allow(dead_code)]
+    location: Value,
+    stiffness: Option<f64>,
+    #[serde(rename = "yield")]
+    yield_drift: Option<f64>,
+    beta: Option<f64>,
+    gamma: Option<f64>,
+    exponent: Option<f64>,
+}
+
+/// Deserialize `value` at `at`; a bad field's error names the file and the field's JSON path.
+fn read<T: DeserializeOwned>(at: &Loc, value: &Value) -> Result<T> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let mut loc = at.clone();
+        for segment in e.path().iter() {
+            loc = match segment {
+                Segment::Seq { index } => loc.index(*index),
+                Segment::Map { key } => loc.field(key),
+                Segment::Enum { .. } | Segment::Unknown => loc,
+            };
+        }
+        let message = e.into_inner().to_string();
+        // serde names a missing or unknown field in its message: put it in the path instead.
+        if let Some(name) = message
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.strip_suffix('`'))
+        {
+            return loc.field(name).error("is missing".into());
+        }
+        if let Some((name, expected)) = message
+            .strip_prefix("unknown field `")
+            .and_then(|rest| rest.split_once('`'))
+        {
+            if !loc.path.ends_with(name) {
+                loc = loc.field(name);
+            }
+            return loc.error(format!(
+                "unknown field; {}",
+                expected.trim_start_matches(", ")
+            ));
+        }
+        loc.error(message)
+    })
 }
 
 /// Where a value sits: the file and the field path, for error messages.
@@ -978,27 +1028,6 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
 pub(super) struct Loc<'a> {
     pub(super) origin: &'a str,
     pub(super) path: String,
-}
-
-fn shown(v: &Value) -> String {
-    let kind = match v {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "a list",
-        Value::Object(_) => "an object",
-    };
-    let mut text = v.to_string();
-    if text.len() > 40 {
-        let mut cut = 37;
-        while !text.is_char_boundary(cut) {
-            cut -= 1;
-        }
-        text.truncate(cut);
-        text.push_str("...");
-    }
-    format!("{kind} ({text})")
 }
 
 impl<'a> Loc<'a> {
@@ -1025,66 +1054,5 @@ impl<'a> Loc<'a> {
         } else {
             anyhow!("{}: field `{}`: {message}", self.origin, self.path)
         }
-    }
-    fn object<'v>(&self, v: &'v Value) -> Result<&'v Map<String, Value>> {
-        v.as_object()
-            .ok_or_else(|| self.error(format!("expected an object, found {}", shown(v))))
-    }
-    fn array<'v>(&self, v: &'v Value) -> Result<&'v Vec<Value>> {
-        v.as_array()
-            .ok_or_else(|| self.error(format!("expected a list, found {}", shown(v))))
-    }
-    fn string<'v>(&self, v: &'v Value) -> Result<&'v str> {
-        v.as_str()
-            .ok_or_else(|| self.error(format!("expected a string, found {}", shown(v))))
-    }
-    fn number(&self, v: &Value) -> Result<f64> {
-        match v.as_f64() {
-            Some(x) if x.is_finite() => Ok(x),
-            _ => Err(self.error(format!("expected a number, found {}", shown(v)))),
-        }
-    }
-    fn u64(&self, v: &Value) -> Result<u64> {
-        if let Some(x) = v.as_u64() {
-            return Ok(x);
-        }
-        match v.as_f64() {
-            Some(x) if x >= 0.0 && x.fract() == 0.0 && x < 2f64.powi(53) => Ok(x as u64),
-            _ => Err(self.error(format!(
-                "expected a non-negative whole number, found {}",
-                shown(v)
-            ))),
-        }
-    }
-    /// Three numbers; with `scalar`, a single number stands for all three.
-    fn three(&self, v: &Value, scalar: bool) -> Result<[f64; 3]> {
-        match v {
-            Value::Number(_) if scalar => Ok([self.number(v)?; 3]),
-            Value::Array(items) if items.len() == 3 => Ok([
-                self.index(0).number(&items[0])?,
-                self.index(1).number(&items[1])?,
-                self.index(2).number(&items[2])?,
-            ]),
-            _ => Err(self.error(format!(
-                "expected {}a list of 3 numbers (floors/storeys 1..3), found {}",
-                if scalar { "a number or " } else { "" },
-                shown(v)
-            ))),
-        }
-    }
-    fn required<'v>(&self, o: &'v Map<String, Value>, key: &str) -> Result<&'v Value> {
-        o.get(key)
-            .ok_or_else(|| self.field(key).error("is missing".into()))
-    }
-    fn known_keys(&self, o: &Map<String, Value>, known: &[&str]) -> Result<()> {
-        for key in o.keys() {
-            if !known.contains(&key.as_str()) {
-                return Err(self.field(key).error(format!(
-                    "unknown field; expected one of {}",
-                    known.join(", ")
-                )));
-            }
-        }
-        Ok(())
     }
 }
