@@ -39,7 +39,7 @@ pub struct AddPhysicsArgs {
     /// JSON report.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     #[arg(long)]
     pub threads: Option<usize>,

@@ -29,7 +29,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub priors: Option<PathBuf>,
     /// Seconds at the start of the record left out of the likelihood.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Optimiser starts (the prior mean plus draws from the widened prior).
     #[arg(long, default_value_t = 12)]
@@ -53,12 +53,6 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
             args.out.display()
-        );
-    }
-    if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!(
-            "--transient must be a non-negative number of seconds, was {}",
-            args.transient
         );
     }
     if let Some(plot) = &args.plot {

@@ -40,7 +40,7 @@ pub struct CompareArgs {
     #[arg(long)]
     pub latent_threshold: Option<f64>,
     /// Seconds at the start left out of the error measures.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
 }
 
@@ -55,12 +55,6 @@ fn variance(x: &[f64]) -> f64 {
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {
-    if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!(
-            "--transient must be a non-negative number of seconds, was {}",
-            args.transient
-        );
-    }
     if let Some(plot) = &args.plot {
         if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
             bail!("{}: only .svg plots are supported", plot.display());

@@ -29,7 +29,7 @@ pub struct DiagnoseArgs {
     #[arg(long, num_args = 1..)]
     pub effects: Vec<String>,
     /// Seconds at the start left out of every error measure and fit.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Length (s) of the alternating fitted / held-out blocks.
     #[arg(long, default_value_t = 1.0)]
@@ -42,15 +42,7 @@ pub struct DiagnoseArgs {
     pub always_fit: bool,
 }
 
-fn check_transient(transient: f64) -> Result<()> {
-    if !(transient >= 0.0 && transient.is_finite()) {
-        bail!("--transient must be a non-negative number of seconds, was {transient}");
-    }
-    Ok(())
-}
-
 pub(super) fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
-    check_transient(transient)?;
     let mut o = DiagnoseOptions {
         transient,
         ..DiagnoseOptions::default()

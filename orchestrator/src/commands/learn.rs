@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use fmu_gp_corrector::TargetForm;
 
 use super::{write_json, write_text_atomically};
 use crate::data::Measurement;
@@ -13,6 +12,20 @@ use crate::learn::{
     N_INITIAL, REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
 };
 use crate::twin::Twin;
+
+/// `--mode`: the query decision (the adaptive mode's forgetting factor is `--forgetting`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ModeArg {
+    Uniform,
+    Fixed,
+    Adaptive,
+}
+
+/// `--modes all`, the only value.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum AllModes {
+    All,
+}
 
 #[derive(clap::Args)]
 pub struct LearnArgs {
@@ -24,14 +37,14 @@ pub struct LearnArgs {
     #[arg(long, num_args = 1.., required = true)]
     pub data: Vec<PathBuf>,
     /// Query decision: uniform (every 25th point), fixed threshold, adaptive threshold.
-    #[arg(long, default_value = "adaptive", value_parser = ["uniform", "fixed", "adaptive"])]
-    pub mode: String,
+    #[arg(long, value_enum, default_value_t = ModeArg::Adaptive)]
+    pub mode: ModeArg,
     /// Forgetting factor f_f of the adaptive mode, in (0, 1]; 1 = plain adaptive.
     #[arg(long, default_value_t = 1.0)]
     pub forgetting: f64,
     /// `all`: uniform, fixed, adaptive f_f = 1, 0.999, 0.99, 0.9 (overrides --mode).
-    #[arg(long, value_parser = ["all"])]
-    pub modes: Option<String>,
+    #[arg(long, value_enum)]
+    pub modes: Option<AllModes>,
     /// Directory for the plots (one SVG per mode) and the JSON report when --report is absent.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
@@ -51,10 +64,10 @@ pub struct LearnArgs {
     pub threshold: Option<f64>,
     #[arg(long, default_value_t = fmu_gp_corrector::DEFAULT_LAGS)]
     pub lags: usize,
-    #[arg(long, default_value = "discrepancy", value_parser = ["discrepancy", "measured"])]
-    pub target: String,
+    #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
+    pub target: super::Target,
     /// Seconds at the start of each record neither streamed nor scored.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// N_initial: points of the first record in the initial training set.
     #[arg(long, default_value_t = N_INITIAL)]
@@ -79,12 +92,6 @@ pub struct LearnArgs {
 }
 
 pub fn run(args: &LearnArgs) -> Result<()> {
-    if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!(
-            "--transient must be a non-negative number of seconds, was {}",
-            args.transient
-        );
-    }
     if !(args.forgetting > 0.0 && args.forgetting <= 1.0) {
         bail!("--forgetting must be in (0, 1], was {}", args.forgetting);
     }
@@ -110,14 +117,9 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             );
         }
     }
-    let target = if args.target == "measured" {
-        TargetForm::Measured
-    } else {
-        TargetForm::Discrepancy
-    };
     let options = LearnOptions {
         lags: args.lags,
-        target,
+        target: args.target.into(),
         transient: args.transient,
         initial: args.initial,
         threshold: args.threshold,
@@ -131,10 +133,10 @@ pub fn run(args: &LearnArgs) -> Result<()> {
     let modes = if args.modes.is_some() {
         Mode::all()
     } else {
-        match args.mode.as_str() {
-            "uniform" => vec![Mode::Uniform],
-            "fixed" => vec![Mode::Fixed],
-            _ => vec![Mode::Adaptive(args.forgetting)],
+        match args.mode {
+            ModeArg::Uniform => vec![Mode::Uniform],
+            ModeArg::Fixed => vec![Mode::Fixed],
+            ModeArg::Adaptive => vec![Mode::Adaptive(args.forgetting)],
         }
     };
     let records = args

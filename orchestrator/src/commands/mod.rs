@@ -74,6 +74,30 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// `--transient`: seconds at the start of a record left out; checked here once for every command.
+pub(crate) fn transient_seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(t) if t >= 0.0 && t.is_finite() => Ok(t),
+        _ => Err("must be a non-negative number of seconds".into()),
+    }
+}
+
+/// `--target`: what the GP corrector models (`twin train`, `twin learn`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Target {
+    Discrepancy,
+    Measured,
+}
+
+impl From<Target> for fmu_gp_corrector::TargetForm {
+    fn from(target: Target) -> Self {
+        match target {
+            Target::Discrepancy => fmu_gp_corrector::TargetForm::Discrepancy,
+            Target::Measured => fmu_gp_corrector::TargetForm::Measured,
+        }
+    }
+}
+
 pub(crate) use crate::fsutil::{write_atomically, write_text_atomically};
 
 /// `value` as pretty JSON and a newline, written atomically.

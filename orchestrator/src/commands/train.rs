@@ -25,10 +25,10 @@ pub struct TrainArgs {
     pub lags: usize,
     /// What the GP models: the discrepancy measured − physics (default), or the measured
     /// acceleration itself (the reference paper's zero-mean form).
-    #[arg(long, default_value = "discrepancy", value_parser = ["discrepancy", "measured"])]
-    pub target: String,
+    #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
+    pub target: super::Target,
     /// Seconds at the start of the record not used for training.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT)]
+    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Train on every n-th sample after the transient (a GP fit costs O(N³)).
     #[arg(long, default_value_t = 1)]
@@ -48,32 +48,20 @@ pub struct TrainArgs {
 
 pub fn run(args: &TrainArgs) -> Result<()> {
     use crate::train::{train, TrainOptions};
-    use fmu_gp_corrector::TargetForm;
     if args.twin.as_deref() == Some(args.out.as_path()) {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
             args.out.display()
         );
     }
-    if !(args.transient >= 0.0 && args.transient.is_finite()) {
-        bail!(
-            "--transient must be a non-negative number of seconds, was {}",
-            args.transient
-        );
-    }
     let data = Measurement::read(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
-    let target = if args.target == "measured" {
-        TargetForm::Measured
-    } else {
-        TargetForm::Discrepancy
-    };
     if args.stride == 0 {
         bail!("--stride must be at least 1");
     }
     let mut options = TrainOptions {
         lags: args.lags,
-        target,
+        target: args.target.into(),
         transient: args.transient,
         stride: args.stride,
     };

@@ -132,8 +132,8 @@ mod scenario;
 mod structure;
 mod truth;
 
-pub use flags::{parse_change_flag, parse_effect_flag};
 pub use csv::{csv_text, format_g9};
+pub use flags::{parse_change_flag, parse_effect_flag};
 pub use force::{band_limited_force, envelope};
 pub use scenario::{
     BetweenSamples, Change, ChangeHow, EffectSpec, ForceSpec, ForceWindow, NoiseLevel, NoiseSpec,
