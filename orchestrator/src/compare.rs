@@ -21,21 +21,7 @@ pub const DEFAULT_SEVERITY: f64 = 5.0;
 /// The window (s) of the severity's moving RMS, centred on the sample.
 pub const DEFAULT_SEVERITY_WINDOW: f64 = 0.5;
 
-/// `100 / (N var(y)) Σ (y − ŷ)²` over the given samples.
-pub fn nmse(measured: &[f64], predicted: &[f64]) -> f64 {
-    let n = measured.len() as f64;
-    if measured.is_empty() {
-        return f64::NAN;
-    }
-    let mean = measured.iter().sum::<f64>() / n;
-    let var = measured.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n;
-    let sse: f64 = measured
-        .iter()
-        .zip(predicted)
-        .map(|(y, p)| (y - p).powi(2))
-        .sum();
-    100.0 * sse / (n * var)
-}
+pub use crate::stats::nmse;
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct FailingWindow {
@@ -110,10 +96,7 @@ pub fn compare(
     options: CompareOptions,
 ) -> Comparison {
     let n = time.len();
-    let first = time
-        .iter()
-        .position(|&t| t - time[0] >= options.transient)
-        .unwrap_or(n);
+    let first = crate::stats::first_after_transient(time, options.transient);
     let nmse_floor = |f: usize, range: std::ops::Range<usize>| {
         nmse(&measured[f][range.clone()], &predicted[f][range])
     };

@@ -287,11 +287,7 @@ pub fn prepare(
                     ]
                 })
                 .collect();
-            let first = data
-                .time
-                .iter()
-                .position(|&t| t - data.time[0] >= options.transient)
-                .unwrap_or(data.len())
+            let first = crate::stats::first_after_transient(&data.time, options.transient)
                 .max(options.lags);
             if first >= data.len() {
                 bail!(
@@ -387,12 +383,8 @@ pub fn relative_threshold(streams: &[Stream]) -> Result<FixedThreshold> {
     let Some(first) = streams.first() else {
         bail!("no record to learn from")
     };
-    let values = [0, 1, 2].map(|f| {
-        let x = &first.measured[f][first.first..];
-        let n = x.len() as f64;
-        let mean = x.iter().sum::<f64>() / n;
-        PAPER_THRESHOLD * x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n
-    });
+    let values = [0, 1, 2]
+        .map(|f| PAPER_THRESHOLD * crate::stats::variance(&first.measured[f][first.first..]));
     if !values.iter().all(|v| *v > 0.0 && v.is_finite()) {
         bail!(
             "{}: the measured variance after the transient is {values:?}: no threshold can be \

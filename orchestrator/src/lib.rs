@@ -14,6 +14,7 @@ pub mod learn;
 pub mod master;
 pub mod report;
 pub mod run;
+pub mod stats;
 pub mod synth;
 pub mod train;
 pub mod twin;

@@ -98,12 +98,8 @@ fn fit_floors(
     options: &TrainOptions,
 ) -> Result<Floors, TrainError> {
     let inputs = lagged_inputs(samples, options.lags);
-    let first = data
-        .time
-        .iter()
-        .position(|&t| t - data.time[0] >= options.transient)
-        .unwrap_or(data.len())
-        .max(options.lags);
+    let first =
+        crate::stats::first_after_transient(&data.time, options.transient).max(options.lags);
     if data.len() <= first + 10 {
         return Err(TrainError::Setup(format!(
             "{}: too few samples after the {} s transient",

@@ -407,11 +407,7 @@ fn used_samples(
     data: &Measurement,
     setup: &CalibrationSetup,
 ) -> Result<(usize, Vec<usize>), CalibrateError> {
-    let first = data
-        .time
-        .iter()
-        .position(|&t| t - data.time[0] >= setup.transient)
-        .unwrap_or(data.len());
+    let first = crate::stats::first_after_transient(&data.time, setup.transient);
     if let Some(mask) = &setup.mask {
         if mask.len() != data.len() {
             return Err(CalibrateError::Setup(format!(
@@ -478,14 +474,9 @@ pub fn calibrate(
         vrs.push(var.value_reference);
         priors.push(prior);
     }
-    let variance = |x: &[f64]| {
-        let n = x.len() as f64;
-        let m = x.iter().sum::<f64>() / n;
-        x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
-    };
     let noise_mean = [0, 1, 2].map(|f| {
         let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
-        (setup.noise_fraction * variance(&y)).ln()
+        (setup.noise_fraction * crate::stats::variance(&y)).ln()
     });
     let mut base = component.parameters.clone();
     for name in &setup.parameters {
@@ -691,8 +682,7 @@ pub fn fixed_log_evidence(
     let mut log_evidence = 0.0;
     for f in 0..3 {
         let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
-        let mean = y.iter().sum::<f64>() / n;
-        let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        let var = crate::stats::variance(&y);
         let noise_mean = (setup.noise_fraction * var).ln();
         let sse: f64 = used
             .iter()

@@ -5,10 +5,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{nmse_on, write_json};
-use crate::compare::{compare, CompareOptions};
+use super::{nmse_on, run_and_compare, write_json};
 use crate::data::Measurement;
-use crate::run::run_twin;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -111,19 +109,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        let prediction = run_twin(&new_twin, &data, |_, _| {})?;
-        let options = CompareOptions {
-            transient: args.transient,
-            ..CompareOptions::default()
-        };
-        let comparison = compare(
-            &data.time,
-            &data.acc,
-            &prediction.acc,
-            calibration.noise_variance,
-            prediction.sd.as_ref(),
-            options,
-        );
+        let comparison = run_and_compare(&new_twin, &data, args.transient, |_, _| {})?.comparison;
         let title = format!("calibrated on {}", data.path.display());
         crate::report::plot_comparison(&comparison, &data.force, &title, path, false)?;
     }

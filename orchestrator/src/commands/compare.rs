@@ -6,10 +6,11 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{progress_bar, write_atomically, write_json};
-use crate::compare::{compare, CompareOptions, Comparison};
+use super::{progress_bar, run_and_compare, write_atomically, write_json, Compared};
+use crate::compare::Comparison;
 use crate::data::Measurement;
-use crate::run::{run_twin, Prediction};
+use crate::run::Prediction;
+use crate::stats::variance;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -44,16 +45,6 @@ pub struct CompareArgs {
     pub transient: f64,
 }
 
-/// Noise variance when the twin has none (not calibrated): 2 % of each floor's measured
-/// variance, the centre the calibration's noise prior uses.
-pub const PRIOR_NOISE_FRACTION: f64 = 0.02;
-
-fn variance(x: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n
-}
-
 pub fn run(args: &CompareArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
@@ -75,26 +66,12 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         );
     }
     let twin = Twin::load(args.twin.as_deref())?;
-    let prediction = run_twin(&twin, &data, progress_bar())?;
-    let (noise_variance, noise_source) = match twin.noise_variance {
-        Some(v) => (v, "twin (calibrated)"),
-        None => (
-            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
-            "prior: 2 % of the measured variance",
-        ),
-    };
-    let options = CompareOptions {
-        transient: args.transient,
-        ..CompareOptions::default()
-    };
-    let comparison = compare(
-        &data.time,
-        &data.acc,
-        &prediction.acc,
+    let Compared {
+        prediction,
+        comparison,
         noise_variance,
-        prediction.sd.as_ref(),
-        options,
-    );
+        noise_source,
+    } = run_and_compare(&twin, &data, args.transient, progress_bar())?;
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
