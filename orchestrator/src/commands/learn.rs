@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use super::{write_json, write_text_atomically};
 use crate::data::Measurement;
 use crate::learn::{
-    plot_mode, prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN,
-    N_INITIAL, REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
+    prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN, N_INITIAL,
+    REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
 };
 use crate::twin::Twin;
 
@@ -213,7 +213,8 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         for r in &results {
             let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
-            let svg = plot_mode(r).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let svg = crate::report::learn_plot::plot_mode(r)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             write_text_atomically(&path, &svg)?;
             println!("wrote {}", path.display());
         }

@@ -5,6 +5,7 @@
 
 use std::path::PathBuf;
 
+pub mod learn_plot;
 pub mod plot;
 pub mod run_plot;
 
