@@ -6,11 +6,12 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
 use super::{Action, Diagnosis, Kind};
+use crate::report::palette;
 
-const BEFORE: RGBColor = RGBColor(0xD5, 0x5E, 0x00);
-const AFTER: RGBColor = RGBColor(0x00, 0x72, 0xB2);
-const FAILING: RGBColor = RGBColor(0xD6, 0x27, 0x28);
-const EFFECT: RGBColor = RGBColor(0x00, 0x9E, 0x73);
+const BEFORE: RGBColor = palette::VERMILION;
+const AFTER: RGBColor = palette::BLUE;
+const FAILING: RGBColor = palette::RED;
+const EFFECT: RGBColor = palette::GREEN;
 const SIZE: (u32, u32) = (1400, 1200);
 
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {

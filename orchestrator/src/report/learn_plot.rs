@@ -4,16 +4,13 @@
 
 use plotters::style::RGBColor;
 
+use super::palette;
 use crate::learn::ModeResult;
 
-const MEASURED: RGBColor = RGBColor(0x00, 0x72, 0xB2);
-const PREDICTED: RGBColor = RGBColor(0xE6, 0x9F, 0x00);
-const QUERY: RGBColor = RGBColor(0xD6, 0x27, 0x28);
-const FLOORS: [RGBColor; 3] = [
-    RGBColor(0x00, 0x72, 0xB2),
-    RGBColor(0xE6, 0x9F, 0x00),
-    RGBColor(0x00, 0x9E, 0x73),
-];
+const MEASURED: RGBColor = palette::BLUE;
+const PREDICTED: RGBColor = palette::ORANGE;
+const QUERY: RGBColor = palette::RED;
+const FLOORS: [RGBColor; 3] = palette::FLOORS;
 
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values

@@ -7,6 +7,22 @@ use std::path::PathBuf;
 
 pub mod learn_plot;
 pub mod plot;
+
+/// Every plot's colours: the Okabe–Ito set (apart for colour-blind readers too), a red for
+/// what fails or is queried, and two greys. Each plot names its roles with these.
+pub mod palette {
+    use plotters::style::RGBColor;
+
+    pub const BLUE: RGBColor = RGBColor(0x00, 0x72, 0xB2);
+    pub const ORANGE: RGBColor = RGBColor(0xE6, 0x9F, 0x00);
+    pub const GREEN: RGBColor = RGBColor(0x00, 0x9E, 0x73);
+    pub const VERMILION: RGBColor = RGBColor(0xD5, 0x5E, 0x00);
+    pub const RED: RGBColor = RGBColor(0xD6, 0x27, 0x28);
+    pub const DARK_GREY: RGBColor = RGBColor(0x33, 0x33, 0x33);
+    pub const GREY: RGBColor = RGBColor(0x80, 0x80, 0x80);
+    /// One colour per floor, in floor order.
+    pub const FLOORS: [RGBColor; 3] = [BLUE, ORANGE, GREEN];
+}
 pub mod run_plot;
 
 pub use plot::{plot_comparison, plot_latent_variance, welch_h1, FrequencyResponse, FRF_SEGMENT};

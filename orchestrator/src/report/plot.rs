@@ -11,7 +11,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
-use super::ReportError;
+use super::{palette, ReportError};
 use crate::compare::Comparison;
 use crate::fsutil::write_text_atomically;
 
@@ -27,12 +27,12 @@ const FRF_VIEW_SIZE: (u32, u32) = (1400, 520);
 const FONT: &str = "sans-serif";
 
 // Okabe–Ito colours: measured, predicted and band stay apart for colour-blind readers too.
-const MEASURED: RGBColor = RGBColor(0x00, 0x72, 0xB2);
-const PREDICTED: RGBColor = RGBColor(0xE6, 0x9F, 0x00);
-const BAND: RGBColor = RGBColor(0x00, 0x9E, 0x73);
-const RESIDUAL: RGBColor = RGBColor(0x33, 0x33, 0x33);
-const FAILING: RGBColor = RGBColor(0xD6, 0x27, 0x28);
-const TRANSIENT: RGBColor = RGBColor(0x80, 0x80, 0x80);
+const MEASURED: RGBColor = palette::BLUE;
+const PREDICTED: RGBColor = palette::ORANGE;
+const BAND: RGBColor = palette::GREEN;
+const RESIDUAL: RGBColor = palette::DARK_GREY;
+const FAILING: RGBColor = palette::RED;
+const TRANSIENT: RGBColor = palette::GREY;
 const BAND_OPACITY: f64 = 0.25;
 /// A failing window on a floor that left the band in it …
 const FAILING_OPACITY: f64 = 0.25;

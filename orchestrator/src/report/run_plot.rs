@@ -7,7 +7,7 @@ use crate::cosim::run::RunResult;
 use crate::import::ScalarType;
 
 const FONT: &str = "sans-serif";
-const LINE: RGBColor = RGBColor(0x00, 0x72, 0xB2);
+const LINE: RGBColor = super::palette::BLUE;
 /// Panels beyond this many are left out (named in the title).
 pub const MAX_PANELS: usize = 16;
 const PANEL_HEIGHT: u32 = 160;
