@@ -231,6 +231,8 @@ struct Node {
     /// String values, per port (empty for the other types).
     text_inputs: Vec<String>,
     text_outputs: Vec<String>,
+    /// The outputs before an evaluation (to tell whether it changed them).
+    previous: Vec<f64>,
     /// Scratch for typed get/set.
     ints: Vec<i32>,
     bools: Vec<bool>,
@@ -427,6 +429,7 @@ impl System {
             outputs: vec![0.0; n_out],
             text_inputs: vec![String::new(); n_in],
             text_outputs: vec![String::new(); n_out],
+            previous: Vec::with_capacity(n_out),
             ints: Vec::new(),
             bools: Vec::new(),
             reals: Vec::new(),
@@ -520,7 +523,8 @@ impl System {
     /// Set node `i`'s inputs from `inputs` and compute its outputs at `time`.
     fn evaluate_node(&mut self, i: usize, time: f64) -> Result<bool, MasterError> {
         let node = &mut self.nodes[i];
-        let before = node.outputs.clone();
+        node.previous.clear();
+        node.previous.extend_from_slice(&node.outputs);
         let has_text = matches!(&node.kind,
             Kind::Slave { output_groups, .. } if !output_groups[3].vrs.is_empty());
         let texts_before = has_text.then(|| node.text_outputs.clone());
@@ -544,7 +548,7 @@ impl System {
             || node
                 .outputs
                 .iter()
-                .zip(&before)
+                .zip(&node.previous)
                 .any(|(a, b)| a.to_bits() != b.to_bits()))
     }
 
@@ -605,44 +609,34 @@ impl System {
     /// Input slopes over `[t_k, t_{k+1}]` for slaves that interpolate: the replayed signals'
     /// segments. Values coming from other nodes are held (slope 0).
     fn set_input_derivatives(&mut self, k: usize, step: f64) -> Result<(), MasterError> {
-        // Only Real inputs are interpolated; the others are held.
-        for i in 0..self.nodes.len() {
-            let slopes: Vec<(u32, f64)> = match &self.nodes[i].kind {
-                Kind::Slave {
-                    slave,
-                    input_vrs,
-                    input_types,
-                    ..
-                } if slave.can_interpolate_inputs() => self.nodes[i]
-                    .sources
-                    .iter()
-                    .enumerate()
-                    .filter(|(p, _)| input_types[*p] == PortType::Real)
-                    .filter_map(|(p, src)| match src {
-                        Some(Port::Signal(s)) => {
-                            let samples = &self.signals[*s].1;
-                            let next = samples
-                                .get(k + 1)
-                                .copied()
-                                .unwrap_or(samples[k.min(samples.len() - 1)]);
-                            Some((
-                                input_vrs[p],
-                                (next - samples[k.min(samples.len() - 1)]) / step,
-                            ))
-                        }
-                        Some(Port::Output(..)) => Some((input_vrs[p], 0.0)),
-                        None => None,
-                    })
-                    .collect(),
-                _ => continue,
+        // Only Real inputs are interpolated (the connected ones: `input_groups[0]`); the
+        // others are held.
+        let signals = &self.signals;
+        for node in &mut self.nodes {
+            let Kind::Slave {
+                slave,
+                input_groups,
+                ..
+            } = &mut node.kind
+            else {
+                continue;
             };
-            if slopes.is_empty() {
+            let real = &input_groups[0];
+            if real.vrs.is_empty() || !slave.can_interpolate_inputs() {
                 continue;
             }
-            let (vrs, values): (Vec<u32>, Vec<f64>) = slopes.into_iter().unzip();
-            if let Kind::Slave { slave, .. } = &mut self.nodes[i].kind {
-                slave.set_real_input_derivatives(&vrs, &values)?;
+            node.reals.clear();
+            for &p in &real.ports {
+                node.reals.push(match node.sources[p] {
+                    Some(Port::Signal(s)) => {
+                        let samples = &signals[s].1;
+                        let now = samples[k.min(samples.len() - 1)];
+                        (samples.get(k + 1).copied().unwrap_or(now) - now) / step
+                    }
+                    _ => 0.0,
+                });
             }
+            slave.set_real_input_derivatives(&real.vrs, &node.reals)?;
         }
         Ok(())
     }
