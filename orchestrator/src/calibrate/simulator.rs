@@ -1,16 +1,21 @@
 //! One FMU instance run again and again on one record, with different parameter values: the
-//! inner loop of calibration. Same input convention as the master algorithm (inputs set at
-//! `t_k`, outputs read, then the segment's slope, then the step), so its predictions equal
-//! `twin compare`'s bit for bit.
+//! inner loop of calibration. The runs are the master algorithm's (`master::System`: the record's
+//! force replayed into the instance), so its predictions are `twin compare`'s by construction.
 
+use std::cell::RefCell;
 use std::collections::BTreeMap;
+use std::rc::Rc;
 
-use crate::import::{Fmu, ImportError, Instance};
+use crate::import::{Fmu, Instance, StepEnd};
+use crate::master::{Clock, MasterError, Port, Recorder, Slave, System};
 use crate::twin::{apply_parameters, ParameterValue, TwinError, OUTPUTS};
 
+/// One FMU instance run on the master, the record's force replayed into its `force` input.
+/// Between runs the simulator resets the instance and sets its parameters.
 pub struct Simulator<'a> {
     fmu: &'a Fmu,
-    instance: Instance,
+    instance: Rc<RefCell<Instance>>,
+    name: String,
     /// The twin's own parameter values for this component, applied before the calibrated ones.
     base: BTreeMap<String, ParameterValue>,
     force_vr: u32,
@@ -29,7 +34,7 @@ impl<'a> Simulator<'a> {
         dt: f64,
         name: &str,
     ) -> Result<Self, TwinError> {
-        let instance = fmu.instantiate(name)?;
+        let instance = Rc::new(RefCell::new(fmu.instantiate(name)?));
         let force_vr = fmu.value_reference("force")?;
         let acc_vrs = [
             fmu.value_reference(OUTPUTS[0])?,
@@ -39,6 +44,7 @@ impl<'a> Simulator<'a> {
         Ok(Simulator {
             fmu,
             instance,
+            name: name.to_owned(),
             base,
             force_vr,
             acc_vrs,
@@ -69,37 +75,79 @@ impl<'a> Simulator<'a> {
         outputs: &[u32],
         out: &mut [Vec<f64>],
     ) -> Result<(), TwinError> {
-        let n = self.force.len();
-        let inst = &mut self.instance;
-        inst.reset()?;
-        inst.setup_experiment(self.start, None)?;
-        inst.enter_initialization_mode()?;
-        apply_parameters(self.fmu, inst, &self.base)?;
-        inst.set_real(vrs, values)?;
-        inst.exit_initialization_mode()?;
-        for o in out.iter_mut() {
-            o.resize(n, 0.0);
+        {
+            let mut inst = self.instance.borrow_mut();
+            inst.reset()?;
+            inst.setup_experiment(self.start, None)?;
+            inst.enter_initialization_mode()?;
+            apply_parameters(self.fmu, &mut inst, &self.base)?;
+            inst.set_real(vrs, values)?;
+            inst.exit_initialization_mode()?;
         }
-        let mut read = vec![0.0; outputs.len()];
-        for k in 0..n {
-            let time = self.start + k as f64 * self.dt;
-            inst.set_real(&[self.force_vr], &[self.force[k]])?;
-            inst.get_real(outputs, &mut read)?;
-            for (o, v) in out.iter_mut().zip(&read) {
-                o[k] = *v;
-            }
-            if k + 1 < n {
-                let slope = (self.force[k + 1] - self.force[k]) / self.dt;
-                if inst.can_interpolate_inputs() {
-                    inst.set_real_input_derivatives(&[self.force_vr], &[slope])?;
-                }
-                step(inst, time, self.dt)?;
-            }
+        for o in out.iter_mut() {
+            o.clear();
+        }
+        if self.force.is_empty() {
+            return Ok(());
+        }
+        let mut system = System::new();
+        let node = system.add_slave(
+            &self.name,
+            Box::new(Shared(Rc::clone(&self.instance))),
+            vec![self.force_vr],
+            outputs.to_vec(),
+        );
+        let force = system.add_signal("force", self.force.to_vec());
+        system.connect(force, node, 0).map_err(master_error)?;
+        let mut recorder = Recorder::new(
+            (0..outputs.len())
+                .map(|i| (i.to_string(), Port::Output(node, i)))
+                .collect(),
+        );
+        let clock = Clock::new(self.start, self.dt, (self.force.len() - 1) as u64);
+        system
+            .run(clock, &mut [&mut recorder], |_, _| {})
+            .map_err(master_error)?;
+        for (o, column) in out.iter_mut().zip(recorder.columns) {
+            *o = column;
         }
         Ok(())
     }
 }
 
-fn step(inst: &mut Instance, time: f64, dt: f64) -> Result<(), ImportError> {
-    inst.do_step(time, dt)
+/// The instance as the master's slave, shared with the simulator that resets it between runs.
+struct Shared(Rc<RefCell<Instance>>);
+
+impl Slave for Shared {
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), MasterError> {
+        Slave::set_real(&mut *self.0.borrow_mut(), vrs, values)
+    }
+    fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Result<(), MasterError> {
+        Slave::get_real(&mut *self.0.borrow_mut(), vrs, values)
+    }
+    fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        slopes: &[f64],
+    ) -> Result<(), MasterError> {
+        Slave::set_real_input_derivatives(&mut *self.0.borrow_mut(), vrs, slopes)
+    }
+    fn can_interpolate_inputs(&self) -> bool {
+        Slave::can_interpolate_inputs(&*self.0.borrow())
+    }
+    fn do_step(&mut self, time: f64, step: f64) -> Result<(), MasterError> {
+        Slave::do_step(&mut *self.0.borrow_mut(), time, step)
+    }
+    fn step(&mut self, time: f64, step: f64) -> Result<StepEnd, MasterError> {
+        Slave::step(&mut *self.0.borrow_mut(), time, step)
+    }
+}
+
+/// An import error stays one (calibration and diagnosis report it as such); the master's own
+/// errors (configuration, a failure at a time) keep their text.
+fn master_error(e: MasterError) -> TwinError {
+    match e {
+        MasterError::Import(e) => TwinError::Import(e),
+        other => TwinError::Message(other.to_string()),
+    }
 }
