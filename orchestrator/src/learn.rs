@@ -103,7 +103,6 @@
 //! them: refits always, appends from 1024 training points, tracking from `n m = 2²⁰`; the
 //! results are the same either way.
 
-use anyhow::{bail, Context, Result};
 use fmu_gp_corrector::model::{
     per_floor, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
 };
@@ -114,8 +113,42 @@ use crate::compare::nmse;
 use crate::data::Measurement;
 use crate::master::{Block, MasterError};
 use crate::run::run_twin;
+use crate::run::RunError;
 use crate::train::physics_only;
 use crate::twin::Twin;
+
+/// What can stop the learning. The messages say which record, floor or time.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnError {
+    /// Records or options that cannot be learned from.
+    #[error("{0}")]
+    Setup(String),
+    #[error("running the physics on {record}")]
+    Physics {
+        record: String,
+        #[source]
+        source: Box<RunError>,
+    },
+    /// A GP's fit, update or tracking failed.
+    #[error("{0}")]
+    Gp(String),
+    #[error(transparent)]
+    Master(Box<MasterError>),
+    #[error("{context}")]
+    In {
+        context: &'static str,
+        #[source]
+        source: Box<LearnError>,
+    },
+}
+
+impl From<MasterError> for LearnError {
+    fn from(e: MasterError) -> Self {
+        LearnError::Master(Box::new(e))
+    }
+}
+
+pub type Result<T, E = LearnError> = std::result::Result<T, E>;
 
 /// N_initial: points of the first record in the initial training set (the paper's 75).
 pub const N_INITIAL: usize = 75;
@@ -274,8 +307,11 @@ pub fn prepare(
     records
         .iter()
         .map(|data| {
-            let prediction = run_twin(&physics, data, |_, _| {})
-                .with_context(|| format!("running the physics on {}", data.path.display()))?;
+            let prediction =
+                run_twin(&physics, data, |_, _| {}).map_err(|source| LearnError::Physics {
+                    record: data.path.display().to_string(),
+                    source: Box::new(source),
+                })?;
             let samples: Vec<Sample> = (0..data.len())
                 .map(|k| {
                     [
@@ -289,11 +325,11 @@ pub fn prepare(
             let first = crate::stats::first_after_transient(&data.time, options.transient)
                 .max(options.lags);
             if first >= data.len() {
-                bail!(
+                return Err(LearnError::Setup(format!(
                     "{}: nothing left after the {} s transient",
                     data.path.display(),
                     options.transient
-                );
+                )));
             }
             Ok(Stream {
                 name: data.path.display().to_string(),
@@ -380,16 +416,16 @@ pub fn fixed_threshold(streams: &[Stream], options: &LearnOptions) -> Result<Fix
 /// variances and below those after refits on contact data.
 pub fn relative_threshold(streams: &[Stream]) -> Result<FixedThreshold> {
     let Some(first) = streams.first() else {
-        bail!("no record to learn from")
+        return Err(LearnError::Setup("no record to learn from".into()));
     };
     let values = [0, 1, 2]
         .map(|f| PAPER_THRESHOLD * crate::stats::variance(&first.measured[f][first.first..]));
     if !values.iter().all(|v| *v > 0.0 && v.is_finite()) {
-        bail!(
+        return Err(LearnError::Setup(format!(
             "{}: the measured variance after the transient is {values:?}: no threshold can be \
              set from it; give --threshold",
             first.name
-        );
+        )));
     }
     Ok(FixedThreshold {
         values,
@@ -413,7 +449,7 @@ pub fn relative_threshold(streams: &[Stream]) -> Result<FixedThreshold> {
 /// the paper's 69; this rule gives 172).
 pub fn reference_threshold(streams: &[Stream], options: &LearnOptions) -> Result<FixedThreshold> {
     let Some(first) = streams.first() else {
-        bail!("no record to learn from")
+        return Err(LearnError::Setup("no record to learn from".into()));
     };
     let (train, test_stream, test) = match streams.get(1) {
         Some(second) => (
@@ -432,33 +468,36 @@ pub fn reference_threshold(streams: &[Stream], options: &LearnOptions) -> Result
     };
     let picked: Vec<usize> = train.clone().step_by(THRESHOLD_STRIDE).collect();
     if picked.len() < 2 || test.is_empty() {
-        bail!(
+        return Err(LearnError::Setup(format!(
             "{}: too short to set the fixed threshold from a reference GP; give --threshold",
             first.name
-        );
+        )));
     }
     let floors = fit_floors(
         picked.iter().map(|&k| first.inputs[k].clone()).collect(),
         picked.iter().map(|&k| first.targets[k]).collect(),
         options,
     )
-    .context("the fixed threshold's reference GPs")?;
+    .map_err(|e| LearnError::In {
+        context: "the fixed threshold's reference GPs",
+        source: Box::new(e),
+    })?;
     let mut values = [0.0f64; 3];
     for (f, value) in values.iter_mut().enumerate() {
         let gp = trained(&floors.gps[f])?;
         for k in test.clone() {
             let p = gp
                 .predict_point(&test_stream.inputs[k])
-                .map_err(|e| anyhow::anyhow!("floor {}: reference GP: {e}", f + 1))?;
+                .map_err(|e| LearnError::Gp(format!("floor {}: reference GP: {e}", f + 1)))?;
             *value = (*value).max(p.latent_variance);
         }
         if !(*value > 0.0 && value.is_finite()) {
-            bail!(
+            return Err(LearnError::Setup(format!(
                 "floor {}: the reference GP's latent variance on {} is {value}: no threshold \
                  can be set from it; give --threshold",
                 f + 1,
                 test_stream.name
-            );
+            )));
         }
     }
     Ok(FixedThreshold {
@@ -573,17 +612,19 @@ pub fn corrected(floors: &Floors, stream: &Stream, target: TargetForm) -> Result
 fn trained(gp: &FloorGp) -> Result<&GaussianProcess> {
     match gp {
         FloorGp::Trained(gp) => Ok(gp),
-        FloorGp::Prior(_) => bail!("a floor's GP has no training point"),
+        FloorGp::Prior(_) => Err(LearnError::Setup(
+            "a floor's GP has no training point".into(),
+        )),
     }
 }
 
 /// Each floor's latent variances and means at the record's points from `first` on.
 fn track(floors: &Floors, stream: &Stream) -> Result<[TrackedPoints; 3]> {
     let points = Inputs::from_rows(&stream.inputs[stream.first..])
-        .map_err(|e| anyhow::anyhow!("{}: GP inputs: {e}", stream.name))?;
+        .map_err(|e| LearnError::Gp(format!("{}: GP inputs: {e}", stream.name)))?;
     let [a, b, c] = per_floor(|f| -> Result<TrackedPoints> {
         TrackedPoints::new(trained(&floors.gps[f])?, points.clone())
-            .map_err(|e| anyhow::anyhow!("floor {}: {e}", f + 1))
+            .map_err(|e| LearnError::Gp(format!("floor {}: {e}", f + 1)))
     });
     Ok([a?, b?, c?])
 }
@@ -601,7 +642,7 @@ fn sync(tracked: &mut [TrackedPoints; 3], floors: &Floors, parallel: bool) -> Re
     let gps = [g0?, g1?, g2?];
     let outcome = |t: &mut TrackedPoints, gp: &GaussianProcess| {
         t.sync(gp)
-            .map_err(|e| anyhow::anyhow!("tracking the GP: {e}"))
+            .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))
     };
     let [t0, t1, t2] = tracked;
     let results = if parallel {
@@ -686,7 +727,9 @@ fn refit_floors(
         max_iterations: refit_iterations(options.refit_iterations, floors.len()),
         ..fmu_gp_corrector::model::refit_options()
     };
-    let reports = floors.refit_with(&fit).map_err(|e| anyhow::anyhow!(e))?;
+    let reports = floors
+        .refit_with(&fit)
+        .map_err(|e| LearnError::Gp(e.to_string()))?;
     let best = |f: usize| {
         reports[f]
             .as_ref()
@@ -818,22 +861,24 @@ pub struct Timing {
 /// Fit the initial GPs on the first `initial` points after the first record's transient.
 pub fn initial_floors(streams: &[Stream], options: &LearnOptions) -> Result<Floors> {
     let Some(first) = streams.first() else {
-        bail!("no record to learn from")
+        return Err(LearnError::Setup("no record to learn from".into()));
     };
     let end = first.first + options.initial;
     if options.initial == 0 || end >= first.len() {
-        bail!(
+        return Err(LearnError::Setup(format!(
             "{}: needs more than {} samples after the transient",
-            first.name,
-            options.initial
-        );
+            first.name, options.initial
+        )));
     }
     fit_floors(
         first.inputs[first.first..end].to_vec(),
         first.targets[first.first..end].to_vec(),
         options,
     )
-    .context("the initial GPs")
+    .map_err(|e| LearnError::In {
+        context: "the initial GPs",
+        source: Box::new(e),
+    })
 }
 
 /// The three floors' GPs fitted (type-II ML, the corrector's initial fit) on a training set.
@@ -849,7 +894,7 @@ fn fit_floors(
         targets,
         hyperparameters: None,
     })
-    .map_err(|e| anyhow::anyhow!(e))
+    .map_err(|e| LearnError::Gp(e.to_string()))
 }
 
 /// The adaptive threshold's reference set (Algorithm 1, line 12): every point streamed so far,
@@ -872,10 +917,10 @@ impl Reference {
             .and_then(|s| s.inputs.first())
             .map_or(1, Vec::len);
         let none = Inputs::from_row_major(dim, Vec::new())
-            .map_err(|e| anyhow::anyhow!("GP inputs: {e}"))?;
+            .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
         let [a, b, c] = [0, 1, 2].map(|f| {
             trained(&floors.gps[f]).and_then(|gp| {
-                TrackedPoints::new(gp, none.clone()).map_err(|e| anyhow::anyhow!("{e}"))
+                TrackedPoints::new(gp, none.clone()).map_err(|e| LearnError::Gp(format!("{e}")))
             })
         });
         Ok(Reference {
@@ -932,7 +977,7 @@ pub fn run_mode(
 ) -> Result<ModeResult> {
     let started = std::time::Instant::now();
     let Some(first) = streams.first() else {
-        bail!("no record to learn from")
+        return Err(LearnError::Setup("no record to learn from".into()));
     };
     let mut floors = initial.clone();
     let mut timing = Timing::default();
@@ -951,7 +996,11 @@ pub fn run_mode(
     let initial_threshold = match mode {
         Mode::Fixed => match fixed {
             Some(fixed) => fixed.values,
-            None => bail!("the fixed mode needs its threshold"),
+            None => {
+                return Err(LearnError::Setup(
+                    "the fixed mode needs its threshold".into(),
+                ))
+            }
         },
         Mode::Adaptive(_) => {
             // Held out: the initial points themselves are interpolated (V(f) ≈ 0 there).
@@ -1014,14 +1063,14 @@ pub fn run_mode(
             let before = floors.len();
             floors
                 .learn(&stream.inputs[t], stream.targets[t], 0)
-                .map_err(|e| anyhow::anyhow!("t = {} s: {e}", stream.time[t]))?;
+                .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
             query_indices.push(t);
             let dropped = reference.learned(r, j, floors.len() == before, r);
             timing.learning += clock.elapsed().as_secs_f64();
             let refit_due = schedule.query();
             if refit_due {
                 let refit = refit_floors(&mut floors, options, r, query_indices.len(), false)
-                    .map_err(|e| anyhow::anyhow!("t = {} s: {e}", stream.time[t]))?;
+                    .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
                 schedule.refitted(floors.len());
                 timing.refits += refit.seconds;
                 refits.push(refit);
@@ -1036,11 +1085,11 @@ pub fn run_mode(
                 timing.rebuilds += sync(&mut reference.earlier, &floors, parallel)?;
                 if let Some((r0, j0)) = dropped {
                     let x = Inputs::from_rows(&[&streams[r0].inputs[streams[r0].first + j0]])
-                        .map_err(|e| anyhow::anyhow!("GP inputs: {e}"))?;
+                        .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
                     for f in 0..3 {
                         reference.earlier[f]
                             .extend(trained(&floors.gps[f])?, &x)
-                            .map_err(|e| anyhow::anyhow!("tracking the GP: {e}"))?;
+                            .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
                     }
                 }
             }
@@ -1065,7 +1114,7 @@ pub fn run_mode(
             // (Algorithm 1 refits after every query; the schedule thins that out, and the end
             // of a record is where its final NMSE and the carried-over GPs are taken).
             let refit = refit_floors(&mut floors, options, r, query_indices.len(), true)
-                .map_err(|e| anyhow::anyhow!("{}: end of record: {e}", stream.name))?;
+                .map_err(|e| LearnError::Gp(format!("{}: end of record: {e}", stream.name)))?;
             schedule.refitted(floors.len());
             timing.refits += refit.seconds;
             refits.push(refit);
@@ -1087,12 +1136,12 @@ pub fn run_mode(
                 .map(|i| stream.inputs[seen_from + i].as_slice())
                 .collect();
             if !outside.is_empty() {
-                let x =
-                    Inputs::from_rows(&outside).map_err(|e| anyhow::anyhow!("GP inputs: {e}"))?;
+                let x = Inputs::from_rows(&outside)
+                    .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
                 for f in 0..3 {
                     reference.earlier[f]
                         .extend(trained(&floors.gps[f])?, &x)
-                        .map_err(|e| anyhow::anyhow!("tracking the GP: {e}"))?;
+                        .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
                 }
             }
             timing.tracking_setup += clock.elapsed().as_secs_f64();

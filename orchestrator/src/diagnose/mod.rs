@@ -54,20 +54,60 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
 use fmu_shear::effects::{Law, Placement};
 use serde::Serialize;
 
 use crate::calibrate::simulator::Simulator;
+use crate::calibrate::CalibrateError;
 use crate::calibrate::{
     calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior, DEFAULT_PARAMETERS,
 };
 use crate::compare::{compare, nmse, CompareOptions, FailingWindow};
 use crate::data::Measurement;
+use crate::import::ImportError;
 use crate::import::{Fmu, ModelDescription};
 use crate::run::run_twin;
 use crate::train::physics_only;
+use crate::twin::TwinError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
+
+/// What can stop a diagnosis or an added effect. The messages say which record, twin or file.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    /// A twin, record or option that cannot be diagnosed.
+    #[error("{0}")]
+    Setup(String),
+    #[error("{context}")]
+    In {
+        context: String,
+        #[source]
+        source: Box<DiagnoseError>,
+    },
+    #[error("reading the diagnosis {}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: not JSON", path.display())]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{0}")]
+    Plot(String),
+    #[error(transparent)]
+    Import(#[from] ImportError),
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    #[error(transparent)]
+    Calibrate(#[from] CalibrateError),
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+}
+
+pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
 pub use candidate::{Candidate, Kind, Scales, Side};
 
 /// The decision thresholds (see the module documentation).
@@ -336,7 +376,7 @@ fn run_physics(
 ) -> Result<PhysicsRun> {
     let component = twin
         .component(PHYSICS)
-        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path)?;
     let mut base = component.parameters.clone();
     base.extend(extra.clone());
@@ -373,9 +413,9 @@ struct PhysicsReals {
 
 impl PhysicsReals {
     fn of(twin: &Twin) -> Result<Self> {
-        let component = twin
-            .component(PHYSICS)
-            .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        let component = twin.component(PHYSICS).ok_or_else(|| {
+            DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
+        })?;
         Ok(PhysicsReals {
             given: component.parameters.clone(),
             model_description: Fmu::open(&component.fmu_path)?.model_description,
@@ -391,7 +431,9 @@ impl PhysicsReals {
             .variable(name)
             .and_then(|v| v.start.as_deref())
             .and_then(|s| s.parse().ok())
-            .ok_or_else(|| anyhow!("{}: no value for '{name}'", self.fmu_name))
+            .ok_or_else(|| {
+                DiagnoseError::Setup(format!("{}: no value for '{name}'", self.fmu_name))
+            })
     }
 }
 
@@ -451,9 +493,9 @@ struct Fitted {
 fn with_switches(physics: &Twin, candidate: Option<&Candidate>) -> Result<Twin> {
     let mut out = physics.duplicate();
     if let Some(c) = candidate {
-        let component = out
-            .component_mut(PHYSICS)
-            .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        let component = out.component_mut(PHYSICS).ok_or_else(|| {
+            DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
+        })?;
         component.parameters.extend(c.switches());
     }
     Ok(out)
@@ -491,7 +533,9 @@ fn fit(
             let mut coarse = twin.duplicate();
             coarse
                 .component_mut(PHYSICS)
-                .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?
+                .ok_or_else(|| {
+                    DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
+                })?
                 .parameters
                 .insert("substeps".into(), ParameterValue::Integer(substeps));
             calibrate(&coarse, data, &setup)?
@@ -561,16 +605,17 @@ enum Job {
 pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
     let started = Instant::now();
     let noise_variance = twin.noise_variance.ok_or_else(|| {
-        anyhow!(
+        DiagnoseError::Setup(
             "the twin has no noise variances, so the noise level is unknown: diagnose a twin \
              made by `twin calibrate`"
+                .into(),
         )
     })?;
     if !(options.block > 0.0 && options.block.is_finite()) {
-        bail!(
+        return Err(DiagnoseError::Setup(format!(
             "the block length must be a positive number of seconds, was {}",
             options.block
-        );
+        )));
     }
     let n = data.len();
     let first = data
@@ -579,19 +624,21 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .position(|&t| t - data.time[0] >= options.transient)
         .unwrap_or(n);
     if n - first < 20 {
-        bail!(
+        return Err(DiagnoseError::Setup(format!(
             "{}: {} samples after the {} s transient; a diagnosis needs more",
             data.path.display(),
             n - first,
             options.transient
-        );
+        )));
     }
     let (mask, held_out) = blocks(&data.time, first, options.block);
     let after: Vec<usize> = (first..n).collect();
 
     // 1. The twin as given, and its physics alone with drifts and velocities.
-    let prediction = run_twin(twin, data, |_, _| {})
-        .with_context(|| format!("running the twin on {}", data.path.display()))?;
+    let prediction = run_twin(twin, data, |_, _| {}).map_err(|e| DiagnoseError::In {
+        context: format!("running the twin on {}", data.path.display()),
+        source: Box::new(e.into()),
+    })?;
     let comparison = compare(
         &data.time,
         &data.acc,
@@ -751,8 +798,11 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let mut results = results.into_iter();
     let (recal, recal_seconds) = results
         .next()
-        .ok_or_else(|| anyhow!("no recalibration result"))?
-        .context("recalibrating")?;
+        .ok_or_else(|| DiagnoseError::Setup("no recalibration result".into()))?
+        .map_err(|e| DiagnoseError::In {
+            context: "recalibrating".into(),
+            source: Box::new(e),
+        })?;
     let before_worst = worst(&nmse_before_held_out);
     let recal_worst = worst(&recal.nmse_held_out);
     let mut moved: Vec<MovedParameter> = recal
@@ -1056,10 +1106,10 @@ pub fn add_physics(
         .position(|&t| t - data.time[0] >= options.transient)
         .unwrap_or(n);
     if n - first < 20 {
-        bail!(
+        return Err(DiagnoseError::Setup(format!(
             "{}: too few samples after the transient",
             data.path.display()
-        );
+        )));
     }
     let after: Vec<usize> = (first..n).collect();
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
@@ -1130,7 +1180,7 @@ pub fn add_physics(
     }
     let component = chosen
         .component_mut(PHYSICS)
-        .ok_or_else(|| anyhow!("the twin has no '{PHYSICS}' component"))?;
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     for p in &result.calibration.parameters {
         component
             .parameters
@@ -1167,20 +1217,25 @@ pub fn add_physics(
 
 /// `contact@2-3[:side]` or the winner of a diagnosis report (`--diagnosis R.json`).
 pub fn effect_from_report(path: &PathBuf) -> Result<Candidate> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading the diagnosis {}", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(|source| DiagnoseError::Read {
+        path: path.clone(),
+        source,
+    })?;
     let value: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        serde_json::from_str(&text).map_err(|source| DiagnoseError::Json {
+            path: path.clone(),
+            source,
+        })?;
     let label = value
         .get("effect")
         .and_then(|e| e.get("label"))
         .and_then(|l| l.as_str())
         .ok_or_else(|| {
-            anyhow!(
+            DiagnoseError::Setup(format!(
                 "{}: the diagnosis names no effect (action {})",
                 path.display(),
                 value.get("action").unwrap_or(&serde_json::Value::Null)
-            )
+            ))
         })?;
-    Candidate::parse(label).map_err(|e| anyhow!("{}: {e}", path.display()))
+    Candidate::parse(label).map_err(|e| DiagnoseError::Setup(format!("{}: {e}", path.display())))
 }

@@ -2,10 +2,9 @@
 //! failing windows shaded; then the evidence: the storey shear the twin misses against the
 //! storey's drift, with the fitted effect's force (for a contact, the kink at the gap).
 
-use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
-use super::{Action, Diagnosis, Kind};
+use super::{Action, DiagnoseError, Diagnosis, Kind, Result};
 use crate::report::palette;
 
 const BEFORE: RGBColor = palette::VERMILION;
@@ -31,12 +30,16 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
     let s = &d.series;
     if s.time.len() < 2 {
-        return Err(anyhow!("the diagnosis plot needs at least 2 samples"));
+        return Err(DiagnoseError::Plot(
+            "the diagnosis plot needs at least 2 samples".into(),
+        ));
     }
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        let err = |e: &dyn std::fmt::Display| anyhow!("drawing the diagnosis plot: {e}");
+        let err = |e: &dyn std::fmt::Display| {
+            DiagnoseError::Plot(format!("drawing the diagnosis plot: {e}"))
+        };
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let title = format!(
             "{} — action: {}{}",

@@ -1,7 +1,7 @@
 //! The command-line forms of an effect (`--effect contact@2-3:gap=5e-4`) and a parameter
 //! change (`--change k2@8:0.85`), read into the scenario's types.
 
-use anyhow::{anyhow, Result};
+use super::{Result, SynthError};
 use serde_json::{Map, Value};
 
 use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamName};
@@ -9,7 +9,7 @@ use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamNam
 /// `contact@2-3:gap=5e-4,stiffness=9000,side=both`, `cubic@2`, `friction@1:force=0.2`,
 /// `hysteresis@2:stiffness=1500,yield=3e-4`.
 pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
-    let bad = |why: String| anyhow!("--effect {text:?}: {why}");
+    let bad = |why: String| SynthError::Scenario(format!("--effect {text:?}: {why}"));
     let (head, params) = match text.split_once(':') {
         Some((h, p)) => (h, Some(p)),
         None => (text, None),
@@ -57,7 +57,7 @@ pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
 
 /// `k2@8:0.85` (factor) or `k2@8=3500` (value).
 pub fn parse_change_flag(text: &str) -> Result<Change> {
-    let bad = |why: String| anyhow!("--change {text:?}: {why}");
+    let bad = |why: String| SynthError::Scenario(format!("--change {text:?}: {why}"));
     let (name, rest) = text
         .split_once('@')
         .ok_or_else(|| bad("expected PARAM@TIME:FACTOR or PARAM@TIME=VALUE".into()))?;

@@ -1,6 +1,6 @@
 //! The band-limited force and its amplitude windows.
 
-use anyhow::{bail, Result};
+use super::{Result, SynthError};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -52,7 +52,9 @@ pub fn band_limited_force(s: &Scenario) -> Result<(Vec<f64>, usize)> {
     let power: f64 = z.iter().map(|c| (c.re / ng as f64).powi(2)).sum();
     let envelope_power: f64 = envelope.iter().map(|e| e * e).sum();
     if !(power > 0.0 && envelope_power > 0.0) {
-        bail!("the force has no power: check force.windows' gains");
+        return Err(SynthError::Record(
+            "the force has no power: check force.windows' gains".into(),
+        ));
     }
     let scale = s.force.rms / (power / envelope_power).sqrt();
     // The same trigonometric polynomial on the fine grid.

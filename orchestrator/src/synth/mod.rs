@@ -147,7 +147,6 @@ pub use truth::{
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
 use fmu_shear::effects::{drift, Effects};
 use fmu_shear::{ShearModel, ShearParameters};
 use rand::SeedableRng;
@@ -158,6 +157,26 @@ use crate::data::Measurement;
 use csv::{round9, round_time};
 use structure::Hysteretic;
 use truth::Stats;
+
+/// What can go wrong making a synthetic record. The messages say where (the scenario file and
+/// field, or the command-line flag).
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// The scenario (a file, a field, a flag) is not valid.
+    #[error("{0}")]
+    Scenario(String),
+    #[error("{origin}: cannot read the scenario")]
+    Read {
+        origin: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A valid scenario whose record cannot be made.
+    #[error("{0}")]
+    Record(String),
+}
+
+pub(crate) type Result<T, E = SynthError> = std::result::Result<T, E>;
 
 pub const DEFAULT_SAMPLE_RATE: f64 = 51.2;
 pub const DEFAULT_DURATION: f64 = 20.0;
@@ -340,10 +359,10 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
                 .chain(&hysteretic.z)
                 .all(|x| x.is_finite());
             if !finite {
-                bail!(
+                return Err(SynthError::Record(format!(
                     "the synthetic structure diverged at t = {t1:.6} s (non-finite state); check the parameters and effects, or raise oversample (now {})",
                     s.oversample
-                );
+                )));
             }
             stats.observe(&model, t1, hf);
             hysteretic.observe();

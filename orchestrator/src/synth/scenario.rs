@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
+use super::{Result, SynthError};
 use fmu_shear::effects::{Contact, Cubic, Friction, Kind, Law, Side};
 use fmu_shear::ShearParameters;
 use serde::de::DeserializeOwned;
@@ -439,10 +439,12 @@ impl Scenario {
     /// Read and check a scenario file. Errors name the file and the field.
     pub fn load(path: &Path) -> Result<Scenario> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{origin}: cannot read the scenario"))?;
-        let value: Value =
-            serde_json::from_str(&text).map_err(|e| anyhow!("{origin}: not valid JSON: {e}"))?;
+        let text = std::fs::read_to_string(path).map_err(|source| SynthError::Read {
+            origin: origin.clone(),
+            source,
+        })?;
+        let value: Value = serde_json::from_str(&text)
+            .map_err(|e| SynthError::Scenario(format!("{origin}: not valid JSON: {e}")))?;
         let scenario = Scenario::from_json(&value, &origin)?;
         scenario.validate(&origin)?;
         Ok(scenario)
@@ -913,7 +915,10 @@ struct NoiseFile {
 
 /// A number for all three floors, or one per floor.
 #[derive(Deserialize)]
-#[serde(untagged, expecting = "expected a number or a list of 3 numbers (floors 1..3)")]
+#[serde(
+    untagged,
+    expecting = "expected a number or a list of 3 numbers (floors 1..3)"
+)]
 enum OneOrThree {
     One(f64),
     Three([f64; 3]),
@@ -1048,11 +1053,11 @@ impl<'a> Loc<'a> {
             path: format!("{}[{i}]", self.path),
         }
     }
-    fn error(&self, message: String) -> anyhow::Error {
-        if self.path.is_empty() {
-            anyhow!("{}: {message}", self.origin)
+    fn error(&self, message: String) -> SynthError {
+        SynthError::Scenario(if self.path.is_empty() {
+            format!("{}: {message}", self.origin)
         } else {
-            anyhow!("{}: field `{}`: {message}", self.origin, self.path)
-        }
+            format!("{}: field `{}`: {message}", self.origin, self.path)
+        })
     }
 }
