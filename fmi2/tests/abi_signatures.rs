@@ -6,6 +6,9 @@
 //! compile unless parameter and return types agree one by one. A test function wraps them so a
 //! failure shows up as a build error of `cargo test`.
 
+// Calls FMUs through their C functions, as a host does.
+#![allow(unsafe_code)]
+
 #[path = "common/probe.rs"]
 mod probe;
 

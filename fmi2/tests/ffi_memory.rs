@@ -2,6 +2,9 @@
 //! the C exports do not make the process grow. Alone in its test binary, so no other test's
 //! allocations move the resident set size it reads.
 
+// Calls FMUs through their C functions, as a host does.
+#![allow(unsafe_code)]
+
 mod common;
 #[path = "common/probe.rs"]
 mod probe;

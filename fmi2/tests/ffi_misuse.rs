@@ -3,6 +3,9 @@
 //! a diverging model, FMU states (also broken ones) and debug logging. A refused call returns
 //! fmi2Error, says why through the logger and changes nothing.
 
+// Calls FMUs through their C functions, as a host does.
+#![allow(unsafe_code)]
+
 mod common;
 #[path = "common/probe.rs"]
 mod probe;

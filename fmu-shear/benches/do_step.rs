@@ -8,6 +8,9 @@
 //! - `record_1024_steps_contact23`: the record with the bumper between floors 2 and 3 switched on
 //!   (0.5 mm gap, 9000 N/m), where the sub-steps are integrated one by one and split at the gap.
 
+// Drives the FMU through its C functions, as a host does.
+#![allow(unsafe_code)]
+
 use std::ffi::CString;
 use std::hint::black_box;
 use std::time::Duration;

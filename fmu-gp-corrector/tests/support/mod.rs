@@ -1,5 +1,8 @@
 //! What the corrector's behaviour tests share: an instance with a resources folder of the test's
 //! own, seeded data, training files and the in-process reference GPs.
+
+// Calls FMUs through their C functions, as a host does.
+#![allow(unsafe_code)]
 #![allow(dead_code)]
 
 use std::path::Path;

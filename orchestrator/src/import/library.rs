@@ -2,6 +2,8 @@
 //! return `Result`. FMI status → `Result` happens in one place, `Instance::check`.
 
 #![allow(non_upper_case_globals)]
+// Loading a shared library and calling its C functions: the orchestrator's only `unsafe`.
+#![allow(unsafe_code)]
 
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::path::{Path, PathBuf};
