@@ -158,6 +158,8 @@ pub trait Observer {
         &[]
     }
     fn record_text(&mut self, _values: &[&str]) {}
+    /// Called once before a run with the number of points it will record at most.
+    fn will_record(&mut self, _points: usize) {}
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -233,6 +235,11 @@ struct Node {
     text_outputs: Vec<String>,
     /// The outputs before an evaluation (to tell whether it changed them).
     previous: Vec<f64>,
+    /// Whether a String input is connected (fixed when the run starts).
+    text_inputs_connected: bool,
+    /// Whether the slave takes input slopes and has a connected Real input (fixed when the
+    /// run starts).
+    interpolated: bool,
     /// Scratch for typed get/set.
     ints: Vec<i32>,
     bools: Vec<bool>,
@@ -359,6 +366,8 @@ pub struct System {
     signals: Vec<(String, Vec<f64>)>,
     pub algorithm: Algorithm,
     pub recording: Recording,
+    /// Whether some node's input comes from another node's output (fixed when the run starts).
+    coupled: bool,
 }
 
 impl Default for System {
@@ -374,6 +383,7 @@ impl System {
             signals: Vec::new(),
             algorithm: Algorithm::default(),
             recording: Recording::default(),
+            coupled: false,
         }
     }
 
@@ -430,6 +440,8 @@ impl System {
             text_inputs: vec![String::new(); n_in],
             text_outputs: vec![String::new(); n_out],
             previous: Vec::with_capacity(n_out),
+            text_inputs_connected: false,
+            interpolated: false,
             ints: Vec::new(),
             bools: Vec::new(),
             reals: Vec::new(),
@@ -560,8 +572,9 @@ impl System {
                 let v = self.value(port, k);
                 changed |= self.nodes[i].inputs[p].to_bits() != v.to_bits();
                 self.nodes[i].inputs[p] = v;
-                let is_text = matches!(&self.nodes[i].kind,
-                    Kind::Slave { input_types, .. } if input_types[p] == PortType::String);
+                let is_text = self.nodes[i].text_inputs_connected
+                    && matches!(&self.nodes[i].kind,
+                        Kind::Slave { input_types, .. } if input_types[p] == PortType::String);
                 if is_text && self.text(port) != self.nodes[i].text_inputs[p] {
                     self.nodes[i].text_inputs[p] = self.text(port).to_owned();
                     changed = true;
@@ -586,7 +599,8 @@ impl System {
                             changed |= self.evaluate_node(i, time)?;
                         }
                     }
-                    if !changed {
+                    // Without node-to-node connections one pass sets every input there is.
+                    if !changed || !self.coupled {
                         return Ok(());
                     }
                 }
@@ -612,7 +626,7 @@ impl System {
         // Only Real inputs are interpolated (the connected ones: `input_groups[0]`); the
         // others are held.
         let signals = &self.signals;
-        for node in &mut self.nodes {
+        for node in self.nodes.iter_mut().filter(|n| n.interpolated) {
             let Kind::Slave {
                 slave,
                 input_groups,
@@ -622,9 +636,6 @@ impl System {
                 continue;
             };
             let real = &input_groups[0];
-            if real.vrs.is_empty() || !slave.can_interpolate_inputs() {
-                continue;
-            }
             node.reals.clear();
             for &p in &real.ports {
                 node.reals.push(match node.sources[p] {
@@ -688,6 +699,11 @@ impl System {
                 )));
             }
         }
+        self.coupled = self.nodes.iter().any(|n| {
+            n.sources
+                .iter()
+                .any(|s| matches!(s, Some(Port::Output(..))))
+        });
         for (i, node) in self.nodes.iter_mut().enumerate() {
             if let Some(p) = node.sources.iter().position(Option::is_none) {
                 if matches!(node.kind, Kind::Block(_)) {
@@ -699,6 +715,7 @@ impl System {
             }
             let sources = &node.sources;
             if let Kind::Slave {
+                slave,
                 input_vrs,
                 input_types,
                 input_groups,
@@ -711,6 +728,9 @@ impl System {
                     .map(|(&vr, &ty)| TypedPort { vr, ty })
                     .collect();
                 *input_groups = groups(&ports, |p| sources[p].is_some());
+                node.text_inputs_connected = !input_groups[3].vrs.is_empty();
+                node.interpolated =
+                    !input_groups[0].vrs.is_empty() && slave.can_interpolate_inputs();
             }
         }
         Ok(())
@@ -746,6 +766,9 @@ impl System {
         mut progress: impl FnMut(u64, u64),
     ) -> Result<RunEnd, MasterError> {
         self.check_wiring(steps)?;
+        for observer in observers.iter_mut() {
+            observer.will_record(steps as usize + 1);
+        }
         let mut buffer = Vec::new();
         for k in 0..=steps {
             let time = time_of(k);
@@ -838,6 +861,12 @@ impl Recorder {
 }
 
 impl Observer for Recorder {
+    fn will_record(&mut self, points: usize) {
+        self.time.reserve(points);
+        for column in &mut self.columns {
+            column.reserve(points);
+        }
+    }
     fn record(&mut self, time: f64, values: &[f64]) {
         self.time.push(time);
         for (column, &v) in self.columns.iter_mut().zip(values) {
