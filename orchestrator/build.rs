@@ -1,7 +1,7 @@
 fn main() {
-    println!("cargo:rerun-if-changed=src/import/logger.c");
+    println!("cargo:rerun-if-changed=src/cosim/import/logger.c");
     cc::Build::new()
-        .file("src/import/logger.c")
+        .file("src/cosim/import/logger.c")
         .warnings(true)
         .compile("twin_fmi2_logger");
 }

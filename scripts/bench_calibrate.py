@@ -2,7 +2,7 @@
 """`twin calibrate` against a numpy/scipy peer on the same MAP problem, in the same run:
 dataset1, m1..3, c1..3, k1..3 of the shear model and the three per-floor noise variances.
 
-The problem (orchestrator/src/calibrate/mod.rs): with `z` the nine parameters standardised by
+The problem (orchestrator/src/workflows/calibrate/mod.rs): with `z` the nine parameters standardised by
 their priors (m ~ N(5.2, 0.5), log c ~ N(−4.605, 1), k ~ N(4021, 10000), second arguments
 variances), `s_f = log σ²_f`, `μ_f = log(0.02·var(acc_f after the transient))` and N the samples
 per floor after the 2 s transient,

@@ -3,7 +3,7 @@
 run: the peer is what a user without `twin diagnose` would write, the shear FMU driven through
 fmpy's `FMU2Slave` and every fit a `scipy.optimize.least_squares`.
 
-The computation (orchestrator/src/diagnose/mod.rs, calibrate/mod.rs, diagnose/candidate.rs),
+The computation (orchestrator/src/workflows/: diagnose/mod.rs, calibrate/mod.rs, diagnose/candidate.rs),
 mirrored step by step:
 
 - the twin: the physics parameters and the noise variances of the calibrated twin, read from the

@@ -7,9 +7,9 @@ use anyhow::{bail, Result};
 
 use super::diagnose::options;
 use super::write_json;
-use crate::data::Measurement;
-use crate::diagnose::{add_physics, effect_from_report, Candidate};
+use crate::twin::data::Measurement;
 use crate::twin::Twin;
+use crate::workflows::diagnose::{add_physics, effect_from_report, Candidate};
 
 #[derive(clap::Args)]
 pub struct AddPhysicsArgs {
@@ -39,7 +39,7 @@ pub struct AddPhysicsArgs {
     /// JSON report.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     #[arg(long)]
     pub threads: Option<usize>,

@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use serde_json::json;
 
 use super::{nmse_on, run_and_compare, write_json};
-use crate::data::Measurement;
+use crate::twin::data::Measurement;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -27,7 +27,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub priors: Option<PathBuf>,
     /// Seconds at the start of the record left out of the likelihood.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Optimiser starts (the prior mean plus draws from the widened prior).
     #[arg(long, default_value_t = 12)]
@@ -46,7 +46,7 @@ pub struct CalibrateArgs {
 }
 
 pub fn run(args: &CalibrateArgs) -> Result<()> {
-    use crate::calibrate::{calibrate, calibrated_twin, read_priors, CalibrationSetup};
+    use crate::workflows::calibrate::{calibrate, calibrated_twin, read_priors, CalibrationSetup};
     if args.twin.as_deref() == Some(args.out.as_path()) {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",

@@ -7,10 +7,10 @@ use anyhow::{bail, Result};
 use serde_json::json;
 
 use super::{progress_bar, run_and_compare, write_atomically, write_json, Compared};
-use crate::compare::Comparison;
-use crate::data::Measurement;
-use crate::run::Prediction;
-use crate::stats::variance;
+use crate::evaluation::compare::Comparison;
+use crate::evaluation::stats::variance;
+use crate::twin::data::Measurement;
+use crate::twin::run::Prediction;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -41,7 +41,7 @@ pub struct CompareArgs {
     #[arg(long)]
     pub latent_threshold: Option<f64>,
     /// Seconds at the start left out of the error measures.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
 }
 
@@ -99,7 +99,8 @@ pub fn run(args: &CompareArgs) -> Result<()> {
                 (Some(t), _) => [t; 3],
                 (None, Some(v)) => v,
                 (None, None) => [0, 1, 2].map(|f| {
-                    crate::learn::PAPER_THRESHOLD * variance(&data.acc[f][comparison.first..])
+                    crate::workflows::learn::PAPER_THRESHOLD
+                        * variance(&data.acc[f][comparison.first..])
                 }),
             };
             crate::report::plot_latent_variance(&comparison, latent, threshold, &title, path)?;

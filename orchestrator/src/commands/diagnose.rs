@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 
 use super::{write_json, write_text_atomically};
-use crate::data::Measurement;
-use crate::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis};
+use crate::twin::data::Measurement;
 use crate::twin::Twin;
+use crate::workflows::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis};
 
 #[derive(clap::Args)]
 pub struct DiagnoseArgs {
@@ -29,7 +29,7 @@ pub struct DiagnoseArgs {
     #[arg(long, num_args = 1..)]
     pub effects: Vec<String>,
     /// Seconds at the start left out of every error measure and fit.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Length (s) of the alternating fitted / held-out blocks.
     #[arg(long, default_value_t = 1.0)]
@@ -72,7 +72,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let d = diagnose(&twin, &data, &o)?;
     // Draw before writing anything: a failed plot leaves no half-written output.
     let plot = match &args.plot {
-        Some(path) => Some((path, crate::diagnose::plot::draw_diagnosis(&d)?)),
+        Some(path) => Some((path, crate::workflows::diagnose::plot::draw_diagnosis(&d)?)),
         None => None,
     };
     write_json(&args.report, &d)?;

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use super::{write_json, write_text_atomically};
-use crate::data::Measurement;
-use crate::learn::{
+use crate::twin::data::Measurement;
+use crate::twin::Twin;
+use crate::workflows::learn::{
     prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN, N_INITIAL,
     REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
 };
-use crate::twin::Twin;
 
 /// `--mode`: the query decision (the adaptive mode's forgetting factor is `--forgetting`).
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -67,7 +67,7 @@ pub struct LearnArgs {
     #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
     pub target: super::Target,
     /// Seconds at the start of each record neither streamed nor scored.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// N_initial: points of the first record in the initial training set.
     #[arg(long, default_value_t = N_INITIAL)]
@@ -197,7 +197,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         let trained = result
             .final_gps
             .to_training_file(options.lags, options.target);
-        crate::train::with_corrector(&twin, &trained)?.write(path)?;
+        crate::workflows::train::with_corrector(&twin, &trained)?.write(path)?;
         println!(
             "wrote {} (the corrector as learned: {} points)",
             path.display(),

@@ -8,10 +8,10 @@ use std::path::Path;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use crate::compare::{compare, CompareOptions, Comparison};
-use crate::data::Measurement;
-use crate::run::{run_twin, Prediction, Progress};
-use crate::stats::variance;
+use crate::evaluation::compare::{compare, CompareOptions, Comparison};
+use crate::evaluation::stats::variance;
+use crate::twin::data::Measurement;
+use crate::twin::run::{run_twin, Prediction, Progress};
 use crate::twin::Twin;
 
 pub mod add_physics;

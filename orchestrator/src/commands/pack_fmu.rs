@@ -19,13 +19,13 @@ pub struct PackArgs {
 }
 
 pub fn run(a: PackArgs) -> Result<()> {
-    let contents = crate::fmu_archive::FmuContents {
+    let contents = crate::cosim::pack::FmuContents {
         model_description: a.model_description,
         library: a.library,
         documentation: a.documentation,
         resources: a.resources,
     };
-    let id = crate::fmu_archive::pack_fmu(&contents, &a.out)?;
+    let id = crate::cosim::pack::pack_fmu(&contents, &a.out)?;
     println!("wrote {} (modelIdentifier {id})", a.out.display());
     Ok(())
 }

@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use serde_json::json;
 
 use super::{nmse_on, write_json};
-use crate::data::Measurement;
+use crate::twin::data::Measurement;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -28,7 +28,7 @@ pub struct TrainArgs {
     #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
     pub target: super::Target,
     /// Seconds at the start of the record not used for training.
-    #[arg(long, default_value_t = crate::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Train on every n-th sample after the transient (a GP fit costs O(N³)).
     #[arg(long, default_value_t = 1)]
@@ -47,7 +47,7 @@ pub struct TrainArgs {
 }
 
 pub fn run(args: &TrainArgs) -> Result<()> {
-    use crate::train::{train, TrainOptions};
+    use crate::workflows::train::{train, TrainOptions};
     if args.twin.as_deref() == Some(args.out.as_path()) {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
@@ -81,7 +81,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         if args.selection_stride == 0 {
             bail!("--selection-stride must be at least 1");
         }
-        selection = crate::train::select_lags(
+        selection = crate::workflows::train::select_lags(
             &twin,
             &data,
             &args.select_lags,

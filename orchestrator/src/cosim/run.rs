@@ -17,14 +17,14 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::cosim::ssp::{self, Connection, SsvValue};
-use crate::import::{
+use crate::cosim::import::{
     self, Causality, Fmu, ImportError, Instance, ModelDescription, ScalarType, ScalarVariable,
     UnpackLimits, Unpacked, UnpackedFmu,
 };
-use crate::master::{
+use crate::cosim::master::{
     MasterError, NodeId, Observer, Port, PortType, Recording, RunEnd, System, TypedPort,
 };
+use crate::cosim::ssp::{self, Connection, SsvValue};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {

@@ -5,7 +5,7 @@
 use plotters::style::RGBColor;
 
 use super::palette;
-use crate::learn::ModeResult;
+use crate::workflows::learn::ModeResult;
 
 const MEASURED: RGBColor = palette::BLUE;
 const PREDICTED: RGBColor = palette::ORANGE;

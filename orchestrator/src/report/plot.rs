@@ -12,7 +12,7 @@ use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
 use super::{palette, ReportError};
-use crate::compare::Comparison;
+use crate::evaluation::compare::Comparison;
 use crate::fsutil::write_text_atomically;
 
 /// Samples per Welch segment of the frequency view: at 51.2 Hz, 5 s and 0.2 Hz resolution.
@@ -735,7 +735,7 @@ fn draw_frequency_view(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::compare::{compare, CompareOptions, FailingWindow};
+    use crate::evaluation::compare::{compare, CompareOptions, FailingWindow};
     use quick_xml::events::Event;
 
     const DT: f64 = 1.0 / 51.2;
@@ -1016,7 +1016,7 @@ mod tests {
     #[test]
     fn renders_dataset_one_against_a_smoothed_stand_in() {
         let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/dataset1.csv");
-        let m = crate::data::Measurement::read(&csv).expect("dataset one reads");
+        let m = crate::twin::data::Measurement::read(&csv).expect("dataset one reads");
         // Stand-in prediction, only for the picture: the measurement through a centred
         // [1/4, 1/2, 1/4] smoother, with floor 3 in anti-phase between 12 and 13 s (a residual
         // of twice the response there, ~13 band sds: severe enough for a failing window).

@@ -3,8 +3,8 @@
 
 use plotters::prelude::*;
 
+use crate::cosim::import::ScalarType;
 use crate::cosim::run::RunResult;
-use crate::import::ScalarType;
 
 const FONT: &str = "sans-serif";
 const LINE: RGBColor = super::palette::BLUE;

@@ -1,6 +1,6 @@
 //! The measurement CSV as `data/` has it.
 
-use crate::data::Measurement;
+use crate::twin::data::Measurement;
 
 /// A value as the CSV writes it (9 significant digits), read back.
 pub(super) fn round9(x: f64) -> f64 {

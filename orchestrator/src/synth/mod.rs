@@ -153,7 +153,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::data::Measurement;
+use crate::twin::data::Measurement;
 use csv::{round9, round_time};
 use structure::Hysteretic;
 use truth::Stats;
@@ -449,7 +449,7 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
         generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
         scenario: s.to_json(),
         record: RecordTruth {
-            columns: crate::data::REQUIRED_COLUMNS.iter().map(|c| c.to_string()).collect(),
+            columns: crate::twin::data::REQUIRED_COLUMNS.iter().map(|c| c.to_string()).collect(),
             samples: n,
             sample_rate: s.sample_rate,
             sample_interval: dt,

@@ -21,7 +21,7 @@ pub const DEFAULT_SEVERITY: f64 = 5.0;
 /// The window (s) of the severity's moving RMS, centred on the sample.
 pub const DEFAULT_SEVERITY_WINDOW: f64 = 0.5;
 
-pub use crate::stats::nmse;
+pub use crate::evaluation::stats::nmse;
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct FailingWindow {
@@ -96,7 +96,7 @@ pub fn compare(
     options: CompareOptions,
 ) -> Comparison {
     let n = time.len();
-    let first = crate::stats::first_after_transient(time, options.transient);
+    let first = crate::evaluation::stats::first_after_transient(time, options.transient);
     let nmse_floor = |f: usize, range: std::ops::Range<usize>| {
         nmse(&measured[f][range.clone()], &predicted[f][range])
     };

@@ -57,19 +57,19 @@ use std::time::Instant;
 use fmu_shear::effects::{Law, Placement};
 use serde::Serialize;
 
-use crate::calibrate::simulator::Simulator;
-use crate::calibrate::CalibrateError;
-use crate::calibrate::{
-    calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior, DEFAULT_PARAMETERS,
-};
-use crate::compare::{compare, nmse, CompareOptions, FailingWindow};
-use crate::data::Measurement;
-use crate::import::ImportError;
-use crate::import::{Fmu, ModelDescription};
-use crate::run::run_twin;
-use crate::train::physics_only;
+use crate::cosim::import::ImportError;
+use crate::cosim::import::{Fmu, ModelDescription};
+use crate::evaluation::compare::{compare, nmse, CompareOptions, FailingWindow};
+use crate::twin::data::Measurement;
+use crate::twin::run::run_twin;
 use crate::twin::TwinError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
+use crate::workflows::calibrate::simulator::Simulator;
+use crate::workflows::calibrate::CalibrateError;
+use crate::workflows::calibrate::{
+    calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior, DEFAULT_PARAMETERS,
+};
+use crate::workflows::train::physics_only;
 
 /// What can stop a diagnosis or an added effect. The messages say which record, twin or file.
 #[derive(Debug, thiserror::Error)]
@@ -104,7 +104,7 @@ pub enum DiagnoseError {
     #[error(transparent)]
     Calibrate(#[from] CalibrateError),
     #[error(transparent)]
-    Run(#[from] crate::run::RunError),
+    Run(#[from] crate::twin::run::RunError),
 }
 
 pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
@@ -168,7 +168,7 @@ pub struct DiagnoseOptions {
 impl Default for DiagnoseOptions {
     fn default() -> Self {
         DiagnoseOptions {
-            transient: crate::compare::DEFAULT_TRANSIENT,
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             block: 1.0,
             gates: Gates::default(),
             candidates: Candidate::library(),
@@ -771,7 +771,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 &held_out,
                 first,
                 options.recalibration_starts,
-                crate::calibrate::SIMULATIONS_PER_START,
+                crate::workflows::calibrate::SIMULATIONS_PER_START,
                 options,
                 baseline_evidence,
             ),
@@ -1158,8 +1158,8 @@ pub fn add_physics(
         // Stage 2: effect and physics jointly, the effect's prior centred on stage 1.
         for (p, e) in result.calibration.parameters.iter().zip(&effect_params) {
             let prior = match e.2.space {
-                crate::calibrate::Space::Log => Prior::log(p.value.ln(), e.2.variance),
-                crate::calibrate::Space::Linear => Prior::linear(p.value, e.2.variance),
+                crate::workflows::calibrate::Space::Log => Prior::log(p.value.ln(), e.2.variance),
+                crate::workflows::calibrate::Space::Linear => Prior::linear(p.value, e.2.variance),
             };
             priors.insert(e.0.clone(), prior);
         }
@@ -1173,7 +1173,7 @@ pub fn add_physics(
             &after,
             first,
             options.recalibration_starts,
-            crate::calibrate::SIMULATIONS_PER_START,
+            crate::workflows::calibrate::SIMULATIONS_PER_START,
             options,
             baseline,
         )?;

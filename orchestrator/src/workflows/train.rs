@@ -12,8 +12,8 @@ use std::sync::Arc;
 
 use fmu_gp_corrector::{lagged_inputs, Floors, Sample, TargetForm, TrainingFile};
 
-use crate::data::Measurement;
-use crate::run::{run_twin, RunError};
+use crate::twin::data::Measurement;
+use crate::twin::run::{run_twin, RunError};
 use crate::twin::{
     find_fmu, Component, Connection, ParameterValue, Twin, TwinError, OUTPUTS, PHYSICS,
 };
@@ -47,7 +47,7 @@ impl Default for TrainOptions {
         TrainOptions {
             lags: fmu_gp_corrector::DEFAULT_LAGS,
             target: TargetForm::Discrepancy,
-            transient: crate::compare::DEFAULT_TRANSIENT,
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             stride: 1,
         }
     }
@@ -98,8 +98,8 @@ fn fit_floors(
     options: &TrainOptions,
 ) -> Result<Floors, TrainError> {
     let inputs = lagged_inputs(samples, options.lags);
-    let first =
-        crate::stats::first_after_transient(&data.time, options.transient).max(options.lags);
+    let first = crate::evaluation::stats::first_after_transient(&data.time, options.transient)
+        .max(options.lags);
     if data.len() <= first + 10 {
         return Err(TrainError::Setup(format!(
             "{}: too few samples after the {} s transient",

@@ -1,7 +1,7 @@
 //! Nodes, connections and the stepping loop.
 
 use super::{Clock, MasterError};
-use crate::import::{Instance, StepEnd};
+use crate::cosim::import::{Instance, StepEnd};
 
 /// The FMI type a slave's port carries. Enumerations travel as `Integer`, as FMI 2.0 gets and
 /// sets them. Real, Integer and Boolean values move through the master as `f64` (exact for

@@ -8,8 +8,8 @@ use serde::Serialize;
 use fmu_shear::effects::Placement;
 pub use fmu_shear::effects::{Kind, Side};
 
-use crate::calibrate::Prior;
 use crate::twin::ParameterValue;
+use crate::workflows::calibrate::Prior;
 
 /// One effect at one place: contact across storey `at` (between floors `at − 1` and `at`, 0 the
 /// ground) on one side; cubic stiffness of storey `at`; friction on floor `at`.

@@ -6,8 +6,8 @@ use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::rc::Rc;
 
-use crate::import::{Fmu, Instance, StepEnd};
-use crate::master::{Clock, MasterError, Port, Recorder, Slave, System};
+use crate::cosim::import::{Fmu, Instance, StepEnd};
+use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
 use crate::twin::{apply_parameters, ParameterValue, TwinError, OUTPUTS};
 
 /// One FMU instance run on the master, the record's force replayed into its `force` input.

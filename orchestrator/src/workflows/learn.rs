@@ -109,13 +109,13 @@ use fmu_gp_corrector::model::{
 use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Sample, TargetForm, TrainingFile};
 use serde::Serialize;
 
-use crate::compare::nmse;
-use crate::data::Measurement;
-use crate::master::{Block, MasterError};
-use crate::run::run_twin;
-use crate::run::RunError;
-use crate::train::physics_only;
+use crate::cosim::master::{Block, MasterError};
+use crate::evaluation::compare::nmse;
+use crate::twin::data::Measurement;
+use crate::twin::run::run_twin;
+use crate::twin::run::RunError;
 use crate::twin::Twin;
+use crate::workflows::train::physics_only;
 
 /// What can stop the learning. The messages say which record, floor or time.
 #[derive(Debug, thiserror::Error)]
@@ -256,7 +256,7 @@ impl Default for LearnOptions {
         LearnOptions {
             lags: fmu_gp_corrector::DEFAULT_LAGS,
             target: TargetForm::Discrepancy,
-            transient: crate::compare::DEFAULT_TRANSIENT,
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             initial: N_INITIAL,
             uniform_every: UNIFORM_EVERY,
             refit_every: REFIT_EVERY,
@@ -322,8 +322,9 @@ pub fn prepare(
                     ]
                 })
                 .collect();
-            let first = crate::stats::first_after_transient(&data.time, options.transient)
-                .max(options.lags);
+            let first =
+                crate::evaluation::stats::first_after_transient(&data.time, options.transient)
+                    .max(options.lags);
             if first >= data.len() {
                 return Err(LearnError::Setup(format!(
                     "{}: nothing left after the {} s transient",
@@ -418,8 +419,9 @@ pub fn relative_threshold(streams: &[Stream]) -> Result<FixedThreshold> {
     let Some(first) = streams.first() else {
         return Err(LearnError::Setup("no record to learn from".into()));
     };
-    let values = [0, 1, 2]
-        .map(|f| PAPER_THRESHOLD * crate::stats::variance(&first.measured[f][first.first..]));
+    let values = [0, 1, 2].map(|f| {
+        PAPER_THRESHOLD * crate::evaluation::stats::variance(&first.measured[f][first.first..])
+    });
     if !values.iter().all(|v| *v > 0.0 && v.is_finite()) {
         return Err(LearnError::Setup(format!(
             "{}: the measured variance after the transient is {values:?}: no threshold can be \

@@ -24,7 +24,7 @@ pub use system::{
 #[derive(Debug, thiserror::Error)]
 pub enum MasterError {
     #[error(transparent)]
-    Import(#[from] crate::import::ImportError),
+    Import(#[from] crate::cosim::import::ImportError),
     #[error("block '{block}': {message}")]
     Block { block: String, message: String },
     #[error("system: {0}")]

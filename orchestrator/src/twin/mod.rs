@@ -6,6 +6,9 @@
 //! measurement, used for the ±3σ band and by calibration) are parameter connectors of the
 //! system, bound to `resources/twin.ssv`.
 
+pub mod data;
+pub mod run;
+
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,9 +16,9 @@ use std::path::{Path, PathBuf};
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
+use crate::cosim::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 pub use crate::cosim::ssp::Connection;
 use crate::cosim::ssp::{self, parse_ssd, SsvValue};
-use crate::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 
 const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescription";
 const NS_SSC: &str = "http://ssp-standard.org/SSP1/SystemStructureCommon";

@@ -31,8 +31,8 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use serde::Serialize;
 
-use crate::data::Measurement;
-use crate::import::{Fmu, ScalarType};
+use crate::cosim::import::{Fmu, ScalarType};
+use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{default_prior, read_priors, Prior, Space};
 use simulator::Simulator;
@@ -76,7 +76,7 @@ impl Default for CalibrationSetup {
         CalibrationSetup {
             parameters: DEFAULT_PARAMETERS.iter().map(|s| s.to_string()).collect(),
             priors: BTreeMap::new(),
-            transient: crate::compare::DEFAULT_TRANSIENT,
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             starts: 12,
             seed: 1,
             noise_fraction: 0.02,
@@ -407,7 +407,7 @@ fn used_samples(
     data: &Measurement,
     setup: &CalibrationSetup,
 ) -> Result<(usize, Vec<usize>), CalibrateError> {
-    let first = crate::stats::first_after_transient(&data.time, setup.transient);
+    let first = crate::evaluation::stats::first_after_transient(&data.time, setup.transient);
     if let Some(mask) = &setup.mask {
         if mask.len() != data.len() {
             return Err(CalibrateError::Setup(format!(
@@ -452,7 +452,7 @@ pub fn calibrate(
             CalibrateError::Setup(format!("{} has no parameter '{name}'", component.fmu_name))
         })?;
         if var.scalar_type != ScalarType::Real
-            || var.causality != crate::import::Causality::Parameter
+            || var.causality != crate::cosim::import::Causality::Parameter
         {
             return Err(CalibrateError::Setup(format!(
                 "'{name}' is not a real parameter"
@@ -476,7 +476,7 @@ pub fn calibrate(
     }
     let noise_mean = [0, 1, 2].map(|f| {
         let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
-        (setup.noise_fraction * crate::stats::variance(&y)).ln()
+        (setup.noise_fraction * crate::evaluation::stats::variance(&y)).ln()
     });
     let mut base = component.parameters.clone();
     for name in &setup.parameters {
@@ -623,7 +623,8 @@ pub fn calibrate(
     let samples_used = target.n_used();
     let mut buf: [Vec<f64>; 3] = Default::default();
     sim.simulate(&target.vrs, &values, &mut buf)?;
-    let nmse = [0, 1, 2].map(|f| crate::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
+    let nmse = [0, 1, 2]
+        .map(|f| crate::evaluation::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
     Ok(Calibration {
         parameters,
         correlation,
@@ -682,7 +683,7 @@ pub fn fixed_log_evidence(
     let mut log_evidence = 0.0;
     for f in 0..3 {
         let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
-        let var = crate::stats::variance(&y);
+        let var = crate::evaluation::stats::variance(&y);
         let noise_mean = (setup.noise_fraction * var).ln();
         let sse: f64 = used
             .iter()

@@ -3,9 +3,9 @@
 
 use std::time::{Duration, Instant};
 
-use crate::data::Measurement;
-use crate::import::Instance;
-use crate::master::{Clock, MasterError, Port, Recorder, System};
+use crate::cosim::import::Instance;
+use crate::cosim::master::{Clock, MasterError, Port, Recorder, System};
+use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError, OUTPUTS};
 
 #[derive(Debug, thiserror::Error)]
