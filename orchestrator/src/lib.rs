@@ -11,6 +11,7 @@
 //! - `commands`: the `twin` CLI (clap, anyhow, printing) over all of the above;
 //! - `fsutil`: the one atomic file write.
 
+pub mod blocks;
 pub mod commands;
 pub mod cosim;
 pub mod evaluation;

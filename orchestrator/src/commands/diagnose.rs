@@ -72,7 +72,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let d = diagnose(&twin, &data, &o)?;
     // Draw before writing anything: a failed plot leaves no half-written output.
     let plot = match &args.plot {
-        Some(path) => Some((path, crate::workflows::diagnose::plot::draw_diagnosis(&d)?)),
+        Some(path) => Some((path, crate::report::diagnose_plot::draw_diagnosis(&d)?)),
         None => None,
     };
     write_json(&args.report, &d)?;

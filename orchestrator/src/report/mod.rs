@@ -1,10 +1,13 @@
-//! Reports on a model-against-measurement comparison: SVG plots of the time histories (the
-//! paper's Figure 4) and, optionally, of the frequency-response estimates (its Figure 3).
+//! The plots: a model against a record (`plot`: the time histories of the paper's Figure 4 and
+//! the frequency responses of its Figure 3), a diagnosis (`diagnose_plot`), active learning
+//! (`learn_plot`) and `twin run`'s outputs (`run_plot`). The JSON reports are written by the
+//! commands from the workflows' serialisable results.
 //!
 //! Only SVG is written: text goes out as `<text>` elements, so nothing here needs system fonts.
 
 use std::path::PathBuf;
 
+pub mod diagnose_plot;
 pub mod learn_plot;
 pub mod plot;
 
@@ -25,7 +28,7 @@ pub mod palette {
 }
 pub mod run_plot;
 
-pub use plot::{plot_comparison, plot_latent_variance, welch_h1, FrequencyResponse, FRF_SEGMENT};
+pub use plot::{plot_comparison, plot_latent_variance, FRF_SEGMENT};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {

@@ -46,7 +46,6 @@
 //! twin.
 
 pub mod candidate;
-pub mod plot;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

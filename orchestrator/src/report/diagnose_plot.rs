@@ -4,8 +4,8 @@
 
 use plotters::prelude::*;
 
-use super::{Action, DiagnoseError, Diagnosis, Kind, Result};
 use crate::report::palette;
+use crate::workflows::diagnose::{Action, DiagnoseError, Diagnosis, Kind, Result};
 
 const BEFORE: RGBColor = palette::VERMILION;
 const AFTER: RGBColor = palette::BLUE;
