@@ -301,45 +301,37 @@ impl Twin {
 
     /// Write the archive to `path` (through a temporary file: a failure leaves nothing half-written).
     pub fn write(&self, path: &Path) -> Result<(), TwinError> {
-        let io = |source| TwinError::Io {
-            path: path.to_owned(),
-            source,
-        };
-        let parent = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let tmp = tempfile::NamedTempFile::new_in(parent).map_err(io)?;
-        {
-            let mut zip = zip::ZipWriter::new(tmp.as_file());
+        // The FMUs are read first, so that a missing one is named as itself.
+        let mut fmus: Vec<(&str, Vec<u8>)> = Vec::new();
+        for c in &self.components {
+            if !fmus.iter().any(|(name, _)| *name == c.fmu_name) {
+                let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io {
+                    path: c.fmu_path.clone(),
+                    source,
+                })?;
+                fmus.push((&c.fmu_name, bytes));
+            }
+        }
+        crate::fsutil::write_atomically(path, |file| {
+            let zip_err = |e: zip::result::ZipError| std::io::Error::other(format!("zip: {e}"));
+            let mut zip = zip::ZipWriter::new(file);
             let options = zip::write::SimpleFileOptions::default()
                 .compression_method(zip::CompressionMethod::Deflated);
-            let zip_err = |e: zip::result::ZipError| TwinError::Invalid {
-                path: path.to_owned(),
-                message: format!("writing the archive: {e}"),
-            };
             zip.start_file("SystemStructure.ssd", options)
                 .map_err(zip_err)?;
-            zip.write_all(self.ssd_xml().as_bytes()).map_err(io)?;
-            let mut written = Vec::new();
+            zip.write_all(self.ssd_xml().as_bytes())?;
+            // Stored: an FMU is itself an archive, and opening the twin should not inflate it
+            // twice.
+            let stored = options.compression_method(zip::CompressionMethod::Stored);
+            for (name, bytes) in &fmus {
+                zip.start_file(format!("resources/{name}"), stored)
+                    .map_err(zip_err)?;
+                zip.write_all(bytes)?;
+            }
             for c in &self.components {
-                if !written.contains(&c.fmu_name) {
-                    let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io {
-                        path: c.fmu_path.clone(),
-                        source,
-                    })?;
-                    // Stored: an FMU is itself an archive, and opening the twin should not
-                    // inflate it twice.
-                    let stored = options.compression_method(zip::CompressionMethod::Stored);
-                    zip.start_file(format!("resources/{}", c.fmu_name), stored)
-                        .map_err(zip_err)?;
-                    zip.write_all(&bytes).map_err(io)?;
-                    written.push(c.fmu_name.clone());
-                }
                 zip.start_file(format!("resources/{}.ssv", c.name), options)
                     .map_err(zip_err)?;
-                zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes())
-                    .map_err(io)?;
+                zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes())?;
             }
             if let Some(nv) = self.noise_variance {
                 let values: BTreeMap<String, ParameterValue> = (0..3)
@@ -352,13 +344,15 @@ impl Twin {
                     .collect();
                 zip.start_file("resources/twin.ssv", options)
                     .map_err(zip_err)?;
-                zip.write_all(ssv_xml("twin", &values).as_bytes())
-                    .map_err(io)?;
+                zip.write_all(ssv_xml("twin", &values).as_bytes())?;
             }
             zip.finish().map_err(zip_err)?;
-        }
-        crate::fsutil::persist_readable(tmp, path).map_err(io)?;
-        Ok(())
+            Ok(())
+        })
+        .map_err(|e| TwinError::Io {
+            path: e.path,
+            source: e.source,
+        })
     }
 
     fn ssd_xml(&self) -> String {

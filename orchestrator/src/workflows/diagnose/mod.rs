@@ -58,7 +58,8 @@ use serde::Serialize;
 
 use crate::cosim::import::ImportError;
 use crate::cosim::import::{Fmu, ModelDescription};
-use crate::evaluation::compare::{compare, nmse, CompareOptions, FailingWindow};
+use crate::evaluation::compare::{compare, CompareOptions, FailingWindow};
+use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
 use crate::twin::run::run_twin;
 use crate::twin::TwinError;
@@ -436,16 +437,6 @@ impl PhysicsReals {
     }
 }
 
-fn rms(x: &[f64]) -> f64 {
-    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
-}
-
-fn variance(x: &[f64]) -> f64 {
-    let n = x.len().max(1) as f64;
-    let m = x.iter().sum::<f64>() / n;
-    x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n
-}
-
 fn correlation(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len()) as f64;
     if n < 2.0 {
@@ -477,6 +468,26 @@ fn nmse_on(measured: &[Vec<f64>; 3], predicted: &[Vec<f64>; 3], idx: &[usize]) -
 
 fn worst(x: &[f64; 3]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// The scales of the candidates' priors on this record: the twin's storey stiffness, and the
+/// RMS after the transient of the physics run's drifts and velocities and of the force.
+fn prior_scales(
+    reals: &PhysicsReals,
+    run: &PhysicsRun,
+    force: &[f64],
+    first: usize,
+) -> Result<Scales> {
+    let mut stiffness = [0.0; 3];
+    for (f, k) in stiffness.iter_mut().enumerate() {
+        *k = reals.get(&format!("k{}", f + 1))?;
+    }
+    Ok(Scales {
+        stiffness,
+        drift_rms: [0, 1, 2].map(|s| rms(&run.drift[s][first..])),
+        velocity_rms: [0, 1, 2].map(|f| rms(&run.velocity[f][first..])),
+        force_rms: rms(&force[first..]),
+    })
 }
 
 /// What one alternative's fit gives.
@@ -617,11 +628,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         )));
     }
     let n = data.len();
-    let first = data
-        .time
-        .iter()
-        .position(|&t| t - data.time[0] >= options.transient)
-        .unwrap_or(n);
+    let first = first_after_transient(&data.time, options.transient);
     if n - first < 20 {
         return Err(DiagnoseError::Setup(format!(
             "{}: {} samples after the {} s transient; a diagnosis needs more",
@@ -672,16 +679,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .map(|f| reals.get(&format!("m{}", f + 1)))
         .into_iter()
         .collect::<Result<Vec<f64>>>()?;
-    let stiffness = [0, 1, 2]
-        .map(|f| reals.get(&format!("k{}", f + 1)))
-        .into_iter()
-        .collect::<Result<Vec<f64>>>()?;
-    let scales = Scales {
-        stiffness: [stiffness[0], stiffness[1], stiffness[2]],
-        drift_rms: [0, 1, 2].map(|s| rms(&base_run.drift[s][first..])),
-        velocity_rms: [0, 1, 2].map(|f| rms(&base_run.velocity[f][first..])),
-        force_rms: rms(&data.force[first..]),
-    };
+    let scales = prior_scales(&reals, &base_run, &data.force, first)?;
 
     // Localisation from the residual of the twin as given.
     let floor_force: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
@@ -1099,11 +1097,7 @@ pub fn add_physics(
     let started = Instant::now();
     let physics = physics_only(twin);
     let n = data.len();
-    let first = data
-        .time
-        .iter()
-        .position(|&t| t - data.time[0] >= options.transient)
-        .unwrap_or(n);
+    let first = first_after_transient(&data.time, options.transient);
     if n - first < 20 {
         return Err(DiagnoseError::Setup(format!(
             "{}: too few samples after the transient",
@@ -1113,16 +1107,7 @@ pub fn add_physics(
     let after: Vec<usize> = (first..n).collect();
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let reals = PhysicsReals::of(&physics)?;
-    let stiffness = [0, 1, 2]
-        .map(|f| reals.get(&format!("k{}", f + 1)))
-        .into_iter()
-        .collect::<Result<Vec<f64>>>()?;
-    let scales = Scales {
-        stiffness: [stiffness[0], stiffness[1], stiffness[2]],
-        drift_rms: [0, 1, 2].map(|s| rms(&base_run.drift[s][first..])),
-        velocity_rms: [0, 1, 2].map(|f| rms(&base_run.velocity[f][first..])),
-        force_rms: rms(&data.force[first..]),
-    };
+    let scales = prior_scales(&reals, &base_run, &data.force, first)?;
     let switched = with_switches(&physics, Some(candidate))?;
     let effect_params = candidate.parameters(&scales);
     let mut names: Vec<String> = effect_params.iter().map(|p| p.0.clone()).collect();
