@@ -7,12 +7,8 @@ use rand_distr::{Distribution, StandardNormal};
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
-use super::scenario::{BetweenSamples, ForceWindow, Scenario};
+use super::scenario::{in_band, BetweenSamples, ForceWindow, Scenario};
 use super::{FORCE_STREAM, GENERATOR_OVERSAMPLE};
-
-pub(super) fn in_band(f: f64, low: f64, band: f64) -> bool {
-    f > low && f < band
-}
 
 /// The force on the fine grid (`samples · oversample` points over one period of the record):
 /// see the module documentation. Also returns the number of frequency bins used.

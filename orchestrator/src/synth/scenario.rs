@@ -10,7 +10,6 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Map, Value};
 use serde_path_to_error::Segment;
 
-use super::force::in_band;
 use super::{
     DEFAULT_DAMPING, DEFAULT_DURATION, DEFAULT_FORCE_RMS, DEFAULT_HYSTERESIS_BETA,
     DEFAULT_HYSTERESIS_EXPONENT, DEFAULT_HYSTERESIS_GAMMA, DEFAULT_HYSTERESIS_STIFFNESS,
@@ -18,6 +17,11 @@ use super::{
     DEFAULT_SAMPLE_RATE, DEFAULT_STIFFNESS, DEFAULT_WINDOW_RAMP, GENERATOR_OVERSAMPLE,
     MAX_FINE_POINTS, MAX_OVERSAMPLE,
 };
+
+/// Whether the frequency `f` lies strictly inside the force's band (`low`, `band`) Hz.
+pub(super) fn in_band(f: f64, low: f64, band: f64) -> bool {
+    f > low && f < band
+}
 
 // ---------------------------------------------------------------------------------------------
 // The scenario
