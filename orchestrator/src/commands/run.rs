@@ -33,6 +33,10 @@ pub struct RunArgs {
     /// Also record the local variables.
     #[arg(long)]
     pub output_all: bool,
+    /// Hold every input over each step even for FMUs that can interpolate inputs (by default
+    /// they get the input's slope over the step; fmpy's simulate_fmu holds them).
+    #[arg(long)]
+    pub hold_inputs: bool,
     /// Plot (.svg) of every recorded numeric column against time.
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -51,6 +55,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         input: args.input.clone(),
         sets: args.sets.clone(),
         output_all: args.output_all,
+        hold_inputs: args.hold_inputs,
     };
     let result = crate::cosim::run::run(&args.model, &options, super::progress_bar())?;
     super::write_atomically(&args.output, |f| Ok(result.write_csv(f)?))?;

@@ -8,7 +8,8 @@
 //!   changes of a discrete input), and gets a last short step to the stop time;
 //! - continuous Real inputs are interpolated linearly between the file's rows at each point,
 //!   the others (Integer, Boolean, Enumeration, discrete Reals) are held from the last row; an
-//!   FMU that declares `canInterpolateInputs` also gets the slope up to the next point;
+//!   FMU that declares `canInterpolateInputs` also gets the slope up to the next point (unless
+//!   `hold_inputs`: fmpy's default never sends one);
 //! - the outputs at a point are recorded as the step left them, before that point's inputs are
 //!   applied (point 0: after the start values and the first inputs, in initialisation mode);
 //! - an FMU that ends the simulation itself (`fmi2Discard` + `fmi2Terminated`) ends the run at
@@ -56,6 +57,9 @@ pub struct RunOptions {
     pub sets: Vec<String>,
     /// Record the local variables too, not only the outputs.
     pub output_all: bool,
+    /// Hold every input over each step, even for FMUs that can interpolate inputs (fmpy's
+    /// `simulate_fmu` default).
+    pub hold_inputs: bool,
 }
 
 /// A recorded column.
@@ -870,12 +874,13 @@ pub fn run(
 ) -> Result<RunResult, RunError> {
     let model = Model::open(path)?;
     let plan = plan(&model, options)?;
-    execute(model, plan, progress)
+    execute(model, plan, options.hold_inputs, progress)
 }
 
 fn execute(
     mut model: Model,
     plan: Plan,
+    hold_inputs: bool,
     progress: impl FnMut(u64, u64),
 ) -> Result<RunResult, RunError> {
     // Ports of each component: inputs driven by the file or by connections, outputs recorded
@@ -959,6 +964,7 @@ fn execute(
 
     let mut system = System::new();
     system.recording = Recording::BeforeInputs;
+    system.interpolate_inputs = !hold_inputs;
     let mut ids: Vec<NodeId> = Vec::new();
     for (i, instance) in instances.into_iter().enumerate() {
         let typed = |vars: &[ScalarVariable]| {

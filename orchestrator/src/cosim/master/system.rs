@@ -366,6 +366,9 @@ pub struct System {
     signals: Vec<(String, Vec<f64>)>,
     pub algorithm: Algorithm,
     pub recording: Recording,
+    /// Send input slopes to the slaves that can interpolate inputs (default); off, every input
+    /// is held over the step, as by a host that never calls `fmi2SetRealInputDerivatives`.
+    pub interpolate_inputs: bool,
     /// Whether some node's input comes from another node's output (fixed when the run starts).
     coupled: bool,
 }
@@ -383,6 +386,7 @@ impl System {
             signals: Vec::new(),
             algorithm: Algorithm::default(),
             recording: Recording::default(),
+            interpolate_inputs: true,
             coupled: false,
         }
     }
@@ -704,6 +708,7 @@ impl System {
                 .iter()
                 .any(|s| matches!(s, Some(Port::Output(..))))
         });
+        let interpolate = self.interpolate_inputs;
         for (i, node) in self.nodes.iter_mut().enumerate() {
             if let Some(p) = node.sources.iter().position(Option::is_none) {
                 if matches!(node.kind, Kind::Block(_)) {
@@ -729,8 +734,9 @@ impl System {
                     .collect();
                 *input_groups = groups(&ports, |p| sources[p].is_some());
                 node.text_inputs_connected = !input_groups[3].vrs.is_empty();
-                node.interpolated =
-                    !input_groups[0].vrs.is_empty() && slave.can_interpolate_inputs();
+                node.interpolated = interpolate
+                    && !input_groups[0].vrs.is_empty()
+                    && slave.can_interpolate_inputs();
             }
         }
         Ok(())
