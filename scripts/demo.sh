@@ -65,7 +65,7 @@ done
 echo
 echo "== twin run: the twin with the added physics is an SSP system any FMI master runs; run it as one =="
 cut -d, -f1,2 data/dataset3.csv >"$out/force-dataset3.csv"
-"$twin" run "$out/with-contact.ssp" --input "$out/force-dataset3.csv" --stop 20 --step 0.01953125 \
+"$twin" run "$out/with-contact.ssp" --input "$out/force-dataset3.csv" --stop 19.98046875 --step 0.01953125 \
   --output "$out/run-with-contact-dataset3.csv" --plot "$out/run-with-contact-dataset3.svg"
 
 echo
