@@ -73,9 +73,8 @@ pub fn rk4_with_events<const N: usize, S: AsRef<[f64]>>(
             let mut theta = 1.0f64;
             for (j, (&a, &b)) in s0.iter().zip(s1).enumerate() {
                 if a != 0.0 && a.signum() != b.signum() {
-                    let g = |th: f64| {
-                        switches(&rk4_step(&f, tau, &state, th * remaining)).as_ref()[j]
-                    };
+                    let g =
+                        |th: f64| switches(&rk4_step(&f, tau, &state, th * remaining)).as_ref()[j];
                     theta = theta.min(locate(g, a, b));
                 }
             }
@@ -166,11 +165,19 @@ mod tests {
         let reference = run(4096, true);
         let error = |n: u32, split: bool| (run(n, split) - reference).abs();
         for n in [8, 16, 32, 64, 128] {
-            println!("n {n}: split {:e}, unsplit {:e}", error(n, true), error(n, false));
+            println!(
+                "n {n}: split {:e}, unsplit {:e}",
+                error(n, true),
+                error(n, false)
+            );
         }
         for n in [16, 32, 64] {
             let ratio = error(n, true) / error(2 * n, true);
-            assert!(ratio > 16.0, "error ratio {ratio} from {n} to {} sub-steps", 2 * n);
+            assert!(
+                ratio > 16.0,
+                "error ratio {ratio} from {n} to {} sub-steps",
+                2 * n
+            );
         }
         assert!(error(32, false) > 100.0 * error(32, true));
     }
