@@ -8,11 +8,8 @@ use std::path::Path;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use crate::evaluation::compare::{compare, CompareOptions, Comparison};
-use crate::evaluation::stats::variance;
-use crate::twin::data::Measurement;
-use crate::twin::run::{run_twin, Prediction, Progress};
-use crate::twin::Twin;
+use crate::twin::run::Progress;
+pub(crate) use crate::twin::run::{nmse_on, run_and_compare, Compared};
 
 pub mod add_physics;
 pub mod calibrate;
@@ -121,60 +118,4 @@ pub(crate) fn progress_bar() -> impl FnMut(u64, u64) {
         }
     });
     move |done, total| progress.tick(done, total)
-}
-
-/// Noise variance when the twin has none (not calibrated): 2 % of each floor's measured
-/// variance, the centre the calibration's noise prior uses.
-pub const PRIOR_NOISE_FRACTION: f64 = 0.02;
-
-/// A twin run on a record and compared with it.
-pub(crate) struct Compared {
-    pub prediction: Prediction,
-    pub comparison: Comparison,
-    /// The ±3σ band's noise variances: the twin's, else [`PRIOR_NOISE_FRACTION`] of the record's.
-    pub noise_variance: [f64; 3],
-    pub noise_source: &'static str,
-}
-
-/// Run `twin` on `data` and compare the accelerations after `transient`: the one sequence
-/// behind `twin compare`, the calibrated twin's plot and the NMSE after calibrating or training.
-pub(crate) fn run_and_compare(
-    twin: &Twin,
-    data: &Measurement,
-    transient: f64,
-    progress: impl FnMut(u64, u64),
-) -> Result<Compared> {
-    let prediction = run_twin(twin, data, progress)?;
-    let (noise_variance, noise_source) = match twin.noise_variance {
-        Some(v) => (v, "twin (calibrated)"),
-        None => (
-            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
-            "prior: 2 % of the measured variance",
-        ),
-    };
-    let options = CompareOptions {
-        transient,
-        ..CompareOptions::default()
-    };
-    let comparison = compare(
-        &data.time,
-        &data.acc,
-        &prediction.acc,
-        noise_variance,
-        prediction.sd.as_ref(),
-        options,
-    );
-    Ok(Compared {
-        prediction,
-        comparison,
-        noise_variance,
-        noise_source,
-    })
-}
-
-/// NMSE per floor of `twin` on `data` after the transient.
-pub(crate) fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3]> {
-    Ok(run_and_compare(twin, data, transient, |_, _| {})?
-        .comparison
-        .nmse)
 }

@@ -5,6 +5,8 @@ use std::time::{Duration, Instant};
 
 use crate::cosim::import::Instance;
 use crate::cosim::master::{Clock, MasterError, Port, Recorder, System};
+use crate::evaluation::compare::{compare, CompareOptions, Comparison};
+use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError, OUTPUTS};
 
@@ -177,4 +179,60 @@ pub fn run_twin(
         latent_var: triple("latent_var"),
         sd: triple("sd"),
     })
+}
+
+/// Noise variance when the twin has none (not calibrated): 2 % of each floor's measured
+/// variance, the centre the calibration's noise prior uses.
+pub const PRIOR_NOISE_FRACTION: f64 = 0.02;
+
+/// A twin run on a record and compared with it.
+pub struct Compared {
+    pub prediction: Prediction,
+    pub comparison: Comparison,
+    /// The ±3σ band's noise variances: the twin's, else [`PRIOR_NOISE_FRACTION`] of the record's.
+    pub noise_variance: [f64; 3],
+    pub noise_source: &'static str,
+}
+
+/// Run `twin` on `data` and compare the accelerations after `transient`: the one sequence
+/// behind `twin compare`, the calibrated twin's plot and the NMSE after calibrating or training.
+pub fn run_and_compare(
+    twin: &Twin,
+    data: &Measurement,
+    transient: f64,
+    progress: impl FnMut(u64, u64),
+) -> Result<Compared, RunError> {
+    let prediction = run_twin(twin, data, progress)?;
+    let (noise_variance, noise_source) = match twin.noise_variance {
+        Some(v) => (v, "twin (calibrated)"),
+        None => (
+            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
+            "prior: 2 % of the measured variance",
+        ),
+    };
+    let options = CompareOptions {
+        transient,
+        ..CompareOptions::default()
+    };
+    let comparison = compare(
+        &data.time,
+        &data.acc,
+        &prediction.acc,
+        noise_variance,
+        prediction.sd.as_ref(),
+        options,
+    );
+    Ok(Compared {
+        prediction,
+        comparison,
+        noise_variance,
+        noise_source,
+    })
+}
+
+/// NMSE per floor of `twin` on `data` after the transient.
+pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3], RunError> {
+    Ok(run_and_compare(twin, data, transient, |_, _| {})?
+        .comparison
+        .nmse)
 }

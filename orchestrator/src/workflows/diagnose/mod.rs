@@ -58,10 +58,10 @@ use serde::Serialize;
 
 use crate::cosim::import::ImportError;
 use crate::cosim::import::{Fmu, ModelDescription};
-use crate::evaluation::compare::{compare, CompareOptions, FailingWindow};
+use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
-use crate::twin::run::run_twin;
+use crate::twin::run::{run_and_compare, run_twin, Compared};
 use crate::twin::TwinError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 use crate::workflows::calibrate::simulator::Simulator;
@@ -641,21 +641,17 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let after: Vec<usize> = (first..n).collect();
 
     // 1. The twin as given, and its physics alone with drifts and velocities.
-    let prediction = run_twin(twin, data, |_, _| {}).map_err(|e| DiagnoseError::In {
-        context: format!("running the twin on {}", data.path.display()),
-        source: Box::new(e.into()),
+    // The twin's noise variances are known here, so the comparison's band is theirs.
+    let Compared {
+        prediction,
+        comparison,
+        ..
+    } = run_and_compare(twin, data, options.transient, |_, _| {}).map_err(|e| {
+        DiagnoseError::In {
+            context: format!("running the twin on {}", data.path.display()),
+            source: Box::new(e.into()),
+        }
     })?;
-    let comparison = compare(
-        &data.time,
-        &data.acc,
-        &prediction.acc,
-        noise_variance,
-        prediction.sd.as_ref(),
-        CompareOptions {
-            transient: options.transient,
-            ..CompareOptions::default()
-        },
-    );
     let physics = physics_only(twin);
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let nmse_before = comparison.nmse;
