@@ -23,8 +23,10 @@ import numpy as np
 import pytest
 
 import fmpy
+import fmpy.fmi1
 import fmpy.fmi2 as fmi2
 from fmpy.fmi1 import FMICallException
+from fmpy.logging import addLoggerProxy
 from fmpy.validation import validate_fmu
 
 from conftest import REPO_ROOT
@@ -51,6 +53,28 @@ def read_csv_input(path: Path, dtypes: dict) -> np.ndarray:
                            for n, x in zip(names, row)) for row in rows[1:]], dtype=dtype)
 
 
+# fmpy formats an FMU's variadic log message in a native proxy that forwards to one
+# process-wide logger: the last callbacks handed to `addLoggerProxy`. fmpy registers its own
+# default callbacks when imported; registering per Slave would leave the proxy pointing at a
+# freed callback once the Slave is gone, and every later FMU's messages would go there. So one
+# module-level set of callbacks is registered once: its logger prints as fmpy's default does and
+# also hands the message to the Slave being driven, if any.
+_current: list = []
+
+
+def _forward(env, instance, status, category, message):
+    fmpy.fmi1.printLogMessage(env, instance, status, category, message)
+    if _current:
+        _current[-1]._log(env, instance, status, category, message)
+
+
+_CALLBACKS = fmi2.fmi2CallbackFunctions()
+_CALLBACKS.logger = fmi2.fmi2CallbackLoggerTYPE(_forward)
+_CALLBACKS.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+_CALLBACKS.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
+addLoggerProxy(ctypes.byref(_CALLBACKS))
+
+
 class Slave:
     """One instance of an FMU driven through fmpy's FMU2Slave, its log messages collected."""
 
@@ -62,12 +86,8 @@ class Slave:
         self.messages: list[tuple[int, str, str]] = []
         self.fmu = fmi2.FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
                                   modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="test")
-        self.callbacks = fmi2.fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2.fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self.callbacks.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        from fmpy.logging import addLoggerProxy
-        addLoggerProxy(ctypes.byref(self.callbacks))
+        self.callbacks = _CALLBACKS
+        _current.append(self)
         if instantiate:
             self.component = self.raw_instantiate(guid or self.md.guid, resource_uri)
             assert self.component, self.messages
@@ -114,6 +134,8 @@ class Slave:
         return [m for s, _, m in self.messages if s >= fmi2.fmi2Error]
 
     def close(self):
+        if self in _current:
+            _current.remove(self)
         if getattr(self.fmu, "component", None):
             self.fmu.freeInstance()
         else:
