@@ -657,17 +657,20 @@ fn schedule(start: f64, stop: f64, step: f64, events: &[f64], variable_step: boo
     let mut times = vec![start];
     let mut time = start;
     let mut n: u64 = 0;
+    let mut pending = 0;
     loop {
         if time > stop || isclose(time, stop) {
             break;
         }
         let regular = start + (n + 1) as f64 * step;
         let mut next = regular;
-        let event = events
-            .iter()
-            .copied()
-            .find(|&e| e > time && !isclose(e, time))
-            .unwrap_or(f64::INFINITY);
+        // The next event after `time`: time only grows, so the search resumes where it
+        // stopped (one pass over the events for the whole schedule, not one per point).
+        while pending < events.len() && (events[pending] <= time || isclose(events[pending], time))
+        {
+            pending += 1;
+        }
+        let event = events.get(pending).copied().unwrap_or(f64::INFINITY);
         if variable_step && next > event && !isclose(next, event) {
             next = event;
         }
