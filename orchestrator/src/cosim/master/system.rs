@@ -228,6 +228,11 @@ struct Node {
     kind: Kind,
     /// Per input port: where its value comes from (None: left at the FMU's own value).
     sources: Vec<Option<Port>>,
+    /// Per input port: whether it is sampled (see [`System::connect_sampled`]).
+    sampled: Vec<bool>,
+    /// The outputs as the last step left them, before the point's inputs were applied (kept
+    /// only when some sampled connection reads this node).
+    held: Vec<f64>,
     inputs: Vec<f64>,
     outputs: Vec<f64>,
     /// String values, per port (empty for the other types).
@@ -371,6 +376,8 @@ pub struct System {
     pub interpolate_inputs: bool,
     /// Whether some node's input comes from another node's output (fixed when the run starts).
     coupled: bool,
+    /// Whether some connection is sampled (fixed when the run starts).
+    sampling: bool,
 }
 
 impl Default for System {
@@ -388,6 +395,7 @@ impl System {
             recording: Recording::default(),
             interpolate_inputs: true,
             coupled: false,
+            sampling: false,
         }
     }
 
@@ -439,6 +447,8 @@ impl System {
             name: name.to_owned(),
             kind,
             sources: vec![None; n_in],
+            sampled: vec![false; n_in],
+            held: vec![0.0; n_out],
             inputs: vec![0.0; n_in],
             outputs: vec![0.0; n_out],
             text_inputs: vec![String::new(); n_in],
@@ -515,6 +525,28 @@ impl System {
         Ok(())
     }
 
+    /// Connect as a sampled-data controller reads its sensors: `to`'s input takes `from`'s
+    /// value as the last step left it, before the communication point's inputs are applied
+    /// (at `t_0`: after initialisation, before any input is set). Inside a point the value is
+    /// constant, so a loop through a feedthrough output (a measured acceleration fed back as
+    /// a control force) closes without an algebraic loop: what a digital controller does when
+    /// it samples, computes and then holds its output over the next step.
+    pub fn connect_sampled(
+        &mut self,
+        from: Port,
+        to: NodeId,
+        input: usize,
+    ) -> Result<(), MasterError> {
+        if !matches!(from, Port::Output(..)) {
+            return Err(MasterError::Config(
+                "only a node's output can be sampled (a replayed signal already is)".into(),
+            ));
+        }
+        self.connect(from, to, input)?;
+        self.nodes[to.0].sampled[input] = true;
+        Ok(())
+    }
+
     pub fn node_name(&self, id: NodeId) -> &str {
         &self.nodes[id.0].name
     }
@@ -527,6 +559,25 @@ impl System {
                 samples[k.min(samples.len() - 1)]
             }
         }
+    }
+
+    /// A sampled connection's value: the source's outputs as the last step left them.
+    fn held_value(&self, port: Port, k: usize) -> f64 {
+        match port {
+            Port::Output(NodeId(n), p) => self.nodes[n].held[p],
+            Port::Signal(_) => self.value(port, k),
+        }
+    }
+
+    /// Before a point's inputs are applied: read every slave's outputs and keep every node's
+    /// outputs for the sampled connections.
+    fn hold_outputs(&mut self) -> Result<(), MasterError> {
+        for node in &mut self.nodes {
+            node.read_outputs()?;
+            node.held.clear();
+            node.held.extend_from_slice(&node.outputs);
+        }
+        Ok(())
     }
 
     fn text(&self, port: Port) -> &str {
@@ -573,7 +624,11 @@ impl System {
         let mut changed = false;
         for p in 0..self.nodes[i].sources.len() {
             if let Some(port) = self.nodes[i].sources[p] {
-                let v = self.value(port, k);
+                let v = if self.nodes[i].sampled[p] {
+                    self.held_value(port, k)
+                } else {
+                    self.value(port, k)
+                };
                 changed |= self.nodes[i].inputs[p].to_bits() != v.to_bits();
                 self.nodes[i].inputs[p] = v;
                 let is_text = self.nodes[i].text_inputs_connected
@@ -708,6 +763,7 @@ impl System {
                 .iter()
                 .any(|s| matches!(s, Some(Port::Output(..))))
         });
+        self.sampling = self.nodes.iter().any(|n| n.sampled.contains(&true));
         let interpolate = self.interpolate_inputs;
         for (i, node) in self.nodes.iter_mut().enumerate() {
             if let Some(p) = node.sources.iter().position(Option::is_none) {
@@ -782,9 +838,14 @@ impl System {
                 time,
                 inner: Box::new(e),
             };
+            if self.sampling {
+                self.hold_outputs().map_err(at)?;
+            }
             if k > 0 && self.recording == Recording::BeforeInputs {
-                for node in &mut self.nodes {
-                    node.read_outputs().map_err(at)?;
+                if !self.sampling {
+                    for node in &mut self.nodes {
+                        node.read_outputs().map_err(at)?;
+                    }
                 }
                 self.observe(observers, time, k as usize, &mut buffer);
                 self.propagate(k as usize, time).map_err(at)?;
@@ -1083,6 +1144,53 @@ mod tests {
             "{} vs {expected}",
             rec.columns[0][100]
         );
+    }
+
+    /// The loop of `blocks_close_loops_in_zero_time`, sampled: the block reads `x + u` as the
+    /// step left it (`x_k + u_{k−1}`), so the loop closes once per point and follows the
+    /// discrete controller's recurrence exactly.
+    #[test]
+    fn sampled_connections_close_feedthrough_loops_as_a_digital_controller() {
+        let mut system = System::new();
+        let slave = system.add_slave("int", Box::new(Integrator::new(false)), vec![10], vec![2]);
+        let calls = std::rc::Rc::new(std::cell::Cell::new(0usize));
+        let counter = calls.clone();
+        let block = system.add_block(
+            "ctrl",
+            Box::new(move |_t: f64, inputs: &[f64], outputs: &mut [f64]| {
+                counter.set(counter.get() + 1);
+                outputs[0] = 1.0 - inputs[0];
+                Ok(())
+            }),
+            1,
+            1,
+        );
+        system
+            .connect_sampled(Port::Output(slave, 0), block, 0)
+            .expect("connect");
+        system
+            .connect(Port::Output(block, 0), slave, 0)
+            .expect("connect");
+        assert!(system.connect_sampled(Port::Signal(0), block, 0).is_err());
+        let (h, steps) = (0.1, 10);
+        let mut rec = Recorder::new(vec![
+            ("x+u".into(), Port::Output(slave, 0)),
+            ("u".into(), Port::Output(block, 0)),
+        ]);
+        system
+            .run(Clock::new(0.0, h, steps), &mut [&mut rec], |_, _| {})
+            .expect("a sampled loop settles");
+        let (mut x, mut u) = (0.0f64, 0.0f64);
+        for k in 0..=steps as usize {
+            u = 1.0 - (x + u);
+            assert!((rec.columns[1][k] - u).abs() < 1e-15, "u at k = {k}");
+            assert!(
+                (rec.columns[0][k] - (x + u)).abs() < 1e-15,
+                "x + u at k = {k}"
+            );
+            x += h * u;
+        }
+        assert_eq!(calls.get(), steps as usize + 1, "one evaluation per point");
     }
 
     #[test]
