@@ -3,6 +3,9 @@
 //! model lightly and moderately damped, in metres and millimetres, q = 1 … 1e6, and three generic
 //! systems), and the failures it must report instead of a gain.
 
+// The checks are written `!(value <= limit)` on purpose: a NaN must fail them.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use numerics::control::{solve_care, Care, DMatrix, RiccatiError};
 use serde::Deserialize;
 

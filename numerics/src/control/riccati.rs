@@ -36,6 +36,9 @@
 //!    X positive semidefinite (smallest eigenvalue at least `−1e-10 ‖X‖₂`), every pole of
 //!    `A − BK` strictly in the left half plane. Any failure is an error, never a gain.
 
+// The checks are written `!(value < limit)` on purpose: a NaN must fail them.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use nalgebra::linalg::balancing::balance_parlett_reinsch;
 use nalgebra::{Complex, DMatrix, DVector, Schur};
 
