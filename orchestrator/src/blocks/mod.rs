@@ -1,4 +1,5 @@
 //! Zero-time blocks of the master: functions of their inputs evaluated at each communication
-//! point (the active-learning supervisor; next, the LQR).
+//! point: the LQR controller and the active-learning supervisor.
 
+pub mod lqr;
 pub mod supervisor;

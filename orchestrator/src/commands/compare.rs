@@ -10,8 +10,10 @@ use super::{progress_bar, run_and_compare, write_atomically, write_json, Compare
 use crate::evaluation::compare::Comparison;
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
+use crate::twin::run::compare_prediction;
 use crate::twin::run::Prediction;
 use crate::twin::Twin;
+use crate::workflows::control::{predict_controlled, ControllerSpec};
 
 #[derive(clap::Args)]
 pub struct CompareArgs {
@@ -40,6 +42,13 @@ pub struct CompareArgs {
     /// measured variance on this record.
     #[arg(long)]
     pub latent_threshold: Option<f64>,
+    /// A `twin control` report: predict the record as the twin in a closed loop with its
+    /// controller (for records of the controlled structure).
+    #[arg(long)]
+    pub controller: Option<PathBuf>,
+    /// Which of the report's designs (its q); default the first stable one.
+    #[arg(long, requires = "controller")]
+    pub controller_q: Option<f64>,
     /// Seconds at the start left out of the error measures.
     #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
@@ -66,12 +75,24 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         );
     }
     let twin = Twin::load(args.twin.as_deref())?;
+    let compared = match &args.controller {
+        None => run_and_compare(&twin, &data, args.transient, progress_bar())?,
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+            let spec = ControllerSpec::from_json(&text, &path.display().to_string())?;
+            let mut progress = progress_bar();
+            let prediction =
+                predict_controlled(&twin, &data, &spec, args.controller_q, &mut progress)?;
+            compare_prediction(&twin, &data, args.transient, prediction)
+        }
+    };
     let Compared {
         prediction,
         comparison,
         noise_variance,
         noise_source,
-    } = run_and_compare(&twin, &data, args.transient, progress_bar())?;
+    } = compared;
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {

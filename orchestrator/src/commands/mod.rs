@@ -14,6 +14,7 @@ pub(crate) use crate::twin::run::{nmse_on, run_and_compare, Compared};
 pub mod add_physics;
 pub mod calibrate;
 pub mod compare;
+pub mod control;
 pub mod diagnose;
 pub mod init;
 pub mod learn;
@@ -56,6 +57,9 @@ pub enum Command {
     AddPhysics(add_physics::AddPhysicsArgs),
     /// Run any FMI 2.0 co-simulation FMU or SSP system and record its outputs as CSV.
     Run(run::RunArgs),
+    /// LQR control designed on the twin: attenuation, control effort and contact initiations,
+    /// passive and under each design; retuning and gain scheduling informed by the twin.
+    Control(control::ControlArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -70,6 +74,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Diagnose(args) => diagnose::run(&args),
         Command::AddPhysics(args) => add_physics::run(&args),
         Command::Run(args) => run::run(&args),
+        Command::Control(args) => control::run(&args),
     }
 }
 

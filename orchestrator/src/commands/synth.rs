@@ -7,9 +7,10 @@ use anyhow::{anyhow, bail, Result};
 
 use super::{write_json, write_text_atomically};
 use crate::synth::{
-    csv_text, parse_change_flag, parse_effect_flag, synth_record, BetweenSamples, ForceWindow,
-    NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
+    csv_text, parse_change_flag, parse_effect_flag, synth_controlled, BetweenSamples, ForceWindow,
+    InLoopController, NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
 };
+use crate::workflows::control::ControllerSpec;
 
 const AFTER_HELP: &str = "\
 Scenario JSON (every field optional; see the orchestrator::synth documentation):
@@ -93,6 +94,13 @@ pub struct SynthArgs {
     /// Parameter change (repeatable): k2@8:0.85 (factor) or k2@8=3500 (value).
     #[arg(long = "change", value_name = "PARAM@TIME:FACTOR|PARAM@TIME=VALUE")]
     pub changes: Vec<String>,
+    /// A `twin control` report: its controller runs in the structure's loop (fed the noisy
+    /// measured accelerations) and the record gets a `control` column.
+    #[arg(long)]
+    pub controller: Option<PathBuf>,
+    /// Which of the report's designs (its q); default the first stable one.
+    #[arg(long, requires = "controller")]
+    pub controller_q: Option<f64>,
 }
 
 impl SynthArgs {
@@ -201,7 +209,26 @@ impl SynthArgs {
 pub fn run(args: &SynthArgs) -> Result<()> {
     let started = std::time::Instant::now();
     let scenario = args.scenario()?;
-    let (record, truth) = synth_record(&scenario)?;
+    let control = match &args.controller {
+        None => None,
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow!("cannot read {}: {e}", path.display()))?;
+            let spec = ControllerSpec::from_json(&text, &path.display().to_string())?;
+            // Refuse a bad report or design now, before the record is made.
+            spec.controller(args.controller_q, 1.0 / spec.control_rate_hz)?;
+            let q = args.controller_q;
+            let interval = 1.0 / spec.control_rate_hz;
+            let sd = spec.sensor_noise_sd.unwrap_or([0.0; 3]);
+            Some(InLoopController {
+                make: Box::new(move |dt| spec.controller(q, dt).map_err(|e| e.to_string())),
+                interval,
+                sensor_sd: sd,
+                seed: scenario.seed,
+            })
+        }
+    };
+    let (record, truth) = synth_controlled(&scenario, control)?;
     let elapsed = started.elapsed();
     // Everything is computed before anything is written.
     let text = csv_text(&record.measurement);

@@ -35,19 +35,31 @@ pub fn format_g9(x: f64) -> String {
     }
 }
 
-/// The record as CSV text: `time,force,acc1,acc2,acc3`.
+/// The record as CSV text: `time,force,acc1,acc2,acc3`, then `control` when the record has
+/// a control force.
 pub fn csv_text(m: &Measurement) -> String {
-    let mut text = String::with_capacity(64 * (m.len() + 1));
-    text.push_str("time,force,acc1,acc2,acc3\n");
+    let control = m.extra.get("control").filter(|c| c.len() == m.len());
+    let mut text = String::with_capacity(80 * (m.len() + 1));
+    text.push_str("time,force,acc1,acc2,acc3");
+    text.push_str(if control.is_some() {
+        ",control\n"
+    } else {
+        "\n"
+    });
     for k in 0..m.len() {
         text.push_str(&format!(
-            "{:.6},{},{},{},{}\n",
+            "{:.6},{},{},{},{}",
             m.time[k],
             format_g9(m.force[k]),
             format_g9(m.acc[0][k]),
             format_g9(m.acc[1][k]),
             format_g9(m.acc[2][k])
         ));
+        if let Some(c) = control {
+            text.push(',');
+            text.push_str(&format_g9(c[k]));
+        }
+        text.push('\n');
     }
     text
 }

@@ -205,6 +205,7 @@ const MAX_FINE_POINTS: usize = 1 << 26;
 const MAX_OVERSAMPLE: u32 = 100_000;
 const FORCE_STREAM: u64 = 1;
 const NOISE_STREAM: u64 = 2;
+const CONTROL_SENSOR_STREAM: u64 = 3;
 
 // ---------------------------------------------------------------------------------------------
 // Making a record
@@ -245,6 +246,31 @@ pub struct HysteresisTrace {
 
 /// Make a record: see the module documentation.
 pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
+    synth_controlled(s, None)
+}
+
+/// Builds the controller for the interval it will sample at (s).
+pub type ControllerFactory =
+    Box<dyn FnOnce(f64) -> std::result::Result<numerics::lqr::Controller, String>>;
+
+/// A controller in the synthetic structure's loop: about every `interval` seconds (a whole
+/// number of fine steps) it reads the floor accelerations (with its own sensor noise:
+/// `sensor_sd`, m/s², drawn from `seed`) and the force, and holds its control force until the
+/// next reading.
+pub struct InLoopController {
+    pub make: ControllerFactory,
+    pub interval: f64,
+    pub sensor_sd: [f64; 3],
+    pub seed: u64,
+}
+
+/// Make a record with a controller in the loop (`None`: passive, as [`synth_record`]). The
+/// record gets a `control` column: the control force at each sample, as the controller set it
+/// there.
+pub fn synth_controlled(
+    s: &Scenario,
+    control: Option<InLoopController>,
+) -> Result<(SynthRecord, Truth)> {
     s.validate("scenario")?;
     let n = s.samples();
     let os = s.oversample as usize;
@@ -308,13 +334,36 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
             work: Vec::with_capacity(n),
         })
         .collect();
+    // The controller reads every `period` fine steps.
+    let (period, seed) = match &control {
+        Some(c) => {
+            if !(c.interval.is_finite() && c.interval > 0.0) {
+                return Err(SynthError::Record(format!(
+                    "the controller's interval must be positive, got {} s",
+                    c.interval
+                )));
+            }
+            (((c.interval / hf).round() as usize).max(1), c.seed)
+        }
+        None => (usize::MAX, 0),
+    };
+    let mut control = match control {
+        Some(c) => {
+            let controller = (c.make)(period as f64 * hf).map_err(SynthError::Record)?;
+            Some((controller, c.sensor_sd))
+        }
+        None => None,
+    };
+    let mut sensor_rng = ChaCha8Rng::seed_from_u64(seed);
+    sensor_rng.set_stream(CONTROL_SENSOR_STREAM);
+    let mut control_at_samples = control.as_ref().map(|_| vec![0.0; n]);
     for k in 0..n {
         let j0 = k * os;
         while next_change < changes.len() && changes[next_change].at <= j0 as f64 * hf {
             apply(&mut model, changes[next_change]);
             next_change += 1;
         }
-        let a = hysteretic.acceleration(&model, fine_force[j0]);
+        let a = hysteretic.acceleration(&model, fine_force[j0] - model.control_force.value);
         for f in 0..3 {
             clean_acc[f][k] = a[f];
             stats.max_acc[f] = stats.max_acc[f].max(a[f].abs());
@@ -337,6 +386,32 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
             } else {
                 fine_force[0]
             };
+            if let Some((controller, sensor_sd)) = &mut control {
+                if j % period == 0 {
+                    // The sensors read the structure as it is, under the force held so far.
+                    let a =
+                        hysteretic.acceleration(&model, fine_force[j] - model.control_force.value);
+                    let mut measured = [0.0; 3];
+                    for f in 0..3 {
+                        let z: f64 = StandardNormal.sample(&mut sensor_rng);
+                        measured[f] = a[f] + sensor_sd[f] * z;
+                    }
+                    let u = controller.step(measured, fine_force[j]);
+                    if !u.is_finite() {
+                        return Err(SynthError::Record(format!(
+                            "the controller in the loop gave a non-finite force at t = {:.6} s",
+                            j as f64 * hf
+                        )));
+                    }
+                    model.control_force.value = u;
+                    model.control_force.slope = 0.0;
+                }
+                if j == j0 {
+                    if let Some(cs) = &mut control_at_samples {
+                        cs[k] = model.control_force.value;
+                    }
+                }
+            }
             model.force.value = fine_force[j];
             model.force.slope = (next - fine_force[j]) / hf;
             let mut t = t0;
@@ -397,13 +472,21 @@ pub fn synth_record(s: &Scenario) -> Result<(SynthRecord, Truth)> {
         .map(|x| round9(x + force_sd * gauss()))
         .collect();
     let time: Vec<f64> = (0..n).map(|k| round_time(k as f64 * dt)).collect();
+    let mut extra = HashMap::new();
+    if let Some(mut cs) = control_at_samples {
+        // The last sample's control force: as the controller left it.
+        if n > 0 {
+            cs[n - 1] = model.control_force.value;
+        }
+        extra.insert("control".to_owned(), cs.into_iter().map(round9).collect());
+    }
     let measurement = Measurement {
         path: PathBuf::from("<synthetic>"),
         time,
         force,
         acc,
         dt,
-        extra: HashMap::new(),
+        extra,
     };
 
     // The truth.

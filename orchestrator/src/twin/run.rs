@@ -203,6 +203,17 @@ pub fn run_and_compare(
     progress: impl FnMut(u64, u64),
 ) -> Result<Compared, RunError> {
     let prediction = run_twin(twin, data, progress)?;
+    Ok(compare_prediction(twin, data, transient, prediction))
+}
+
+/// Compare a prediction the twin made some other way (e.g. in a closed loop) with `data`, as
+/// [`run_and_compare`] does.
+pub fn compare_prediction(
+    twin: &Twin,
+    data: &Measurement,
+    transient: f64,
+    prediction: Prediction,
+) -> Compared {
     let (noise_variance, noise_source) = match twin.noise_variance {
         Some(v) => (v, "twin (calibrated)"),
         None => (
@@ -222,12 +233,12 @@ pub fn run_and_compare(
         prediction.sd.as_ref(),
         options,
     );
-    Ok(Compared {
+    Compared {
         prediction,
         comparison,
         noise_variance,
         noise_source,
-    })
+    }
 }
 
 /// NMSE per floor of `twin` on `data` after the transient.

@@ -1,0 +1,123 @@
+//! The LQR controller as a zero-time block of the master: inputs the floor accelerations (through
+//! sampled connections: what the sensors read as the last step left the structure) and the
+//! excitation force; outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
+//! held over the next step, and which gain is on. The law itself is `numerics::lqr`, shared with
+//! the controller FMU.
+
+use numerics::lqr::{Controller, Scheduler, FLOORS, STATES};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::cosim::master::{Block, MasterError};
+
+/// Gain scheduling inside the block: the scheduler and the gains it switches between.
+pub struct Scheduled {
+    pub scheduler: Scheduler,
+    pub low: [f64; STATES],
+    pub high: [f64; STATES],
+}
+
+/// Accelerometer noise added to what the controller reads (the structure's own outputs are
+/// noise-free): per-floor sd (m/s²) and a seed, so runs repeat.
+#[derive(Clone, Copy, Debug)]
+pub struct SensorNoise {
+    pub sd: [f64; FLOORS],
+    pub seed: u64,
+}
+
+pub struct LqrBlock {
+    controller: Controller,
+    scheduled: Option<Scheduled>,
+    noise: Option<(ChaCha8Rng, [f64; FLOORS])>,
+    /// A control force beyond this (N) means the loop has gone unstable: the run stops.
+    force_limit: f64,
+    last: Option<(f64, [f64; 4])>,
+}
+
+impl LqrBlock {
+    pub const INPUTS: usize = 4;
+    /// `control_force`, `high_gain` (1 when the scheduler has the high gain on).
+    pub const OUTPUTS: usize = 2;
+
+    pub fn new(
+        controller: Controller,
+        scheduled: Option<Scheduled>,
+        noise: Option<SensorNoise>,
+        force_limit: f64,
+    ) -> Self {
+        // A negative or non-finite sd reads as no noise on that floor.
+        let noise = noise.map(|n| {
+            (
+                ChaCha8Rng::seed_from_u64(n.seed),
+                n.sd.map(|sd| if sd.is_finite() { sd.max(0.0) } else { 0.0 }),
+            )
+        });
+        LqrBlock {
+            controller,
+            scheduled,
+            noise,
+            force_limit,
+            last: None,
+        }
+    }
+}
+
+impl Block for LqrBlock {
+    fn evaluate(
+        &mut self,
+        time: f64,
+        inputs: &[f64],
+        outputs: &mut [f64],
+    ) -> Result<(), MasterError> {
+        let now = [inputs[0], inputs[1], inputs[2], inputs[3]];
+        if let Some((t, seen)) = self.last {
+            // The law has state: one sample per communication point. Sampled inputs do not
+            // move inside a point, so a second call there can only be a wiring mistake.
+            if t == time {
+                if seen == now {
+                    return Ok(());
+                }
+                return Err(MasterError::Config(
+                    "the LQR block's inputs changed inside a communication point: connect the \
+                     accelerations with `connect_sampled`"
+                        .into(),
+                ));
+            }
+        }
+        self.last = Some((time, now));
+        let mut acc = [inputs[0], inputs[1], inputs[2]];
+        if let Some((rng, sd)) = &mut self.noise {
+            for (a, s) in acc.iter_mut().zip(sd.iter()) {
+                let z: f64 = StandardNormal.sample(rng);
+                *a += s * z;
+            }
+        }
+        if acc.iter().chain([&inputs[3]]).any(|v| !v.is_finite()) {
+            return Err(MasterError::Config(format!(
+                "the controller read a non-finite measurement at t = {time} s: {acc:?}, force {}",
+                inputs[3]
+            )));
+        }
+        self.controller.observe(acc, inputs[3]);
+        let mut high = 0.0;
+        if let Some(s) = &mut self.scheduled {
+            let on = s
+                .scheduler
+                .decide(time, &self.controller.estimate_si(), None);
+            self.controller.set_gain(if on { s.high } else { s.low });
+            high = f64::from(u8::from(on));
+        }
+        let force = self.controller.output();
+        if !force.is_finite() || force.abs() > self.force_limit {
+            return Err(MasterError::Config(format!(
+                "closed loop unstable: the control force reached {force:.3e} N at t = {time} s \
+                 (limit {:.3e} N)",
+                self.force_limit
+            )));
+        }
+        outputs[0] = force;
+        outputs[1] = high;
+        Ok(())
+    }
+}

@@ -1,0 +1,258 @@
+//! `twin control`: LQR designs on the twin, the structure driven by a record's force passive and
+//! under each design, the attenuation, control effort and contact initiations; `--retune` and
+//! `--schedule` let the twin inform the control.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+
+use super::{progress_bar, write_json, write_text_atomically};
+use crate::report::control_plot::plot_control;
+use crate::twin::data::Measurement;
+use crate::twin::Twin;
+use crate::workflows::control::closed_loop::Gap;
+use crate::workflows::control::{
+    run_control, ControlOptions, EstimatorChoice, Retune, ScheduleOptions, StateUnit,
+};
+use fmu_shear::effects::kind::{Kind, Law, Side};
+
+#[derive(clap::Args)]
+pub struct ControlArgs {
+    /// The twin (.ssp) whose structure is controlled (its calibrated m, c, k; its effects).
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// The record whose force drives the structure.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// State weight q of Q = q·diag(0, I); repeat for several designs.
+    #[arg(long = "q", required = true, num_args = 1..)]
+    pub q: Vec<f64>,
+    /// Control weight R (N⁻², > 0).
+    #[arg(long = "r", default_value_t = 0.1)]
+    pub r: f64,
+    /// Unit of the designed state: q and R mean something only with it.
+    #[arg(long, value_enum, default_value_t = StateUnit::M)]
+    pub state_unit: StateUnit,
+    /// How the controller estimates the state from the measured accelerations.
+    #[arg(long, value_enum, default_value_t = EstimatorChoice::Integrate)]
+    pub estimator: EstimatorChoice,
+    /// Corner (Hz) of the integrating estimator's drift removal.
+    #[arg(long, default_value_t = 0.5)]
+    pub highpass: f64,
+    /// Controller samples per record sample (default: from the fastest closed-loop pole).
+    #[arg(long)]
+    pub substeps: Option<usize>,
+    /// Accelerometer noise sd (m/s², every floor) the controller reads; default: the twin's
+    /// calibrated noise; 0 for none.
+    #[arg(long)]
+    pub sensor_noise: Option<f64>,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// A gap to watch for contact besides the twin's own: `2-3:5e-4[:negative|positive|both]`
+    /// (storey by its floors, gap in m).
+    #[arg(long)]
+    pub gap: Vec<String>,
+    /// Find the smallest q (on a grid from the smallest --q up to 100×) keeping the contact
+    /// initiations at or below --target-contacts.
+    #[arg(long)]
+    pub retune: bool,
+    #[arg(long, default_value_t = 3)]
+    pub target_contacts: usize,
+    /// Largest peak control force (N) a retuned design may use.
+    #[arg(long)]
+    pub max_force: Option<f64>,
+    /// Gain scheduling: the lowest q normally, the highest (or the retuned) q while the
+    /// estimated drift comes within --margin of the gap.
+    #[arg(long)]
+    pub schedule: bool,
+    /// Fraction of the gap: the high gain comes on when the projected drift passes
+    /// (1 − margin)·gap.
+    #[arg(long, default_value_t = 0.4)]
+    pub margin: f64,
+    /// Seconds ahead the drift is projected (drift + lookahead · drift rate).
+    #[arg(long, default_value_t = 0.02)]
+    pub lookahead: f64,
+    /// Seconds the high gain stays on after the last trigger (against chattering).
+    #[arg(long, default_value_t = 0.5)]
+    pub dwell: f64,
+    /// Also run the first design with the exact state and with each estimator, to show what
+    /// the estimation costs in attenuation.
+    #[arg(long)]
+    pub estimator_costs: bool,
+    /// JSON report.
+    #[arg(long)]
+    pub report: PathBuf,
+    /// Plot (.svg): FRFs per floor and time histories with the contact initiations.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+fn parse_gap(text: &str) -> Result<Gap> {
+    let parts: Vec<&str> = text.split(':').collect();
+    let usage = || {
+        format!("--gap {text}: expected STOREY:GAP[:SIDE], e.g. 2-3:5e-4:negative (storey 1-2, 2-3 or 0-1)")
+    };
+    if !(2..=3).contains(&parts.len()) {
+        bail!(usage());
+    }
+    let storey = match parts[0] {
+        "0-1" => 1,
+        "1-2" => 2,
+        "2-3" => 3,
+        _ => bail!(usage()),
+    };
+    let gap: f64 = parts[1].parse().with_context(usage)?;
+    if !(gap.is_finite() && gap > 0.0) {
+        bail!("--gap {text}: the gap must be a positive number of metres");
+    }
+    let side = match parts.get(2) {
+        None => Side::Both,
+        Some(s) => Side::parse(s).with_context(usage)?,
+    };
+    let start: Vec<f64> = Kind::Contact
+        .real_params()
+        .iter()
+        .map(|p| p.start)
+        .collect();
+    let mut reals = start;
+    reals[0] = gap;
+    let law = Law::new(Kind::Contact, &reals, side).context("contact law")?;
+    Ok(Gap { storey, law })
+}
+
+pub fn run(args: &ControlArgs) -> Result<()> {
+    if let Some(plot) = &args.plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            bail!("{}: only .svg plots are supported", plot.display());
+        }
+    }
+    for &q in &args.q {
+        if !(q.is_finite() && q >= 0.0) {
+            bail!("--q {q}: the state weight must be a finite number ≥ 0");
+        }
+    }
+    if !(args.r.is_finite() && args.r > 0.0) {
+        bail!(
+            "--r {}: the control weight must be a finite number > 0",
+            args.r
+        );
+    }
+    if let Some(m) = args.max_force {
+        if !(m.is_finite() && m > 0.0) {
+            bail!("--max-force {m}: must be a positive number of newtons");
+        }
+    }
+    let sensor_noise = match args.sensor_noise {
+        Some(s) if s.is_finite() && s >= 0.0 => (s > 0.0).then_some([s; 3]),
+        Some(s) => bail!("--sensor-noise {s}: must be a number ≥ 0 (m/s²)"),
+        None => None,
+    };
+    let gaps = args
+        .gap
+        .iter()
+        .map(|g| parse_gap(g))
+        .collect::<Result<Vec<_>>>()?;
+    let data = Measurement::read(&args.data)?;
+    let mut twin = Twin::load(args.twin.as_deref())?;
+    if args.sensor_noise == Some(0.0) {
+        twin.noise_variance = None;
+    }
+    let options = ControlOptions {
+        qs: args.q.clone(),
+        r: args.r,
+        unit: args.state_unit,
+        estimator: args.estimator,
+        highpass_hz: args.highpass,
+        substeps: args.substeps,
+        sensor_noise,
+        seed: args.seed,
+        gaps,
+        retune: args.retune.then_some(Retune {
+            target: args.target_contacts,
+            max_force: args.max_force,
+        }),
+        schedule: args.schedule.then_some(ScheduleOptions {
+            margin: args.margin,
+            lookahead: args.lookahead,
+            dwell: args.dwell,
+        }),
+        estimator_costs: args.estimator_costs,
+    };
+    let mut progress = progress_bar();
+    let outcome = run_control(&twin, &data, &options, &mut progress)?;
+    let svg = match &args.plot {
+        Some(path) => Some((
+            path,
+            plot_control(
+                &outcome,
+                &format!("twin control on {}", args.data.display()),
+            )
+            .map_err(|m| anyhow::anyhow!("cannot draw {}: {m}", path.display()))?,
+        )),
+        None => None,
+    };
+    write_json(&args.report, &outcome.report)?;
+    if let Some((path, text)) = svg {
+        write_text_atomically(path, &text)?;
+    }
+    print_summary(&outcome.report);
+    Ok(())
+}
+
+fn print_summary(r: &crate::workflows::control::ControlReport) {
+    println!(
+        "twin control: {} on {} (state in {}, R = {}, estimator {}, controller at {:.1} Hz)",
+        r.twin, r.data, r.state_unit, r.r, r.estimator, r.control_rate_hz
+    );
+    let gaps: Vec<String> = r
+        .gaps
+        .iter()
+        .map(|g| format!("{} (gap {:.3} mm)", g.storey, g.gap * 1e3))
+        .collect();
+    if !gaps.is_empty() {
+        println!("  contacts watched at {}", gaps.join(", "));
+    }
+    println!(
+        "  {:>12}  {:>8}  {:>14}  {:>14}  {:>14}",
+        "design", "contacts", "attenuation dB", "control RMS N", "control peak N"
+    );
+    println!(
+        "  {:>12}  {:>8}  {:>14}  {:>14}  {:>14}",
+        "passive", r.passive.contacts, "-", "-", "-"
+    );
+    for d in &r.designs {
+        match &d.unstable {
+            Some(m) => println!("  {:>12}  {m}", format!("q = {}", d.design.q)),
+            None => println!(
+                "  {:>12}  {:>8}  {:>14.2}  {:>14.4}  {:>14.4}",
+                format!("q = {}", d.design.q),
+                d.contacts,
+                d.mean_attenuation_db,
+                d.control_rms,
+                d.control_peak
+            ),
+        }
+    }
+    if let Some(s) = &r.schedule {
+        println!(
+            "  {:>12}  {:>8}  {:>14.2}  {:>14.4}  {:>14.4}   ({} switches, high gain {:.0} % of the time)",
+            format!("scheduled"),
+            s.contacts,
+            s.mean_attenuation_db,
+            s.control_rms,
+            s.control_peak,
+            s.switches.len(),
+            100.0 * s.high_fraction
+        );
+    }
+    if let Some(rt) = &r.retune {
+        println!("  retune: {}", rt.verdict);
+    }
+    for c in &r.estimator_costs {
+        println!(
+            "  state from {:>9}: mean attenuation {:.2} dB, control RMS {:.4} N, {} contacts",
+            c.estimator, c.mean_attenuation_db, c.control_rms, c.contacts
+        );
+    }
+}

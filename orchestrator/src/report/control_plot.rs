@@ -1,0 +1,219 @@
+//! The plot of `twin control` (the reference paper's Figs 16–18): per floor, the frequency
+//! response from the excitation force to the acceleration (left) and the acceleration's time
+//! history (right), passive and under each design (and the gain schedule); the contact
+//! initiations as vertical lines under the time histories, one row per run.
+
+use plotters::prelude::*;
+
+use super::palette;
+use crate::evaluation::frf::welch_h1;
+use crate::workflows::control::{ControlOutcome, FRF_SEGMENT};
+
+const FONT: &str = "sans-serif";
+const WIDTH: u32 = 1500;
+const ROW: u32 = 260;
+const COLOURS: [RGBColor; 4] = [
+    palette::BLUE,
+    palette::VERMILION,
+    palette::GREEN,
+    palette::ORANGE,
+];
+
+fn text(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+/// One line of the plot: its label, colour and accelerations (record rate).
+struct Run<'a> {
+    label: String,
+    colour: RGBColor,
+    acc: &'a [Vec<f64>; 3],
+    contacts: Vec<f64>,
+}
+
+/// The SVG text of the plot.
+pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, String> {
+    let mut runs = vec![Run {
+        label: format!("passive ({} contacts)", outcome.report.passive.contacts),
+        colour: palette::GREY,
+        acc: &outcome.passive.acc,
+        contacts: outcome.report.passive.contact_times.clone(),
+    }];
+    let mut c = 0;
+    for (d, r) in outcome.report.designs.iter().zip(&outcome.designs) {
+        if let Some(r) = r {
+            runs.push(Run {
+                label: format!("LQR q = {} ({} contacts)", d.design.q, d.contacts),
+                colour: COLOURS[c % COLOURS.len()],
+                acc: &r.acc,
+                contacts: d.contact_times.clone(),
+            });
+            c += 1;
+        }
+    }
+    if let (Some(s), Some(r)) = (&outcome.report.schedule, &outcome.scheduled) {
+        runs.push(Run {
+            label: format!(
+                "scheduled q = {} / {} ({} contacts)",
+                s.q_low, s.q_high, s.contacts
+            ),
+            colour: palette::DARK_GREY,
+            acc: &r.acc,
+            contacts: s.contact_times.clone(),
+        });
+    }
+    let dt = outcome.dt;
+    let n = outcome.force.len();
+    let nyquist = 0.5 / dt;
+    let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let t_end = time.last().copied().unwrap_or(1.0).max(dt);
+    let contact_rows = runs.len() as u32 * 16 + 60;
+    let height = 90 + 3 * ROW + contact_rows;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(text)?;
+        let root = root.titled(title, (FONT, 22)).map_err(text)?;
+        let (key, rest) = root.split_vertically(40);
+        let mut x = 80;
+        for run in &runs {
+            key.draw(&PathElement::new(
+                vec![(x, 20), (x + 30, 20)],
+                run.colour.stroke_width(2),
+            ))
+            .map_err(text)?;
+            key.draw(&Text::new(
+                run.label.clone(),
+                (x + 36, 12),
+                (FONT, 14).into_font(),
+            ))
+            .map_err(text)?;
+            x += 40 + 8 * run.label.len() as i32;
+        }
+        let (rows, bottom) = rest.split_vertically(3 * ROW);
+        let panels = rows.split_evenly((3, 2));
+        for floor in 0..3 {
+            // Frequency responses.
+            let frfs: Vec<_> = runs
+                .iter()
+                .map(|r| {
+                    welch_h1(
+                        &outcome.force,
+                        &r.acc[floor][..n.min(r.acc[floor].len())],
+                        dt,
+                        FRF_SEGMENT,
+                    )
+                })
+                .collect();
+            let (lo, hi) = frfs
+                .iter()
+                .flatten()
+                .flat_map(|h| h.magnitude_db.iter().copied())
+                .filter(|v| v.is_finite())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                    (a.min(v), b.max(v))
+                });
+            let (lo, hi) = if lo.is_finite() {
+                ((hi - 80.0).max(lo) - 2.0, hi + 3.0)
+            } else {
+                (-1.0, 1.0)
+            };
+            let mut chart = ChartBuilder::on(&panels[2 * floor])
+                .caption(
+                    format!("floor {}: force → acceleration", floor + 1),
+                    (FONT, 15),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.0..nyquist.min(30.0), lo..hi)
+                .map_err(text)?;
+            chart
+                .configure_mesh()
+                .x_desc("frequency (Hz)")
+                .y_desc("|H| (dB re 1 (m/s²)/N)")
+                .label_style((FONT, 12))
+                .max_light_lines(1)
+                .bold_line_style(BLACK.mix(0.10))
+                .light_line_style(BLACK.mix(0.04))
+                .draw()
+                .map_err(text)?;
+            for (run, h) in runs.iter().zip(&frfs) {
+                if let Some(h) = h {
+                    let pts = h
+                        .frequency
+                        .iter()
+                        .zip(&h.magnitude_db)
+                        .filter(|(f, m)| **f <= 30.0 && m.is_finite())
+                        .map(|(f, m)| (*f, m.max(lo)));
+                    chart
+                        .draw_series(LineSeries::new(pts, run.colour.stroke_width(1)))
+                        .map_err(text)?;
+                }
+            }
+            // Time histories.
+            let peak = runs
+                .iter()
+                .flat_map(|r| r.acc[floor].iter())
+                .fold(0.0f64, |m, v| m.max(v.abs()))
+                .max(1e-12)
+                * 1.05;
+            let mut chart = ChartBuilder::on(&panels[2 * floor + 1])
+                .caption(format!("floor {}: acceleration", floor + 1), (FONT, 15))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.0..t_end, -peak..peak)
+                .map_err(text)?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("m/s²")
+                .label_style((FONT, 12))
+                .max_light_lines(1)
+                .bold_line_style(BLACK.mix(0.10))
+                .light_line_style(BLACK.mix(0.04))
+                .draw()
+                .map_err(text)?;
+            for run in &runs {
+                let pts = time
+                    .iter()
+                    .zip(run.acc[floor].iter())
+                    .map(|(t, a)| (*t, *a));
+                chart
+                    .draw_series(LineSeries::new(pts, run.colour.mix(0.8).stroke_width(1)))
+                    .map_err(text)?;
+            }
+        }
+        // Contact initiations: one row of ticks per run (the paper's vertical lines).
+        let rows_n = runs.len() as f64;
+        let mut chart = ChartBuilder::on(&bottom)
+            .caption("contact initiations (drift crossing the gap)", (FONT, 15))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..t_end, 0.0..rows_n)
+            .map_err(text)?;
+        chart
+            .configure_mesh()
+            .disable_y_mesh()
+            .disable_y_axis()
+            .x_desc("time (s)")
+            .label_style((FONT, 12))
+            .draw()
+            .map_err(text)?;
+        for (i, run) in runs.iter().enumerate() {
+            let y = rows_n - i as f64 - 1.0;
+            for &t in &run.contacts {
+                chart
+                    .draw_series(LineSeries::new(
+                        [(t, y + 0.1), (t, y + 0.9)],
+                        run.colour.stroke_width(2),
+                    ))
+                    .map_err(text)?;
+            }
+        }
+        root.present().map_err(text)?;
+    }
+    Ok(svg)
+}

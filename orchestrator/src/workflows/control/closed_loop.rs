@@ -1,0 +1,419 @@
+//! The structure in the loop: the twin's physics FMU (with whatever effects it has) driven by a
+//! record's force, with or without the LQR block, through the master at the controller's rate.
+//! An observer keeps the accelerations at the record's rate, the control effort, the gain
+//! schedule's switches and the contact initiations (the drift of a storey with a contact crossing
+//! its gap, open → closed), all online.
+
+use fmu_shear::effects::kind::{Kind, Law, Side};
+use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace, FLOORS, STATES};
+
+use super::ControlError;
+use crate::blocks::lqr::{LqrBlock, Scheduled, SensorNoise};
+use crate::cosim::import::Instance;
+use crate::cosim::master::{Clock, NodeId, Observer, Port, Recording, System};
+use crate::twin::data::Measurement;
+use crate::twin::{ParameterValue, Twin, PHYSICS};
+
+/// A gap watched for contact: the storey (1-based: storey 3 joins floors 2 and 3) and its law.
+#[derive(Clone, Debug)]
+pub struct Gap {
+    pub storey: usize,
+    pub law: Law,
+}
+
+impl Gap {
+    pub fn gap(&self) -> f64 {
+        match &self.law {
+            Law::Contact(c) => c.gap,
+            _ => f64::NAN,
+        }
+    }
+
+    pub fn side(&self) -> i32 {
+        match &self.law {
+            Law::Contact(c) => c.side,
+            _ => 0,
+        }
+    }
+
+    /// "2-3" for storey 3.
+    pub fn label(&self) -> String {
+        format!("{}-{}", self.storey - 1, self.storey)
+    }
+}
+
+/// The contacts the twin's physics has switched on.
+pub fn twin_gaps(twin: &Twin) -> Vec<Gap> {
+    let Some(physics) = twin.component(PHYSICS) else {
+        return Vec::new();
+    };
+    let kind = Kind::Contact;
+    let mut gaps = Vec::new();
+    for location in 0..kind.locations() {
+        let prefix = kind.prefix(location);
+        let on = matches!(
+            physics.parameters.get(&format!("{prefix}_enabled")),
+            Some(ParameterValue::Boolean(true))
+        );
+        if !on {
+            continue;
+        }
+        let reals: Vec<f64> = kind
+            .real_params()
+            .iter()
+            .map(
+                |p| match physics.parameters.get(&format!("{prefix}_{}", p.suffix)) {
+                    Some(ParameterValue::Real(x)) => *x,
+                    _ => p.start,
+                },
+            )
+            .collect();
+        let side = match physics.parameters.get(&format!("{prefix}_side")) {
+            Some(ParameterValue::Integer(i)) => Side::from_code(*i).unwrap_or(Side::Both),
+            _ => Side::Both,
+        };
+        if let Some(law) = Law::new(kind, &reals, side) {
+            gaps.push(Gap {
+                storey: location + 1,
+                law,
+            });
+        }
+    }
+    gaps
+}
+
+/// Which gain the loop uses.
+#[derive(Clone, Debug)]
+pub enum Gains {
+    Fixed([f64; STATES]),
+    Scheduled {
+        low: [f64; STATES],
+        high: [f64; STATES],
+        schedule: numerics::lqr::Schedule,
+    },
+}
+
+/// How the controller knows the state.
+#[derive(Clone, Copy, Debug)]
+pub enum StateSource {
+    /// From the measured accelerations (with sensor noise when given).
+    Estimated(Estimator),
+    /// The structure's true displacements and velocities: the design's own optimum, the
+    /// reference an estimator's cost is measured against.
+    Exact,
+}
+
+/// The controller in the loop.
+#[derive(Clone, Debug)]
+pub struct LoopLaw {
+    pub gains: Gains,
+    pub state: StateSource,
+}
+
+/// The loop's fixed settings.
+#[derive(Clone, Debug)]
+pub struct LoopSetup {
+    pub plant: StateSpace,
+    /// Controller samples per record sample.
+    pub substeps: usize,
+    pub noise: Option<SensorNoise>,
+    pub gaps: Vec<Gap>,
+    /// A control force beyond this (N) stops the run as unstable.
+    pub force_limit: f64,
+}
+
+/// A contact initiation.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ContactEvent {
+    pub time: f64,
+    /// "2-3": the storey whose gap closed.
+    pub storey: String,
+}
+
+/// What one run of the loop gives.
+#[derive(Clone, Debug, Default)]
+pub struct Response {
+    /// At the record's rate.
+    pub time: Vec<f64>,
+    pub acc: [Vec<f64>; FLOORS],
+    pub control: Vec<f64>,
+    pub control_rms: f64,
+    pub control_peak: f64,
+    pub contacts: Vec<ContactEvent>,
+    /// (time, high gain on) at each switch of the schedule.
+    pub switches: Vec<(f64, bool)>,
+    /// Fraction of the time on the high gain.
+    pub high_fraction: f64,
+}
+
+/// The law on the structure's exact state: inputs as [`LqrBlock`]'s, then the displacements and
+/// velocities (m, m/s).
+struct ExactStateBlock {
+    gains: Gains,
+    scheduler: Option<Scheduler>,
+    scale: f64,
+    force_limit: f64,
+}
+
+impl crate::cosim::master::Block for ExactStateBlock {
+    fn evaluate(
+        &mut self,
+        time: f64,
+        inputs: &[f64],
+        outputs: &mut [f64],
+    ) -> Result<(), crate::cosim::master::MasterError> {
+        let mut w = [0.0; STATES];
+        w.copy_from_slice(&inputs[4..4 + STATES]);
+        let (gain, high) = match (&self.gains, &mut self.scheduler) {
+            (Gains::Fixed(g), _) => (*g, false),
+            (Gains::Scheduled { low, high, .. }, Some(s)) => {
+                let on = s.decide(time, &w, None);
+                (if on { *high } else { *low }, on)
+            }
+            (Gains::Scheduled { low, .. }, None) => (*low, false),
+        };
+        let u: f64 = gain
+            .iter()
+            .zip(w.iter())
+            .map(|(g, x)| g * x / self.scale)
+            .sum();
+        if !u.is_finite() || u.abs() > self.force_limit {
+            return Err(crate::cosim::master::MasterError::Config(format!(
+                "closed loop unstable: the control force reached {u:.3e} N at t = {time} s"
+            )));
+        }
+        outputs[0] = u;
+        outputs[1] = f64::from(u8::from(high));
+        Ok(())
+    }
+}
+
+struct LoopObserver {
+    ports: Vec<Port>,
+    substeps: usize,
+    gaps: Vec<Gap>,
+    closed: Vec<bool>,
+    k: usize,
+    response: Response,
+    sum_sq: f64,
+    points: usize,
+    high_points: usize,
+    high: bool,
+}
+
+impl Observer for LoopObserver {
+    fn record(&mut self, time: f64, values: &[f64]) {
+        // values: acc1..3, control force, high flag, then one drift per gap.
+        let r = &mut self.response;
+        if self.k.is_multiple_of(self.substeps) {
+            r.time.push(time);
+            for f in 0..FLOORS {
+                r.acc[f].push(values[f]);
+            }
+            r.control.push(values[3]);
+        }
+        self.k += 1;
+        let u = values[3];
+        self.sum_sq += u * u;
+        r.control_peak = r.control_peak.max(u.abs());
+        self.points += 1;
+        let high = values[4] != 0.0;
+        if high != self.high {
+            r.switches.push((time, high));
+            self.high = high;
+        }
+        self.high_points += usize::from(high);
+        for (i, gap) in self.gaps.iter().enumerate() {
+            let closed = gap.law.force_at(values[5 + i]) != 0.0;
+            if closed && !self.closed[i] {
+                r.contacts.push(ContactEvent {
+                    time,
+                    storey: gap.label(),
+                });
+            }
+            self.closed[i] = closed;
+        }
+    }
+
+    fn ports(&self) -> &[Port] {
+        &self.ports
+    }
+
+    fn will_record(&mut self, points: usize) {
+        let n = points / self.substeps + 1;
+        self.response.time.reserve(n);
+        for a in &mut self.response.acc {
+            a.reserve(n);
+        }
+        self.response.control.reserve(n);
+    }
+}
+
+/// The record's force at the controller's rate: linear between the record's samples.
+fn upsample(force: &[f64], substeps: usize) -> Vec<f64> {
+    let mut out = Vec::with_capacity((force.len() - 1) * substeps + 1);
+    for w in force.windows(2) {
+        for j in 0..substeps {
+            out.push(w[0] + (w[1] - w[0]) * j as f64 / substeps as f64);
+        }
+    }
+    out.push(*force.last().expect("a record has samples"));
+    out
+}
+
+/// Run the twin's physics on `data`'s force, passive (`law` None) or under `law`.
+pub fn simulate(
+    twin: &Twin,
+    data: &Measurement,
+    setup: &LoopSetup,
+    law: Option<&LoopLaw>,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Response, ControlError> {
+    let substeps = setup.substeps.max(1);
+    let start = data.time[0];
+    let instances = twin.instantiate(start)?;
+    let mut loaded = Vec::new();
+    let mut physics: Option<(Instance, Vec<u32>, Vec<u32>)> = None;
+    for (component, fmu, instance) in instances {
+        if component.name == PHYSICS {
+            let vr = |name: &str| {
+                fmu.value_reference(name)
+                    .map_err(|e| ControlError::Twin(e.to_string()))
+            };
+            let inputs = vec![vr("force")?, vr("control_force")?];
+            let mut outputs = Vec::new();
+            for prefix in ["acc", "disp", "vel"] {
+                for f in 1..=FLOORS {
+                    outputs.push(vr(&format!("{prefix}{f}"))?);
+                }
+            }
+            for gap in &setup.gaps {
+                outputs.push(vr(&format!("drift{}", gap.storey))?);
+            }
+            physics = Some((instance, inputs, outputs));
+        }
+        loaded.push(fmu);
+    }
+    let (instance, inputs, outputs) = physics.ok_or_else(|| {
+        ControlError::Twin(format!("{} has no '{PHYSICS}' component", twin.describe()))
+    })?;
+    let mut system = System::new();
+    // Observed as the sensors read the structure: at each point before the controller's new
+    // force acts (floor 1's acceleration jumps with it), which is what a record holds.
+    system.recording = Recording::BeforeInputs;
+    let plant = system.add_slave(PHYSICS, Box::new(instance), inputs, outputs);
+    let force = system.add_signal("force", upsample(&data.force, substeps));
+    system.connect(force, plant, 0)?;
+    let dt = data.dt / substeps as f64;
+    let controller: Option<NodeId> = match law {
+        None => None,
+        Some(law) => {
+            let block: Box<dyn crate::cosim::master::Block> = match law.state {
+                StateSource::Estimated(estimator) => {
+                    let (first, scheduled) = match &law.gains {
+                        Gains::Fixed(g) => (*g, None),
+                        Gains::Scheduled {
+                            low,
+                            high,
+                            schedule,
+                        } => (
+                            *low,
+                            Some(Scheduled {
+                                scheduler: Scheduler::new(schedule.clone())?,
+                                low: *low,
+                                high: *high,
+                            }),
+                        ),
+                    };
+                    let controller = Controller::new(&setup.plant, first, &estimator, dt)?;
+                    Box::new(LqrBlock::new(
+                        controller,
+                        scheduled,
+                        setup.noise,
+                        setup.force_limit,
+                    ))
+                }
+                StateSource::Exact => {
+                    let scheduler = match &law.gains {
+                        Gains::Scheduled { schedule, .. } => {
+                            Some(Scheduler::new(schedule.clone())?)
+                        }
+                        Gains::Fixed(_) => None,
+                    };
+                    Box::new(ExactStateBlock {
+                        gains: law.gains.clone(),
+                        scheduler,
+                        scale: setup.plant.state_scale,
+                        force_limit: setup.force_limit,
+                    })
+                }
+            };
+            let exact = matches!(law.state, StateSource::Exact);
+            let n_inputs = LqrBlock::INPUTS + if exact { STATES } else { 0 };
+            let node = system.add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
+            for f in 0..FLOORS {
+                system.connect_sampled(Port::Output(plant, f), node, f)?;
+            }
+            system.connect(force, node, 3)?;
+            if exact {
+                for s in 0..STATES {
+                    system.connect_sampled(Port::Output(plant, FLOORS + s), node, 4 + s)?;
+                }
+            }
+            system.connect(Port::Output(node, 0), plant, 1)?;
+            Some(node)
+        }
+    };
+    // Passive: the control force stays at the FMU's own 0, and the observer reads zeros.
+    let zero = system.add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
+    let mut ports: Vec<Port> = (0..FLOORS).map(|f| Port::Output(plant, f)).collect();
+    match controller {
+        Some(node) => ports.extend([Port::Output(node, 0), Port::Output(node, 1)]),
+        None => ports.extend([zero, zero]),
+    }
+    for (i, _) in setup.gaps.iter().enumerate() {
+        ports.push(Port::Output(plant, 3 * FLOORS + i));
+    }
+    let mut observer = LoopObserver {
+        ports,
+        substeps,
+        gaps: setup.gaps.clone(),
+        closed: vec![false; setup.gaps.len()],
+        k: 0,
+        response: Response::default(),
+        sum_sq: 0.0,
+        points: 0,
+        high_points: 0,
+        high: false,
+    };
+    let steps = ((data.len() - 1) * substeps) as u64;
+    let clock = Clock::new(start, dt, steps);
+    system
+        .run(clock, &mut [&mut observer], progress)
+        .map_err(|e| {
+            let text = e.to_string();
+            if text.contains("closed loop unstable") {
+                ControlError::Unstable(text)
+            } else {
+                ControlError::Master(e)
+            }
+        })?;
+    drop(system);
+    drop(loaded);
+    let mut response = observer.response;
+    let points = observer.points.max(1) as f64;
+    response.control_rms = (observer.sum_sq / points).sqrt();
+    response.high_fraction = observer.high_points as f64 / points;
+    Ok(response)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upsampling_is_linear_and_keeps_the_samples() {
+        let f = upsample(&[0.0, 4.0, 0.0], 4);
+        assert_eq!(f, vec![0.0, 1.0, 2.0, 3.0, 4.0, 3.0, 2.0, 1.0, 0.0]);
+    }
+}

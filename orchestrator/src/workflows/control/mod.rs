@@ -1,0 +1,900 @@
+//! Active control on the twin (the reference paper's section 6, automated): LQR designs on the
+//! twin's calibrated linear structure, the structure (the twin's physics, with whatever effects it
+//! has) driven by a record's force passive and under each design, the frequency responses and the
+//! attenuation at each resonance, the control effort and the contact initiations; then the twin
+//! informs the control: the smallest state weight that keeps the contacts at a target
+//! (`retune`), and a gain schedule that switches to the high gain when the estimated drift
+//! approaches the gap.
+
+pub mod closed_loop;
+pub mod design;
+
+use numerics::lqr::{Estimator, Schedule, ShearMatrices, FLOORS};
+use serde::Serialize;
+
+use crate::blocks::lqr::SensorNoise;
+use crate::cosim::master::MasterError;
+use crate::evaluation::frf::welch_h1;
+use crate::evaluation::stats::rms;
+use crate::twin::data::Measurement;
+use crate::twin::{Twin, TwinError};
+use closed_loop::{simulate, ContactEvent, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
+pub use design::{design, structure_of, Design, StateUnit};
+
+/// Errors of `twin control`.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlError {
+    #[error("{0}")]
+    Options(String),
+    #[error("{0}")]
+    Twin(String),
+    #[error("the LQR design for q = {q} failed: {message}")]
+    Design { q: f64, message: String },
+    #[error("{0}")]
+    Unstable(String),
+    #[error(transparent)]
+    Lqr(#[from] numerics::lqr::LqrError),
+    #[error(transparent)]
+    Master(#[from] MasterError),
+    #[error(transparent)]
+    TwinFile(#[from] TwinError),
+}
+
+/// Segment of the frequency-response estimates (as `twin compare --frf`).
+pub const FRF_SEGMENT: usize = crate::report::FRF_SEGMENT;
+/// Half-width of the band around a resonance in which the peak is read, relative.
+pub const RESONANCE_BAND: f64 = 0.1;
+/// The grid `--retune` searches, as multiples of the smallest `--q`.
+pub const RETUNE_GRID: [f64; 13] = [
+    1.0, 1.5, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 70.0, 100.0,
+];
+
+/// `--retune`: the smallest q on the grid that keeps the contacts at or below `target` with the
+/// peak control force within `max_force`.
+#[derive(Clone, Debug)]
+pub struct Retune {
+    pub target: usize,
+    pub max_force: Option<f64>,
+}
+
+/// `--schedule`: switch between the smallest and the largest design (or the retuned one).
+#[derive(Clone, Debug)]
+pub struct ScheduleOptions {
+    pub margin: f64,
+    pub lookahead: f64,
+    pub dwell: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct ControlOptions {
+    pub qs: Vec<f64>,
+    pub r: f64,
+    pub unit: StateUnit,
+    pub estimator: EstimatorChoice,
+    /// Corner of the integrating estimator's drift removal, Hz.
+    pub highpass_hz: f64,
+    /// Controller samples per record sample (None: from the fastest closed-loop pole).
+    pub substeps: Option<usize>,
+    /// Accelerometer noise sd the controller reads (None: the twin's calibrated noise).
+    pub sensor_noise: Option<[f64; FLOORS]>,
+    pub seed: u64,
+    /// Gaps to watch besides the twin's own contacts.
+    pub gaps: Vec<Gap>,
+    pub retune: Option<Retune>,
+    pub schedule: Option<ScheduleOptions>,
+    /// Compare the estimators' cost on the first design.
+    pub estimator_costs: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum EstimatorChoice {
+    /// Integrate the measured accelerations twice with drift removal (the paper's).
+    Integrate,
+    /// A steady-state Kalman observer on the twin's linear model.
+    Kalman,
+}
+
+/// Attenuation at one resonance: passive peak over controlled peak, per floor, dB.
+#[derive(Clone, Debug, Serialize)]
+pub struct Attenuation {
+    pub mode: usize,
+    pub frequency_hz: f64,
+    pub floors_db: [f64; FLOORS],
+}
+
+/// A design run on the structure.
+#[derive(Clone, Debug, Serialize)]
+pub struct DesignRun {
+    #[serde(flatten)]
+    pub design: Design,
+    /// "requested", "retuned".
+    pub role: String,
+    pub contacts: usize,
+    pub contact_times: Vec<f64>,
+    pub contact_events: Vec<ContactEvent>,
+    pub attenuation_db: Vec<Attenuation>,
+    pub mean_attenuation_db: f64,
+    pub control_rms: f64,
+    pub control_peak: f64,
+    pub acc_rms: [f64; FLOORS],
+    /// Why the run stopped, when the closed loop went unstable (then no figures).
+    pub unstable: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Passive {
+    pub contacts: usize,
+    pub contact_times: Vec<f64>,
+    pub contact_events: Vec<ContactEvent>,
+    pub acc_rms: [f64; FLOORS],
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct RetuneRow {
+    pub q: f64,
+    pub contacts: Option<usize>,
+    pub control_rms: Option<f64>,
+    pub control_peak: Option<f64>,
+    pub mean_attenuation_db: Option<f64>,
+    pub unstable: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct RetuneReport {
+    pub target_contacts: usize,
+    pub max_force: Option<f64>,
+    pub grid: Vec<RetuneRow>,
+    /// The smallest q that met the target (None: none on the grid did).
+    pub chosen_q: Option<f64>,
+    pub verdict: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Switch {
+    pub time: f64,
+    /// "high" or "low".
+    pub to: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ScheduleReport {
+    pub q_low: f64,
+    pub q_high: f64,
+    pub storey: String,
+    pub gap: f64,
+    pub margin: f64,
+    pub lookahead: f64,
+    pub dwell: f64,
+    pub switches: Vec<Switch>,
+    pub high_fraction: f64,
+    pub contacts: usize,
+    pub contact_times: Vec<f64>,
+    pub attenuation_db: Vec<Attenuation>,
+    pub mean_attenuation_db: f64,
+    pub control_rms: f64,
+    pub control_peak: f64,
+    pub acc_rms: [f64; FLOORS],
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EstimatorCost {
+    /// "exact" (the structure's true state), "integrate", "kalman".
+    pub estimator: String,
+    pub mean_attenuation_db: f64,
+    pub attenuation_db: Vec<Attenuation>,
+    pub control_rms: f64,
+    pub contacts: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct GapReport {
+    pub storey: String,
+    pub gap: f64,
+    pub side: i32,
+}
+
+/// The report of `twin control` (its JSON is the report contract).
+#[derive(Clone, Debug, Serialize)]
+pub struct ControlReport {
+    pub twin: String,
+    pub data: String,
+    pub parameters: std::collections::BTreeMap<String, f64>,
+    #[serde(rename = "A")]
+    pub a: Vec<Vec<f64>>,
+    #[serde(rename = "B")]
+    pub b: Vec<f64>,
+    #[serde(rename = "R")]
+    pub r: f64,
+    /// Metres per state unit.
+    pub state_scale: f64,
+    pub state_unit: String,
+    pub units_note: String,
+    pub estimator: String,
+    /// The estimator as the controller runs it (what `twin synth --controller` rebuilds).
+    pub estimator_settings: Estimator,
+    pub highpass_hz: f64,
+    pub substeps: usize,
+    pub control_rate_hz: f64,
+    pub sensor_noise_sd: Option<[f64; FLOORS]>,
+    pub resonances_hz: [f64; FLOORS],
+    pub gaps: Vec<GapReport>,
+    pub passive: Passive,
+    pub designs: Vec<DesignRun>,
+    pub retune: Option<RetuneReport>,
+    pub schedule: Option<ScheduleReport>,
+    pub estimator_costs: Vec<EstimatorCost>,
+}
+
+/// Everything `twin control` computed: the report and the time histories for the plot.
+pub struct ControlOutcome {
+    pub report: ControlReport,
+    pub passive: Response,
+    /// One per entry of `report.designs` (empty when unstable).
+    pub designs: Vec<Option<Response>>,
+    pub scheduled: Option<Response>,
+    pub force: Vec<f64>,
+    pub dt: f64,
+}
+
+/// Peak of the FRF (dB) in the band around each resonance, per floor.
+fn resonance_peaks(
+    force: &[f64],
+    response: &Response,
+    dt: f64,
+    resonances: &[f64; FLOORS],
+) -> [[f64; FLOORS]; FLOORS] {
+    let mut out = [[f64::NAN; FLOORS]; FLOORS];
+    for floor in 0..FLOORS {
+        let n = force.len().min(response.acc[floor].len());
+        let Some(h) = welch_h1(&force[..n], &response.acc[floor][..n], dt, FRF_SEGMENT) else {
+            continue;
+        };
+        for (mode, &fr) in resonances.iter().enumerate() {
+            let peak = h
+                .frequency
+                .iter()
+                .zip(&h.magnitude_db)
+                .filter(|(f, m)| {
+                    (**f - fr).abs() <= RESONANCE_BAND * fr.max(h.frequency[0]) && m.is_finite()
+                })
+                .map(|(_, m)| *m)
+                .fold(f64::NEG_INFINITY, f64::max);
+            out[mode][floor] = peak;
+        }
+    }
+    out
+}
+
+fn attenuation(
+    passive: &[[f64; FLOORS]; FLOORS],
+    controlled: &[[f64; FLOORS]; FLOORS],
+    resonances: &[f64; FLOORS],
+) -> (Vec<Attenuation>, f64) {
+    let mut list = Vec::new();
+    let mut sum = 0.0;
+    let mut count = 0;
+    for mode in 0..FLOORS {
+        let mut floors_db = [f64::NAN; FLOORS];
+        for floor in 0..FLOORS {
+            floors_db[floor] = passive[mode][floor] - controlled[mode][floor];
+            if floors_db[floor].is_finite() {
+                sum += floors_db[floor];
+                count += 1;
+            }
+        }
+        list.push(Attenuation {
+            mode: mode + 1,
+            frequency_hz: resonances[mode],
+            floors_db,
+        });
+    }
+    (
+        list,
+        if count > 0 {
+            sum / count as f64
+        } else {
+            f64::NAN
+        },
+    )
+}
+
+fn acc_rms(r: &Response) -> [f64; FLOORS] {
+    [rms(&r.acc[0]), rms(&r.acc[1]), rms(&r.acc[2])]
+}
+
+/// Controller samples per record sample: the fastest closed-loop pole moves by at most 0.1 rad
+/// per sample; a power of two (so that it divides a synthetic record's fine grid), at least 4,
+/// at most 4096.
+pub fn substeps_for(designs: &[Design], dt: f64) -> usize {
+    let fastest = designs
+        .iter()
+        .flat_map(|d| d.closed_loop_poles.iter())
+        .map(|p| p[0].hypot(p[1]))
+        .fold(0.0f64, f64::max);
+    ((fastest * dt / 0.1).ceil() as usize)
+        .clamp(4, 4096)
+        .next_power_of_two()
+}
+
+struct Runner<'a> {
+    twin: &'a Twin,
+    data: &'a Measurement,
+    setup: LoopSetup,
+    estimator: Estimator,
+    resonances: [f64; FLOORS],
+    passive_peaks: [[f64; FLOORS]; FLOORS],
+    progress: &'a mut dyn FnMut(u64, u64),
+    runs_done: u64,
+    runs_total: u64,
+}
+
+impl Runner<'_> {
+    fn run(&mut self, law: Option<&LoopLaw>) -> Result<Response, ControlError> {
+        let (done, total) = (self.runs_done, self.runs_total.max(self.runs_done + 1));
+        let progress = &mut *self.progress;
+        let mut report = |k: u64, n: u64| progress(done * n + k, total * n);
+        let out = simulate(self.twin, self.data, &self.setup, law, &mut report);
+        self.runs_done += 1;
+        out
+    }
+
+    /// Run `gains` with the chosen estimator; an unstable loop is a result, not a failure.
+    fn run_law(
+        &mut self,
+        gains: Gains,
+        state: StateSource,
+    ) -> Result<Result<Response, String>, ControlError> {
+        match self.run(Some(&LoopLaw { gains, state })) {
+            Ok(r) => Ok(Ok(r)),
+            Err(ControlError::Unstable(message)) => Ok(Err(message)),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn design_run(
+        &mut self,
+        design: Design,
+        role: &str,
+    ) -> Result<(DesignRun, Option<Response>), ControlError> {
+        let state = StateSource::Estimated(self.estimator);
+        let outcome = self.run_law(Gains::Fixed(design.gain), state)?;
+        Ok(match outcome {
+            Ok(r) => {
+                let peaks = resonance_peaks(&self.data.force, &r, self.data.dt, &self.resonances);
+                let (att, mean) = attenuation(&self.passive_peaks, &peaks, &self.resonances);
+                (
+                    DesignRun {
+                        design,
+                        role: role.into(),
+                        contacts: r.contacts.len(),
+                        contact_times: r.contacts.iter().map(|c| c.time).collect(),
+                        contact_events: r.contacts.clone(),
+                        attenuation_db: att,
+                        mean_attenuation_db: mean,
+                        control_rms: r.control_rms,
+                        control_peak: r.control_peak,
+                        acc_rms: acc_rms(&r),
+                        unstable: None,
+                    },
+                    Some(r),
+                )
+            }
+            Err(message) => (
+                DesignRun {
+                    design,
+                    role: role.into(),
+                    contacts: 0,
+                    contact_times: Vec::new(),
+                    contact_events: Vec::new(),
+                    attenuation_db: Vec::new(),
+                    mean_attenuation_db: f64::NAN,
+                    control_rms: f64::NAN,
+                    control_peak: f64::NAN,
+                    acc_rms: [f64::NAN; FLOORS],
+                    unstable: Some(message),
+                },
+                None,
+            ),
+        })
+    }
+}
+
+fn estimator_of(
+    choice: EstimatorChoice,
+    options: &ControlOptions,
+    noise_sd: Option<[f64; FLOORS]>,
+    data: &Measurement,
+) -> Estimator {
+    match choice {
+        EstimatorChoice::Integrate => Estimator::Integrate {
+            highpass_hz: options.highpass_hz,
+        },
+        EstimatorChoice::Kalman => {
+            // The model's error as a force on floor 1: 5 % of the record's force RMS per
+            // sample; the sensors' noise as the twin calibrated it (else 1 % of the measured
+            // RMS).
+            let force_rms = rms(&data.force).max(1e-6);
+            let sensor_sd =
+                noise_sd.unwrap_or_else(|| [0, 1, 2].map(|f| (0.01 * rms(&data.acc[f])).max(1e-6)));
+            Estimator::Kalman {
+                process_sd: 0.05 * force_rms,
+                sensor_sd: sensor_sd.map(|s| s.max(1e-9)),
+            }
+        }
+    }
+}
+
+/// The whole of `twin control`.
+pub fn run_control(
+    twin: &Twin,
+    data: &Measurement,
+    options: &ControlOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<ControlOutcome, ControlError> {
+    if options.qs.is_empty() {
+        return Err(ControlError::Options("give at least one --q".into()));
+    }
+    if !(options.highpass_hz.is_finite() && options.highpass_hz > 0.0) {
+        return Err(ControlError::Options(format!(
+            "--highpass must be a positive frequency (Hz), got {}",
+            options.highpass_hz
+        )));
+    }
+    let structure: ShearMatrices = structure_of(twin)?;
+    let plant = structure.state_space(options.unit.scale())?;
+    let mut qs = options.qs.clone();
+    qs.sort_by(f64::total_cmp);
+    qs.dedup();
+    let designs = qs
+        .iter()
+        .map(|&q| design(&plant, q, options.r))
+        .collect::<Result<Vec<_>, _>>()?;
+    // The retune grid's designs fix the controller's rate too (all runs share it).
+    let retune_designs = match &options.retune {
+        Some(_) => RETUNE_GRID
+            .iter()
+            .map(|m| design(&plant, qs[0] * m, options.r))
+            .collect::<Result<Vec<_>, _>>()?,
+        None => Vec::new(),
+    };
+    let all: Vec<Design> = designs.iter().chain(&retune_designs).cloned().collect();
+    let substeps = match options.substeps {
+        Some(n) if n >= 1 => n,
+        Some(n) => {
+            return Err(ControlError::Options(format!(
+                "--substeps must be at least 1, got {n}"
+            )))
+        }
+        None => substeps_for(&all, data.dt),
+    };
+    let noise_sd = options
+        .sensor_noise
+        .or_else(|| twin.noise_variance.map(|v| v.map(|x| x.max(0.0).sqrt())));
+    let mut gaps = closed_loop::twin_gaps(twin);
+    for g in &options.gaps {
+        if !gaps.iter().any(|h| h.storey == g.storey) {
+            gaps.push(g.clone());
+        }
+    }
+    let force_peak = data.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    let setup = LoopSetup {
+        plant,
+        substeps,
+        noise: noise_sd.map(|sd| SensorNoise {
+            sd,
+            seed: options.seed,
+        }),
+        gaps: gaps.clone(),
+        force_limit: 1e3 * force_peak.max(1e-3),
+    };
+    let estimator = estimator_of(options.estimator, options, noise_sd, data);
+    let resonances = structure.natural_frequencies();
+    let runs_total = 1
+        + designs.len()
+        + retune_designs.len()
+        + usize::from(options.schedule.is_some())
+        + if options.estimator_costs { 2 } else { 0 };
+    let mut runner = Runner {
+        twin,
+        data,
+        setup,
+        estimator,
+        resonances,
+        passive_peaks: [[f64::NAN; FLOORS]; FLOORS],
+        progress,
+        runs_done: 0,
+        runs_total: runs_total as u64,
+    };
+    let passive = runner.run(None)?;
+    runner.passive_peaks = resonance_peaks(&data.force, &passive, data.dt, &resonances);
+
+    let mut design_runs = Vec::new();
+    let mut responses = Vec::new();
+    for d in designs {
+        let (run, response) = runner.design_run(d, "requested")?;
+        design_runs.push(run);
+        responses.push(response);
+    }
+
+    let retune = match &options.retune {
+        None => None,
+        Some(rt) => {
+            let mut grid = Vec::new();
+            let mut chosen: Option<(DesignRun, Option<Response>)> = None;
+            for d in retune_designs {
+                let (run, response) = runner.design_run(d, "retuned")?;
+                grid.push(RetuneRow {
+                    q: run.design.q,
+                    contacts: run.unstable.is_none().then_some(run.contacts),
+                    control_rms: run.unstable.is_none().then_some(run.control_rms),
+                    control_peak: run.unstable.is_none().then_some(run.control_peak),
+                    mean_attenuation_db: run.unstable.is_none().then_some(run.mean_attenuation_db),
+                    unstable: run.unstable.clone(),
+                });
+                let ok = run.unstable.is_none()
+                    && run.contacts <= rt.target
+                    && rt.max_force.is_none_or(|m| run.control_peak <= m);
+                if ok && chosen.is_none() {
+                    chosen = Some((run, response));
+                }
+            }
+            let verdict = match &chosen {
+                Some((run, _)) => format!(
+                    "q = {} is the smallest on the grid with at most {} contact initiations ({}){}",
+                    run.design.q,
+                    rt.target,
+                    run.contacts,
+                    rt.max_force
+                        .map(|m| format!(
+                            " and a peak control force within {m} N ({:.3} N)",
+                            run.control_peak
+                        ))
+                        .unwrap_or_default()
+                ),
+                None => format!(
+                    "no q on the grid ({} … {}) keeps the contact initiations at or below {}{}",
+                    qs[0] * RETUNE_GRID[0],
+                    qs[0] * RETUNE_GRID[RETUNE_GRID.len() - 1],
+                    rt.target,
+                    rt.max_force
+                        .map(|m| format!(" within {m} N"))
+                        .unwrap_or_default()
+                ),
+            };
+            let chosen_q = chosen.as_ref().map(|(r, _)| r.design.q);
+            if let Some((run, response)) = chosen {
+                if !design_runs.iter().any(|d| d.design.q == run.design.q) {
+                    design_runs.push(run);
+                    responses.push(response);
+                }
+            }
+            Some(RetuneReport {
+                target_contacts: rt.target,
+                max_force: rt.max_force,
+                grid,
+                chosen_q,
+                verdict,
+            })
+        }
+    };
+
+    let mut scheduled_response = None;
+    let schedule = match &options.schedule {
+        None => None,
+        Some(so) => {
+            let gap = gaps.first().cloned().ok_or_else(|| {
+                ControlError::Options(
+                    "--schedule needs a gap to watch: the twin has no contact; give --gap".into(),
+                )
+            })?;
+            let low = design_runs
+                .iter()
+                .filter(|d| d.unstable.is_none())
+                .min_by(|a, b| a.design.q.total_cmp(&b.design.q))
+                .cloned();
+            let high_q = retune
+                .as_ref()
+                .and_then(|r| r.chosen_q)
+                .unwrap_or_else(|| qs[qs.len() - 1]);
+            let high = design_runs
+                .iter()
+                .find(|d| d.design.q == high_q && d.unstable.is_none())
+                .cloned();
+            let (Some(low), Some(high)) = (low, high) else {
+                return Err(ControlError::Options(
+                    "--schedule needs two stable designs (two --q, or --retune)".into(),
+                ));
+            };
+            if low.design.q == high.design.q {
+                return Err(ControlError::Options(
+                    "--schedule needs a higher q than the lowest: give two --q or --retune".into(),
+                ));
+            }
+            let schedule = Schedule {
+                storey: gap.storey,
+                gap: gap.gap(),
+                side: gap.side(),
+                margin: so.margin,
+                lookahead: so.lookahead,
+                dwell: so.dwell,
+                variance_threshold: None,
+            };
+            let gains = Gains::Scheduled {
+                low: low.design.gain,
+                high: high.design.gain,
+                schedule,
+            };
+            let state = StateSource::Estimated(estimator);
+            let r = runner
+                .run_law(gains, state)?
+                .map_err(ControlError::Unstable)?;
+            let peaks = resonance_peaks(&data.force, &r, data.dt, &resonances);
+            let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
+            let report = ScheduleReport {
+                q_low: low.design.q,
+                q_high: high.design.q,
+                storey: gap.label(),
+                gap: gap.gap(),
+                margin: so.margin,
+                lookahead: so.lookahead,
+                dwell: so.dwell,
+                switches: r
+                    .switches
+                    .iter()
+                    .map(|&(time, high)| Switch {
+                        time,
+                        to: if high { "high" } else { "low" }.into(),
+                    })
+                    .collect(),
+                high_fraction: r.high_fraction,
+                contacts: r.contacts.len(),
+                contact_times: r.contacts.iter().map(|c| c.time).collect(),
+                attenuation_db: att,
+                mean_attenuation_db: mean,
+                control_rms: r.control_rms,
+                control_peak: r.control_peak,
+                acc_rms: acc_rms(&r),
+            };
+            scheduled_response = Some(r);
+            Some(report)
+        }
+    };
+
+    let mut estimator_costs = Vec::new();
+    if options.estimator_costs {
+        let first = design_runs[0].clone();
+        let choices = [
+            ("exact", StateSource::Exact),
+            (
+                "integrate",
+                StateSource::Estimated(estimator_of(
+                    EstimatorChoice::Integrate,
+                    options,
+                    noise_sd,
+                    data,
+                )),
+            ),
+            (
+                "kalman",
+                StateSource::Estimated(estimator_of(
+                    EstimatorChoice::Kalman,
+                    options,
+                    noise_sd,
+                    data,
+                )),
+            ),
+        ];
+        for (name, state) in choices {
+            // The chosen estimator's run is the design's own.
+            let same = matches!(state, StateSource::Estimated(e) if e == estimator);
+            let (att, mean, rms_u, contacts) = if same {
+                (
+                    first.attenuation_db.clone(),
+                    first.mean_attenuation_db,
+                    first.control_rms,
+                    first.contacts,
+                )
+            } else {
+                match runner.run_law(Gains::Fixed(first.design.gain), state)? {
+                    Ok(r) => {
+                        let peaks = resonance_peaks(&data.force, &r, data.dt, &resonances);
+                        let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
+                        (att, mean, r.control_rms, r.contacts.len())
+                    }
+                    Err(message) => {
+                        return Err(ControlError::Unstable(format!(
+                            "with the {name} state: {message}"
+                        )))
+                    }
+                }
+            };
+            estimator_costs.push(EstimatorCost {
+                estimator: name.into(),
+                mean_attenuation_db: mean,
+                attenuation_db: att,
+                control_rms: rms_u,
+                contacts,
+            });
+        }
+    }
+
+    let units_note = match options.unit {
+        StateUnit::M => "state in m and m/s; q weighs (m/s)², R weighs N²".to_owned(),
+        StateUnit::Mm => "state in mm and mm/s; q weighs (mm/s)², R weighs N²".to_owned(),
+    };
+    let passive_report = Passive {
+        contacts: passive.contacts.len(),
+        contact_times: passive.contacts.iter().map(|c| c.time).collect(),
+        contact_events: passive.contacts.clone(),
+        acc_rms: acc_rms(&passive),
+    };
+    let report = ControlReport {
+        twin: twin.describe(),
+        data: data.path.display().to_string(),
+        parameters: design::parameter_map(&structure),
+        a: design::rows(&plant.a),
+        b: plant.b.iter().copied().collect(),
+        r: options.r,
+        state_scale: plant.state_scale,
+        state_unit: options.unit.name().into(),
+        units_note,
+        estimator: estimator.name().into(),
+        estimator_settings: estimator,
+        highpass_hz: options.highpass_hz,
+        substeps,
+        control_rate_hz: substeps as f64 / data.dt,
+        sensor_noise_sd: noise_sd,
+        resonances_hz: resonances,
+        gaps: gaps
+            .iter()
+            .map(|g| GapReport {
+                storey: g.label(),
+                gap: g.gap(),
+                side: g.side(),
+            })
+            .collect(),
+        passive: passive_report,
+        designs: design_runs,
+        retune,
+        schedule,
+        estimator_costs,
+    };
+    Ok(ControlOutcome {
+        report,
+        passive,
+        designs: responses,
+        scheduled: scheduled_response,
+        force: data.force.clone(),
+        dt: data.dt,
+    })
+}
+
+/// A controller read back from a `twin control` report: what `twin synth --controller` puts in
+/// the synthetic structure's loop.
+#[derive(Clone, Debug, serde::Deserialize)]
+pub struct ControllerSpec {
+    pub parameters: std::collections::BTreeMap<String, f64>,
+    pub state_scale: f64,
+    pub estimator_settings: Estimator,
+    pub control_rate_hz: f64,
+    pub sensor_noise_sd: Option<[f64; FLOORS]>,
+    pub designs: Vec<SpecDesign>,
+}
+
+#[derive(Clone, Debug, serde::Deserialize)]
+pub struct SpecDesign {
+    pub q: f64,
+    pub gain: [f64; numerics::lqr::STATES],
+    pub unstable: Option<String>,
+}
+
+impl ControllerSpec {
+    /// Parse a report's JSON text; `origin` names it in errors.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self, ControlError> {
+        let de = &mut serde_json::Deserializer::from_str(text);
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            ControlError::Options(format!(
+                "{origin}: not a `twin control` report: at {}: {}",
+                e.path(),
+                e.inner()
+            ))
+        })
+    }
+
+    /// The design with state weight `q` (None: the first stable one).
+    pub fn design(&self, q: Option<f64>) -> Result<&SpecDesign, ControlError> {
+        let stable = || self.designs.iter().filter(|d| d.unstable.is_none());
+        match q {
+            Some(q) => stable().find(|d| d.q == q).ok_or_else(|| {
+                let have: Vec<String> = stable().map(|d| d.q.to_string()).collect();
+                ControlError::Options(format!(
+                    "the report has no stable design with q = {q} (it has {})",
+                    have.join(", ")
+                ))
+            }),
+            None => stable()
+                .next()
+                .ok_or_else(|| ControlError::Options("the report has no stable design".into())),
+        }
+    }
+
+    /// The structure the design was made on.
+    pub fn structure(&self) -> Result<ShearMatrices, ControlError> {
+        let get = |name: String| {
+            self.parameters.get(&name).copied().ok_or_else(|| {
+                ControlError::Options(format!("the report's parameters lack '{name}'"))
+            })
+        };
+        let mut s = ShearMatrices {
+            mass: [0.0; FLOORS],
+            damping: [0.0; FLOORS],
+            stiffness: [0.0; FLOORS],
+        };
+        for i in 0..FLOORS {
+            s.mass[i] = get(format!("m{}", i + 1))?;
+            s.damping[i] = get(format!("c{}", i + 1))?;
+            s.stiffness[i] = get(format!("k{}", i + 1))?;
+        }
+        s.check()?;
+        Ok(s)
+    }
+
+    /// The controller for design `q`, sampling every `dt` seconds (the report's rate is
+    /// `control_rate_hz`).
+    pub fn controller(
+        &self,
+        q: Option<f64>,
+        dt: f64,
+    ) -> Result<numerics::lqr::Controller, ControlError> {
+        let design = self.design(q)?;
+        let plant = self.structure()?.state_space(self.state_scale)?;
+        if !(self.control_rate_hz.is_finite() && self.control_rate_hz > 0.0) {
+            return Err(ControlError::Options(format!(
+                "the report's control rate {} Hz is not positive",
+                self.control_rate_hz
+            )));
+        }
+        Ok(numerics::lqr::Controller::new(
+            &plant,
+            design.gain,
+            &self.estimator_settings,
+            dt,
+        )?)
+    }
+}
+
+/// The twin's prediction of a controlled record: the twin's physics in the loop with the
+/// report's controller (reading the twin's own accelerations, without noise), driven by the
+/// record's force — not the record's control force replayed open-loop, which a high-gain loop
+/// makes ill-conditioned (the structure answers to the small difference of two large forces).
+pub fn predict_controlled(
+    twin: &Twin,
+    data: &Measurement,
+    spec: &ControllerSpec,
+    q: Option<f64>,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<crate::twin::run::Prediction, ControlError> {
+    let design = spec.design(q)?;
+    let plant = spec.structure()?.state_space(spec.state_scale)?;
+    let substeps = (spec.control_rate_hz * data.dt).round().max(1.0) as usize;
+    let force_peak = data.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    let setup = LoopSetup {
+        plant,
+        substeps,
+        noise: None,
+        gaps: Vec::new(),
+        force_limit: 1e3 * force_peak.max(1e-3),
+    };
+    let law = LoopLaw {
+        gains: Gains::Fixed(design.gain),
+        state: StateSource::Estimated(spec.estimator_settings),
+    };
+    let r = simulate(twin, data, &setup, Some(&law), progress)?;
+    Ok(crate::twin::run::Prediction {
+        time: r.time,
+        acc: r.acc,
+        latent_var: None,
+        sd: None,
+    })
+}
