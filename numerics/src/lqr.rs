@@ -294,26 +294,32 @@ impl Kalman {
 
     /// The estimate at this sample from the measured accelerations (state units), the force
     /// now and the control force that acted until now.
-    fn update(&mut self, z: Vector3<f64>, force: f64, control_held: f64) -> StateVector {
+    fn update(&mut self, z: Vector3<f64>, force: f64, control_until_now: f64) -> StateVector {
         if let Some((force_prev, control_prev)) = self.previous {
             let u0 = force_prev - control_prev;
             self.w = self.ad * self.w + self.g0 * u0 + self.g1 * (force - force_prev);
         }
-        let innovation = z - self.c * self.w - self.d * (force - control_held);
+        let innovation = z - self.c * self.w - self.d * (force - control_until_now);
         self.w += self.l * innovation;
         self.w
     }
 }
 
-/// The run-time law `f_c = K ŵ`, one call per sample.
+/// The run-time law `f_c = K ŵ`, one call per sample, as a digital controller runs it: the
+/// command computed from the sample at `t_k` is applied from `t_{k+1}` (one sample of
+/// computation delay). A co-simulation master gives every connection between FMUs that delay
+/// anyway when the controller computes in its step, so the controller FMU, the master's block
+/// and the synthetic structure's loop are the same system under any master.
 #[derive(Clone, Debug)]
 pub struct Controller {
     gain: [f64; STATES],
     state_scale: f64,
     dt: f64,
     state: State,
-    /// The control force held since the last sample.
-    held: f64,
+    /// The command acting over the interval that ends at the next sample.
+    acting: f64,
+    /// The command computed at the last sample, acting from the next one.
+    pending: f64,
     estimate: StateVector,
 }
 
@@ -350,7 +356,8 @@ impl Controller {
             state_scale: model.state_scale,
             dt,
             state,
-            held: 0.0,
+            acting: 0.0,
+            pending: 0.0,
             estimate: StateVector::zeros(),
         })
     }
@@ -365,18 +372,24 @@ impl Controller {
     }
 
     /// One sample: the accelerations measured now (m/s², before the new control force acts)
-    /// and the excitation force now (N). Returns the control force to hold until the next
-    /// sample (N).
+    /// and the excitation force now (N). Returns the new command (N), which acts from the next
+    /// sample on; [`Controller::acting`] is the one that acts from now.
     pub fn step(&mut self, acc: [f64; FLOORS], force: f64) -> f64 {
         self.observe(acc, force);
         self.output()
+    }
+
+    /// The command acting from this sample to the next (the one computed a sample ago), N.
+    pub fn acting(&self) -> f64 {
+        self.acting
     }
 
     /// Update the state estimate with this sample's measurements (see [`Controller::step`]).
     pub fn observe(&mut self, acc: [f64; FLOORS], force: f64) {
         let scale = 1.0 / self.state_scale;
         let z = Vector3::from(acc.map(|a| a * scale));
-        let held = self.held;
+        // Acting until now (the measurement's feedthrough), and from now to the next sample.
+        let (until_now, from_now) = (self.acting, self.pending);
         let dt = self.dt;
         self.estimate = match &mut self.state {
             State::Integrate {
@@ -398,14 +411,15 @@ impl Controller {
                 StateVector::from_column_slice(&[y[0], y[1], y[2], v[0], v[1], v[2]])
             }
             State::Kalman(k) => {
-                let w = k.update(z, force, held);
-                k.previous = Some((force, held));
+                let w = k.update(z, force, until_now);
+                k.previous = Some((force, from_now));
                 w
             }
         };
     }
 
-    /// The control force `K ŵ` from the current estimate and gain (N), held from now on.
+    /// The new command `K ŵ` from the current estimate and gain (N), acting from the next
+    /// sample.
     pub fn output(&mut self) -> f64 {
         let u: f64 = self
             .gain
@@ -413,7 +427,8 @@ impl Controller {
             .zip(self.estimate.iter())
             .map(|(g, w)| g * w)
             .sum();
-        self.held = u;
+        self.acting = self.pending;
+        self.pending = u;
         u
     }
 

@@ -1,7 +1,8 @@
 //! The LQR controller as a zero-time block of the master: inputs the floor accelerations (through
 //! sampled connections: what the sensors read as the last step left the structure) and the
 //! excitation force; outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
-//! held over the next step, and which gain is on. The law itself is `numerics::lqr`, shared with
+//! held over the next step (the command computed a sample ago: see `numerics::lqr::Controller`),
+//! and which gain is on. The law itself is `numerics::lqr`, shared with
 //! the controller FMU.
 
 use numerics::lqr::{Controller, Scheduler, FLOORS, STATES};
@@ -108,7 +109,8 @@ impl Block for LqrBlock {
             self.controller.set_gain(if on { s.high } else { s.low });
             high = f64::from(u8::from(on));
         }
-        let force = self.controller.output();
+        self.controller.output();
+        let force = self.controller.acting();
         if !force.is_finite() || force.abs() > self.force_limit {
             return Err(MasterError::Config(format!(
                 "closed loop unstable: the control force reached {force:.3e} N at t = {time} s \

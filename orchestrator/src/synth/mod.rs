@@ -396,7 +396,8 @@ pub fn synth_controlled(
                         let z: f64 = StandardNormal.sample(&mut sensor_rng);
                         measured[f] = a[f] + sensor_sd[f] * z;
                     }
-                    let u = controller.step(measured, fine_force[j]);
+                    controller.step(measured, fine_force[j]);
+                    let u = controller.acting();
                     if !u.is_finite() {
                         return Err(SynthError::Record(format!(
                             "the controller in the loop gave a non-finite force at t = {:.6} s",

@@ -153,6 +153,10 @@ struct ExactStateBlock {
     scheduler: Option<Scheduler>,
     scale: f64,
     force_limit: f64,
+    /// The command computed at the last point (applied one sample late, as the estimated law).
+    pending: f64,
+    last_time: f64,
+    acting: f64,
 }
 
 impl crate::cosim::master::Block for ExactStateBlock {
@@ -182,7 +186,12 @@ impl crate::cosim::master::Block for ExactStateBlock {
                 "closed loop unstable: the control force reached {u:.3e} N at t = {time} s"
             )));
         }
-        outputs[0] = u;
+        if time != self.last_time {
+            self.acting = self.pending;
+            self.last_time = time;
+        }
+        self.pending = u;
+        outputs[0] = self.acting;
         outputs[1] = f64::from(u8::from(high));
         Ok(())
     }
@@ -345,6 +354,9 @@ pub fn simulate(
                         scheduler,
                         scale: setup.plant.state_scale,
                         force_limit: setup.force_limit,
+                        pending: 0.0,
+                        last_time: f64::NAN,
+                        acting: 0.0,
                     })
                 }
             };
