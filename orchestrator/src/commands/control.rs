@@ -25,7 +25,7 @@ pub struct ControlArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// State weight q of Q = q·diag(0, I); repeat for several designs.
-    #[arg(long = "q", required = true, num_args = 1..)]
+    #[arg(long = "q", required = true, num_args = 1.., allow_negative_numbers = true)]
     pub q: Vec<f64>,
     /// Control weight R (N⁻², > 0).
     #[arg(long = "r", default_value_t = 0.1)]
