@@ -85,6 +85,11 @@ echo "== twin-informed control: from a light controller (q = 10) the retune find
   --retune --schedule --report "$out/control-retune-dataset3.json" --plot "$out/control-retune-dataset3.svg"
 
 echo
+echo "== gain scheduling on the twin's uncertainty: the twin with the GP corrector (no contact physics) switches to the high gain where the corrector is unsure =="
+"$twin" control --twin "$out/corrected.ssp" --data data/dataset3.csv --q 10 --q 300 --r 0.1 \
+  --schedule --gap 2-3:5e-4:negative --report "$out/control-corrected-dataset3.json"
+
+echo
 echo "== the controlled structure: a synthetic record with the q = 1e3 controller in its loop, predicted by the twin in the closed loop =="
 "$twin" synth --out "$out/synth-passive.csv" --seed 5
 "$twin" calibrate --data "$out/synth-passive.csv" --out "$out/synth-calibrated.ssp" >/dev/null

@@ -461,12 +461,22 @@ pub struct Schedule {
     pub variance_threshold: Option<[f64; FLOORS]>,
 }
 
+/// What made the schedule hold the high gain at a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Triggers {
+    /// The projected drift within the margin of the gap.
+    pub drift: bool,
+    /// A latent variance above its threshold.
+    pub variance: bool,
+}
+
 /// The schedule's state.
 #[derive(Clone, Debug)]
 pub struct Scheduler {
     pub schedule: Schedule,
     high: bool,
     last_trigger: f64,
+    last: Triggers,
 }
 
 impl Scheduler {
@@ -494,11 +504,17 @@ impl Scheduler {
             schedule,
             high: false,
             last_trigger: f64::NEG_INFINITY,
+            last: Triggers::default(),
         })
     }
 
     pub fn high(&self) -> bool {
         self.high
+    }
+
+    /// What fired at the last decision.
+    pub fn triggers(&self) -> Triggers {
+        self.last
     }
 
     /// Decide at time `t` from the state estimate (SI) and, when the twin has a corrector, the
@@ -521,6 +537,10 @@ impl Scheduler {
         let uncertain = match (self.schedule.variance_threshold, latent_var) {
             (Some(th), Some(v)) => v.iter().zip(th.iter()).any(|(v, th)| v > th),
             _ => false,
+        };
+        self.last = Triggers {
+            drift: closing,
+            variance: uncertain,
         };
         if closing || uncertain {
             self.last_trigger = t;

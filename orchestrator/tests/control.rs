@@ -443,3 +443,82 @@ fn bad_input_is_refused_and_instability_reported() {
     let text = std::fs::read_to_string(&report).expect("report");
     assert!(!text.contains("NaN") && !text.contains("inf"));
 }
+
+/// With a GP corrector in the twin, the schedule also switches up where the corrector is unsure
+/// (its latent variance above the threshold): the corrector runs beside the physics at the
+/// record's rate. Off, only the drift triggers.
+#[test]
+fn schedule_switches_on_the_correctors_latent_variance() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tw = dir.path().join("default.ssp");
+    write_twin(&tw, &[]);
+    let corrected = dir.path().join("corrected.ssp");
+    ok(
+        &twin(&[
+            "train",
+            "--twin",
+            s(&tw),
+            "--data",
+            s(&data(1)),
+            "--out",
+            s(&corrected),
+            "--stride",
+            "8",
+        ]),
+        "twin train",
+    );
+    let d3 = data(3);
+    let run = |extra: &[&str]| -> Value {
+        let report = dir.path().join("schedule.json");
+        let mut args = vec![
+            "control",
+            "--twin",
+            s(&corrected),
+            "--data",
+            s(&d3),
+            "--q",
+            "10",
+            "--q",
+            "300",
+            "--schedule",
+            "--gap",
+            "2-3:5e-4:negative",
+            "--report",
+            s(&report),
+        ];
+        args.extend(extra);
+        println!("{}", ok(&twin(&args), "twin control --schedule"));
+        read(&report)["schedule"].clone()
+    };
+    let with = run(&[]);
+    let without = run(&["--variance-threshold", "off"]);
+    let fraction = |s: &Value, key: &str| f(&s[key]);
+    assert!(with["variance_threshold"].is_array());
+    assert!(without["variance_threshold"].is_null());
+    assert!(fraction(&with, "variance_trigger_fraction") > 0.0);
+    assert_eq!(fraction(&without, "variance_trigger_fraction"), 0.0);
+    assert!(fraction(&with, "high_fraction") >= fraction(&without, "high_fraction"));
+    // A twin without a corrector cannot take a threshold.
+    let e = failed(
+        &twin(&[
+            "control",
+            "--twin",
+            s(&tw),
+            "--data",
+            s(&d3),
+            "--q",
+            "10",
+            "--q",
+            "300",
+            "--schedule",
+            "--gap",
+            "2-3:5e-4",
+            "--variance-threshold",
+            "1e-6",
+            "--report",
+            s(&dir.path().join("x.json")),
+        ]),
+        "threshold without a corrector",
+    );
+    assert!(e.contains("no corrector"), "{e}");
+}

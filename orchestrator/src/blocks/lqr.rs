@@ -29,6 +29,8 @@ pub struct SensorNoise {
 
 pub struct LqrBlock {
     controller: Controller,
+    /// Whether inputs 4..7 are a corrector's latent variances (for the schedule).
+    latent: bool,
     scheduled: Option<Scheduled>,
     noise: Option<(ChaCha8Rng, [f64; FLOORS])>,
     /// A control force beyond this (N) means the loop has gone unstable: the run stops.
@@ -36,16 +38,25 @@ pub struct LqrBlock {
     last: Option<(f64, [f64; 4])>,
 }
 
+/// The schedule's triggers at a point as one output: 1 the drift, 2 the latent variance, 3 both.
+pub fn trigger_code(t: numerics::lqr::Triggers) -> f64 {
+    f64::from(u8::from(t.drift) + 2 * u8::from(t.variance))
+}
+
 impl LqrBlock {
+    /// `acc1..3`, `force`; then, with `latent`, `latent_var1..3`.
     pub const INPUTS: usize = 4;
-    /// `control_force`, `high_gain` (1 when the scheduler has the high gain on).
-    pub const OUTPUTS: usize = 2;
+    pub const LATENT_INPUTS: usize = FLOORS;
+    /// `control_force`, `high_gain` (1 when the scheduler has the high gain on), the schedule's
+    /// triggers ([`trigger_code`]).
+    pub const OUTPUTS: usize = 3;
 
     pub fn new(
         controller: Controller,
         scheduled: Option<Scheduled>,
         noise: Option<SensorNoise>,
         force_limit: f64,
+        latent: bool,
     ) -> Self {
         // A negative or non-finite sd reads as no noise on that floor.
         let noise = noise.map(|n| {
@@ -56,6 +67,7 @@ impl LqrBlock {
         });
         LqrBlock {
             controller,
+            latent,
             scheduled,
             noise,
             force_limit,
@@ -101,13 +113,15 @@ impl Block for LqrBlock {
             )));
         }
         self.controller.observe(acc, inputs[3]);
-        let mut high = 0.0;
+        let (mut high, mut triggers) = (0.0, 0.0);
         if let Some(s) = &mut self.scheduled {
+            let latent = self.latent.then(|| [inputs[4], inputs[5], inputs[6]]);
             let on = s
                 .scheduler
-                .decide(time, &self.controller.estimate_si(), None);
+                .decide(time, &self.controller.estimate_si(), latent);
             self.controller.set_gain(if on { s.high } else { s.low });
             high = f64::from(u8::from(on));
+            triggers = trigger_code(s.scheduler.triggers());
         }
         self.controller.output();
         let force = self.controller.acting();
@@ -120,6 +134,7 @@ impl Block for LqrBlock {
         }
         outputs[0] = force;
         outputs[1] = high;
+        outputs[2] = triggers;
         Ok(())
     }
 }

@@ -13,6 +13,7 @@ use crate::twin::Twin;
 use crate::workflows::control::closed_loop::Gap;
 use crate::workflows::control::{
     run_control, ControlOptions, EstimatorChoice, Retune, ScheduleOptions, StateUnit,
+    VarianceTrigger,
 };
 use fmu_shear::effects::kind::{Kind, Law, Side};
 
@@ -76,6 +77,11 @@ pub struct ControlArgs {
     /// Seconds the high gain stays on after the last trigger (against chattering).
     #[arg(long, default_value_t = 0.5)]
     pub dwell: f64,
+    /// The schedule also switches up when the twin's GP corrector's latent variance exceeds
+    /// this, (m/s²)², every floor: `auto` (default: when the twin has a corrector, above its
+    /// calibrated noise variance), `off`, or a number.
+    #[arg(long, default_value = "auto")]
+    pub variance_threshold: String,
     /// Also run the first design with the exact state and with each estimator, to show what
     /// the estimation costs in attenuation.
     #[arg(long)]
@@ -153,6 +159,14 @@ pub fn run(args: &ControlArgs) -> Result<()> {
         .iter()
         .map(|g| parse_gap(g))
         .collect::<Result<Vec<_>>>()?;
+    let variance = match args.variance_threshold.as_str() {
+        "auto" => VarianceTrigger::Auto,
+        "off" => VarianceTrigger::Off,
+        text => match text.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => VarianceTrigger::Value(v),
+            _ => bail!("--variance-threshold {text}: expected auto, off or a positive number"),
+        },
+    };
     let data = Measurement::read(&args.data)?;
     let mut twin = Twin::load(args.twin.as_deref())?;
     if args.sensor_noise == Some(0.0) {
@@ -176,6 +190,7 @@ pub fn run(args: &ControlArgs) -> Result<()> {
             margin: args.margin,
             lookahead: args.lookahead,
             dwell: args.dwell,
+            variance,
         }),
         estimator_costs: args.estimator_costs,
     };
@@ -237,13 +252,21 @@ fn print_summary(r: &crate::workflows::control::ControlReport) {
     if let Some(s) = &r.schedule {
         println!(
             "  {:>12}  {:>8}  {:>14.2}  {:>14.4}  {:>14.4}   ({} switches, high gain {:.0} % of the time)",
-            format!("scheduled"),
+            "scheduled",
             s.contacts,
             s.mean_attenuation_db,
             s.control_rms,
             s.control_peak,
             s.switches.len(),
             100.0 * s.high_fraction
+        );
+        println!(
+            "  schedule triggers: drift near the gap {:.1} % of the time, latent variance {}",
+            100.0 * s.drift_trigger_fraction,
+            match s.variance_threshold {
+                Some(_) => format!("{:.1} %", 100.0 * s.variance_trigger_fraction),
+                None => "not used (no corrector, or off)".into(),
+            }
         );
     }
     if let Some(rt) = &r.retune {

@@ -13,9 +13,11 @@
 //! reached, one pass, no iteration.
 
 mod clock;
+mod decimated;
 mod system;
 
 pub use clock::Clock;
+pub use decimated::Decimated;
 pub use system::{
     Algorithm, Block, NodeId, Observer, Port, PortType, Recorder, Recording, RunEnd, Slave, System,
     TypedPort,

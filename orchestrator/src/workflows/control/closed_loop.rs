@@ -8,11 +8,12 @@ use fmu_shear::effects::kind::{Kind, Law, Side};
 use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace, FLOORS, STATES};
 
 use super::ControlError;
-use crate::blocks::lqr::{LqrBlock, Scheduled, SensorNoise};
+use crate::blocks::lqr::{trigger_code, LqrBlock, Scheduled, SensorNoise};
 use crate::cosim::import::Instance;
-use crate::cosim::master::{Clock, NodeId, Observer, Port, Recording, System};
+use crate::cosim::master::{Clock, Decimated, NodeId, Observer, Port, Recording, System};
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
+use crate::workflows::train::CORRECTOR;
 
 /// A gap watched for contact: the storey (1-based: storey 3 joins floors 2 and 3) and its law.
 #[derive(Clone, Debug)]
@@ -120,6 +121,9 @@ pub struct LoopSetup {
     pub gaps: Vec<Gap>,
     /// A control force beyond this (N) stops the run as unstable.
     pub force_limit: f64,
+    /// Run the twin's GP corrector beside the physics (at the record's rate) and hand its
+    /// latent variances to the schedule.
+    pub corrector: bool,
 }
 
 /// A contact initiation.
@@ -144,11 +148,17 @@ pub struct Response {
     pub switches: Vec<(f64, bool)>,
     /// Fraction of the time on the high gain.
     pub high_fraction: f64,
+    /// Fractions of the time the schedule's drift and latent-variance triggers held.
+    pub drift_trigger_fraction: f64,
+    pub variance_trigger_fraction: f64,
 }
 
 /// The law on the structure's exact state: inputs as [`LqrBlock`]'s, then the displacements and
 /// velocities (m, m/s).
 struct ExactStateBlock {
+    /// Where the state starts among the inputs.
+    state_at: usize,
+    latent: bool,
     gains: Gains,
     scheduler: Option<Scheduler>,
     scale: f64,
@@ -167,11 +177,14 @@ impl crate::cosim::master::Block for ExactStateBlock {
         outputs: &mut [f64],
     ) -> Result<(), crate::cosim::master::MasterError> {
         let mut w = [0.0; STATES];
-        w.copy_from_slice(&inputs[4..4 + STATES]);
+        w.copy_from_slice(&inputs[self.state_at..self.state_at + STATES]);
+        let latent = self.latent.then(|| [inputs[4], inputs[5], inputs[6]]);
+        let mut triggers = 0.0;
         let (gain, high) = match (&self.gains, &mut self.scheduler) {
             (Gains::Fixed(g), _) => (*g, false),
             (Gains::Scheduled { low, high, .. }, Some(s)) => {
-                let on = s.decide(time, &w, None);
+                let on = s.decide(time, &w, latent);
+                triggers = trigger_code(s.triggers());
                 (if on { *high } else { *low }, on)
             }
             (Gains::Scheduled { low, .. }, None) => (*low, false),
@@ -193,6 +206,7 @@ impl crate::cosim::master::Block for ExactStateBlock {
         self.pending = u;
         outputs[0] = self.acting;
         outputs[1] = f64::from(u8::from(high));
+        outputs[2] = triggers;
         Ok(())
     }
 }
@@ -207,12 +221,14 @@ struct LoopObserver {
     sum_sq: f64,
     points: usize,
     high_points: usize,
+    drift_points: usize,
+    variance_points: usize,
     high: bool,
 }
 
 impl Observer for LoopObserver {
     fn record(&mut self, time: f64, values: &[f64]) {
-        // values: acc1..3, control force, high flag, then one drift per gap.
+        // values: acc1..3, control force, high flag, triggers, then one drift per gap.
         let r = &mut self.response;
         if self.k.is_multiple_of(self.substeps) {
             r.time.push(time);
@@ -232,8 +248,11 @@ impl Observer for LoopObserver {
             self.high = high;
         }
         self.high_points += usize::from(high);
+        let triggers = values[5] as u8;
+        self.drift_points += usize::from(triggers & 1 != 0);
+        self.variance_points += usize::from(triggers & 2 != 0);
         for (i, gap) in self.gaps.iter().enumerate() {
-            let closed = gap.law.force_at(values[5 + i]) != 0.0;
+            let closed = gap.law.force_at(values[6 + i]) != 0.0;
             if closed && !self.closed[i] {
                 r.contacts.push(ContactEvent {
                     time,
@@ -283,8 +302,23 @@ pub fn simulate(
     let instances = twin.instantiate(start)?;
     let mut loaded = Vec::new();
     let mut physics: Option<(Instance, Vec<u32>, Vec<u32>)> = None;
+    let mut corrector: Option<(Instance, Vec<u32>, Vec<u32>)> = None;
     for (component, fmu, instance) in instances {
-        if component.name == PHYSICS {
+        if component.name == CORRECTOR && setup.corrector {
+            let vr = |name: &str| {
+                fmu.value_reference(name)
+                    .map_err(|e| ControlError::Twin(e.to_string()))
+            };
+            let mut inputs = Vec::new();
+            for f in 1..=FLOORS {
+                inputs.push(vr(&format!("physics_acc{f}"))?);
+            }
+            inputs.push(vr("force")?);
+            let outputs = (1..=FLOORS)
+                .map(|f| vr(&format!("latent_var{f}")))
+                .collect::<Result<Vec<_>, _>>()?;
+            corrector = Some((instance, inputs, outputs));
+        } else if component.name == PHYSICS {
             let vr = |name: &str| {
                 fmu.value_reference(name)
                     .map_err(|e| ControlError::Twin(e.to_string()))
@@ -314,6 +348,26 @@ pub fn simulate(
     let force = system.add_signal("force", upsample(&data.force, substeps));
     system.connect(force, plant, 0)?;
     let dt = data.dt / substeps as f64;
+    // The corrector keeps the record's rate (its lags are the record's samples).
+    let latent = match corrector {
+        Some((instance, inputs, outputs)) => {
+            let slow = Decimated::new(Box::new(instance), substeps)?;
+            let node = system.add_slave(CORRECTOR, Box::new(slow), inputs, outputs);
+            for f in 0..FLOORS {
+                system.connect(Port::Output(plant, f), node, f)?;
+            }
+            system.connect(force, node, FLOORS)?;
+            Some(node)
+        }
+        None if setup.corrector => {
+            return Err(ControlError::Options(format!(
+                "{} has no corrector: the schedule cannot use a latent variance (train one with \
+                 `twin train`, or leave the variance threshold out)",
+                twin.describe()
+            )))
+        }
+        None => None,
+    };
     let controller: Option<NodeId> = match law {
         None => None,
         Some(law) => {
@@ -340,6 +394,7 @@ pub fn simulate(
                         scheduled,
                         setup.noise,
                         setup.force_limit,
+                        latent.is_some(),
                     ))
                 }
                 StateSource::Exact => {
@@ -350,6 +405,13 @@ pub fn simulate(
                         Gains::Fixed(_) => None,
                     };
                     Box::new(ExactStateBlock {
+                        state_at: LqrBlock::INPUTS
+                            + if latent.is_some() {
+                                LqrBlock::LATENT_INPUTS
+                            } else {
+                                0
+                            },
+                        latent: latent.is_some(),
                         gains: law.gains.clone(),
                         scheduler,
                         scale: setup.plant.state_scale,
@@ -361,15 +423,26 @@ pub fn simulate(
                 }
             };
             let exact = matches!(law.state, StateSource::Exact);
-            let n_inputs = LqrBlock::INPUTS + if exact { STATES } else { 0 };
+            let latent_inputs = if latent.is_some() {
+                LqrBlock::LATENT_INPUTS
+            } else {
+                0
+            };
+            let state_at = LqrBlock::INPUTS + latent_inputs;
+            let n_inputs = state_at + if exact { STATES } else { 0 };
             let node = system.add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
             for f in 0..FLOORS {
                 system.connect_sampled(Port::Output(plant, f), node, f)?;
             }
             system.connect(force, node, 3)?;
+            if let Some(c) = latent {
+                for f in 0..FLOORS {
+                    system.connect_sampled(Port::Output(c, f), node, LqrBlock::INPUTS + f)?;
+                }
+            }
             if exact {
                 for s in 0..STATES {
-                    system.connect_sampled(Port::Output(plant, FLOORS + s), node, 4 + s)?;
+                    system.connect_sampled(Port::Output(plant, FLOORS + s), node, state_at + s)?;
                 }
             }
             system.connect(Port::Output(node, 0), plant, 1)?;
@@ -380,8 +453,12 @@ pub fn simulate(
     let zero = system.add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
     let mut ports: Vec<Port> = (0..FLOORS).map(|f| Port::Output(plant, f)).collect();
     match controller {
-        Some(node) => ports.extend([Port::Output(node, 0), Port::Output(node, 1)]),
-        None => ports.extend([zero, zero]),
+        Some(node) => ports.extend([
+            Port::Output(node, 0),
+            Port::Output(node, 1),
+            Port::Output(node, 2),
+        ]),
+        None => ports.extend([zero, zero, zero]),
     }
     for (i, _) in setup.gaps.iter().enumerate() {
         ports.push(Port::Output(plant, 3 * FLOORS + i));
@@ -396,6 +473,8 @@ pub fn simulate(
         sum_sq: 0.0,
         points: 0,
         high_points: 0,
+        drift_points: 0,
+        variance_points: 0,
         high: false,
     };
     let steps = ((data.len() - 1) * substeps) as u64;
@@ -416,6 +495,8 @@ pub fn simulate(
     let points = observer.points.max(1) as f64;
     response.control_rms = (observer.sum_sq / points).sqrt();
     response.high_fraction = observer.high_points as f64 / points;
+    response.drift_trigger_fraction = observer.drift_points as f64 / points;
+    response.variance_trigger_fraction = observer.variance_points as f64 / points;
     Ok(response)
 }
 

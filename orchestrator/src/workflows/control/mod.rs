@@ -63,6 +63,18 @@ pub struct ScheduleOptions {
     pub margin: f64,
     pub lookahead: f64,
     pub dwell: f64,
+    pub variance: VarianceTrigger,
+}
+
+/// Whether the schedule also switches on the corrector's latent variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VarianceTrigger {
+    /// When the twin has a corrector: above the twin's noise variance (the threshold active
+    /// learning queries at), else 1e-3 of the record's measured variance.
+    Auto,
+    /// This threshold on every floor, (m/s²)².
+    Value(f64),
+    Off,
 }
 
 #[derive(Clone, Debug)]
@@ -168,6 +180,12 @@ pub struct ScheduleReport {
     pub dwell: f64,
     pub switches: Vec<Switch>,
     pub high_fraction: f64,
+    /// The corrector's latent variance above which the high gain comes on, per floor (None:
+    /// the twin has no corrector, or the trigger is off).
+    pub variance_threshold: Option<[f64; FLOORS]>,
+    /// Fractions of the time the drift and the latent-variance triggers held.
+    pub drift_trigger_fraction: f64,
+    pub variance_trigger_fraction: f64,
     pub contacts: usize,
     pub contact_times: Vec<f64>,
     pub attenuation_db: Vec<Attenuation>,
@@ -487,6 +505,7 @@ pub fn run_control(
         }),
         gaps: gaps.clone(),
         force_limit: 1e3 * force_peak.max(1e-3),
+        corrector: false,
     };
     let estimator = estimator_of(options.estimator, options, noise_sd, data);
     let resonances = structure.natural_frequencies();
@@ -611,6 +630,29 @@ pub fn run_control(
                     "--schedule needs a higher q than the lowest: give two --q or --retune".into(),
                 ));
             }
+            let has_corrector = twin.component(crate::workflows::train::CORRECTOR).is_some();
+            let variance_threshold = match so.variance {
+                VarianceTrigger::Off => None,
+                VarianceTrigger::Value(v) => {
+                    if !has_corrector {
+                        return Err(ControlError::Options(format!(
+                            "--variance-threshold {v}: {} has no corrector to give a latent \
+                             variance (train one with `twin train`)",
+                            twin.describe()
+                        )));
+                    }
+                    Some([v; FLOORS])
+                }
+                VarianceTrigger::Auto if has_corrector => {
+                    Some(twin.noise_variance.unwrap_or_else(|| {
+                        [0, 1, 2].map(|f| {
+                            crate::workflows::learn::PAPER_THRESHOLD
+                                * crate::evaluation::stats::variance(&data.acc[f])
+                        })
+                    }))
+                }
+                VarianceTrigger::Auto => None,
+            };
             let schedule = Schedule {
                 storey: gap.storey,
                 gap: gap.gap(),
@@ -618,7 +660,7 @@ pub fn run_control(
                 margin: so.margin,
                 lookahead: so.lookahead,
                 dwell: so.dwell,
-                variance_threshold: None,
+                variance_threshold,
             };
             let gains = Gains::Scheduled {
                 low: low.design.gain,
@@ -626,9 +668,10 @@ pub fn run_control(
                 schedule,
             };
             let state = StateSource::Estimated(estimator);
-            let r = runner
-                .run_law(gains, state)?
-                .map_err(ControlError::Unstable)?;
+            runner.setup.corrector = variance_threshold.is_some();
+            let r = runner.run_law(gains, state);
+            runner.setup.corrector = false;
+            let r = r?.map_err(ControlError::Unstable)?;
             let peaks = resonance_peaks(&data.force, &r, data.dt, &resonances);
             let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
             let report = ScheduleReport {
@@ -648,6 +691,9 @@ pub fn run_control(
                     })
                     .collect(),
                 high_fraction: r.high_fraction,
+                variance_threshold,
+                drift_trigger_fraction: r.drift_trigger_fraction,
+                variance_trigger_fraction: r.variance_trigger_fraction,
                 contacts: r.contacts.len(),
                 contact_times: r.contacts.iter().map(|c| c.time).collect(),
                 attenuation_db: att,
@@ -885,6 +931,7 @@ pub fn predict_controlled(
         noise: None,
         gaps: Vec::new(),
         force_limit: 1e3 * force_peak.max(1e-3),
+        corrector: false,
     };
     let law = LoopLaw {
         gains: Gains::Fixed(design.gain),
