@@ -196,7 +196,7 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
             .map_err(text)?;
         chart
             .configure_mesh()
-            .disable_y_mesh()
+            .disable_mesh()
             .disable_y_axis()
             .x_desc("time (s)")
             .label_style((FONT, 12))
@@ -204,6 +204,13 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
             .map_err(text)?;
         for (i, run) in runs.iter().enumerate() {
             let y = rows_n - i as f64 - 1.0;
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    run.label.clone(),
+                    (0.005 * t_end, y + 0.75),
+                    (FONT, 11).into_font().color(&run.colour),
+                )))
+                .map_err(text)?;
             for &t in &run.contacts {
                 chart
                     .draw_series(LineSeries::new(
