@@ -442,6 +442,109 @@ impl Controller {
     }
 }
 
+/// What a [`Controller`] remembers between samples (its gain, the commands acting and pending,
+/// the estimate and the estimator's memory), in plain numbers: the controller FMU serializes
+/// its state with it and rebuilds the rest from its parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ControllerMemory {
+    pub gain: [f64; STATES],
+    pub acting: f64,
+    pub pending: f64,
+    pub estimate: [f64; STATES],
+    pub estimator: EstimatorMemory,
+}
+
+/// The estimator's part of [`ControllerMemory`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum EstimatorMemory {
+    Integrate {
+        y: [f64; FLOORS],
+        v: [f64; FLOORS],
+        a_prev: [f64; FLOORS],
+        started: bool,
+    },
+    Kalman {
+        w: [f64; STATES],
+        previous: Option<(f64, f64)>,
+    },
+}
+
+impl Controller {
+    /// The memory, to [`Controller::restore`] into a controller built with the same model,
+    /// estimator and interval.
+    pub fn memory(&self) -> ControllerMemory {
+        let mut estimate = [0.0; STATES];
+        estimate.copy_from_slice(self.estimate.as_slice());
+        let estimator = match &self.state {
+            State::Integrate {
+                y,
+                v,
+                a_prev,
+                started,
+                ..
+            } => EstimatorMemory::Integrate {
+                y: *y,
+                v: *v,
+                a_prev: *a_prev,
+                started: *started,
+            },
+            State::Kalman(k) => {
+                let mut w = [0.0; STATES];
+                w.copy_from_slice(k.w.as_slice());
+                EstimatorMemory::Kalman {
+                    w,
+                    previous: k.previous,
+                }
+            }
+        };
+        ControllerMemory {
+            gain: self.gain,
+            acting: self.acting,
+            pending: self.pending,
+            estimate,
+            estimator,
+        }
+    }
+
+    /// Put back a memory taken with [`Controller::memory`]; false (and nothing changed) when
+    /// it is of the other estimator.
+    pub fn restore(&mut self, memory: &ControllerMemory) -> bool {
+        match (&mut self.state, &memory.estimator) {
+            (
+                State::Integrate {
+                    y,
+                    v,
+                    a_prev,
+                    started,
+                    ..
+                },
+                EstimatorMemory::Integrate {
+                    y: my,
+                    v: mv,
+                    a_prev: ma,
+                    started: ms,
+                },
+            ) => {
+                *y = *my;
+                *v = *mv;
+                *a_prev = *ma;
+                *started = *ms;
+            }
+            (State::Kalman(k), EstimatorMemory::Kalman { w, previous }) => {
+                k.w = StateVector::from_column_slice(w);
+                k.previous = *previous;
+            }
+            _ => return false,
+        }
+        self.gain = memory.gain;
+        self.acting = memory.acting;
+        self.pending = memory.pending;
+        self.estimate = StateVector::from_column_slice(&memory.estimate);
+        true
+    }
+}
+
 /// Gain scheduling: the low gain while the structure is far from contact, the high gain when
 /// the estimated drift of the watched storey, projected `lookahead` seconds ahead, comes within
 /// `margin` (a fraction of the gap) of closing the gap — or when a corrector's latent variance
