@@ -92,6 +92,13 @@ pub struct ControlArgs {
     /// Plot (.svg): FRFs per floor and time histories with the contact initiations.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Also write the controlled system as an SSP archive: the twin's shear FMU and the
+    /// controller as the fmu_lqr FMU, for any SSP tool (`twin run`, fmpy's simulate_ssp).
+    #[arg(long)]
+    pub ssp: Option<PathBuf>,
+    /// The design (its q) the SSP holds; default: the first stable one.
+    #[arg(long, requires = "ssp")]
+    pub ssp_q: Option<f64>,
 }
 
 fn parse_gap(text: &str) -> Result<Gap> {
@@ -208,6 +215,17 @@ pub fn run(args: &ControlArgs) -> Result<()> {
         None => None,
     };
     write_json(&args.report, &outcome.report)?;
+    if let Some(path) = &args.ssp {
+        let span = (data.time[0], *data.time.last().unwrap_or(&data.time[0]));
+        crate::workflows::control::ssp::write_controlled_ssp(
+            &twin,
+            &outcome.report,
+            args.ssp_q,
+            Some(span),
+            path,
+        )
+        .with_context(|| format!("--ssp {}", path.display()))?;
+    }
     if let Some((path, text)) = svg {
         write_text_atomically(path, &text)?;
     }

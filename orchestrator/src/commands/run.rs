@@ -4,7 +4,14 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::cosim::master::Algorithm;
 use crate::cosim::run::RunOptions;
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum AlgorithmArg {
+    GaussSeidel,
+    Jacobi,
+}
 
 #[derive(clap::Args)]
 pub struct RunArgs {
@@ -37,6 +44,12 @@ pub struct RunArgs {
     /// they get the input's slope over the step; fmpy's simulate_fmu holds them).
     #[arg(long)]
     pub hold_inputs: bool,
+    /// How a system's connections are resolved at each communication point: gauss-seidel
+    /// (each component sees what the ones before it produced at this point, until nothing
+    /// changes) or jacobi (every component reads the outputs as the last step left them, as
+    /// fmpy's simulate_ssp does).
+    #[arg(long, value_enum, default_value_t = AlgorithmArg::GaussSeidel)]
+    pub algorithm: AlgorithmArg,
     /// Plot (.svg) of every recorded numeric column against time.
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -56,6 +69,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
         sets: args.sets.clone(),
         output_all: args.output_all,
         hold_inputs: args.hold_inputs,
+        algorithm: match args.algorithm {
+            AlgorithmArg::GaussSeidel => Algorithm::GaussSeidel,
+            AlgorithmArg::Jacobi => Algorithm::Jacobi,
+        },
     };
     let result = crate::cosim::run::run(&args.model, &options, super::progress_bar())?;
     super::write_atomically(&args.output, |f| Ok(result.write_csv(f)?))?;

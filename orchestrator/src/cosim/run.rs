@@ -10,6 +10,9 @@
 //!   the others (Integer, Boolean, Enumeration, discrete Reals) are held from the last row; an
 //!   FMU that declares `canInterpolateInputs` also gets the slope up to the next point (unless
 //!   `hold_inputs`: fmpy's default never sends one);
+//! - a system's connections are resolved by Gauss–Seidel at each point (default), or by Jacobi
+//!   (`algorithm`): every component then reads the others' outputs as the last step left them,
+//!   as fmpy's `simulate_ssp` does (which also delivers the system inputs a step late);
 //! - the outputs at a point are recorded as the step left them, before that point's inputs are
 //!   applied (point 0: after the start values and the first inputs, in initialisation mode);
 //! - an FMU that ends the simulation itself (`fmi2Discard` + `fmi2Terminated`) ends the run at
@@ -23,7 +26,7 @@ use crate::cosim::import::{
     UnpackLimits, Unpacked, UnpackedFmu,
 };
 use crate::cosim::master::{
-    MasterError, NodeId, Observer, Port, PortType, Recording, RunEnd, System, TypedPort,
+    Algorithm, MasterError, NodeId, Observer, Port, PortType, Recording, RunEnd, System, TypedPort,
 };
 use crate::cosim::ssp::{self, Connection, SsvValue};
 
@@ -60,6 +63,11 @@ pub struct RunOptions {
     /// Hold every input over each step, even for FMUs that can interpolate inputs (fmpy's
     /// `simulate_fmu` default).
     pub hold_inputs: bool,
+    /// How a system's connections are resolved at a communication point: Gauss–Seidel (each
+    /// component, in the SSD's order, sees what the ones before it produced at this point,
+    /// repeated until nothing changes) or Jacobi (every component sees the outputs as the last
+    /// step left them: fmpy's `simulate_ssp` for connections between components).
+    pub algorithm: Algorithm,
 }
 
 /// A recorded column.
@@ -877,13 +885,20 @@ pub fn run(
 ) -> Result<RunResult, RunError> {
     let model = Model::open(path)?;
     let plan = plan(&model, options)?;
-    execute(model, plan, options.hold_inputs, progress)
+    execute(
+        model,
+        plan,
+        options.hold_inputs,
+        options.algorithm,
+        progress,
+    )
 }
 
 fn execute(
     mut model: Model,
     plan: Plan,
     hold_inputs: bool,
+    algorithm: Algorithm,
     progress: impl FnMut(u64, u64),
 ) -> Result<RunResult, RunError> {
     // Ports of each component: inputs driven by the file or by connections, outputs recorded
@@ -968,6 +983,7 @@ fn execute(
     let mut system = System::new();
     system.recording = Recording::BeforeInputs;
     system.interpolate_inputs = !hold_inputs;
+    system.algorithm = algorithm;
     let mut ids: Vec<NodeId> = Vec::new();
     for (i, instance) in instances.into_iter().enumerate() {
         let typed = |vars: &[ScalarVariable]| {

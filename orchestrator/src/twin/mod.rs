@@ -90,6 +90,8 @@ pub struct Twin {
     pub connections: Vec<Connection>,
     /// Measurement noise variance per floor, (m/s²)²; None until calibrated.
     pub noise_variance: Option<[f64; 3]>,
+    /// The SSD's `DefaultExperiment` (start, stop), s; None: none written.
+    pub default_experiment: Option<(f64, f64)>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
     /// Keeps what `fmu_path`s point into (the unpacked archive, a trained FMU's scratch
@@ -150,6 +152,7 @@ impl Twin {
             }],
             connections,
             noise_variance: None,
+            default_experiment: None,
             source: None,
             keep_alive: Vec::new(),
         })
@@ -170,6 +173,7 @@ impl Twin {
             components: self.components.clone(),
             connections: self.connections.clone(),
             noise_variance: self.noise_variance,
+            default_experiment: self.default_experiment,
             source: self.source.clone(),
             keep_alive: self.keep_alive.clone(),
         }
@@ -181,9 +185,15 @@ impl Twin {
         self.keep_alive.push(resource);
     }
 
-    /// The system's input connectors: the standard inputs plus any a connection starts from.
+    /// The system's input connectors: the standard inputs (but for one the system outputs, as
+    /// a controlled system does its control force) plus any a connection starts from.
     pub fn system_inputs(&self) -> Vec<String> {
-        let mut names: Vec<String> = INPUTS.iter().map(|s| s.to_string()).collect();
+        let outputs = self.system_outputs();
+        let mut names: Vec<String> = INPUTS
+            .iter()
+            .map(|s| s.to_string())
+            .filter(|s| !outputs.contains(s))
+            .collect();
         for c in &self.connections {
             if c.start_element.is_none() && !names.contains(&c.start_connector) {
                 names.push(c.start_connector.clone());
@@ -291,6 +301,7 @@ impl Twin {
             components,
             connections: parsed.connections,
             noise_variance,
+            default_experiment: parsed.start_time.zip(parsed.stop_time),
             source: Some(path.to_owned()),
             keep_alive: vec![std::sync::Arc::new(unpacked)],
         })
@@ -460,6 +471,12 @@ impl Twin {
             .expect(ok);
         w.write_event(Event::End(BytesEnd::new("ssd:System")))
             .expect(ok);
+        if let Some((start, stop)) = self.default_experiment {
+            let mut e = BytesStart::new("ssd:DefaultExperiment");
+            e.push_attribute(("startTime", format!("{start:?}").as_str()));
+            e.push_attribute(("stopTime", format!("{stop:?}").as_str()));
+            w.write_event(Event::Empty(e)).expect(ok);
+        }
         w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription")))
             .expect(ok);
         finish_xml(w)

@@ -8,6 +8,7 @@
 
 pub mod closed_loop;
 pub mod design;
+pub mod ssp;
 
 use numerics::lqr::{Estimator, Schedule, ShearMatrices, FLOORS};
 use serde::Serialize;

@@ -1,0 +1,167 @@
+//! `twin control --ssp`: the controlled system as an SSP 1.0 archive any SSP tool runs — the
+//! twin's shear FMU with its parameters, and the controller as the `fmu_lqr` FMU (the same
+//! `numerics::lqr` law as the master's `LqrBlock`) with a design's gain and the report's
+//! estimator, sampling at the report's control rate.
+//!
+//! Connections: system `force` → `physics.force` and `lqr.force`; `physics.acc1..3` →
+//! `lqr.acc1..3`; `lqr.control_force` → `physics.control_force`; system outputs `acc1..3` (the
+//! physics') and `control_force` (the controller's). The noise-free loop: the sensor noise of a
+//! `twin control` run is not part of it.
+//!
+//! What the masters make of it (the controller's output has no feedthrough, the shear's `acc1`
+//! has: it jumps with `force − control_force`). In every case the structure steps over
+//! `[t_k, t_{k+1}]` with the command the controller computed at its step from `t_{k−1}`:
+//! - a Jacobi master (`twin run --algorithm jacobi`; fmpy's `simulate_ssp`, which also hands the
+//!   system input to the components a step late) gives the controller the accelerations as the
+//!   structure's last step left them, before the new command acts: the system `twin control`
+//!   runs with its block and sampled connections;
+//! - a Gauss–Seidel master (`twin run`'s default) sets the new command first and gives the
+//!   controller the accelerations at `t_k` with it acting: floor 1's reading differs by
+//!   `(u_{k−2} − u_{k−1})/m1`, a slightly different (still stable) system.
+//!
+//! SSP 1.0's `DefaultExperiment` has no step: both FMUs declare 1/51.2 s, the step `twin run`
+//! takes by default; at another control rate give `--step` (the controller refuses any other
+//! step, saying which it needs).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::{ControlError, ControllerSpec};
+use crate::twin::{find_fmu, Component, Connection, ParameterValue, Twin, PHYSICS};
+use numerics::lqr::Estimator;
+
+/// The controller component's name.
+pub const CONTROLLER: &str = "lqr";
+/// The controller FMU's archive name.
+pub const LQR_FMU: &str = "fmu_lqr.fmu";
+
+/// The `fmu_lqr` parameters of design `q` (None: the first stable one) of `spec`.
+pub fn controller_parameters(
+    spec: &ControllerSpec,
+    q: Option<f64>,
+) -> Result<BTreeMap<String, ParameterValue>, ControlError> {
+    let design = spec.design(q)?;
+    let structure = spec.structure()?;
+    if !(spec.control_rate_hz.is_finite() && spec.control_rate_hz > 0.0) {
+        return Err(ControlError::Options(format!(
+            "the report's control rate {} Hz is not positive",
+            spec.control_rate_hz
+        )));
+    }
+    let mut p = BTreeMap::new();
+    let mut real = |name: String, x: f64| {
+        p.insert(name, ParameterValue::Real(x));
+    };
+    for (i, g) in design.gain.iter().enumerate() {
+        real(format!("gain{}", i + 1), *g);
+    }
+    real("state_scale".into(), spec.state_scale);
+    for i in 0..3 {
+        real(format!("m{}", i + 1), structure.mass[i]);
+        real(format!("c{}", i + 1), structure.damping[i]);
+        real(format!("k{}", i + 1), structure.stiffness[i]);
+    }
+    real("sample_interval".into(), 1.0 / spec.control_rate_hz);
+    let estimator = match spec.estimator_settings {
+        Estimator::Integrate { highpass_hz } => {
+            real("highpass_hz".into(), highpass_hz);
+            0
+        }
+        Estimator::Kalman {
+            process_sd,
+            sensor_sd,
+        } => {
+            real("process_sd".into(), process_sd);
+            for (i, s) in sensor_sd.iter().enumerate() {
+                real(format!("sensor_sd{}", i + 1), *s);
+            }
+            1
+        }
+    };
+    p.insert("estimator".into(), ParameterValue::Integer(estimator));
+    Ok(p)
+}
+
+fn link(from: Option<&str>, out: &str, to: Option<&str>, input: &str) -> Connection {
+    Connection {
+        start_element: from.map(str::to_owned),
+        start_connector: out.to_owned(),
+        end_element: to.map(str::to_owned),
+        end_connector: input.to_owned(),
+    }
+}
+
+/// The controlled system: `twin`'s physics component and the controller of design `q`, with
+/// `experiment` (start, stop) as its DefaultExperiment. `lqr_fmu`: the controller FMU (None:
+/// `find_fmu`).
+pub fn controlled_system(
+    twin: &Twin,
+    spec: &ControllerSpec,
+    q: Option<f64>,
+    experiment: Option<(f64, f64)>,
+    lqr_fmu: Option<PathBuf>,
+) -> Result<Twin, ControlError> {
+    let physics = twin
+        .component(PHYSICS)
+        .ok_or_else(|| {
+            ControlError::Twin(format!("{} has no '{PHYSICS}' component", twin.describe()))
+        })?
+        .clone();
+    let fmu_path = match lqr_fmu {
+        Some(p) => p,
+        None => find_fmu(LQR_FMU)?,
+    };
+    let controller = Component {
+        name: CONTROLLER.into(),
+        fmu_name: LQR_FMU.into(),
+        fmu_path,
+        parameters: controller_parameters(spec, q)?,
+    };
+    let mut connections = vec![
+        link(None, "force", Some(PHYSICS), "force"),
+        link(None, "force", Some(CONTROLLER), "force"),
+    ];
+    for f in 1..=3 {
+        let acc = format!("acc{f}");
+        connections.push(link(Some(PHYSICS), &acc, Some(CONTROLLER), &acc));
+    }
+    connections.push(link(
+        Some(CONTROLLER),
+        "control_force",
+        Some(PHYSICS),
+        "control_force",
+    ));
+    for f in 1..=3 {
+        let acc = format!("acc{f}");
+        connections.push(link(Some(PHYSICS), &acc, None, &acc));
+    }
+    connections.push(link(
+        Some(CONTROLLER),
+        "control_force",
+        None,
+        "control_force",
+    ));
+    let mut system = twin.duplicate();
+    system.name = "shear-twin-controlled".into();
+    system.components = vec![physics, controller];
+    system.connections = connections;
+    system.noise_variance = None;
+    system.default_experiment = experiment;
+    Ok(system)
+}
+
+/// `twin control --ssp`: write the controlled system of design `q` of `report` (a
+/// `ControlReport`'s JSON) to `path`.
+pub fn write_controlled_ssp(
+    twin: &Twin,
+    report: &impl serde::Serialize,
+    q: Option<f64>,
+    experiment: Option<(f64, f64)>,
+    path: &Path,
+) -> Result<(), ControlError> {
+    let text = serde_json::to_string(report)
+        .map_err(|e| ControlError::Options(format!("the control report: {e}")))?;
+    let spec = ControllerSpec::from_json(&text, "the control report")?;
+    controlled_system(twin, &spec, q, experiment, None)?.write(path)?;
+    Ok(())
+}
