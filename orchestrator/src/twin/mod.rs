@@ -431,6 +431,8 @@ impl Twin {
             w.write_event(Event::Start(e)).expect(ok);
             w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
                 .expect(ok);
+            // Each connector once, however many connections it has (an output can feed
+            // another component and the system).
             let mut listed: Vec<(&str, &str)> = Vec::new();
             for conn in &self.connections {
                 if conn.end_element.as_deref() == Some(&c.name) {
@@ -440,7 +442,8 @@ impl Twin {
                     listed.push((&conn.start_connector, "output"));
                 }
             }
-            listed.dedup();
+            let mut seen = std::collections::HashSet::new();
+            listed.retain(|(name, _)| seen.insert(*name));
             for (name, kind) in listed {
                 connector(&mut w, name, kind, "Real");
             }
