@@ -72,7 +72,15 @@ cut -d, -f1,2 data/dataset3.csv >"$out/force-dataset3.csv"
 echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
 "$twin" control --twin "$out/calibrated.ssp" --data data/dataset2.csv --q 1e3 --q 5e3 --r 0.1 \
-  --estimator-costs --report "$out/control-dataset2.json" --plot "$out/control-dataset2.svg"
+  --estimator-costs --report "$out/control-dataset2.json" --plot "$out/control-dataset2.svg" \
+  --ssp "$out/controlled-dataset2.ssp"
+
+echo
+echo "== the controlled system (shear FMU + LQR FMU, q = 1e3) is an SSP any FMI master runs: twin run it =="
+cut -d, -f1,2 data/dataset2.csv >"$out/force-dataset2.csv"
+control_step=$(python3 -c "import json, sys; print(1 / json.load(open(sys.argv[1]))['control_rate_hz'])" "$out/control-dataset2.json")
+"$twin" run "$out/controlled-dataset2.ssp" --algorithm jacobi --input "$out/force-dataset2.csv" \
+  --step "$control_step" --stop 19.98046875 --output "$out/run-controlled-dataset2.csv"
 
 echo
 echo "== twin control on dataset3, the structure with the contact add-physics found: contacts passive, fixed gains, scheduled =="
