@@ -23,6 +23,28 @@ fn text(e: impl std::fmt::Display) -> String {
     e.to_string()
 }
 
+/// The panels' grid and axis labels.
+fn draw_mesh<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    x: &str,
+    y: &str,
+) -> Result<(), String> {
+    chart
+        .configure_mesh()
+        .x_desc(x)
+        .y_desc(y)
+        .label_style((FONT, 12))
+        .max_light_lines(1)
+        .bold_line_style(BLACK.mix(0.10))
+        .light_line_style(BLACK.mix(0.04))
+        .draw()
+        .map_err(text)
+}
+
 /// One line of the plot: its label, colour and accelerations (record rate).
 struct Run<'a> {
     label: String,
@@ -128,16 +150,7 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
                 .y_label_area_size(55)
                 .build_cartesian_2d(0.0..nyquist.min(30.0), lo..hi)
                 .map_err(text)?;
-            chart
-                .configure_mesh()
-                .x_desc("frequency (Hz)")
-                .y_desc("|H| (dB re 1 (m/s²)/N)")
-                .label_style((FONT, 12))
-                .max_light_lines(1)
-                .bold_line_style(BLACK.mix(0.10))
-                .light_line_style(BLACK.mix(0.04))
-                .draw()
-                .map_err(text)?;
+            draw_mesh(&mut chart, "frequency (Hz)", "|H| (dB re 1 (m/s²)/N)")?;
             for (run, h) in runs.iter().zip(&frfs) {
                 if let Some(h) = h {
                     let pts = h
@@ -165,16 +178,7 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
                 .y_label_area_size(55)
                 .build_cartesian_2d(0.0..t_end, -peak..peak)
                 .map_err(text)?;
-            chart
-                .configure_mesh()
-                .x_desc("time (s)")
-                .y_desc("m/s²")
-                .label_style((FONT, 12))
-                .max_light_lines(1)
-                .bold_line_style(BLACK.mix(0.10))
-                .light_line_style(BLACK.mix(0.04))
-                .draw()
-                .map_err(text)?;
+            draw_mesh(&mut chart, "time (s)", "m/s²")?;
             for run in &runs {
                 let pts = time
                     .iter()
