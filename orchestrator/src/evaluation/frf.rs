@@ -5,6 +5,10 @@ use std::f64::consts::PI;
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 
+/// Samples per Welch segment of the frequency views (`twin compare --frf`, `twin control`): at
+/// 51.2 Hz, 5 s and 0.2 Hz resolution.
+pub const FRF_SEGMENT: usize = 256;
+
 /// A frequency-response estimate, DC left out (every segment has its mean removed).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrequencyResponse {

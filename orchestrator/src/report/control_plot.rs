@@ -6,8 +6,8 @@
 use plotters::prelude::*;
 
 use super::palette;
-use crate::evaluation::frf::welch_h1;
-use crate::workflows::control::{ControlOutcome, FRF_SEGMENT};
+use crate::evaluation::frf::{welch_h1, FRF_SEGMENT};
+use crate::workflows::control::ControlOutcome;
 
 const FONT: &str = "sans-serif";
 const WIDTH: u32 = 1500;

@@ -13,8 +13,7 @@ use crate::evaluation::compare::Comparison;
 use crate::evaluation::frf::{welch_h1, FrequencyResponse};
 use crate::fsutil::write_text_atomically;
 
-/// Samples per Welch segment of the frequency view: at 51.2 Hz, 5 s and 0.2 Hz resolution.
-pub const FRF_SEGMENT: usize = 256;
+pub use crate::evaluation::frf::FRF_SEGMENT;
 
 /// The frequency view reaches at most this far (dB) below its highest point, lower values drawn
 /// on its bottom edge: one estimate diving toward a zero would otherwise flatten all the others.

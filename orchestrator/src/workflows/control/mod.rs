@@ -15,7 +15,7 @@ use serde::Serialize;
 
 use crate::blocks::lqr::SensorNoise;
 use crate::cosim::master::MasterError;
-use crate::evaluation::frf::welch_h1;
+use crate::evaluation::frf::{welch_h1, FRF_SEGMENT};
 use crate::evaluation::stats::rms;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
@@ -41,8 +41,6 @@ pub enum ControlError {
     TwinFile(#[from] TwinError),
 }
 
-/// Segment of the frequency-response estimates (as `twin compare --frf`).
-pub const FRF_SEGMENT: usize = crate::report::FRF_SEGMENT;
 /// Half-width of the band around a resonance in which the peak is read, relative.
 pub const RESONANCE_BAND: f64 = 0.1;
 /// The grid `--retune` searches, as multiples of the smallest `--q`.
