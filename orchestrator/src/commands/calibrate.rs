@@ -7,6 +7,7 @@ use serde_json::json;
 
 use super::{nmse_on, run_and_compare, write_json};
 use crate::twin::data::Measurement;
+use crate::twin::run::{Tolerance, VALIDATION_CAP};
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -78,7 +79,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         setup.priors = read_priors(path).map_err(anyhow::Error::msg)?;
     }
     let calibration = calibrate(&twin, &data, &setup)?;
-    let new_twin = calibrated_twin(&twin, &calibration)?;
+    let mut new_twin = calibrated_twin(&twin, &calibration)?;
     let mut validated = Vec::new();
     for v in &validation {
         validated.push((
@@ -86,6 +87,14 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             nmse_on(&new_twin, v, args.transient)?,
         ));
     }
+    // The worst validation NMSE sets the default tolerance of compare and diagnose; records
+    // above the cap show something the twin does not know and are no measure of its fidelity.
+    let worst_floor = |n: &[f64; 3]| n.iter().copied().fold(0.0, f64::max);
+    new_twin.validation_nmse = validated
+        .iter()
+        .map(|(_, n)| worst_floor(n))
+        .filter(|w| *w <= VALIDATION_CAP)
+        .reduce(f64::max);
 
     // All computed: now write, each file atomically.
     new_twin.write(&args.out)?;
@@ -101,7 +110,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             "noise_log_sd": calibration.noise_log_sd,
             "neg_log_posterior": calibration.neg_log_posterior,
             "nmse": calibration.nmse,
-            "validation": validated.iter().map(|(p, n)| json!({"data": p, "nmse": n})).collect::<Vec<_>>(),
+            "validation": validated.iter().map(|(p, n)| json!({"data": p, "nmse": n, "accepted": worst_floor(n) <= VALIDATION_CAP})).collect::<Vec<_>>(),
+            "validation_nmse": new_twin.validation_nmse,
+            "tolerance": Tolerance::resolve(&new_twin, None),
             "starts": calibration.starts,
             "simulations": calibration.simulations,
             "seconds": calibration.seconds,
@@ -168,8 +179,23 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         calibration.nmse[2]
     );
     for (p, n) in &validated {
-        println!("NMSE % on {p}: {:.3} / {:.3} / {:.3}", n[0], n[1], n[2]);
+        println!(
+            "NMSE % on {p}: {:.3} / {:.3} / {:.3}{}",
+            n[0],
+            n[1],
+            n[2],
+            if worst_floor(n) <= VALIDATION_CAP {
+                ""
+            } else {
+                " (above the cap: not taken as the twin's validation level)"
+            }
+        );
     }
+    let tolerance = Tolerance::resolve(&new_twin, None);
+    println!(
+        "tolerance of compare and diagnose: {:.3} % NMSE ({})",
+        tolerance.value, tolerance.source
+    );
     println!("wrote {}", args.out.display());
     Ok(())
 }

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use serde_json::json;
 
-use super::{progress_bar, run_and_compare, write_atomically, write_json, Compared};
+use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
-use crate::twin::run::compare_prediction;
 use crate::twin::run::Prediction;
+use crate::twin::run::{compare_with, run_and_compare_with};
 use crate::twin::Twin;
 use crate::workflows::control::{predict_controlled, ControllerSpec};
 
@@ -52,6 +52,11 @@ pub struct CompareArgs {
     /// Seconds at the start left out of the error measures.
     #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
     pub transient: f64,
+    /// Practical significance, NMSE %: an out-of-band window whose NMSE is below it on every
+    /// floor that left the band is not a failing window. Default: 2 × the twin's worst
+    /// validation NMSE (`twin calibrate --validate`), else 0.5 %.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {
@@ -65,6 +70,11 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             bail!("--latent-threshold must be a positive number, was {t}");
         }
     }
+    if let Some(t) = args.tolerance {
+        if !(t >= 0.0 && t.is_finite()) {
+            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
+        }
+    }
     let data = Measurement::read(&args.data)?;
     if args.transient >= data.duration() {
         bail!(
@@ -76,7 +86,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     let twin = Twin::load(args.twin.as_deref())?;
     let compared = match &args.controller {
-        None => run_and_compare(&twin, &data, args.transient, progress_bar())?,
+        None => run_and_compare_with(&twin, &data, args.transient, args.tolerance, progress_bar())?,
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
@@ -84,7 +94,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             let mut progress = progress_bar();
             let prediction =
                 predict_controlled(&twin, &data, &spec, args.controller_q, &mut progress)?;
-            compare_prediction(&twin, &data, args.transient, prediction)
+            compare_with(
+                &twin,
+                &data,
+                args.transient,
+                args.tolerance,
+                prediction,
+                None,
+            )
         }
     };
     let Compared {
@@ -92,6 +109,10 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         comparison,
         noise_variance,
         noise_source,
+        parameter_variance,
+        noise_nmse,
+        band_nmse,
+        tolerance,
     } = compared;
 
     // Everything is computed before anything is written: a failure leaves no partial output.
@@ -99,6 +120,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_atomically(path, |f| write_predictions(f, &prediction))?;
     }
     if let Some(path) = &args.report {
+        let explained = [0, 1, 2].map(|f| noise_nmse[f] + band_nmse[f]);
         let report = json!({
             "twin": twin.describe(),
             "data": data.path.display().to_string(),
@@ -106,6 +128,15 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             "failing_windows": comparison.failing_windows,
             "noise_variance": noise_variance,
             "noise_variance_source": noise_source,
+            "band": {
+                "parameter_uncertainty": parameter_variance.is_some(),
+                "noise_nmse": noise_nmse,
+                "parameter_nmse": band_nmse,
+                "explained_nmse": explained,
+            },
+            "tolerance": tolerance.value,
+            "tolerance_source": tolerance.source,
+            "windows_below_tolerance": comparison.windows_below_tolerance,
             "transient": args.transient,
             "samples": data.len(),
             "sample_interval": data.dt,
@@ -128,6 +159,27 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         }
     }
     print_summary(&twin, &data, &comparison);
+    if parameter_variance.is_some() {
+        println!(
+            "band: noise + parameter uncertainty, explains NMSE {:.3} / {:.3} / {:.3} % \
+             (noise {:.3} / {:.3} / {:.3} %)",
+            noise_nmse[0] + band_nmse[0],
+            noise_nmse[1] + band_nmse[1],
+            noise_nmse[2] + band_nmse[2],
+            noise_nmse[0],
+            noise_nmse[1],
+            noise_nmse[2]
+        );
+    }
+    println!(
+        "tolerance: {:.3} % NMSE ({}){}",
+        tolerance.value,
+        tolerance.source,
+        match comparison.windows_below_tolerance {
+            0 => String::new(),
+            n => format!("; {n} out-of-band window(s) below it not counted"),
+        }
+    );
     Ok(())
 }
 

@@ -40,6 +40,11 @@ pub struct DiagnoseArgs {
     /// Fit the alternatives even when the error is within the noise.
     #[arg(long)]
     pub always_fit: bool,
+    /// Practical significance, NMSE %: a worst-floor NMSE below it is `none` whatever the
+    /// statistics say. Default: 2 × the twin's worst validation NMSE (`twin calibrate
+    /// --validate`), else 0.5 %.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
 }
 
 pub(super) fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
@@ -60,6 +65,12 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = options(args.transient, args.threads)?;
     o.block = args.block;
     o.always_fit = args.always_fit;
+    if let Some(t) = args.tolerance {
+        if !(t >= 0.0 && t.is_finite()) {
+            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
+        }
+        o.tolerance = Some(t);
+    }
     if !args.effects.is_empty() {
         o.candidates = args
             .effects
@@ -90,6 +101,26 @@ pub fn summary(d: &Diagnosis) -> String {
     s += &format!("record        {}\n", d.record);
     s += &format!("NMSE before   {}\n", pct(&d.nmse_before));
     s += &format!("noise level   {}\n", pct(&d.noise_nmse));
+    s += &format!(
+        "band explains {} (noise + parameter uncertainty {}); {}statistically significant\n",
+        pct(&d.explained_nmse),
+        pct(&d.band_nmse),
+        if d.statistically_significant {
+            ""
+        } else {
+            "not "
+        }
+    );
+    s += &format!(
+        "tolerance     {:.3} % ({}); {}practically significant\n",
+        d.tolerance,
+        d.tolerance_source,
+        if d.practically_significant {
+            ""
+        } else {
+            "not "
+        }
+    );
     if !d.failing_windows.is_empty() {
         let w: Vec<String> = d
             .failing_windows

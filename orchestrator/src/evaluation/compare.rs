@@ -40,6 +40,9 @@ pub struct CompareOptions {
     pub min_outliers: usize,
     pub severity: f64,
     pub severity_window: f64,
+    /// Practical significance, NMSE %: a window whose NMSE is below it on every floor that left
+    /// the band is not a failing window, whatever the band says (0: every window counts).
+    pub tolerance: f64,
 }
 
 impl Default for CompareOptions {
@@ -50,6 +53,7 @@ impl Default for CompareOptions {
             min_outliers: DEFAULT_MIN_OUTLIERS,
             severity: DEFAULT_SEVERITY,
             severity_window: DEFAULT_SEVERITY_WINDOW,
+            tolerance: 0.0,
         }
     }
 }
@@ -67,6 +71,9 @@ pub struct Comparison {
     pub first: usize,
     pub nmse: [f64; 3],
     pub failing_windows: Vec<FailingWindow>,
+    /// Windows out of the band but below the tolerance on every floor that left it.
+    pub windows_below_tolerance: usize,
+    pub tolerance: f64,
 }
 
 impl Comparison {
@@ -140,7 +147,7 @@ pub fn compare(
             _ => groups.push(vec![k]),
         }
     }
-    let failing_windows = groups
+    let windows: Vec<FailingWindow> = groups
         .into_iter()
         .filter(|g| g.len() >= options.min_outliers)
         .map(|g| {
@@ -157,6 +164,12 @@ pub fn compare(
             }
         })
         .collect();
+    let (failing_windows, below): (Vec<FailingWindow>, Vec<FailingWindow>) =
+        windows.into_iter().partition(|w| {
+            w.floors
+                .iter()
+                .any(|&f| !(w.nmse[f - 1] < options.tolerance))
+        });
 
     Comparison {
         time: time.to_vec(),
@@ -167,6 +180,8 @@ pub fn compare(
         first,
         nmse: overall,
         failing_windows,
+        windows_below_tolerance: below.len(),
+        tolerance: options.tolerance,
     }
 }
 
@@ -248,6 +263,39 @@ mod tests {
         let w = &c.failing_windows[0];
         assert!(w.start >= 5.7 && w.end <= 6.8, "{w:?}");
         assert_eq!(w.floors, vec![2]);
+    }
+
+    #[test]
+    fn windows_below_the_tolerance_are_not_failing() {
+        let time: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = time.iter().map(|t| (3.0 * t).sin()).collect();
+        let mut measured = [y.clone(), y.clone(), y.clone()];
+        // A burst at 10σ (σ = 0.01) in 6.0–6.5 s: window NMSE 5.8 %.
+        for k in 600..650 {
+            measured[1][k] = y[k] + if k % 2 == 0 { 0.1 } else { -0.1 };
+        }
+        let predicted = [y.clone(), y.clone(), y];
+        let run = |tolerance: f64| {
+            compare(
+                &time,
+                &measured,
+                &predicted,
+                [1e-4; 3],
+                None,
+                CompareOptions {
+                    tolerance,
+                    ..CompareOptions::default()
+                },
+            )
+        };
+        let strict = run(0.0);
+        assert_eq!(strict.failing_windows.len(), 1);
+        let w = strict.failing_windows[0].nmse[1];
+        assert!(w > 1.0 && w < 10.0, "{w}");
+        let tolerant = run(w * 1.01);
+        assert!(tolerant.failing_windows.is_empty());
+        assert_eq!(tolerant.windows_below_tolerance, 1);
+        assert_eq!(run(w * 0.99).failing_windows.len(), 1);
     }
 
     #[test]

@@ -723,6 +723,8 @@ mod tests {
             first: 103,
             nmse: [0.26, 2.44, 2.94],
             failing_windows,
+            windows_below_tolerance: 0,
+            tolerance: 0.0,
         };
         (c, force)
     }

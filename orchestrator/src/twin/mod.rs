@@ -4,7 +4,11 @@
 //!
 //! The twin's own figures that are no FMU parameter (the noise variance of each floor's
 //! measurement, used for the ±3σ band and by calibration) are parameter connectors of the
-//! system, bound to `resources/twin.ssv`.
+//! system, bound to `resources/twin.ssv`. Beside them, when the twin was calibrated and
+//! validated: the Laplace posterior covariance of the calibrated physics parameters
+//! (`covariance.A.B`, one Real per pair A ≤ B, in the parameters' own units), which widens the
+//! comparison's band, and the worst validation NMSE (`validation_nmse`, %), which sets the
+//! default tolerance of `twin compare` and `twin diagnose`.
 
 pub mod data;
 pub mod run;
@@ -72,6 +76,17 @@ impl std::fmt::Display for ParameterValue {
     }
 }
 
+/// The posterior covariance of calibrated physics parameters, in their own units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParameterCovariance {
+    pub names: Vec<String>,
+    /// `matrix[a][b]` = cov(names[a], names[b]).
+    pub matrix: Vec<Vec<f64>>,
+}
+
+/// The prefix of the covariance's entries in `resources/twin.ssv`.
+const COVARIANCE_PREFIX: &str = "covariance.";
+
 /// One FMU of the twin, with the parameter values the twin gives it.
 #[derive(Debug, Clone)]
 pub struct Component {
@@ -92,6 +107,10 @@ pub struct Twin {
     pub noise_variance: Option<[f64; 3]>,
     /// The SSD's `DefaultExperiment` (start, stop), s; None: none written.
     pub default_experiment: Option<(f64, f64)>,
+    /// Posterior covariance of the calibrated physics parameters; None unless calibrated.
+    pub parameter_covariance: Option<ParameterCovariance>,
+    /// Worst-floor NMSE (%) of the worst validation record the twin was accepted on.
+    pub validation_nmse: Option<f64>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
     /// Keeps what `fmu_path`s point into (the unpacked archive, a trained FMU's scratch
@@ -153,6 +172,8 @@ impl Twin {
             connections,
             noise_variance: None,
             default_experiment: None,
+            parameter_covariance: None,
+            validation_nmse: None,
             source: None,
             keep_alive: Vec::new(),
         })
@@ -174,6 +195,8 @@ impl Twin {
             connections: self.connections.clone(),
             noise_variance: self.noise_variance,
             default_experiment: self.default_experiment,
+            parameter_covariance: self.parameter_covariance.clone(),
+            validation_nmse: self.validation_nmse,
             source: self.source.clone(),
             keep_alive: self.keep_alive.clone(),
         }
@@ -280,6 +303,8 @@ impl Twin {
             });
         }
         let mut noise_variance = None;
+        let mut parameter_covariance = None;
+        let mut validation_nmse = None;
         for binding in parsed.system_bindings {
             let ssv = std::fs::read_to_string(unpacked.path().join(&binding))
                 .map_err(|e| invalid(format!("{binding}: {e}")))?;
@@ -295,6 +320,17 @@ impl Twin {
                 None => Err(invalid(format!("{binding}: noise_variance{i} is missing"))),
             };
             noise_variance = Some([get(1)?, get(2)?, get(3)?]);
+            parameter_covariance =
+                read_covariance(&values).map_err(|m| invalid(format!("{binding}: {m}")))?;
+            validation_nmse = match values.get("validation_nmse") {
+                None => None,
+                Some(ParameterValue::Real(x)) if *x >= 0.0 && x.is_finite() => Some(*x),
+                Some(other) => {
+                    return Err(invalid(format!(
+                        "{binding}: validation_nmse = {other} is not a non-negative real"
+                    )))
+                }
+            };
         }
         Ok(Twin {
             name: parsed.name,
@@ -302,6 +338,8 @@ impl Twin {
             connections: parsed.connections,
             noise_variance,
             default_experiment: parsed.start_time.zip(parsed.stop_time),
+            parameter_covariance,
+            validation_nmse,
             source: Some(path.to_owned()),
             keep_alive: vec![std::sync::Arc::new(unpacked)],
         })
@@ -344,15 +382,8 @@ impl Twin {
                     .map_err(zip_err)?;
                 zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes())?;
             }
-            if let Some(nv) = self.noise_variance {
-                let values: BTreeMap<String, ParameterValue> = (0..3)
-                    .map(|i| {
-                        (
-                            format!("noise_variance{}", i + 1),
-                            ParameterValue::Real(nv[i]),
-                        )
-                    })
-                    .collect();
+            if self.noise_variance.is_some() {
+                let values = self.system_values();
                 zip.start_file("resources/twin.ssv", options)
                     .map_err(zip_err)?;
                 zip.write_all(ssv_xml("twin", &values).as_bytes())?;
@@ -364,6 +395,31 @@ impl Twin {
             path: e.path,
             source: e.source,
         })
+    }
+
+    /// The system's own parameters, written to `resources/twin.ssv` (only with noise variances).
+    fn system_values(&self) -> BTreeMap<String, ParameterValue> {
+        let mut values = BTreeMap::new();
+        let Some(nv) = self.noise_variance else {
+            return values;
+        };
+        for (i, v) in nv.iter().enumerate() {
+            values.insert(format!("noise_variance{}", i + 1), ParameterValue::Real(*v));
+        }
+        if let Some(c) = &self.parameter_covariance {
+            for (a, na) in c.names.iter().enumerate() {
+                for (b, nb) in c.names.iter().enumerate().skip(a) {
+                    values.insert(
+                        format!("{COVARIANCE_PREFIX}{na}.{nb}"),
+                        ParameterValue::Real(c.matrix[a][b]),
+                    );
+                }
+            }
+        }
+        if let Some(v) = self.validation_nmse {
+            values.insert("validation_nmse".into(), ParameterValue::Real(v));
+        }
+        values
     }
 
     fn ssd_xml(&self) -> String {
@@ -410,10 +466,8 @@ impl Twin {
         for output in self.system_outputs() {
             connector(&mut w, &output, "output", "Real");
         }
-        if self.noise_variance.is_some() {
-            for i in 1..=3 {
-                connector(&mut w, &format!("noise_variance{i}"), "parameter", "Real");
-            }
+        for name in self.system_values().keys() {
+            connector(&mut w, name, "parameter", "Real");
         }
         w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
             .expect(ok);
@@ -606,6 +660,56 @@ fn finish_xml(w: Writer<Vec<u8>>) -> String {
     let mut s = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
     s.push('\n');
     s
+}
+
+/// The covariance from `covariance.A.B` entries: the names are those with a diagonal entry,
+/// every pair must be there (either order), finite, with non-negative variances.
+fn read_covariance(
+    values: &BTreeMap<String, ParameterValue>,
+) -> Result<Option<ParameterCovariance>, String> {
+    let mut names = Vec::new();
+    let mut entries = BTreeMap::new();
+    for (key, value) in values {
+        let Some(pair) = key.strip_prefix(COVARIANCE_PREFIX) else {
+            continue;
+        };
+        let (a, b) = pair
+            .split_once('.')
+            .ok_or_else(|| format!("{key}: not {COVARIANCE_PREFIX}A.B"))?;
+        let ParameterValue::Real(x) = value else {
+            return Err(format!("{key} = {value} is not a real"));
+        };
+        if !x.is_finite() {
+            return Err(format!("{key} = {x} is not finite"));
+        }
+        if a == b {
+            if *x < 0.0 {
+                return Err(format!("{key} = {x}: a variance cannot be negative"));
+            }
+            names.push(a.to_owned());
+        }
+        entries.insert((a.to_owned(), b.to_owned()), *x);
+    }
+    if entries.is_empty() {
+        return Ok(None);
+    }
+    let get = |a: &str, b: &str| {
+        entries
+            .get(&(a.to_owned(), b.to_owned()))
+            .or_else(|| entries.get(&(b.to_owned(), a.to_owned())))
+            .copied()
+            .ok_or_else(|| format!("{COVARIANCE_PREFIX}{a}.{b} is missing"))
+    };
+    let matrix = names
+        .iter()
+        .map(|a| {
+            names
+                .iter()
+                .map(|b| get(a, b))
+                .collect::<Result<Vec<f64>, _>>()
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Some(ParameterCovariance { names, matrix }))
 }
 
 /// An `.ssv` parameter set as twin parameters: Real, Integer and Boolean values.

@@ -132,6 +132,38 @@ pub struct Calibration {
     pub seconds: f64,
 }
 
+impl Calibration {
+    /// The Laplace posterior covariance of the calibrated parameters in their own units (for
+    /// log-space priors by the delta method, as `sd`): `corr[a][b] · sd[a] · sd[b]`.
+    pub fn covariance(&self) -> crate::twin::ParameterCovariance {
+        let p = &self.parameters;
+        let matrix = (0..p.len())
+            .map(|a| {
+                (0..p.len())
+                    .map(|b| {
+                        // Symmetric to the bit: the inverse Hessian's two halves differ by rounding.
+                        let r = if a == b {
+                            1.0
+                        } else {
+                            0.5 * (self.correlation[a][b] + self.correlation[b][a])
+                        };
+                        let c = r * (p[a].sd * p[b].sd);
+                        if c.is_finite() {
+                            c
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        crate::twin::ParameterCovariance {
+            names: p.iter().map(|e| e.name.clone()).collect(),
+            matrix,
+        }
+    }
+}
+
 /// What one calibration works on, shared by the threads.
 struct Target<'a> {
     fmu: &'a Fmu,
@@ -640,7 +672,8 @@ pub fn calibrate(
     })
 }
 
-/// A copy of `twin` with the calibrated values and noise variances.
+/// A copy of `twin` with the calibrated values, noise variances and posterior covariance (a
+/// validation NMSE the input twin had no longer applies).
 pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, CalibrateError> {
     let mut out = twin.duplicate();
     let physics = out
@@ -652,6 +685,8 @@ pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, C
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
     out.noise_variance = Some(calibration.noise_variance);
+    out.parameter_covariance = Some(calibration.covariance());
+    out.validation_nmse = None;
     Ok(out)
 }
 

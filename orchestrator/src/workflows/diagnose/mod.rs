@@ -7,9 +7,16 @@
 //! 1. **Compare.** The twin as given runs on the record (FMI): NMSE per floor after the
 //!    transient, failing windows, and the corrector's latent variance when it has one. The
 //!    physics alone runs too, recording the storey drifts and floor velocities.
-//! 2. **Noise level.** The twin's calibrated noise variances `σ²_f` say how much NMSE noise
-//!    alone explains on this record: `100 σ²_f / var(ÿ_f)`. When every floor's NMSE is within
-//!    [`Gates::none_factor`] (2) of it, the action is `none` and nothing is fitted.
+//! 2. **Explained level and tolerance.** The twin's calibrated noise variances `σ²_f` say how
+//!    much NMSE noise alone explains on this record: `100 σ²_f / var(ÿ_f)`; its calibration's
+//!    Laplace posterior covariance `Σ` of the physics parameters, propagated through the FMU's
+//!    sensitivities `J` (finite differences through FMI), adds what the parameter uncertainty
+//!    explains: `100 mean(J Σ Jᵀ) / var(ÿ_f)` (on a record louder than the calibration record
+//!    the noise share falls, the parameter share does not). The error is *statistically*
+//!    significant when a floor's NMSE exceeds [`Gates::none_factor`] (2) × that explained level,
+//!    *practically* significant when the worst floor's NMSE exceeds the tolerance
+//!    (`--tolerance`, else 2 × the twin's worst validation NMSE, else 0.5 %). Unless it is both,
+//!    the action is `none` and nothing is fitted.
 //! 3. **Held-out blocks.** The record after the transient is cut into blocks of
 //!    [`DiagnoseOptions::block`] (1 s); even blocks are fitted, odd ones held out. Every
 //!    fitted alternative is scored on the held-out blocks, so an extra parameter that only fits
@@ -61,9 +68,9 @@ use crate::cosim::import::{Fmu, ModelDescription};
 use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
-use crate::twin::run::{run_and_compare, run_twin, Compared};
+use crate::twin::run::{run_and_compare_with, run_twin, Compared, Tolerance};
 use crate::twin::TwinError;
-use crate::twin::{ParameterValue, Twin, PHYSICS};
+use crate::twin::{ParameterCovariance, ParameterValue, Twin, PHYSICS};
 use crate::workflows::calibrate::simulator::Simulator;
 use crate::workflows::calibrate::CalibrateError;
 use crate::workflows::calibrate::{
@@ -160,6 +167,8 @@ pub struct DiagnoseOptions {
     pub seed: u64,
     /// Fit every alternative even when the error is within the noise (`none`).
     pub always_fit: bool,
+    /// Practical significance, NMSE % (None: the twin's default, see [`Tolerance::resolve`]).
+    pub tolerance: Option<f64>,
     /// RK4 sub-steps of the shear FMU while candidates are fitted (its `substeps`); each fit is
     /// then scored at the twin's own sub-steps. `None`: the twin's own throughout.
     pub fit_substeps: Option<i32>,
@@ -180,6 +189,7 @@ impl Default for DiagnoseOptions {
                 .unwrap_or(1),
             seed: 1,
             always_fit: false,
+            tolerance: None,
             fit_substeps: Some(FIT_SUBSTEPS),
         }
     }
@@ -314,6 +324,18 @@ pub struct Diagnosis {
     pub nmse_before: [f64; 3],
     /// NMSE per floor that the twin's noise variances alone explain on this record.
     pub noise_nmse: [f64; 3],
+    /// NMSE per floor that the twin's parameter uncertainty explains (its band's `J Σ Jᵀ`; 0
+    /// for a twin without a posterior covariance).
+    pub band_nmse: [f64; 3],
+    /// `noise_nmse + band_nmse`: what the twin's ±3σ band explains.
+    pub explained_nmse: [f64; 3],
+    /// Practical significance (NMSE %) and where it comes from.
+    pub tolerance: f64,
+    pub tolerance_source: String,
+    /// Some floor's NMSE exceeds `gates.none_factor` × its explained level.
+    pub statistically_significant: bool,
+    /// The worst floor's NMSE exceeds the tolerance.
+    pub practically_significant: bool,
     pub nmse_before_held_out: [f64; 3],
     pub noise_nmse_held_out: [f64; 3],
     pub failing_windows: Vec<FailingWindow>,
@@ -645,13 +667,15 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let Compared {
         prediction,
         comparison,
+        band_nmse,
+        tolerance,
         ..
-    } = run_and_compare(twin, data, options.transient, |_, _| {}).map_err(|e| {
-        DiagnoseError::In {
+    } = run_and_compare_with(twin, data, options.transient, options.tolerance, |_, _| {}).map_err(
+        |e| DiagnoseError::In {
             context: format!("running the twin on {}", data.path.display()),
             source: Box::new(e.into()),
-        }
-    })?;
+        },
+    )?;
     let physics = physics_only(twin);
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let nmse_before = comparison.nmse;
@@ -664,6 +688,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     };
     let noise_nmse = noise_nmse_on(&after);
     let noise_nmse_held_out = noise_nmse_on(&held_out);
+    let explained_nmse = [0, 1, 2].map(|f| noise_nmse[f] + band_nmse[f]);
     let latent_variance = prediction.latent_var.as_ref().map(|v| LatentVariance {
         max: [0, 1, 2].map(|f| v[f][first..].iter().copied().fold(0.0, f64::max)),
         mean: [0, 1, 2].map(|f| v[f][first..].iter().sum::<f64>() / (n - first) as f64),
@@ -699,6 +724,12 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             .unwrap_or_else(|| "(default twin)".into()),
         nmse_before,
         noise_nmse,
+        band_nmse,
+        explained_nmse,
+        tolerance: tolerance.value,
+        tolerance_source: tolerance.source.clone(),
+        statistically_significant: false,
+        practically_significant: false,
         nmse_before_held_out,
         noise_nmse_held_out,
         failing_windows: comparison.failing_windows.clone(),
@@ -726,19 +757,24 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         },
     };
 
-    // 2. Within the noise?
+    // 2. Significant, statistically and practically?
     let gates = options.gates;
-    let noise_ratio = [0, 1, 2].map(|f| nmse_before[f] / noise_nmse[f]);
-    let within_noise = noise_ratio.iter().all(|r| *r <= gates.none_factor);
-    if within_noise && !options.always_fit {
+    let statistically = (0..3).any(|f| nmse_before[f] > gates.none_factor * explained_nmse[f]);
+    let practically = worst(&nmse_before) > tolerance.value;
+    diagnosis.statistically_significant = statistically;
+    diagnosis.practically_significant = practically;
+    let no_alarm = !(statistically && practically);
+    let none_reason = none_reason(
+        &nmse_before,
+        &noise_nmse,
+        &band_nmse,
+        gates.none_factor,
+        statistically,
+        &tolerance,
+    );
+    if no_alarm && !options.always_fit {
         diagnosis.action = Action::None;
-        diagnosis.reason = format!(
-            "every floor's NMSE ({}) is within {}× of what the twin's noise variances explain on \
-             this record ({}): nothing to do",
-            triple(&nmse_before),
-            gates.none_factor,
-            triple(&noise_nmse)
-        );
+        diagnosis.reason = none_reason;
         diagnosis.seconds = started.elapsed().as_secs_f64();
         return Ok(diagnosis);
     }
@@ -878,14 +914,9 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         && (0..3).all(|f| {
             recal.nmse_held_out[f] <= gates.recalibration_noise_factor * noise_nmse_held_out[f]
         });
-    if within_noise {
+    if no_alarm {
         diagnosis.action = Action::None;
-        diagnosis.reason = format!(
-            "every floor's NMSE ({}) is within {}× of what the twin's noise variances explain ({})",
-            triple(&nmse_before),
-            gates.none_factor,
-            triple(&noise_nmse)
-        );
+        diagnosis.reason = none_reason;
     } else if let Some(i) = winner {
         let (c, fitted) = &fitted_candidates[i];
         let report = &diagnosis.candidates[i];
@@ -967,6 +998,46 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .collect();
     diagnosis.seconds = started.elapsed().as_secs_f64();
     Ok(diagnosis)
+}
+
+/// Why `none`: within the explained level, or below the tolerance, or both.
+fn none_reason(
+    nmse: &[f64; 3],
+    noise: &[f64; 3],
+    band: &[f64; 3],
+    factor: f64,
+    statistically: bool,
+    tolerance: &Tolerance,
+) -> String {
+    let explained = [0, 1, 2].map(|f| noise[f] + band[f]);
+    let stat =
+        format!(
+        "{} NMSE ({}) is within {}× of what the twin's band explains on this record ({}: noise \
+         {} + parameter uncertainty {})",
+        if statistically { "not every floor's" } else { "every floor's" },
+        triple(nmse),
+        factor,
+        triple(&explained),
+        triple(noise),
+        triple(band)
+    );
+    let worst_floor = worst(nmse);
+    let practical = format!(
+        "the worst floor's NMSE {:.3} % {} the tolerance of {:.3} % ({})",
+        worst_floor,
+        if worst_floor > tolerance.value {
+            "exceeds"
+        } else {
+            "is within"
+        },
+        tolerance.value,
+        tolerance.source
+    );
+    if statistically {
+        format!("{stat}, but {practical}: not practically significant, nothing to do")
+    } else {
+        format!("{stat}, and {practical}: nothing to do")
+    }
 }
 
 fn triple(x: &[f64; 3]) -> String {
@@ -1171,6 +1242,13 @@ pub fn add_physics(
     chosen.noise_variance = twin
         .noise_variance
         .or(Some(result.calibration.noise_variance));
+    // The band's parameter uncertainty: with `refine`, the joint fit's posterior; else the
+    // effect's beside the twin's own (the physics held, so the two blocks are independent).
+    let fitted = result.calibration.covariance();
+    chosen.parameter_covariance = match (&twin.parameter_covariance, refine) {
+        (Some(own), false) => Some(block_diagonal(own, &fitted)),
+        _ => Some(fitted),
+    };
     let before = run_twin(twin, data, |_, _| {})?;
     let report = AddPhysicsReport {
         record: data.path.display().to_string(),
@@ -1193,6 +1271,29 @@ pub fn add_physics(
         seconds: started.elapsed().as_secs_f64(),
     };
     Ok((chosen, report))
+}
+
+/// `a` and `b` side by side, uncorrelated (`b`'s entry wins for a name in both).
+fn block_diagonal(a: &ParameterCovariance, b: &ParameterCovariance) -> ParameterCovariance {
+    let keep: Vec<usize> = (0..a.names.len())
+        .filter(|&i| !b.names.contains(&a.names[i]))
+        .collect();
+    let mut names: Vec<String> = keep.iter().map(|&i| a.names[i].clone()).collect();
+    names.extend(b.names.iter().cloned());
+    let n = names.len();
+    let mut matrix = vec![vec![0.0; n]; n];
+    for (x, &i) in keep.iter().enumerate() {
+        for (y, &j) in keep.iter().enumerate() {
+            matrix[x][y] = a.matrix[i][j];
+        }
+    }
+    let off = keep.len();
+    for i in 0..b.names.len() {
+        for j in 0..b.names.len() {
+            matrix[off + i][off + j] = b.matrix[i][j];
+        }
+    }
+    ParameterCovariance { names, matrix }
 }
 
 /// `contact@2-3[:side]` or the winner of a diagnosis report (`--diagnosis R.json`).
