@@ -53,6 +53,7 @@
 //! twin.
 
 pub mod candidate;
+pub mod sensor;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -116,6 +117,7 @@ pub enum DiagnoseError {
 
 pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
 pub use candidate::{Candidate, Kind, Scales, Side};
+pub use sensor::{SensorFit, SensorSd};
 
 /// The decision thresholds (see the module documentation).
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -202,6 +204,8 @@ pub enum Action {
     Recalibrate,
     AddPhysics,
     UpdateDataModel,
+    /// One accelerometer is faulty (gain, offset, drift, dead): not physics.
+    SensorFault,
 }
 
 impl Action {
@@ -211,6 +215,7 @@ impl Action {
             Action::Recalibrate => "recalibrate",
             Action::AddPhysics => "add_physics",
             Action::UpdateDataModel => "update_data_model",
+            Action::SensorFault => "sensor_fault",
         }
     }
 }
@@ -345,6 +350,11 @@ pub struct Diagnosis {
     /// Why, in a sentence with the numbers.
     pub reason: String,
     pub effect: Option<EffectReport>,
+    /// The faulty channel, when the action is `sensor_fault`.
+    pub sensor: Option<SensorFit>,
+    /// Every floor's sensor candidate (gain, offset, drift of the twin's prediction), floor 1
+    /// first; empty when nothing was fitted.
+    pub sensor_candidates: Vec<SensorFit>,
     pub nmse_after: [f64; 3],
     pub recalibration: Option<RecalibrationReport>,
     /// Best evidence first.
@@ -737,6 +747,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         action: Action::None,
         reason: String::new(),
         effect: None,
+        sensor: None,
+        sensor_candidates: Vec::new(),
         nmse_after: nmse_before,
         recalibration: None,
         candidates: Vec::new(),
@@ -777,6 +789,45 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         diagnosis.reason = none_reason;
         diagnosis.seconds = started.elapsed().as_secs_f64();
         return Ok(diagnosis);
+    }
+
+    // 3a. Faulty sensors: per floor, the channel as gain·ŷ + offset + drift·t of the twin's
+    // prediction, least squares on the fitted blocks, scored on the held-out ones.
+    let fitted_idx: Vec<usize> = (0..n).filter(|&k| mask[k]).collect();
+    diagnosis.sensor_candidates = (0..3)
+        .filter_map(|f| {
+            sensor::fit_channel(
+                f,
+                &data.acc[f],
+                &prediction.acc[f],
+                &data.time,
+                &fitted_idx,
+                &held_out,
+                &after,
+            )
+        })
+        .collect();
+    let sensor_fault = sensor_decision(
+        &diagnosis.sensor_candidates,
+        &nmse_before_held_out,
+        &noise_nmse_held_out,
+        &band_nmse,
+        tolerance.value,
+        &gates,
+    );
+    if let Some((fault, reason)) = &sensor_fault {
+        if !no_alarm {
+            let f = fault.floor - 1;
+            diagnosis.action = Action::SensorFault;
+            diagnosis.reason = reason.clone();
+            diagnosis.sensor = Some(fault.clone());
+            diagnosis.series.after[f] = fault.apply(&prediction.acc[f], &data.time);
+            diagnosis.nmse_after[f] = fault.nmse_after;
+            if !options.always_fit {
+                diagnosis.seconds = started.elapsed().as_secs_f64();
+                return Ok(diagnosis);
+            }
+        }
     }
 
     // 3–4. The alternatives, in parallel.
@@ -917,6 +968,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     if no_alarm {
         diagnosis.action = Action::None;
         diagnosis.reason = none_reason;
+    } else if sensor_fault.is_some() {
+        // Decided above (the alternatives were fitted for the report only).
     } else if let Some(i) = winner {
         let (c, fitted) = &fitted_candidates[i];
         let report = &diagnosis.candidates[i];
@@ -998,6 +1051,60 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .collect();
     diagnosis.seconds = started.elapsed().as_secs_f64();
     Ok(diagnosis)
+}
+
+/// A sensor fault: exactly one floor's channel candidate cuts that floor's held-out NMSE by
+/// [`Gates::required_cut`] and brings it within [`Gates::recalibration_noise_factor`] × its
+/// explained level (or the tolerance), while every other floor is already fine: within
+/// [`Gates::none_factor`] × its explained level, or the tolerance. A structural change moves
+/// several floors' residuals coherently; a faulty sensor only its own.
+fn sensor_decision(
+    fits: &[SensorFit],
+    before_held_out: &[f64; 3],
+    noise_held_out: &[f64; 3],
+    band: &[f64; 3],
+    tolerance: f64,
+    gates: &Gates,
+) -> Option<(SensorFit, String)> {
+    let explained = |f: usize| noise_held_out[f] + band[f];
+    let fine = |f: usize, x: f64, factor: f64| x <= (factor * explained(f)).max(tolerance);
+    let explains: Vec<&SensorFit> = fits
+        .iter()
+        .filter(|s| {
+            let f = s.floor - 1;
+            s.nmse_held_out * gates.required_cut <= before_held_out[f]
+                && fine(f, s.nmse_held_out, gates.recalibration_noise_factor)
+                && (0..3)
+                    .filter(|&g| g != f)
+                    .all(|g| fine(g, before_held_out[g], gates.none_factor))
+        })
+        .collect();
+    let [s] = explains.as_slice() else {
+        return None;
+    };
+    let f = s.floor - 1;
+    let others: Vec<String> = (0..3)
+        .filter(|&g| g != f)
+        .map(|g| format!("floor {} {:.3} %", g + 1, before_held_out[g]))
+        .collect();
+    Some((
+        (*s).clone(),
+        format!(
+            "the accelerometer on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} m/s²,              drift {:.5} ± {:.5} m/s³ of the twin's prediction: that cuts floor {}'s held-out              NMSE from {:.3} % to {:.3} % ({:.1}×), while the other floors are already within              the noise or the tolerance ({}): a sensor fault, not physics",
+            s.floor,
+            s.gain,
+            s.sd.gain,
+            s.offset,
+            s.sd.offset,
+            s.drift,
+            s.sd.drift,
+            s.floor,
+            s.nmse_held_out_before,
+            s.nmse_held_out,
+            s.nmse_held_out_before / s.nmse_held_out,
+            others.join(", ")
+        ),
+    ))
 }
 
 /// Why `none`: within the explained level, or below the tolerance, or both.
@@ -1307,6 +1414,17 @@ pub fn effect_from_report(path: &PathBuf) -> Result<Candidate> {
             path: path.clone(),
             source,
         })?;
+    if value.get("action").and_then(|a| a.as_str()) == Some(Action::SensorFault.name()) {
+        let floor = value
+            .get("sensor")
+            .and_then(|s| s.get("floor"))
+            .map(|f| f.to_string())
+            .unwrap_or_else(|| "?".into());
+        return Err(DiagnoseError::Setup(format!(
+            "{}: a sensor fault is not physics: fix or recalibrate the sensor on floor {floor}",
+            path.display()
+        )));
+    }
     let label = value
         .get("effect")
         .and_then(|e| e.get("label"))
