@@ -167,6 +167,13 @@ pub fn summary(d: &Diagnosis) -> String {
             .collect();
         s += &format!("effect        {}: {}\n", e.name.label, params.join(", "));
     }
+    if let Some(x) = &d.sensor {
+        s += &format!(
+            "sensor        floor {}: gain {:.4} ± {:.1e}, offset {:.4e} ± {:.1e} m/s², drift \
+             {:.4e} ± {:.1e} m/s³ (a sensor fault is not physics: fix or recalibrate it)\n",
+            x.floor, x.gain, x.sd.gain, x.offset, x.sd.offset, x.drift, x.sd.drift
+        );
+    }
     s += &format!("NMSE after    {}\n", pct(&d.nmse_after));
     s += &format!("why           {}\n", d.reason);
     s += &format!("time          {:.1} s\n", d.seconds);

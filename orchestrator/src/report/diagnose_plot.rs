@@ -48,6 +48,10 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             d.effect
                 .as_ref()
                 .map(|e| format!(" ({})", e.name.label))
+                .or_else(|| d.sensor.as_ref().map(|x| format!(
+                    " (floor {}: gain {:.3}, offset {:.3e}, drift {:.3e})",
+                    x.floor, x.gain, x.offset, x.drift
+                )))
                 .unwrap_or_default()
         );
         let root = root
@@ -59,6 +63,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
         let after_label = match d.action {
             Action::AddPhysics => "residual after adding the effect",
             Action::Recalibrate => "residual after recalibration",
+            Action::SensorFault => "residual with the sensor fault modelled",
             _ => "residual (unchanged)",
         };
         for (f, area) in rows.iter().enumerate() {
