@@ -22,6 +22,15 @@
 //!    fitted alternative is scored on the held-out blocks, so an extra parameter that only fits
 //!    noise is not rewarded, and contact that only happens late in the record still falls in
 //!    both halves.
+//!    **Faulty sensors** ([`sensor`]): per floor, the measured channel as `gain·ŷ_f + offset +
+//!    drift·t` of the twin's prediction (physics unchanged), least squares on the fitted
+//!    blocks, scored on the held-out ones. When exactly one floor's fit cuts that floor's
+//!    held-out NMSE by [`Gates::required_cut`] to within
+//!    [`Gates::recalibration_noise_factor`] × its explained level (or the tolerance), while
+//!    every other floor is already within [`Gates::none_factor`] × its explained level (or the
+//!    tolerance), the action is `sensor_fault` and nothing else is fitted (unless
+//!    [`DiagnoseOptions::always_fit`]): a structural change moves several floors' residuals
+//!    coherently, a faulty sensor only its own; a dead channel is found as gain ≈ 0.
 //! 4. **Alternatives, in parallel threads**, each a MAP fit through FMI (`calibrate`, Laplace
 //!    posterior) on the fitted blocks:
 //!    - *recalibration*: the nine physics parameters under the paper's priors;
@@ -48,9 +57,9 @@
 //!    is correlated with each storey's drift (linear, cubic) and each floor's velocity sign
 //!    (friction). Reported as evidence beside the fits.
 //!
-//! `twin add-physics` switches the chosen effect on, estimates its parameters on the whole
-//! record (more starts), optionally refines the physics parameters jointly, and writes the new
-//! twin.
+//! `twin add-physics` refuses a `sensor_fault` diagnosis (not physics); it switches the chosen
+//! effect on, estimates its parameters on the whole record (more starts), optionally refines
+//! the physics parameters jointly, and writes the new twin.
 
 pub mod candidate;
 pub mod sensor;
