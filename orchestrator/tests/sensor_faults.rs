@@ -169,6 +169,9 @@ fn a_dead_channel_is_a_sensor_fault_of_gain_zero() {
     assert_fault(&d, 1, [0.0, 0.0, 0.0], [0.02, 0.003, 0.001]);
 }
 
+/// A change of the synthetic structure.
+type Change = Box<dyn FnOnce(&mut Scenario)>;
+
 #[test]
 fn structural_changes_are_never_sensor_faults() {
     // Only the sensor check matters here: it runs before the alternatives, so the effect
@@ -178,7 +181,7 @@ fn structural_changes_are_never_sensor_faults() {
         recalibration_starts: 1,
         ..DiagnoseOptions::default()
     };
-    let cases: [(&str, Box<dyn FnOnce(&mut Scenario)>); 4] = [
+    let cases: [(&str, Change); 4] = [
         (
             "k2 −15 %",
             Box::new(|s: &mut Scenario| s.stiffness[1] = 0.85 * DEFAULT_STIFFNESS[1]),
@@ -256,7 +259,9 @@ fn add_physics_refuses_a_sensor_fault_diagnosis() {
         r#"{"action": "sensor_fault", "effect": null, "sensor": {"floor": 2, "gain": 0.8}}"#,
     )
     .expect("write");
-    let e = effect_from_report(&path).unwrap_err().to_string();
+    let e = effect_from_report(&path)
+        .expect_err("a sensor fault is refused")
+        .to_string();
     assert!(
         e.contains("a sensor fault is not physics") && e.contains("sensor on floor 2"),
         "{e}"

@@ -119,15 +119,14 @@ fn invert3(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     if !(det.is_finite() && det.abs() > 1e-14 * scale.powi(3)) {
         return None;
     }
-    let mut inv = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
+    // The adjugate: inv[i][j] = cofactor(j, i) / det (cyclic indices).
+    Some([0, 1, 2].map(|i| {
+        [0, 1, 2].map(|j| {
             let (r1, r2) = ((j + 1) % 3, (j + 2) % 3);
             let (c1, c2) = ((i + 1) % 3, (i + 2) % 3);
-            inv[i][j] = (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det;
-        }
-    }
-    Some(inv)
+            (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det
+        })
+    }))
 }
 
 #[cfg(test)]
@@ -142,7 +141,11 @@ mod tests {
             .iter()
             .map(|t| (3.0 * t).sin() + 0.3 * (7.1 * t).cos())
             .collect();
-        let y: Vec<f64> = (0..n).map(|k| 0.8 * p[k] + 0.05 + 0.01 * time[k]).collect();
+        let y: Vec<f64> = p
+            .iter()
+            .zip(&time)
+            .map(|(p, t)| 0.8 * p + 0.05 + 0.01 * t)
+            .collect();
         let idx: Vec<usize> = (0..n).collect();
         let f = fit_channel(1, &y, &p, &time, &idx, &idx, &idx).expect("fit");
         assert!((f.gain - 0.8).abs() < 1e-9 && (f.offset - 0.05).abs() < 1e-9);
