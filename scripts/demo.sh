@@ -70,6 +70,13 @@ cut -d, -f1,2 data/dataset3.csv >"$out/force-dataset3.csv"
   --output "$out/run-with-contact-dataset3.csv" --plot "$out/run-with-contact-dataset3.svg"
 
 echo
+echo "== a faulty sensor is not physics: dataset2 with floor 2's accelerometer reading 0.8 of the truth =="
+awk -F, 'NR == 1 { print; next } { printf "%s,%s,%s,%.9g,%s\n", $1, $2, $3, $4 * 0.8, $5 }' \
+  data/dataset2.csv >"$out/dataset2-sensor2-gain0.8.csv"
+"$twin" diagnose --twin "$out/calibrated.ssp" --data "$out/dataset2-sensor2-gain0.8.csv" \
+  --report "$out/diagnose-sensor-fault.json"
+
+echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
 "$twin" control --twin "$out/calibrated.ssp" --data data/dataset2.csv --q 1e3 --q 5e3 --r 0.1 \
   --estimator-costs --report "$out/control-dataset2.json" --plot "$out/control-dataset2.svg" \

@@ -1099,7 +1099,10 @@ fn sensor_decision(
     Some((
         (*s).clone(),
         format!(
-            "the accelerometer on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} m/s²,              drift {:.5} ± {:.5} m/s³ of the twin's prediction: that cuts floor {}'s held-out              NMSE from {:.3} % to {:.3} % ({:.1}×), while the other floors are already within              the noise or the tolerance ({}): a sensor fault, not physics",
+            "the accelerometer on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} m/s², \
+             drift {:.5} ± {:.5} m/s³ of the twin's prediction: that cuts floor {}'s held-out \
+             NMSE from {:.3} % to {:.3} % ({:.1}×), while the other floors are already within \
+             the noise or the tolerance ({}): a sensor fault, not physics",
             s.floor,
             s.gain,
             s.sd.gain,
