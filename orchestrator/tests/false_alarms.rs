@@ -12,7 +12,6 @@
 
 use std::sync::OnceLock;
 
-use orchestrator::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
 use orchestrator::data::Measurement;
 use orchestrator::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
 use orchestrator::run::{run_and_compare, FALLBACK_TOLERANCE};
@@ -20,26 +19,14 @@ use orchestrator::synth::{synth_record, BetweenSamples, NoiseLevel, Scenario, DE
 use orchestrator::twin::Twin;
 
 mod common;
-use common::fmu_dir;
+use common::twin_calibrated_on_default_structure;
 
 const NOISE_SD: f64 = 0.003;
 const NOISE_FRACTION: f64 = 0.03;
 
 fn twin() -> &'static Twin {
     static TWIN: OnceLock<Twin> = OnceLock::new();
-    TWIN.get_or_init(|| {
-        std::env::set_var("TWIN_FMU_DIR", fmu_dir());
-        let mut s = Scenario {
-            seed: 1,
-            ..Scenario::default()
-        };
-        s.noise.level = NoiseLevel::Sd([NOISE_SD; 3]);
-        let (record, _) = synth_record(&s).expect("synth");
-        let twin = Twin::default_twin().expect("default twin");
-        let cal = calibrate(&twin, &record.measurement, &CalibrationSetup::default())
-            .expect("calibration");
-        calibrated_twin(&twin, &cal).expect("calibrated twin")
-    })
+    TWIN.get_or_init(|| twin_calibrated_on_default_structure(NOISE_SD))
 }
 
 fn record(gain: f64, noise: NoiseLevel, between: BetweenSamples) -> Measurement {

@@ -88,9 +88,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     let compared = match &args.controller {
         None => run_and_compare_with(&twin, &data, args.transient, args.tolerance, progress_bar())?,
         Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-            let spec = ControllerSpec::from_json(&text, &path.display().to_string())?;
+            let spec = ControllerSpec::load(path)?;
             let mut progress = progress_bar();
             let prediction =
                 predict_controlled(&twin, &data, &spec, args.controller_q, &mut progress)?;

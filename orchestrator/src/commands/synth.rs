@@ -212,9 +212,7 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     let control = match &args.controller {
         None => None,
         Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| anyhow!("cannot read {}: {e}", path.display()))?;
-            let spec = ControllerSpec::from_json(&text, &path.display().to_string())?;
+            let spec = ControllerSpec::load(path)?;
             // Refuse a bad report or design now, before the record is made.
             spec.controller(args.controller_q, 1.0 / spec.control_rate_hz)?;
             let q = args.controller_q;

@@ -27,3 +27,21 @@ pub fn fmu_dir() -> PathBuf {
     );
     dir
 }
+
+/// The twin calibrated (MAP, default setup) on a 20 s record of `twin synth`'s default
+/// structure, seed 1, with absolute sensor noise of `noise_sd` m/s² on every floor.
+pub fn twin_calibrated_on_default_structure(noise_sd: f64) -> orchestrator::twin::Twin {
+    use orchestrator::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
+    use orchestrator::synth::{synth_record, NoiseLevel, Scenario};
+    std::env::set_var("TWIN_FMU_DIR", fmu_dir());
+    let mut s = Scenario {
+        seed: 1,
+        ..Scenario::default()
+    };
+    s.noise.level = NoiseLevel::Sd([noise_sd; 3]);
+    let (record, _) = synth_record(&s).expect("synth");
+    let twin = orchestrator::twin::Twin::default_twin().expect("default twin");
+    let cal =
+        calibrate(&twin, &record.measurement, &CalibrationSetup::default()).expect("calibration");
+    calibrated_twin(&twin, &cal).expect("calibrated twin")
+}

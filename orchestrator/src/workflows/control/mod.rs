@@ -835,6 +835,13 @@ pub struct SpecDesign {
 }
 
 impl ControllerSpec {
+    /// Read a `twin control` report.
+    pub fn load(path: &std::path::Path) -> Result<Self, ControlError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ControlError::Options(format!("cannot read {}: {e}", path.display())))?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+
     /// Parse a report's JSON text; `origin` names it in errors.
     pub fn from_json(text: &str, origin: &str) -> Result<Self, ControlError> {
         let de = &mut serde_json::Deserializer::from_str(text);
