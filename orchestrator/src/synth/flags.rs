@@ -7,7 +7,9 @@ use serde_json::{Map, Value};
 use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamName};
 
 /// `contact@2-3:gap=5e-4,stiffness=9000,side=both`, `cubic@2`, `friction@1:force=0.2`,
-/// `hysteresis@2:stiffness=1500,yield=3e-4`.
+/// `hysteresis@2:stiffness=1500,yield=3e-4`, `quadratic-damping@2:coefficient=40` (storey 2,
+/// or `@1-2`) and `quadratic-damping@floor1:coefficient=40` (floor 1 to the ground; the kind
+/// may also be written `quadratic_damping`, as in the JSON).
 pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
     let bad = |why: String| SynthError::Scenario(format!("--effect {text:?}: {why}"));
     let (head, params) = match text.split_once(':') {
@@ -17,18 +19,30 @@ pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
     let (kind, location) = head
         .split_once('@')
         .ok_or_else(|| bad("expected KIND@LOCATION, e.g. contact@2-3".into()))?;
-    let floors: Vec<Value> = location
-        .split('-')
-        .map(|p| {
-            p.trim()
-                .parse::<u64>()
-                .map(Value::from)
-                .map_err(|_| bad(format!("location {location:?} is not N or N-M")))
-        })
-        .collect::<Result<_>>()?;
+    let kind = match kind.trim() {
+        "quadratic-damping" => "quadratic_damping",
+        other => other,
+    };
     let mut o = Map::new();
-    o.insert("kind".into(), Value::from(kind.trim()));
-    o.insert("location".into(), Value::Array(floors));
+    o.insert("kind".into(), Value::from(kind));
+    // A quadratic damper on a floor, to the ground: `@floor1`.
+    if let Some(floor) = location.trim().strip_prefix("floor") {
+        let floor = floor
+            .parse::<u64>()
+            .map_err(|_| bad(format!("location {location:?} is not floorN")))?;
+        o.insert("floor".into(), Value::from(floor));
+    } else {
+        let floors: Vec<Value> = location
+            .split('-')
+            .map(|p| {
+                p.trim()
+                    .parse::<u64>()
+                    .map(Value::from)
+                    .map_err(|_| bad(format!("location {location:?} is not N or N-M")))
+            })
+            .collect::<Result<_>>()?;
+        o.insert("location".into(), Value::Array(floors));
+    }
     for pair in params
         .into_iter()
         .flat_map(|p| p.split(','))

@@ -1,6 +1,7 @@
 //! `twin synth`: the synthetic physical twin. It makes measurement records of a simulated
-//! three-storey shear frame — any set of effects from the shear FMU's library (and one kind the
-//! library deliberately lacks, Bouc–Wen hysteresis, for hidden-effect tests), parameter changes
+//! three-storey shear frame — any set of effects from the shear FMU's library (and two kinds the
+//! library deliberately lacks, Bouc–Wen hysteresis and quadratic (velocity-squared) damping, for
+//! hidden-effect tests), parameter changes
 //! at given times, a band-limited random force with optional amplitude windows, and Gaussian
 //! sensor noise — for tests, demos and teaching.
 //!
@@ -20,6 +21,11 @@
 //!   `δ̇·z` changes sign (the Bouc–Wen law switches branch there), as the library's contact is
 //!   split where its gap closes. Records without hysteresis are made exactly as before (the
 //!   structure alone, by [`fmu_shear::ShearModel::advance`]).
+//! * **Quadratic damping** (not in the FMU's library either): each `quadratic_damping` effect's
+//!   force `c₂·u|u|` enters the accelerations in the same RK4 state and step (with, per effect,
+//!   the energy it dissipated, `∫ c₂|u|³ dt`, as one more state). The force is C¹ in u, so no
+//!   step is split for it. Records with neither of these two effects are made exactly as before
+//!   them.
 //! * **Force**: white Gaussian noise on a generator grid of 8 points per sample interval,
 //!   multiplied by the amplitude envelope (1 outside windows, `gain` inside, raised-cosine ramps of
 //!   `ramp` seconds centred on each window edge; overlapping windows multiply), then low-passed by
@@ -75,7 +81,9 @@
 //!     {"kind": "cubic", "location": [2], "stiffness": 5e9},
 //!     {"kind": "friction", "location": [1], "force": 0.2, "velocity_scale": 1e-3},
 //!     {"kind": "hysteresis", "location": [2], "stiffness": 1000, "yield": 5e-4,
-//!      "beta": 0.5, "gamma": 0.5, "exponent": 2}
+//!      "beta": 0.5, "gamma": 0.5, "exponent": 2},
+//!     {"kind": "quadratic_damping", "location": [2], "coefficient": 400},
+//!     {"kind": "quadratic_damping", "floor": 1, "coefficient": 400}
 //!   ],
 //!   "changes": [{"at": 8.0, "parameter": "k2", "factor": 0.85}]
 //! }
@@ -101,6 +109,19 @@
 //!   `in_library: false`, `z_saturation`, `max_abs_z` and `hysteretic_work` (`∫ k_h z dδ` over
 //!   the record, J: the energy dissipated plus what z stores at the end, `k_h·z²/2`
 //!   when β = γ); [`SynthRecord::hysteresis`] has z, δ and that work at the sample times.
+//! * `quadratic_damping` (**not** in the shear FMU's library either): a velocity-squared damping
+//!   force `c₂·u|u|` ([`EffectSpec::QuadraticDamping`], site a [`DampingSite`]). Either across a
+//!   storey, `location` = `[storey]` or `[lower, upper]` as for `cubic`, with u the storey's
+//!   relative velocity `v_s − v_{s−1}` (0 = the ground) and the force applied as the library's
+//!   storey forces (positive resists: `+f` on the upper floor, `−f` on the lower); or on a floor,
+//!   `"floor": f` (1..3) instead of `location`, with u the floor's velocity and the force to the
+//!   ground. `coefficient` c₂ N s²/m² (default 400, finite and > 0). On the default structure
+//!   and force (relative velocities up to ~0.01 m/s) c₂ = 400 at storey 2 is about half the
+//!   storey's linear damping force (RMS) and changes ÿ by NMSE 0.5 / 1.6 / 0.5 % per floor over
+//!   20 s (measured in `tests/synth.rs`); c₂ = 40 only by ~0.02 %. One per storey and one per
+//!   floor. Its `fmu_prefix` (`quadratic_damping2`, `quadratic_damping_floor1`) names no FMU
+//!   variable; the truth reports `in_library: false`, `dissipated_energy` (`∫ c₂|u|³ dt` over
+//!   the record, J) and the largest |u| as `max_drift_or_velocity`.
 //! * `changes`: `parameter` one of `m1..m3`, `c1..c3`, `k1..k3`; either `factor` (multiplies the
 //!   value in force at that time) or `value`; `at` in s, inside the record. Changes apply in time
 //!   order.
@@ -113,7 +134,8 @@
 //! Flags override the scenario's values and extend its lists: `--seed 3 --force-rms 1.2
 //! --force-window 13:17:3[:RAMP] --effect contact@2-3[:gap=5e-4,stiffness=9000,side=both]
 //! --effect cubic@2:stiffness=5e9 --effect friction@1:force=0.2
-//! --effect hysteresis@2:stiffness=1500,yield=3e-4 --change k2@8:0.85` (factor) or
+//! --effect hysteresis@2:stiffness=1500,yield=3e-4 --effect quadratic-damping@2:coefficient=400
+//! --effect quadratic-damping@floor1:coefficient=400 --change k2@8:0.85` (factor) or
 //! `--change k2@8=3500` (value), `--mass/--damping/--stiffness A,B,C`, `--noise-fraction`,
 //! `--noise-sd`, `--force-noise-fraction`, `--band-hz`, `--low-hz`,
 //! `--force-between-samples band-limited|linear`, `--duration`,
@@ -123,7 +145,8 @@
 //!
 //! [`synth_record`] makes a record in-process from a [`Scenario`]: the [`Measurement`] exactly as
 //! the written CSV reads back, the noise-free accelerations and the fine-grid force (and the
-//! hysteresis states, if any), and the [`Truth`].
+//! hysteresis states, if any), and the [`Truth`] (with, per quadratic damper, the energy it
+//! dissipated).
 
 mod csv;
 mod flags;
@@ -136,8 +159,8 @@ pub use csv::{csv_text, format_g9};
 pub use flags::{parse_change_flag, parse_effect_flag};
 pub use force::{band_limited_force, envelope};
 pub use scenario::{
-    BetweenSamples, Change, ChangeHow, EffectSpec, ForceSpec, ForceWindow, NoiseLevel, NoiseSpec,
-    ParamKind, ParamName, Scenario,
+    BetweenSamples, Change, ChangeHow, DampingSite, EffectSpec, ForceSpec, ForceWindow, NoiseLevel,
+    NoiseSpec, ParamKind, ParamName, Scenario,
 };
 pub use truth::{
     ChangeTruth, EffectTruth, ForceTruth, NoiseTruth, RecordTruth, ResponseTruth, StructureTruth,
@@ -200,6 +223,8 @@ pub const DEFAULT_HYSTERESIS_YIELD: f64 = 5e-4;
 pub const DEFAULT_HYSTERESIS_BETA: f64 = 0.5;
 pub const DEFAULT_HYSTERESIS_GAMMA: f64 = 0.5;
 pub const DEFAULT_HYSTERESIS_EXPONENT: f64 = 2.0;
+/// Default of the `quadratic_damping` effect's c₂, N s²/m².
+pub const DEFAULT_QUADRATIC_DAMPING: f64 = 400.0;
 /// Fine steps in one record at most (memory and time guard).
 const MAX_FINE_POINTS: usize = 1 << 26;
 const MAX_OVERSAMPLE: u32 = 100_000;
@@ -281,7 +306,8 @@ pub fn synth_controlled(
     // The structure.
     let mut effects = Effects::default();
     for e in &s.effects {
-        // Hysteresis is not in the library: integrated here, beside the model (see `Hysteretic`).
+        // Hysteresis and quadratic damping are not in the library: integrated here, beside the
+        // model (see `Hysteretic`).
         if let Some((_, location, law)) = e.library() {
             effects.switch_on(location, law);
         }
@@ -441,7 +467,7 @@ pub fn synth_controlled(
                 )));
             }
             stats.observe(&model, t1, hf);
-            hysteretic.observe();
+            hysteretic.observe(&model);
         }
     }
 
@@ -518,6 +544,10 @@ pub fn synth_controlled(
                 truth.max_abs_z = Some(hysteretic.max_abs_z[h]);
                 truth.hysteretic_work = Some(hysteretic.work[h]);
             }
+            if let Some(d) = hysteretic.dampers.iter().position(|d| d.effect == i) {
+                truth.max_drift_or_velocity = hysteretic.max_abs_velocity[d];
+                truth.dissipated_energy = Some(hysteretic.dissipated[d]);
+            }
             truth
         })
         .collect();
@@ -527,6 +557,11 @@ pub fn synth_controlled(
     if !hysteretic.laws.is_empty() {
         integrator.push_str(
             "; with each hysteresis effect's Bouc–Wen z (and its work) in the same RK4 state, steps split where a storey's drift rate × z or a contact's gap changes sign",
+        );
+    }
+    if !hysteretic.dampers.is_empty() {
+        integrator.push_str(
+            "; with each quadratic damper's force c₂·v|v| in the accelerations and its dissipated energy ∫ c₂|v|³ dt in the same RK4 state (smooth: no step splitting)",
         );
     }
     let truth = Truth {

@@ -14,8 +14,8 @@ use super::{
     DEFAULT_DAMPING, DEFAULT_DURATION, DEFAULT_FORCE_RMS, DEFAULT_HYSTERESIS_BETA,
     DEFAULT_HYSTERESIS_EXPONENT, DEFAULT_HYSTERESIS_GAMMA, DEFAULT_HYSTERESIS_STIFFNESS,
     DEFAULT_HYSTERESIS_YIELD, DEFAULT_MASS, DEFAULT_NOISE_FRACTION, DEFAULT_OVERSAMPLE,
-    DEFAULT_SAMPLE_RATE, DEFAULT_STIFFNESS, DEFAULT_WINDOW_RAMP, GENERATOR_OVERSAMPLE,
-    MAX_FINE_POINTS, MAX_OVERSAMPLE,
+    DEFAULT_QUADRATIC_DAMPING, DEFAULT_SAMPLE_RATE, DEFAULT_STIFFNESS, DEFAULT_WINDOW_RAMP,
+    GENERATOR_OVERSAMPLE, MAX_FINE_POINTS, MAX_OVERSAMPLE,
 };
 
 /// Whether the frequency `f` lies strictly inside the force's band (`low`, `band`) Hz.
@@ -140,6 +140,22 @@ pub enum EffectSpec {
         /// n.
         exponent: f64,
     },
+    /// Quadratic (velocity-squared) damping, **not** in the FMU's library: the force
+    /// `c₂ · v |v|` of a storey's relative velocity (applied as a storey force) or of a floor's
+    /// velocity (to the ground); see the module docs.
+    QuadraticDamping {
+        site: DampingSite,
+        /// c₂, N s²/m².
+        coefficient: f64,
+    },
+}
+
+/// Where a quadratic damper acts: across a storey (1..3; storey 1 is ground–floor 1), on the
+/// storey's relative velocity, or from a floor (1..3) to the ground, on its velocity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DampingSite {
+    Storey(usize),
+    Floor(usize),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -278,7 +294,7 @@ impl EffectSpec {
                 force,
                 velocity_scale,
             }),
-            EffectSpec::Hysteresis { .. } => return None,
+            EffectSpec::Hysteresis { .. } | EffectSpec::QuadraticDamping { .. } => return None,
         };
         Some((law.kind(), self.library_location(), law))
     }
@@ -303,14 +319,32 @@ impl EffectSpec {
         }
     }
     pub fn kind(&self) -> &'static str {
-        match self.library() {
-            Some((kind, ..)) => kind.name(),
-            None => "hysteresis",
+        match self {
+            EffectSpec::Hysteresis { .. } => "hysteresis",
+            EffectSpec::QuadraticDamping { .. } => "quadratic_damping",
+            _ => self.library().map_or("", |(kind, ..)| kind.name()),
         }
     }
-    /// Whether the shear FMU's effect library has this kind (hysteresis: no).
+    /// Whether the shear FMU's effect library has this kind (hysteresis, quadratic damping: no).
     pub fn in_library(&self) -> bool {
-        !matches!(self, EffectSpec::Hysteresis { .. })
+        !matches!(
+            self,
+            EffectSpec::Hysteresis { .. } | EffectSpec::QuadraticDamping { .. }
+        )
+    }
+    /// Whether two effects of a kind sit at the same place (a quadratic damper across storey
+    /// 2 and one on floor 2 do not).
+    pub(super) fn same_place(&self, other: &EffectSpec) -> bool {
+        let site = |e: &EffectSpec| match *e {
+            EffectSpec::QuadraticDamping {
+                site: DampingSite::Floor(_),
+                ..
+            } => 1,
+            _ => 0,
+        };
+        self.kind() == other.kind()
+            && self.library_location() == other.library_location()
+            && site(self) == site(other)
     }
     /// The parameters by their JSON names (the library's parameter names; contact's side by
     /// name).
@@ -346,18 +380,24 @@ impl EffectSpec {
                     o.insert(key.into(), json!(x));
                 }
             }
+            (None, &EffectSpec::QuadraticDamping { coefficient, .. }) => {
+                o.insert("coefficient".into(), json!(coefficient));
+            }
             (None, _) => {}
         }
         o
     }
-    /// 0-based location in the FMU's effect library (for hysteresis, which the library lacks,
-    /// the 0-based storey).
+    /// 0-based location in the FMU's effect library (for hysteresis and quadratic damping,
+    /// which the library lacks, the 0-based storey or floor).
     pub fn library_location(&self) -> usize {
         match *self {
             EffectSpec::Contact { lower, .. } => lower,
             EffectSpec::Cubic { storey, .. } => storey - 1,
             EffectSpec::Friction { floor, .. } => floor - 1,
             EffectSpec::Hysteresis { storey, .. } => storey - 1,
+            EffectSpec::QuadraticDamping { site, .. } => match site {
+                DampingSite::Storey(s) | DampingSite::Floor(s) => s - 1,
+            },
         }
     }
     /// The location as the scenario writes it.
@@ -367,6 +407,9 @@ impl EffectSpec {
             EffectSpec::Cubic { storey, .. } => vec![storey],
             EffectSpec::Friction { floor, .. } => vec![floor],
             EffectSpec::Hysteresis { storey, .. } => vec![storey],
+            EffectSpec::QuadraticDamping { site, .. } => match site {
+                DampingSite::Storey(s) | DampingSite::Floor(s) => vec![s],
+            },
         }
     }
     /// Where, in words: "between floors 2 and 3", "of storey 2 (floors 1–2)", "on floor 1".
@@ -384,20 +427,39 @@ impl EffectSpec {
                 format!("of storey {s} ({})", storey(s - 1))
             }
             EffectSpec::Friction { floor, .. } => format!("on floor {floor}"),
+            EffectSpec::QuadraticDamping { site, .. } => match site {
+                DampingSite::Storey(s) => format!("of storey {s} ({})", storey(s - 1)),
+                DampingSite::Floor(f) => format!("on floor {f} (to the ground)"),
+            },
         }
     }
-    /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`. Hysteresis is not in
-    /// the library: its `hysteresis2` names no FMU variable (see [`EffectSpec::in_library`]).
+    /// The FMU variables' prefix, e.g. `contact23`, `cubic2`, `friction1`. Hysteresis and
+    /// quadratic damping are not in the library: their `hysteresis2`, `quadratic_damping2`
+    /// (storey 2) or `quadratic_damping_floor1` (floor 1) name no FMU variable (see
+    /// [`EffectSpec::in_library`]).
     pub fn fmu_prefix(&self) -> String {
-        match self.library() {
-            Some((kind, location, _)) => kind.prefix(location),
-            None => format!("hysteresis{}", self.library_location() + 1),
+        match (self.library(), self) {
+            (Some((kind, location, _)), _) => kind.prefix(location),
+            (
+                None,
+                EffectSpec::QuadraticDamping {
+                    site: DampingSite::Floor(f),
+                    ..
+                },
+            ) => format!("quadratic_damping_floor{f}"),
+            (None, _) => format!("{}{}", self.kind(), self.library_location() + 1),
         }
     }
     fn to_json(&self) -> Value {
         let mut o = Map::new();
         o.insert("kind".into(), json!(self.kind()));
-        o.insert("location".into(), json!(self.location()));
+        match *self {
+            EffectSpec::QuadraticDamping {
+                site: DampingSite::Floor(f),
+                ..
+            } => o.insert("floor".into(), json!(f)),
+            _ => o.insert("location".into(), json!(self.location())),
+        };
         o.extend(self.parameters_json());
         Value::Object(o)
     }
@@ -731,6 +793,22 @@ impl Scenario {
                             .error(format!("{exponent} must be a finite number ≥ 1")));
                     }
                 }
+                EffectSpec::QuadraticDamping { site, coefficient } => {
+                    match site {
+                        DampingSite::Storey(s) if !(1..=3).contains(&s) => {
+                            return Err(at
+                                .field("location")
+                                .error(format!("storey {s} is not 1, 2 or 3")))
+                        }
+                        DampingSite::Floor(f) if !(1..=3).contains(&f) => {
+                            return Err(at
+                                .field("floor")
+                                .error(format!("floor {f} is not 1, 2 or 3")))
+                        }
+                        _ => {}
+                    }
+                    positive(at.field("coefficient"), coefficient, true)?;
+                }
             }
             // A library effect's parameters: the ranges the FMU accepts.
             if let Some((kind, _, law)) = e.library() {
@@ -749,10 +827,7 @@ impl Scenario {
                     }
                 }
             }
-            if let Some(j) = self.effects[..i]
-                .iter()
-                .position(|o| o.kind() == e.kind() && o.library_location() == e.library_location())
-            {
+            if let Some(j) = self.effects[..i].iter().position(|o| o.same_place(e)) {
                 return Err(at.error(format!(
                     "{} {} is already given as effects[{j}]; one effect of a kind per location",
                     e.kind(),
@@ -783,7 +858,6 @@ impl Scenario {
 pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
     let head: EffectHead = read(at, value)?;
     let loc = at.field("location");
-    let location = head.location.floors();
     let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
     let storey_or_adjacent = |location: &[u64]| {
         match location[..] {
@@ -793,6 +867,35 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
             "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
         ))),
     }
+    };
+    if head.kind == "quadratic_damping" {
+        let q: QuadraticDampingFile = read(at, value)?;
+        let site = match (head.location, q.floor) {
+            (Some(location), None) => DampingSite::Storey(storey_or_adjacent(&location.floors())?),
+            (None, Some(f)) if (1..=3).contains(&f) => DampingSite::Floor(small(f)),
+            (None, Some(f)) => {
+                return Err(at
+                    .field("floor")
+                    .error(format!("floor {f} is not 1, 2 or 3")))
+            }
+            (Some(_), Some(_)) => {
+                return Err(at.error(
+                    "give either `location` (a storey) or `floor` (to the ground), not both"
+                        .into(),
+                ))
+            }
+            (None, None) => return Err(loc.error(
+                "is missing; give `location` (a storey: [1], [2], [3] or two adjacent floors) or `floor` (1, 2 or 3, damped to the ground)".into(),
+            )),
+        };
+        return Ok(EffectSpec::QuadraticDamping {
+            site,
+            coefficient: q.coefficient.unwrap_or(DEFAULT_QUADRATIC_DAMPING),
+        });
+    }
+    let location = match head.location {
+        Some(location) => location.floors(),
+        None => return Err(loc.error("is missing".into())),
     };
     if head.kind == "hysteresis" {
         let h: HysteresisFile = read(at, value)?;
@@ -807,7 +910,7 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
     }
     let Some(kind) = Kind::parse(&head.kind) else {
         return Err(at.field("kind").error(format!(
-            "unknown effect kind {:?}; expected \"contact\", \"cubic\", \"friction\" or \"hysteresis\"",
+            "unknown effect kind {:?}; expected \"contact\", \"cubic\", \"friction\", \"hysteresis\" or \"quadratic_damping\"",
             head.kind
         )));
     };
@@ -951,7 +1054,8 @@ struct ChangeFile {
 #[serde(expecting = "an object")]
 struct EffectHead {
     kind: String,
-    location: LocationFile,
+    /// Absent only for a quadratic damper on a floor (its `floor`).
+    location: Option<LocationFile>,
 }
 
 /// Floor numbers, or a single number.
@@ -995,6 +1099,17 @@ struct HysteresisFile {
     beta: Option<f64>,
     gamma: Option<f64>,
     exponent: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct QuadraticDampingFile {
+    #[allow(dead_code)]
+    kind: String,
+    #[allow(dead_code)]
+    location: Option<Value>,
+    floor: Option<u64>,
+    coefficient: Option<f64>,
 }
 
 /// Deserialize `value` at `at`; a bad field's error names the file and the field's JSON path.

@@ -6,7 +6,7 @@ use fmu_shear::ShearModel;
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use super::scenario::{EffectSpec, ForceWindow};
+use super::scenario::{DampingSite, EffectSpec, ForceWindow};
 
 /// How the record was made: the resolved scenario and what came out of it.
 #[derive(Debug, Clone, Serialize)]
@@ -55,8 +55,9 @@ pub struct StructureTruth {
 #[derive(Debug, Clone, Serialize)]
 pub struct EffectTruth {
     pub kind: String,
-    /// As the scenario writes it: `[lower, upper]` for contact, `[storey]` for cubic, `[floor]`
-    /// for friction.
+    /// As the scenario writes it: `[lower, upper]` for contact, `[storey]` for cubic,
+    /// hysteresis and a storey's quadratic damping, `[floor]` for friction and a floor's
+    /// quadratic damping (the scenario's `floor`; `floors` tells the two apart).
     pub location: Vec<usize>,
     /// The floors the effect acts between / on (0 = the ground).
     pub floors: Vec<usize>,
@@ -64,7 +65,8 @@ pub struct EffectTruth {
     /// The shear FMU's variable prefix, e.g. `contact23` (for an effect not in the library, as
     /// `hysteresis2`, no FMU variable has it).
     pub fmu_prefix: String,
-    /// Whether the shear FMU's effect library has this kind (false for hysteresis).
+    /// Whether the shear FMU's effect library has this kind (false for hysteresis and quadratic
+    /// damping).
     pub in_library: bool,
     /// 0-based location in the FMU's effect library (hysteresis: the 0-based storey).
     pub library_location: usize,
@@ -79,7 +81,8 @@ pub struct EffectTruth {
     /// Contact only: largest |drift| − gap while closed, m.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_penetration: Option<f64>,
-    /// Largest |drift| (storey effects) or |velocity| (friction) over the record.
+    /// Largest |drift| (storey effects) or |velocity| (friction; quadratic damping: the
+    /// velocity it damps, a storey's relative velocity or a floor's) over the record.
     pub max_drift_or_velocity: f64,
     /// Hysteresis only: the bound of |z|, `yield · (1/(beta + gamma))^(1/exponent)`, m.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -91,6 +94,10 @@ pub struct EffectTruth {
     /// end).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hysteretic_work: Option<f64>,
+    /// Quadratic damping only: the energy it dissipated over the record, `∫ c₂ |v|³ dt`, J
+    /// (integrated with the structure on the fine grid).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dissipated_energy: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -225,6 +232,11 @@ impl Stats {
                 (vec![storey - 1, storey], self.max_drift[storey - 1])
             }
             EffectSpec::Friction { floor, .. } => (vec![floor], self.max_vel[floor - 1]),
+            // Its largest velocity is the structure's (see `Hysteretic::observe`).
+            EffectSpec::QuadraticDamping { site, .. } => match site {
+                DampingSite::Storey(s) => (vec![s - 1, s], 0.0),
+                DampingSite::Floor(f) => (vec![f], 0.0),
+            },
         };
         let mut parameters = e.parameters_json();
         if let EffectSpec::Contact { side, .. } = *e {
@@ -249,6 +261,7 @@ impl Stats {
             z_saturation: None,
             max_abs_z: None,
             hysteretic_work: None,
+            dissipated_energy: None,
         }
     }
 }
