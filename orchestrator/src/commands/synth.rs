@@ -23,11 +23,15 @@ Scenario JSON (every field optional; see the orchestrator::synth documentation):
                {\"kind\": \"cubic\", \"location\": [2], \"stiffness\": 5e9},
                {\"kind\": \"friction\", \"location\": [1], \"force\": 0.2, \"velocity_scale\": 1e-3},
                {\"kind\": \"hysteresis\", \"location\": [2], \"stiffness\": 1000, \"yield\": 5e-4,
-                \"beta\": 0.5, \"gamma\": 0.5, \"exponent\": 2}],
+                \"beta\": 0.5, \"gamma\": 0.5, \"exponent\": 2},
+               {\"kind\": \"quadratic_damping\", \"location\": [2], \"coefficient\": 400},
+               {\"kind\": \"quadratic_damping\", \"floor\": 1, \"coefficient\": 400}],
    \"changes\": [{\"at\": 8.0, \"parameter\": \"k2\", \"factor\": 0.85}]}
-Locations: contact [lower, upper] floors (0 = ground); cubic and hysteresis [storey]
-(1 = ground-floor 1); friction [floor]. Hysteresis (Bouc-Wen) is NOT in the shear FMU's
-library. Flags override the scenario and extend its lists.";
+Locations: contact [lower, upper] floors (0 = ground); cubic, hysteresis and quadratic_damping
+[storey] (1 = ground-floor 1); friction [floor]; quadratic_damping \"floor\": N instead damps
+floor N's velocity to the ground. Hysteresis (Bouc-Wen) and quadratic_damping (force
+coefficient * v|v|, N s^2/m^2, default 400) are NOT in the shear FMU's library. Flags override the scenario
+and extend its lists.";
 
 #[derive(clap::Args, Debug, Default, Clone)]
 #[command(after_help = AFTER_HELP)]
@@ -88,7 +92,9 @@ pub struct SynthArgs {
     pub force_noise_fraction: Option<f64>,
     /// Effect (repeatable): contact@2-3[:gap=5e-4,stiffness=9000,side=both], cubic@2[:stiffness=5e9],
     /// friction@1[:force=0.2,velocity_scale=1e-3],
-    /// hysteresis@2[:stiffness=1000,yield=5e-4,beta=0.5,gamma=0.5,exponent=2] (not in the FMU).
+    /// hysteresis@2[:stiffness=1000,yield=5e-4,beta=0.5,gamma=0.5,exponent=2] (not in the FMU),
+    /// quadratic-damping@2[:coefficient=400] (storey) or quadratic-damping@floor1[:coefficient=400]
+    /// (floor to the ground; not in the FMU).
     #[arg(long = "effect", value_name = "KIND@LOCATION[:KEY=VALUE,...]")]
     pub effects: Vec<String>,
     /// Parameter change (repeatable): k2@8:0.85 (factor) or k2@8=3500 (value).
@@ -257,7 +263,13 @@ pub fn run(args: &SynthArgs) -> Result<()> {
                     e.description,
                     e.hysteretic_work.unwrap_or(0.0)
                 ),
-                _ => println!("  {}", e.description),
+                _ => match e.dissipated_energy {
+                    Some(energy) => println!(
+                        "  {} (not in the FMU's library): max |v| {:.3e} m/s, dissipated {energy:.3e} J",
+                        e.description, e.max_drift_or_velocity
+                    ),
+                    None => println!("  {}", e.description),
+                },
             },
         }
     }
