@@ -30,8 +30,8 @@ Scenario JSON (every field optional; see the orchestrator::synth documentation):
 Locations: contact [lower, upper] floors (0 = ground); cubic, hysteresis and quadratic_damping
 [storey] (1 = ground-floor 1); friction [floor]; quadratic_damping \"floor\": N instead damps
 floor N's velocity to the ground. Hysteresis (Bouc-Wen) and quadratic_damping (force
-coefficient * v|v|, N s^2/m^2, default 400) are NOT in the shear FMU's library. Flags override the scenario
-and extend its lists.";
+coefficient * v|v|, N s^2/m^2, default 400) are NOT in the shear FMU's library. Flags override
+the scenario and extend its lists.";
 
 #[derive(clap::Args, Debug, Default, Clone)]
 #[command(after_help = AFTER_HELP)]
