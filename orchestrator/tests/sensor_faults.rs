@@ -14,7 +14,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use orchestrator::data::Measurement;
-use orchestrator::diagnose::{diagnose, effect_from_report, Action, DiagnoseOptions, Diagnosis};
+use orchestrator::diagnose::{diagnose, effects_from_report, Action, DiagnoseOptions, Diagnosis};
 use orchestrator::stats::rms;
 use orchestrator::synth::{
     synth_record, EffectSpec, ForceWindow, NoiseLevel, Scenario, DEFAULT_STIFFNESS,
@@ -246,7 +246,7 @@ fn add_physics_refuses_a_sensor_fault_diagnosis() {
         r#"{"action": "sensor_fault", "effect": null, "sensor": {"floor": 2, "gain": 0.8}}"#,
     )
     .expect("write");
-    let e = effect_from_report(&path)
+    let e = effects_from_report(&path)
         .expect_err("a sensor fault is refused")
         .to_string();
     assert!(

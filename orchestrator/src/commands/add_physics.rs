@@ -9,7 +9,7 @@ use super::diagnose::options;
 use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
-use crate::workflows::diagnose::{add_physics, effect_from_report, Candidate};
+use crate::workflows::diagnose::{add_physics, effects_from_report, Candidate};
 
 #[derive(clap::Args)]
 pub struct AddPhysicsArgs {
@@ -17,14 +17,15 @@ pub struct AddPhysicsArgs {
     #[arg(long)]
     pub twin: PathBuf,
     /// The effect, KIND@LOCATION[:SIDE]: contact@2-3[:both|positive|negative], cubic@2,
-    /// friction@1.
+    /// friction@1; repeat it to add several at once.
     #[arg(
         long,
         conflicts_with = "diagnosis",
         required_unless_present = "diagnosis"
     )]
-    pub effect: Option<String>,
-    /// Take the effect from a `twin diagnose` report instead.
+    pub effect: Vec<String>,
+    /// Take the effects from a `twin diagnose` report instead (all of them, in order; with the
+    /// physics refined too when the diagnosis's joint refit moved it).
     #[arg(long)]
     pub diagnosis: Option<PathBuf>,
     /// The record its parameters are estimated on.
@@ -47,26 +48,40 @@ pub struct AddPhysicsArgs {
 
 pub fn run(args: &AddPhysicsArgs) -> Result<()> {
     let o = options(args.transient, args.threads)?;
-    let candidate = match (&args.effect, &args.diagnosis) {
-        (Some(e), _) => Candidate::parse(e).map_err(anyhow::Error::msg)?,
-        (None, Some(path)) => effect_from_report(path)?,
-        (None, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
+    let (candidates, refine) = match (args.effect.is_empty(), &args.diagnosis) {
+        (false, _) => (
+            args.effect
+                .iter()
+                .map(|e| Candidate::parse(e).map_err(anyhow::Error::msg))
+                .collect::<Result<Vec<_>>>()?,
+            args.refine,
+        ),
+        (true, Some(path)) => {
+            let (candidates, moved) = effects_from_report(path)?;
+            if moved && !args.refine {
+                println!("the diagnosis moved the physics with the effects: refining it too");
+            }
+            (candidates, args.refine || moved)
+        }
+        (true, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
     };
     let data = Measurement::read(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
-    let (new_twin, report) = add_physics(&twin, &data, &candidate, args.refine, &o)?;
+    let (new_twin, report) = add_physics(&twin, &data, &candidates, refine, &o)?;
     new_twin.write(&args.out)?;
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
     let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
-    println!("effect        {}", report.effect.name.label);
-    for (k, v) in &report.effect.parameters {
-        if k != "side" {
-            println!(
-                "  {k:<14} {v:.4e} ± {:.2e}",
-                report.effect.sd.get(k).copied().unwrap_or(0.0)
-            );
+    for effect in &report.effects {
+        println!("effect        {}", effect.name.label);
+        for (k, v) in &effect.parameters {
+            if k != "side" {
+                println!(
+                    "  {k:<14} {v:.4e} ± {:.2e}",
+                    effect.sd.get(k).copied().unwrap_or(0.0)
+                );
+            }
         }
     }
     for p in &report.refined_physics {

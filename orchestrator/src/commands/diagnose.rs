@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use super::{write_json, write_text_atomically};
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
-use crate::workflows::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis};
+use crate::workflows::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis, Progress};
 
 #[derive(clap::Args)]
 pub struct DiagnoseArgs {
@@ -80,7 +80,17 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     }
     let data = Measurement::read(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
-    let d = diagnose(&twin, &data, &o)?;
+    // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).
+    let spinner = indicatif::ProgressBar::new_spinner();
+    spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+    spinner.set_message("comparing the twin with the record");
+    let shown = spinner.clone();
+    o.progress = Some(Progress(std::sync::Arc::new(move |what: &str| {
+        shown.set_message(what.to_string())
+    })));
+    let d = diagnose(&twin, &data, &o);
+    spinner.finish_and_clear();
+    let d = d?;
     // Draw before writing anything: a failed plot leaves no half-written output.
     let plot = match &args.plot {
         Some(path) => Some((path, crate::report::diagnose_plot::draw_diagnosis(&d)?)),
@@ -152,8 +162,25 @@ pub fn summary(d: &Diagnosis) -> String {
     for (label, error) in &d.failed_candidates {
         s += &format!("  failed {label}: {error}\n");
     }
+    for step in &d.selection {
+        s += &format!(
+            "round {}       + {} (worst held-out NMSE {:.3} % → alone {:.3} %, jointly {:.3} %{})\n",
+            step.round,
+            step.added,
+            step.worst_before,
+            step.nmse_held_out_effect
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max),
+            step.nmse_held_out_joint
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max),
+            if step.joint_kept { "" } else { ", not kept" }
+        );
+    }
     s += &format!("action        {}\n", d.action.name());
-    if let Some(e) = &d.effect {
+    for e in &d.effects {
         let params: Vec<String> = e
             .parameters
             .iter()
@@ -166,6 +193,16 @@ pub fn summary(d: &Diagnosis) -> String {
             })
             .collect();
         s += &format!("effect        {}: {}\n", e.name.label, params.join(", "));
+    }
+    for p in &d.physics_moved {
+        s += &format!(
+            "physics       {} {:.4} → {:.4} ({:+.1} %, {:+.1} sd)\n",
+            p.name,
+            p.before,
+            p.after,
+            100.0 * p.relative_change,
+            p.change_in_sd
+        );
     }
     if let Some(x) = &d.sensor {
         s += &format!(

@@ -45,3 +45,26 @@ pub fn twin_calibrated_on_default_structure(noise_sd: f64) -> orchestrator::twin
         calibrate(&twin, &record.measurement, &CalibrationSetup::default()).expect("calibration");
     calibrated_twin(&twin, &cal).expect("calibrated twin")
 }
+
+/// A new 20 s record of the default structure (seed 2, sensor noise `noise_sd` m/s², the force
+/// ×3 between 12 and 17 s, like dataset3's stronger shaking) with the hidden changes `change`
+/// makes.
+pub fn hidden_change_record(
+    noise_sd: f64,
+    change: impl FnOnce(&mut orchestrator::synth::Scenario),
+) -> orchestrator::data::Measurement {
+    use orchestrator::synth::{synth_record, ForceWindow, NoiseLevel, Scenario};
+    let mut s = Scenario {
+        seed: 2,
+        ..Scenario::default()
+    };
+    s.noise.level = NoiseLevel::Sd([noise_sd; 3]);
+    s.force.windows.push(ForceWindow {
+        start: 12.0,
+        end: 17.0,
+        gain: 3.0,
+        ramp: 0.5,
+    });
+    change(&mut s);
+    synth_record(&s).expect("synth").0.measurement
+}

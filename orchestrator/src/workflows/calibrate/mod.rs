@@ -10,8 +10,9 @@
 //! residuals plus the prior as residuals), solved by Levenberg–Marquardt (`levenberg-marquardt`
 //! crate) with a forward-difference Jacobian (one extra simulation per parameter); the noise
 //! variances then have a 1-D Newton update each, and the two alternate until both settle.
-//! Multi-start: the prior mean plus starts drawn from the prior widened ×3 (seeded), run in
-//! parallel, one FMU instance per thread; the best posterior wins. The damping's prior mean
+//! Multi-start: the prior mean (or [`CalibrationSetup::initial`]) plus starts drawn from the
+//! prior widened ×3 (seeded), run in parallel, one FMU instance per thread; the best posterior
+//! wins. The damping's prior mean
 //! (c ≈ 0.01 N s/m) is far from a structure's real damping, and from there the optimiser can
 //! stop with the damping stuck near zero; the widened starts reach past it.
 //!
@@ -69,6 +70,9 @@ pub struct CalibrationSetup {
     pub mask: Option<Vec<bool>>,
     /// Simulations one start may use before it is abandoned.
     pub simulations_per_start: usize,
+    /// Where the first start begins, by parameter name (the prior mean for a name not given):
+    /// a refinement from a model already fitted starts there.
+    pub initial: BTreeMap<String, f64>,
 }
 
 impl Default for CalibrationSetup {
@@ -86,6 +90,7 @@ impl Default for CalibrationSetup {
                 .unwrap_or(1),
             mask: None,
             simulations_per_start: SIMULATIONS_PER_START,
+            initial: BTreeMap::new(),
         }
     }
 }
@@ -532,7 +537,17 @@ pub fn calibrate(
     let starts: Vec<Vec<f64>> = (0..setup.starts.max(1))
         .map(|i| {
             if i == 0 {
-                vec![0.0; p]
+                setup
+                    .parameters
+                    .iter()
+                    .zip(&target.priors)
+                    .map(|(name, prior)| match setup.initial.get(name) {
+                        Some(&v) if prior.space == Space::Linear || v > 0.0 => {
+                            (prior.coordinate(v) - prior.mean) / prior.sd()
+                        }
+                        _ => 0.0,
+                    })
+                    .collect()
             } else {
                 (0..p)
                     .map(|_| 3.0 * rng.sample::<f64, _>(StandardNormal))

@@ -62,6 +62,7 @@
 //! the physics parameters jointly, and writes the new twin.
 
 pub mod candidate;
+pub mod select;
 pub mod sensor;
 
 use std::collections::BTreeMap;
@@ -140,6 +141,12 @@ pub struct Gates {
     /// Recalibration explains the error when every floor's held-out NMSE is within this factor
     /// of the noise level.
     pub recalibration_noise_factor: f64,
+    /// Forward selection adds an effect that cuts the model's worst-floor held-out NMSE by at
+    /// least this factor (the combination must still meet `required_cut` and
+    /// `beat_recalibration` as a whole).
+    pub step_cut: f64,
+    /// At most this many effects are added.
+    pub max_effects: usize,
 }
 
 impl Default for Gates {
@@ -149,6 +156,8 @@ impl Default for Gates {
             required_cut: 4.0,
             beat_recalibration: 2.0,
             recalibration_noise_factor: 3.0,
+            step_cut: 1.5,
+            max_effects: 3,
         }
     }
 }
@@ -183,6 +192,26 @@ pub struct DiagnoseOptions {
     /// RK4 sub-steps of the shear FMU while candidates are fitted (its `substeps`); each fit is
     /// then scored at the twin's own sub-steps. `None`: the twin's own throughout.
     pub fit_substeps: Option<i32>,
+    /// Told what the diagnosis is doing, stage by stage (a terminal's progress line).
+    pub progress: Option<Progress>,
+}
+
+/// Where a diagnosis says what it is doing.
+#[derive(Clone)]
+pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Progress")
+    }
+}
+
+impl DiagnoseOptions {
+    fn tell(&self, what: &str) {
+        if let Some(p) = &self.progress {
+            (p.0)(what);
+        }
+    }
 }
 
 impl Default for DiagnoseOptions {
@@ -202,6 +231,7 @@ impl Default for DiagnoseOptions {
             always_fit: false,
             tolerance: None,
             fit_substeps: Some(FIT_SUBSTEPS),
+            progress: None,
         }
     }
 }
@@ -358,7 +388,16 @@ pub struct Diagnosis {
     pub action: Action,
     /// Why, in a sentence with the numbers.
     pub reason: String,
+    /// The first of `effects` (what a single-effect diagnosis names).
     pub effect: Option<EffectReport>,
+    /// Every effect added, in the order forward selection chose them, with their jointly
+    /// fitted parameters.
+    pub effects: Vec<EffectReport>,
+    /// The physics parameters the joint refit with the effects moved by more than 3 posterior
+    /// sd and 1 %, largest move first (empty unless the action is `add_physics`).
+    pub physics_moved: Vec<MovedParameter>,
+    /// The forward selection's rounds.
+    pub selection: Vec<select::SelectionStep>,
     /// The faulty channel, when the action is `sensor_fault`.
     pub sensor: Option<SensorFit>,
     /// Every floor's sensor candidate (gain, offset, drift of the twin's prediction), floor 1
@@ -397,6 +436,7 @@ pub struct Series {
 }
 
 /// One physics run: accelerations, storey drifts and floor velocities.
+#[derive(Clone)]
 struct PhysicsRun {
     acc: [Vec<f64>; 3],
     drift: [Vec<f64>; 3],
@@ -532,6 +572,7 @@ fn prior_scales(
 }
 
 /// What one alternative's fit gives.
+#[derive(Clone)]
 struct Fitted {
     calibration: Calibration,
     evidence: f64,
@@ -567,6 +608,7 @@ fn fit(
     simulations_per_start: usize,
     options: &DiagnoseOptions,
     baseline_evidence: f64,
+    initial: &BTreeMap<String, f64>,
 ) -> Result<Fitted> {
     let setup = CalibrationSetup {
         parameters: parameters.clone(),
@@ -577,6 +619,7 @@ fn fit(
         threads: 1,
         mask: Some(mask.to_vec()),
         simulations_per_start,
+        initial: initial.clone(),
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
@@ -629,6 +672,15 @@ fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, work: impl Fn(&J) -> T
         .into_iter()
         .map(|r| r.expect("every job ran"))
         .collect()
+}
+
+/// Calls its closure when dropped: a fit counts as done however it ended.
+struct Told<F: FnMut()>(F);
+
+impl<F: FnMut()> Drop for Told<F> {
+    fn drop(&mut self) {
+        (self.0)()
+    }
 }
 
 /// The fitted and held-out samples: after the transient, alternate blocks of `block` seconds.
@@ -756,6 +808,9 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         action: Action::None,
         reason: String::new(),
         effect: None,
+        effects: Vec::new(),
+        physics_moved: Vec::new(),
+        selection: Vec::new(),
         sensor: None,
         sensor_candidates: Vec::new(),
         nmse_after: nmse_before,
@@ -848,8 +903,20 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
     let mut jobs = vec![Job::Recalibrate];
     jobs.extend(options.candidates.iter().map(|c| Job::Effect(*c)));
+    let done = AtomicUsize::new(0);
+    let total = jobs.len();
+    options.tell(&format!(
+        "round 1: recalibration and {} candidates",
+        total - 1
+    ));
     let results = parallel(&jobs, options.threads, |job| -> Result<(Fitted, f64)> {
         let t = Instant::now();
+        let _told = Told(|| {
+            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+            options.tell(&format!(
+                "round 1: {k}/{total} fits (recalibration and candidates)"
+            ));
+        });
         let fitted = match job {
             Job::Recalibrate => fit(
                 &physics,
@@ -863,6 +930,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 crate::workflows::calibrate::SIMULATIONS_PER_START,
                 options,
                 baseline_evidence,
+                &BTreeMap::new(),
             ),
             Job::Effect(c) => {
                 let twin = with_switches(&physics, Some(c))?;
@@ -879,6 +947,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                     options.simulations_per_start,
                     options,
                     baseline_evidence,
+                    &BTreeMap::new(),
                 )
             }
         }?;
@@ -964,44 +1033,97 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             .evidence
             .total_cmp(&diagnosis.candidates[a].evidence)
     });
-    let winner = order
-        .iter()
-        .copied()
-        .find(|&i| diagnosis.candidates[i].passes);
 
-    // 5. Decide.
+    // 5. Forward selection: the best effect, refitted jointly with the physics, then the next
+    // while the error falls by the step gate (see `select`).
     let recal_explains = recal_worst * gates.required_cut <= before_worst
         && (0..3).all(|f| {
             recal.nmse_held_out[f] <= gates.recalibration_noise_factor * noise_nmse_held_out[f]
         });
+    let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
+    let selection = if no_alarm || sensor_fault.is_some() {
+        None
+    } else {
+        let ctx = select::Context {
+            physics: &physics,
+            data,
+            options,
+            scales: &scales,
+            reals: &reals,
+            mask: &mask,
+            held_out: &held_out,
+            first,
+            baseline_evidence,
+            explained_held_out: [0, 1, 2].map(|f| noise_nmse_held_out[f] + band_nmse[f]),
+            tolerance: tolerance.value,
+        };
+        Some(select::forward(
+            &ctx,
+            &fitted_candidates,
+            &passes,
+            &recal,
+            before_worst,
+            &|what| options.tell(what),
+        )?)
+    };
+    let combination = selection.as_ref().and_then(|s| {
+        if s.chosen.is_empty() {
+            return None;
+        }
+        let fitted = s.fitted.as_ref()?;
+        let w = worst(&fitted.nmse_held_out);
+        (w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst)
+            .then_some((s, fitted, w))
+    });
+    if let Some(s) = &selection {
+        diagnosis.selection = s.steps.clone();
+    }
+
+    // 6. Decide.
     if no_alarm {
         diagnosis.action = Action::None;
         diagnosis.reason = none_reason;
     } else if sensor_fault.is_some() {
         // Decided above (the alternatives were fitted for the report only).
-    } else if let Some(i) = winner {
-        let (c, fitted) = &fitted_candidates[i];
-        let report = &diagnosis.candidates[i];
+    } else if let Some((selection, fitted, w)) = combination {
         diagnosis.action = Action::AddPhysics;
-        diagnosis.reason = format!(
-            "{} cuts the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×), beats \
-             recalibration ({:.3} %) by {:.1}×, and has the highest evidence ({:.1}) of the {} \
-             candidates that pass",
-            c.label(),
+        let labels: Vec<String> = selection.chosen.iter().map(|c| c.label()).collect();
+        diagnosis.effects = selection
+            .chosen
+            .iter()
+            .map(|c| effect_report(c, &selection.values, &scales))
+            .collect();
+        diagnosis.effect = diagnosis.effects.first().cloned();
+        diagnosis.physics_moved = moved_physics(&reals, &selection.values);
+        let moved: Vec<String> = diagnosis
+            .physics_moved
+            .iter()
+            .map(|p| format!("{} {:+.1} %", p.name, 100.0 * p.relative_change))
+            .collect();
+        diagnosis.reason =
+            format!(
+            "{} cut{} the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×) and beat{} \
+             recalibration ({:.3} %) by {:.1}×{}",
+            labels.join(" + "),
+            if labels.len() == 1 { "s" } else { "" },
             before_worst,
-            worst(&report.nmse_held_out),
-            before_worst / worst(&report.nmse_held_out),
+            w,
+            before_worst / w,
+            if labels.len() == 1 { "s" } else { "" },
             recal_worst,
-            recal_worst / worst(&report.nmse_held_out),
-            report.evidence,
-            diagnosis.candidates.iter().filter(|c| c.passes).count()
+            recal_worst / w,
+            if moved.is_empty() {
+                String::new()
+            } else {
+                format!("; refitted jointly, the physics moved: {}", moved.join(", "))
+            }
         );
-        diagnosis.effect = Some(effect_report(c, &fitted.calibration, &scales));
         diagnosis.nmse_after = fitted.nmse_after;
         diagnosis.series.after = fitted.run.acc.clone();
         // The evidence: along the fitted model's drift (which follows the structure), the
         // storey shear the linear part misses = the effect's force plus what is still missed.
-        if let Some(force) = effect_force(c, &fitted.calibration, &fitted.run) {
+        let c = &selection.chosen[0];
+        if let Some(force) = effect_force(c, &selection.values, &scales, &fitted.run) {
             let s = c.at - 1;
             diagnosis.series.drift = fitted.run.drift.clone();
             diagnosis.series.missing_shear[s] = (0..n)
@@ -1163,13 +1285,48 @@ fn triple(x: &[f64; 3]) -> String {
     format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2])
 }
 
-fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> EffectReport {
-    let short = c.parameters(scales);
+/// The physics parameters in `values` that moved from the twin's by more than 3 posterior sd
+/// and 1 %, largest move (in sd) first.
+fn moved_physics(reals: &PhysicsReals, values: &Estimates) -> Vec<MovedParameter> {
+    let mut moved: Vec<MovedParameter> = DEFAULT_PARAMETERS
+        .iter()
+        .filter_map(|&name| {
+            let &(after, sd) = values.get(name)?;
+            let before = reals.get(name).ok()?;
+            Some(MovedParameter {
+                name: name.to_string(),
+                before,
+                after,
+                sd,
+                change_in_sd: (after - before) / sd,
+                relative_change: (after - before) / before,
+            })
+        })
+        .filter(|p| p.change_in_sd.abs() > 3.0 && p.relative_change.abs() > 0.01)
+        .collect();
+    moved.sort_by(|a, b| b.change_in_sd.abs().total_cmp(&a.change_in_sd.abs()));
+    moved
+}
+
+/// Fitted values and posterior sds by FMU parameter name.
+pub(crate) type Estimates = BTreeMap<String, (f64, f64)>;
+
+fn estimates(calibration: &Calibration) -> Estimates {
+    calibration
+        .parameters
+        .iter()
+        .map(|p| (p.name.clone(), (p.value, p.sd)))
+        .collect()
+}
+
+fn effect_report(c: &Candidate, fitted: &Estimates, scales: &Scales) -> EffectReport {
     let mut parameters = BTreeMap::new();
     let mut sd = BTreeMap::new();
-    for (p, s) in calibration.parameters.iter().zip(&short) {
-        parameters.insert(s.1.to_string(), p.value);
-        sd.insert(s.1.to_string(), p.sd);
+    for (name, short, _) in c.parameters(scales) {
+        if let Some(&(value, s)) = fitted.get(&name) {
+            parameters.insert(short.to_string(), value);
+            sd.insert(short.to_string(), s);
+        }
     }
     if c.kind.has_side() {
         parameters.insert("side".into(), f64::from(c.side.code()));
@@ -1181,11 +1338,20 @@ fn effect_report(c: &Candidate, calibration: &Calibration, scales: &Scales) -> E
     }
 }
 
-/// The fitted effect's storey force along the base run's drift (contact and cubic), or its
-/// floor force along the velocity (friction): what the evidence panel draws. The force law is
-/// the library's own.
-fn effect_force(c: &Candidate, calibration: &Calibration, run: &PhysicsRun) -> Option<Vec<f64>> {
-    let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
+/// The fitted effect's storey force along the run's drift (contact and cubic), or its floor
+/// force along the velocity (friction): what the evidence panel draws. The force law is the
+/// library's own; its parameters are read from `fitted` by name.
+fn effect_force(
+    c: &Candidate,
+    fitted: &Estimates,
+    scales: &Scales,
+    run: &PhysicsRun,
+) -> Option<Vec<f64>> {
+    let values = c
+        .parameters(scales)
+        .iter()
+        .map(|(name, _, _)| fitted.get(name).map(|v| v.0))
+        .collect::<Option<Vec<f64>>>()?;
     let law = Law::new(c.kind, &values, c.side)?;
     let along = match c.placement() {
         Placement::Storey => &run.drift[c.at - 1],
@@ -1261,7 +1427,10 @@ fn localise(
 #[derive(Clone, Debug, Serialize)]
 pub struct AddPhysicsReport {
     pub record: String,
+    /// The first of `effects`.
     pub effect: EffectReport,
+    /// Every effect added, in order.
+    pub effects: Vec<EffectReport>,
     pub refined_physics: Vec<Estimate>,
     pub nmse_before: [f64; 3],
     pub nmse_after: [f64; 3],
@@ -1270,17 +1439,20 @@ pub struct AddPhysicsReport {
     pub seconds: f64,
 }
 
-/// Switch `candidate` on in `twin`'s physics, estimate its parameters on the whole of `data`
-/// (after the transient), with `refine` also the nine physics parameters jointly, and return
-/// the new twin (the corrector, if any, is left out: it learned the old physics' errors).
+/// Switch `candidates` on in `twin`'s physics, estimate their parameters jointly on the whole of
+/// `data` (after the transient), with `refine` also the nine physics parameters, and return the
+/// new twin (the corrector, if any, is left out: it learned the old physics' errors).
 pub fn add_physics(
     twin: &Twin,
     data: &Measurement,
-    candidate: &Candidate,
+    candidates: &[Candidate],
     refine: bool,
     options: &DiagnoseOptions,
 ) -> Result<(Twin, AddPhysicsReport)> {
     let started = Instant::now();
+    if candidates.is_empty() {
+        return Err(DiagnoseError::Setup("no effect to add".into()));
+    }
     let physics = physics_only(twin);
     let n = data.len();
     let first = first_after_transient(&data.time, options.transient);
@@ -1294,8 +1466,12 @@ pub fn add_physics(
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let reals = PhysicsReals::of(&physics)?;
     let scales = prior_scales(&reals, &base_run, &data.force, first)?;
-    let switched = with_switches(&physics, Some(candidate))?;
-    let effect_params = candidate.parameters(&scales);
+    let mut switched = physics.duplicate();
+    let mut effect_params = Vec::new();
+    for c in candidates {
+        switched = with_switches(&switched, Some(c))?;
+        effect_params.extend(c.parameters(&scales));
+    }
     let mut names: Vec<String> = effect_params.iter().map(|p| p.0.clone()).collect();
     let mut priors: BTreeMap<String, Prior> =
         effect_params.iter().map(|p| (p.0.clone(), p.2)).collect();
@@ -1305,7 +1481,7 @@ pub fn add_physics(
         ..CalibrationSetup::default()
     };
     let baseline = fixed_log_evidence(&physics, data, &evidence_setup)?;
-    // Stage 1: the effect alone, the physics held.
+    // Stage 1: the effects alone, the physics held.
     let stage1 = fit(
         &switched,
         data,
@@ -1315,17 +1491,14 @@ pub fn add_physics(
         &after,
         first,
         options.starts.max(8),
-        options.simulations_per_start,
-        &DiagnoseOptions {
-            threads: options.threads,
-            ..options.clone()
-        },
+        options.simulations_per_start * candidates.len(),
+        options,
         baseline,
+        &BTreeMap::new(),
     )?;
     let mut result = stage1;
-    let mut chosen = switched.duplicate();
     if refine {
-        // Stage 2: effect and physics jointly, the effect's prior centred on stage 1.
+        // Stage 2: effects and physics jointly, the effects' priors centred on stage 1.
         for (p, e) in result.calibration.parameters.iter().zip(&effect_params) {
             let prior = match e.2.space {
                 crate::workflows::calibrate::Space::Log => Prior::log(p.value.ln(), e.2.variance),
@@ -1346,8 +1519,10 @@ pub fn add_physics(
             crate::workflows::calibrate::SIMULATIONS_PER_START,
             options,
             baseline,
+            &BTreeMap::new(),
         )?;
     }
+    let mut chosen = switched.duplicate();
     let component = chosen
         .component_mut(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
@@ -1362,16 +1537,22 @@ pub fn add_physics(
         .noise_variance
         .or(Some(result.calibration.noise_variance));
     // The band's parameter uncertainty: with `refine`, the joint fit's posterior; else the
-    // effect's beside the twin's own (the physics held, so the two blocks are independent).
+    // effects' beside the twin's own (the physics held, so the two blocks are independent).
     let fitted = result.calibration.covariance();
     chosen.parameter_covariance = match (&twin.parameter_covariance, refine) {
         (Some(own), false) => Some(block_diagonal(own, &fitted)),
         _ => Some(fitted),
     };
     let before = run_twin(twin, data, |_, _| {})?;
+    let values = estimates(&result.calibration);
+    let effects: Vec<EffectReport> = candidates
+        .iter()
+        .map(|c| effect_report(c, &values, &scales))
+        .collect();
     let report = AddPhysicsReport {
         record: data.path.display().to_string(),
-        effect: effect_report(candidate, &result.calibration, &scales),
+        effect: effects[0].clone(),
+        effects,
         refined_physics: result
             .calibration
             .parameters
@@ -1415,8 +1596,9 @@ fn block_diagonal(a: &ParameterCovariance, b: &ParameterCovariance) -> Parameter
     ParameterCovariance { names, matrix }
 }
 
-/// `contact@2-3[:side]` or the winner of a diagnosis report (`--diagnosis R.json`).
-pub fn effect_from_report(path: &PathBuf) -> Result<Candidate> {
+/// The effects a diagnosis report (`--diagnosis R.json`) adds, in order, and whether its
+/// joint refit moved the physics (then `add-physics` refines the physics too).
+pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Candidate>, bool)> {
     let text = std::fs::read_to_string(path).map_err(|source| DiagnoseError::Read {
         path: path.clone(),
         source,
@@ -1437,16 +1619,32 @@ pub fn effect_from_report(path: &PathBuf) -> Result<Candidate> {
             path.display()
         )));
     }
-    let label = value
-        .get("effect")
-        .and_then(|e| e.get("label"))
-        .and_then(|l| l.as_str())
-        .ok_or_else(|| {
-            DiagnoseError::Setup(format!(
-                "{}: the diagnosis names no effect (action {})",
-                path.display(),
-                value.get("action").unwrap_or(&serde_json::Value::Null)
-            ))
-        })?;
-    Candidate::parse(label).map_err(|e| DiagnoseError::Setup(format!("{}: {e}", path.display())))
+    let label = |e: &serde_json::Value| e.get("label").and_then(|l| l.as_str()).map(String::from);
+    let mut labels: Vec<String> = value
+        .get("effects")
+        .and_then(|e| e.as_array())
+        .map(|all| all.iter().filter_map(label).collect())
+        .unwrap_or_default();
+    if labels.is_empty() {
+        labels.extend(value.get("effect").and_then(label));
+    }
+    if labels.is_empty() {
+        return Err(DiagnoseError::Setup(format!(
+            "{}: the diagnosis names no effect (action {})",
+            path.display(),
+            value.get("action").unwrap_or(&serde_json::Value::Null)
+        )));
+    }
+    let candidates = labels
+        .iter()
+        .map(|l| {
+            Candidate::parse(l)
+                .map_err(|e| DiagnoseError::Setup(format!("{}: {e}", path.display())))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let moved = value
+        .get("physics_moved")
+        .and_then(|m| m.as_array())
+        .is_some_and(|m| !m.is_empty());
+    Ok((candidates, moved))
 }

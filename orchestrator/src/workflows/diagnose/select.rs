@@ -1,0 +1,403 @@
+//! Several changes at once: forward selection over the effect library.
+//!
+//! A structure can lose stiffness and start to touch a bumper in the same week, or rub at one
+//! floor while another storey stiffens. No single candidate explains such a record, so the
+//! diagnosis builds the model up one change at a time:
+//!
+//! 1. **Pick** from a round of candidate fits (each with everything else held): the candidates
+//!    that pass the single-effect gates first (by evidence, as a single effect is chosen), else
+//!    the one with the lowest held-out error among those that cut the model's worst-floor
+//!    held-out NMSE by [`Gates::step_cut`].
+//! 2. **A parameter change is a move too.** In the first round, when no effect passes alone
+//!    and the recalibration (the nine physics parameters) cuts the error more than the best
+//!    effect, the recalibrated physics is taken first and the whole library is tried again on
+//!    it: a stiffness loss hides a contact from every fit that holds the old stiffness.
+//! 3. **Refit** the effects chosen so far jointly, kept when it lowers the held-out error; the
+//!    physics held, unless it was recalibrated (then it was fitted while the effect was
+//!    missing, and is refitted with it).
+//! 4. **Repeat** while the model is not yet good enough (some floor above
+//!    [`Gates::none_factor`] × its explained held-out level and the worst above the tolerance)
+//!    and fewer than [`Gates::max_effects`] are chosen. After a full round (the first, or the
+//!    one on recalibrated physics) the next rounds try only its candidates that cut the error
+//!    on their own by 10 % or more (at most [`SCREENED`]), at other FMU locations than those
+//!    chosen:
+//!    a second effect that shows no trace alone rarely matters beside the first, and the
+//!    screening keeps a round to seconds.
+//! 5. **Polish**: every chosen effect and the nine physics parameters jointly, one start from
+//!    the values fitted (a local refinement: the globally searched fits are the rounds' own),
+//!    kept when it lowers the held-out error. The physics is freed only here, at the end: freed
+//!    after the first effect, a floor's viscous damping soaks up a friction that a second round
+//!    would otherwise find.
+//!
+//! The caller then judges the whole combination with the gates a single effect meets: a cut of
+//! [`Gates::required_cut`] from the twin as given, and [`Gates::beat_recalibration`] against
+//! the recalibration alone.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{
+    estimates, fit, parallel, with_switches, worst, Candidate, DiagnoseError, DiagnoseOptions,
+    Estimates, Fitted, PhysicsReals, Result, Scales,
+};
+use crate::twin::data::Measurement;
+use crate::twin::{ParameterValue, Twin, PHYSICS};
+use crate::workflows::calibrate::DEFAULT_PARAMETERS;
+
+/// Candidates a round after the first tries, at most.
+pub const SCREENED: usize = 6;
+
+/// Simulations the joint refit may use (one start from fitted values: it converges in a few
+/// hundred; the budget stops a refit that wanders).
+pub const JOINT_SIMULATIONS: usize = 900;
+
+/// One round of the forward selection.
+#[derive(Clone, Debug, Serialize)]
+pub struct SelectionStep {
+    pub round: usize,
+    /// The effect added in this round.
+    pub added: String,
+    /// Worst-floor held-out NMSE of the model before the round.
+    pub worst_before: f64,
+    /// Held-out NMSE per floor with the effect added, everything else held.
+    pub nmse_held_out_effect: [f64; 3],
+    /// Held-out NMSE per floor after the joint refit of every chosen effect and the physics.
+    pub nmse_held_out_joint: [f64; 3],
+    /// Whether the joint refit was kept (it lowered the held-out error).
+    pub joint_kept: bool,
+    /// Every candidate the round tried: label and worst-floor held-out NMSE.
+    pub tried: Vec<(String, f64)>,
+    pub seconds: f64,
+}
+
+/// What the rounds read.
+pub(super) struct Context<'a> {
+    pub physics: &'a Twin,
+    pub data: &'a Measurement,
+    pub options: &'a DiagnoseOptions,
+    pub scales: &'a Scales,
+    pub reals: &'a PhysicsReals,
+    pub mask: &'a [bool],
+    pub held_out: &'a [usize],
+    pub first: usize,
+    pub baseline_evidence: f64,
+    /// Per floor, the held-out NMSE the twin's band explains.
+    pub explained_held_out: [f64; 3],
+    pub tolerance: f64,
+}
+
+/// The chosen effects, in order, and the model they make.
+pub(super) struct Selection {
+    pub chosen: Vec<Candidate>,
+    /// Every fitted value of the final model (effects and physics), by FMU name.
+    pub values: Estimates,
+    /// The final model's fit (scores and run).
+    pub fitted: Option<Fitted>,
+    pub steps: Vec<SelectionStep>,
+    /// The last round's candidates when none of them was added: label and worst-floor
+    /// held-out NMSE.
+    pub not_added: Vec<(String, f64)>,
+}
+
+impl Context<'_> {
+    fn good_enough(&self, nmse_held_out: &[f64; 3]) -> bool {
+        let factor = self.options.gates.none_factor;
+        worst(nmse_held_out) <= self.tolerance
+            || (0..3).all(|f| nmse_held_out[f] <= factor * self.explained_held_out[f])
+    }
+
+    /// The physics twin with `chosen` switched on and `values` set.
+    fn model(&self, chosen: &[Candidate], values: &Estimates) -> Result<Twin> {
+        let mut twin = self.physics.duplicate();
+        let component = twin.component_mut(PHYSICS).ok_or_else(|| {
+            DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
+        })?;
+        for c in chosen {
+            component.parameters.extend(c.switches());
+        }
+        for (name, &(value, _)) in values {
+            component
+                .parameters
+                .insert(name.clone(), ParameterValue::Real(value));
+        }
+        Ok(twin)
+    }
+
+    /// Each of `candidates` fitted alone on `base` (its parameters only).
+    fn round(&self, base: &Twin, candidates: &[Candidate]) -> Vec<(Candidate, Result<Fitted>)> {
+        let o = self.options;
+        let results = parallel(candidates, o.threads, |c| {
+            let twin = with_switches(base, Some(c))?;
+            let params = c.parameters(self.scales);
+            fit(
+                &twin,
+                self.data,
+                params.iter().map(|p| p.0.clone()).collect(),
+                params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+                self.mask,
+                self.held_out,
+                self.first,
+                o.starts,
+                o.simulations_per_start,
+                o,
+                self.baseline_evidence,
+                &BTreeMap::new(),
+            )
+        });
+        candidates.iter().copied().zip(results).collect()
+    }
+
+    /// Every chosen effect (and with `physics` the nine physics parameters), from `start`; what
+    /// is not fitted is held at `start`.
+    fn joint(&self, chosen: &[Candidate], start: &Estimates, physics: bool) -> Result<Fitted> {
+        let twin = self.model(chosen, start)?;
+        let mut names = Vec::new();
+        let mut priors = BTreeMap::new();
+        for c in chosen {
+            for (name, _, prior) in c.parameters(self.scales) {
+                priors.insert(name.clone(), prior);
+                names.push(name);
+            }
+        }
+        let mut initial: BTreeMap<String, f64> =
+            start.iter().map(|(k, v)| (k.clone(), v.0)).collect();
+        if physics {
+            names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
+            for name in DEFAULT_PARAMETERS {
+                if !initial.contains_key(name) {
+                    initial.insert(name.to_string(), self.reals.get(name)?);
+                }
+            }
+        }
+        fit(
+            &twin,
+            self.data,
+            names,
+            priors,
+            self.mask,
+            self.held_out,
+            self.first,
+            1,
+            JOINT_SIMULATIONS,
+            self.options,
+            self.baseline_evidence,
+            &initial,
+        )
+    }
+}
+
+/// The pick of a round: the candidates that passed the single-effect gates (`passes`, the
+/// first round only), by evidence, as a single-effect diagnosis always chose; else those that
+/// cut `current` by the step gate, by held-out error (on a model still missing something, the
+/// Laplace evidence of the fitted blocks can favour a wrong side of a contact that the
+/// held-out blocks expose). Also whether the pick passed.
+fn pick<'a>(
+    results: &'a [(Candidate, Fitted)],
+    passes: &[bool],
+    current: f64,
+    step_cut: f64,
+) -> Option<(&'a (Candidate, Fitted), bool)> {
+    let held_out = |i: usize| worst(&results[i].1.nmse_held_out);
+    (0..results.len())
+        .filter(|&i| passes[i])
+        .max_by(|&a, &b| results[a].1.evidence.total_cmp(&results[b].1.evidence))
+        .map(|i| (&results[i], true))
+        .or_else(|| {
+            (0..results.len())
+                .filter(|&i| held_out(i) * step_cut <= current)
+                .min_by(|&a, &b| held_out(a).total_cmp(&held_out(b)))
+                .map(|i| (&results[i], false))
+        })
+}
+
+/// The candidates of a round that cut `current` by 10 % or more alone, best first.
+fn screen(results: &[(Candidate, Fitted)], current: f64) -> Vec<Candidate> {
+    let mut cut: Vec<(Candidate, f64)> = results
+        .iter()
+        .map(|(c, f)| (*c, worst(&f.nmse_held_out)))
+        .filter(|&(_, w)| w <= 0.9 * current)
+        .collect();
+    cut.sort_by(|a, b| a.1.total_cmp(&b.1));
+    cut.into_iter().map(|(c, _)| c).collect()
+}
+
+/// Forward selection from the first round's fits (`first_round`, with which of them passed the
+/// single-effect gates, and the recalibration `recalibrated`). `before` is the twin's
+/// worst-floor held-out NMSE.
+pub(super) fn forward(
+    ctx: &Context,
+    first_round: &[(Candidate, Fitted)],
+    passes: &[bool],
+    recalibrated: &Fitted,
+    before: f64,
+    progress: &dyn Fn(&str),
+) -> Result<Selection> {
+    let gates = ctx.options.gates;
+    let mut selection = Selection {
+        chosen: Vec::new(),
+        values: BTreeMap::new(),
+        fitted: None,
+        steps: Vec::new(),
+        not_added: Vec::new(),
+    };
+    // The candidates of the last full round that cut the error alone by 10 %, best first: what
+    // the next rounds try.
+    let mut screened = screen(first_round, before);
+    let mut physics_moved = false;
+    let mut full_round_next = false;
+
+    let mut current = before;
+    let mut results: Vec<(Candidate, Fitted)> = first_round.to_vec();
+    let mut passing = passes.to_vec();
+    let mut tried: Vec<(String, f64)> = first_round
+        .iter()
+        .map(|(c, f)| (c.label(), worst(&f.nmse_held_out)))
+        .collect();
+    let mut round = 1;
+    loop {
+        let started = Instant::now();
+        let picked = pick(&results, &passing, current, gates.step_cut);
+        // A parameter change is a move too: in the first round, when no effect passes alone
+        // and the recalibration cuts the error more than the best effect, it is taken first and
+        // the effects are tried again on the recalibrated physics.
+        let recal = worst(&recalibrated.nmse_held_out);
+        let take_recalibration = round == 1
+            && !picked.is_some_and(|(_, passed)| passed)
+            && recal * gates.step_cut <= current
+            && picked.is_none_or(|((_, f), _)| recal < worst(&f.nmse_held_out));
+        if take_recalibration {
+            selection
+                .values
+                .extend(estimates(&recalibrated.calibration));
+            selection.steps.push(SelectionStep {
+                round,
+                added: "recalibration".into(),
+                worst_before: current,
+                nmse_held_out_effect: recalibrated.nmse_held_out,
+                nmse_held_out_joint: recalibrated.nmse_held_out,
+                joint_kept: true,
+                tried: std::mem::take(&mut tried),
+                seconds: started.elapsed().as_secs_f64(),
+            });
+            current = recal;
+            physics_moved = true;
+            full_round_next = true;
+            selection.fitted = Some(recalibrated.clone());
+            if ctx.good_enough(&recalibrated.nmse_held_out) {
+                break;
+            }
+        } else {
+            let Some(((c, alone), _)) = picked else {
+                selection.not_added = tried;
+                break;
+            };
+            let (c, alone) = (*c, alone.clone());
+            selection.chosen.push(c);
+            let mut values = selection.values.clone();
+            values.extend(estimates(&alone.calibration));
+            let mut kept = alone.clone();
+            let mut refit_held_out = alone.nmse_held_out;
+            let mut refit_kept = false;
+            // On recalibrated physics (fitted while the effect was missing) the physics is
+            // refitted with the effects; else the effects alone, when there are several.
+            if selection.chosen.len() > 1 || physics_moved {
+                progress(&format!(
+                    "round {round}: {} chosen; refitting jointly",
+                    c.label()
+                ));
+                match ctx.joint(&selection.chosen, &values, physics_moved) {
+                    Ok(joint) => {
+                        refit_held_out = joint.nmse_held_out;
+                        if worst(&joint.nmse_held_out) < worst(&alone.nmse_held_out) {
+                            values.extend(estimates(&joint.calibration));
+                            kept = joint;
+                            refit_kept = true;
+                        }
+                    }
+                    Err(e) => progress(&format!("the joint refit failed ({e})")),
+                }
+            }
+            selection.steps.push(SelectionStep {
+                round,
+                added: c.label(),
+                worst_before: current,
+                nmse_held_out_effect: alone.nmse_held_out,
+                nmse_held_out_joint: refit_held_out,
+                joint_kept: refit_kept,
+                tried: std::mem::take(&mut tried),
+                seconds: started.elapsed().as_secs_f64(),
+            });
+            current = worst(&kept.nmse_held_out);
+            selection.values = values;
+            let good = ctx.good_enough(&kept.nmse_held_out);
+            selection.fitted = Some(kept);
+            if good || selection.chosen.len() >= gates.max_effects {
+                break;
+            }
+        }
+        // The next round, at locations not yet chosen: the whole library on recalibrated
+        // physics, else the last full round's screened candidates.
+        let taken: Vec<String> = selection.chosen.iter().map(|c| c.prefix()).collect();
+        let full = std::mem::take(&mut full_round_next);
+        let next: Vec<Candidate> = if full {
+            ctx.options.candidates.clone()
+        } else {
+            screened.clone()
+        }
+        .into_iter()
+        .filter(|c| !taken.contains(&c.prefix()))
+        .take(if full { usize::MAX } else { SCREENED })
+        .collect();
+        if next.is_empty() {
+            break;
+        }
+        round += 1;
+        progress(&format!(
+            "round {round}: {} candidates on top of {}",
+            next.len(),
+            selection
+                .steps
+                .iter()
+                .map(|s| s.added.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        let base = ctx.model(&selection.chosen, &selection.values)?;
+        results = Vec::new();
+        for (c, r) in ctx.round(&base, &next) {
+            match r {
+                Ok(f) => {
+                    tried.push((c.label(), worst(&f.nmse_held_out)));
+                    results.push((c, f));
+                }
+                Err(e) => tried.push((format!("{} (failed: {e})", c.label()), f64::NAN)),
+            }
+        }
+        passing = vec![false; results.len()];
+        if full {
+            screened = screen(&results, current);
+        }
+    }
+    // The final polish: every chosen effect and the physics jointly, kept when it lowers the
+    // held-out error.
+    if !selection.chosen.is_empty() {
+        progress("refitting the effects jointly with the physics");
+        if let Ok(joint) = ctx.joint(&selection.chosen, &selection.values, true) {
+            let better = selection
+                .fitted
+                .as_ref()
+                .is_none_or(|f| worst(&joint.nmse_held_out) < worst(&f.nmse_held_out));
+            if better {
+                selection.values.extend(estimates(&joint.calibration));
+                if let Some(last) = selection.steps.last_mut() {
+                    last.nmse_held_out_joint = joint.nmse_held_out;
+                    last.joint_kept = true;
+                }
+                selection.fitted = Some(joint);
+            }
+        }
+    }
+    Ok(selection)
+}

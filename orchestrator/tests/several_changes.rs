@@ -1,0 +1,147 @@
+//! Several changes at once: `twin diagnose`'s forward selection on records of a structure that
+//! changed in two ways, diagnosed with a twin calibrated on the change-free record (the same
+//! twin and records as `tests/diagnose.rs`: sensor noise 0.003 m/s², seed 2, force ×3 in
+//! 12–17 s). The figures in the comments were measured with the release build on this
+//! project's 2-core machine; the assertions leave the stated margins.
+//!
+//! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
+
+use std::sync::OnceLock;
+
+use orchestrator::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis, Kind};
+use orchestrator::synth::{EffectSpec, DEFAULT_STIFFNESS};
+use orchestrator::twin::Twin;
+
+mod common;
+use common::{hidden_change_record, twin_calibrated_on_default_structure};
+
+const NOISE_SD: f64 = 0.003;
+
+fn twin() -> &'static Twin {
+    static TWIN: OnceLock<Twin> = OnceLock::new();
+    TWIN.get_or_init(|| twin_calibrated_on_default_structure(NOISE_SD))
+}
+
+fn worst(x: &[f64; 3]) -> f64 {
+    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn run(change: impl FnOnce(&mut orchestrator::synth::Scenario)) -> Diagnosis {
+    let data = hidden_change_record(NOISE_SD, change);
+    let d = diagnose(twin(), &data, &DiagnoseOptions::default()).expect("diagnosis");
+    eprintln!(
+        "{}\n  effects {:?}\n  physics moved {:?}\n  NMSE {:?} → {:?}, {:.1} s",
+        d.reason,
+        d.effects
+            .iter()
+            .map(|e| (&e.name.label, &e.parameters))
+            .collect::<Vec<_>>(),
+        d.physics_moved
+            .iter()
+            .map(|p| (&p.name, p.relative_change))
+            .collect::<Vec<_>>(),
+        d.nmse_before,
+        d.nmse_after,
+        d.seconds
+    );
+    for step in &d.selection {
+        eprintln!(
+            "  round {} + {} ({:.3} → {:?} / {:?}); tried {:?}",
+            step.round,
+            step.added,
+            step.worst_before,
+            step.nmse_held_out_effect,
+            step.nmse_held_out_joint,
+            step.tried
+        );
+    }
+    d
+}
+
+/// The effect of `kind` at `location` among `d.effects`, its parameters within `tolerance`
+/// (relative) of `truth`.
+fn assert_has(
+    d: &Diagnosis,
+    kind: Kind,
+    location: &[usize],
+    truth: &[(&str, f64)],
+    tolerance: f64,
+) {
+    let e = d
+        .effects
+        .iter()
+        .find(|e| e.name.kind == kind && e.name.location == location)
+        .unwrap_or_else(|| panic!("no {kind:?} at {location:?}: {}", d.reason));
+    for (name, value) in truth {
+        let got = e.parameters[*name];
+        assert!(
+            (got - value).abs() <= tolerance * value.abs(),
+            "{}: {name} {got} for {value} (±{tolerance})",
+            e.name.label
+        );
+    }
+}
+
+#[test]
+fn a_stiffness_loss_and_a_contact_at_once() {
+    let d = run(|s| {
+        s.stiffness[1] = 0.85 * DEFAULT_STIFFNESS[1];
+        s.effects.push(EffectSpec::Contact {
+            lower: 2,
+            gap: 5e-4,
+            stiffness: 9000.0,
+            side: 0,
+        });
+    });
+    assert_eq!(d.action, Action::AddPhysics, "{}", d.reason);
+    assert_eq!(d.effects.len(), 1, "{}", d.reason);
+    assert_has(
+        &d,
+        Kind::Contact,
+        &[2, 3],
+        &[("gap", 5e-4), ("stiffness", 9000.0)],
+        0.05,
+    );
+    assert_eq!(
+        d.effect.as_ref().map(|e| &e.name.label),
+        Some(&d.effects[0].name.label)
+    );
+    let k2 = d
+        .physics_moved
+        .iter()
+        .find(|p| p.name == "k2")
+        .unwrap_or_else(|| panic!("k2 did not move: {}", d.reason));
+    assert!(
+        (k2.relative_change + 0.15).abs() < 0.02,
+        "k2 moved {}",
+        k2.relative_change
+    );
+    assert!(worst(&d.nmse_after) <= worst(&d.nmse_before) / 4.0);
+}
+
+#[test]
+fn friction_at_one_floor_and_cubic_stiffness_at_another() {
+    let d = run(|s| {
+        s.effects.push(EffectSpec::Friction {
+            floor: 1,
+            force: 0.05,
+            velocity_scale: 1e-3,
+        });
+        s.effects.push(EffectSpec::Cubic {
+            storey: 3,
+            stiffness: 8e9,
+        });
+    });
+    assert_eq!(d.action, Action::AddPhysics, "{}", d.reason);
+    assert_eq!(d.effects.len(), 2, "{}", d.reason);
+    assert_has(&d, Kind::Cubic, &[3], &[("stiffness", 8e9)], 0.05);
+    assert_has(
+        &d,
+        Kind::Friction,
+        &[1],
+        &[("force", 0.05), ("velocity_scale", 1e-3)],
+        0.1,
+    );
+    assert!(d.physics_moved.is_empty(), "{:?}", d.physics_moved);
+    assert!(worst(&d.nmse_after) <= worst(&d.nmse_before) / 4.0);
+}
