@@ -169,7 +169,7 @@ pub fn info() -> &'static ModelInfo {
         ModelInfo::new(
             "ShearFrame3",
             MODEL_IDENTIFIER,
-            "Three-storey shear frame (3-DOF, eq. 1 of the reference paper) shaken at floor 1, RK4 with sub-steps and optional gap contact, cubic stiffness and friction",
+            "Three-storey shear frame (3-DOF, eq. 1 of the reference paper) shaken at floor 1, RK4 with sub-steps and optional gap contact, cubic stiffness, friction and up to six discovered terms coefficient·f(x, v)",
             env!("CARGO_PKG_VERSION"),
             variables(),
             units(),

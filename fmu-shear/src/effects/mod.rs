@@ -1,12 +1,15 @@
 //! The optional-effect library `g(y, ẏ)`: forces that eq. (1) does not have, each kind in its
 //! own file behind [`Effect`]. Adding a kind is one new file, one field in [`Effects`] and its
 //! line in `Effects::all_variables` / the dispatch below.
+//! The exception is [`discovered`]: up to six generic terms `coefficient · f(x, v)` whose
+//! function and site are parameters too, for the forces a diagnosis finds by regression.
 //!
 //! Sign convention: an effect adds to `g`, the left-hand side of `M ÿ + C ẏ + K y + g = φ u`, so
 //! a restoring force is positive along the displacement that causes it.
 
 pub mod contact;
 pub mod cubic;
+pub mod discovered;
 pub mod friction;
 pub mod kind;
 
@@ -15,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 pub use contact::Contact;
 pub use cubic::Cubic;
+pub use discovered::{Discovered, Function, Site, Term, MAX_TERMS};
 pub use friction::Friction;
 pub use kind::{Kind, Law, Placement, Side};
 
@@ -224,10 +228,12 @@ impl<E: Effect> Library<E> {
     }
 }
 
-/// Up to two switch values per contact location.
+/// Up to two switch values per contact location and one per discovered ramp term.
+pub const MAX_SWITCHES: usize = 2 * 3 + MAX_TERMS;
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Switches {
-    pub values: [f64; 6],
+    pub values: [f64; MAX_SWITCHES],
     pub len: usize,
 }
 
@@ -237,11 +243,15 @@ pub struct Effects {
     pub contact: Library<Contact>,
     pub cubic: Library<Cubic>,
     pub friction: Library<Friction>,
+    /// The generic terms of a diagnosis (`discovered{1..6}_*`); its own layout, see
+    /// [`discovered`].
+    pub discovered: Discovered,
 }
 
 pub const CONTACT_BASE_VR: u32 = 100;
 pub const CUBIC_BASE_VR: u32 = 200;
 pub const FRICTION_BASE_VR: u32 = 300;
+pub use discovered::DISCOVERED_BASE_VR;
 
 impl Default for Effects {
     fn default() -> Self {
@@ -249,6 +259,7 @@ impl Default for Effects {
             contact: Library::new(CONTACT_BASE_VR),
             cubic: Library::new(CUBIC_BASE_VR),
             friction: Library::new(FRICTION_BASE_VR),
+            discovered: Discovered::default(),
         }
     }
 }
@@ -258,6 +269,7 @@ impl Effects {
         let mut vars = Library::<Contact>::variables(CONTACT_BASE_VR);
         vars.extend(Library::<Cubic>::variables(CUBIC_BASE_VR));
         vars.extend(Library::<Friction>::variables(FRICTION_BASE_VR));
+        vars.extend(Discovered::variables());
         vars
     }
 
@@ -279,16 +291,27 @@ impl Effects {
         }
     }
 
+    /// Replace the discovered terms by `terms` (at most [`MAX_TERMS`], switched on in slots
+    /// 1..; the other slots off). A term that is not valid is refused, naming its variable, and
+    /// nothing changes.
+    pub fn switch_on_terms(&mut self, terms: &[Term]) -> Result<(), ModelError> {
+        self.discovered.set_terms(terms)
+    }
+
     pub fn any_enabled(&self) -> bool {
-        self.contact.any_enabled() || self.cubic.any_enabled() || self.friction.any_enabled()
+        self.contact.any_enabled()
+            || self.cubic.any_enabled()
+            || self.friction.any_enabled()
+            || self.discovered.any_enabled()
     }
 
     /// The switch functions of the enabled effects: values whose sign change marks a kink in
-    /// `g` (a contact gap opening or closing). Smooth effects have none.
+    /// `g` (a contact gap opening or closing, a discovered ramp's `x ∓ s` crossing zero).
+    /// Smooth effects have none.
     #[inline]
     pub fn switches(&self, y: &Floors) -> Switches {
         let mut out = Switches {
-            values: [0.0; 6],
+            values: [0.0; MAX_SWITCHES],
             len: 0,
         };
         for (location, contact) in self.contact.effects.iter().enumerate() {
@@ -298,6 +321,10 @@ impl Effects {
                     out.len += 1;
                 }
             }
+        }
+        for value in self.discovered.enabled_terms().filter_map(|t| t.switch(y)) {
+            out.values[out.len] = value;
+            out.len += 1;
         }
         out
     }
@@ -309,6 +336,7 @@ impl Effects {
         self.contact.add_forces(y, v, &mut g);
         self.cubic.add_forces(y, v, &mut g);
         self.friction.add_forces(y, v, &mut g);
+        self.discovered.add_forces(y, v, &mut g);
         g
     }
 
@@ -317,36 +345,42 @@ impl Effects {
             .get_real(vr)
             .or_else(|| self.cubic.get_real(vr))
             .or_else(|| self.friction.get_real(vr))
+            .or_else(|| self.discovered.get_real(vr))
     }
     pub fn set_real(&mut self, vr: u32, value: f64) -> Option<Result<(), ModelError>> {
         self.contact
             .set_real(vr, value)
             .or_else(|| self.cubic.set_real(vr, value))
             .or_else(|| self.friction.set_real(vr, value))
+            .or_else(|| self.discovered.set_real(vr, value))
     }
     pub fn get_integer(&self, vr: u32) -> Option<i32> {
         self.contact
             .get_integer(vr)
             .or_else(|| self.cubic.get_integer(vr))
             .or_else(|| self.friction.get_integer(vr))
+            .or_else(|| self.discovered.get_integer(vr))
     }
     pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
         self.contact
             .set_integer(vr, value)
             .or_else(|| self.cubic.set_integer(vr, value))
             .or_else(|| self.friction.set_integer(vr, value))
+            .or_else(|| self.discovered.set_integer(vr, value))
     }
     pub fn get_boolean(&self, vr: u32) -> Option<bool> {
         self.contact
             .get_boolean(vr)
             .or_else(|| self.cubic.get_boolean(vr))
             .or_else(|| self.friction.get_boolean(vr))
+            .or_else(|| self.discovered.get_boolean(vr))
     }
     pub fn set_boolean(&mut self, vr: u32, value: bool) -> Option<()> {
         self.contact
             .set_boolean(vr, value)
             .or_else(|| self.cubic.set_boolean(vr, value))
             .or_else(|| self.friction.set_boolean(vr, value))
+            .or_else(|| self.discovered.set_boolean(vr, value))
     }
 }
 
