@@ -486,7 +486,7 @@ impl Discovered {
             .iter()
             .map(|f| format!("{} {}", f.code(), f.name()))
             .collect::<Vec<_>>()
-            .join(", ");
+            .join("; ");
         let mut vars = Vec::new();
         for i in 1..=MAX_TERMS {
             let what = format!("discovered term {i}");
