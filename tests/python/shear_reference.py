@@ -13,6 +13,11 @@ f_s acts on floor s as −f_s and on floor s − 1 as +f_s. The effects, from th
   only the second, side 0 both;
 - cubic stiffness of storey s: f = k₃ δ_s³;
 - friction on floor i: a force F_c tanh(ẏ_i / v_s) opposing the floor's velocity.
+- discovered term i (`discovered{i}_*`, enabled): coefficient · f(x, v), f chosen by its code
+  (the list in the description of `discovered{i}_function`), s = `discovered{i}_scale`. At a
+  storey (placement 0) x and v are the storey's drift and drift rate and the force is a storey
+  force like the spring's; at a floor (placement 1) they are the floor's displacement and
+  velocity and the force resists them on that floor alone.
 
 Nothing here comes from the FMU's source: only the parameter names and start values of its
 modelDescription, which is the interface a user sees.
@@ -29,6 +34,24 @@ from scipy.integrate import solve_ivp
 #: (checked: tightening rtol to 1e-12 moves the reference's NMSE by ~1e-11 %).
 RTOL = 1e-10
 ATOL = 1e-14
+
+
+#: The discovered terms' functions by code, from the modelDescription: f(x, v, s).
+DISCOVERED_FUNCTIONS = {
+    1: ("x", lambda x, v, s: x),
+    2: ("x^2", lambda x, v, s: x**2),
+    3: ("x^3", lambda x, v, s: x**3),
+    4: ("x|x|", lambda x, v, s: x * abs(x)),
+    5: ("v", lambda x, v, s: v),
+    6: ("v^2", lambda x, v, s: v**2),
+    7: ("v|v|", lambda x, v, s: v * abs(v)),
+    8: ("v^3", lambda x, v, s: v**3),
+    9: ("sign(v)", lambda x, v, s: float(np.sign(v))),
+    10: ("tanh(v/s)", lambda x, v, s: math.tanh(v / s)),
+    11: ("max(0,x-s)", lambda x, v, s: max(0.0, x - s)),
+    12: ("min(0,x+s)", lambda x, v, s: min(0.0, x + s)),
+    13: ("x^2*v", lambda x, v, s: x**2 * v),
+}
 
 
 class Structure:
@@ -51,6 +74,18 @@ class Structure:
             for i in range(3)
             if p[f"friction{i + 1}_enabled"]
         ]
+        # (function, placement 0 storey / 1 floor, index 0..2, coefficient, scale)
+        self.discovered = [
+            (
+                DISCOVERED_FUNCTIONS[p[f"discovered{i}_function"]][1],
+                p[f"discovered{i}_placement"],
+                p[f"discovered{i}_at"] - 1,
+                p[f"discovered{i}_coefficient"],
+                p[f"discovered{i}_scale"],
+            )
+            for i in range(1, 7)
+            if p.get(f"discovered{i}_enabled", False)
+        ]
 
     @staticmethod
     def contact_force(drift: float, gap: float, stiffness: float, side: int) -> float:
@@ -68,10 +103,16 @@ class Structure:
             storey[s] += self.contact_force(drift[s], gap, stiffness, side)
         for s, cubic in self.cubics:
             storey[s] += cubic * drift[s] ** 3
+        for function, placement, at, coefficient, scale in self.discovered:
+            if placement == 0:
+                storey[at] += coefficient * function(drift[at], drift_rate[at], scale)
         # Floor i feels −f of the storey below it and +f of the storey above it.
         resisting = np.array([storey[0] - storey[1], storey[1] - storey[2], storey[2]])
         for i, coulomb, velocity_scale in self.frictions:
             resisting[i] += coulomb * math.tanh(v[i] / velocity_scale)
+        for function, placement, at, coefficient, scale in self.discovered:
+            if placement == 1:
+                resisting[at] += coefficient * function(y[at], v[at], scale)
         return (np.array([u, 0.0, 0.0]) - resisting) / self.mass
 
 
