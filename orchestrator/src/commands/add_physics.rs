@@ -9,7 +9,7 @@ use super::diagnose::options;
 use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
-use crate::workflows::diagnose::{add_physics, effects_from_report, Candidate};
+use crate::workflows::diagnose::{add_physics, effects_from_report, Addition, Candidate};
 
 #[derive(clap::Args)]
 pub struct AddPhysicsArgs {
@@ -52,7 +52,11 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
         (false, _) => (
             args.effect
                 .iter()
-                .map(|e| Candidate::parse(e).map_err(anyhow::Error::msg))
+                .map(|e| {
+                    Candidate::parse(e)
+                        .map(Addition::Library)
+                        .map_err(anyhow::Error::msg)
+                })
                 .collect::<Result<Vec<_>>>()?,
             args.refine,
         ),
@@ -75,8 +79,19 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
     let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
     for effect in &report.effects {
         println!("effect        {}", effect.name.label);
+        for t in &effect.terms {
+            println!(
+                "  {:<14} {:.4e} ± {:.2e}{}",
+                t.function,
+                t.coefficient,
+                t.sd,
+                t.scale
+                    .map(|s| format!("  (s = {s:.3e})"))
+                    .unwrap_or_default()
+            );
+        }
         for (k, v) in &effect.parameters {
-            if k != "side" {
+            if k != "side" && effect.terms.is_empty() {
                 println!(
                     "  {k:<14} {v:.4e} ± {:.2e}",
                     effect.sd.get(k).copied().unwrap_or(0.0)

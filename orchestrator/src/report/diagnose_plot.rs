@@ -5,7 +5,7 @@
 use plotters::prelude::*;
 
 use crate::report::palette;
-use crate::workflows::diagnose::{Action, DiagnoseError, Diagnosis, Kind, Result};
+use crate::workflows::diagnose::{Action, DiagnoseError, Diagnosis, EffectKind, Kind, Result};
 
 const BEFORE: RGBColor = palette::VERMILION;
 const AFTER: RGBColor = palette::BLUE;
@@ -150,7 +150,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                     .and_then(|x| x.parse().ok())
                     .unwrap_or(1usize)
                     .clamp(1, 3);
-                (n, Kind::Contact)
+                (n, EffectKind::Contact)
             }
         };
         let i = storey - 1;

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use fmu_shear::effects::discovered::{variable_name, Site, Slot, Term};
 use fmu_shear::effects::Placement;
 pub use fmu_shear::effects::{Kind, Side};
 
@@ -190,6 +191,89 @@ impl Candidate {
             .zip(priors)
             .map(|(param, prior)| (format!("{p}_{}", param.suffix), param.suffix, prior))
             .collect()
+    }
+}
+
+/// What `add-physics` switches on: an effect of the library, or terms found by discovery
+/// (the shear FMU's generic `discovered` effect, all at one site).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Addition {
+    Library(Candidate),
+    Discovered(Vec<Term>),
+}
+
+impl Addition {
+    /// The library's label, or `discovered@storey2` / `discovered@floor1`.
+    pub fn label(&self) -> String {
+        match self {
+            Addition::Library(c) => c.label(),
+            Addition::Discovered(terms) => match terms.first().map(|t| t.site) {
+                Some(Site::Storey(n)) => format!("discovered@storey{n}"),
+                Some(Site::Floor(n)) => format!("discovered@floor{n}"),
+                None => "discovered@none".into(),
+            },
+        }
+    }
+
+    /// The parameters that switch it on (and fix what is not estimated: a contact's side, a
+    /// term's function, site and scale).
+    pub fn switches(&self) -> BTreeMap<String, ParameterValue> {
+        match self {
+            Addition::Library(c) => c.switches(),
+            Addition::Discovered(terms) => {
+                let mut out = BTreeMap::new();
+                for (i, t) in terms.iter().enumerate() {
+                    let index = i + 1;
+                    out.insert(
+                        variable_name(index, Slot::Enabled),
+                        ParameterValue::Boolean(true),
+                    );
+                    for (name, value) in t.integer_parameters(index) {
+                        out.insert(name, ParameterValue::Integer(value));
+                    }
+                    out.insert(
+                        variable_name(index, Slot::Scale),
+                        ParameterValue::Real(t.scale),
+                    );
+                }
+                out
+            }
+        }
+    }
+
+    /// The estimated parameters: FMU name, short name, prior. A discovered term's coefficient
+    /// (short name `term1`, …) has a normal prior centred on 0 (no effect) with an sd of 10 ×
+    /// the coefficient found by the regression: weak, and shrinking towards no effect.
+    pub fn parameters(&self, scales: &Scales) -> Vec<(String, String, Prior)> {
+        match self {
+            Addition::Library(c) => c
+                .parameters(scales)
+                .into_iter()
+                .map(|(name, short, prior)| (name, short.to_string(), prior))
+                .collect(),
+            Addition::Discovered(terms) => terms
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    let sd = 10.0 * t.coefficient.abs();
+                    (
+                        variable_name(i + 1, Slot::Coefficient),
+                        format!("term{}", i + 1),
+                        Prior::linear(0.0, if sd > 0.0 { sd * sd } else { 1.0 }),
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// The FMU name prefixes it occupies (one per library effect; every term's for discovery).
+    pub fn prefixes(&self) -> Vec<String> {
+        match self {
+            Addition::Library(c) => vec![c.prefix()],
+            Addition::Discovered(terms) => (1..=terms.len())
+                .map(|i| format!("discovered{i}"))
+                .collect(),
+        }
     }
 }
 

@@ -62,6 +62,7 @@
 //! the physics parameters jointly, and writes the new twin.
 
 pub mod candidate;
+pub mod discover;
 pub mod select;
 pub mod sensor;
 
@@ -126,7 +127,8 @@ pub enum DiagnoseError {
 }
 
 pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
-pub use candidate::{Candidate, Kind, Scales, Side};
+pub use candidate::{Addition, Candidate, Kind, Scales, Side};
+pub use discover::Found;
 pub use sensor::{SensorFit, SensorSd};
 
 /// The decision thresholds (see the module documentation).
@@ -273,27 +275,93 @@ pub struct EffectReport {
     pub name: EffectName,
     pub parameters: BTreeMap<String, f64>,
     pub sd: BTreeMap<String, f64>,
+    /// A discovered effect's terms (empty for the library's kinds).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub terms: Vec<TermReport>,
+}
+
+/// One term of a discovered effect: `coefficient · function` at the effect's site.
+#[derive(Clone, Debug, Serialize)]
+pub struct TermReport {
+    /// The function's name, e.g. `v|v|`, `max(0,x-s)`.
+    pub function: String,
+    pub coefficient: f64,
+    pub sd: f64,
+    /// The function's `s` (m or m/s), where it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+}
+
+/// The kind of an effect a diagnosis names: one of the library's, or `discovered`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EffectKind {
+    Contact,
+    Cubic,
+    Friction,
+    Discovered,
+}
+
+impl From<Kind> for EffectKind {
+    fn from(kind: Kind) -> Self {
+        match kind {
+            Kind::Contact => EffectKind::Contact,
+            Kind::Cubic => EffectKind::Cubic,
+            Kind::Friction => EffectKind::Friction,
+        }
+    }
+}
+
+impl PartialEq<Kind> for EffectKind {
+    fn eq(&self, other: &Kind) -> bool {
+        *self == EffectKind::from(*other)
+    }
 }
 
 /// Which effect, where: what the named effect and every candidate of a report share.
 #[derive(Clone, Debug, Serialize)]
 pub struct EffectName {
-    pub kind: Kind,
+    pub kind: EffectKind,
+    /// Contact `[lower, upper]` floors, cubic `[storey]`, friction `[floor]`; discovered
+    /// `[storey]` or `[floor]` as `site` says.
     pub location: Vec<usize>,
     /// Contact only: "both", "positive" or "negative".
     #[serde(skip_serializing_if = "Option::is_none")]
     pub side: Option<&'static str>,
-    /// `KIND@LOCATION[:SIDE]`, what `twin add-physics --effect` takes.
+    /// Discovered only: "storey" or "floor".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub site: Option<&'static str>,
+    /// `KIND@LOCATION[:SIDE]`, what `twin add-physics --effect` takes; `discovered@storey2`.
     pub label: String,
 }
 
 impl EffectName {
     fn of(c: &Candidate) -> Self {
         EffectName {
-            kind: c.kind,
+            kind: c.kind.into(),
             location: c.location(),
             side: c.kind.has_side().then_some(c.side.name()),
+            site: None,
             label: c.label(),
+        }
+    }
+
+    fn of_addition(a: &Addition) -> Self {
+        match a {
+            Addition::Library(c) => EffectName::of(c),
+            Addition::Discovered(terms) => {
+                let site = terms.first().map(|t| t.site);
+                EffectName {
+                    kind: EffectKind::Discovered,
+                    location: site.map(|s| vec![s.at()]).unwrap_or_default(),
+                    side: None,
+                    site: site.map(|s| match s {
+                        fmu_shear::effects::discovered::Site::Storey(_) => "storey",
+                        fmu_shear::effects::discovered::Site::Floor(_) => "floor",
+                    }),
+                    label: a.label(),
+                }
+            }
         }
     }
 }
@@ -398,6 +466,8 @@ pub struct Diagnosis {
     pub physics_moved: Vec<MovedParameter>,
     /// The forward selection's rounds.
     pub selection: Vec<select::SelectionStep>,
+    /// The search for an effect outside the library, when it ran.
+    pub discovery: Option<DiscoveryReport>,
     /// The faulty channel, when the action is `sensor_fault`.
     pub sensor: Option<SensorFit>,
     /// Every floor's sensor candidate (gain, offset, drift of the twin's prediction), floor 1
@@ -811,6 +881,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         effects: Vec::new(),
         physics_moved: Vec::new(),
         selection: Vec::new(),
+        discovery: None,
         sensor: None,
         sensor_candidates: Vec::new(),
         nmse_after: nmse_before,
@@ -1041,22 +1112,22 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             recal.nmse_held_out[f] <= gates.recalibration_noise_factor * noise_nmse_held_out[f]
         });
     let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
+    let ctx = select::Context {
+        physics: &physics,
+        data,
+        options,
+        scales: &scales,
+        reals: &reals,
+        mask: &mask,
+        held_out: &held_out,
+        first,
+        baseline_evidence,
+        explained_held_out: [0, 1, 2].map(|f| noise_nmse_held_out[f] + band_nmse[f]),
+        tolerance: tolerance.value,
+    };
     let selection = if no_alarm || sensor_fault.is_some() {
         None
     } else {
-        let ctx = select::Context {
-            physics: &physics,
-            data,
-            options,
-            scales: &scales,
-            reals: &reals,
-            mask: &mask,
-            held_out: &held_out,
-            first,
-            baseline_evidence,
-            explained_held_out: [0, 1, 2].map(|f| noise_nmse_held_out[f] + band_nmse[f]),
-            tolerance: tolerance.value,
-        };
         Some(select::forward(
             &ctx,
             &fitted_candidates,
@@ -1079,6 +1150,53 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         diagnosis.selection = s.steps.clone();
     }
 
+    // 7. Discovery: when neither recalibration nor any combination of library effects explains
+    // the error, the missing force by sparse regression on top of the selection's model (see
+    // `discover`), refitted through FMI as the FMU's `discovered` effect and gated the same way.
+    // Also when the library's combination passes but leaves the model short of good enough:
+    // then discovery on the twin's own physics competes with it, and replaces it when its
+    // held-out error is lower by the step gate.
+    let combination_short =
+        combination.is_some_and(|(_, fitted, _)| !ctx.good_enough(&fitted.nmse_held_out));
+    let discovered = match &selection {
+        Some(s) if combination.is_none() && !recal_explains => {
+            options.tell("discovering the missing force by sparse regression");
+            let run = s.fitted.as_ref().map(|f| &f.run).unwrap_or(&base_run);
+            Some(discover_missing(
+                &ctx,
+                &s.chosen,
+                &s.values,
+                run,
+                before_worst,
+                recal_worst,
+            )?)
+        }
+        Some(_) if combination_short => {
+            options.tell("the library's answer leaves more than the noise: discovering");
+            let d = discover_missing(
+                &ctx,
+                &[],
+                &BTreeMap::new(),
+                &base_run,
+                before_worst,
+                recal_worst,
+            )?;
+            let better = |(_, fitted): &(Vec<_>, Fitted)| {
+                combination
+                    .is_some_and(|(_, _, w)| worst(&fitted.nmse_held_out) * gates.step_cut <= w)
+            };
+            Some((d.0, d.1.filter(better)))
+        }
+        _ => None,
+    };
+    let combination = if discovered.as_ref().is_some_and(|d| d.1.is_some()) {
+        None
+    } else {
+        combination
+    };
+    let discovered_passes = discovered.as_ref().and_then(|d| d.1.as_ref());
+    diagnosis.discovery = discovered.as_ref().map(|d| d.0.clone());
+
     // 6. Decide.
     if no_alarm {
         diagnosis.action = Action::None;
@@ -1091,7 +1209,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         diagnosis.effects = selection
             .chosen
             .iter()
-            .map(|c| effect_report(c, &selection.values, &scales))
+            .map(|c| effect_report(&Addition::Library(*c), &selection.values, &scales))
             .collect();
         diagnosis.effect = diagnosis.effects.first().cloned();
         diagnosis.physics_moved = moved_physics(&reals, &selection.values);
@@ -1164,12 +1282,78 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         );
         diagnosis.nmse_after = recal.nmse_after;
         diagnosis.series.after = recal.run.acc.clone();
+    } else if let (Some(s), Some((terms, fitted))) = (&selection, discovered_passes) {
+        diagnosis.action = Action::AddPhysics;
+        // On top of the selection's effects, unless discovery replaced them.
+        let (chosen, mut values) = if combination_short {
+            (Vec::new(), BTreeMap::new())
+        } else {
+            (s.chosen.clone(), s.values.clone())
+        };
+        let mut additions: Vec<Addition> = chosen.into_iter().map(Addition::Library).collect();
+        additions.push(Addition::Discovered(terms.clone()));
+        values.extend(estimates(&fitted.calibration));
+        diagnosis.effects = additions
+            .iter()
+            .map(|a| effect_report(a, &values, &scales))
+            .collect();
+        diagnosis.effect = diagnosis.effects.first().cloned();
+        diagnosis.physics_moved = moved_physics(&reals, &values);
+        let w = worst(&fitted.nmse_held_out);
+        let found = diagnosis
+            .effects
+            .last()
+            .map(describe_terms)
+            .unwrap_or_default();
+        let library = if combination_short {
+            let best = diagnosis
+                .selection
+                .iter()
+                .map(|s| s.added.as_str())
+                .collect::<Vec<_>>()
+                .join(" + ");
+            format!("the library's best ({best}) leaves more than the noise")
+        } else {
+            "nothing in the library explains the error".to_string()
+        };
+        diagnosis.reason = format!(
+            "{library} (recalibration leaves {:.3} % held out); sparse regression found {found}, \
+             which, refitted through the FMU, cuts the worst-floor held-out NMSE from {:.3} % \
+             to {:.3} % ({:.1}×) and beats recalibration by {:.1}×",
+            recal_worst,
+            before_worst,
+            w,
+            before_worst / w,
+            recal_worst / w
+        );
+        diagnosis.nmse_after = fitted.nmse_after;
+        diagnosis.series.after = fitted.run.acc.clone();
     } else {
         diagnosis.action = Action::UpdateDataModel;
         let best = order.first().map(|&i| &diagnosis.candidates[i]);
+        let discovery = match &diagnosis.discovery {
+            Some(d) if d.terms.is_empty() => {
+                "; no sparse model of a few candidate functions at one storey or floor fits it \
+                 either"
+                    .to_string()
+            }
+            Some(d) => format!(
+                "; the sparse model found ({}) leaves {} held out, short of the gates",
+                d.terms
+                    .iter()
+                    .map(|t| t.function.as_str())
+                    .collect::<Vec<_>>()
+                    .join(" + "),
+                d.nmse_held_out
+                    .map(|x| format!("{:.3} %", worst(&x)))
+                    .unwrap_or_else(|| "?".into())
+            ),
+            None => String::new(),
+        };
         diagnosis.reason = format!(
             "neither recalibration (worst-floor held-out NMSE {:.3} % from {:.3} %) nor any \
-             effect of the library (best: {}) explains the error: the corrector should learn it",
+             effect of the library (best: {}) explains the error{discovery}: the corrector \
+             should learn it",
             recal_worst,
             before_worst,
             best.map(|b| format!("{} at {:.3} %", b.name.label, worst(&b.nmse_held_out)))
@@ -1285,6 +1469,193 @@ fn triple(x: &[f64; 3]) -> String {
     format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2])
 }
 
+/// The search for an effect outside the library.
+#[derive(Clone, Debug, Serialize)]
+pub struct DiscoveryReport {
+    /// The regression's result: the winning site, and every site's sparse model with the
+    /// share of the held-out residual it leaves (linearised). `None`: no site's model with a
+    /// nonlinear term cut it by the step gate.
+    pub regression: Option<Found>,
+    /// The second pass, linearised around the refitted model's trajectory.
+    pub relinearised: Option<Found>,
+    /// The terms kept, with the FMI refit's coefficients and sd.
+    pub terms: Vec<TermReport>,
+    /// After the refit through the FMU (with the physics): per floor.
+    pub nmse_held_out: Option<[f64; 3]>,
+    pub nmse_after: Option<[f64; 3]>,
+    /// Cut the error by the required factor and beat recalibration.
+    pub passes: bool,
+    pub seconds: f64,
+}
+
+/// What discovery found and, when it passes the gates, its terms and fit.
+type Discovered = (
+    DiscoveryReport,
+    Option<(Vec<fmu_shear::effects::discovered::Term>, Fitted)>,
+);
+
+/// Sparse regression of the missing force on top of the model of `chosen` at `values` (whose
+/// physics run is `run`), refitted through FMI with the physics (see [`discover`]).
+fn discover_missing(
+    ctx: &select::Context,
+    chosen: &[Candidate],
+    values: &Estimates,
+    run: &PhysicsRun,
+    before_worst: f64,
+    recal_worst: f64,
+) -> Result<Discovered> {
+    let started = Instant::now();
+    let gates = ctx.options.gates;
+    let data = ctx.data;
+    let n = data.len();
+    let fitted_idx: Vec<usize> = (0..n).filter(|&k| ctx.mask[k]).collect();
+    // The regression problem around the run of the model at `values`, with `terms` (their
+    // linearised response) added back to the residual.
+    let problem = |values: &Estimates,
+                   run: &PhysicsRun,
+                   terms: &[fmu_shear::effects::discovered::Term]|
+     -> Result<Found> {
+        let value = |name: &str| -> Result<f64> {
+            match values.get(name) {
+                Some(&(v, _)) => Ok(v),
+                None => ctx.reals.get(name),
+            }
+        };
+        let triple = |p: char| -> Result<[f64; 3]> {
+            Ok([
+                value(&format!("{p}1"))?,
+                value(&format!("{p}2"))?,
+                value(&format!("{p}3"))?,
+            ])
+        };
+        let linear = discover::LinearPart {
+            mass: triple('m')?,
+            damping: triple('c')?,
+            stiffness: triple('k')?,
+        };
+        let states = discover::States {
+            drift: &run.drift,
+            velocity: &run.velocity,
+            acceleration: &run.acc,
+        };
+        let mut residual: [Vec<f64>; 3] =
+            [0, 1, 2].map(|f| (0..n).map(|k| data.acc[f][k] - run.acc[f][k]).collect());
+        for t in terms {
+            let share = discover::term_response(&linear, &states, t, data.dt);
+            for f in 0..3 {
+                for k in 0..n {
+                    residual[f][k] += share[f][k];
+                }
+            }
+        }
+        let problem = discover::Problem {
+            linear,
+            states,
+            residual,
+            variance: [0, 1, 2].map(|f| variance(&data.acc[f][ctx.first..])),
+            dt: data.dt,
+            fitted: &fitted_idx,
+            held_out: ctx.held_out,
+            first: ctx.first,
+        };
+        discover::regress(&problem, gates.step_cut)
+            .ok_or_else(|| DiagnoseError::Setup("no sparse model cuts the residual".into()))
+    };
+    let found = problem(values, run, &[]).ok();
+    let mut report = DiscoveryReport {
+        regression: found.clone(),
+        relinearised: None,
+        terms: Vec::new(),
+        nmse_held_out: None,
+        nmse_after: None,
+        passes: false,
+        seconds: 0.0,
+    };
+    let Some(found) = found else {
+        report.seconds = started.elapsed().as_secs_f64();
+        return Ok((report, None));
+    };
+    let refit = |terms: &[fmu_shear::effects::discovered::Term]| -> Result<(Vec<_>, Fitted)> {
+        ctx.options.tell(&format!(
+            "refitting {} through the FMU",
+            terms
+                .iter()
+                .map(|t| t.to_string())
+                .collect::<Vec<_>>()
+                .join(" + ")
+        ));
+        let fitted = ctx.fit_addition(chosen, values, &Addition::Discovered(terms.to_vec()))?;
+        let mut terms = terms.to_vec();
+        let names = Addition::Discovered(terms.clone()).parameters(ctx.scales);
+        for (t, (name, _, _)) in terms.iter_mut().zip(&names) {
+            if let Some(p) = fitted
+                .calibration
+                .parameters
+                .iter()
+                .find(|p| &p.name == name)
+            {
+                t.coefficient = p.value;
+            }
+        }
+        Ok((terms, fitted))
+    };
+    let mut best = refit(&found.terms)?;
+    // A second pass around the refitted model's trajectory, closer to the structure's: the
+    // first linearisation sees the states of a model without the force, which can make a
+    // near-twin (`v^3` for `v|v|`) look better than the truth.
+    let mut refitted_values = values.clone();
+    refitted_values.extend(estimates(&best.1.calibration));
+    if let Ok(again) = problem(&refitted_values, &best.1.run, &best.0) {
+        let same =
+            again.terms.len() == best.0.len()
+                && again.terms.iter().zip(&best.0).all(|(a, b)| {
+                    a.function == b.function && a.site == b.site && a.scale == b.scale
+                });
+        if !same {
+            let second = refit(&again.terms)?;
+            if worst(&second.1.nmse_held_out) < worst(&best.1.nmse_held_out) {
+                best = second;
+            }
+        }
+        report.relinearised = Some(again);
+    }
+    let (terms, fitted) = best;
+    let addition = Addition::Discovered(terms.clone());
+    let w = worst(&fitted.nmse_held_out);
+    report.passes =
+        w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst;
+    report.terms = effect_report(&addition, &estimates(&fitted.calibration), ctx.scales).terms;
+    report.nmse_held_out = Some(fitted.nmse_held_out);
+    report.nmse_after = Some(fitted.nmse_after);
+    report.seconds = started.elapsed().as_secs_f64();
+    let pass = report.passes.then_some((terms, fitted));
+    Ok((report, pass))
+}
+
+/// `c·v|v| + c·x^3 at storey 2`: a discovered effect's terms in words.
+fn describe_terms(e: &EffectReport) -> String {
+    let terms: Vec<String> = e
+        .terms
+        .iter()
+        .map(|t| {
+            format!(
+                "{:.3e}·{}{}",
+                t.coefficient,
+                t.function,
+                t.scale
+                    .map(|s| format!(" (s = {s:.2e})"))
+                    .unwrap_or_default()
+            )
+        })
+        .collect();
+    format!(
+        "{} at {} {}",
+        terms.join(" + "),
+        e.name.site.unwrap_or("?"),
+        e.name.location.first().copied().unwrap_or(0)
+    )
+}
+
 /// The physics parameters in `values` that moved from the twin's by more than 3 posterior sd
 /// and 1 %, largest move (in sd) first.
 fn moved_physics(reals: &PhysicsReals, values: &Estimates) -> Vec<MovedParameter> {
@@ -1319,22 +1690,38 @@ fn estimates(calibration: &Calibration) -> Estimates {
         .collect()
 }
 
-fn effect_report(c: &Candidate, fitted: &Estimates, scales: &Scales) -> EffectReport {
+fn effect_report(a: &Addition, fitted: &Estimates, scales: &Scales) -> EffectReport {
     let mut parameters = BTreeMap::new();
     let mut sd = BTreeMap::new();
-    for (name, short, _) in c.parameters(scales) {
+    for (name, short, _) in a.parameters(scales) {
         if let Some(&(value, s)) = fitted.get(&name) {
-            parameters.insert(short.to_string(), value);
-            sd.insert(short.to_string(), s);
+            parameters.insert(short.clone(), value);
+            sd.insert(short, s);
         }
     }
-    if c.kind.has_side() {
-        parameters.insert("side".into(), f64::from(c.side.code()));
+    let mut terms = Vec::new();
+    match a {
+        Addition::Library(c) if c.kind.has_side() => {
+            parameters.insert("side".into(), f64::from(c.side.code()));
+        }
+        Addition::Library(_) => {}
+        Addition::Discovered(found) => {
+            for (i, t) in found.iter().enumerate() {
+                let key = format!("term{}", i + 1);
+                terms.push(TermReport {
+                    function: t.function.name().to_string(),
+                    coefficient: parameters.get(&key).copied().unwrap_or(t.coefficient),
+                    sd: sd.get(&key).copied().unwrap_or(f64::NAN),
+                    scale: t.function.uses_scale().then_some(t.scale),
+                });
+            }
+        }
     }
     EffectReport {
-        name: EffectName::of(c),
+        name: EffectName::of_addition(a),
         parameters,
         sd,
+        terms,
     }
 }
 
@@ -1441,11 +1828,12 @@ pub struct AddPhysicsReport {
 
 /// Switch `candidates` on in `twin`'s physics, estimate their parameters jointly on the whole of
 /// `data` (after the transient), with `refine` also the nine physics parameters, and return the
-/// new twin (the corrector, if any, is left out: it learned the old physics' errors).
+/// new twin (the corrector, if any, is left out: it learned the old physics' errors). A
+/// discovered effect's coefficients start from the values it comes with.
 pub fn add_physics(
     twin: &Twin,
     data: &Measurement,
-    candidates: &[Candidate],
+    candidates: &[Addition],
     refine: bool,
     options: &DiagnoseOptions,
 ) -> Result<(Twin, AddPhysicsReport)> {
@@ -1468,9 +1856,20 @@ pub fn add_physics(
     let scales = prior_scales(&reals, &base_run, &data.force, first)?;
     let mut switched = physics.duplicate();
     let mut effect_params = Vec::new();
+    let mut initial = BTreeMap::new();
     for c in candidates {
-        switched = with_switches(&switched, Some(c))?;
-        effect_params.extend(c.parameters(&scales));
+        switched
+            .component_mut(PHYSICS)
+            .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?
+            .parameters
+            .extend(c.switches());
+        let params = c.parameters(&scales);
+        if let Addition::Discovered(terms) = c {
+            for (p, t) in params.iter().zip(terms) {
+                initial.insert(p.0.clone(), t.coefficient);
+            }
+        }
+        effect_params.extend(params);
     }
     let mut names: Vec<String> = effect_params.iter().map(|p| p.0.clone()).collect();
     let mut priors: BTreeMap<String, Prior> =
@@ -1494,7 +1893,7 @@ pub fn add_physics(
         options.simulations_per_start * candidates.len(),
         options,
         baseline,
-        &BTreeMap::new(),
+        &initial,
     )?;
     let mut result = stage1;
     if refine {
@@ -1598,7 +1997,7 @@ fn block_diagonal(a: &ParameterCovariance, b: &ParameterCovariance) -> Parameter
 
 /// The effects a diagnosis report (`--diagnosis R.json`) adds, in order, and whether its
 /// joint refit moved the physics (then `add-physics` refines the physics too).
-pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Candidate>, bool)> {
+pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Addition>, bool)> {
     let text = std::fs::read_to_string(path).map_err(|source| DiagnoseError::Read {
         path: path.clone(),
         source,
@@ -1608,43 +2007,88 @@ pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Candidate>, bool)> {
             path: path.clone(),
             source,
         })?;
+    let bad = |what: String| DiagnoseError::Setup(format!("{}: {what}", path.display()));
     if value.get("action").and_then(|a| a.as_str()) == Some(Action::SensorFault.name()) {
         let floor = value
             .get("sensor")
             .and_then(|s| s.get("floor"))
             .map(|f| f.to_string())
             .unwrap_or_else(|| "?".into());
-        return Err(DiagnoseError::Setup(format!(
-            "{}: a sensor fault is not physics: fix or recalibrate the sensor on floor {floor}",
-            path.display()
+        return Err(bad(format!(
+            "a sensor fault is not physics: fix or recalibrate the sensor on floor {floor}"
         )));
     }
-    let label = |e: &serde_json::Value| e.get("label").and_then(|l| l.as_str()).map(String::from);
-    let mut labels: Vec<String> = value
+    let mut effects: Vec<&serde_json::Value> = value
         .get("effects")
         .and_then(|e| e.as_array())
-        .map(|all| all.iter().filter_map(label).collect())
+        .map(|all| all.iter().collect())
         .unwrap_or_default();
-    if labels.is_empty() {
-        labels.extend(value.get("effect").and_then(label));
+    if effects.is_empty() {
+        effects.extend(value.get("effect").filter(|e| !e.is_null()));
     }
-    if labels.is_empty() {
-        return Err(DiagnoseError::Setup(format!(
-            "{}: the diagnosis names no effect (action {})",
-            path.display(),
+    if effects.is_empty() {
+        return Err(bad(format!(
+            "the diagnosis names no effect (action {})",
             value.get("action").unwrap_or(&serde_json::Value::Null)
         )));
     }
-    let candidates = labels
+    let additions = effects
         .iter()
-        .map(|l| {
-            Candidate::parse(l)
-                .map_err(|e| DiagnoseError::Setup(format!("{}: {e}", path.display())))
-        })
+        .map(|e| addition_from_json(e).map_err(&bad))
         .collect::<Result<Vec<_>>>()?;
     let moved = value
         .get("physics_moved")
         .and_then(|m| m.as_array())
         .is_some_and(|m| !m.is_empty());
-    Ok((candidates, moved))
+    Ok((additions, moved))
+}
+
+/// One effect of a report: a library label, or a discovered effect with its terms.
+fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, String> {
+    use fmu_shear::effects::discovered::{Function, Site, Term};
+    let label = e
+        .get("label")
+        .and_then(|l| l.as_str())
+        .ok_or("an effect without a label")?;
+    let Some(site) = label.strip_prefix("discovered@") else {
+        return Candidate::parse(label).map(Addition::Library);
+    };
+    let site = Site::parse(site)
+        .ok_or_else(|| format!("effect '{label}': the site must be storey1..3 or floor1..3"))?;
+    let terms = e
+        .get("terms")
+        .and_then(|t| t.as_array())
+        .filter(|t| !t.is_empty())
+        .ok_or_else(|| format!("effect '{label}': no terms"))?;
+    terms
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let name = t.get("function").and_then(|f| f.as_str()).unwrap_or("");
+            let function = Function::parse(name).ok_or_else(|| {
+                format!(
+                    "effect '{label}', term {}: unknown function '{name}'",
+                    i + 1
+                )
+            })?;
+            let number = |key: &str| t.get(key).and_then(|x| x.as_f64());
+            let coefficient = number("coefficient")
+                .filter(|c| c.is_finite())
+                .ok_or_else(|| {
+                    format!("effect '{label}', term {}: no finite coefficient", i + 1)
+                })?;
+            let mut term = Term::new(function, site, coefficient);
+            if let Some(scale) = number("scale") {
+                if !(scale > 0.0 && scale.is_finite()) {
+                    return Err(format!(
+                        "effect '{label}', term {}: the scale must be positive, was {scale}",
+                        i + 1
+                    ));
+                }
+                term.scale = scale;
+            }
+            Ok(term)
+        })
+        .collect::<std::result::Result<Vec<_>, String>>()
+        .map(Addition::Discovered)
 }

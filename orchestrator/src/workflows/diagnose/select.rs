@@ -39,8 +39,8 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::{
-    estimates, fit, parallel, with_switches, worst, Candidate, DiagnoseError, DiagnoseOptions,
-    Estimates, Fitted, PhysicsReals, Result, Scales,
+    estimates, fit, parallel, with_switches, worst, Addition, Candidate, DiagnoseError,
+    DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
 };
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -102,7 +102,7 @@ pub(super) struct Selection {
 }
 
 impl Context<'_> {
-    fn good_enough(&self, nmse_held_out: &[f64; 3]) -> bool {
+    pub fn good_enough(&self, nmse_held_out: &[f64; 3]) -> bool {
         let factor = self.options.gates.none_factor;
         worst(nmse_held_out) <= self.tolerance
             || (0..3).all(|f| nmse_held_out[f] <= factor * self.explained_held_out[f])
@@ -147,6 +147,51 @@ impl Context<'_> {
             )
         });
         candidates.iter().copied().zip(results).collect()
+    }
+
+    /// `addition` on top of the model of `chosen` at `values`: its parameters and the nine
+    /// physics parameters, one start from `values` (a discovered effect's coefficients from the
+    /// regression's).
+    pub fn fit_addition(
+        &self,
+        chosen: &[Candidate],
+        values: &Estimates,
+        addition: &Addition,
+    ) -> Result<Fitted> {
+        let mut twin = self.model(chosen, values)?;
+        twin.component_mut(PHYSICS)
+            .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?
+            .parameters
+            .extend(addition.switches());
+        let params = addition.parameters(self.scales);
+        let mut initial: BTreeMap<String, f64> =
+            values.iter().map(|(k, v)| (k.clone(), v.0)).collect();
+        if let Addition::Discovered(terms) = addition {
+            for (p, t) in params.iter().zip(terms) {
+                initial.insert(p.0.clone(), t.coefficient);
+            }
+        }
+        for name in DEFAULT_PARAMETERS {
+            if !initial.contains_key(name) {
+                initial.insert(name.to_string(), self.reals.get(name)?);
+            }
+        }
+        let mut names: Vec<String> = params.iter().map(|p| p.0.clone()).collect();
+        names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
+        fit(
+            &twin,
+            self.data,
+            names,
+            params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+            self.mask,
+            self.held_out,
+            self.first,
+            1,
+            JOINT_SIMULATIONS,
+            self.options,
+            self.baseline_evidence,
+            &initial,
+        )
     }
 
     /// Every chosen effect (and with `physics` the nine physics parameters), from `start`; what

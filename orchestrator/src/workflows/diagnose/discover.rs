@@ -1,0 +1,620 @@
+//! Effects outside the library, discovered by sparse regression.
+//!
+//! When neither recalibration nor any combination of library effects explains a record, the
+//! force the model misses is looked for as a sparse sum of candidate functions at one site, in
+//! the spirit of equation discovery (SINDy), then added to the physics as the shear FMU's
+//! generic `discovered` effect and refitted through FMI like any candidate.
+//!
+//! 1. **Candidates.** At each storey (its drift `x` and drift rate `v`) and each floor (its
+//!    displacement and velocity): every function of the FMU's list ([`Function::ALL`]: `x`,
+//!    `x^2`, `x^3`, `x|x|`, `v`, `v^2`, `v|v|`, `v^3`, `sign(v)`, `x^2*v`, …), `tanh(v/s)` at
+//!    two widths (5 % and 20 % of the site's velocity RMS), and the one-sided ramps
+//!    `max(0, x − s)`, `min(0, x + s)` with `s` at the 80th, 90th and 95th percentiles of `|x|`
+//!    (a gap the data reach). The states are the base model's run: the twin as the forward
+//!    selection left it.
+//! 2. **Linearised output error.** A missing force `Σ θ_i φ_i(x, v)` at a site does not show up
+//!    in the acceleration residual as itself but filtered by the structure. So each candidate
+//!    `φ_i(t)` (along the base run) is driven through the base model's linear part (`M, C, K`,
+//!    RK4, [`SUBSTEPS`] per sample, the force linear between samples): its response `s_i(t)` is
+//!    the sensitivity of the accelerations to `θ_i` at `θ = 0`, and the residual is regressed on
+//!    the `s_i`, every floor weighted by its measured variance (an NMSE fit) — a Gauss–Newton
+//!    step from "no effect", which the FMI refit then finishes.
+//! 3. **Sparse, localised.** Per site, greedy forward selection of at most [`MAX_TERMS_FOUND`]
+//!    terms (least squares on the fitted blocks, from the Gram matrices), each size polished by
+//!    single swaps while one lowers the fitted residual. SINDy's classic
+//!    sequentially thresholded least squares was the first choice; with candidates as
+//!    correlated as `x`, `x|x|`, `x^3` and the ramps it trades large cancelling coefficients,
+//!    while a greedy path scored on the held-out blocks stays sparse by construction. The path
+//!    stops at the smallest size within [`PARSIMONY`] (1 % of the residual before) of its best
+//!    held-out error. The site whose model
+//!    cuts the held-out residual most wins; a model of only `x` and `v` is a parameter change,
+//!    not an effect, and is passed over.
+//! 4. The caller adds the terms to the FMU (`discovered{i}_*`), refits their coefficients and
+//!    the physics through FMI, and gates the result like any candidate.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use serde::Serialize;
+
+use fmu_shear::effects::discovered::{Function, Site, Term};
+
+/// RK4 sub-steps per sample of the sensitivity runs.
+pub const SUBSTEPS: u32 = 8;
+
+/// Terms a discovered effect has at most.
+pub const MAX_TERMS_FOUND: usize = 3;
+
+/// The path stops at the smallest size whose held-out residual is within this share of the
+/// residual before of the path's best: a term that explains less than 1 % is not worth it.
+pub const PARSIMONY: f64 = 0.01;
+
+/// The linear part of the base model.
+#[derive(Clone, Copy, Debug)]
+pub struct LinearPart {
+    pub mass: [f64; 3],
+    pub damping: [f64; 3],
+    pub stiffness: [f64; 3],
+}
+
+/// The base model's states along the record.
+pub struct States<'a> {
+    /// Storey drifts (storey 1 = floor 1's displacement).
+    pub drift: &'a [Vec<f64>; 3],
+    /// Floor velocities.
+    pub velocity: &'a [Vec<f64>; 3],
+    /// Floor accelerations.
+    pub acceleration: &'a [Vec<f64>; 3],
+}
+
+/// What the regression sees.
+pub struct Problem<'a> {
+    pub linear: LinearPart,
+    pub states: States<'a>,
+    /// Measured minus base-model accelerations, per floor.
+    pub residual: [Vec<f64>; 3],
+    /// Variance of each floor's measured acceleration (the NMSE's denominator).
+    pub variance: [f64; 3],
+    pub dt: f64,
+    pub fitted: &'a [usize],
+    pub held_out: &'a [usize],
+    pub first: usize,
+}
+
+/// One site's sparse model.
+#[derive(Clone, Debug, Serialize)]
+pub struct SiteModel {
+    pub site: String,
+    /// `function` names (with `s` where used) of the selected terms.
+    pub terms: Vec<String>,
+    /// Held-out weighted residual left (linearised), as a fraction of what the physics
+    /// parameters alone leave (1 = the terms explain nothing more).
+    pub held_out_fraction: f64,
+}
+
+/// What was found: the terms (regression coefficients) and every site's model.
+#[derive(Clone, Debug, Serialize)]
+pub struct Found {
+    #[serde(skip)]
+    pub terms: Vec<Term>,
+    pub site: String,
+    pub held_out_fraction: f64,
+    pub sites: Vec<SiteModel>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Column {
+    function: Function,
+    scale: f64,
+}
+
+impl Column {
+    fn label(&self) -> String {
+        if self.function.uses_scale() {
+            format!("{} (s = {:.3e})", self.function.name(), self.scale)
+        } else {
+            self.function.name().to_string()
+        }
+    }
+}
+
+/// The site's `(x, v)` along the run.
+fn site_states(states: &States, site: Site) -> (Vec<f64>, Vec<f64>) {
+    let n = states.drift[0].len();
+    (0..n)
+        .map(|k| {
+            let mut y = [0.0; 3];
+            let mut acc = 0.0;
+            for (f, yf) in y.iter_mut().enumerate() {
+                acc += states.drift[f][k];
+                *yf = acc;
+            }
+            let v = [0, 1, 2].map(|f| states.velocity[f][k]);
+            site.state(&y, &v)
+        })
+        .unzip()
+}
+
+fn quantile(x: &[f64], q: f64) -> f64 {
+    let mut a: Vec<f64> = x.iter().map(|v| v.abs()).collect();
+    a.sort_by(f64::total_cmp);
+    a[((a.len() - 1) as f64 * q) as usize]
+}
+
+/// The candidate columns of one site, from its `(x, v)` after the transient.
+fn columns(site: Site, x: &[f64], v: &[f64]) -> Vec<Column> {
+    let v_rms = (v.iter().map(|a| a * a).sum::<f64>() / v.len() as f64).sqrt();
+    let mut out = Vec::new();
+    for function in Function::ALL {
+        // A storey's `x` and `v` are its stiffness and damping: nuisance columns already.
+        if matches!(site, Site::Storey(_)) && matches!(function, Function::X | Function::V) {
+            continue;
+        }
+        let scales: Vec<f64> = match function {
+            Function::TanhV => vec![0.05 * v_rms, 0.2 * v_rms],
+            Function::RampUp | Function::RampDown => {
+                [0.8, 0.9, 0.95].iter().map(|&q| quantile(x, q)).collect()
+            }
+            _ => vec![fmu_shear::effects::discovered::DEFAULT_SCALE],
+        };
+        for scale in scales {
+            if scale > 0.0 && scale.is_finite() {
+                out.push(Column { function, scale });
+            }
+        }
+    }
+    out
+}
+
+/// The accelerations of the base model's linear part driven by the force `−P φ(t)` of a unit
+/// coefficient at `site` (`φ` linear between samples), from rest.
+fn sensitivity(linear: &LinearPart, site: Site, phi: &[f64], dt: f64) -> [Vec<f64>; 3] {
+    let m_inv = Vector3::from(linear.mass.map(|m| 1.0 / m));
+    let storey = |c: &[f64; 3]| {
+        let mut m = Matrix3::zeros();
+        for i in 0..3 {
+            m[(i, i)] += c[i];
+            if i + 1 < 3 {
+                m[(i, i)] += c[i + 1];
+                m[(i, i + 1)] -= c[i + 1];
+                m[(i + 1, i)] -= c[i + 1];
+            }
+        }
+        m
+    };
+    let c = storey(&linear.damping);
+    let k = storey(&linear.stiffness);
+    let mut pattern = [0.0; 3];
+    site.add_force(1.0, &mut pattern);
+    let p = -Vector3::from(pattern);
+    let accel = |y: &Vector3<f64>, v: &Vector3<f64>, u: f64| -> Vector3<f64> {
+        (p * u - c * v - k * y).component_mul(&m_inv)
+    };
+    let n = phi.len();
+    let mut out = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    let (mut y, mut v) = (Vector3::zeros(), Vector3::zeros());
+    let h = dt / f64::from(SUBSTEPS);
+    for j in 0..n {
+        let a = accel(&y, &v, phi[j]);
+        for f in 0..3 {
+            out[f][j] = a[f];
+        }
+        if j + 1 == n {
+            break;
+        }
+        let (u0, u1) = (phi[j], phi[j + 1]);
+        for i in 0..SUBSTEPS {
+            let s = f64::from(i) / f64::from(SUBSTEPS);
+            let u = |tau: f64| u0 + (u1 - u0) * (s + tau / dt);
+            let k1v = accel(&y, &v, u(0.0));
+            let k1y = v;
+            let k2v = accel(&(y + k1y * (h / 2.0)), &(v + k1v * (h / 2.0)), u(h / 2.0));
+            let k2y = v + k1v * (h / 2.0);
+            let k3v = accel(&(y + k2y * (h / 2.0)), &(v + k2v * (h / 2.0)), u(h / 2.0));
+            let k3y = v + k2v * (h / 2.0);
+            let k4v = accel(&(y + k3y * h), &(v + k3v * h), u(h));
+            let k4y = v + k3v * h;
+            y += (k1y + k2y * 2.0 + k3y * 2.0 + k4y) * (h / 6.0);
+            v += (k1v + k2v * 2.0 + k3v * 2.0 + k4v) * (h / 6.0);
+        }
+    }
+    out
+}
+
+/// Weighted Gram matrix, right-hand side and residual energy over `rows`.
+struct Normal {
+    gram: DMatrix<f64>,
+    rhs: DVector<f64>,
+    energy: f64,
+}
+
+fn normal(
+    columns: &[[Vec<f64>; 3]],
+    residual: &[Vec<f64>; 3],
+    w: &[f64; 3],
+    rows: &[usize],
+) -> Normal {
+    let p = columns.len();
+    let mut gram = DMatrix::zeros(p, p);
+    let mut rhs = DVector::zeros(p);
+    let mut energy = 0.0;
+    for f in 0..3 {
+        for &k in rows {
+            let r = residual[f][k];
+            energy += w[f] * r * r;
+            for i in 0..p {
+                let si = columns[i][f][k];
+                rhs[i] += w[f] * si * r;
+                for j in i..p {
+                    gram[(i, j)] += w[f] * si * columns[j][f][k];
+                }
+            }
+        }
+    }
+    for i in 0..p {
+        for j in 0..i {
+            gram[(i, j)] = gram[(j, i)];
+        }
+    }
+    Normal { gram, rhs, energy }
+}
+
+/// Least squares on the `active` columns: the coefficients, or `None` when singular. The
+/// columns are scaled to unit norm first (their natural sizes differ by ten orders of
+/// magnitude between `x^3` and `sign(v)`).
+fn solve(n: &Normal, active: &[usize]) -> Option<DVector<f64>> {
+    let k = active.len();
+    let d: Vec<f64> = active
+        .iter()
+        .map(|&i| {
+            let g = n.gram[(i, i)];
+            if g > 0.0 {
+                1.0 / g.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    if d.iter().any(|&x| x == 0.0 || !x.is_finite()) {
+        return None;
+    }
+    let mut g = DMatrix::zeros(k, k);
+    let mut b = DVector::zeros(k);
+    for (a, &i) in active.iter().enumerate() {
+        b[a] = d[a] * n.rhs[i];
+        for (c, &j) in active.iter().enumerate() {
+            g[(a, c)] = d[a] * n.gram[(i, j)] * d[c];
+        }
+    }
+    // A whisper of ridge against exactly collinear candidates.
+    for i in 0..k {
+        g[(i, i)] += 1e-12;
+    }
+    let z = g.cholesky()?.solve(&b);
+    Some(DVector::from_iterator(k, (0..k).map(|a| d[a] * z[a])))
+}
+
+/// The residual energy left by `theta` on `active` under `n`.
+fn left(n: &Normal, active: &[usize], theta: &DVector<f64>) -> f64 {
+    let mut e = n.energy;
+    for (a, &i) in active.iter().enumerate() {
+        e -= 2.0 * theta[a] * n.rhs[i];
+        for (c, &j) in active.iter().enumerate() {
+            e += theta[a] * theta[c] * n.gram[(i, j)];
+        }
+    }
+    e
+}
+
+/// The accelerations the base model's linear part gives to `term`'s force along `states`: its
+/// linearised share of the response (a pass after a refit adds it back to the residual to
+/// linearise again around the better trajectory).
+pub fn term_response(linear: &LinearPart, states: &States, term: &Term, dt: f64) -> [Vec<f64>; 3] {
+    let (x, v) = site_states(states, term.site);
+    let phi: Vec<f64> = x
+        .iter()
+        .zip(&v)
+        .map(|(&a, &b)| term.force_at(a, b))
+        .collect();
+    sensitivity(linear, term.site, &phi, dt)
+}
+
+/// Improve `active` (its first `q` columns fixed) by single swaps with the columns `q..p` while
+/// one lowers the fitted residual; the final coefficients.
+fn swap(fit: &Normal, active: &mut [usize], q: usize, p: usize) -> DVector<f64> {
+    let energy = |set: &[usize]| solve(fit, set).map(|t| (left(fit, set, &t), t));
+    let Some((mut best, mut theta)) = energy(active) else {
+        return DVector::zeros(active.len());
+    };
+    for _ in 0..MAX_TERMS_FOUND * 4 {
+        let mut improved = false;
+        for position in q..active.len() {
+            for candidate in q..p {
+                if active.contains(&candidate) {
+                    continue;
+                }
+                let old = active[position];
+                active[position] = candidate;
+                match energy(active) {
+                    Some((e, t)) if e < best * (1.0 - 1e-9) => {
+                        best = e;
+                        theta = t;
+                        improved = true;
+                    }
+                    _ => active[position] = old,
+                }
+            }
+        }
+        if !improved {
+            break;
+        }
+    }
+    theta
+}
+
+/// Find the sparse model of the missing force (see the module documentation); `None` when no
+/// site's model cuts the held-out residual the physics parameters alone leave by `min_cut`.
+pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
+    let w = problem
+        .variance
+        .map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
+    let dt = problem.dt;
+    // The nuisance columns, in every model: the sensitivities to the nine physics parameters
+    // (each storey's `x` and `v`, each floor's mass as the force `δm·ÿ`), so a parameter that
+    // is also off takes its own share and the sparse terms only what no parameter can.
+    let mut nuisance: Vec<[Vec<f64>; 3]> = Vec::new();
+    for storey in 1..=3 {
+        let site = Site::Storey(storey);
+        let (x, v) = site_states(&problem.states, site);
+        nuisance.push(sensitivity(&problem.linear, site, &x, dt));
+        nuisance.push(sensitivity(&problem.linear, site, &v, dt));
+    }
+    for floor in 1..=3 {
+        nuisance.push(sensitivity(
+            &problem.linear,
+            Site::Floor(floor),
+            &problem.states.acceleration[floor - 1],
+            dt,
+        ));
+    }
+    let q = nuisance.len();
+    let base: Vec<usize> = (0..q).collect();
+    let mut best: Option<(f64, Vec<Term>, String)> = None;
+    let mut sites = Vec::new();
+    for site in Site::ALL {
+        let (x, v) = site_states(&problem.states, site);
+        let after = |s: &[f64]| s[problem.first..].to_vec();
+        let cols = columns(site, &after(&x), &after(&v));
+        let mut responses = nuisance.clone();
+        responses.extend(cols.iter().map(|c| {
+            let phi: Vec<f64> = x
+                .iter()
+                .zip(&v)
+                .map(|(&a, &b)| c.function.eval(a, b, c.scale))
+                .collect();
+            sensitivity(&problem.linear, site, &phi, dt)
+        }));
+        let fit = normal(&responses, &problem.residual, &w, problem.fitted);
+        let held = normal(&responses, &problem.residual, &w, problem.held_out);
+        // What the physics parameters alone leave on the held-out blocks: the reference.
+        let reference = solve(&fit, &base)
+            .map(|theta| left(&held, &base, &theta))
+            .unwrap_or(held.energy);
+        // The greedy path, scored on the held-out blocks.
+        let mut active: Vec<usize> = base.clone();
+        let mut path: Vec<(Vec<usize>, DVector<f64>, f64)> = Vec::new();
+        while active.len() < q + MAX_TERMS_FOUND {
+            let mut step: Option<(usize, DVector<f64>, f64)> = None;
+            for i in q..responses.len() {
+                if active.contains(&i) {
+                    continue;
+                }
+                let mut trial = active.clone();
+                trial.push(i);
+                let Some(theta) = solve(&fit, &trial) else {
+                    continue;
+                };
+                let e = left(&fit, &trial, &theta);
+                if step.as_ref().is_none_or(|s| e < s.2) {
+                    step = Some((i, theta, e));
+                }
+            }
+            let Some((i, _, _)) = step else { break };
+            active.push(i);
+            // Swaps: each chosen term against every other candidate, while one lowers the
+            // fitted-block residual (greedy picks are often a near-twin of the truth first,
+            // `v^3` for `v|v|`).
+            let theta = swap(&fit, &mut active, q, responses.len());
+            let e_held = left(&held, &active, &theta);
+            path.push((active.clone(), theta, e_held));
+        }
+        let Some(min_held) = path.iter().map(|p| p.2).min_by(f64::total_cmp) else {
+            continue;
+        };
+        let Some((set, theta, e_held)) = path
+            .iter()
+            .find(|p| p.2 <= min_held + PARSIMONY * reference)
+            .cloned()
+        else {
+            continue;
+        };
+        let fraction = e_held / reference;
+        let chosen: Vec<(usize, f64)> = set
+            .iter()
+            .zip(theta.iter())
+            .skip(q)
+            .map(|(&i, &c)| (i - q, c))
+            .collect();
+        sites.push(SiteModel {
+            site: site.to_string(),
+            terms: chosen.iter().map(|&(i, _)| cols[i].label()).collect(),
+            held_out_fraction: fraction,
+        });
+        let terms: Vec<Term> = chosen
+            .iter()
+            .map(|&(i, coefficient)| Term {
+                function: cols[i].function,
+                site,
+                coefficient,
+                scale: cols[i].scale,
+            })
+            .collect();
+        if fraction * min_cut <= 1.0 && best.as_ref().is_none_or(|b| e_held < b.0) {
+            best = Some((e_held, terms, site.to_string()));
+        }
+    }
+    sites.sort_by(|a, b| a.held_out_fraction.total_cmp(&b.held_out_fraction));
+    let (_, terms, site) = best?;
+    let held_out_fraction = sites
+        .iter()
+        .find(|s| s.site == site)
+        .map(|s| s.held_out_fraction)
+        .unwrap_or(f64::NAN);
+    Some(Found {
+        terms,
+        site,
+        held_out_fraction,
+        sites,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LINEAR: LinearPart = LinearPart {
+        mass: [5.0, 5.0, 5.0],
+        damping: [3.0, 3.0, 3.0],
+        stiffness: [4000.0, 4000.0, 4000.0],
+    };
+
+    /// A storey-1 force pattern is a floor-1 force (the ground takes the other half); the
+    /// response is linear in the input; and a constant unit force at floor 1 settles at the
+    /// static acceleration 0 with the structure displaced.
+    #[test]
+    fn sensitivities_follow_the_force_pattern_and_are_linear() {
+        let dt = 1.0 / 51.2;
+        let n = 600;
+        let force: Vec<f64> = (0..n)
+            .map(|k| (0.7 * k as f64).sin() + 0.5 * (0.23 * k as f64).cos())
+            .collect();
+        let storey1 = sensitivity(&LINEAR, Site::Storey(1), &force, dt);
+        let floor1 = sensitivity(&LINEAR, Site::Floor(1), &force, dt);
+        assert_eq!(storey1, floor1);
+        let double: Vec<f64> = force.iter().map(|f| 2.0 * f).collect();
+        let twice = sensitivity(&LINEAR, Site::Floor(1), &double, dt);
+        for f in 0..3 {
+            for k in 0..n {
+                let expected = 2.0 * floor1[f][k];
+                assert!((twice[f][k] - expected).abs() <= 1e-12 * (1.0 + expected.abs()));
+            }
+        }
+        // The first sample: from rest, only the force accelerates floor 1, against it (g adds
+        // to the left-hand side): −φ/m₁.
+        assert!((floor1[0][0] + force[0] / LINEAR.mass[0]).abs() < 1e-15);
+        assert_eq!((floor1[1][0], floor1[2][0]), (0.0, 0.0));
+        // A storey-3 pattern pushes floor 3 and pulls floor 2.
+        let step = vec![1.0; 2];
+        let s3 = sensitivity(&LINEAR, Site::Storey(3), &step, dt);
+        assert!(s3[2][0] < 0.0 && s3[1][0] > 0.0 && s3[0][0] == 0.0);
+    }
+
+    /// A residual made of known terms' sensitivities is found again: the site, the functions
+    /// and the coefficients.
+    #[test]
+    fn a_sparse_residual_is_found_again() {
+        let dt = 1.0 / 51.2;
+        let n = 1024;
+        // States: two incommensurate sines per floor.
+        let drift: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+            (0..n)
+                .map(|k| 1e-3 * ((0.31 + 0.07 * f as f64) * k as f64).sin())
+                .collect()
+        });
+        let velocity: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+            (0..n)
+                .map(|k| 0.02 * ((0.19 + 0.05 * f as f64) * k as f64 + 0.4).cos())
+                .collect()
+        });
+        let acceleration: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+            (0..n)
+                .map(|k| 0.3 * ((0.43 + 0.03 * f as f64) * k as f64 + 1.1).sin())
+                .collect()
+        });
+        let states = States {
+            drift: &drift,
+            velocity: &velocity,
+            acceleration: &acceleration,
+        };
+        let site = Site::Storey(2);
+        let (x, v) = site_states(&states, site);
+        let truth = [(Function::X3, 2e9), (Function::VAbsV, 300.0)];
+        let mut residual = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for (function, c) in truth {
+            let phi: Vec<f64> = x
+                .iter()
+                .zip(&v)
+                .map(|(&a, &b)| c * function.eval(a, b, 1e-3))
+                .collect();
+            let s = sensitivity(&LINEAR, site, &phi, dt);
+            for f in 0..3 {
+                for k in 0..n {
+                    residual[f][k] += s[f][k];
+                }
+            }
+        }
+        let first = 100;
+        let fitted: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 0).collect();
+        let held_out: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 1).collect();
+        let variance =
+            [0, 1, 2].map(|f| residual[f].iter().map(|r| r * r).sum::<f64>() / n as f64 + 1e-12);
+        // The same with storey 1's stiffness 5 % (200 N/m) off too: the nuisance columns take
+        // it, the sparse terms stay.
+        let (x1, _) = site_states(&states, Site::Storey(1));
+        let stiffer: Vec<f64> = x1.iter().map(|x| 200.0 * x).collect();
+        let off = sensitivity(&LINEAR, Site::Storey(1), &stiffer, dt);
+        let mut with_off = residual.clone();
+        for f in 0..3 {
+            for k in 0..n {
+                with_off[f][k] += off[f][k];
+            }
+        }
+        for residual in [residual, with_off] {
+            let found = regress(
+                &Problem {
+                    linear: LINEAR,
+                    states: States {
+                        drift: &drift,
+                        velocity: &velocity,
+                        acceleration: &acceleration,
+                    },
+                    residual,
+                    variance,
+                    dt,
+                    fitted: &fitted,
+                    held_out: &held_out,
+                    first,
+                },
+                1.5,
+            )
+            .expect("found");
+            assert_eq!(found.site, "storey 2", "{found:?}");
+            assert_eq!(found.terms.len(), 2, "{found:?}");
+            for (function, c) in truth {
+                let t = found
+                    .terms
+                    .iter()
+                    .find(|t| t.function == function)
+                    .unwrap_or_else(|| panic!("{function} not found: {found:?}"));
+                assert!(
+                    (t.coefficient - c).abs() <= 1e-6 * c,
+                    "{function}: {}",
+                    t.coefficient
+                );
+            }
+            assert!(
+                found.held_out_fraction < 1e-10,
+                "{}",
+                found.held_out_fraction
+            );
+        }
+    }
+}
