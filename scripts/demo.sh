@@ -2,7 +2,8 @@
 # The demo on the bundled example data: build the FMUs and the twin CLI, calibrate the twin on
 # dataset1, compare it with the three records (dataset3 has contact the twin does not know
 # about), train the GP corrector, run active learning over the three records in every query
-# mode, then diagnose dataset3, add the physics the diagnosis names and compare again, run
+# mode, then diagnose dataset3, add the physics the diagnosis names and compare again (and, on
+# synthetic records, two changes at once and a force outside the library, discovered), run
 # the resulting twin with `twin run` as any SSP system, and control the structure with LQR
 # designs on the twin (attenuation, contacts, retuning and gain scheduling, a controlled record
 # predicted in the closed loop). Reports, predictions and plots go to out/demo/.
@@ -75,6 +76,27 @@ awk -F, 'NR == 1 { print; next } { printf "%s,%s,%s,%.9g,%s\n", $1, $2, $3, $4 *
   data/dataset2.csv >"$out/dataset2-sensor2-gain0.8.csv"
 "$twin" diagnose --twin "$out/calibrated.ssp" --data "$out/dataset2-sensor2-gain0.8.csv" \
   --report "$out/diagnose-sensor-fault.json"
+
+echo
+echo "== several changes at once, and a force outside the library: records of twin synth's structure =="
+"$twin" synth --seed 1 --noise-sd 0.003 --out "$out/synth-unchanged.csv" >/dev/null
+"$twin" calibrate --data "$out/synth-unchanged.csv" --out "$out/synth-calibrated.ssp" >/dev/null
+echo "-- storey 2 lost 15 % of its stiffness and floors 2 and 3 touch: forward selection --"
+"$twin" synth --seed 2 --noise-sd 0.003 --force-window 12:17:3:0.5 --change k2@0:0.85 \
+  --effect contact@2-3:gap=5e-4,stiffness=9000,side=both \
+  --out "$out/synth-two-changes.csv" --truth "$out/synth-two-changes-truth.json" >/dev/null
+"$twin" diagnose --twin "$out/synth-calibrated.ssp" --data "$out/synth-two-changes.csv" \
+  --report "$out/diagnose-two-changes.json"
+echo "-- velocity-squared damping in storey 2, which the FMU's library lacks: discovered --"
+"$twin" synth --seed 2 --noise-sd 0.003 --force-window 12:17:3:0.5 \
+  --effect quadratic-damping@2:coefficient=2000 \
+  --out "$out/synth-quadratic-damping.csv" --truth "$out/synth-quadratic-damping-truth.json" >/dev/null
+"$twin" diagnose --twin "$out/synth-calibrated.ssp" --data "$out/synth-quadratic-damping.csv" \
+  --report "$out/diagnose-quadratic-damping.json" --plot "$out/diagnose-quadratic-damping.svg"
+"$twin" add-physics --twin "$out/synth-calibrated.ssp" --diagnosis "$out/diagnose-quadratic-damping.json" \
+  --data "$out/synth-quadratic-damping.csv" --out "$out/with-discovered.ssp"
+"$twin" compare --twin "$out/with-discovered.ssp" --data "$out/synth-quadratic-damping.csv" \
+  --report "$out/compare-with-discovered.json"
 
 echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="

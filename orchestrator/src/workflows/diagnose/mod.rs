@@ -44,22 +44,32 @@
 //!    coloured, not white, so evidence alone rewards tiny spurious effects (a friction of a
 //!    milli-newton "wins" on a record with no change). The decision is gated on how far the
 //!    error falls, and the evidence only ranks the alternatives that pass:
-//!    - an effect passes when it cuts the error by [`Gates::required_cut`] (4×) and beats
-//!      recalibration by [`Gates::beat_recalibration`] (2×): `add_physics`, the passing
-//!      candidate of highest evidence wins;
+//!    - an effect passes alone when it cuts the error by [`Gates::required_cut`] (4×) and
+//!      beats recalibration by [`Gates::beat_recalibration`] (2×);
+//!    - **forward selection** ([`select`]) builds the model up from there, for several changes
+//!      at once: the passing candidate of highest evidence (else the one cutting the error most,
+//!      by [`Gates::step_cut`] at least; a recalibration is a move too), the rounds repeated
+//!      while the model is short of the noise or the tolerance, every chosen effect finally
+//!      refitted jointly with the physics. The combination must meet the same 4× and 2× gates
+//!      as a whole: `add_physics`, with `effects` in order and the physics that moved;
 //!    - else, recalibration, when it cuts the error by 4× and brings every floor within
 //!      [`Gates::recalibration_noise_factor`] (3) of the noise level: `recalibrate`, with the
 //!      parameters that moved;
-//!    - else `update_data_model`: nothing in the library explains the error; the corrector
-//!      should learn it (no effect is named).
+//!    - else **discovery** ([`discover`]): sparse regression of the missing force over
+//!      candidate functions of one storey's or floor's state, linearised through the structure;
+//!      the terms found become the shear FMU's `discovered` effect, refitted with the physics
+//!      through FMI and gated the same way (it also runs, and may replace the library's answer,
+//!      when that answer leaves more than the noise): `add_physics` with a `discovered` effect;
+//!    - else `update_data_model`: nothing in the library or sparse explains the error; the
+//!      corrector should learn it (no effect is named).
 //! 6. **Localise**: the residual acceleration times the floor masses is the force the model
 //!    misses on each floor; summed from the top it is the storey shear the model misses, which
 //!    is correlated with each storey's drift (linear, cubic) and each floor's velocity sign
 //!    (friction). Reported as evidence beside the fits.
 //!
 //! `twin add-physics` refuses a `sensor_fault` diagnosis (not physics); it switches the chosen
-//! effect on, estimates its parameters on the whole record (more starts), optionally refines
-//! the physics parameters jointly, and writes the new twin.
+//! effects on (a discovered one with its terms), estimates their parameters on the whole record
+//! (more starts), optionally refines the physics parameters jointly, and writes the new twin.
 
 pub mod candidate;
 pub mod discover;
