@@ -1,0 +1,287 @@
+//! What a diagnosis and `add-physics` report: the JSON contract's types.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::{select, Action, Addition, Candidate, Found, Gates, Kind, SensorFit};
+use crate::evaluation::compare::FailingWindow;
+
+/// An estimated parameter: its short name, value and posterior sd.
+#[derive(Clone, Debug, Serialize)]
+pub struct Estimate {
+    pub name: String,
+    pub value: f64,
+    pub sd: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct EffectReport {
+    #[serde(flatten)]
+    pub name: EffectName,
+    pub parameters: BTreeMap<String, f64>,
+    pub sd: BTreeMap<String, f64>,
+    /// A discovered effect's terms (empty for the library's kinds).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub terms: Vec<TermReport>,
+}
+
+/// One term of a discovered effect: `coefficient · function` at the effect's site.
+#[derive(Clone, Debug, Serialize)]
+pub struct TermReport {
+    /// The function's name, e.g. `v|v|`, `max(0,x-s)`.
+    pub function: String,
+    pub coefficient: f64,
+    pub sd: f64,
+    /// The function's `s` (m or m/s), where it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+}
+
+/// The kind of an effect a diagnosis names: one of the library's, or `discovered`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EffectKind {
+    Contact,
+    Cubic,
+    Friction,
+    Discovered,
+}
+
+impl From<Kind> for EffectKind {
+    fn from(kind: Kind) -> Self {
+        match kind {
+            Kind::Contact => EffectKind::Contact,
+            Kind::Cubic => EffectKind::Cubic,
+            Kind::Friction => EffectKind::Friction,
+        }
+    }
+}
+
+impl PartialEq<Kind> for EffectKind {
+    fn eq(&self, other: &Kind) -> bool {
+        *self == EffectKind::from(*other)
+    }
+}
+
+/// Which effect, where: what the named effect and every candidate of a report share.
+#[derive(Clone, Debug, Serialize)]
+pub struct EffectName {
+    pub kind: EffectKind,
+    /// Contact `[lower, upper]` floors, cubic `[storey]`, friction `[floor]`; discovered
+    /// `[storey]` or `[floor]` as `site` says.
+    pub location: Vec<usize>,
+    /// Contact only: "both", "positive" or "negative".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub side: Option<&'static str>,
+    /// Discovered only: "storey" or "floor".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub site: Option<&'static str>,
+    /// `KIND@LOCATION[:SIDE]`, what `twin add-physics --effect` takes; `discovered@storey2`.
+    pub label: String,
+}
+
+impl EffectName {
+    pub(super) fn of(c: &Candidate) -> Self {
+        EffectName {
+            kind: c.kind.into(),
+            location: c.location(),
+            side: c.kind.has_side().then_some(c.side.name()),
+            site: None,
+            label: c.label(),
+        }
+    }
+
+    pub(super) fn of_addition(a: &Addition) -> Self {
+        match a {
+            Addition::Library(c) => EffectName::of(c),
+            Addition::Discovered(terms) => {
+                let site = terms.first().map(|t| t.site);
+                EffectName {
+                    kind: EffectKind::Discovered,
+                    location: site.map(|s| vec![s.at()]).unwrap_or_default(),
+                    side: None,
+                    site: site.map(|s| match s {
+                        fmu_shear::effects::discovered::Site::Storey(_) => "storey",
+                        fmu_shear::effects::discovered::Site::Floor(_) => "floor",
+                    }),
+                    label: a.label(),
+                }
+            }
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CandidateReport {
+    #[serde(flatten)]
+    pub name: EffectName,
+    /// Log Bayes factor (Laplace) against the twin as it is, on the fitted blocks.
+    pub evidence: f64,
+    /// NMSE per floor over the whole record after the transient.
+    pub nmse_after: [f64; 3],
+    /// NMSE per floor on the held-out blocks.
+    pub nmse_held_out: [f64; 3],
+    pub parameters: Vec<Estimate>,
+    /// Cut the error by the required factor and beat recalibration.
+    pub passes: bool,
+    pub simulations: usize,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MovedParameter {
+    pub name: String,
+    pub before: f64,
+    pub after: f64,
+    pub sd: f64,
+    /// `(after − before) / sd`.
+    pub change_in_sd: f64,
+    pub relative_change: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct RecalibrationReport {
+    pub evidence: f64,
+    pub nmse_after: [f64; 3],
+    pub nmse_held_out: [f64; 3],
+    /// Every parameter, largest move (in posterior sd) first.
+    pub parameters: Vec<MovedParameter>,
+    pub noise_variance: [f64; 3],
+    pub simulations: usize,
+    pub seconds: f64,
+}
+
+/// Correlations of the missing storey shear with storey drift, and of the missing floor force
+/// with the sign of the floor's velocity.
+#[derive(Clone, Debug, Serialize)]
+pub struct Localisation {
+    /// Per storey 1..3: corr(missing shear, drift).
+    pub shear_vs_drift: [f64; 3],
+    /// Per storey: corr(missing shear, drift³).
+    pub shear_vs_drift_cubed: [f64; 3],
+    /// Per storey: corr(missing shear, the part of the drift beyond its 80th percentile of |drift|,
+    /// the shape of a contact force).
+    pub shear_vs_drift_beyond: [f64; 3],
+    /// Per floor 1..3: corr(missing floor force, sign of the floor's velocity).
+    pub force_vs_velocity_sign: [f64; 3],
+    /// The storey or floor with the largest |correlation| of any kind, e.g. "storey 3".
+    pub strongest: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct LatentVariance {
+    pub max: [f64; 3],
+    pub mean: [f64; 3],
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnosis {
+    pub record: String,
+    pub twin: String,
+    pub nmse_before: [f64; 3],
+    /// NMSE per floor that the twin's noise variances alone explain on this record.
+    pub noise_nmse: [f64; 3],
+    /// NMSE per floor that the twin's parameter uncertainty explains (its band's `J Σ Jᵀ`; 0
+    /// for a twin without a posterior covariance).
+    pub band_nmse: [f64; 3],
+    /// `noise_nmse + band_nmse`: what the twin's ±3σ band explains.
+    pub explained_nmse: [f64; 3],
+    /// Practical significance (NMSE %) and where it comes from.
+    pub tolerance: f64,
+    pub tolerance_source: String,
+    /// Some floor's NMSE exceeds `gates.none_factor` × its explained level.
+    pub statistically_significant: bool,
+    /// The worst floor's NMSE exceeds the tolerance.
+    pub practically_significant: bool,
+    pub nmse_before_held_out: [f64; 3],
+    pub noise_nmse_held_out: [f64; 3],
+    pub failing_windows: Vec<FailingWindow>,
+    /// The corrector's latent variance V(f) on the record, when the twin has one.
+    pub latent_variance: Option<LatentVariance>,
+    pub action: Action,
+    /// Why, in a sentence with the numbers.
+    pub reason: String,
+    /// The first of `effects` (what a single-effect diagnosis names).
+    pub effect: Option<EffectReport>,
+    /// Every effect added, in the order forward selection chose them, with their jointly
+    /// fitted parameters.
+    pub effects: Vec<EffectReport>,
+    /// The physics parameters the joint refit with the effects moved by more than 3 posterior
+    /// sd and 1 %, largest move first (empty unless the action is `add_physics`).
+    pub physics_moved: Vec<MovedParameter>,
+    /// The forward selection's rounds.
+    pub selection: Vec<select::SelectionStep>,
+    /// The search for an effect outside the library, when it ran.
+    pub discovery: Option<DiscoveryReport>,
+    /// The faulty channel, when the action is `sensor_fault`.
+    pub sensor: Option<SensorFit>,
+    /// Every floor's sensor candidate (gain, offset, drift of the twin's prediction), floor 1
+    /// first; empty when nothing was fitted.
+    pub sensor_candidates: Vec<SensorFit>,
+    pub nmse_after: [f64; 3],
+    pub recalibration: Option<RecalibrationReport>,
+    /// Best evidence first.
+    pub candidates: Vec<CandidateReport>,
+    /// Candidates whose fit failed (no start converged, the FMU refused every value): label
+    /// and error. They take no part in the decision.
+    pub failed_candidates: Vec<(String, String)>,
+    pub localisation: Localisation,
+    pub gates: Gates,
+    pub block_seconds: f64,
+    pub seconds: f64,
+    /// For the plot (not in the JSON).
+    #[serde(skip)]
+    pub series: Series,
+}
+
+/// Time series the plot draws.
+#[derive(Clone, Debug, Default)]
+pub struct Series {
+    pub time: Vec<f64>,
+    pub first: usize,
+    pub measured: [Vec<f64>; 3],
+    pub before: [Vec<f64>; 3],
+    pub after: [Vec<f64>; 3],
+    pub drift: [Vec<f64>; 3],
+    /// Missing storey shear per storey (N): from the residual of the twin as given; for the
+    /// winning effect's storey, the shear the linear part misses along the fitted model.
+    pub missing_shear: [Vec<f64>; 3],
+    /// The winning effect's storey force (N) for its storey, when one won.
+    pub effect_force: Option<Vec<f64>>,
+}
+
+/// The search for an effect outside the library.
+#[derive(Clone, Debug, Serialize)]
+pub struct DiscoveryReport {
+    /// The regression's result: the winning site, and every site's sparse model with the
+    /// share of the held-out residual it leaves (linearised). `None`: no site's model with a
+    /// nonlinear term cut it by the step gate.
+    pub regression: Option<Found>,
+    /// The second pass, linearised around the refitted model's trajectory.
+    pub relinearised: Option<Found>,
+    /// The terms kept, with the FMI refit's coefficients and sd.
+    pub terms: Vec<TermReport>,
+    /// After the refit through the FMU (with the physics): per floor.
+    pub nmse_held_out: Option<[f64; 3]>,
+    pub nmse_after: Option<[f64; 3]>,
+    /// Cut the error by the required factor and beat recalibration.
+    pub passes: bool,
+    pub seconds: f64,
+}
+
+/// What `twin add-physics` did.
+#[derive(Clone, Debug, Serialize)]
+pub struct AddPhysicsReport {
+    pub record: String,
+    /// The first of `effects`.
+    pub effect: EffectReport,
+    /// Every effect added, in order.
+    pub effects: Vec<EffectReport>,
+    pub refined_physics: Vec<Estimate>,
+    pub nmse_before: [f64; 3],
+    pub nmse_after: [f64; 3],
+    pub evidence: f64,
+    pub noise_variance: [f64; 3],
+    pub seconds: f64,
+}
