@@ -25,7 +25,7 @@ pub struct AddPhysicsArgs {
     )]
     pub effect: Vec<String>,
     /// Take the effects from a `twin diagnose` report instead (all of them, in order; with the
-    /// physics refined too when the diagnosis's joint refit moved it).
+    /// physics refined too when the diagnosis took a recalibration as one of its moves).
     #[arg(long)]
     pub diagnosis: Option<PathBuf>,
     /// The record its parameters are estimated on.
@@ -63,7 +63,9 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
         (true, Some(path)) => {
             let (candidates, moved) = effects_from_report(path)?;
             if moved && !args.refine {
-                println!("the diagnosis moved the physics with the effects: refining it too");
+                println!(
+                    "the diagnosis recalibrated the physics with the effects: refining it too"
+                );
             }
             (candidates, args.refine || moved)
         }
