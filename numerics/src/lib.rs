@@ -1,5 +1,6 @@
 //! Numerics for the twin, with no FFI and no I/O.
 
+pub mod actuator;
 pub mod control;
 pub mod gp;
 pub mod lqr;
