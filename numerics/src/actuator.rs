@@ -299,8 +299,9 @@ impl Actuator {
 /// The test is flagged unstable, for good, when `E_int > factor · max(E_in, 0)` with `E_int > 0`,
 /// when `|y_n|` exceeds the displacement bound, or when a value is not finite. In a steady
 /// forced response `E_int/E_in` is the ratio of injected to net dissipated energy,
-/// `kτ/(c − kτ)`, so the default factor 10 flags a steady test within about 9 % of the stability limit or
-/// past it.
+/// `kτ/(c − kτ)`, so the default factor 10 flags a steady test within about 9 % of the
+/// stability limit or past it; a start-up can be flagged sooner, when the interface feeds a free
+/// vibration that the excitation does no net work on.
 #[derive(Clone, Debug)]
 pub struct EnergyMonitor {
     factor: f64,
