@@ -2,6 +2,7 @@
 
 pub mod actuator;
 pub mod control;
+pub mod excitation;
 pub mod gp;
 pub mod lqr;
 pub mod ode;
