@@ -27,7 +27,10 @@
 //! its rates from the last three positions: only displacements cross the interface) and
 //! returns the force. RK4 for both.
 
+use numerics::actuator::EnergyMonitor;
 use serde::Serialize;
+
+pub mod identify;
 
 /// What can stop a hybrid test.
 #[derive(Debug, thiserror::Error)]
@@ -36,7 +39,7 @@ pub enum HybridError {
     Setup(String),
     #[error(
         "hybrid test unstable at t = {time:.3} s: the interface has put {interface_work:.3e} J into \
-         the physical substructure against {excitation_work:.3e} J from the excitation (the \
+         the numerical substructure against {excitation_work:.3e} J from the excitation (the \
          actuator's delay acts as negative damping); stopped"
     )]
     Unstable {
@@ -230,8 +233,8 @@ impl Physical {
 /// Run the hybrid test: `excitation` (N on floor 1) at step `dt`, `substeps` control steps per
 /// sample, `actuator` turning each new target displacement into the achieved one (called once
 /// per control step, in order). `energy_factor`: stop with [`HybridError::Unstable`] when the
-/// work the interface has done on the physical substructure exceeds this factor times the
-/// excitation's (plus a floor of 1 µJ), both accumulated from the start.
+/// energy the interface has put into the numerical substructure exceeds this factor times the
+/// excitation's ([`numerics::actuator::EnergyMonitor`]: a delay acts as negative damping).
 pub fn run(
     s: &Structure,
     excitation: &[f64],
@@ -264,7 +267,8 @@ pub fn run(
     let (mut y2p, mut v2p, mut y2p_previous) = (0.0, 0.0, 0.0);
     let (mut fm, mut fm_previous) = (0.0, 0.0);
     let mut first_step = true;
-    let (mut interface_work, mut excitation_work) = (0.0, 0.0);
+    let mut monitor = EnergyMonitor::new(energy_factor, f64::INFINITY)
+        .map_err(|e| HybridError::Setup(e.to_string()))?;
     let mut closed = false;
     let record = |out: &mut HybridRun, t: f64, num: &Numerical, y2p: f64, phys: &Physical, fm| {
         out.time.push(t);
@@ -286,7 +290,7 @@ pub fn run(
             let fe = (excitation[k] + slope * tau0, slope);
             // The measured force, extrapolated linearly from the last two measurements.
             let fm_slope = (fm - fm_previous) / h;
-            let (y1_before, y2_before) = (num.y[0], y2p);
+            let y1_before = num.y[0];
             num.step(s, h, fe, (fm, fm_slope));
             let target = num.y[1];
             let achieved = actuator(target);
@@ -310,10 +314,9 @@ pub fn run(
             v2p = v_end;
             fm_previous = fm;
             fm = interface_force(s, y2p, v2p, &phys);
-            // Work: the interface's force times the displacement it imposed; the excitation's
-            // force times floor 1's displacement.
-            interface_work += 0.5 * (fm + fm_previous) * (y2p - y2_before);
-            excitation_work += (fe.0 + 0.5 * fe.1 * h) * (num.y[0] - y1_before);
+            // The excitation's work on floor 1 over the step (force at mid-step).
+            let input_work = (fe.0 + 0.5 * fe.1 * h) * (num.y[0] - y1_before);
+            monitor.observe(fm, num.y[1], input_work);
             let yr = y2p - phys.y3;
             out.max_relative = out.max_relative.max(yr);
             let now = yr > s.gap;
@@ -327,11 +330,11 @@ pub fn run(
                     t + tau0 + h
                 )));
             }
-            if interface_work > energy_factor * excitation_work.abs() + 1e-6 {
+            if monitor.unstable() {
                 return Err(HybridError::Unstable {
                     time: t + tau0 + h,
-                    interface_work,
-                    excitation_work,
+                    interface_work: monitor.interface_energy(),
+                    excitation_work: monitor.input_energy(),
                 });
             }
         }
