@@ -3,7 +3,8 @@
 # dataset1, compare it with the three records (dataset3 has contact the twin does not know
 # about), train the GP corrector, run active learning over the three records in every query
 # mode, then diagnose dataset3, add the physics the diagnosis names and compare again (and, on
-# synthetic records, two changes at once and a force outside the library, discovered), run
+# synthetic records, two changes at once and a force outside the library, discovered), run the
+# simulated real-time hybrid test (the contact threshold, the law learned from it), run
 # the resulting twin with `twin run` as any SSP system, and control the structure with LQR
 # designs on the twin (attenuation, contacts, retuning and gain scheduling, a controlled record
 # predicted in the closed loop). Reports, predictions and plots go to out/demo/.
@@ -97,6 +98,22 @@ echo "-- velocity-squared damping in storey 2, which the FMU's library lacks: di
   --data "$out/synth-quadratic-damping.csv" --out "$out/with-discovered.ssp"
 "$twin" compare --twin "$out/with-discovered.ssp" --data "$out/synth-quadratic-damping.csv" \
   --report "$out/compare-with-discovered.json"
+
+echo
+echo "== the simulated real-time hybrid test (paper section 5): where contact starts, and the contact law learned from it =="
+"$twin" hybrid threshold --twin "$out/calibrated.ssp" \
+  --report "$out/hybrid-threshold.json" --plot "$out/hybrid-threshold.svg"
+"$twin" hybrid run --twin "$out/calibrated.ssp" --peak 5 --a-err 0 --a-err 0.05 \
+  --report "$out/hybrid-run.json" --plot "$out/hybrid-run.svg"
+echo "-- an actuator 5 control steps late, then with third-order delay compensation --"
+"$twin" hybrid run --twin "$out/calibrated.ssp" --peak 5 --a-err 0 --delay 0.0048828125 \
+  --report "$out/hybrid-delay.json"
+"$twin" hybrid run --twin "$out/calibrated.ssp" --peak 5 --a-err 0 --delay 0.0048828125 --compensate 3 \
+  --report "$out/hybrid-delay-compensated.json"
+echo "-- the law the hybrid test learned, added to the twin, on dataset3 --"
+"$twin" add-physics --twin "$out/calibrated.ssp" --hybrid "$out/hybrid-run.json" --out "$out/with-hybrid-contact.ssp"
+"$twin" compare --twin "$out/with-hybrid-contact.ssp" --data data/dataset3.csv \
+  --report "$out/compare-with-hybrid-contact-dataset3.json"
 
 echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="

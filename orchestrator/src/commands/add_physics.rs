@@ -20,17 +20,22 @@ pub struct AddPhysicsArgs {
     /// friction@1; repeat it to add several at once.
     #[arg(
         long,
-        conflicts_with = "diagnosis",
-        required_unless_present = "diagnosis"
+        conflicts_with_all = ["diagnosis", "hybrid"],
+        required_unless_present_any = ["diagnosis", "hybrid"]
     )]
     pub effect: Vec<String>,
+    /// Take the contact law a `twin hybrid run` report identified from its interface
+    /// measurements (its run with the smallest |a_err|): contact between floors 2 and 3, set
+    /// as identified, nothing refitted.
+    #[arg(long, conflicts_with_all = ["diagnosis", "refine"])]
+    pub hybrid: Option<PathBuf>,
     /// Take the effects from a `twin diagnose` report instead (all of them, in order; with the
     /// physics refined too when the diagnosis took a recalibration as one of its moves).
     #[arg(long)]
     pub diagnosis: Option<PathBuf>,
     /// The record its parameters are estimated on.
-    #[arg(long)]
-    pub data: PathBuf,
+    #[arg(long, required_unless_present = "hybrid")]
+    pub data: Option<PathBuf>,
     /// The new twin (.ssp).
     #[arg(long)]
     pub out: PathBuf,
@@ -47,6 +52,22 @@ pub struct AddPhysicsArgs {
 }
 
 pub fn run(args: &AddPhysicsArgs) -> Result<()> {
+    if let Some(path) = &args.hybrid {
+        let twin = Twin::load(Some(&args.twin))?;
+        let (new_twin, law, a_err) =
+            crate::workflows::hybrid::experiment::add_identified_contact(&twin, path)?;
+        new_twin.write(&args.out)?;
+        if let Some(report) = &args.report {
+            write_json(report, &law)?;
+        }
+        println!(
+            "effect        contact@2-3:negative from the hybrid test (a_err {a_err:+.3}): gap \
+             {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
+            law.gap, law.gap_sd, law.contact_stiffness, law.contact_stiffness_sd
+        );
+        println!("wrote {}", args.out.display());
+        return Ok(());
+    }
     let o = options(args.transient, args.threads)?;
     let (candidates, refine) = match (args.effect.is_empty(), &args.diagnosis) {
         (false, _) => (
@@ -71,7 +92,10 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
         }
         (true, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
     };
-    let data = Measurement::read(&args.data)?;
+    let Some(data) = &args.data else {
+        bail!("give --data D.csv: the record the effects are estimated on");
+    };
+    let data = Measurement::read(data)?;
     let twin = Twin::load(Some(&args.twin))?;
     let (new_twin, report) = add_physics(&twin, &data, &candidates, refine, &o)?;
     new_twin.write(&args.out)?;

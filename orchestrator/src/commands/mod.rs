@@ -16,6 +16,7 @@ pub mod calibrate;
 pub mod compare;
 pub mod control;
 pub mod diagnose;
+pub mod hybrid;
 pub mod init;
 pub mod learn;
 pub mod pack_fmu;
@@ -60,6 +61,9 @@ pub enum Command {
     /// LQR control designed on the twin: attenuation, control effort and contact initiations,
     /// passive and under each design; retuning and gain scheduling informed by the twin.
     Control(control::ControlArgs),
+    /// The simulated real-time hybrid test: numerical and physical substructures joined by an
+    /// actuator; the excitation at which contact starts, spectra, the contact law learned.
+    Hybrid(hybrid::HybridArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -75,6 +79,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::AddPhysics(args) => add_physics::run(&args),
         Command::Run(args) => run::run(&args),
         Command::Control(args) => control::run(&args),
+        Command::Hybrid(args) => hybrid::run(&args),
     }
 }
 

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 
 pub mod control_plot;
 pub mod diagnose_plot;
+pub mod hybrid_plot;
 pub mod learn_plot;
 pub mod plot;
 

@@ -13,10 +13,10 @@
 //! `a_err · y₂ₙ`.
 
 use nalgebra::{Matrix3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// An identified contact law with its posterior sd.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct ContactLaw {
     pub gap: f64,
     pub gap_sd: f64,
@@ -91,7 +91,11 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
     let step = top / scan as f64;
     let (mut a, mut b) = ((best.1 - step).max(0.0), (best.1 + step).min(top));
     let golden = 0.5 * (5f64.sqrt() - 1.0);
-    let sse = |d: f64| fit_at(d, &yr, &vr, &f).map(|x| x.sse).unwrap_or(f64::INFINITY);
+    let sse = |d: f64| {
+        fit_at(d, &yr, &vr, &f)
+            .map(|x| x.sse)
+            .unwrap_or(f64::INFINITY)
+    };
     for _ in 0..80 {
         let c = b - golden * (b - a);
         let e = a + golden * (b - a);

@@ -30,7 +30,9 @@
 use numerics::actuator::EnergyMonitor;
 use serde::Serialize;
 
+pub mod experiment;
 pub mod identify;
+pub mod spectrum;
 
 /// What can stop a hybrid test.
 #[derive(Debug, thiserror::Error)]
@@ -126,6 +128,19 @@ pub struct HybridRun {
     pub contact_times: Vec<f64>,
     /// The largest `y_r = y₂ₚ − y₃`.
     pub max_relative: f64,
+    /// The interface at every control step (what a hybrid test's controller logs).
+    #[serde(skip)]
+    pub interface: Interface,
+}
+
+/// The interface signals at the control rate.
+#[derive(Clone, Debug, Default)]
+pub struct Interface {
+    pub step: f64,
+    pub y2n: Vec<f64>,
+    pub y2p: Vec<f64>,
+    pub y3: Vec<f64>,
+    pub force: Vec<f64>,
 }
 
 /// The numerical substructure: floors 1 and 2 with storeys 1 and 2, loaded by the excitation on
@@ -262,6 +277,7 @@ pub fn run(
         max_relative: f64::NEG_INFINITY,
         ..HybridRun::default()
     };
+    out.interface.step = h;
     let mut num = Numerical::default();
     let mut phys = Physical::default();
     let (mut y2p, mut v2p, mut y2p_previous) = (0.0, 0.0, 0.0);
@@ -318,6 +334,10 @@ pub fn run(
             let input_work = (fe.0 + 0.5 * fe.1 * h) * (num.y[0] - y1_before);
             monitor.observe(fm, num.y[1], input_work);
             let yr = y2p - phys.y3;
+            out.interface.y2n.push(num.y[1]);
+            out.interface.y2p.push(y2p);
+            out.interface.y3.push(phys.y3);
+            out.interface.force.push(fm);
             out.max_relative = out.max_relative.max(yr);
             let now = yr > s.gap;
             if now && !closed {

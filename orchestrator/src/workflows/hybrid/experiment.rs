@@ -1,0 +1,341 @@
+//! `twin hybrid threshold` and `twin hybrid run`: the experiments of the reference paper's
+//! section 5 on the substructured test of [`super::run`], with the actuator of
+//! [`numerics::actuator`] and the excitation of [`numerics::excitation`] (or a record's force),
+//! and the contact law learned from the interface measurements.
+
+use std::time::Instant;
+
+use numerics::actuator::{Actuator, ActuatorSpec};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use serde::Serialize;
+
+use super::identify::{identify, ContactLaw};
+use super::spectrum::{harmonics, welch, Harmonics, Spectrum};
+use super::{run, threshold, HybridError, HybridRun, Result, Structure};
+
+/// Everything a hybrid experiment is set up with.
+#[derive(Clone, Debug)]
+pub struct Setup {
+    pub structure: Structure,
+    /// The excitation scaled to a peak of 1 N, at `dt`.
+    pub unit: Vec<f64>,
+    pub dt: f64,
+    pub substeps: u32,
+    /// The actuator (its `amplitude_error` is overridden by each experiment's a_err).
+    pub actuator: ActuatorSpec,
+    pub energy_factor: f64,
+}
+
+impl Setup {
+    fn control_step(&self) -> f64 {
+        self.dt / f64::from(self.substeps)
+    }
+
+    /// The actuator with amplitude error `a_err`; refuses a delay the control step cannot
+    /// represent.
+    fn actuator(&self, a_err: f64) -> Result<Actuator> {
+        let spec = ActuatorSpec {
+            amplitude_error: a_err,
+            ..self.actuator.clone()
+        };
+        Actuator::new(spec, self.control_step()).map_err(|e| HybridError::Setup(e.to_string()))
+    }
+}
+
+/// One point of the threshold curve.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct ThresholdPoint {
+    pub a_err: f64,
+    /// The peak excitation force at which the bumper first closes (bisection on the test).
+    pub threshold_peak_force: f64,
+    /// The same from the linear assembly: the gap over the largest `y_r` of the unit-peak run.
+    pub independent: f64,
+    /// Against perfect control's threshold (when a_err = 0 is among the points).
+    pub relative_to_perfect: Option<f64>,
+}
+
+/// The threshold curve, or why a point could not be had (an unstable test).
+#[derive(Clone, Debug, Serialize)]
+pub struct ThresholdCurve {
+    pub thresholds: Vec<ThresholdPoint>,
+    /// a_err and the reason, for each point that failed.
+    pub failed: Vec<(f64, String)>,
+    pub seconds: f64,
+}
+
+/// The threshold for each amplitude error.
+pub fn threshold_curve(setup: &Setup, a_errs: &[f64]) -> Result<ThresholdCurve> {
+    let started = Instant::now();
+    let mut points = Vec::new();
+    let mut failed = Vec::new();
+    for &a in a_errs {
+        // Refuse a bad actuator up front (a delay that is no whole number of steps).
+        setup.actuator(a)?;
+        let found = threshold(
+            &setup.structure,
+            &setup.unit,
+            setup.dt,
+            setup.substeps,
+            || {
+                let mut act = setup.actuator(a).expect("checked above");
+                move |y: f64| act.step(y)
+            },
+            setup.energy_factor,
+        );
+        let mut open = setup.structure;
+        open.gap = f64::MAX / 4.0;
+        let mut act = setup.actuator(a)?;
+        let linear = run(
+            &open,
+            &setup.unit,
+            setup.dt,
+            setup.substeps,
+            |y| act.step(y),
+            setup.energy_factor,
+        );
+        match (found, linear) {
+            (Ok(t), Ok(l)) => points.push(ThresholdPoint {
+                a_err: a,
+                threshold_peak_force: t,
+                independent: setup.structure.gap / l.max_relative,
+                relative_to_perfect: None,
+            }),
+            (Err(e), _) | (_, Err(e)) => failed.push((a, e.to_string())),
+        }
+    }
+    if let Some(perfect) = points
+        .iter()
+        .find(|p| p.a_err == 0.0)
+        .map(|p| p.threshold_peak_force)
+    {
+        for p in &mut points {
+            p.relative_to_perfect = Some(p.threshold_peak_force / perfect - 1.0);
+        }
+    }
+    Ok(ThresholdCurve {
+        thresholds: points,
+        failed,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Sensor noise on the interface measurements (sd).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct InterfaceNoise {
+    /// m, on each displacement.
+    pub displacement: f64,
+    /// N, on the force.
+    pub force: f64,
+    pub seed: u64,
+}
+
+/// One run of `twin hybrid run`.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunSummary {
+    pub a_err: f64,
+    pub contacts: usize,
+    pub max_relative: f64,
+    /// Floor 2's displacement spectrum: fundamental, peaks, harmonics.
+    pub spectrum: Option<Harmonics>,
+    /// The contact law from the measured (noisy) interface: y₂ₚ, y₃, F_m.
+    pub identified: Option<ContactLaw>,
+    /// The same from the commanded y₂ₙ instead of the measured y₂ₚ: the bias an amplitude
+    /// error puts in a law identified from the command.
+    pub identified_from_command: Option<ContactLaw>,
+    /// Why the run stopped, if it did (an unstable test).
+    pub stopped: Option<String>,
+}
+
+/// A run with what the plot draws.
+pub struct RunOutcome {
+    pub summary: RunSummary,
+    pub run: Option<HybridRun>,
+    pub spectrum: Option<Spectrum>,
+}
+
+/// Segment of the displacement spectra: 4 s at the record's rate.
+fn segment(dt: f64) -> usize {
+    ((4.0 / dt).round() as usize).max(16)
+}
+
+/// The test at `peak` N for each amplitude error, with the law identified from each.
+pub fn runs(
+    setup: &Setup,
+    peak: f64,
+    a_errs: &[f64],
+    noise: InterfaceNoise,
+) -> Result<Vec<RunOutcome>> {
+    if !(peak.is_finite() && peak > 0.0) {
+        return Err(HybridError::Setup(format!(
+            "the peak force must be positive and finite, was {peak}"
+        )));
+    }
+    let excitation: Vec<f64> = setup.unit.iter().map(|f| f * peak).collect();
+    let mut out = Vec::new();
+    for (i, &a) in a_errs.iter().enumerate() {
+        let mut act = setup.actuator(a)?;
+        let result = run(
+            &setup.structure,
+            &excitation,
+            setup.dt,
+            setup.substeps,
+            |y| act.step(y),
+            setup.energy_factor,
+        );
+        let run = match result {
+            Ok(r) => r,
+            Err(e @ HybridError::Unstable { .. }) => {
+                out.push(RunOutcome {
+                    summary: RunSummary {
+                        a_err: a,
+                        contacts: 0,
+                        max_relative: f64::NAN,
+                        spectrum: None,
+                        identified: None,
+                        identified_from_command: None,
+                        stopped: Some(e.to_string()),
+                    },
+                    run: None,
+                    spectrum: None,
+                });
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
+        let spectrum = welch(&run.y2p, setup.dt, segment(setup.dt));
+        // The measurements, with noise (seeded per run).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(noise.seed.wrapping_add(i as u64));
+        let mut noisy = |x: &[f64], sd: f64| -> Vec<f64> {
+            match Normal::new(0.0, sd) {
+                Ok(d) if sd > 0.0 => x.iter().map(|v| v + d.sample(&mut rng)).collect(),
+                _ => x.to_vec(),
+            }
+        };
+        let face = &run.interface;
+        let y2p = noisy(&face.y2p, noise.displacement);
+        let y2n = noisy(&face.y2n, noise.displacement);
+        let y3 = noisy(&face.y3, noise.displacement);
+        let force = noisy(&face.force, noise.force);
+        out.push(RunOutcome {
+            summary: RunSummary {
+                a_err: a,
+                contacts: run.contact_times.len(),
+                max_relative: run.max_relative,
+                spectrum: harmonics(&spectrum, 40.0),
+                identified: identify(&y2p, &y3, &force, face.step),
+                identified_from_command: identify(&y2n, &y3, &force, face.step),
+                stopped: None,
+            },
+            run: Some(run),
+            spectrum: Some(spectrum),
+        });
+    }
+    Ok(out)
+}
+
+/// A `time,force` CSV (a header, then one sample a line at a constant step): the force and
+/// the step. Errors name the file and the line.
+pub fn read_excitation(path: &std::path::Path) -> Result<(Vec<f64>, f64)> {
+    let bad = |what: String| HybridError::Setup(format!("{}: {what}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let mut lines = text.lines().enumerate();
+    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    if columns.len() < 2 || columns[0] != "time" || columns[1] != "force" {
+        return Err(bad(format!(
+            "line 1: the header must start with time,force, was '{header}'"
+        )));
+    }
+    let (mut time, mut force) = (Vec::new(), Vec::new());
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let mut fields = line.split(',').map(str::trim);
+        let mut number = |name: &str| -> Result<f64> {
+            let field = fields.next().unwrap_or("");
+            field
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    bad(format!(
+                        "line {}: {name} '{field}' is not a finite number",
+                        i + 1
+                    ))
+                })
+        };
+        time.push(number("time")?);
+        force.push(number("force")?);
+    }
+    if time.len() < 2 {
+        return Err(bad("fewer than two samples".into()));
+    }
+    let dt = (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64;
+    if !(dt > 0.0) {
+        return Err(bad("the time column does not increase".into()));
+    }
+    if let Some(k) = (1..time.len()).find(|&k| ((time[k] - time[k - 1]) - dt).abs() > 1e-6 * dt) {
+        return Err(bad(format!(
+            "line {}: the step {} s differs from the mean step {dt} s: resample it first",
+            k + 2,
+            time[k] - time[k - 1]
+        )));
+    }
+    Ok((force, dt))
+}
+
+/// The contact law a `twin hybrid run` report identified (from the measured interface of its
+/// run with the smallest |a_err|), switched on in `twin`'s physics as the library's contact
+/// between floors 2 and 3 — closing when floor 2 runs ahead of floor 3 by the gap, i.e. on the
+/// storey's negative drift — with the identified gap and stiffness. Also the law and its a_err.
+pub fn add_identified_contact(
+    twin: &crate::twin::Twin,
+    report: &std::path::Path,
+) -> Result<(crate::twin::Twin, ContactLaw, f64)> {
+    use crate::twin::{ParameterValue, PHYSICS};
+    use crate::workflows::diagnose::{Candidate, Kind, Side};
+    let bad = |what: String| HybridError::Setup(format!("{}: {what}", report.display()));
+    let text = std::fs::read_to_string(report).map_err(|e| bad(e.to_string()))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(format!("not JSON ({e})")))?;
+    let runs = value
+        .get("runs")
+        .and_then(|r| r.as_array())
+        .ok_or_else(|| bad("no runs: give the report of `twin hybrid run`".into()))?;
+    let (a_err, law) = runs
+        .iter()
+        .filter_map(|r| {
+            let a = r.get("a_err")?.as_f64()?;
+            let law: ContactLaw = serde_json::from_value(r.get("identified")?.clone()).ok()?;
+            Some((a, law))
+        })
+        .min_by(|x, y| x.0.abs().total_cmp(&y.0.abs()))
+        .ok_or_else(|| bad("no run identified a contact law".into()))?;
+    if !(law.gap > 0.0 && law.contact_stiffness > 0.0) {
+        return Err(bad(format!(
+            "the identified law (gap {}, stiffness {}) is not a contact",
+            law.gap, law.contact_stiffness
+        )));
+    }
+    let contact = Candidate {
+        kind: Kind::Contact,
+        at: 3,
+        side: Side::Negative,
+    };
+    let mut out = twin.duplicate();
+    let component = out
+        .component_mut(PHYSICS)
+        .ok_or_else(|| HybridError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    component.parameters.extend(contact.switches());
+    let prefix = contact.prefix();
+    component
+        .parameters
+        .insert(format!("{prefix}_gap"), ParameterValue::Real(law.gap));
+    component.parameters.insert(
+        format!("{prefix}_stiffness"),
+        ParameterValue::Real(law.contact_stiffness),
+    );
+    Ok((out, law, a_err))
+}
