@@ -66,13 +66,14 @@ pub struct Harmonics {
     pub fundamental_hz: f64,
     /// Local maxima within `floor_db` of the largest, strongest first (at most 12).
     pub peaks: Vec<Peak>,
-    /// Integer multiples `n ≥ 2` of the fundamental with a peak within two bins.
+    /// Integer multiples `n ≥ 2` of the fundamental with a peak within one bin, that is not
+    /// one of the structure's own modes (within two bins of a natural frequency).
     pub harmonics: Vec<(u32, Peak)>,
 }
 
 /// Peaks above 1 Hz within `floor_db` (e.g. 40) of the largest, and the harmonics of the
-/// largest (the fundamental) among them.
-pub fn harmonics(s: &Spectrum, floor_db: f64) -> Option<Harmonics> {
+/// largest (the fundamental) among them, leaving out the structure's `modes` (Hz).
+pub fn harmonics(s: &Spectrum, floor_db: f64, modes: &[f64]) -> Option<Harmonics> {
     let n = s.power.len();
     if n < 5 {
         return None;
@@ -95,10 +96,10 @@ pub fn harmonics(s: &Spectrum, floor_db: f64) -> Option<Harmonics> {
     let mut found = Vec::new();
     for order in 2..=((s.frequency[n - 1] / fundamental) as u32) {
         let target = order as f64 * fundamental;
-        if let Some(&hit) = peaks
-            .iter()
-            .find(|&&(b, _)| (s.frequency[b] - target).abs() <= 2.0 * df)
-        {
+        let is_mode = |f: f64| modes.iter().any(|m| (f - m).abs() <= 2.0 * df);
+        if let Some(&hit) = peaks.iter().find(|&&(b, _)| {
+            (s.frequency[b] - target).abs() <= df * 1.01 && !is_mode(s.frequency[b])
+        }) {
             found.push((order, as_peak(hit)));
         }
     }
@@ -126,7 +127,7 @@ mod tests {
             })
             .collect();
         let s = welch(&x, dt, 2048);
-        let h = harmonics(&s, 40.0).expect("peaks");
+        let h = harmonics(&s, 40.0, &[]).expect("peaks");
         assert!((h.fundamental_hz - 10.0).abs() < 0.3, "{h:?}");
         let orders: Vec<u32> = h.harmonics.iter().map(|x| x.0).collect();
         assert!(orders.contains(&3) && orders.contains(&5), "{orders:?}");
