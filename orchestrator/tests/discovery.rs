@@ -7,8 +7,6 @@
 //!
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
-use std::sync::OnceLock;
-
 use orchestrator::diagnose::{
     add_physics, diagnose, effects_from_report, Action, DiagnoseOptions, Diagnosis, EffectKind,
     EffectReport,
@@ -20,17 +18,12 @@ use orchestrator::synth::{
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{hidden_change_record, twin_calibrated_on_default_structure};
+use common::{hidden_change_record, hidden_change_twin, worst, HIDDEN_CHANGE_NOISE_SD};
 
-const NOISE_SD: f64 = 0.003;
+const NOISE_SD: f64 = HIDDEN_CHANGE_NOISE_SD;
 
 fn twin() -> &'static Twin {
-    static TWIN: OnceLock<Twin> = OnceLock::new();
-    TWIN.get_or_init(|| twin_calibrated_on_default_structure(NOISE_SD))
-}
-
-fn worst(x: &[f64; 3]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    hidden_change_twin()
 }
 
 fn run(change: impl FnOnce(&mut Scenario)) -> Diagnosis {

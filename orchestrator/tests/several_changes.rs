@@ -6,8 +6,6 @@
 //!
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
-use std::sync::OnceLock;
-
 use orchestrator::diagnose::{
     diagnose, effects_from_report, Action, DiagnoseOptions, Diagnosis, Kind,
 };
@@ -15,17 +13,12 @@ use orchestrator::synth::{EffectSpec, DEFAULT_STIFFNESS};
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{hidden_change_record, twin_calibrated_on_default_structure};
+use common::{hidden_change_record, hidden_change_twin, worst, HIDDEN_CHANGE_NOISE_SD};
 
-const NOISE_SD: f64 = 0.003;
+const NOISE_SD: f64 = HIDDEN_CHANGE_NOISE_SD;
 
 fn twin() -> &'static Twin {
-    static TWIN: OnceLock<Twin> = OnceLock::new();
-    TWIN.get_or_init(|| twin_calibrated_on_default_structure(NOISE_SD))
-}
-
-fn worst(x: &[f64; 3]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    hidden_change_twin()
 }
 
 fn run(change: impl FnOnce(&mut orchestrator::synth::Scenario)) -> Diagnosis {
@@ -124,6 +117,13 @@ fn a_stiffness_loss_and_a_contact_at_once() {
         k2.relative_change
     );
     assert!(worst(&d.nmse_after) <= worst(&d.nmse_before) / 4.0);
+    // The selection recalibrated first, so `add-physics --diagnosis` refines the physics too.
+    assert_eq!(d.selection[0].added, "recalibration");
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let report = dir.path().join("d.json");
+    std::fs::write(&report, serde_json::to_string(&d).expect("JSON")).expect("write");
+    let (additions, refine) = effects_from_report(&report).expect("effects");
+    assert_eq!((additions.len(), refine), (1, true));
 }
 
 // Friction on floor 1 (0.05 N) and cubic stiffness of storey 3 (8e9 N/m³): round 1 adds cubic@3

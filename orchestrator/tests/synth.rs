@@ -1215,20 +1215,7 @@ fn hysteresis_json_and_flag_agree_and_bad_values_are_refused() {
     let parsed = Scenario::from_json(&t["scenario"], "truth").expect("reads back");
     assert_eq!(parsed.effects, [expected]);
     assert_eq!(parsed.to_json(), t["scenario"]);
-    let replay_scenario = dir.path().join("replay.json");
-    std::fs::write(&replay_scenario, t["scenario"].to_string()).expect("write");
-    let replay = dir.path().join("replay.csv");
-    ok(&twin(&[
-        "synth",
-        "--scenario",
-        &replay_scenario.display().to_string(),
-        "--out",
-        &replay.display().to_string(),
-    ]));
-    assert!(
-        std::fs::read(&replay).expect("replay") == std::fs::read(&csv).expect("csv"),
-        "the truth replays bit for bit"
-    );
+    assert_truth_replays(dir.path(), &t, &csv);
 
     let cases = [
         (
@@ -1260,29 +1247,7 @@ fn hysteresis_json_and_flag_agree_and_bad_values_are_refused() {
             "`effects[0].yield`",
         ),
     ];
-    for (i, (effect, needle)) in cases.iter().enumerate() {
-        let path = dir.path().join(format!("bad{i}.json"));
-        std::fs::write(&path, format!("{{\"effects\": [{effect}]}}")).expect("write");
-        let out = twin(&[
-            "synth",
-            "--scenario",
-            &path.display().to_string(),
-            "--out",
-            &p(dir.path(), "x.csv"),
-        ]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        println!("{effect}: {}", err.trim());
-        assert!(!out.status.success(), "{effect} is refused");
-        assert!(
-            err.contains(&path.display().to_string()),
-            "names the file: {err}"
-        );
-        assert!(
-            err.contains(needle),
-            "{effect}: expected {needle:?} in {err}"
-        );
-        assert!(!err.contains("panicked"), "{err}");
-    }
+    assert_effects_refused(dir.path(), &cases);
     let beta_gamma = dir.path().join("bad2.json");
     let out = twin(&[
         "synth",
@@ -1635,20 +1600,7 @@ fn quadratic_damping_json_and_flag_agree_and_bad_values_are_refused() {
     assert_eq!(t["effects"][0]["parameters"]["coefficient"], 40.0);
     assert_eq!(t["effects"][0]["floors"], serde_json::json!([1, 2]));
     assert_eq!(t["effects"][1]["floors"], serde_json::json!([1]));
-    let replay_scenario = dir.path().join("replay.json");
-    std::fs::write(&replay_scenario, t["scenario"].to_string()).expect("write");
-    let replay = dir.path().join("replay.csv");
-    ok(&twin(&[
-        "synth",
-        "--scenario",
-        &replay_scenario.display().to_string(),
-        "--out",
-        &replay.display().to_string(),
-    ]));
-    assert!(
-        std::fs::read(&replay).expect("replay") == std::fs::read(&csv).expect("csv"),
-        "the truth replays bit for bit"
-    );
+    assert_truth_replays(dir.path(), &t, &csv);
 
     let cases = [
         (
@@ -1684,29 +1636,7 @@ fn quadratic_damping_json_and_flag_agree_and_bad_values_are_refused() {
             "`effects[0].stiffness`",
         ),
     ];
-    for (i, (effect, needle)) in cases.iter().enumerate() {
-        let path = dir.path().join(format!("bad{i}.json"));
-        std::fs::write(&path, format!("{{\"effects\": [{effect}]}}")).expect("write");
-        let out = twin(&[
-            "synth",
-            "--scenario",
-            &path.display().to_string(),
-            "--out",
-            &p(dir.path(), "x.csv"),
-        ]);
-        let err = String::from_utf8_lossy(&out.stderr);
-        println!("{effect}: {}", err.trim());
-        assert!(!out.status.success(), "{effect} is refused");
-        assert!(
-            err.contains(&path.display().to_string()),
-            "names the file: {err}"
-        );
-        assert!(
-            err.contains(needle),
-            "{effect}: expected {needle:?} in {err}"
-        );
-        assert!(!err.contains("panicked"), "{err}");
-    }
+    assert_effects_refused(dir.path(), &cases);
     let flags: [(&[&str], &str); 6] = [
         (
             &["--effect", "quadratic-damping@2:coefficient=-5"],
@@ -1750,4 +1680,50 @@ fn quadratic_damping_json_and_flag_agree_and_bad_values_are_refused() {
         !dir.path().join("x.csv").exists(),
         "nothing is written on error"
     );
+}
+
+/// The truth JSON's scenario, given back to `twin synth`, makes the record `csv` bit for bit.
+fn assert_truth_replays(dir: &Path, t: &serde_json::Value, csv: &Path) {
+    let replay_scenario = dir.join("replay.json");
+    std::fs::write(&replay_scenario, t["scenario"].to_string()).expect("write");
+    let replay = dir.join("replay.csv");
+    ok(&twin(&[
+        "synth",
+        "--scenario",
+        &replay_scenario.display().to_string(),
+        "--out",
+        &replay.display().to_string(),
+    ]));
+    assert!(
+        std::fs::read(&replay).expect("replay") == std::fs::read(csv).expect("csv"),
+        "the truth replays bit for bit"
+    );
+}
+
+/// Each scenario effect of `cases` (JSON) is refused by `twin synth`, naming the file and the
+/// expected phrase, never panicking.
+fn assert_effects_refused(dir: &Path, cases: &[(&str, &str)]) {
+    for (i, (effect, needle)) in cases.iter().enumerate() {
+        let path = dir.join(format!("bad{i}.json"));
+        std::fs::write(&path, format!("{{\"effects\": [{effect}]}}")).expect("write");
+        let out = twin(&[
+            "synth",
+            "--scenario",
+            &path.display().to_string(),
+            "--out",
+            &p(dir, "x.csv"),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        println!("{effect}: {}", err.trim());
+        assert!(!out.status.success(), "{effect} is refused");
+        assert!(
+            err.contains(&path.display().to_string()),
+            "names the file: {err}"
+        );
+        assert!(
+            err.contains(needle),
+            "{effect}: expected {needle:?} in {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
 }

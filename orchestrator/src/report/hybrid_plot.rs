@@ -32,6 +32,24 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A panel's grid and axis labels.
+fn mesh(chart: &mut Chart<'_, '_>, x: &str, y: &str) -> Result<(), String> {
+    chart
+        .configure_mesh()
+        .x_desc(x)
+        .y_desc(y)
+        .label_style((FONT, 11))
+        .light_line_style(BLACK.mix(0.04))
+        .draw()
+        .map_err(text)
+}
+
 /// Fig. 14: the threshold peak force against a_err, the bisection on the test and the linear
 /// assembly's independent value.
 pub fn threshold_svg(curve: &ThresholdCurve) -> Result<String, String> {
@@ -140,14 +158,7 @@ pub fn runs_svg(outcomes: &[RunOutcome], dt: f64) -> Result<String, String> {
                 .y_label_area_size(60)
                 .build_cartesian_2d(0.0..t_end, y.0..y.1)
                 .map_err(text)?;
-            chart
-                .configure_mesh()
-                .x_desc("time (s)")
-                .y_desc("y2 (mm)")
-                .label_style((FONT, 11))
-                .light_line_style(BLACK.mix(0.04))
-                .draw()
-                .map_err(text)?;
+            mesh(&mut chart, "time (s)", "y2 (mm)")?;
             chart
                 .draw_series(LineSeries::new(
                     run.time.iter().zip(&run.y2p).map(|(t, v)| (*t, 1e3 * v)),
@@ -180,14 +191,7 @@ pub fn runs_svg(outcomes: &[RunOutcome], dt: f64) -> Result<String, String> {
                 .y_label_area_size(60)
                 .build_cartesian_2d(0.0..f_max, -80.0..5.0)
                 .map_err(text)?;
-            chart
-                .configure_mesh()
-                .x_desc("frequency (Hz)")
-                .y_desc("power (dB re peak)")
-                .label_style((FONT, 11))
-                .light_line_style(BLACK.mix(0.04))
-                .draw()
-                .map_err(text)?;
+            mesh(&mut chart, "frequency (Hz)", "power (dB re peak)")?;
             chart
                 .draw_series(LineSeries::new(
                     db.into_iter().filter(|(f, _)| *f <= f_max),

@@ -68,3 +68,18 @@ pub fn hidden_change_record(
     change(&mut s);
     synth_record(&s).expect("synth").0.measurement
 }
+
+/// The twin of the hidden-change tests: calibrated on the default structure's change-free
+/// record with 0.003 m/s² of sensor noise, once per test binary.
+pub fn hidden_change_twin() -> &'static orchestrator::twin::Twin {
+    static TWIN: std::sync::OnceLock<orchestrator::twin::Twin> = std::sync::OnceLock::new();
+    TWIN.get_or_init(|| twin_calibrated_on_default_structure(HIDDEN_CHANGE_NOISE_SD))
+}
+
+/// Sensor noise sd (m/s²) of the hidden-change records and their twin.
+pub const HIDDEN_CHANGE_NOISE_SD: f64 = 0.003;
+
+/// The worst floor's value.
+pub fn worst(x: &[f64; 3]) -> f64 {
+    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
