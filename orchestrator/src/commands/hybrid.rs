@@ -13,7 +13,8 @@ use crate::report::hybrid_plot;
 use crate::twin::Twin;
 use crate::workflows::control::design::structure_of;
 use crate::workflows::hybrid::experiment::{
-    read_excitation, runs, threshold_curve, InterfaceNoise, RunSummary, Setup, ThresholdPoint,
+    read_excitation, runs, threshold_curve, Coupling, InterfaceNoise, RunSummary, Setup,
+    ThresholdPoint,
 };
 use crate::workflows::hybrid::{unit_peak, Structure};
 use numerics::actuator::{ActuatorSpec, Compensation};
@@ -74,6 +75,10 @@ pub struct Common {
     /// the numerical substructure.
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     pub energy_factor: f64,
+    /// How the substructures are coupled: auto (one ODE for an actuator without dynamics, as
+    /// the paper's simplified simulation; the stepped loop otherwise), monolithic or stepped.
+    #[arg(long, value_enum, default_value_t = Coupling::Auto)]
+    pub coupling: Coupling,
     /// JSON report.
     #[arg(long)]
     pub report: PathBuf,
@@ -118,6 +123,7 @@ struct Header {
     control_step: f64,
     excitation: String,
     actuator: ActuatorSpec,
+    coupling: Coupling,
 }
 
 fn setup(c: &Common) -> Result<(Setup, Header)> {
@@ -180,18 +186,22 @@ fn setup(c: &Common) -> Result<(Setup, Header)> {
         control_step: dt / f64::from(c.substeps),
         excitation: source,
         actuator: actuator.clone(),
+        coupling: Coupling::Auto,
     };
-    Ok((
-        Setup {
-            structure,
-            unit: unit_peak(&signal)?,
-            dt,
-            substeps: c.substeps,
-            actuator,
-            energy_factor: c.energy_factor,
-        },
-        header,
-    ))
+    let setup = Setup {
+        structure,
+        unit: unit_peak(&signal)?,
+        dt,
+        substeps: c.substeps,
+        actuator,
+        energy_factor: c.energy_factor,
+        coupling: c.coupling,
+    };
+    let header = Header {
+        coupling: setup.resolved()?,
+        ..header
+    };
+    Ok((setup, header))
 }
 
 #[derive(Serialize)]

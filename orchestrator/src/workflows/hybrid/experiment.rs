@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::identify::{identify, ContactLaw};
 use super::spectrum::{harmonics, welch, Harmonics, Spectrum};
-use super::{run, threshold, HybridError, HybridRun, Result, Structure};
+use super::{monolithic, run, threshold, HybridError, HybridRun, Result, Structure};
 
 /// Everything a hybrid experiment is set up with.
 #[derive(Clone, Debug)]
@@ -25,6 +25,20 @@ pub struct Setup {
     /// The actuator (its `amplitude_error` is overridden by each experiment's a_err).
     pub actuator: ActuatorSpec,
     pub energy_factor: f64,
+    pub coupling: Coupling,
+}
+
+/// How the substructures are coupled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Coupling {
+    /// One ODE when the actuator has no dynamics (no delay, lag or compensation: the paper's
+    /// simplified simulation), the stepped loop otherwise.
+    Auto,
+    /// The assembly as one ODE (an actuator without dynamics only).
+    Monolithic,
+    /// The substructures stepped at the control rate with the actuator between, as a real test.
+    Stepped,
 }
 
 impl Setup {
@@ -40,6 +54,48 @@ impl Setup {
             ..self.actuator.clone()
         };
         Actuator::new(spec, self.control_step()).map_err(|e| HybridError::Setup(e.to_string()))
+    }
+
+    /// Whether the actuator only scales (no delay, lag or compensation).
+    fn algebraic(&self) -> bool {
+        self.actuator.delay == 0.0
+            && self.actuator.lag == 0.0
+            && self.actuator.compensation == numerics::actuator::Compensation::None
+    }
+
+    /// The coupling `coupling` resolves to; refuses a one-ODE solve of an actuator with
+    /// dynamics.
+    pub fn resolved(&self) -> Result<Coupling> {
+        match (self.coupling, self.algebraic()) {
+            (Coupling::Auto, true) => Ok(Coupling::Monolithic),
+            (Coupling::Auto, false) => Ok(Coupling::Stepped),
+            (Coupling::Monolithic, false) => Err(HybridError::Setup(
+                "a delay, lag or compensation makes the actuator dynamic: it needs the stepped \
+                 coupling"
+                    .into(),
+            )),
+            (c, _) => Ok(c),
+        }
+    }
+
+    /// One test of `excitation` with amplitude error `a_err`.
+    pub fn simulate(&self, excitation: &[f64], a_err: f64) -> Result<HybridRun> {
+        match self.resolved()? {
+            Coupling::Monolithic => {
+                monolithic::run(&self.structure, excitation, self.dt, self.substeps, a_err)
+            }
+            _ => {
+                let mut act = self.actuator(a_err)?;
+                run(
+                    &self.structure,
+                    excitation,
+                    self.dt,
+                    self.substeps,
+                    |y| act.step(y),
+                    self.energy_factor,
+                )
+            }
+        }
     }
 }
 
@@ -72,28 +128,15 @@ pub fn threshold_curve(setup: &Setup, a_errs: &[f64]) -> Result<ThresholdCurve> 
     for &a in a_errs {
         // Refuse a bad actuator up front (a delay that is no whole number of steps).
         setup.actuator(a)?;
-        let found = threshold(
-            &setup.structure,
-            &setup.unit,
-            setup.dt,
-            setup.substeps,
-            || {
-                let mut act = setup.actuator(a).expect("checked above");
-                move |y: f64| act.step(y)
+        let found = threshold(&setup.unit, |f| setup.simulate(f, a));
+        let open = Setup {
+            structure: Structure {
+                gap: f64::MAX / 4.0,
+                ..setup.structure
             },
-            setup.energy_factor,
-        );
-        let mut open = setup.structure;
-        open.gap = f64::MAX / 4.0;
-        let mut act = setup.actuator(a)?;
-        let linear = run(
-            &open,
-            &setup.unit,
-            setup.dt,
-            setup.substeps,
-            |y| act.step(y),
-            setup.energy_factor,
-        );
+            ..setup.clone()
+        };
+        let linear = open.simulate(&setup.unit, a);
         match (found, linear) {
             (Ok(t), Ok(l)) => points.push(ThresholdPoint {
                 a_err: a,
@@ -182,15 +225,8 @@ pub fn runs(
     .natural_frequencies();
     let mut out = Vec::new();
     for (i, &a) in a_errs.iter().enumerate() {
-        let mut act = setup.actuator(a)?;
-        let result = run(
-            &setup.structure,
-            &excitation,
-            setup.dt,
-            setup.substeps,
-            |y| act.step(y),
-            setup.energy_factor,
-        );
+        setup.actuator(a)?;
+        let result = setup.simulate(&excitation, a);
         let run = match result {
             Ok(r) => r,
             Err(e @ HybridError::Unstable { .. }) => {

@@ -32,6 +32,7 @@ use serde::Serialize;
 
 pub mod experiment;
 pub mod identify;
+pub mod monolithic;
 pub mod spectrum;
 
 /// What can stop a hybrid test.
@@ -363,21 +364,12 @@ pub fn run(
 }
 
 /// The peak excitation force (N) at which the bumper first closes: the excitation `unit`
-/// (scaled to a peak |F| of 1 N) times the peak, bisected on whether the run sees a contact, to
-/// a relative width of `1e-6`. `actuator` makes a fresh actuator for each run.
-pub fn threshold<A: FnMut(f64) -> f64>(
-    s: &Structure,
-    unit: &[f64],
-    dt: f64,
-    substeps: u32,
-    actuator: impl Fn() -> A,
-    energy_factor: f64,
-) -> Result<f64> {
+/// (scaled to a peak |F| of 1 N) times the peak, bisected on whether `simulate` (a fresh test
+/// of the scaled excitation) sees a contact, to a relative width of `1e-6`.
+pub fn threshold(unit: &[f64], simulate: impl Fn(&[f64]) -> Result<HybridRun>) -> Result<f64> {
     let contact_at = |peak: f64| -> Result<bool> {
         let scaled: Vec<f64> = unit.iter().map(|f| f * peak).collect();
-        Ok(!run(s, &scaled, dt, substeps, actuator(), energy_factor)?
-            .contact_times
-            .is_empty())
+        Ok(!simulate(&scaled)?.contact_times.is_empty())
     };
     let mut hi = 1.0;
     while !contact_at(hi)? {
@@ -511,7 +503,7 @@ mod tests {
         let unit = unit_peak(&excitation(512)).expect("unit");
         let dt = 1.0 / 51.2;
         for a_err in [-0.1, 0.0, 0.05] {
-            let found = threshold(&s, &unit, dt, 32, || move |y: f64| (1.0 + a_err) * y, 10.0)
+            let found = threshold(&unit, |f| run(&s, f, dt, 32, |y| (1.0 + a_err) * y, 10.0))
                 .expect("threshold");
             let mut open = s;
             open.gap = 1.0;
