@@ -185,7 +185,7 @@ fn setup(c: &Common) -> Result<(Setup, Header)> {
         contact_stiffness: c.contact_stiffness,
         control_step: dt / f64::from(c.substeps),
         excitation: source,
-        actuator: actuator.clone(),
+        actuator,
         coupling: Coupling::Auto,
     };
     let setup = Setup {

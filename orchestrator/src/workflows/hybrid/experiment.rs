@@ -51,7 +51,7 @@ impl Setup {
     fn actuator(&self, a_err: f64) -> Result<Actuator> {
         let spec = ActuatorSpec {
             amplitude_error: a_err,
-            ..self.actuator.clone()
+            ..self.actuator
         };
         Actuator::new(spec, self.control_step()).map_err(|e| HybridError::Setup(e.to_string()))
     }
