@@ -5,7 +5,9 @@
 //! - `twin`: the twin as an SSP archive around the shear FMU, its measurement records and
 //!   running it on one;
 //! - `evaluation`: statistics and the comparison of a run with a record;
-//! - `workflows`: calibrate, train, learn, diagnose;
+//! - `workflows`: calibrate, train, learn, diagnose (with forward selection and discovery),
+//!   control, the hybrid test;
+//! - `blocks`: zero-time blocks of the master (the LQR, the active-learning supervisor);
 //! - `synth`: the synthetic structure that makes records with known truth;
 //! - `report`: JSON and SVG plots;
 //! - `commands`: the `twin` CLI (clap, anyhow, printing) over all of the above;
