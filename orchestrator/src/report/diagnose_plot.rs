@@ -154,7 +154,11 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             }
         };
         let i = storey - 1;
-        let x: Vec<f64> = s.drift[i][s.first..].to_vec();
+        let axis = s.evidence_axis.as_ref();
+        let x: Vec<f64> = match axis {
+            Some(a) => a.values[s.first..].to_vec(),
+            None => s.drift[i][s.first..].to_vec(),
+        };
         let y: Vec<f64> = s.missing_shear[i][s.first..].to_vec();
         let (xlo, xhi) = range(x.iter().copied());
         let mut ys: Vec<f64> = y.clone();
@@ -162,7 +166,16 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             ys.extend(fe[s.first..].iter().map(|v| -v));
         }
         let (ylo, yhi) = range(ys.into_iter());
-        let (x_desc, caption) = if what == Kind::Friction {
+        let (x_desc, caption) = if let Some(a) = axis {
+            (
+                a.label.clone(),
+                format!(
+                    "evidence: storey {storey} shear the twin misses (Σ mⱼ·residualⱼ above it) \
+                     against the {}",
+                    a.label
+                ),
+            )
+        } else if what == Kind::Friction {
             (
                 format!("velocity of floor {storey} is not drawn; drift of storey {storey} (m)"),
                 format!("evidence: force the twin misses at storey {storey} against its drift"),
@@ -211,14 +224,24 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                     .zip(fe[s.first..].iter().map(|v| -v))
                     .collect();
                 pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                chart
-                    .draw_series(LineSeries::new(pts, EFFECT.stroke_width(3)))
-                    .map_err(|e| err(&e))?
-                    .label(format!(
-                        "fitted {} force (restoring, sign flipped)",
-                        e.name.label
-                    ))
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EFFECT));
+                let label = format!("fitted {} force (restoring, sign flipped)", e.name.label);
+                if axis.is_some_and(|a| !a.curve) {
+                    // A force of both drift and rate is no curve of either: its points.
+                    chart
+                        .draw_series(
+                            pts.into_iter()
+                                .map(|p| Circle::new(p, 2, EFFECT.mix(0.6).filled())),
+                        )
+                        .map_err(|e| err(&e))?
+                        .label(label)
+                        .legend(|(x, y)| Circle::new((x + 10, y), 3, EFFECT.filled()));
+                } else {
+                    chart
+                        .draw_series(LineSeries::new(pts, EFFECT.stroke_width(3)))
+                        .map_err(|e| err(&e))?
+                        .label(label)
+                        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], EFFECT));
+                }
             }
         }
         chart

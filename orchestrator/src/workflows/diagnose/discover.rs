@@ -624,6 +624,60 @@ pub(super) fn missing(
     Ok((report, pass))
 }
 
+/// The discovered terms' storey force along `run` (drift and drift rate of their storey), when
+/// they sit at a storey, and the axis to draw it against: the drift rate when every term is a
+/// function of the rate alone, else the drift (a curve when every term is of the drift alone).
+pub(super) fn storey_force(
+    terms: &[Term],
+    run: &PhysicsRun,
+) -> Option<(Vec<f64>, super::EvidenceAxis)> {
+    let Site::Storey(storey) = terms.first()?.site else {
+        return None;
+    };
+    let s = storey - 1;
+    let rate: Vec<f64> = (0..run.drift[s].len())
+        .map(|k| {
+            if s == 0 {
+                run.velocity[0][k]
+            } else {
+                run.velocity[s][k] - run.velocity[s - 1][k]
+            }
+        })
+        .collect();
+    let force = run.drift[s]
+        .iter()
+        .zip(&rate)
+        .map(|(&x, &v)| terms.iter().map(|t| t.force_at(x, v)).sum())
+        .collect();
+    let of_rate = |f: Function| {
+        matches!(
+            f,
+            Function::V
+                | Function::V2
+                | Function::VAbsV
+                | Function::V3
+                | Function::SignV
+                | Function::TanhV
+        )
+    };
+    let axis = if terms.iter().all(|t| of_rate(t.function)) {
+        super::EvidenceAxis {
+            label: format!("drift rate of storey {storey} (m/s)"),
+            values: rate,
+            curve: true,
+        }
+    } else {
+        super::EvidenceAxis {
+            label: format!("drift of storey {storey} (m)"),
+            values: run.drift[s].clone(),
+            curve: terms
+                .iter()
+                .all(|t| !of_rate(t.function) && t.function != Function::X2V),
+        }
+    };
+    Some((force, axis))
+}
+
 /// `c·v|v| + c·x^3 at storey 2`: a discovered effect's terms in words.
 pub(super) fn describe_terms(e: &EffectReport) -> String {
     let terms: Vec<String> = e

@@ -670,6 +670,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             drift: base_run.drift.clone(),
             missing_shear,
             effect_force: None,
+            evidence_axis: None,
         },
     };
 
@@ -1097,6 +1098,22 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         );
         diagnosis.nmse_after = fitted.nmse_after;
         diagnosis.series.after = fitted.run.acc.clone();
+        // The evidence panel: at a storey, the discovered terms' storey force along the fitted
+        // model's drift or drift rate, beside the shear the linear part still misses.
+        if let Some((force, axis)) = discover::storey_force(terms, &fitted.run) {
+            diagnosis.series.evidence_axis = Some(axis);
+            let s = terms[0].site.at() - 1;
+            diagnosis.series.drift = fitted.run.drift.clone();
+            diagnosis.series.missing_shear[s] = (0..n)
+                .map(|k| {
+                    let still: f64 = (s..3)
+                        .map(|j| mass[j] * (data.acc[j][k] - fitted.run.acc[j][k]))
+                        .sum();
+                    still - force[k]
+                })
+                .collect();
+            diagnosis.series.effect_force = Some(force);
+        }
     } else {
         diagnosis.action = Action::UpdateDataModel;
         let best = order.first().map(|&i| &diagnosis.candidates[i]);

@@ -249,6 +249,18 @@ pub struct Series {
     pub missing_shear: [Vec<f64>; 3],
     /// The winning effect's storey force (N) for its storey, when one won.
     pub effect_force: Option<Vec<f64>>,
+    /// The evidence panel's horizontal axis when it is not the storey's drift (a discovered
+    /// force of the drift rate).
+    pub evidence_axis: Option<EvidenceAxis>,
+}
+
+/// What the evidence panel draws the missing shear against.
+#[derive(Clone, Debug)]
+pub struct EvidenceAxis {
+    pub label: String,
+    pub values: Vec<f64>,
+    /// Whether the fitted force is a curve of it (else it is drawn as points).
+    pub curve: bool,
 }
 
 /// The search for an effect outside the library.
