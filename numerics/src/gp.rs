@@ -21,6 +21,7 @@
 //! Dense linear algebra runs on faer: at N = 1000 its blocked Cholesky and Cholesky-based
 //! inverse were several times faster than nalgebra's (benches/gp.rs measures both).
 
+mod budget;
 mod fit;
 mod kernel;
 mod lbfgs;
@@ -31,6 +32,7 @@ mod tracked;
 
 use serde::{Deserialize, Serialize};
 
+pub use budget::BudgetedGp;
 pub use fit::{Bounds, FitOptions, FitReport, StartOutcome};
 pub use likelihood::{negative_log_marginal_likelihood, nlml_with_gradient, LikelihoodGradient};
 pub use model::{GaussianProcess, PendingAppend, PointPrediction, Predictions, BATCH_THRESHOLD};
