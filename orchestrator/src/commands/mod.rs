@@ -23,6 +23,7 @@ pub mod pack_fmu;
 pub mod run;
 pub mod synth;
 pub mod train;
+pub mod watch;
 
 #[derive(Parser)]
 #[command(
@@ -64,6 +65,10 @@ pub enum Command {
     /// The simulated real-time hybrid test: numerical and physical substructures joined by an
     /// actuator; the excitation at which contact starts, spectra, the contact law learned.
     Hybrid(hybrid::HybridArgs),
+    /// The operational twin on a live stream (standard input or a growing CSV file): the twin
+    /// stepped per sample, rolling NMSE, failing windows online, alerts as JSON lines,
+    /// checkpoints to resume from.
+    Watch(watch::WatchArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -80,6 +85,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Run(args) => run::run(&args),
         Command::Control(args) => control::run(&args),
         Command::Hybrid(args) => hybrid::run(&args),
+        Command::Watch(args) => watch::run(&args),
     }
 }
 

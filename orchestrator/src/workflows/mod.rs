@@ -7,3 +7,4 @@ pub mod diagnose;
 pub mod hybrid;
 pub mod learn;
 pub mod train;
+pub mod watch;

@@ -164,6 +164,19 @@ struct Api {
     get_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
     set_fmu_state: Option<unsafe extern "C" fn(fmi2Component, fmi2FMUstate) -> fmi2Status>,
     free_fmu_state: Option<unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status>,
+    serialized_fmu_state_size:
+        Option<unsafe extern "C" fn(fmi2Component, fmi2FMUstate, *mut usize) -> fmi2Status>,
+    serialize_fmu_state: Option<
+        unsafe extern "C" fn(fmi2Component, fmi2FMUstate, *mut fmi2Byte, usize) -> fmi2Status,
+    >,
+    deserialize_fmu_state: Option<
+        unsafe extern "C" fn(
+            fmi2Component,
+            *const fmi2Byte,
+            usize,
+            *mut fmi2FMUstate,
+        ) -> fmi2Status,
+    >,
     // Keeps the code above mapped; dropped last.
     _library: libloading::Library,
 }
@@ -180,6 +193,16 @@ pub struct Library {
     /// `canInterpolateInputs` of the modelDescription: an FMU may export
     /// fmi2SetRealInputDerivatives and still not support it.
     interpolates: bool,
+    /// `canGetAndSetFMUstate` and `canSerializeFMUstate` of the modelDescription: what the
+    /// state-serialising methods of [`Instance`] check before calling the FMU.
+    state_capabilities: StateCapabilities,
+}
+
+/// What the modelDescription declares about FMU states.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StateCapabilities {
+    pub get_and_set: bool,
+    pub serialize: bool,
 }
 
 impl Library {
@@ -232,6 +255,9 @@ impl Library {
             get_fmu_state: optional!("fmi2GetFMUstate"),
             set_fmu_state: optional!("fmi2SetFMUstate"),
             free_fmu_state: optional!("fmi2FreeFMUstate"),
+            serialized_fmu_state_size: optional!("fmi2SerializedFMUstateSize"),
+            serialize_fmu_state: optional!("fmi2SerializeFMUstate"),
+            deserialize_fmu_state: optional!("fmi2DeSerializeFMUstate"),
             _library: library,
         };
         let resource_uri = file_uri(resources);
@@ -242,7 +268,15 @@ impl Library {
             guid: guid.to_owned(),
             resource_uri,
             interpolates: false,
+            state_capabilities: StateCapabilities::default(),
         })
+    }
+
+    /// Declare what the FMU says about its states (`canGetAndSetFMUstate`,
+    /// `canSerializeFMUstate`).
+    pub fn with_state_capabilities(mut self, capabilities: StateCapabilities) -> Self {
+        self.state_capabilities = capabilities;
+        self
     }
 
     /// Name `fmu` (the archive the library was unpacked from) in every message of its instances.
@@ -320,6 +354,7 @@ impl Library {
         let instance = Instance {
             api: self.api.clone(),
             interpolates: self.interpolates && self.api.set_real_input_derivatives.is_some(),
+            state_capabilities: self.state_capabilities,
             component,
             states: Vec::new(),
             name: instance_name.to_owned(),
@@ -388,6 +423,7 @@ pub struct StateHandle(usize);
 pub struct Instance {
     api: Arc<Api>,
     interpolates: bool,
+    state_capabilities: StateCapabilities,
     component: fmi2Component,
     states: Vec<fmi2FMUstate>,
     name: String,
@@ -747,6 +783,181 @@ impl Instance {
         let status = unsafe { f(self.component, self.states[handle.0]) };
         self.check("fmi2SetFMUstate", status)
     }
+
+    /// Refuse a state call the modelDescription does not declare (`what` names the capability).
+    fn require_state(&self, serialize: bool) -> Result<(), ImportError> {
+        let declared = self.state_capabilities.get_and_set
+            && (!serialize || self.state_capabilities.serialize);
+        if declared {
+            Ok(())
+        } else {
+            Err(ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: if serialize {
+                    "serialisable FMU states (its modelDescription does not declare \
+                     canGetAndSetFMUstate=\"true\" and canSerializeFMUstate=\"true\")"
+                } else {
+                    "FMU states (its modelDescription does not declare \
+                     canGetAndSetFMUstate=\"true\")"
+                },
+            })
+        }
+    }
+
+    /// A free slot in `states` (reused after [`Instance::free_state`]), or a new one.
+    fn state_slot(&mut self) -> usize {
+        match self.states.iter().position(|s| s.is_null()) {
+            Some(i) => i,
+            None => {
+                self.states.push(std::ptr::null_mut());
+                self.states.len() - 1
+            }
+        }
+    }
+
+    fn live_state(&self, handle: StateHandle) -> Result<fmi2FMUstate, ImportError> {
+        match self.states.get(handle.0) {
+            Some(s) if !s.is_null() => Ok(*s),
+            _ => Err(ImportError::Call {
+                instance: self.name.clone(),
+                fmu: self.source.clone(),
+                call: "FMU state",
+                status: "not called: the state handle was freed or is not this instance's".into(),
+                messages: String::new(),
+            }),
+        }
+    }
+
+    /// `fmi2GetFMUstate` into a new state, checked against the modelDescription.
+    pub fn get_fmu_state(&mut self) -> Result<StateHandle, ImportError> {
+        self.require_state(false)?;
+        let f = self
+            .api
+            .get_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2GetFMUstate",
+            })?;
+        let slot = self.state_slot();
+        let mut state: fmi2FMUstate = std::ptr::null_mut();
+        // SAFETY: `state` is a valid slot holding null; the FMU allocates the state.
+        let status = unsafe { f(self.component, &mut state) };
+        self.check("fmi2GetFMUstate", status)?;
+        self.states[slot] = state;
+        Ok(StateHandle(slot))
+    }
+
+    /// `fmi2SetFMUstate`, checked against the modelDescription.
+    pub fn set_fmu_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
+        self.require_state(false)?;
+        let state = self.live_state(handle)?;
+        let f = self
+            .api
+            .set_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2SetFMUstate",
+            })?;
+        // SAFETY: a live state this instance made.
+        let status = unsafe { f(self.component, state) };
+        self.check("fmi2SetFMUstate", status)
+    }
+
+    /// `fmi2FreeFMUstate`; the handle is invalid afterwards (its slot is reused).
+    pub fn free_fmu_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
+        let _ = self.live_state(handle)?;
+        let f = self
+            .api
+            .free_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2FreeFMUstate",
+            })?;
+        // SAFETY: the slot holds a live state of this instance; the FMU frees it and nulls it.
+        let status = unsafe { f(self.component, &mut self.states[handle.0]) };
+        self.states[handle.0] = std::ptr::null_mut();
+        self.check("fmi2FreeFMUstate", status)
+    }
+
+    /// `fmi2SerializedFMUstateSize` then `fmi2SerializeFMUstate`: the state's bytes.
+    pub fn serialize_fmu_state(&mut self, handle: StateHandle) -> Result<Vec<u8>, ImportError> {
+        self.require_state(true)?;
+        let state = self.live_state(handle)?;
+        let unsupported = |what| ImportError::Unsupported {
+            instance: self.name.clone(),
+            what,
+        };
+        let size_of = self
+            .api
+            .serialized_fmu_state_size
+            .ok_or_else(|| unsupported("fmi2SerializedFMUstateSize"))?;
+        let serialize = self
+            .api
+            .serialize_fmu_state
+            .ok_or_else(|| unsupported("fmi2SerializeFMUstate"))?;
+        let mut size = 0usize;
+        // SAFETY: a live state of this instance; `size` is writable.
+        let status = unsafe { size_of(self.component, state, &mut size) };
+        self.check("fmi2SerializedFMUstateSize", status)?;
+        let mut bytes = vec![0u8; size];
+        // SAFETY: `bytes` has `size` writable bytes.
+        let status = unsafe {
+            serialize(
+                self.component,
+                state,
+                bytes.as_mut_ptr() as *mut fmi2Byte,
+                size,
+            )
+        };
+        self.check("fmi2SerializeFMUstate", status)?;
+        Ok(bytes)
+    }
+
+    /// `fmi2DeSerializeFMUstate`: a new state from bytes [`Instance::serialize_fmu_state`] gave
+    /// (of an instance of the same FMU).
+    pub fn deserialize_fmu_state(&mut self, bytes: &[u8]) -> Result<StateHandle, ImportError> {
+        self.require_state(true)?;
+        let f = self
+            .api
+            .deserialize_fmu_state
+            .ok_or_else(|| ImportError::Unsupported {
+                instance: self.name.clone(),
+                what: "fmi2DeSerializeFMUstate",
+            })?;
+        let slot = self.state_slot();
+        let mut state: fmi2FMUstate = std::ptr::null_mut();
+        // SAFETY: `bytes` has bytes.len() readable bytes; `state` is a valid slot.
+        let status = unsafe {
+            f(
+                self.component,
+                bytes.as_ptr() as *const fmi2Byte,
+                bytes.len(),
+                &mut state,
+            )
+        };
+        self.check("fmi2DeSerializeFMUstate", status)?;
+        self.states[slot] = state;
+        Ok(StateHandle(slot))
+    }
+
+    /// The instance's current state as bytes (get, serialise, free).
+    pub fn state_bytes(&mut self) -> Result<Vec<u8>, ImportError> {
+        let handle = self.get_fmu_state()?;
+        let bytes = self.serialize_fmu_state(handle);
+        let freed = self.free_fmu_state(handle);
+        let bytes = bytes?;
+        freed?;
+        Ok(bytes)
+    }
+
+    /// Put the instance in the state `bytes` hold (deserialise, set, free).
+    pub fn restore_state_bytes(&mut self, bytes: &[u8]) -> Result<(), ImportError> {
+        let handle = self.deserialize_fmu_state(bytes)?;
+        let set = self.set_fmu_state(handle);
+        let freed = self.free_fmu_state(handle);
+        set?;
+        freed
+    }
 }
 
 impl Drop for Instance {
@@ -755,7 +966,7 @@ impl Drop for Instance {
             return;
         }
         if let Some(free_state) = self.api.free_fmu_state {
-            for state in &mut self.states {
+            for state in self.states.iter_mut().filter(|s| !s.is_null()) {
                 // SAFETY: each state came from this instance and is freed once.
                 unsafe { free_state(self.component, state) };
             }

@@ -8,7 +8,9 @@ pub mod model_description;
 use std::path::{Path, PathBuf};
 
 pub use archive::{unpack, UnpackLimits, Unpacked};
-pub use library::{file_uri, FmuMessage, Instance, Library, StateHandle, StepEnd};
+pub use library::{
+    file_uri, FmuMessage, Instance, Library, StateCapabilities, StateHandle, StepEnd,
+};
 pub use model_description::{Causality, ModelDescription, ScalarType, ScalarVariable};
 
 #[derive(Debug, thiserror::Error)]
@@ -126,6 +128,10 @@ impl UnpackedFmu {
         )
         .map(|l| {
             l.with_input_interpolation(model_description.can_interpolate_inputs)
+                .with_state_capabilities(StateCapabilities {
+                    get_and_set: model_description.can_get_and_set_fmu_state,
+                    serialize: model_description.can_serialize_fmu_state,
+                })
                 .with_source(path)
         })
         .map_err(|e| match e {

@@ -1,0 +1,145 @@
+//! `twin watch`: the operational twin on a live stream of CSV lines (standard input or a file
+//! that grows); alerts as JSON lines, a checkpoint to resume from.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{bail, Result};
+
+use crate::twin::Twin;
+use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions};
+
+#[derive(clap::Args)]
+pub struct WatchArgs {
+    /// The twin (.ssp), calibrated (its noise variances make the ±3σ band).
+    #[arg(long)]
+    pub twin: Option<PathBuf>,
+    /// `-`: CSV lines on standard input (header `time,force,acc1,acc2,acc3` first), read to the
+    /// end; else a CSV file (see --follow).
+    #[arg(long)]
+    pub source: String,
+    /// Keep reading the file as lines are appended (polled every 100 ms) until --idle seconds
+    /// pass without a new line; without it the file is read to its end.
+    #[arg(long)]
+    pub follow: bool,
+    /// With --follow: seconds without a new line that end the stream.
+    #[arg(long, default_value_t = 10.0)]
+    pub idle: f64,
+    /// Alerts, one JSON object a line (kinds failing, recovered, bad_sample, gap, end), each
+    /// flushed as it is written.
+    #[arg(long)]
+    pub alerts: PathBuf,
+    /// Checkpoint file (JSON): saved every --checkpoint-every samples and at the end; when it
+    /// exists at the start, the watcher resumes from it, skipping the samples it consumed.
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    #[arg(long, default_value_t = 512)]
+    pub checkpoint_every: u64,
+    /// Seconds of the rolling NMSE.
+    #[arg(long, default_value_t = 2.0)]
+    pub window: f64,
+    /// Practical significance, NMSE % (as `twin compare`'s); default: 2 × the twin's worst
+    /// validation NMSE, else 0.5 %.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Seconds after the stream's start (and after each gap) left out of the comparison.
+    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    pub transient: f64,
+    /// Sampling rate (Hz); default: from the first two samples' times.
+    #[arg(long)]
+    pub rate: Option<f64>,
+}
+
+pub fn run(args: &WatchArgs) -> Result<()> {
+    if let Some(t) = args.tolerance {
+        if !(t >= 0.0 && t.is_finite()) {
+            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
+        }
+    }
+    if !(args.idle >= 0.0 && args.idle.is_finite()) {
+        bail!(
+            "--idle must be a non-negative number of seconds, was {}",
+            args.idle
+        );
+    }
+    let source = if args.source == "-" {
+        if args.follow {
+            bail!("--follow is for a file source; standard input is read to its end");
+        }
+        StreamSource::Stdin
+    } else {
+        StreamSource::File {
+            path: PathBuf::from(&args.source),
+            follow: args.follow,
+            idle: Duration::from_secs_f64(args.idle),
+        }
+    };
+    let twin = Twin::load(args.twin.as_deref())?;
+    let options = WatchOptions {
+        source,
+        alerts: args.alerts.clone(),
+        checkpoint: args.checkpoint.clone(),
+        checkpoint_every: args.checkpoint_every,
+        window: args.window,
+        tolerance: args.tolerance,
+        transient: args.transient,
+        rate: args.rate,
+    };
+    let spinner = std::io::stderr().is_terminal().then(|| {
+        let s = indicatif::ProgressBar::new_spinner();
+        s.enable_steady_tick(Duration::from_millis(120));
+        s
+    });
+    let summary = watch(&twin, &options, |status: &Status| {
+        if let Some(s) = &spinner {
+            let nmse = status.rolling_nmse.map(|v| {
+                if v.is_finite() {
+                    format!("{v:.2}")
+                } else {
+                    "-".into()
+                }
+            });
+            s.set_message(format!(
+                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}",
+                status.samples,
+                status.time,
+                status.samples_per_second,
+                nmse.join(" / ")
+            ));
+        }
+    })?;
+    if let Some(s) = spinner {
+        s.finish_and_clear();
+    }
+    let nmse = summary.nmse.map(|v| {
+        if v.is_finite() {
+            format!("{v:.3}")
+        } else {
+            "-".into()
+        }
+    });
+    println!(
+        "watched {} samples ({} this run): {} bad lines, {} gaps ({} samples missing), {} failing windows",
+        summary.samples,
+        summary.samples_this_run,
+        summary.bad_lines,
+        summary.gaps,
+        summary.missing_samples,
+        summary.failing_windows
+    );
+    println!(
+        "NMSE % over the stream (after the transient): {}; tolerance {:.3} %",
+        nmse.join(" / "),
+        summary.tolerance
+    );
+    println!(
+        "{:.0} samples/s ({:.0}× real time); per-sample latency median {:.1} µs, p99 {:.1} µs",
+        summary.samples_per_second,
+        summary.real_time_factor,
+        summary.latency_median_us,
+        summary.latency_p99_us
+    );
+    println!("alerts: {}", args.alerts.display());
+    Ok(())
+}

@@ -1,0 +1,742 @@
+//! `twin watch`: the operational twin on a live stream. Samples arrive as CSV lines (standard
+//! input, or a file that grows); per sample the twin's FMUs step once (their state carried from
+//! sample to sample), the prediction is compared with the measured accelerations (a rolling
+//! NMSE per floor, the ±3σ band of the twin's noise variances, failing windows found online by
+//! `twin compare`'s rule), and alerts go out as JSON lines, each flushed. A checkpoint (stream
+//! position, comparison state, counters, the FMUs' serialised states) lets a restarted watcher
+//! resume exactly where the last one saved.
+
+pub mod online;
+pub mod stepper;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+
+use crate::cosim::import::ImportError;
+use crate::evaluation::compare::CompareOptions;
+use crate::fsutil::{write_text_atomically, WriteError};
+use crate::twin::run::Tolerance;
+use crate::twin::{Twin, TwinError};
+use online::{Detector, Event, Options};
+use stepper::{NodeState, Stepper};
+
+#[derive(Debug, thiserror::Error)]
+pub enum WatchError {
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    #[error(transparent)]
+    Import(#[from] ImportError),
+    #[error("{what}")]
+    Io {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the stream's header: {0}")]
+    Header(String),
+    #[error(
+        "{0}: the twin has no noise variances for the ±3σ band; calibrate it first (twin calibrate)"
+    )]
+    NoNoise(String),
+    #[error("checkpoint {path}: {message}")]
+    BadCheckpoint { path: PathBuf, message: String },
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    #[error("the twin's FMUs were used before they were started")]
+    NotStarted,
+    #[error("{0}")]
+    Options(String),
+}
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> WatchError {
+    let what = what.into();
+    move |source| WatchError::Io { what, source }
+}
+
+/// Where the samples come from.
+#[derive(Debug, Clone)]
+pub enum StreamSource {
+    /// Standard input, read to its end.
+    Stdin,
+    /// A CSV file; with `follow`, read as it grows (polled every 100 ms) until `idle` passes
+    /// without a new line.
+    File {
+        path: PathBuf,
+        follow: bool,
+        idle: Duration,
+    },
+}
+
+#[derive(Debug, Clone)]
+pub struct WatchOptions {
+    pub source: StreamSource,
+    pub alerts: PathBuf,
+    pub checkpoint: Option<PathBuf>,
+    pub checkpoint_every: u64,
+    /// Rolling NMSE window, s.
+    pub window: f64,
+    /// NMSE %; None: the twin's default ([`Tolerance::resolve`]).
+    pub tolerance: Option<f64>,
+    pub transient: f64,
+    /// Sampling rate, Hz; None: from the first two samples.
+    pub rate: Option<f64>,
+}
+
+/// What the progress display shows.
+#[derive(Debug, Clone)]
+pub struct Status {
+    pub samples: u64,
+    pub time: f64,
+    pub samples_per_second: f64,
+    pub rolling_nmse: [f64; 3],
+    pub open_window: bool,
+}
+
+/// The `end` alert's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub samples: u64,
+    pub samples_this_run: u64,
+    pub bad_lines: u64,
+    pub gaps: u64,
+    pub missing_samples: u64,
+    pub alerts: BTreeMap<String, u64>,
+    pub failing_windows: u64,
+    pub nmse: [f64; 3],
+    pub samples_per_second: f64,
+    pub real_time_factor: f64,
+    pub latency_median_us: f64,
+    pub latency_p99_us: f64,
+    pub tolerance: f64,
+}
+
+/// A checkpoint's format version.
+const CHECKPOINT_VERSION: u32 = 1;
+/// A time step above this × the nominal one is a gap.
+pub const GAP_FACTOR: f64 = 1.5;
+const POLL: Duration = Duration::from_millis(100);
+
+/// Everything a restarted watcher needs to go on exactly.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct State {
+    version: u32,
+    options: Options,
+    /// Nominal sampling interval, s (None before the second sample).
+    dt: Option<f64>,
+    /// Data lines read (after the header), good or bad.
+    lines: u64,
+    samples: u64,
+    last_time: Option<f64>,
+    /// The current segment's first time and its samples so far (its FMU clock).
+    segment_start: Option<f64>,
+    segment_count: u64,
+    /// The stream's first sample, held until the second gives the sampling interval.
+    first: Option<(f64, [f64; 3], [f64; 3])>,
+    detector: Option<Detector>,
+    bad_lines: u64,
+    gaps: u64,
+    missing_samples: u64,
+    /// Alerts raised so far (their sequence numbers run on from here), by kind.
+    seq: u64,
+    alerts: BTreeMap<String, u64>,
+    fmu: Vec<NodeState>,
+    fmu_last: Option<(f64, f64)>,
+}
+
+/// Lines of the stream, a partial last line of a growing file held until it is complete.
+struct LineReader {
+    reader: Box<dyn BufRead>,
+    follow: Option<Duration>,
+    partial: String,
+}
+
+impl LineReader {
+    fn open(source: &StreamSource) -> Result<Self, WatchError> {
+        Ok(match source {
+            StreamSource::Stdin => LineReader {
+                reader: Box::new(BufReader::new(std::io::stdin())),
+                follow: None,
+                partial: String::new(),
+            },
+            StreamSource::File { path, follow, idle } => LineReader {
+                reader: Box::new(BufReader::new(
+                    File::open(path).map_err(io(format!("cannot open {}", path.display())))?,
+                )),
+                follow: follow.then_some(*idle),
+                partial: String::new(),
+            },
+        })
+    }
+
+    /// The next line without its line break; None at the end.
+    fn next(&mut self) -> Result<Option<String>, WatchError> {
+        let mut idle_since = Instant::now();
+        loop {
+            let n = self
+                .reader
+                .read_line(&mut self.partial)
+                .map_err(io("cannot read the stream"))?;
+            if self.partial.ends_with('\n') {
+                let line = std::mem::take(&mut self.partial);
+                return Ok(Some(line.trim_end_matches(['\n', '\r']).to_owned()));
+            }
+            if n > 0 {
+                idle_since = Instant::now();
+            }
+            match self.follow {
+                Some(idle) if idle_since.elapsed() < idle => std::thread::sleep(POLL),
+                _ => {
+                    // The end: a last line without a line break still counts.
+                    return Ok((!self.partial.is_empty()).then(|| {
+                        std::mem::take(&mut self.partial)
+                            .trim_end_matches('\r')
+                            .to_owned()
+                    }));
+                }
+            }
+        }
+    }
+}
+
+/// Column positions of the stream's header.
+struct Header {
+    width: usize,
+    time: usize,
+    force: usize,
+    acc: [usize; 3],
+}
+
+impl Header {
+    fn parse(line: &str) -> Result<Self, WatchError> {
+        let names: Vec<&str> = line.split(',').map(str::trim).collect();
+        let at = |name: &str| {
+            names.iter().position(|n| *n == name).ok_or_else(|| {
+                WatchError::Header(format!(
+                    "'{line}' has no column '{name}' (it must have time,force,acc1,acc2,acc3)"
+                ))
+            })
+        };
+        Ok(Header {
+            width: names.len(),
+            time: at("time")?,
+            force: at("force")?,
+            acc: [at("acc1")?, at("acc2")?, at("acc3")?],
+        })
+    }
+
+    /// (time, force, accelerations), or why the line is not a sample.
+    fn sample(&self, line: &str) -> Result<(f64, f64, [f64; 3]), String> {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != self.width {
+            return Err(format!(
+                "{} fields, the header has {}",
+                fields.len(),
+                self.width
+            ));
+        }
+        let value = |i: usize, name: &str| -> Result<f64, String> {
+            match fields[i].parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                Ok(v) => Err(format!("'{name}' is {v}; only finite numbers are accepted")),
+                Err(_) => Err(format!("'{name}' is not a number: '{}'", fields[i])),
+            }
+        };
+        Ok((
+            value(self.time, "time")?,
+            value(self.force, "force")?,
+            [
+                value(self.acc[0], "acc1")?,
+                value(self.acc[1], "acc2")?,
+                value(self.acc[2], "acc3")?,
+            ],
+        ))
+    }
+}
+
+/// The sampling interval from one step of printed times: the coarsest round rate (1, 0.1,
+/// 0.01 or 0.001 Hz) whose interval is within the times' 1 µs printing of it, else the step.
+pub fn nominal_step(step: f64) -> f64 {
+    for resolution in [1.0, 0.1, 0.01, 0.001] {
+        let rate = (1.0 / step / resolution).round() * resolution;
+        if rate > 0.0 && (1.0 / rate - step).abs() <= 2e-6 {
+            return 1.0 / rate;
+        }
+    }
+    step
+}
+
+/// Per-sample processing times in logarithmic bins (5 % wide, from 10 ns): constant memory.
+struct Latency {
+    bins: Vec<u64>,
+    n: u64,
+}
+
+const LATENCY_BASE: f64 = 1e-8;
+const LATENCY_RATIO: f64 = 1.05;
+
+impl Latency {
+    fn new() -> Self {
+        Latency {
+            bins: vec![0; 520],
+            n: 0,
+        }
+    }
+    fn add(&mut self, seconds: f64) {
+        let i = ((seconds.max(LATENCY_BASE) / LATENCY_BASE).ln() / LATENCY_RATIO.ln()) as usize;
+        let i = i.min(self.bins.len() - 1);
+        self.bins[i] += 1;
+        self.n += 1;
+    }
+    /// The `q` quantile (s): the upper edge of its bin; NaN without samples.
+    fn quantile(&self, q: f64) -> f64 {
+        if self.n == 0 {
+            return f64::NAN;
+        }
+        let target = (q * self.n as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (i, &c) in self.bins.iter().enumerate() {
+            seen += c;
+            if seen >= target {
+                return LATENCY_BASE * LATENCY_RATIO.powi(i as i32 + 1);
+            }
+        }
+        f64::NAN
+    }
+}
+
+/// The alerts file: one JSON object a line, each written and flushed at once. On a resumed
+/// run, alerts the file already holds (those raised after the checkpoint by the run that
+/// stopped, raised again now by the same samples) are not written twice.
+struct Alerts {
+    file: File,
+    /// Alerts with a sequence number up to this are in the file already.
+    written: u64,
+}
+
+impl Alerts {
+    fn open(path: &Path, resuming: bool) -> Result<Self, WatchError> {
+        let what = || format!("cannot write the alerts {}", path.display());
+        if !resuming {
+            let file = File::create(path).map_err(io(what()))?;
+            return Ok(Alerts { file, written: 0 });
+        }
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .read(true)
+            .append(true)
+            .open(path)
+            .map_err(io(what()))?;
+        let mut text = String::new();
+        file.read_to_string(&mut text).map_err(io(what()))?;
+        // A line cut short by a killed writer is dropped.
+        let complete = text.rfind('\n').map_or(0, |i| i + 1);
+        if complete < text.len() {
+            file.set_len(complete as u64).map_err(io(what()))?;
+            file.seek(std::io::SeekFrom::End(0)).map_err(io(what()))?;
+        }
+        let written = text[..complete]
+            .lines()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .filter_map(|v| v.get("seq").and_then(Value::as_u64))
+            .max()
+            .unwrap_or(0);
+        Ok(Alerts { file, written })
+    }
+
+    fn write(&mut self, alert: &Value) -> Result<(), WatchError> {
+        let seq = alert.get("seq").and_then(Value::as_u64).unwrap_or(0);
+        if seq <= self.written && seq != 0 {
+            return Ok(());
+        }
+        let mut line = alert.to_string();
+        line.push('\n');
+        self.file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.flush())
+            .map_err(io("cannot write an alert"))?;
+        self.written = seq;
+        Ok(())
+    }
+}
+
+/// NaN as JSON null.
+fn floats(x: [f64; 3]) -> Value {
+    json!(x.map(|v| if v.is_finite() { Some(v) } else { None }))
+}
+
+struct Watcher<'a> {
+    state: State,
+    stepper: Stepper,
+    alerts: Alerts,
+    noise_variance: [f64; 3],
+    options: &'a WatchOptions,
+}
+
+impl Watcher<'_> {
+    fn alert(&mut self, time: Option<f64>, kind: &str, mut body: Value) -> Result<(), WatchError> {
+        self.state.seq += 1;
+        *self.state.alerts.entry(kind.to_owned()).or_default() += 1;
+        if let Value::Object(map) = &mut body {
+            map.insert("seq".into(), json!(self.state.seq));
+            map.insert("time".into(), json!(time));
+            map.insert("kind".into(), json!(kind));
+        }
+        self.alerts.write(&body)
+    }
+
+    fn events(&mut self, time: f64, events: Vec<Event>) -> Result<(), WatchError> {
+        for event in events {
+            match event {
+                Event::Opened {
+                    start,
+                    floors,
+                    nmse,
+                } => {
+                    let rolling = self
+                        .state
+                        .detector
+                        .as_ref()
+                        .map_or([f64::NAN; 3], Detector::rolling_nmse);
+                    self.alert(
+                        Some(time),
+                        "failing",
+                        json!({"start": start, "floors": floors, "nmse": floats(nmse),
+                               "rolling_nmse": floats(rolling)}),
+                    )?;
+                }
+                Event::Closed {
+                    window,
+                    failing,
+                    was_opened,
+                } => {
+                    if failing && !was_opened {
+                        self.alert(
+                            Some(time),
+                            "failing",
+                            json!({"start": window.start, "floors": window.floors,
+                                   "nmse": floats(window.nmse)}),
+                        )?;
+                    }
+                    if failing || was_opened {
+                        self.alert(
+                            Some(time),
+                            "recovered",
+                            json!({"start": window.start, "end": window.end,
+                                   "floors": window.floors, "nmse": floats(window.nmse),
+                                   "withdrawn": !failing}),
+                        )?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn save(&mut self) -> Result<(), WatchError> {
+        let Some(path) = &self.options.checkpoint else {
+            return Ok(());
+        };
+        if self.state.segment_start.is_some() {
+            self.state.fmu = self.stepper.save()?;
+            self.state.fmu_last = self.stepper.last();
+        }
+        let text = serde_json::to_string(&self.state)
+            .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+        write_text_atomically(path, &text)?;
+        Ok(())
+    }
+
+    /// One good sample.
+    fn sample(&mut self, time: f64, force: f64, measured: [f64; 3]) -> Result<(), WatchError> {
+        if let (None, Some(last)) = (self.state.dt, self.state.last_time) {
+            // The second sample gives the interval (unless --rate did).
+            let dt = self
+                .options
+                .rate
+                .map_or_else(|| nominal_step(time - last), |r| 1.0 / r);
+            self.state.dt = Some(dt);
+        }
+        if let (Some(last), Some(dt)) = (self.state.last_time, self.state.dt) {
+            let step = time - last;
+            if step > GAP_FACTOR * dt {
+                let missing = ((step / dt).round() as u64).saturating_sub(1);
+                if let Some(d) = &mut self.state.detector {
+                    let events = d.finish_segment();
+                    self.events(last, events)?;
+                }
+                self.state.gaps += 1;
+                self.state.missing_samples += missing;
+                self.alert(
+                    Some(time),
+                    "gap",
+                    json!({"after": last, "missing": missing,
+                           "step": step, "nominal_step": dt}),
+                )?;
+                // Re-synchronise: the twin at rest from here, the comparison's transient anew.
+                self.state.segment_start = None;
+                self.state.first = None;
+            }
+        }
+        if self.state.segment_start.is_none() {
+            self.stepper.start(time)?;
+            self.state.segment_start = Some(time);
+            self.state.segment_count = 0;
+        }
+        let start = self.state.segment_start.unwrap_or(time);
+        let grid = match self.state.dt {
+            Some(dt) => start + self.state.segment_count as f64 * dt,
+            None => time,
+        };
+        let predicted = self.stepper.advance(grid, force)?;
+        self.state.segment_count += 1;
+        if self.state.dt.is_none() {
+            // The stream's first sample waits for the second to give the interval.
+            self.state.first = Some((time, measured, predicted));
+            self.state.samples += 1;
+            self.state.last_time = Some(time);
+            return Ok(());
+        }
+        let dt = self.state.dt.unwrap_or(1.0);
+        let mut events = Vec::new();
+        let detector = self
+            .state
+            .detector
+            .get_or_insert_with(|| Detector::new(self.state.options, self.noise_variance, dt));
+        if let Some((t0, y0, p0)) = self.state.first.take() {
+            events.extend(detector.push(t0, y0, p0));
+        }
+        events.extend(detector.push(time, measured, predicted));
+        self.state.samples += 1;
+        self.state.last_time = Some(time);
+        self.events(time, events)
+    }
+}
+
+/// Watch the stream `options.source` with `twin`, alerts to `options.alerts`; `progress` gets
+/// a status now and then. Returns the `end` alert's summary.
+pub fn watch(
+    twin: &Twin,
+    options: &WatchOptions,
+    mut progress: impl FnMut(&Status),
+) -> Result<Summary, WatchError> {
+    let noise_variance = twin
+        .noise_variance
+        .ok_or_else(|| WatchError::NoNoise(twin.describe()))?;
+    if !(options.window > 0.0 && options.window.is_finite()) {
+        return Err(WatchError::Options(format!(
+            "--window must be a positive number of seconds, was {}",
+            options.window
+        )));
+    }
+    if options.checkpoint_every == 0 {
+        return Err(WatchError::Options(
+            "--checkpoint-every must be at least 1".into(),
+        ));
+    }
+    if let Some(r) = options.rate {
+        if !(r > 0.0 && r.is_finite()) {
+            return Err(WatchError::Options(format!(
+                "--rate must be positive, was {r}"
+            )));
+        }
+    }
+    let tolerance = Tolerance::resolve(twin, options.tolerance);
+    let detector_options = Options::new(
+        CompareOptions {
+            transient: options.transient,
+            tolerance: tolerance.value,
+            ..CompareOptions::default()
+        },
+        options.window,
+    );
+    let mut stepper = Stepper::new(twin)?;
+    let saved: Option<State> = match &options.checkpoint {
+        Some(path) if path.exists() => {
+            let bad = |message: String| WatchError::BadCheckpoint {
+                path: path.clone(),
+                message,
+            };
+            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+            let state: State = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+            if state.version != CHECKPOINT_VERSION {
+                return Err(bad(format!(
+                    "format version {}, this twin writes {CHECKPOINT_VERSION}",
+                    state.version
+                )));
+            }
+            if state.options != detector_options {
+                return Err(bad(format!(
+                    "made with other comparison options ({:?}) than these ({:?})",
+                    state.options, detector_options
+                )));
+            }
+            Some(state)
+        }
+        _ => None,
+    };
+    let resuming = saved.is_some();
+    let state = match saved {
+        Some(state) => {
+            if let Some(start) = state.segment_start {
+                stepper.start(start)?;
+                stepper.restore(&state.fmu, state.fmu_last)?;
+            }
+            state
+        }
+        None => State {
+            version: CHECKPOINT_VERSION,
+            options: detector_options,
+            dt: None,
+            lines: 0,
+            samples: 0,
+            last_time: None,
+            segment_start: None,
+            segment_count: 0,
+            first: None,
+            detector: None,
+            bad_lines: 0,
+            gaps: 0,
+            missing_samples: 0,
+            seq: 0,
+            alerts: BTreeMap::new(),
+            fmu: Vec::new(),
+            fmu_last: None,
+        },
+    };
+    let alerts = Alerts::open(&options.alerts, resuming)?;
+    let mut w = Watcher {
+        state,
+        stepper,
+        alerts,
+        noise_variance,
+        options,
+    };
+    let mut reader = LineReader::open(&options.source)?;
+    let header = loop {
+        match reader.next()? {
+            None => return Err(WatchError::Header("the stream is empty".into())),
+            Some(line) if line.trim().is_empty() => continue,
+            Some(line) => break Header::parse(&line)?,
+        }
+    };
+    // Lines and samples the checkpoint has consumed are skipped.
+    let skip_lines = w.state.lines;
+    let skip_until = w.state.last_time;
+    let mut line_number: u64 = 0;
+    let mut latency = Latency::new();
+    let started = Instant::now();
+    let mut this_run: u64 = 0;
+    let mut since_save: u64 = 0;
+    let mut last_status = Instant::now();
+    while let Some(line) = reader.next()? {
+        line_number += 1;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let began = Instant::now();
+        let sample = header.sample(&line);
+        if line_number <= skip_lines {
+            continue;
+        }
+        if let (Ok((t, ..)), Some(until)) = (&sample, skip_until) {
+            if this_run == 0 && *t <= until {
+                w.state.lines = line_number;
+                continue;
+            }
+        }
+        w.state.lines = line_number;
+        let sample = sample.and_then(|s| match w.state.last_time {
+            Some(last) if s.0 <= last => {
+                Err(format!("time {} does not increase (previous {last})", s.0))
+            }
+            _ => Ok(s),
+        });
+        match sample {
+            Err(reason) => {
+                w.state.bad_lines += 1;
+                let time = w.state.last_time;
+                // Line numbers count the header as line 1.
+                w.alert(
+                    time,
+                    "bad_sample",
+                    json!({"line": line_number + 1, "reason": reason}),
+                )?;
+            }
+            Ok((time, force, measured)) => {
+                w.sample(time, force, measured)?;
+                this_run += 1;
+                latency.add(began.elapsed().as_secs_f64());
+                since_save += 1;
+                if since_save >= options.checkpoint_every {
+                    since_save = 0;
+                    w.save()?;
+                }
+                if last_status.elapsed() > Duration::from_millis(200) {
+                    last_status = Instant::now();
+                    progress(&status(&w, this_run, started));
+                }
+            }
+        }
+    }
+    // Saved before the stream's end is judged: a watcher restarted on a source that grew goes
+    // on from here.
+    w.save()?;
+    let elapsed = started.elapsed().as_secs_f64();
+    let last = w.state.last_time;
+    if let Some(d) = &mut w.state.detector {
+        let events = d.finish_segment();
+        w.events(last.unwrap_or(0.0), events)?;
+    }
+    progress(&status(&w, this_run, started));
+    let rate = this_run as f64 / elapsed.max(1e-9);
+    let real_time = w.state.dt.map_or(f64::NAN, |dt| rate * dt);
+    let summary = Summary {
+        samples: w.state.samples,
+        samples_this_run: this_run,
+        bad_lines: w.state.bad_lines,
+        gaps: w.state.gaps,
+        missing_samples: w.state.missing_samples,
+        alerts: w.state.alerts.clone(),
+        failing_windows: w.state.detector.as_ref().map_or(0, |d| d.failing_windows),
+        nmse: w
+            .state
+            .detector
+            .as_ref()
+            .map_or([f64::NAN; 3], |d| d.overall.nmse()),
+        samples_per_second: rate,
+        real_time_factor: real_time,
+        latency_median_us: 1e6 * latency.quantile(0.5),
+        latency_p99_us: 1e6 * latency.quantile(0.99),
+        tolerance: tolerance.value,
+    };
+    let mut body =
+        serde_json::to_value(&summary).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+    if let Value::Object(map) = &mut body {
+        map.insert("nmse".into(), floats(summary.nmse));
+        map.insert("tolerance_source".into(), json!(tolerance.source));
+    }
+    w.alert(last, "end", body)?;
+    Ok(summary)
+}
+
+fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
+    Status {
+        samples: w.state.samples,
+        time: w.state.last_time.unwrap_or(0.0),
+        samples_per_second: this_run as f64 / started.elapsed().as_secs_f64().max(1e-9),
+        rolling_nmse: w
+            .state
+            .detector
+            .as_ref()
+            .map_or([f64::NAN; 3], Detector::rolling_nmse),
+        open_window: false,
+    }
+}
