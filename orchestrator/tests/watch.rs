@@ -1,0 +1,361 @@
+//! `twin watch` on streams: standard input and a file give the same alerts; the failing windows
+//! found online are `twin compare`'s on the whole record, to the sample; a malformed line and a
+//! gap are reported and the stream goes on; a watcher killed mid-stream and restarted on its
+//! checkpoint gives, with the first run, the alerts and NMSE of one uninterrupted run.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use orchestrator::synth::{csv_text, EffectSpec};
+use serde_json::Value;
+
+mod common;
+use common::{fmu_dir, hidden_change_record, hidden_change_twin, HIDDEN_CHANGE_NOISE_SD};
+
+/// The hidden-change twin without its parameter covariance, so `twin compare`'s band is the
+/// noise band `twin watch` uses; written once per test binary.
+fn twin_path() -> &'static Path {
+    static PATH: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    &PATH
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().expect("tempdir");
+            let mut twin = hidden_change_twin().duplicate();
+            twin.parameter_covariance = None;
+            let path = dir.path().join("twin.ssp");
+            twin.write(&path).expect("write the twin");
+            (dir, path)
+        })
+        .1
+}
+
+/// A 20 s record with contact between floors 2 and 3 (the force ×3 in 12–17 s), as CSV text.
+fn contact_record() -> String {
+    static TEXT: OnceLock<String> = OnceLock::new();
+    TEXT.get_or_init(|| {
+        let m = hidden_change_record(HIDDEN_CHANGE_NOISE_SD, |s| {
+            s.effects.push(EffectSpec::Contact {
+                lower: 2,
+                gap: 5e-4,
+                stiffness: 9000.0,
+                side: 0,
+            })
+        });
+        csv_text(&m)
+    })
+    .clone()
+}
+
+fn twin_cmd() -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
+    cmd.env("TWIN_FMU_DIR", fmu_dir());
+    cmd
+}
+
+fn read_alerts(path: &Path) -> Vec<Value> {
+    std::fs::read_to_string(path)
+        .expect("alerts")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("an alert is JSON"))
+        .collect()
+}
+
+/// `twin watch` on `source` (a path, or `-` with `stdin` piped in); its alerts.
+fn watch(source: &str, stdin: Option<&str>, alerts: &Path, extra: &[&str]) -> Vec<Value> {
+    let mut cmd = twin_cmd();
+    cmd.args(["watch", "--twin"])
+        .arg(twin_path())
+        .args(["--source", source, "--alerts"])
+        .arg(alerts)
+        .args(extra)
+        .stdin(if stdin.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut child = cmd.spawn().expect("spawn twin watch");
+    if let Some(text) = stdin {
+        let mut pipe = child.stdin.take().expect("stdin");
+        pipe.write_all(text.as_bytes()).expect("write stdin");
+    }
+    let out = child.wait_with_output().expect("twin watch");
+    assert!(
+        out.status.success(),
+        "twin watch failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    read_alerts(alerts)
+}
+
+/// Alerts without the figures that depend on the machine (speed, latency, this run's count).
+fn comparable(alerts: &[Value]) -> Vec<Value> {
+    alerts
+        .iter()
+        .map(|a| {
+            let mut a = a.clone();
+            if let Value::Object(m) = &mut a {
+                for key in [
+                    "samples_per_second",
+                    "real_time_factor",
+                    "latency_median_us",
+                    "latency_p99_us",
+                    "samples_this_run",
+                ] {
+                    m.remove(key);
+                }
+            }
+            a
+        })
+        .collect()
+}
+
+fn of_kind<'a>(alerts: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    alerts.iter().filter(|a| a["kind"] == kind).collect()
+}
+
+#[test]
+fn standard_input_and_a_file_give_the_same_alerts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("record.csv");
+    let text = contact_record();
+    std::fs::write(&csv, &text).expect("write");
+    let from_file = watch(
+        csv.to_str().expect("utf-8"),
+        None,
+        &dir.path().join("a.jsonl"),
+        &[],
+    );
+    let from_stdin = watch("-", Some(&text), &dir.path().join("b.jsonl"), &[]);
+    assert_eq!(comparable(&from_file), comparable(&from_stdin));
+    let end = from_file.last().expect("an end alert");
+    assert_eq!(end["kind"], "end");
+    assert_eq!(end["samples"], 1024);
+    assert!(end["samples_per_second"].as_f64().expect("a rate") > 0.0);
+    assert!(
+        end["latency_p99_us"].as_f64().expect("p99")
+            >= end["latency_median_us"].as_f64().expect("median")
+    );
+}
+
+#[test]
+fn the_online_failing_windows_are_twin_compare_s() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("record.csv");
+    std::fs::write(&csv, contact_record()).expect("write");
+    let report = dir.path().join("report.json");
+    let out = twin_cmd()
+        .args(["compare", "--twin"])
+        .arg(twin_path())
+        .arg("--data")
+        .arg(&csv)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .expect("twin compare");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    let batch = report["failing_windows"]
+        .as_array()
+        .expect("windows")
+        .clone();
+    assert!(!batch.is_empty(), "the contact gives a failing window");
+    let alerts = watch(
+        csv.to_str().expect("utf-8"),
+        None,
+        &dir.path().join("a.jsonl"),
+        &[],
+    );
+    let online: Vec<&Value> = of_kind(&alerts, "recovered")
+        .into_iter()
+        .filter(|a| a["withdrawn"] == false)
+        .collect();
+    assert_eq!(online.len(), batch.len(), "{online:?}\n{batch:?}");
+    for (o, b) in online.iter().zip(&batch) {
+        // The same samples: times as the CSV gives them, the same floors.
+        assert_eq!(o["start"], b["start"], "{o} {b}");
+        assert_eq!(o["end"], b["end"], "{o} {b}");
+        assert_eq!(o["floors"], b["floors"], "{o} {b}");
+        for f in 0..3 {
+            let (x, y) = (
+                o["nmse"][f].as_f64().expect("nmse"),
+                b["nmse"][f].as_f64().expect("nmse"),
+            );
+            assert!((x - y).abs() <= 1e-9 * y.abs().max(1e-12), "{x} {y}");
+        }
+    }
+    // Each failing window was announced before it closed.
+    assert_eq!(of_kind(&alerts, "failing").len(), batch.len());
+    let end = alerts.last().expect("end");
+    assert_eq!(end["failing_windows"], batch.len());
+    for f in 0..3 {
+        let (x, y) = (
+            end["nmse"][f].as_f64().expect("nmse"),
+            report["nmse"][f].as_f64().expect("nmse"),
+        );
+        assert!((x - y).abs() <= 1e-9 * y.abs(), "{x} {y}");
+    }
+}
+
+#[test]
+fn a_malformed_line_and_a_gap_are_reported_and_the_stream_goes_on() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = contact_record();
+    let lines: Vec<&str> = text.lines().collect();
+    // Data line k is lines[k + 1]; drop samples 400..410, put a malformed line after sample 299.
+    let mut edited: Vec<String> = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let k = i as i64 - 1;
+        if (400..410).contains(&k) {
+            continue;
+        }
+        edited.push((*line).to_owned());
+        if k == 299 {
+            edited.push("6.0,oops,0.1,0.2,0.3".into());
+        }
+    }
+    let csv = dir.path().join("record.csv");
+    std::fs::write(&csv, edited.join("\n") + "\n").expect("write");
+    let alerts = watch(
+        csv.to_str().expect("utf-8"),
+        None,
+        &dir.path().join("a.jsonl"),
+        &[],
+    );
+    let bad = of_kind(&alerts, "bad_sample");
+    assert_eq!(bad.len(), 1, "{alerts:?}");
+    // Header line 1, samples 0..299 on lines 2..301: the malformed line is 302.
+    assert_eq!(bad[0]["line"], 302);
+    assert!(
+        bad[0]["reason"].as_str().expect("reason").contains("force"),
+        "{}",
+        bad[0]
+    );
+    let gaps = of_kind(&alerts, "gap");
+    assert_eq!(gaps.len(), 1, "{alerts:?}");
+    assert_eq!(gaps[0]["missing"], 10);
+    let t410: f64 = lines[411]
+        .split(',')
+        .next()
+        .expect("time")
+        .parse()
+        .expect("t");
+    assert_eq!(gaps[0]["time"].as_f64(), Some(t410));
+    let end = alerts.last().expect("end");
+    assert_eq!(end["kind"], "end");
+    assert_eq!(end["samples"], 1024 - 10);
+    assert_eq!(end["bad_lines"], 1);
+    assert_eq!(end["gaps"], 1);
+    assert_eq!(end["missing_samples"], 10);
+    // After the gap the twin starts again at rest and the comparison goes on: the contact
+    // (12–17 s, after the gap) is still found.
+    assert!(!of_kind(&alerts, "failing").is_empty(), "{alerts:?}");
+    assert!(end["nmse"][2].as_f64().expect("nmse") > 1.0);
+}
+
+#[test]
+fn a_watcher_killed_mid_stream_resumes_from_its_checkpoint() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = contact_record();
+    let lines: Vec<&str> = text.lines().collect();
+    // The first part: the header and 820 samples (to 16.0 s): the contact's failing window
+    // opens at 15.4 s, after the last checkpoint (768 samples, 15.0 s) and before the kill.
+    let split = 821;
+    let csv = dir.path().join("stream.csv");
+    std::fs::write(&csv, lines[..split].join("\n") + "\n").expect("write");
+    let checkpoint = dir.path().join("checkpoint.json");
+    let alerts = dir.path().join("alerts.jsonl");
+    let args = |follow: bool| {
+        let mut a = vec![
+            "--checkpoint".to_owned(),
+            checkpoint.display().to_string(),
+            "--checkpoint-every".into(),
+            "64".into(),
+        ];
+        if follow {
+            a.extend(["--follow".into(), "--idle".into(), "30".into()]);
+        }
+        a
+    };
+    let mut cmd = twin_cmd();
+    cmd.args(["watch", "--twin"])
+        .arg(twin_path())
+        .args(["--source", csv.to_str().expect("utf-8"), "--alerts"])
+        .arg(&alerts)
+        .args(args(true))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    let mut child = cmd.spawn().expect("spawn");
+    // Wait until the checkpoint has advanced to 768 samples (it is written every 64).
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let samples = std::fs::read_to_string(&checkpoint)
+            .ok()
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+            .and_then(|v| v["samples"].as_u64());
+        if samples.is_some_and(|s| s >= 768) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the checkpoint never reached 768 samples"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Let it take the 52 samples after the checkpoint too, then kill it (SIGKILL).
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill().expect("kill");
+    child.wait().expect("wait");
+    let before_kill = read_alerts(&alerts);
+    assert!(
+        before_kill.iter().all(|a| a["kind"] != "end"),
+        "the first run did not end"
+    );
+    // The window opened after the checkpoint: the resumed run raises it again from the same
+    // samples, and must not write it twice.
+    assert_eq!(of_kind(&before_kill, "failing").len(), 1, "{before_kill:?}");
+    let saved: Value =
+        serde_json::from_str(&std::fs::read_to_string(&checkpoint).expect("checkpoint"))
+            .expect("json");
+    assert_eq!(saved["samples"], 768);
+    // The rest of the stream arrives; a new watcher starts on the same checkpoint and source.
+    let mut file = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&csv)
+        .expect("open");
+    file.write_all((lines[split..].join("\n") + "\n").as_bytes())
+        .expect("append");
+    drop(file);
+    let resumed = watch(
+        csv.to_str().expect("utf-8"),
+        None,
+        &alerts,
+        &args(false).iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    // One uninterrupted run on the whole stream.
+    let whole = dir.path().join("whole.csv");
+    std::fs::write(&whole, &text).expect("write");
+    let once = watch(
+        whole.to_str().expect("utf-8"),
+        None,
+        &dir.path().join("once.jsonl"),
+        &[],
+    );
+    assert!(
+        !of_kind(&once, "failing").is_empty(),
+        "the record has a failing window"
+    );
+    assert_eq!(comparable(&resumed), comparable(&once));
+    let (a, b) = (resumed.last().expect("end"), once.last().expect("end"));
+    assert_eq!(a["nmse"], b["nmse"]);
+    assert_eq!(a["samples"], 1024);
+    assert!(a["samples_this_run"].as_u64().expect("count") < 1024);
+}
