@@ -359,3 +359,57 @@ fn a_watcher_killed_mid_stream_resumes_from_its_checkpoint() {
     assert_eq!(a["samples"], 1024);
     assert!(a["samples_this_run"].as_u64().expect("count") < 1024);
 }
+
+#[test]
+fn an_fmu_state_serialised_and_restored_gives_the_same_steps_and_is_refused_when_undeclared() {
+    use orchestrator::cosim::import::{unpack, Fmu, Library, UnpackLimits};
+    let path = fmu_dir().join("fmu_shear.fmu");
+    let fmu = Fmu::open(&path).expect("open the shear FMU");
+    let (force, acc) = (
+        fmu.value_reference("force").expect("force"),
+        ["acc1", "acc2", "acc3"].map(|n| fmu.value_reference(n).expect("acc")),
+    );
+    let run = |instance: &mut orchestrator::cosim::import::Instance, from: usize, to: usize| {
+        let mut out = Vec::new();
+        for k in from..to {
+            let t = k as f64 / 51.2;
+            instance
+                .set_real(&[force], &[(3.0 * t).sin() * 50.0])
+                .expect("set");
+            instance.do_step(t, 1.0 / 51.2).expect("step");
+            let mut y = [0.0; 3];
+            instance.get_real(&acc, &mut y).expect("get");
+            out.push(y);
+        }
+        out
+    };
+    let mut a = fmu.instantiate("a").expect("instantiate");
+    a.setup_experiment(0.0, None).expect("setup");
+    a.enter_initialization_mode().expect("init");
+    a.exit_initialization_mode().expect("init");
+    run(&mut a, 0, 100);
+    let bytes = a.state_bytes().expect("serialise");
+    let straight = run(&mut a, 100, 200);
+    // Another instance put in the saved state steps on exactly as the first.
+    let mut b = fmu.instantiate("b").expect("instantiate");
+    b.setup_experiment(0.0, None).expect("setup");
+    b.enter_initialization_mode().expect("init");
+    b.exit_initialization_mode().expect("init");
+    b.restore_state_bytes(&bytes).expect("deserialise");
+    assert_eq!(run(&mut b, 100, 200), straight);
+
+    // A library told nothing of the modelDescription's capabilities refuses, saying why.
+    let unpacked = unpack(&path, UnpackLimits::default()).expect("unpack");
+    let library = Library::load(
+        &unpacked.path().join("binaries/linux64/fmu_shear.so"),
+        &fmu.model_description.guid,
+        &unpacked.path().join("resources"),
+    )
+    .expect("load");
+    let mut c = library.instantiate("c").expect("instantiate");
+    c.setup_experiment(0.0, None).expect("setup");
+    c.enter_initialization_mode().expect("init");
+    c.exit_initialization_mode().expect("init");
+    let refused = c.state_bytes().expect_err("undeclared").to_string();
+    assert!(refused.contains("canGetAndSetFMUstate"), "{refused}");
+}
