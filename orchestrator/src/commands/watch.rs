@@ -101,11 +101,12 @@ pub fn run(args: &WatchArgs) -> Result<()> {
                 }
             });
             s.set_message(format!(
-                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}",
+                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}",
                 status.samples,
                 status.time,
                 status.samples_per_second,
-                nmse.join(" / ")
+                nmse.join(" / "),
+                if status.open_window { ", FAILING" } else { "" }
             ));
         }
     })?;

@@ -97,6 +97,7 @@ pub struct Status {
     pub time: f64,
     pub samples_per_second: f64,
     pub rolling_nmse: [f64; 3],
+    /// Whether a failing window is open.
     pub open_window: bool,
 }
 
@@ -737,6 +738,6 @@ fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
             .detector
             .as_ref()
             .map_or([f64::NAN; 3], Detector::rolling_nmse),
-        open_window: false,
+        open_window: w.state.detector.as_ref().is_some_and(Detector::window_open),
     }
 }

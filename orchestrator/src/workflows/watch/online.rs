@@ -221,6 +221,11 @@ impl Detector {
         events
     }
 
+    /// Whether a failing window is open (announced, not yet closed).
+    pub fn window_open(&self) -> bool {
+        self.group.as_ref().is_some_and(|g| g.alerted)
+    }
+
     /// NMSE per floor over the last `--window` seconds after the transient (NaN: no samples).
     pub fn rolling_nmse(&self) -> [f64; 3] {
         [0, 1, 2].map(|f| {
