@@ -6,3 +6,4 @@ pub mod excitation;
 pub mod gp;
 pub mod lqr;
 pub mod ode;
+pub mod substructure;

@@ -26,8 +26,13 @@
 //! one, and the physical substructure follows that displacement (a cubic Hermite over the step,
 //! its rates from the last three positions: only displacements cross the interface) and
 //! returns the force. RK4 for both.
+//!
+//! The substructures' equations and RK4 are `numerics::substructure`, shared with the
+//! `fmu_substructure` FMU; [`fmus::run_on_master`] runs the same test with the substructures as
+//! two instances of that FMU on the master algorithm.
 
 use numerics::actuator::EnergyMonitor;
+use numerics::substructure::{Frame, Imposed, Numerical, Physical};
 use serde::Serialize;
 
 pub mod experiment;
@@ -104,10 +109,18 @@ impl Structure {
     /// The bumper's force, one-sided: `k_nl (y_r − d)` when `y_r > d`, else 0.
     #[inline]
     pub fn contact_force(&self, yr: f64) -> f64 {
-        if yr > self.gap {
-            self.contact_stiffness * (yr - self.gap)
-        } else {
-            0.0
+        self.frame().contact_force(yr)
+    }
+
+    /// The substructures' parameters (`numerics::substructure`, shared with the
+    /// `fmu_substructure` FMU).
+    pub fn frame(&self) -> Frame {
+        Frame {
+            mass: self.mass,
+            damping: self.damping,
+            stiffness: self.stiffness,
+            gap: self.gap,
+            contact_stiffness: self.contact_stiffness,
         }
     }
 }
@@ -144,108 +157,6 @@ pub struct Interface {
     pub force: Vec<f64>,
 }
 
-/// The numerical substructure: floors 1 and 2 with storeys 1 and 2, loaded by the excitation on
-/// floor 1 and the measured interface force on floor 2 (`−F_m`).
-#[derive(Clone, Copy, Debug, Default)]
-struct Numerical {
-    y: [f64; 2],
-    v: [f64; 2],
-}
-
-/// The physical substructure: floor 3, storey 3 and the bumper, its bottom at the imposed `y₂ₚ`.
-#[derive(Clone, Copy, Debug, Default)]
-struct Physical {
-    y3: f64,
-    v3: f64,
-}
-
-fn numerical_rate(s: &Structure, y: [f64; 2], v: [f64; 2], fe: f64, fm: f64) -> [f64; 2] {
-    let [m1, m2, _] = s.mass;
-    let [c1, c2, _] = s.damping;
-    let [k1, k2, _] = s.stiffness;
-    let storey2 = c2 * (v[1] - v[0]) + k2 * (y[1] - y[0]);
-    [
-        (fe - c1 * v[0] - k1 * y[0] + storey2) / m1,
-        (-storey2 - fm) / m2,
-    ]
-}
-
-/// Storey 3's shear with the bumper, on floor 2 from above: the measured force.
-fn interface_force(s: &Structure, y2: f64, v2: f64, p: &Physical) -> f64 {
-    s.damping[2] * (v2 - p.v3) + s.stiffness[2] * (y2 - p.y3) + s.contact_force(y2 - p.y3)
-}
-
-impl Numerical {
-    /// RK4 over `h`, the excitation `fe0 + fe1·τ` and the interface force `fm0 + fm1·τ`.
-    fn step(&mut self, s: &Structure, h: f64, fe: (f64, f64), fm: (f64, f64)) {
-        let rate = |tau: f64, y: [f64; 2], v: [f64; 2]| {
-            numerical_rate(s, y, v, fe.0 + fe.1 * tau, fm.0 + fm.1 * tau)
-        };
-        let add = |a: [f64; 2], b: [f64; 2], k: f64| [a[0] + k * b[0], a[1] + k * b[1]];
-        let (y, v) = (self.y, self.v);
-        let a1 = rate(0.0, y, v);
-        let (y2, v2) = (add(y, v, h / 2.0), add(v, a1, h / 2.0));
-        let a2 = rate(h / 2.0, y2, v2);
-        let (y3, v3) = (add(y, v2, h / 2.0), add(v, a2, h / 2.0));
-        let a3 = rate(h / 2.0, y3, v3);
-        let (y4, v4) = (add(y, v3, h), add(v, a3, h));
-        let a4 = rate(h, y4, v4);
-        for i in 0..2 {
-            self.y[i] += h / 6.0 * (v[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]);
-            self.v[i] += h / 6.0 * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]);
-        }
-    }
-}
-
-/// The imposed displacement over a step: the cubic Hermite through `(y0, v0)` at `τ = 0` and
-/// `(y1, v1)` at `τ = h`; its value and rate at `τ`.
-#[derive(Clone, Copy, Debug)]
-struct Imposed {
-    y0: f64,
-    v0: f64,
-    y1: f64,
-    v1: f64,
-    h: f64,
-}
-
-impl Imposed {
-    #[inline]
-    fn at(&self, tau: f64) -> (f64, f64) {
-        let (h, s) = (self.h, tau / self.h);
-        let (s2, s3) = (s * s, s * s * s);
-        let y = (2.0 * s3 - 3.0 * s2 + 1.0) * self.y0
-            + (s3 - 2.0 * s2 + s) * h * self.v0
-            + (-2.0 * s3 + 3.0 * s2) * self.y1
-            + (s3 - s2) * h * self.v1;
-        let v = (6.0 * s2 - 6.0 * s) / h * self.y0
-            + (3.0 * s2 - 4.0 * s + 1.0) * self.v0
-            + (-6.0 * s2 + 6.0 * s) / h * self.y1
-            + (3.0 * s2 - 2.0 * s) * self.v1;
-        (y, v)
-    }
-}
-
-impl Physical {
-    /// RK4 over `h` with the bottom of storey 3 moving as `imposed`.
-    fn step(&mut self, s: &Structure, h: f64, imposed: &Imposed) {
-        let m3 = s.mass[2];
-        let rate = |tau: f64, y3: f64, v3: f64| {
-            let (y2, v2) = imposed.at(tau);
-            interface_force(s, y2, v2, &Physical { y3, v3 }) / m3
-        };
-        let (y, v) = (self.y3, self.v3);
-        let a1 = rate(0.0, y, v);
-        let v2 = v + h / 2.0 * a1;
-        let a2 = rate(h / 2.0, y + h / 2.0 * v, v2);
-        let v3 = v + h / 2.0 * a2;
-        let a3 = rate(h / 2.0, y + h / 2.0 * v2, v3);
-        let v4 = v + h * a3;
-        let a4 = rate(h, y + h * v3, v4);
-        self.y3 += h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4);
-        self.v3 += h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
-    }
-}
-
 /// Run the hybrid test: `excitation` (N on floor 1) at step `dt`, `substeps` control steps per
 /// sample, `actuator` turning each new target displacement into the achieved one (called once
 /// per control step, in order). `energy_factor`: stop with [`HybridError::Unstable`] when the
@@ -273,6 +184,7 @@ pub fn run(
     }
     let h = dt / f64::from(substeps);
     let n = excitation.len();
+    let frame = s.frame();
     let mut out = HybridRun {
         excitation: excitation.to_vec(),
         max_relative: f64::NEG_INFINITY,
@@ -308,7 +220,7 @@ pub fn run(
             // The measured force, extrapolated linearly from the last two measurements.
             let fm_slope = (fm - fm_previous) / h;
             let y1_before = num.y[0];
-            num.step(s, h, fe, (fm, fm_slope));
+            num.step(&frame, h, fe, (fm, fm_slope));
             let target = num.y[1];
             let achieved = actuator(target);
             // The achieved motion's rate, from its last three positions (second order).
@@ -325,12 +237,12 @@ pub fn run(
                 v1: v_end,
                 h,
             };
-            phys.step(s, h, &imposed);
+            phys.step(&frame, h, &imposed, 0.0);
             y2p_previous = y2p;
             y2p = achieved;
             v2p = v_end;
             fm_previous = fm;
-            fm = interface_force(s, y2p, v2p, &phys);
+            fm = frame.interface_force(y2p, v2p, &phys);
             // The excitation's work on floor 1 over the step (force at mid-step).
             let input_work = (fe.0 + 0.5 * fe.1 * h) * (num.y[0] - y1_before);
             monitor.observe(fm, num.y[1], input_work);
