@@ -6,7 +6,7 @@ cd "$root"
 target_dir=${CARGO_TARGET_DIR:-$root/target}
 
 # crate name : modelIdentifier
-fmus=("fmu-shear:fmu_shear" "fmu-gp-corrector:fmu_gp_corrector" "fmu-lqr:fmu_lqr")
+fmus=("fmu-shear:fmu_shear" "fmu-gp-corrector:fmu_gp_corrector" "fmu-lqr:fmu_lqr" "fmu-substructure:fmu_substructure")
 
 packages=()
 features=()
