@@ -36,6 +36,7 @@ use numerics::substructure::{Frame, Imposed, Numerical, Physical};
 use serde::Serialize;
 
 pub mod experiment;
+pub mod fmus;
 pub mod identify;
 pub mod monolithic;
 pub mod spectrum;
