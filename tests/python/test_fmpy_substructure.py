@@ -143,9 +143,11 @@ def test_the_physical_role_is_storey_3_with_the_bumper(fmu):
     independent = _reference(y, v, H, 1)
     closed = np.sum(y - y3 > PHYSICAL["gap"])
     assert closed > 50, f"the bumper is closed at only {closed} of {STEPS} control steps"
-    # The same RK4 on the same Hermite, written twice: agreement to rounding.
-    np.testing.assert_allclose(by_fmu, independent, rtol=0, atol=1e-9 * np.max(np.abs(independent)))
-    # Against a converged reference (64 RK4 steps per control step), the FMU at 8: the bar.
+    # The same RK4 on the same Hermite, written twice: agreement to rounding (measured 2.3e-15
+    # of the peak force; the bumper closed at 637 of the 2048 points).
+    np.testing.assert_allclose(by_fmu, independent, rtol=0, atol=1e-12 * np.max(np.abs(independent)))
+    # Against a converged reference (64 RK4 steps per control step), the FMU at 8: the bar
+    # (measured 8.3e-8 %; 3.4e-4 % at one step per control step).
     converged = _reference(y, v, H, 64)
     at_8, _ = _drive_physical(fmu, y, v, H, 8)
     error = nmse(converged[:, None], at_8[:, None])

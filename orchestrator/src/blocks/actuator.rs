@@ -239,7 +239,8 @@ impl Block for InterfaceBlock {
                 }));
             }
         }
-        if k % substeps == 0 {
+        let within = k % substeps;
+        if within == 0 {
             let mut log = self.log.borrow_mut();
             let run = &mut log.run;
             run.time.push((k / substeps) as f64 * self.dt);

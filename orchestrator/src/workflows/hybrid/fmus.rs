@@ -229,7 +229,7 @@ mod tests {
 
     /// An amplitude error and a pure delay of `delay` control steps.
     fn actuator(a_err: f64, delay: usize) -> impl FnMut(f64) -> f64 + 'static {
-        let mut queue: VecDeque<f64> = std::iter::repeat(0.0).take(delay).collect();
+        let mut queue: VecDeque<f64> = vec![0.0; delay].into();
         move |y| {
             queue.push_back((1.0 + a_err) * y);
             queue.pop_front().unwrap_or(0.0)
