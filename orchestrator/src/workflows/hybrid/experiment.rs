@@ -1,7 +1,10 @@
 //! `twin hybrid threshold` and `twin hybrid run`: the experiments of the reference paper's
 //! section 5 on the substructured test of [`super::run`], with the actuator of
 //! [`numerics::actuator`] and the excitation of [`numerics::excitation`] (or a record's force),
-//! and the contact law learned from the interface measurements.
+//! and the contact law learned from the interface measurements. `twin hybrid run`'s stepped
+//! tests run on the master with the substructures as `fmu_substructure` FMUs
+//! ([`Setup::simulate_on_master`]); the threshold's bisection, dozens of runs per amplitude
+//! error, on the Rust loop ([`super::run`]): the same computation, tested equal to 1e-12.
 
 use std::time::Instant;
 
@@ -95,6 +98,28 @@ impl Setup {
                     self.energy_factor,
                 )
             }
+        }
+    }
+}
+
+impl Setup {
+    /// [`Setup::simulate`] with the stepped coupling on the master: the substructures as two
+    /// `fmu_substructure` instances ([`super::fmus::run_on_master`], the same computation as
+    /// [`super::run`], tested equal to it). The one-ODE coupling has no substructures to run.
+    pub fn simulate_on_master(&self, excitation: &[f64], a_err: f64) -> Result<HybridRun> {
+        match self.resolved()? {
+            Coupling::Stepped => {
+                let mut act = self.actuator(a_err)?;
+                super::fmus::run_on_master(
+                    &self.structure,
+                    excitation,
+                    self.dt,
+                    self.substeps,
+                    move |y| act.step(y),
+                    self.energy_factor,
+                )
+            }
+            _ => self.simulate(excitation, a_err),
         }
     }
 }
@@ -203,7 +228,8 @@ fn segment(dt: f64) -> usize {
     ((8.0 / dt).round() as usize).max(16)
 }
 
-/// The test at `peak` N for each amplitude error, with the law identified from each.
+/// The test at `peak` N for each amplitude error (stepped: on the master with the substructure
+/// FMUs), with the law identified from each.
 pub fn runs(
     setup: &Setup,
     peak: f64,
@@ -226,7 +252,7 @@ pub fn runs(
     let mut out = Vec::new();
     for (i, &a) in a_errs.iter().enumerate() {
         setup.actuator(a)?;
-        let result = setup.simulate(&excitation, a);
+        let result = setup.simulate_on_master(&excitation, a);
         let run = match result {
             Ok(r) => r,
             Err(e @ HybridError::Unstable { .. }) => {
