@@ -4,7 +4,8 @@
 # about), train the GP corrector, run active learning over the three records in every query
 # mode, then diagnose dataset3, add the physics the diagnosis names and compare again (and, on
 # synthetic records, two changes at once and a force outside the library, discovered), run the
-# simulated real-time hybrid test (the contact threshold, the law learned from it), run
+# simulated real-time hybrid test (the contact threshold, the law learned from it), stream
+# dataset3 through `twin watch`, run
 # the resulting twin with `twin run` as any SSP system, and control the structure with LQR
 # designs on the twin (attenuation, contacts, retuning and gain scheduling, a controlled record
 # predicted in the closed loop). Reports, predictions and plots go to out/demo/.
@@ -114,6 +115,19 @@ echo "-- the law the hybrid test learned, added to the twin, on dataset3 --"
 "$twin" add-physics --twin "$out/calibrated.ssp" --hybrid "$out/hybrid-run.json" --out "$out/with-hybrid-contact.ssp"
 "$twin" compare --twin "$out/with-hybrid-contact.ssp" --data data/dataset3.csv \
   --report "$out/compare-with-hybrid-contact-dataset3.json"
+
+echo
+echo "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample =="
+rm -f "$out/watch-dataset3.jsonl" "$out/watch-dataset3-checkpoint.json"  # a fresh stream, not a resume
+"$twin" watch --twin "$out/calibrated.ssp" --source - --alerts "$out/watch-dataset3.jsonl" \
+  --checkpoint "$out/watch-dataset3-checkpoint.json" <data/dataset3.csv
+python3 - "$out/watch-dataset3.jsonl" <<'PY'
+import json, sys
+for line in open(sys.argv[1]):
+    a = json.loads(line)
+    if a["kind"] in ("failing", "recovered", "gap", "bad_sample"):
+        print(f"  alert at {a['time']:7.3f} s: {a['kind']}")
+PY
 
 echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
