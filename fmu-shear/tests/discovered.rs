@@ -9,6 +9,8 @@ use fmu_shear::variables::{info, ACC, FORCE};
 use fmu_shear::{ShearModel, ShearParameters};
 use numerics::ode::rk4_substeps;
 
+mod common;
+
 const STEP: f64 = 1.0 / 51.2;
 const SUBSTEPS: u32 = 16;
 
@@ -21,21 +23,8 @@ fn params() -> ShearParameters {
     }
 }
 
-/// A deterministic band-limited force (sines from 0.25 to 25 Hz, about 1 N RMS).
 fn force(steps: usize) -> Vec<f64> {
-    const COMPONENTS: usize = 100;
-    let amplitude = (2.0 / COMPONENTS as f64).sqrt();
-    (0..=steps)
-        .map(|n| {
-            let t = n as f64 * STEP;
-            (1..=COMPONENTS)
-                .map(|j| {
-                    let phase = std::f64::consts::TAU * (j as f64 * 0.618_033_988_749_895).fract();
-                    amplitude * (std::f64::consts::TAU * 0.25 * j as f64 * t + phase).sin()
-                })
-                .sum()
-        })
-        .collect()
+    common::band_limited_force(steps, STEP)
 }
 
 /// The accelerations after each step, the model driven as a host drives it.

@@ -19,6 +19,8 @@ use fmu_shear::{ShearModel, ShearParameters, DEFAULT_SUBSTEPS};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 /// The examples' communication step, 51.2 Hz.
+mod common;
+
 const STEP: f64 = 1.0 / 51.2;
 
 /// A structure whose floors and storeys all differ, so that a swapped index shows.
@@ -81,21 +83,8 @@ fn from_drifts(d: [f64; 3]) -> [f64; 3] {
     [d[0], d[0] + d[1], d[0] + d[1] + d[2]]
 }
 
-/// A deterministic band-limited force (sines from 0.25 to 25 Hz, fixed phases, about 1 N RMS).
 fn random_force(steps: usize) -> Vec<f64> {
-    const COMPONENTS: usize = 100;
-    let amplitude = (2.0 / COMPONENTS as f64).sqrt();
-    (0..=steps)
-        .map(|n| {
-            let t = n as f64 * STEP;
-            (1..=COMPONENTS)
-                .map(|j| {
-                    let phase = std::f64::consts::TAU * (j as f64 * 0.618_033_988_749_895).fract();
-                    amplitude * (std::f64::consts::TAU * 0.25 * j as f64 * t + phase).sin()
-                })
-                .sum()
-        })
-        .collect()
+    common::band_limited_force(steps, STEP)
 }
 
 /// Drive a model with `force` as a host does (value and slope, step) and return the floor

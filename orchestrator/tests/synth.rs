@@ -1270,24 +1270,7 @@ fn hysteresis_json_and_flag_agree_and_bad_values_are_refused() {
             "`effects[1]`",
         ),
     ];
-    for (args, needle) in flags {
-        let out_path = p(dir.path(), "x.csv");
-        let mut all = vec!["synth", "--out", out_path.as_str()];
-        all.extend_from_slice(args);
-        let out = twin(&all);
-        let err = String::from_utf8_lossy(&out.stderr);
-        println!("{args:?}: {}", err.trim());
-        assert!(!out.status.success(), "{args:?} is refused");
-        assert!(
-            err.contains(needle),
-            "{args:?}: expected {needle:?} in {err}"
-        );
-        assert!(!err.contains("panicked"), "{err}");
-    }
-    assert!(
-        !dir.path().join("x.csv").exists(),
-        "nothing is written on error"
-    );
+    assert_flags_refused(dir.path(), &flags);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1662,24 +1645,7 @@ fn quadratic_damping_json_and_flag_agree_and_bad_values_are_refused() {
             "`effects[1]`",
         ),
     ];
-    for (args, needle) in flags {
-        let out_path = p(dir.path(), "x.csv");
-        let mut all = vec!["synth", "--out", out_path.as_str()];
-        all.extend_from_slice(args);
-        let out = twin(&all);
-        let err = String::from_utf8_lossy(&out.stderr);
-        println!("{args:?}: {}", err.trim());
-        assert!(!out.status.success(), "{args:?} is refused");
-        assert!(
-            err.contains(needle),
-            "{args:?}: expected {needle:?} in {err}"
-        );
-        assert!(!err.contains("panicked"), "{err}");
-    }
-    assert!(
-        !dir.path().join("x.csv").exists(),
-        "nothing is written on error"
-    );
+    assert_flags_refused(dir.path(), &flags);
 }
 
 /// The truth JSON's scenario, given back to `twin synth`, makes the record `csv` bit for bit.
@@ -1726,4 +1692,24 @@ fn assert_effects_refused(dir: &Path, cases: &[(&str, &str)]) {
         );
         assert!(!err.contains("panicked"), "{err}");
     }
+}
+
+/// Each set of `twin synth` flags is refused with the expected phrase, never panicking, and
+/// nothing is written.
+fn assert_flags_refused(dir: &Path, flags: &[(&[&str], &str)]) {
+    for (args, needle) in flags {
+        let out_path = p(dir, "x.csv");
+        let mut all = vec!["synth", "--out", out_path.as_str()];
+        all.extend_from_slice(args);
+        let out = twin(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        println!("{args:?}: {}", err.trim());
+        assert!(!out.status.success(), "{args:?} is refused");
+        assert!(
+            err.contains(needle),
+            "{args:?}: expected {needle:?} in {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    assert!(!dir.join("x.csv").exists(), "nothing is written on error");
 }

@@ -741,13 +741,7 @@ impl Instance {
 
     /// Save the FMU state (for rollback); the handle stays valid until the instance drops.
     pub fn save_state(&mut self) -> Result<StateHandle, ImportError> {
-        let f = self
-            .api
-            .get_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2GetFMUstate",
-            })?;
+        let f = self.required(self.api.get_fmu_state, "fmi2GetFMUstate")?;
         let mut state: fmi2FMUstate = std::ptr::null_mut();
         // SAFETY: `state` is a valid slot; the FMU allocates the state.
         let status = unsafe { f(self.component, &mut state) };
@@ -758,13 +752,7 @@ impl Instance {
 
     /// Overwrite a saved state with the current one.
     pub fn update_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
-        let f = self
-            .api
-            .get_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2GetFMUstate",
-            })?;
+        let f = self.required(self.api.get_fmu_state, "fmi2GetFMUstate")?;
         let slot = &mut self.states[handle.0];
         // SAFETY: the slot holds a state of this instance; the FMU updates it in place.
         let status = unsafe { f(self.component, slot) };
@@ -772,16 +760,18 @@ impl Instance {
     }
 
     pub fn restore_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
-        let f = self
-            .api
-            .set_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2SetFMUstate",
-            })?;
+        let f = self.required(self.api.set_fmu_state, "fmi2SetFMUstate")?;
         // SAFETY: the handle indexes a state this instance made.
         let status = unsafe { f(self.component, self.states[handle.0]) };
         self.check("fmi2SetFMUstate", status)
+    }
+
+    /// The FMU's function `f`, or an error naming the call `what` when the library lacks it.
+    fn required<F>(&self, f: Option<F>, what: &'static str) -> Result<F, ImportError> {
+        f.ok_or_else(|| ImportError::Unsupported {
+            instance: self.name.clone(),
+            what,
+        })
     }
 
     /// Refuse a state call the modelDescription does not declare (`what` names the capability).
@@ -831,13 +821,7 @@ impl Instance {
     /// `fmi2GetFMUstate` into a new state, checked against the modelDescription.
     pub fn get_fmu_state(&mut self) -> Result<StateHandle, ImportError> {
         self.require_state(false)?;
-        let f = self
-            .api
-            .get_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2GetFMUstate",
-            })?;
+        let f = self.required(self.api.get_fmu_state, "fmi2GetFMUstate")?;
         let slot = self.state_slot();
         let mut state: fmi2FMUstate = std::ptr::null_mut();
         // SAFETY: `state` is a valid slot holding null; the FMU allocates the state.
@@ -851,13 +835,7 @@ impl Instance {
     pub fn set_fmu_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
         self.require_state(false)?;
         let state = self.live_state(handle)?;
-        let f = self
-            .api
-            .set_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2SetFMUstate",
-            })?;
+        let f = self.required(self.api.set_fmu_state, "fmi2SetFMUstate")?;
         // SAFETY: a live state this instance made.
         let status = unsafe { f(self.component, state) };
         self.check("fmi2SetFMUstate", status)
@@ -866,13 +844,7 @@ impl Instance {
     /// `fmi2FreeFMUstate`; the handle is invalid afterwards (its slot is reused).
     pub fn free_fmu_state(&mut self, handle: StateHandle) -> Result<(), ImportError> {
         let _ = self.live_state(handle)?;
-        let f = self
-            .api
-            .free_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2FreeFMUstate",
-            })?;
+        let f = self.required(self.api.free_fmu_state, "fmi2FreeFMUstate")?;
         // SAFETY: the slot holds a live state of this instance; the FMU frees it and nulls it.
         let status = unsafe { f(self.component, &mut self.states[handle.0]) };
         self.states[handle.0] = std::ptr::null_mut();
@@ -917,13 +889,7 @@ impl Instance {
     /// (of an instance of the same FMU).
     pub fn deserialize_fmu_state(&mut self, bytes: &[u8]) -> Result<StateHandle, ImportError> {
         self.require_state(true)?;
-        let f = self
-            .api
-            .deserialize_fmu_state
-            .ok_or_else(|| ImportError::Unsupported {
-                instance: self.name.clone(),
-                what: "fmi2DeSerializeFMUstate",
-            })?;
+        let f = self.required(self.api.deserialize_fmu_state, "fmi2DeSerializeFMUstate")?;
         let slot = self.state_slot();
         let mut state: fmi2FMUstate = std::ptr::null_mut();
         // SAFETY: `bytes` has bytes.len() readable bytes; `state` is a valid slot.

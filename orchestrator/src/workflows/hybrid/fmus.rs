@@ -207,25 +207,7 @@ mod tests {
         path
     }
 
-    fn structure() -> Structure {
-        Structure {
-            mass: [4.6, 5.3, 4.9],
-            damping: [8.0, 3.5, 2.6],
-            stiffness: [3850.0, 4100.0, 4650.0],
-            gap: 5e-4,
-            contact_stiffness: 9000.0,
-        }
-    }
-
-    fn excitation(n: usize) -> Vec<f64> {
-        (0..n)
-            .map(|k| {
-                let t = k as f64 / 51.2;
-                (2.0 * std::f64::consts::PI * 9.0 * t).sin() * (-0.1 * t).exp()
-                    + 0.5 * (2.0 * std::f64::consts::PI * 3.1 * t).cos()
-            })
-            .collect()
-    }
+    use crate::workflows::hybrid::tests::{excitation, structure};
 
     /// An amplitude error and a pure delay of `delay` control steps.
     fn actuator(a_err: f64, delay: usize) -> impl FnMut(f64) -> f64 + 'static {

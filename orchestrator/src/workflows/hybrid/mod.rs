@@ -317,10 +317,11 @@ pub fn unit_peak(signal: &[f64]) -> Result<Vec<f64>> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn structure() -> Structure {
+    /// The structure of the hybrid tests (a calibrated-like frame with the paper's bumper).
+    pub(crate) fn structure() -> Structure {
         Structure {
             mass: [4.6, 5.3, 4.9],
             damping: [8.0, 3.5, 2.6],
@@ -330,7 +331,8 @@ mod tests {
         }
     }
 
-    fn excitation(n: usize) -> Vec<f64> {
+    /// A decaying 9 Hz sine and a 3.1 Hz cosine at 51.2 Hz: `n` samples.
+    pub(crate) fn excitation(n: usize) -> Vec<f64> {
         (0..n)
             .map(|k| {
                 let t = k as f64 / 51.2;
