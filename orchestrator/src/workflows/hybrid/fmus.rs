@@ -89,19 +89,7 @@ pub fn run_with_fmu(
     actuator: impl FnMut(f64) -> f64 + 'static,
     energy_factor: f64,
 ) -> Result<HybridRun> {
-    s.check()?;
-    if !(dt.is_finite() && dt > 0.0) || substeps == 0 {
-        return Err(HybridError::Setup(format!(
-            "the step ({dt} s) must be positive and the control steps per sample ({substeps}) at \
-             least 1"
-        )));
-    }
-    if let Some(k) = excitation.iter().position(|f| !f.is_finite()) {
-        return Err(HybridError::Setup(format!(
-            "the excitation's sample {k} is not a finite number"
-        )));
-    }
-    let h = dt / f64::from(substeps);
+    let h = super::check_inputs(s, excitation, dt, substeps)?;
     let log = Rc::new(RefCell::new(InterfaceLog::default()));
     let interface = InterfaceBlock::new(
         log.clone(),

@@ -158,6 +158,29 @@ pub struct Interface {
     pub force: Vec<f64>,
 }
 
+/// Check a test's inputs — the structure, a positive step, at least one control step a
+/// sample, a finite excitation — and give the control step `dt / substeps`.
+pub(crate) fn check_inputs(
+    s: &Structure,
+    excitation: &[f64],
+    dt: f64,
+    substeps: u32,
+) -> Result<f64> {
+    s.check()?;
+    if !(dt.is_finite() && dt > 0.0) || substeps == 0 {
+        return Err(HybridError::Setup(format!(
+            "the step ({dt} s) must be positive and the control steps per sample ({substeps}) at \
+             least 1"
+        )));
+    }
+    if let Some(k) = excitation.iter().position(|f| !f.is_finite()) {
+        return Err(HybridError::Setup(format!(
+            "the excitation's sample {k} is not a finite number"
+        )));
+    }
+    Ok(dt / f64::from(substeps))
+}
+
 /// Run the hybrid test: `excitation` (N on floor 1) at step `dt`, `substeps` control steps per
 /// sample, `actuator` turning each new target displacement into the achieved one (called once
 /// per control step, in order). `energy_factor`: stop with [`HybridError::Unstable`] when the
@@ -171,19 +194,7 @@ pub fn run(
     mut actuator: impl FnMut(f64) -> f64,
     energy_factor: f64,
 ) -> Result<HybridRun> {
-    s.check()?;
-    if !(dt.is_finite() && dt > 0.0) || substeps == 0 {
-        return Err(HybridError::Setup(format!(
-            "the step ({dt} s) must be positive and the control steps per sample ({substeps}) at \
-             least 1"
-        )));
-    }
-    if let Some(k) = excitation.iter().position(|f| !f.is_finite()) {
-        return Err(HybridError::Setup(format!(
-            "the excitation's sample {k} is not a finite number"
-        )));
-    }
-    let h = dt / f64::from(substeps);
+    let h = check_inputs(s, excitation, dt, substeps)?;
     let n = excitation.len();
     let frame = s.frame();
     let mut out = HybridRun {

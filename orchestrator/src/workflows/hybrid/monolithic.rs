@@ -38,23 +38,12 @@ pub fn run(
     substeps: u32,
     a_err: f64,
 ) -> Result<HybridRun> {
-    s.check()?;
-    if !(dt.is_finite() && dt > 0.0) || substeps == 0 {
-        return Err(HybridError::Setup(format!(
-            "the step ({dt} s) must be positive and the sub-steps per sample ({substeps}) at least 1"
-        )));
-    }
+    let h = super::check_inputs(s, excitation, dt, substeps)?;
     if !(a_err.is_finite() && a_err > -1.0) {
         return Err(HybridError::Setup(format!(
             "the amplitude error must be a finite number above −1, was {a_err}"
         )));
     }
-    if let Some(k) = excitation.iter().position(|f| !f.is_finite()) {
-        return Err(HybridError::Setup(format!(
-            "the excitation's sample {k} is not a finite number"
-        )));
-    }
-    let h = dt / f64::from(substeps);
     let gain = 1.0 + a_err;
     let mut out = HybridRun {
         excitation: excitation.to_vec(),
