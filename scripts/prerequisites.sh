@@ -6,7 +6,8 @@
 #
 # Needed: cargo (Rust), CPython ≥ 3.10, a C compiler (the importer's logger shim, the C test
 # FMUs), libclang (bindgen, for fmi-sys: the compile-time check of the exported C signatures
-# and the independent rust-fmi importer test). Rust and Python are not installed here:
+# and the independent rust-fmi importer test), mosquitto (the MQTT broker `twin watch`'s tests
+# start on a loopback port). Rust and Python are not installed here:
 # they come with the machine. The Debian packages are installed when this runs as root on a
 # machine with apt-get; otherwise it stops at once with the command to run.
 set -euo pipefail
@@ -40,6 +41,10 @@ have_libclang() {
 packages=()
 command -v cc >/dev/null 2>&1 || packages+=(gcc)
 have_libclang || packages+=(libclang-dev)
+have_mosquitto() {
+  command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ]
+}
+have_mosquitto || packages+=(mosquitto)
 
 [ ${#packages[@]} -eq 0 ] && exit 0
 
@@ -55,3 +60,4 @@ export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq || die "apt-get update failed; run: apt-get update && $command"
 apt-get install -y -qq "${packages[@]}" >/dev/null || die "'$command' failed"
 have_libclang || die "libclang-dev is installed but no libclang.so is found; set LIBCLANG_PATH"
+have_mosquitto || die "mosquitto is installed but not found in PATH or /usr/sbin"

@@ -435,3 +435,293 @@ fn an_fmu_state_serialised_and_restored_gives_the_same_steps_and_is_refused_when
     let refused = c.state_bytes().expect_err("undeclared").to_string();
     assert!(refused.contains("canGetAndSetFMUstate"), "{refused}");
 }
+
+/// A mosquitto broker of the test's own on a free loopback port, with its persistence in a
+/// temporary folder; stopped (SIGTERM, so it saves what it keeps) when dropped.
+struct Broker {
+    child: std::process::Child,
+    config: PathBuf,
+    port: u16,
+}
+
+impl Broker {
+    fn start(dir: &Path) -> Broker {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let store = dir.join("mosquitto");
+        std::fs::create_dir_all(&store).expect("mkdir");
+        let config = dir.join("mosquitto.conf");
+        std::fs::write(
+            &config,
+            format!(
+                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\n\
+                 persistence_location {}/\nmax_queued_messages 100000\nuser root\nlog_type all\nlog_dest file {}/log\n",
+                store.display(), store.display()
+            ),
+        )
+        .expect("write the broker's config");
+        let child = Broker::spawn(&config, port);
+        Broker {
+            child,
+            config,
+            port,
+        }
+    }
+
+    fn spawn(config: &Path, port: u16) -> std::process::Child {
+        let program = ["/usr/sbin/mosquitto", "/usr/bin/mosquitto"]
+            .into_iter()
+            .find(|p| Path::new(p).exists())
+            .expect("mosquitto is not installed: run scripts/prerequisites.sh as root, or apt-get install mosquitto");
+        let child = Command::new(program)
+            .arg("-c")
+            .arg(config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start mosquitto");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "mosquitto did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        child
+    }
+
+    /// SIGTERM and wait: the broker writes its sessions and queued messages to its store.
+    fn stop(&mut self) {
+        signal(self.child.id(), "TERM");
+        self.child.wait().expect("wait for mosquitto");
+    }
+
+    fn restart(&mut self) {
+        self.child = Broker::spawn(&self.config, self.port);
+    }
+}
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            self.stop();
+        }
+    }
+}
+
+fn signal(pid: u32, name: &str) {
+    let ok = Command::new("kill")
+        .args([&format!("-{name}"), &pid.to_string()])
+        .status()
+        .expect("kill")
+        .success();
+    assert!(ok, "kill -{name} {pid}");
+}
+
+/// An MQTT client of the test's (QoS 1, a persistent session): its connection driven on a
+/// thread that collects what arrives on `subscribe` and reconnects after errors.
+fn mqtt_client(
+    port: u16,
+    id: &str,
+    subscribe: Option<&str>,
+) -> (
+    rumqttc::Client,
+    std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+    std::sync::Arc<std::sync::atomic::AtomicU64>,
+) {
+    use rumqttc::{Event, Packet, QoS};
+    let mut options = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
+    options.set_clean_session(false);
+    let (client, mut connection) = rumqttc::Client::new(options, 100_000);
+    if let Some(topic) = subscribe {
+        client
+            .subscribe(topic, QoS::AtLeastOnce)
+            .expect("subscribe");
+    }
+    let received = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let acked = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let (r, a) = (received.clone(), acked.clone());
+    std::thread::spawn(move || loop {
+        match connection.recv() {
+            Ok(Ok(Event::Incoming(Packet::Publish(p)))) => r
+                .lock()
+                .expect("lock")
+                .push(String::from_utf8_lossy(&p.payload).into_owned()),
+            Ok(Ok(Event::Incoming(Packet::PubAck(_)))) => {
+                a.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            }
+            Ok(Ok(_)) => {}
+            Ok(Err(_)) => std::thread::sleep(Duration::from_millis(100)),
+            Err(_) => return,
+        }
+    });
+    (client, received, acked)
+}
+
+fn wait_for(what: &str, seconds: u64, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    while !done() {
+        assert!(Instant::now() < deadline, "waited {seconds} s for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Samples arrive through a real broker (mosquitto) in messages of one to 16 lines, the
+/// first with a header; the watcher is stopped (SIGSTOP) while a third of the stream is
+/// published, so the broker keeps it, then the broker itself is stopped and restarted on its
+/// store; the watcher reconnects, gets what the broker kept (QoS 1, its persistent session)
+/// and the rest, and gives the alerts of one run over the whole record from a file. Its
+/// alerts also arrive on the alerts topic.
+#[test]
+fn a_stream_from_a_broker_survives_the_broker_going_away() {
+    use rumqttc::QoS;
+    use std::sync::atomic::Ordering;
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The record and the twin first: the watcher's --idle runs from its start.
+    let text = contact_record();
+    let twin = twin_path();
+    let mut broker = Broker::start(dir.path());
+    let topic = "lab/frame/samples";
+    let (_listener, heard, _) =
+        mqtt_client(broker.port, "test-alerts", Some("lab/frame/samples/alerts"));
+    let alerts = dir.path().join("alerts.jsonl");
+    let mut watcher = twin_cmd()
+        .args(["watch", "--twin"])
+        .arg(twin)
+        .arg("--source")
+        .arg(format!("mqtt://127.0.0.1:{}/{topic}", broker.port))
+        .arg("--alerts")
+        .arg(&alerts)
+        .args(["--idle", "4"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn twin watch");
+    let connected = |n: usize| {
+        std::fs::read_to_string(&alerts).is_ok_and(|t| {
+            t.lines()
+                .filter(|l| l.contains("\"state\":\"connected\""))
+                .count()
+                >= n
+        })
+    };
+    wait_for("the watcher to subscribe", 20, || connected(1));
+    let lines: Vec<&str> = text.lines().collect();
+    let (header, samples) = (lines[0], &lines[1..]);
+    // Messages of 1, 2, …, 16 lines, the first with the header.
+    let mut messages: Vec<String> = Vec::new();
+    let mut at = 0;
+    let mut size = 1;
+    while at < samples.len() {
+        let end = (at + size).min(samples.len());
+        let mut body = samples[at..end].join("\n");
+        if at == 0 {
+            body = format!("{header}\n{body}");
+        }
+        messages.push(body);
+        at = end;
+        size = size % 16 + 1;
+    }
+    let (publisher, _, acked) = mqtt_client(broker.port, "test-publisher", None);
+    let publish = |range: std::ops::Range<usize>| {
+        for m in &messages[range] {
+            publisher
+                .publish(topic, QoS::AtLeastOnce, false, m.clone())
+                .expect("publish");
+        }
+    };
+    let third = messages.len() / 3;
+    publish(0..third);
+    wait_for("the first third to be acknowledged", 20, || {
+        acked.load(Ordering::SeqCst) >= third as u64
+    });
+    // The watcher stops reading; the next third waits in the broker.
+    signal(watcher.id(), "STOP");
+    publish(third..2 * third);
+    wait_for("the second third to be acknowledged", 20, || {
+        acked.load(Ordering::SeqCst) >= 2 * third as u64
+    });
+    // The broker goes away with it and comes back from its store.
+    broker.stop();
+    broker.restart();
+    signal(watcher.id(), "CONT");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !connected(2) {
+        if Instant::now() > deadline {
+            let _ = watcher.kill();
+            let out = watcher.wait_with_output().expect("twin watch");
+            panic!(
+                "the watcher did not reconnect; its alerts: {}\nits output: {}\nbroker: {}",
+                std::fs::read_to_string(&alerts).unwrap_or_default(),
+                std::fs::read_to_string(dir.path().join("mosquitto/log")).unwrap_or_default(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    publish(2 * third..messages.len());
+    let out = watcher.wait_with_output().expect("twin watch");
+    assert!(
+        out.status.success(),
+        "twin watch failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let from_broker = read_alerts(&alerts);
+
+    let once = watch("-", Some(&text), &dir.path().join("once.jsonl"), &[]);
+    let data = |alerts: &[Value]| -> Vec<Value> {
+        comparable(alerts)
+            .into_iter()
+            .filter(|a| a["kind"] != "connection")
+            .map(|mut a| {
+                if let Value::Object(m) = &mut a {
+                    m.remove("mqtt");
+                    m.remove("duplicates");
+                    m.remove("alerts");
+                }
+                a
+            })
+            .collect()
+    };
+    assert!(!of_kind(&once, "failing").is_empty(), "the record fails");
+    assert_eq!(data(&from_broker), data(&once));
+    let end = from_broker.last().expect("end");
+    assert_eq!(end["samples"], 1024);
+    assert_eq!(end["bad_lines"], 0);
+    assert_eq!(end["gaps"], 0);
+    let mqtt = &end["mqtt"];
+    eprintln!(
+        "through the broker: {mqtt}, {} duplicate samples dropped",
+        end["duplicates"]
+    );
+    assert!(mqtt["connections"].as_u64() >= Some(2), "{mqtt}");
+    assert!(mqtt["disconnections"].as_u64() >= Some(1), "{mqtt}");
+    assert!(
+        mqtt["messages"].as_u64() >= Some(messages.len() as u64),
+        "{mqtt}"
+    );
+    // Every numbered alert also reached the alerts topic (a listener on its own session).
+    wait_for("the alerts on the topic", 10, || {
+        heard
+            .lock()
+            .expect("lock")
+            .iter()
+            .any(|m| m.contains("\"kind\":\"end\""))
+    });
+    let numbered = |alerts: Vec<Value>| -> Vec<u64> {
+        let mut seq: Vec<u64> = alerts.iter().filter_map(|a| a["seq"].as_u64()).collect();
+        seq.sort_unstable();
+        seq.dedup();
+        seq
+    };
+    let heard: Vec<Value> = heard
+        .lock()
+        .expect("lock")
+        .iter()
+        .map(|m| serde_json::from_str(m).expect("an alert is JSON"))
+        .collect();
+    assert_eq!(numbered(heard), numbered(from_broker.clone()));
+}

@@ -1,5 +1,6 @@
-//! `twin watch`: the operational twin on a live stream of CSV lines (standard input or a file
-//! that grows); alerts as JSON lines, a checkpoint to resume from.
+//! `twin watch`: the operational twin on a live stream of CSV lines (standard input, a file
+//! that grows, or an MQTT topic); alerts as JSON lines (and MQTT messages), a checkpoint to
+//! resume from.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -8,6 +9,7 @@ use std::time::Duration;
 use anyhow::{bail, Result};
 
 use crate::twin::Twin;
+use crate::workflows::watch::mqtt::MqttUrl;
 use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions};
 
 #[derive(clap::Args)]
@@ -16,16 +18,23 @@ pub struct WatchArgs {
     #[arg(long)]
     pub twin: Option<PathBuf>,
     /// `-`: CSV lines on standard input (header `time,force,acc1,acc2,acc3` first), read to the
-    /// end; else a CSV file (see --follow).
+    /// end; `mqtt://HOST[:PORT]/TOPIC`: messages of one or more CSV lines (those columns, or a
+    /// header line first) subscribed with QoS 1 on a persistent session, alerts published to
+    /// TOPIC/alerts; else a CSV file (see --follow).
     #[arg(long)]
     pub source: String,
+    /// The MQTT client id (default `twin-watch-` and the topic): a restarted watcher with the
+    /// same id gets what the broker kept for it.
+    #[arg(long)]
+    pub client_id: Option<String>,
     /// Keep reading the file as lines are appended (polled every 100 ms) until --idle seconds
     /// pass without a new line; without it the file is read to its end.
     #[arg(long)]
     pub follow: bool,
-    /// With --follow: seconds without a new line that end the stream.
-    #[arg(long, default_value_t = 10.0)]
-    pub idle: f64,
+    /// Seconds without a new line (--follow; default 10) or message (MQTT; default: never)
+    /// that end the stream.
+    #[arg(long)]
+    pub idle: Option<f64>,
     /// Alerts, one JSON object a line (kinds failing, recovered, bad_sample, gap, end), each
     /// flushed as it is written.
     #[arg(long)]
@@ -57,13 +66,25 @@ pub fn run(args: &WatchArgs) -> Result<()> {
             bail!("--tolerance must be a non-negative NMSE in %, was {t}");
         }
     }
-    if !(args.idle >= 0.0 && args.idle.is_finite()) {
-        bail!(
-            "--idle must be a non-negative number of seconds, was {}",
-            args.idle
-        );
+    if let Some(idle) = args.idle {
+        if !(idle >= 0.0 && idle.is_finite()) {
+            bail!("--idle must be a non-negative number of seconds, was {idle}");
+        }
     }
-    let source = if args.source == "-" {
+    let mqtt = MqttUrl::parse(&args.source).transpose()?;
+    if args.client_id.is_some() && mqtt.is_none() {
+        bail!("--client-id is for an mqtt:// source");
+    }
+    let source = if let Some(url) = mqtt {
+        if args.follow {
+            bail!("--follow is for a file source; an MQTT source is followed anyway");
+        }
+        StreamSource::Mqtt {
+            url,
+            client_id: args.client_id.clone(),
+            idle: args.idle.map(Duration::from_secs_f64),
+        }
+    } else if args.source == "-" {
         if args.follow {
             bail!("--follow is for a file source; standard input is read to its end");
         }
@@ -72,7 +93,7 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         StreamSource::File {
             path: PathBuf::from(&args.source),
             follow: args.follow,
-            idle: Duration::from_secs_f64(args.idle),
+            idle: Duration::from_secs_f64(args.idle.unwrap_or(10.0)),
         }
     };
     let twin = Twin::load(args.twin.as_deref())?;
@@ -141,6 +162,12 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         summary.latency_median_us,
         summary.latency_p99_us
     );
+    if let Some(m) = &summary.mqtt {
+        println!(
+            "MQTT: {} messages ({} delivered again, {} duplicate samples dropped), {} connections, {} lost",
+            m.messages, m.redelivered, summary.duplicates, m.connections, m.disconnections
+        );
+    }
     println!("alerts: {}", args.alerts.display());
     Ok(())
 }

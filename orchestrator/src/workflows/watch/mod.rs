@@ -6,6 +6,7 @@
 //! position, comparison state, counters, the FMUs' serialised states) lets a restarted watcher
 //! resume exactly where the last one saved.
 
+pub mod mqtt;
 pub mod online;
 pub mod stepper;
 
@@ -23,6 +24,7 @@ use crate::evaluation::compare::CompareOptions;
 use crate::fsutil::{write_text_atomically, WriteError};
 use crate::twin::run::Tolerance;
 use crate::twin::{Twin, TwinError};
+use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
 use online::{Detector, Event, Options};
 use stepper::{NodeState, Stepper};
 
@@ -73,6 +75,13 @@ pub enum StreamSource {
         follow: bool,
         idle: Duration,
     },
+    /// An MQTT topic (QoS 1, a persistent session); the stream ends after `idle` without a
+    /// message (None: never).
+    Mqtt {
+        url: MqttUrl,
+        client_id: Option<String>,
+        idle: Option<Duration>,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -107,10 +116,16 @@ pub struct Summary {
     pub samples: u64,
     pub samples_this_run: u64,
     pub bad_lines: u64,
+    /// Samples whose time was not after the last one's, from an MQTT source (a message the
+    /// broker delivered again): dropped, not counted as bad.
+    pub duplicates: u64,
     pub gaps: u64,
     pub missing_samples: u64,
     pub alerts: BTreeMap<String, u64>,
     pub failing_windows: u64,
+    /// The broker connection (an MQTT source only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mqtt: Option<ConnectionStats>,
     pub nmse: [f64; 3],
     pub samples_per_second: f64,
     pub real_time_factor: f64,
@@ -119,6 +134,8 @@ pub struct Summary {
     pub tolerance: f64,
 }
 
+/// The columns of an MQTT message without a header line.
+pub const DEFAULT_HEADER: &str = "time,force,acc1,acc2,acc3";
 /// A checkpoint's format version.
 const CHECKPOINT_VERSION: u32 = 1;
 /// A time step above this × the nominal one is a gap.
@@ -143,6 +160,8 @@ struct State {
     first: Option<(f64, [f64; 3], [f64; 3])>,
     detector: Option<Detector>,
     bad_lines: u64,
+    #[serde(default)]
+    duplicates: u64,
     gaps: u64,
     missing_samples: u64,
     /// Alerts raised so far (their sequence numbers run on from here), by kind.
@@ -152,55 +171,79 @@ struct State {
     fmu_last: Option<(f64, f64)>,
 }
 
-/// Lines of the stream, a partial last line of a growing file held until it is complete.
-struct LineReader {
-    reader: Box<dyn BufRead>,
-    follow: Option<Duration>,
-    partial: String,
+/// Lines of the stream: from standard input or a file (a partial last line of a growing file
+/// held until it is complete), or from an MQTT topic's messages.
+enum LineReader {
+    Text {
+        reader: Box<dyn BufRead>,
+        follow: Option<Duration>,
+        partial: String,
+    },
+    Mqtt(Box<MqttSource>),
 }
 
 impl LineReader {
     fn open(source: &StreamSource) -> Result<Self, WatchError> {
         Ok(match source {
-            StreamSource::Stdin => LineReader {
+            StreamSource::Stdin => LineReader::Text {
                 reader: Box::new(BufReader::new(std::io::stdin())),
                 follow: None,
                 partial: String::new(),
             },
-            StreamSource::File { path, follow, idle } => LineReader {
+            StreamSource::File { path, follow, idle } => LineReader::Text {
                 reader: Box::new(BufReader::new(
                     File::open(path).map_err(io(format!("cannot open {}", path.display())))?,
                 )),
                 follow: follow.then_some(*idle),
                 partial: String::new(),
             },
+            StreamSource::Mqtt {
+                url,
+                client_id,
+                idle,
+            } => LineReader::Mqtt(Box::new(MqttSource::open(
+                url.clone(),
+                client_id.clone(),
+                *idle,
+            )?)),
         })
+    }
+
+    fn mqtt(&mut self) -> Option<&mut MqttSource> {
+        match self {
+            LineReader::Mqtt(m) => Some(m),
+            LineReader::Text { .. } => None,
+        }
     }
 
     /// The next line without its line break; None at the end.
     fn next(&mut self) -> Result<Option<String>, WatchError> {
+        let (reader, follow, partial) = match self {
+            LineReader::Mqtt(m) => return m.next_line(),
+            LineReader::Text {
+                reader,
+                follow,
+                partial,
+            } => (reader, follow, partial),
+        };
         let mut idle_since = Instant::now();
         loop {
-            let n = self
-                .reader
-                .read_line(&mut self.partial)
+            let n = reader
+                .read_line(partial)
                 .map_err(io("cannot read the stream"))?;
-            if self.partial.ends_with('\n') {
-                let line = std::mem::take(&mut self.partial);
+            if partial.ends_with('\n') {
+                let line = std::mem::take(partial);
                 return Ok(Some(line.trim_end_matches(['\n', '\r']).to_owned()));
             }
             if n > 0 {
                 idle_since = Instant::now();
             }
-            match self.follow {
-                Some(idle) if idle_since.elapsed() < idle => std::thread::sleep(POLL),
+            match follow {
+                Some(idle) if idle_since.elapsed() < *idle => std::thread::sleep(POLL),
                 _ => {
                     // The end: a last line without a line break still counts.
-                    return Ok((!self.partial.is_empty()).then(|| {
-                        std::mem::take(&mut self.partial)
-                            .trim_end_matches('\r')
-                            .to_owned()
-                    }));
+                    return Ok((!partial.is_empty())
+                        .then(|| std::mem::take(partial).trim_end_matches('\r').to_owned()));
                 }
             }
         }
@@ -352,10 +395,12 @@ impl Alerts {
         Ok(Alerts { file, written })
     }
 
-    fn write(&mut self, alert: &Value) -> Result<(), WatchError> {
+    /// Write `alert` unless the file holds it already; whether it was written. An alert without
+    /// a sequence number (a connection change) is always written.
+    fn write(&mut self, alert: &Value) -> Result<bool, WatchError> {
         let seq = alert.get("seq").and_then(Value::as_u64).unwrap_or(0);
         if seq <= self.written && seq != 0 {
-            return Ok(());
+            return Ok(false);
         }
         let mut line = alert.to_string();
         line.push('\n');
@@ -363,8 +408,8 @@ impl Alerts {
             .write_all(line.as_bytes())
             .and_then(|()| self.file.flush())
             .map_err(io("cannot write an alert"))?;
-        self.written = seq;
-        Ok(())
+        self.written = self.written.max(seq);
+        Ok(true)
     }
 }
 
@@ -377,6 +422,7 @@ struct Watcher<'a> {
     state: State,
     stepper: Stepper,
     alerts: Alerts,
+    reader: LineReader,
     noise_variance: [f64; 3],
     options: &'a WatchOptions,
 }
@@ -390,7 +436,51 @@ impl Watcher<'_> {
             map.insert("time".into(), json!(time));
             map.insert("kind".into(), json!(kind));
         }
-        self.alerts.write(&body)
+        self.send(&body)
+    }
+
+    /// To the alerts file and, from an MQTT source, to the alerts topic.
+    fn send(&mut self, body: &Value) -> Result<(), WatchError> {
+        if self.alerts.write(body)? {
+            if let Some(m) = self.reader.mqtt() {
+                m.publish_alert(body.to_string())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The broker connection's changes as `connection` alerts (without a sequence number: a
+    /// resumed run's connections are its own).
+    fn connection_alerts(&mut self) -> Result<(), WatchError> {
+        let Some(m) = self.reader.mqtt() else {
+            return Ok(());
+        };
+        let events = m.take_events();
+        let broker = format!("{}:{}", m.url().host, m.url().port);
+        for event in events {
+            let body = match event {
+                ConnectionEvent::Connected { session_present } => json!({
+                    "time": self.state.last_time, "kind": "connection", "state": "connected",
+                    "broker": broker, "session_present": session_present}),
+                ConnectionEvent::Lost { reason } => json!({
+                    "time": self.state.last_time, "kind": "connection", "state": "lost",
+                    "broker": broker, "reason": reason}),
+            };
+            *self
+                .state
+                .alerts
+                .entry("connection".to_owned())
+                .or_default() += 1;
+            self.send(&body)?;
+        }
+        Ok(())
+    }
+
+    /// The next line of the stream, the connection's changes reported.
+    fn next_line(&mut self) -> Result<Option<String>, WatchError> {
+        let line = self.reader.next();
+        self.connection_alerts()?;
+        line
     }
 
     fn events(&mut self, time: f64, events: Vec<Event>) -> Result<(), WatchError> {
@@ -604,6 +694,7 @@ pub fn watch(
             first: None,
             detector: None,
             bad_lines: 0,
+            duplicates: 0,
             gaps: 0,
             missing_samples: 0,
             seq: 0,
@@ -613,23 +704,32 @@ pub fn watch(
         },
     };
     let alerts = Alerts::open(&options.alerts, resuming)?;
+    let reader = LineReader::open(&options.source)?;
+    let from_broker = matches!(reader, LineReader::Mqtt(_));
     let mut w = Watcher {
         state,
         stepper,
         alerts,
+        reader,
         noise_variance,
         options,
     };
-    let mut reader = LineReader::open(&options.source)?;
-    let header = loop {
-        match reader.next()? {
-            None => return Err(WatchError::Header("the stream is empty".into())),
-            Some(line) if line.trim().is_empty() => continue,
-            Some(line) => break Header::parse(&line)?,
+    // A file or standard input starts with its header; MQTT messages carry the usual columns
+    // unless a header line in one of them says otherwise.
+    let mut header = if from_broker {
+        Header::parse(DEFAULT_HEADER)?
+    } else {
+        loop {
+            match w.next_line()? {
+                None => return Err(WatchError::Header("the stream is empty".into())),
+                Some(line) if line.trim().is_empty() => continue,
+                Some(line) => break Header::parse(&line)?,
+            }
         }
     };
-    // Lines and samples the checkpoint has consumed are skipped.
-    let skip_lines = w.state.lines;
+    // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:
+    // there only the samples' times tell what was seen).
+    let skip_lines = if from_broker { 0 } else { w.state.lines };
     let skip_until = w.state.last_time;
     let mut line_number: u64 = 0;
     let mut latency = Latency::new();
@@ -637,10 +737,47 @@ pub fn watch(
     let mut this_run: u64 = 0;
     let mut since_save: u64 = 0;
     let mut last_status = Instant::now();
-    while let Some(line) = reader.next()? {
-        line_number += 1;
+    // Time spent waiting for a live source (a followed file, a broker), left out of the speed.
+    let live = from_broker || matches!(options.source, StreamSource::File { follow: true, .. });
+    let mut waited = Duration::ZERO;
+    loop {
+        let asked = Instant::now();
+        let Some(line) = w.next_line()? else {
+            break;
+        };
+        if live {
+            waited += asked.elapsed();
+        }
         if line.trim().is_empty() {
+            // A file's blank line still counts for the line numbers; a broker's empty line is
+            // only a connection change.
+            if !from_broker {
+                line_number += 1;
+            }
             continue;
+        }
+        line_number += 1;
+        if from_broker
+            && line
+                .trim_start()
+                .starts_with(|c: char| c.is_ascii_alphabetic())
+        {
+            match Header::parse(&line) {
+                Ok(h) => {
+                    header = h;
+                    continue;
+                }
+                Err(e) => {
+                    w.state.bad_lines += 1;
+                    let time = w.state.last_time;
+                    w.alert(
+                        time,
+                        "bad_sample",
+                        json!({"line": line_number, "reason": e.to_string()}),
+                    )?;
+                    continue;
+                }
+            }
         }
         let began = Instant::now();
         let sample = header.sample(&line);
@@ -654,6 +791,12 @@ pub fn watch(
             }
         }
         w.state.lines = line_number;
+        if let (true, Ok((t, ..)), Some(last)) = (from_broker, &sample, w.state.last_time) {
+            if *t <= last {
+                w.state.duplicates += 1;
+                continue;
+            }
+        }
         let sample = sample.and_then(|s| match w.state.last_time {
             Some(last) if s.0 <= last => {
                 Err(format!("time {} does not increase (previous {last})", s.0))
@@ -664,12 +807,14 @@ pub fn watch(
             Err(reason) => {
                 w.state.bad_lines += 1;
                 let time = w.state.last_time;
-                // Line numbers count the header as line 1.
-                w.alert(
-                    time,
-                    "bad_sample",
-                    json!({"line": line_number + 1, "reason": reason}),
-                )?;
+                // A file's line numbers count the header as line 1; a broker's count the lines
+                // of its messages from 1.
+                let line = if from_broker {
+                    line_number
+                } else {
+                    line_number + 1
+                };
+                w.alert(time, "bad_sample", json!({"line": line, "reason": reason}))?;
             }
             Ok((time, force, measured)) => {
                 w.sample(time, force, measured)?;
@@ -690,7 +835,7 @@ pub fn watch(
     // Saved before the stream's end is judged: a watcher restarted on a source that grew goes
     // on from here.
     w.save()?;
-    let elapsed = started.elapsed().as_secs_f64();
+    let elapsed = started.elapsed().saturating_sub(waited).as_secs_f64();
     let last = w.state.last_time;
     if let Some(d) = &mut w.state.detector {
         let events = d.finish_segment();
@@ -703,10 +848,12 @@ pub fn watch(
         samples: w.state.samples,
         samples_this_run: this_run,
         bad_lines: w.state.bad_lines,
+        duplicates: w.state.duplicates,
         gaps: w.state.gaps,
         missing_samples: w.state.missing_samples,
         alerts: w.state.alerts.clone(),
         failing_windows: w.state.detector.as_ref().map_or(0, |d| d.failing_windows),
+        mqtt: w.reader.mqtt().map(|m| m.stats),
         nmse: w
             .state
             .detector
@@ -725,6 +872,9 @@ pub fn watch(
         map.insert("tolerance_source".into(), json!(tolerance.source));
     }
     w.alert(last, "end", body)?;
+    if let Some(m) = w.reader.mqtt() {
+        m.close(Duration::from_secs(5));
+    }
     Ok(summary)
 }
 
