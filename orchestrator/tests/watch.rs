@@ -62,10 +62,11 @@ fn read_alerts(path: &Path) -> Vec<Value> {
         .collect()
 }
 
-/// `twin watch` on `source` (a path, or `-` with `stdin` piped in); its alerts.
+/// `twin watch` on `source` (a path, or `-` with `stdin` piped in), without the background
+/// diagnosis (its own test has it); its alerts.
 fn watch(source: &str, stdin: Option<&str>, alerts: &Path, extra: &[&str]) -> Vec<Value> {
     let mut cmd = twin_cmd();
-    cmd.args(["watch", "--twin"])
+    cmd.args(["watch", "--no-diagnosis", "--twin"])
         .arg(twin_path())
         .args(["--source", source, "--alerts"])
         .arg(alerts)
@@ -308,7 +309,7 @@ fn a_watcher_killed_mid_stream_resumes_from_its_checkpoint() {
         a
     };
     let mut cmd = twin_cmd();
-    cmd.args(["watch", "--twin"])
+    cmd.args(["watch", "--no-diagnosis", "--twin"])
         .arg(twin_path())
         .args(["--source", csv.to_str().expect("utf-8"), "--alerts"])
         .arg(&alerts)
@@ -589,7 +590,7 @@ fn a_stream_from_a_broker_survives_the_broker_going_away() {
         mqtt_client(broker.port, "test-alerts", Some("lab/frame/samples/alerts"));
     let alerts = dir.path().join("alerts.jsonl");
     let mut watcher = twin_cmd()
-        .args(["watch", "--twin"])
+        .args(["watch", "--no-diagnosis", "--twin"])
         .arg(twin)
         .arg("--source")
         .arg(format!("mqtt://127.0.0.1:{}/{topic}", broker.port))
@@ -724,4 +725,102 @@ fn a_stream_from_a_broker_survives_the_broker_going_away() {
         .map(|m| serde_json::from_str(m).expect("an alert is JSON"))
         .collect();
     assert_eq!(numbered(heard), numbered(from_broker.clone()));
+}
+
+/// A failing window is diagnosed on a thread while the stream goes on: the `diagnosis` alert
+/// names the contact between floors 2 and 3, and it is `twin diagnose`'s answer on the same
+/// samples, whose report is written beside the alerts.
+#[test]
+fn a_failing_window_is_diagnosed_in_the_background_as_twin_diagnose_would() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("record.csv");
+    std::fs::write(&csv, contact_record()).expect("write");
+    let alerts = dir.path().join("alerts.jsonl");
+    let out = twin_cmd()
+        .args(["watch", "--twin"])
+        .arg(twin_path())
+        .arg("--source")
+        .arg(&csv)
+        .arg("--alerts")
+        .arg(&alerts)
+        .args(["--diagnosis-after", "2"])
+        .output()
+        .expect("twin watch");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let all = read_alerts(&alerts);
+    let failing = of_kind(&all, "failing");
+    let diagnosis = of_kind(&all, "diagnosis");
+    assert_eq!(failing.len(), 1, "{all:?}");
+    assert_eq!(diagnosis.len(), 1, "{all:?}");
+    let (failing, diagnosis) = (failing[0], diagnosis[0]);
+    assert_eq!(diagnosis["window_start"], failing["start"]);
+    assert_eq!(diagnosis["action"], "add_physics", "{diagnosis}");
+    let effect = &diagnosis["effects"][0];
+    assert_eq!(effect["kind"], "contact", "{diagnosis}");
+    assert_eq!(effect["location"], serde_json::json!([2, 3]), "{diagnosis}");
+    // The samples it was run on: the last 20 s (here the whole record) when it started.
+    let (from, to) = (
+        diagnosis["from"].as_f64().expect("from"),
+        diagnosis["to"].as_f64().expect("to"),
+    );
+    assert_eq!(from, 0.0);
+    assert!(
+        to > failing["start"].as_f64().expect("start"),
+        "{diagnosis}"
+    );
+    let text = contact_record();
+    let cut: Vec<&str> = std::iter::once(text.lines().next().expect("header"))
+        .chain(text.lines().skip(1).filter(|l| {
+            let t: f64 = l
+                .split(',')
+                .next()
+                .and_then(|t| t.parse().ok())
+                .expect("time");
+            t <= to + 1e-9
+        }))
+        .collect();
+    let cut_csv = dir.path().join("cut.csv");
+    std::fs::write(&cut_csv, cut.join("\n") + "\n").expect("write");
+    let report = dir.path().join("diagnose.json");
+    let status = twin_cmd()
+        .args(["diagnose", "--twin"])
+        .arg(twin_path())
+        .arg("--data")
+        .arg(&cut_csv)
+        .arg("--report")
+        .arg(&report)
+        .stdout(Stdio::null())
+        .status()
+        .expect("twin diagnose");
+    assert!(status.success());
+    let batch: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    let background: Value = serde_json::from_str(
+        &std::fs::read_to_string(diagnosis["report"].as_str().expect("a report path"))
+            .expect("the background report"),
+    )
+    .expect("json");
+    for d in [&batch, &background] {
+        assert_eq!(d["action"], diagnosis["action"]);
+        assert_eq!(d["effects"][0]["label"], effect["label"]);
+    }
+    for (key, value) in effect["parameters"].as_object().expect("parameters") {
+        let b = batch["effects"][0]["parameters"][key]
+            .as_f64()
+            .expect("a parameter");
+        let v = value.as_f64().expect("a parameter");
+        assert!(
+            (b - v).abs() <= 1e-9 * b.abs().max(1e-12),
+            "{key}: {v} against {b}"
+        );
+    }
+    assert_eq!(
+        of_kind(&all, "end")[0]["alerts"]["diagnosis"],
+        1,
+        "the end counts it"
+    );
 }

@@ -9,6 +9,7 @@ use std::time::Duration;
 use anyhow::{bail, Result};
 
 use crate::twin::Twin;
+use crate::workflows::watch::background::DiagnosisOptions;
 use crate::workflows::watch::mqtt::MqttUrl;
 use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions};
 
@@ -35,8 +36,9 @@ pub struct WatchArgs {
     /// that end the stream.
     #[arg(long)]
     pub idle: Option<f64>,
-    /// Alerts, one JSON object a line (kinds failing, recovered, bad_sample, gap, end), each
-    /// flushed as it is written.
+    /// Alerts, one JSON object a line (kinds failing, recovered, diagnosis, bad_sample, gap,
+    /// connection, end), each flushed as it is written. A diagnosis's whole report goes beside
+    /// it, ALERTS.diagnosis-K.json (for `twin add-physics --diagnosis`).
     #[arg(long)]
     pub alerts: PathBuf,
     /// Checkpoint file (JSON): saved every --checkpoint-every samples and at the end; when it
@@ -58,6 +60,17 @@ pub struct WatchArgs {
     /// Sampling rate (Hz); default: from the first two samples' times.
     #[arg(long)]
     pub rate: Option<f64>,
+    /// No diagnosis of failing windows in the background.
+    #[arg(long)]
+    pub no_diagnosis: bool,
+    /// Seconds of the stream a failing window's diagnosis is run on (the last ones when it
+    /// starts).
+    #[arg(long, default_value_t = 20.0)]
+    pub diagnosis_record: f64,
+    /// Seconds after a failing window opens that its diagnosis starts if the window is still
+    /// open (it starts at once when the window closes).
+    #[arg(long, default_value_t = 5.0)]
+    pub diagnosis_after: f64,
 }
 
 pub fn run(args: &WatchArgs) -> Result<()> {
@@ -96,8 +109,20 @@ pub fn run(args: &WatchArgs) -> Result<()> {
             idle: Duration::from_secs_f64(args.idle.unwrap_or(10.0)),
         }
     };
+    for (name, value) in [
+        ("--diagnosis-record", args.diagnosis_record),
+        ("--diagnosis-after", args.diagnosis_after),
+    ] {
+        if !(value >= 0.0 && value.is_finite()) {
+            bail!("{name} must be a non-negative number of seconds, was {value}");
+        }
+    }
     let twin = Twin::load(args.twin.as_deref())?;
     let options = WatchOptions {
+        diagnosis: (!args.no_diagnosis).then_some(DiagnosisOptions {
+            record: args.diagnosis_record,
+            after: args.diagnosis_after,
+        }),
         source,
         alerts: args.alerts.clone(),
         checkpoint: args.checkpoint.clone(),
@@ -122,12 +147,17 @@ pub fn run(args: &WatchArgs) -> Result<()> {
                 }
             });
             s.set_message(format!(
-                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}",
+                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
                 status.samples,
                 status.time,
                 status.samples_per_second,
                 nmse.join(" / "),
-                if status.open_window { ", FAILING" } else { "" }
+                if status.open_window { ", FAILING" } else { "" },
+                if status.diagnosing {
+                    ", diagnosing in the background"
+                } else {
+                    ""
+                }
             ));
         }
     })?;

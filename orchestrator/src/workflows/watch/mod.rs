@@ -6,6 +6,7 @@
 //! position, comparison state, counters, the FMUs' serialised states) lets a restarted watcher
 //! resume exactly where the last one saved.
 
+pub mod background;
 pub mod mqtt;
 pub mod online;
 pub mod stepper;
@@ -24,6 +25,7 @@ use crate::evaluation::compare::CompareOptions;
 use crate::fsutil::{write_text_atomically, WriteError};
 use crate::twin::run::Tolerance;
 use crate::twin::{Twin, TwinError};
+use background::{Background, DiagnosisOptions, Finished};
 use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
 use online::{Detector, Event, Options};
 use stepper::{NodeState, Stepper};
@@ -97,6 +99,8 @@ pub struct WatchOptions {
     pub transient: f64,
     /// Sampling rate, Hz; None: from the first two samples.
     pub rate: Option<f64>,
+    /// The background diagnosis of failing windows (None: off).
+    pub diagnosis: Option<DiagnosisOptions>,
 }
 
 /// What the progress display shows.
@@ -108,6 +112,8 @@ pub struct Status {
     pub rolling_nmse: [f64; 3],
     /// Whether a failing window is open.
     pub open_window: bool,
+    /// Whether a diagnosis runs in the background.
+    pub diagnosing: bool,
 }
 
 /// The `end` alert's figures.
@@ -169,6 +175,8 @@ struct State {
     alerts: BTreeMap<String, u64>,
     fmu: Vec<NodeState>,
     fmu_last: Option<(f64, f64)>,
+    #[serde(default)]
+    background: background::Saved,
 }
 
 /// Lines of the stream: from standard input or a file (a partial last line of a growing file
@@ -363,6 +371,8 @@ struct Alerts {
     file: File,
     /// Alerts with a sequence number up to this are in the file already.
     written: u64,
+    /// The windows (their starts) whose diagnosis the file holds already.
+    diagnosed: Vec<f64>,
 }
 
 impl Alerts {
@@ -370,7 +380,11 @@ impl Alerts {
         let what = || format!("cannot write the alerts {}", path.display());
         if !resuming {
             let file = File::create(path).map_err(io(what()))?;
-            return Ok(Alerts { file, written: 0 });
+            return Ok(Alerts {
+                file,
+                written: 0,
+                diagnosed: Vec::new(),
+            });
         }
         let mut file = std::fs::OpenOptions::new()
             .create(true)
@@ -386,13 +400,25 @@ impl Alerts {
             file.set_len(complete as u64).map_err(io(what()))?;
             file.seek(std::io::SeekFrom::End(0)).map_err(io(what()))?;
         }
-        let written = text[..complete]
+        let alerts: Vec<Value> = text[..complete]
             .lines()
             .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .collect();
+        let written = alerts
+            .iter()
             .filter_map(|v| v.get("seq").and_then(Value::as_u64))
             .max()
             .unwrap_or(0);
-        Ok(Alerts { file, written })
+        let diagnosed = alerts
+            .iter()
+            .filter(|v| v["kind"] == "diagnosis")
+            .filter_map(|v| v["window_start"].as_f64())
+            .collect();
+        Ok(Alerts {
+            file,
+            written,
+            diagnosed,
+        })
     }
 
     /// Write `alert` unless the file holds it already; whether it was written. An alert without
@@ -423,6 +449,7 @@ struct Watcher<'a> {
     stepper: Stepper,
     alerts: Alerts,
     reader: LineReader,
+    background: Option<Background>,
     noise_variance: [f64; 3],
     options: &'a WatchOptions,
 }
@@ -491,6 +518,9 @@ impl Watcher<'_> {
                     floors,
                     nmse,
                 } => {
+                    if let Some(b) = &mut self.background {
+                        b.opened(start, time);
+                    }
                     let rolling = self
                         .state
                         .detector
@@ -508,6 +538,9 @@ impl Watcher<'_> {
                     failing,
                     was_opened,
                 } => {
+                    if let Some(b) = &mut self.background {
+                        b.closed(window.start, failing);
+                    }
                     if failing && !was_opened {
                         self.alert(
                             Some(time),
@@ -539,6 +572,9 @@ impl Watcher<'_> {
             self.state.fmu = self.stepper.save()?;
             self.state.fmu_last = self.stepper.last();
         }
+        if let Some(b) = &self.background {
+            self.state.background = b.saved.clone();
+        }
         let text = serde_json::to_string(&self.state)
             .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
         write_text_atomically(path, &text)?;
@@ -554,6 +590,9 @@ impl Watcher<'_> {
                 .rate
                 .map_or_else(|| nominal_step(time - last), |r| 1.0 / r);
             self.state.dt = Some(dt);
+            if let Some(b) = &mut self.background {
+                b.set_dt(dt);
+            }
         }
         if let (Some(last), Some(dt)) = (self.state.last_time, self.state.dt) {
             let step = time - last;
@@ -572,6 +611,9 @@ impl Watcher<'_> {
                            "step": step, "nominal_step": dt}),
                 )?;
                 // Re-synchronise: the twin at rest from here, the comparison's transient anew.
+                if let Some(b) = &mut self.background {
+                    b.gap();
+                }
                 self.state.segment_start = None;
                 self.state.first = None;
             }
@@ -588,6 +630,9 @@ impl Watcher<'_> {
         };
         let predicted = self.stepper.advance(grid, force)?;
         self.state.segment_count += 1;
+        if let Some(b) = &mut self.background {
+            b.push([time, force, measured[0], measured[1], measured[2]]);
+        }
         if self.state.dt.is_none() {
             // The stream's first sample waits for the second to give the interval.
             self.state.first = Some((time, measured, predicted));
@@ -607,7 +652,58 @@ impl Watcher<'_> {
         events.extend(detector.push(time, measured, predicted));
         self.state.samples += 1;
         self.state.last_time = Some(time);
-        self.events(time, events)
+        self.events(time, events)?;
+        if let Some(finished) = self.background.as_mut().and_then(|b| b.poll(time)) {
+            self.diagnosed(finished)?;
+        }
+        Ok(())
+    }
+
+    /// A background diagnosis finished: its report beside the alerts, and a `diagnosis`
+    /// alert (without a sequence number: when it comes depends on the machine).
+    fn diagnosed(&mut self, finished: Finished) -> Result<(), WatchError> {
+        let Finished {
+            job,
+            result,
+            seconds,
+        } = finished;
+        *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
+        if self.alerts.diagnosed.contains(&job.window_start) {
+            // Reported before a restart.
+            return Ok(());
+        }
+        let (from, to) = (
+            job.samples.first().map_or(f64::NAN, |s| s[0]),
+            job.samples.last().map_or(f64::NAN, |s| s[0]),
+        );
+        let mut body = json!({
+            "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
+            "from": from, "to": to, "seconds": seconds,
+        });
+        match result {
+            Ok(d) => {
+                let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
+                let path = background::report_path(&self.options.alerts, k);
+                let text = serde_json::to_string_pretty(&d)
+                    .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+                write_text_atomically(&path, &text)?;
+                if let Value::Object(m) = &mut body {
+                    m.insert("action".into(), json!(d.action));
+                    m.insert("reason".into(), json!(d.reason));
+                    m.insert("effects".into(), json!(d.effects));
+                    m.insert("nmse_before".into(), floats(d.nmse_before));
+                    m.insert("nmse_after".into(), floats(d.nmse_after));
+                    m.insert("report".into(), json!(path.display().to_string()));
+                }
+            }
+            Err(error) => {
+                if let Value::Object(m) = &mut body {
+                    m.insert("error".into(), json!(error));
+                }
+            }
+        }
+        self.alerts.diagnosed.push(job.window_start);
+        self.send(&body)
     }
 }
 
@@ -701,16 +797,30 @@ pub fn watch(
             alerts: BTreeMap::new(),
             fmu: Vec::new(),
             fmu_last: None,
+            background: background::Saved::default(),
         },
     };
     let alerts = Alerts::open(&options.alerts, resuming)?;
     let reader = LineReader::open(&options.source)?;
     let from_broker = matches!(reader, LineReader::Mqtt(_));
+    let background = options.diagnosis.map(|o| {
+        let diagnose = crate::workflows::diagnose::DiagnoseOptions {
+            transient: options.transient,
+            tolerance: options.tolerance,
+            ..Default::default()
+        };
+        let mut b = Background::new(twin, o, diagnose, state.background.clone());
+        if let Some(dt) = state.dt {
+            b.set_dt(dt);
+        }
+        b
+    });
     let mut w = Watcher {
         state,
         stepper,
         alerts,
         reader,
+        background,
         noise_variance,
         options,
     };
@@ -842,6 +952,10 @@ pub fn watch(
         w.events(last.unwrap_or(0.0), events)?;
     }
     progress(&status(&w, this_run, started));
+    let finished = w.background.as_mut().map(Background::finish);
+    for f in finished.into_iter().flatten() {
+        w.diagnosed(f)?;
+    }
     let rate = this_run as f64 / elapsed.max(1e-9);
     let real_time = w.state.dt.map_or(f64::NAN, |dt| rate * dt);
     let summary = Summary {
@@ -889,5 +1003,6 @@ fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
             .as_ref()
             .map_or([f64::NAN; 3], Detector::rolling_nmse),
         open_window: w.state.detector.as_ref().is_some_and(Detector::window_open),
+        diagnosing: w.background.as_ref().is_some_and(Background::busy),
     }
 }
