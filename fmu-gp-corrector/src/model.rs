@@ -97,7 +97,7 @@ impl FloorGp {
     /// Add a point (`O(n²)`); beyond [`MAX_TRAINING_POINTS`] the oldest point goes.
     pub fn learn(&mut self, x: &[f64], y: f64) -> Result<(), GpError> {
         let plan = self.plan_learn(x, y)?;
-        self.commit_learn(plan)
+        self.commit_learn(plan, MAX_TRAINING_POINTS)
     }
 
     /// The fallible part of [`FloorGp::learn`], leaving the GP as it is.
@@ -114,12 +114,12 @@ impl FloorGp {
 
     /// Applies a plan of this GP's: the append, then (at the size limit) the removal of the
     /// oldest point, neither of which can fail on a GP left as planned.
-    fn commit_learn(&mut self, plan: PendingLearn) -> Result<(), GpError> {
+    fn commit_learn(&mut self, plan: PendingLearn, budget: usize) -> Result<(), GpError> {
         match (plan, &mut *self) {
             (PendingLearn::First(gp), _) => *self = FloorGp::Trained(gp),
             (PendingLearn::Append(plan), FloorGp::Trained(gp)) => {
                 gp.commit(plan)?;
-                if gp.len() > MAX_TRAINING_POINTS {
+                while gp.len() > budget.clamp(1, MAX_TRAINING_POINTS) {
                     gp.remove(0)?;
                 }
             }
@@ -154,10 +154,17 @@ pub struct Settings {
     pub lags: usize,
     pub target: TargetForm,
     pub refit_every: u32,
+    /// The most training points a floor keeps while learning.
+    #[serde(default = "default_budget")]
+    pub budget: usize,
     pub training_path: String,
     pub initial_signal_variance: f64,
     pub initial_noise_variance: f64,
     pub initial_length_scale: f64,
+}
+
+fn default_budget() -> usize {
+    MAX_TRAINING_POINTS
 }
 
 impl Default for Settings {
@@ -166,6 +173,7 @@ impl Default for Settings {
             lags: DEFAULT_LAGS,
             target: TargetForm::Discrepancy,
             refit_every: DEFAULT_REFIT_EVERY,
+            budget: MAX_TRAINING_POINTS,
             training_path: String::new(),
             initial_signal_variance: INITIAL_SIGNAL_VARIANCE,
             initial_noise_variance: INITIAL_NOISE_VARIANCE,
@@ -284,7 +292,13 @@ impl Floors {
     /// [`MAX_TRAINING_POINTS`] the oldest point goes after the append), which cannot fail. Only
     /// a step that ends in a scheduled refit copies the floors first, to restore them if the
     /// refit fails (a refit costs far more than the copy).
-    pub fn learn(&mut self, x: &[f64], targets: [f64; 3], refit_every: u32) -> Result<(), String> {
+    pub fn learn(
+        &mut self,
+        x: &[f64],
+        targets: [f64; 3],
+        refit_every: u32,
+        budget: usize,
+    ) -> Result<(), String> {
         let parallel = self.len() >= PARALLEL_LEARNING;
         let plan = |floor: usize| self.gps[floor].plan_learn(x, targets[floor]);
         let plans = if parallel {
@@ -305,9 +319,9 @@ impl Floors {
         let [p0, p1, p2] = plans;
         let committed = if parallel {
             std::thread::scope(|scope| {
-                let h1 = scope.spawn(|| g1.commit_learn(p1));
-                let h2 = scope.spawn(|| g2.commit_learn(p2));
-                let r0 = g0.commit_learn(p0);
+                let h1 = scope.spawn(|| g1.commit_learn(p1, budget));
+                let h2 = scope.spawn(|| g2.commit_learn(p2, budget));
+                let r0 = g0.commit_learn(p0, budget);
                 let join =
                     |h: std::thread::ScopedJoinHandle<'_, Result<(), GpError>>| match h.join() {
                         Ok(r) => r,
@@ -317,9 +331,9 @@ impl Floors {
             })
         } else {
             [
-                g0.commit_learn(p0),
-                g1.commit_learn(p1),
-                g2.commit_learn(p2),
+                g0.commit_learn(p0, budget),
+                g1.commit_learn(p1, budget),
+                g2.commit_learn(p2, budget),
             ]
         };
         for (floor, r) in committed.into_iter().enumerate() {
@@ -662,9 +676,13 @@ impl CoSimModel for GpCorrector {
     }
 
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {
+        // The prediction is kept while its inputs keep their values (a master's second
+        // pass sets the same ones again).
         if let Some(i) = Self::floor_index(vr, PHYSICS_ACC) {
-            self.inputs.physics_acc[i] = value;
-            self.cache = None;
+            if self.inputs.physics_acc[i].to_bits() != value.to_bits() {
+                self.inputs.physics_acc[i] = value;
+                self.cache = None;
+            }
             return Ok(());
         }
         if let Some(i) = Self::floor_index(vr, MEASURED_ACC) {
@@ -673,8 +691,10 @@ impl CoSimModel for GpCorrector {
         }
         match vr {
             FORCE => {
-                self.inputs.force = value;
-                self.cache = None;
+                if self.inputs.force.to_bits() != value.to_bits() {
+                    self.inputs.force = value;
+                    self.cache = None;
+                }
             }
             INITIAL_SIGNAL_VARIANCE_VR => {
                 self.settings.initial_signal_variance = positive("initial_signal_variance", value)?;
@@ -698,6 +718,7 @@ impl CoSimModel for GpCorrector {
             LAGS => self.settings.lags as i32,
             TARGET => self.settings.target.code(),
             REFIT_EVERY => self.settings.refit_every as i32,
+            BUDGET => self.settings.budget as i32,
             TRAINING_POINTS => {
                 let floors = self.prepare().map_err(refused)?;
                 floors.len() as i32
@@ -744,6 +765,17 @@ impl CoSimModel for GpCorrector {
             REFIT_EVERY => {
                 self.settings.refit_every = u32::try_from(value)
                     .map_err(|_| invalid("refit_every", format!("{value} must be ≥ 0")))?;
+            }
+            BUDGET => {
+                self.settings.budget = usize::try_from(value)
+                    .ok()
+                    .filter(|b| (1..=MAX_TRAINING_POINTS).contains(b))
+                    .ok_or_else(|| {
+                        invalid(
+                            "budget",
+                            format!("{value} is outside [1, {MAX_TRAINING_POINTS}]"),
+                        )
+                    })?;
             }
             _ => {
                 return Err(ModelError::UnknownVariable {
@@ -815,11 +847,12 @@ impl CoSimModel for GpCorrector {
             let physics = self.inputs.physics_acc;
             let targets = [0, 1, 2].map(|i| target.target(measured[i], physics[i]));
             let refit_every = self.settings.refit_every;
+            let budget = self.settings.budget;
             let floors = self
                 .prepare()
                 .map_err(|e| ModelError::Other(e.to_string()))?;
             floors
-                .learn(&x, targets, refit_every)
+                .learn(&x, targets, refit_every, budget)
                 .map_err(|e| ModelError::Other(format!("learning the current sample: {e}")))?;
         }
         self.history.push(sample);

@@ -8,7 +8,7 @@ use crate::model::{
     DEFAULT_LAGS, DEFAULT_REFIT_EVERY, INITIAL_LENGTH_SCALE, INITIAL_NOISE_VARIANCE,
     INITIAL_SIGNAL_VARIANCE,
 };
-use crate::training::MAX_LAGS;
+use crate::training::{MAX_LAGS, MAX_TRAINING_POINTS};
 
 /// physics_acc1..3 are PHYSICS_ACC..PHYSICS_ACC+2; likewise for the other per-floor variables.
 pub const PHYSICS_ACC: u32 = 1;
@@ -31,6 +31,8 @@ pub const TRAINING_PATH: u32 = 33;
 pub const INITIAL_SIGNAL_VARIANCE_VR: u32 = 34;
 pub const INITIAL_NOISE_VARIANCE_VR: u32 = 35;
 pub const INITIAL_LENGTH_SCALE_VR: u32 = 36;
+/// The most training points a floor's GP keeps while learning (the oldest go first).
+pub const BUDGET: u32 = 37;
 
 pub const MODEL_IDENTIFIER: &str = "fmu_gp_corrector";
 
@@ -147,6 +149,13 @@ fn variables() -> Vec<Variable> {
             .min(0.0)
             .max(1.0)
             .describe("0: the GP models measured − physics (corrected = physics + mean); 1: the GP models the measured acceleration (zero mean, corrected = mean)"),
+    );
+    v.push(
+        Variable::integer_parameter("budget", BUDGET, MAX_TRAINING_POINTS as i32)
+            .min(1.0)
+            .max(MAX_TRAINING_POINTS as f64)
+            .tunable()
+            .describe("the most training points a floor's GP keeps while learning: beyond, the oldest goes"),
     );
     v.push(
         Variable::integer_parameter("refit_every", REFIT_EVERY, DEFAULT_REFIT_EVERY as i32)

@@ -472,6 +472,8 @@ fn parameters_outside_their_ranges_are_refused_and_fixed_ones_stay_fixed() {
         (LAGS, -1, "'lags': -1 is outside"),
         (TARGET, 2, "'target': 2 is neither 0"),
         (REFIT_EVERY, -3, "'refit_every': -3 must be ≥ 0"),
+        (BUDGET, 0, "'budget': 0 is outside [1, 2048]"),
+        (BUDGET, 2049, "'budget': 2049 is outside [1, 2048]"),
     ] {
         assert_refused(&s, s.set_integers(&[vr], &[value]), &[needle]);
     }
@@ -579,6 +581,55 @@ fn a_training_file_written_from_the_model_loads_back_to_the_same_predictions() {
         );
         assert!(
             (a - b).abs() <= 1e-9 * a.abs().max(1e-6),
+            "vr {vr}: {a} vs {b}"
+        );
+    }
+}
+
+/// A budget of 8 points: 20 samples learned leave the last 8, and the predictions are those of
+/// a corrector that learned only those 8 (the oldest forgotten, not merely hidden).
+#[test]
+fn a_budget_keeps_the_most_recent_points_and_forgets_the_oldest() {
+    use fmi2::{CoSimModel, InstantiateContext};
+    use fmu_gp_corrector::GpCorrector;
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let context = InstantiateContext {
+        instance_name: "in-process".into(),
+        resource_dir: Some(dir.path().to_path_buf()),
+    };
+    let record = samples(41, 30);
+    let run = |budget: i32, learn_from: usize| {
+        let mut model = GpCorrector::instantiate(&context).expect("instantiate");
+        model.set_integer(LAGS, 2).expect("lags");
+        model.set_integer(REFIT_EVERY, 0).expect("refit_every");
+        model.set_integer(BUDGET, budget).expect("budget");
+        model.exit_initialization().expect("initialize");
+        for (k, sample) in record.iter().enumerate().take(21) {
+            for (i, v) in sample.iter().enumerate() {
+                model.set_real(PHYSICS_ACC + i as u32, *v).expect("set");
+            }
+            for (i, v) in measured(sample).iter().enumerate() {
+                model.set_real(MEASURED_ACC + i as u32, *v).expect("set");
+            }
+            model
+                .set_boolean(LEARN, (learn_from..20).contains(&k))
+                .expect("learn");
+            model.do_step(k as f64 * H, H).expect("step");
+        }
+        model
+    };
+    let mut budgeted = run(8, 0);
+    let mut recent = run(2048, 12);
+    assert_eq!(budgeted.get_integer(TRAINING_POINTS).expect("points"), 8);
+    assert_eq!(budgeted.get_integer(BUDGET).expect("budget"), 8);
+    for vr in (ACC..ACC + 3).chain(LATENT_VAR..LATENT_VAR + 3) {
+        let (a, b) = (
+            budgeted.get_real(vr).expect("get"),
+            recent.get_real(vr).expect("get"),
+        );
+        assert!(
+            (a - b).abs() <= 1e-9 * a.abs().max(1e-9),
             "vr {vr}: {a} vs {b}"
         );
     }

@@ -11,6 +11,7 @@ use anyhow::{bail, Result};
 use crate::twin::Twin;
 use crate::workflows::watch::background::DiagnosisOptions;
 use crate::workflows::watch::mqtt::MqttUrl;
+use crate::workflows::watch::supervise::LearnOptions;
 use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions};
 
 #[derive(clap::Args)]
@@ -71,6 +72,20 @@ pub struct WatchArgs {
     /// open (it starts at once when the window closes).
     #[arg(long, default_value_t = 5.0)]
     pub diagnosis_after: f64,
+    /// With a GP corrector: query where its latent variance V(f) exceeds this (m²/s⁴);
+    /// default: the largest V(f) over the first 100 samples after the transient.
+    #[arg(long)]
+    pub query_threshold: Option<f64>,
+    /// With a GP corrector: watch its latent variances, learn nothing.
+    #[arg(long)]
+    pub no_learning: bool,
+    /// With a GP corrector: the most training points a floor keeps (the oldest go first).
+    #[arg(long, default_value_t = LearnOptions::default().budget)]
+    pub budget: u32,
+    /// With a GP corrector: refit its hyperparameters after this many learned points (0:
+    /// never; a refit holds the stream up for as long as it takes).
+    #[arg(long, default_value_t = 0)]
+    pub refit_every: u32,
 }
 
 pub fn run(args: &WatchArgs) -> Result<()> {
@@ -117,8 +132,19 @@ pub fn run(args: &WatchArgs) -> Result<()> {
             bail!("{name} must be a non-negative number of seconds, was {value}");
         }
     }
+    if let Some(t) = args.query_threshold {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--query-threshold must be a positive variance (m²/s⁴), was {t}");
+        }
+    }
     let twin = Twin::load(args.twin.as_deref())?;
     let options = WatchOptions {
+        learning: LearnOptions {
+            threshold: args.query_threshold,
+            learn: !args.no_learning,
+            budget: args.budget,
+            refit_every: args.refit_every,
+        },
         diagnosis: (!args.no_diagnosis).then_some(DiagnosisOptions {
             record: args.diagnosis_record,
             after: args.diagnosis_after,
@@ -196,6 +222,20 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         println!(
             "MQTT: {} messages ({} delivered again, {} duplicate samples dropped), {} connections, {} lost",
             m.messages, m.redelivered, summary.duplicates, m.connections, m.disconnections
+        );
+    }
+    if let Some(l) = &summary.learning {
+        println!(
+            "corrector: {} queries{}, {} training points (budget {})",
+            l.queries,
+            if l.learned {
+                " learned"
+            } else {
+                " (not learned)"
+            },
+            l.training_points.map_or("-".into(), |n| n.to_string()),
+            l.budget
+                .map_or("the FMU's own, 2048".into(), |b| b.to_string())
         );
     }
     println!("alerts: {}", args.alerts.display());

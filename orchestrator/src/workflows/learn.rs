@@ -106,6 +106,7 @@
 use fmu_gp_corrector::model::{
     per_floor, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
 };
+use fmu_gp_corrector::training::MAX_TRAINING_POINTS;
 use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Sample, TargetForm, TrainingFile};
 use serde::Serialize;
 
@@ -949,7 +950,7 @@ pub fn run_mode(
             let clock = std::time::Instant::now();
             let before = floors.len();
             floors
-                .learn(&stream.inputs[t], stream.targets[t], 0)
+                .learn(&stream.inputs[t], stream.targets[t], 0, MAX_TRAINING_POINTS)
                 .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
             query_indices.push(t);
             let dropped = reference.learned(r, j, floors.len() == before, r);

@@ -10,6 +10,7 @@ pub mod background;
 pub mod mqtt;
 pub mod online;
 pub mod stepper;
+pub mod supervise;
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -29,6 +30,7 @@ use background::{Background, DiagnosisOptions, Finished};
 use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
 use online::{Detector, Event, Options};
 use stepper::{NodeState, Stepper};
+use supervise::{Decision, LearnOptions, Supervisor};
 
 #[derive(Debug, thiserror::Error)]
 pub enum WatchError {
@@ -101,6 +103,8 @@ pub struct WatchOptions {
     pub rate: Option<f64>,
     /// The background diagnosis of failing windows (None: off).
     pub diagnosis: Option<DiagnosisOptions>,
+    /// The active-learning supervisor of a twin with a GP corrector.
+    pub learning: LearnOptions,
 }
 
 /// What the progress display shows.
@@ -132,6 +136,9 @@ pub struct Summary {
     /// The broker connection (an MQTT source only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mqtt: Option<ConnectionStats>,
+    /// The corrector's supervisor (a twin with a GP corrector only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub learning: Option<LearningSummary>,
     pub nmse: [f64; 3],
     pub samples_per_second: f64,
     pub real_time_factor: f64,
@@ -142,6 +149,21 @@ pub struct Summary {
 
 /// The columns of an MQTT message without a header line.
 pub const DEFAULT_HEADER: &str = "time,force,acc1,acc2,acc3";
+/// What the active-learning supervisor did over the stream.
+#[derive(Debug, Clone, Serialize)]
+pub struct LearningSummary {
+    pub queries: u64,
+    /// Whether the queried samples were learned.
+    pub learned: bool,
+    pub training_points: Option<i32>,
+    /// None: the corrector's FMU takes no budget (its own limit, 2048, holds).
+    pub budget: Option<u32>,
+    /// Per floor, m²/s⁴ (None while the reference samples come).
+    pub threshold: Option<[f64; 3]>,
+    /// The largest V(f) / threshold over the stream.
+    pub largest_ratio: f64,
+}
+
 /// A checkpoint's format version.
 const CHECKPOINT_VERSION: u32 = 1;
 /// A time step above this × the nominal one is a gap.
@@ -177,6 +199,8 @@ struct State {
     fmu_last: Option<(f64, f64)>,
     #[serde(default)]
     background: background::Saved,
+    #[serde(default)]
+    supervisor: Option<Supervisor>,
 }
 
 /// Lines of the stream: from standard input or a file (a partial last line of a growing file
@@ -614,6 +638,9 @@ impl Watcher<'_> {
                 if let Some(b) = &mut self.background {
                     b.gap();
                 }
+                if let Some(s) = &mut self.state.supervisor {
+                    s.gap();
+                }
                 self.state.segment_start = None;
                 self.state.first = None;
             }
@@ -653,8 +680,49 @@ impl Watcher<'_> {
         self.state.samples += 1;
         self.state.last_time = Some(time);
         self.events(time, events)?;
+        if self.state.supervisor.is_some() && time - start >= self.options.transient {
+            self.supervise(time, measured)?;
+        }
         if let Some(finished) = self.background.as_mut().and_then(|b| b.poll(time)) {
             self.diagnosed(finished)?;
+        }
+        Ok(())
+    }
+
+    /// The corrector's latent variances against the thresholds: a query learns the sample,
+    /// an excursion is an `uncertain` alert, its end a `certain` one.
+    fn supervise(&mut self, time: f64, measured: [f64; 3]) -> Result<(), WatchError> {
+        let Some(v) = self.stepper.latent_variance()? else {
+            return Ok(());
+        };
+        let Some(supervisor) = &mut self.state.supervisor else {
+            return Ok(());
+        };
+        let decision = supervisor.decide(time, v, self.options.window);
+        let threshold = supervisor.threshold;
+        let queries = supervisor.queries;
+        match decision {
+            Decision::Quiet => {}
+            Decision::Query { floors, alarm } => {
+                if self.options.learning.learn {
+                    self.stepper.learn_current(measured)?;
+                }
+                if alarm {
+                    self.alert(
+                        Some(time),
+                        "uncertain",
+                        json!({"floors": floors, "latent_variance": floats(v),
+                               "threshold": threshold.map(floats)}),
+                    )?;
+                }
+            }
+            Decision::Closes { since, peak } => {
+                self.alert(
+                    Some(time),
+                    "certain",
+                    json!({"since": since, "queries": queries, "peak_ratio": peak}),
+                )?;
+            }
         }
         Ok(())
     }
@@ -745,6 +813,21 @@ pub fn watch(
         options.window,
     );
     let mut stepper = Stepper::new(twin)?;
+    // The corrector's training-set budget, when its FMU takes one.
+    let mut budget = Some(options.learning.budget);
+    if stepper.has_learner() {
+        let l = &options.learning;
+        if !(1..=2048).contains(&l.budget) {
+            return Err(WatchError::Options(format!(
+                "--budget must be between 1 and 2048 points, was {}",
+                l.budget
+            )));
+        }
+        if !stepper.set_learner_parameter("budget", l.budget as i32) {
+            budget = None;
+        }
+        stepper.set_learner_parameter("refit_every", l.refit_every as i32);
+    }
     let saved: Option<State> = match &options.checkpoint {
         Some(path) if path.exists() => {
             let bad = |message: String| WatchError::BadCheckpoint {
@@ -770,7 +853,7 @@ pub fn watch(
         _ => None,
     };
     let resuming = saved.is_some();
-    let state = match saved {
+    let mut state = match saved {
         Some(state) => {
             if let Some(start) = state.segment_start {
                 stepper.start(start)?;
@@ -798,8 +881,12 @@ pub fn watch(
             fmu: Vec::new(),
             fmu_last: None,
             background: background::Saved::default(),
+            supervisor: None,
         },
     };
+    if stepper.has_learner() && state.supervisor.is_none() {
+        state.supervisor = Some(Supervisor::new(options.learning.threshold));
+    }
     let alerts = Alerts::open(&options.alerts, resuming)?;
     let reader = LineReader::open(&options.source)?;
     let from_broker = matches!(reader, LineReader::Mqtt(_));
@@ -968,6 +1055,21 @@ pub fn watch(
         alerts: w.state.alerts.clone(),
         failing_windows: w.state.detector.as_ref().map_or(0, |d| d.failing_windows),
         mqtt: w.reader.mqtt().map(|m| m.stats),
+        learning: match &w.state.supervisor {
+            Some(s) => Some(LearningSummary {
+                queries: s.queries,
+                learned: options.learning.learn,
+                training_points: if w.state.segment_start.is_some() {
+                    w.stepper.training_points()?
+                } else {
+                    None
+                },
+                budget,
+                threshold: s.threshold,
+                largest_ratio: s.largest_ratio,
+            }),
+            None => None,
+        },
         nmse: w
             .state
             .detector

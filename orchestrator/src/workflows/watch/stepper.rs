@@ -31,6 +31,20 @@ struct Node {
     inputs: Vec<f64>,
     outputs: Vec<f64>,
     slopes: Vec<f64>,
+    /// The outputs were read after the last step with the inputs as they are now.
+    fresh: bool,
+}
+
+/// The GP corrector's learning interface: the measured accelerations and the learn flag it
+/// takes, the latent variances and training-set size it gives.
+struct Learner {
+    node: usize,
+    measured: [u32; 3],
+    learn: u32,
+    latent: [u32; 3],
+    points: u32,
+    /// Learn the point at the next step (then the flag is lowered again).
+    pending: bool,
 }
 
 pub struct Stepper {
@@ -40,6 +54,7 @@ pub struct Stepper {
     coupled: bool,
     /// The last point's force and time (None before the first point of a segment).
     last: Option<(f64, f64)>,
+    learner: Option<Learner>,
 }
 
 impl Stepper {
@@ -136,17 +151,101 @@ impl Stepper {
                 inputs: vec![0.0; input_vrs.len()],
                 slopes: vec![0.0; input_vrs.len()],
                 outputs: vec![0.0; output_vrs.len()],
+                fresh: false,
                 input_vrs,
                 sources,
                 output_vrs,
             })
-            .collect();
+            .collect::<Vec<Node>>();
+        let learner = nodes.iter().enumerate().find_map(|(i, node)| {
+            let vr = |name: &str| node.fmu.value_reference(name).ok();
+            let three = |stem: &str| -> Option<[u32; 3]> {
+                Some([
+                    vr(&format!("{stem}1"))?,
+                    vr(&format!("{stem}2"))?,
+                    vr(&format!("{stem}3"))?,
+                ])
+            };
+            Some(Learner {
+                node: i,
+                measured: three("measured_acc")?,
+                learn: vr("learn")?,
+                latent: three("latent_var")?,
+                points: vr("training_points")?,
+                pending: false,
+            })
+        });
         Ok(Stepper {
             nodes,
             acc,
             coupled,
             last: None,
+            learner,
         })
+    }
+
+    /// Whether the twin has a corrector that learns (the GP corrector FMU).
+    pub fn has_learner(&self) -> bool {
+        self.learner.is_some()
+    }
+
+    /// Set an integer parameter of the corrector for the next [`Stepper::start`]; false when
+    /// its FMU has no such parameter (a corrector built before it had one).
+    pub fn set_learner_parameter(&mut self, name: &str, value: i32) -> bool {
+        let Some(l) = &self.learner else {
+            return false;
+        };
+        let node = &mut self.nodes[l.node];
+        if node.fmu.value_reference(name).is_err() {
+            return false;
+        }
+        node.parameters
+            .insert(name.to_owned(), ParameterValue::Integer(value));
+        true
+    }
+
+    /// The corrector's latent variances V(f) per floor at the current point.
+    pub fn latent_variance(&mut self) -> Result<Option<[f64; 3]>, WatchError> {
+        let Some(l) = &self.learner else {
+            return Ok(None);
+        };
+        let instance = self.nodes[l.node]
+            .instance
+            .as_mut()
+            .ok_or(WatchError::NotStarted)?;
+        let mut v = [0.0; 3];
+        instance.get_real(&l.latent, &mut v)?;
+        Ok(Some(v))
+    }
+
+    /// The corrector's training-set size.
+    pub fn training_points(&mut self) -> Result<Option<i32>, WatchError> {
+        let Some(l) = &self.learner else {
+            return Ok(None);
+        };
+        let instance = self.nodes[l.node]
+            .instance
+            .as_mut()
+            .ok_or(WatchError::NotStarted)?;
+        let mut n = [0];
+        instance.get_integer(&[l.points], &mut n)?;
+        Ok(Some(n[0]))
+    }
+
+    /// The current point joins the corrector's training sets, with these measured
+    /// accelerations, at the next step.
+    pub fn learn_current(&mut self, measured: [f64; 3]) -> Result<(), WatchError> {
+        let Some(l) = &mut self.learner else {
+            return Ok(());
+        };
+        let instance = self.nodes[l.node]
+            .instance
+            .as_mut()
+            .ok_or(WatchError::NotStarted)?;
+        instance.set_real(&l.measured, &measured)?;
+        instance.set_boolean(&[l.learn], &[true])?;
+        l.pending = true;
+        Ok(())
     }
 
     /// (Re)start every FMU at rest at `start` (s): new instances, the twin's parameters,
@@ -160,6 +259,10 @@ impl Stepper {
             apply_parameters(&node.fmu, &mut instance, &node.parameters)?;
             instance.exit_initialization_mode()?;
             node.instance = Some(instance);
+            node.fresh = false;
+        }
+        if let Some(l) = &mut self.learner {
+            l.pending = false;
         }
         self.last = None;
         Ok(())
@@ -186,6 +289,17 @@ impl Stepper {
             for node in &mut self.nodes {
                 let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
                 instance.do_step(t0, step)?;
+                node.fresh = false;
+            }
+            if let Some(l) = &mut self.learner {
+                if l.pending {
+                    l.pending = false;
+                    let instance = self.nodes[l.node]
+                        .instance
+                        .as_mut()
+                        .ok_or(WatchError::NotStarted)?;
+                    instance.set_boolean(&[l.learn], &[false])?;
+                }
             }
         }
         self.last = Some((time, force));
@@ -197,11 +311,18 @@ impl Stepper {
         for _ in 0..passes {
             let mut changed = false;
             for i in 0..self.nodes.len() {
+                let mut same = self.nodes[i].fresh;
                 for p in 0..self.nodes[i].sources.len() {
-                    self.nodes[i].inputs[p] = match self.nodes[i].sources[p] {
+                    let value = match self.nodes[i].sources[p] {
                         Source::Force => force,
                         Source::Node(n, o) => self.nodes[n].outputs[o],
                     };
+                    same &= value.to_bits() == self.nodes[i].inputs[p].to_bits();
+                    self.nodes[i].inputs[p] = value;
+                }
+                if same {
+                    // Read after this step with these very inputs: the outputs stand.
+                    continue;
                 }
                 let node = &mut self.nodes[i];
                 let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
@@ -210,6 +331,7 @@ impl Stepper {
                 }
                 let before = node.outputs.clone();
                 instance.get_real(&node.output_vrs, &mut node.outputs)?;
+                node.fresh = true;
                 changed |= before
                     .iter()
                     .zip(&node.outputs)
@@ -259,8 +381,14 @@ impl Stepper {
             let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
             instance.restore_state_bytes(&saved.state)?;
             node.outputs.clone_from(&saved.outputs);
+            node.fresh = false;
         }
         self.last = last;
+        // The corrector's learn flag may have been raised when the state was saved: lowered
+        // after the next step either way.
+        if let Some(l) = &mut self.learner {
+            l.pending = true;
+        }
         Ok(())
     }
 
