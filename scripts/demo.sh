@@ -5,7 +5,8 @@
 # mode, then diagnose dataset3, add the physics the diagnosis names and compare again (and, on
 # synthetic records, two changes at once and a force outside the library, discovered), run the
 # simulated real-time hybrid test (the contact threshold, the law learned from it), stream
-# dataset3 through `twin watch`, run
+# dataset3 through `twin watch` (its failing window diagnosed in the background; with the GP
+# corrector, its latent variance flagging the change and the corrector learning online), run
 # the resulting twin with `twin run` as any SSP system, and control the structure with LQR
 # designs on the twin (attenuation, contacts, retuning and gain scheduling, a controlled record
 # predicted in the closed loop). Reports, predictions and plots go to out/demo/.
@@ -117,16 +118,37 @@ echo "-- the law the hybrid test learned, added to the twin, on dataset3 --"
   --report "$out/compare-with-hybrid-contact-dataset3.json"
 
 echo
-echo "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample =="
-rm -f "$out/watch-dataset3.jsonl" "$out/watch-dataset3-checkpoint.json"  # a fresh stream, not a resume
+echo "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample;"
+echo "   the failing window is diagnosed in the background =="
+rm -f "$out"/watch-dataset3*  # a fresh stream, not a resume
 "$twin" watch --twin "$out/calibrated.ssp" --source - --alerts "$out/watch-dataset3.jsonl" \
   --checkpoint "$out/watch-dataset3-checkpoint.json" <data/dataset3.csv
-python3 - "$out/watch-dataset3.jsonl" <<'PY'
+echo
+echo "== twin watch: the same stream through the twin with the GP corrector, which queries and"
+echo "   learns online (its budget: 256 points) and says where it is unsure =="
+"$twin" watch --no-diagnosis --twin "$out/corrected.ssp" --source data/dataset3.csv \
+  --alerts "$out/watch-corrected-dataset3.jsonl" 
+python3 - "$out/watch-dataset3.jsonl" "$out/watch-corrected-dataset3.jsonl" <<'PY'
 import json, sys
-for line in open(sys.argv[1]):
-    a = json.loads(line)
-    if a["kind"] in ("failing", "recovered", "gap", "bad_sample"):
-        print(f"  alert at {a['time']:7.3f} s: {a['kind']}")
+for path in sys.argv[1:]:
+    print(f"  {path}:")
+    for line in open(path):
+        a = json.loads(line)
+        if a["kind"] in ("failing", "recovered", "uncertain", "certain", "gap", "bad_sample"):
+            floors = a.get("floors", "")
+            print(f"    alert at {a['time']:7.3f} s: {a['kind']} {floors}")
+        elif a["kind"] == "diagnosis":
+            effects = ", ".join(
+                e["label"] + " (" + ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items()) + ")"
+                for e in a.get("effects", []))
+            before = max(a["nmse_before"]); after = max(a["nmse_after"])
+            print(f"    alert at {a['time']:7.3f} s: diagnosis of the window from {a['window_start']:.3f} s"
+                  f" (run on {a['from']:.2f}-{a['to']:.2f} s, {a['seconds']:.1f} s in the background):"
+                  f" {a['action']} {effects}; worst-floor NMSE {before:.2f} % -> {after:.3f} %")
+        elif a["kind"] == "end" and a.get("learning"):
+            l = a["learning"]
+            print(f"    corrector: {l['queries']} queries learned, {l['training_points']} training points;"
+                  f" worst-floor NMSE over the stream {max(a['nmse']):.2f} %")
 PY
 
 echo
