@@ -4,8 +4,9 @@
 //! (Algorithm 1), and O(n²) updates when a point joins or leaves the training set.
 //!
 //! One [`GaussianProcess`] models one output; the corrector's three floors are three values
-//! fitted on the same [`Inputs`] (by the caller, in parallel threads if it wants: everything here
-//! is single-threaded and `Send + Sync`). A model holds its training set, its hyperparameters and
+//! fitted on the same [`Inputs`] (by the caller, in parallel threads if it wants, or by
+//! [`GaussianProcess::fit_many`], which shares the (output, start) runs among threads; all else
+//! here is single-threaded and `Send + Sync`). A model holds its training set, its hyperparameters and
 //! the Cholesky factor with `α = K⁻¹y`; it serialises as the first two (plus the jitter in use)
 //! and refactors on load.
 //!
@@ -34,7 +35,10 @@ use serde::{Deserialize, Serialize};
 
 pub use budget::BudgetedGp;
 pub use fit::{Bounds, FitOptions, FitReport, StartOutcome};
-pub use likelihood::{negative_log_marginal_likelihood, nlml_with_gradient, LikelihoodGradient};
+pub use likelihood::{
+    evaluation_flops, model_flops, negative_log_marginal_likelihood, nlml_with_gradient,
+    LikelihoodGradient,
+};
 pub use model::{GaussianProcess, PendingAppend, PointPrediction, Predictions, BATCH_THRESHOLD};
 pub use synthetic::{benchmark_problem, BENCHMARK_NOISE_SD};
 pub use tracked::{TrackedPoints, Tracking};

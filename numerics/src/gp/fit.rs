@@ -22,6 +22,8 @@
 //! optimiser bounce (lbfgs.rs says what that cost). The NLML is therefore only ever computed at
 //! sensible hyperparameters (no overflow of `σ_f²`, no `l → 0`).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -200,50 +202,73 @@ impl FitOptions {
     }
 }
 
-impl GaussianProcess {
-    /// Type-II ML hyperparameters for one output (see the module doc for the search), then the
-    /// model at them. Single-threaded: fit the floors' GPs in parallel threads if wanted.
-    pub fn fit(
+/// One output's search: its start points, its box and the L-BFGS settings.
+struct Search {
+    starts: Vec<Hyperparameters>,
+    bounds: Bounds,
+    settings: Settings,
+}
+
+impl Search {
+    fn new(inputs: &Inputs, targets: &[f64], options: &FitOptions) -> Result<Self, GpError> {
+        Ok(Self {
+            starts: options.start_points(inputs, targets)?,
+            bounds: Bounds::from_data(inputs, targets, options.noise_floor)?,
+            settings: Settings {
+                max_iterations: options.max_iterations,
+                history: options.history,
+                gradient_tolerance: options.gradient_tolerance,
+                cost_tolerance: options.cost_tolerance,
+            },
+        })
+    }
+
+    /// The L-BFGS run from start `k`, on the caller's buffers (every evaluation overwrites
+    /// what it reads, so a run does not depend on what the buffers held before).
+    fn run(
+        &self,
+        k: usize,
+        work: &mut Workspace,
         inputs: &Inputs,
         targets: &[f64],
-        options: &FitOptions,
-    ) -> Result<(Self, FitReport), GpError> {
-        let starts = options.start_points(inputs, targets)?;
-        let bounds = Bounds::from_data(inputs, targets, options.noise_floor)?;
+    ) -> Result<StartOutcome, GpError> {
         let dim = inputs.dim();
         let n = inputs.len() as f64;
-        let settings = Settings {
-            max_iterations: options.max_iterations,
-            history: options.history,
-            gradient_tolerance: options.gradient_tolerance,
-            cost_tolerance: options.cost_tolerance,
+        let start = &self.starts[k];
+        let objective = |theta: &[f64]| -> Result<(f64, Vec<f64>), GpError> {
+            let hyper = Hyperparameters::from_log_vector(dim, theta)?;
+            let at = work.evaluate(inputs, targets, &hyper, true)?;
+            Ok((at.nlml / n, at.gradient.iter().map(|g| g / n).collect()))
         };
-        // One set of N × N buffers for every evaluation of every start.
-        let mut work = Workspace::new(inputs.len());
-        let mut outcomes = Vec::with_capacity(starts.len());
+        let r = lbfgs::minimise(
+            objective,
+            &start.to_log_vector(),
+            &self.bounds.lower,
+            &self.bounds.upper,
+            &self.settings,
+        )?;
+        Ok(StartOutcome {
+            start: start.clone(),
+            end: Hyperparameters::from_log_vector(dim, &r.x)?,
+            nlml: r.value * n,
+            iterations: r.iterations,
+            evaluations: r.evaluations,
+            termination: r.termination.to_string(),
+        })
+    }
+
+    /// The model at the best start's end, with the report; `runs` in the order of the starts.
+    fn finish(
+        self,
+        inputs: &Inputs,
+        targets: &[f64],
+        runs: Vec<Result<StartOutcome, GpError>>,
+    ) -> Result<(GaussianProcess, FitReport), GpError> {
+        let mut outcomes = Vec::with_capacity(runs.len());
         let mut errors = Vec::new();
-        for start in &starts {
-            let objective = |theta: &[f64]| -> Result<(f64, Vec<f64>), GpError> {
-                let hyper = Hyperparameters::from_log_vector(dim, theta)?;
-                let at = work.evaluate(inputs, targets, &hyper, true)?;
-                Ok((at.nlml / n, at.gradient.iter().map(|g| g / n).collect()))
-            };
-            let run = lbfgs::minimise(
-                objective,
-                &start.to_log_vector(),
-                &bounds.lower,
-                &bounds.upper,
-                &settings,
-            );
-            match run.and_then(|r| Ok((Hyperparameters::from_log_vector(dim, &r.x)?, r))) {
-                Ok((end, r)) => outcomes.push(StartOutcome {
-                    start: start.clone(),
-                    end,
-                    nlml: r.value * n,
-                    iterations: r.iterations,
-                    evaluations: r.evaluations,
-                    termination: r.termination.to_string(),
-                }),
+        for run in runs {
+            match run {
+                Ok(outcome) => outcomes.push(outcome),
                 Err(e) => errors.push(e.to_string()),
             }
         }
@@ -255,15 +280,99 @@ impl GaussianProcess {
             .map(|(i, _)| i)
             .ok_or_else(|| GpError::FitFailed(errors.join("; ")))?;
         let hyper = outcomes[best_start].end.clone();
-        let model = Self::new(inputs.clone(), targets.to_vec(), hyper)?;
+        let model = GaussianProcess::new(inputs.clone(), targets.to_vec(), hyper)?;
         let report = FitReport {
             nlml: model.negative_log_marginal_likelihood(),
             jitter: model.jitter(),
             best_start,
             starts: outcomes,
-            bounds,
+            bounds: self.bounds,
         };
         Ok((model, report))
+    }
+}
+
+impl GaussianProcess {
+    /// Type-II ML hyperparameters for one output (see the module doc for the search), then the
+    /// model at them. Single-threaded: [`GaussianProcess::fit_many`] fits several outputs in
+    /// parallel threads.
+    pub fn fit(
+        inputs: &Inputs,
+        targets: &[f64],
+        options: &FitOptions,
+    ) -> Result<(Self, FitReport), GpError> {
+        let search = Search::new(inputs, targets, options)?;
+        // One set of N × N buffers for every evaluation of every start.
+        let mut work = Workspace::new(inputs.len());
+        let runs = (0..search.starts.len())
+            .map(|k| search.run(k, &mut work, inputs, targets))
+            .collect();
+        search.finish(inputs, targets, runs)
+    }
+
+    /// [`GaussianProcess::fit`] for several outputs on the same inputs (the corrector's floors),
+    /// on `threads` threads: every (output, start) run is one task, taken from a shared queue
+    /// by the next free thread (longest first is not known in advance, so in order), each
+    /// thread with its own `N × N` buffers. Each run is the same computation as in `fit`, so
+    /// the results are those of `fit` on each output, bit for bit, whatever `threads` is.
+    pub fn fit_many(
+        inputs: &Inputs,
+        targets: &[&[f64]],
+        options: &FitOptions,
+        threads: usize,
+    ) -> Vec<Result<(Self, FitReport), GpError>> {
+        let searches: Vec<Result<Search, GpError>> = targets
+            .iter()
+            .map(|y| Search::new(inputs, y, options))
+            .collect();
+        let tasks: Vec<(usize, usize)> = searches
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| s.as_ref().ok().map(|s| (i, s.starts.len())))
+            .flat_map(|(i, starts)| (0..starts).map(move |k| (i, k)))
+            .collect();
+        let next = AtomicUsize::new(0);
+        let threads = threads.clamp(1, tasks.len().max(1));
+        let work = || {
+            let mut buffers = Workspace::new(inputs.len());
+            let mut done = Vec::new();
+            loop {
+                let t = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&(i, k)) = tasks.get(t) else {
+                    return done;
+                };
+                if let Ok(search) = &searches[i] {
+                    done.push((t, search.run(k, &mut buffers, inputs, targets[i])));
+                }
+            }
+        };
+        let mut finished: Vec<(usize, Result<StartOutcome, GpError>)> = if threads == 1 {
+            work()
+        } else {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = (1..threads).map(|_| scope.spawn(work)).collect();
+                let mut all = work();
+                for h in handles {
+                    match h.join() {
+                        Ok(done) => all.extend(done),
+                        Err(payload) => std::panic::resume_unwind(payload),
+                    }
+                }
+                all
+            })
+        };
+        finished.sort_by_key(|(t, _)| *t);
+        let mut runs: Vec<Vec<Result<StartOutcome, GpError>>> =
+            targets.iter().map(|_| Vec::new()).collect();
+        for (t, run) in finished {
+            runs[tasks[t].0].push(run);
+        }
+        searches
+            .into_iter()
+            .zip(runs)
+            .zip(targets)
+            .map(|((search, runs), y)| search?.finish(inputs, y, runs))
+            .collect()
     }
 
     /// Fits again on the model's current training set, the first run warm-started from its

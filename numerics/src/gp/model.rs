@@ -18,7 +18,7 @@ use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Mat, Par};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::kernel::{dot, matern32, scaled_sq_distance};
+use super::kernel::{clear_upper_vector_state, dot, matern32, scaled_sq_distance};
 use super::likelihood::factor_training_set;
 use super::{check_finite, check_len, check_training, GpError, Hyperparameters, Inputs};
 
@@ -275,6 +275,7 @@ impl GaussianProcess {
             v.col_as_slice_mut(j).copy_from_slice(&k_star);
         }
         solve_lower_triangular_in_place(factor.as_ref(), v.as_mut(), Par::Seq);
+        clear_upper_vector_state();
         let signal_variance = self.hyper.signal_variance();
         let noise_variance = self.hyper.noise_variance();
         let latent_variance: Vec<f64> = (0..m)

@@ -145,6 +145,41 @@ fn fit_is_seeded_and_respects_the_noise_floor() {
     assert!(floor <= (1e-8 * target_scale(&targets)).ln() + 1e-12);
 }
 
+/// `fit_many` on any number of threads gives each output exactly `fit`'s result: every run's
+/// outcome and the model's hyperparameters, bit for bit; an output whose data are bad gets its
+/// error and the others their fits.
+#[test]
+fn fit_many_equals_fit_whatever_the_threads() {
+    let (inputs, y1) = synthetic(21, 40, 3, 0.05, smooth);
+    let y2: Vec<f64> = inputs.rows().map(|x| x[2] * x[0] + 0.1 * x[1]).collect();
+    let y3: Vec<f64> = inputs.rows().map(|x| (x[1] - x[2]).tanh()).collect();
+    let bad = vec![f64::NAN; inputs.len()];
+    let options = FitOptions {
+        starts: 3,
+        seed: 5,
+        max_iterations: 40,
+        ..FitOptions::default()
+    };
+    let alone: Vec<_> = [&y1, &y2, &y3]
+        .iter()
+        .map(|y| GaussianProcess::fit(&inputs, y, &options).expect("fit"))
+        .collect();
+    for threads in [1, 2, 3, 8] {
+        let many = GaussianProcess::fit_many(&inputs, &[&y1, &bad, &y2, &y3], &options, threads);
+        assert_eq!(many.len(), 4);
+        assert!(many[1].is_err(), "{threads} threads: NaN targets fitted");
+        for (fit, (model, report)) in [&many[0], &many[2], &many[3]].into_iter().zip(&alone) {
+            let (m, r) = fit.as_ref().expect("fit");
+            assert_eq!(r, report, "{threads} threads");
+            assert_eq!(
+                m.hyperparameters(),
+                model.hyperparameters(),
+                "{threads} threads"
+            );
+        }
+    }
+}
+
 #[test]
 fn predictions_interpolate_and_latent_variance_grows_away_from_data() {
     let xs = [-1.0, -0.4, 0.1, 0.5, 1.2, 2.0];

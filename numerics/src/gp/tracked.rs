@@ -23,7 +23,7 @@
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Mat, Par};
 
-use super::kernel::{dot, matern32, scaled_sq_distance};
+use super::kernel::{clear_upper_vector_state, dot, matern32, scaled_sq_distance};
 use super::model::{Change, GaussianProcess};
 use super::{check_len, GpError, Inputs};
 
@@ -220,6 +220,7 @@ impl TrackedPoints {
                     .copy_from_slice(&model.cross_covariance(self.points.row(start + j)));
             }
             solve_lower_triangular_in_place(factor.as_ref(), block.as_mut(), Par::Seq);
+            clear_upper_vector_state();
             for j in 0..width {
                 let col = block.col_as_slice(j);
                 self.explained[start + j] = dot(col, col);
