@@ -5,7 +5,9 @@ run: dataset1's force, 1023 steps of 1/51.2 s, the shear FMU's three acceleratio
 End to end (medians of --repetitions runs, after two untimed ones):
 
 - twin: `twin compare --data data/dataset1.csv --report R.json` as a process: start, read the
-  CSV, unzip and load the FMU, run, compare, write the report, exit;
+  CSV, open the FMU (from the FMU cache, which the untimed runs filled: the first run after an
+  FMU is built unpacks it there, about 0.4 ms more), load it, run, compare, write the report,
+  exit;
 - fmpy, in process: one `fmpy.simulate_fmu("fmu_shear.fmu", ...)` call, the interpreter started
   and fmpy imported beforehand (this favours fmpy: no process start);
 - fmpy, as a process: `python -c "import fmpy ...; simulate_fmu(...)"`, the like of the twin
@@ -46,7 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 STEP = 1.0 / 51.2  # 5/256 s, exact in binary
 OUTPUTS = ["acc1", "acc2", "acc3"]
-GOAL = 30.0  # fmpy / twin, end to end
+GOAL = 40.0  # fmpy's process / the twin's process, end to end
 
 
 def children_cpu() -> float:
@@ -211,9 +213,14 @@ def main() -> None:
     print(f"  {'  the same FMU calls without the master':42} {ms(rust['direct_run_s'])}")
     print(f"  {'fmpy simulate_fmu, instance reused':42} {ms(fmpy_loop_only['wall_s'])}")
     print(f"  {'ratio fmpy / twin master':42} {ratio['excluding_load_wall']:11.1f}×")
-    print(f"  {'twin FMU load alone (unzip + dlopen)':42} {ms(rust['fmu_load_s'])}")
-    met = ratio["end_to_end_cpu"] >= GOAL and ratio["end_to_end_wall"] >= GOAL
-    print(f"goal fmpy / twin ≥ {GOAL:.0f}× end to end (fmpy call vs twin process): {'met' if met else 'NOT met'}")
+    print(f"  {'twin FMU load alone (FMU cache + dlopen)':42} {ms(rust['fmu_load_s'])}")
+    # The goal compares like with like: the twin's process with fmpy's process (issue 16).
+    verdict = lambda r: "met" if r >= GOAL else "NOT met"  # noqa: E731
+    print(f"goal fmpy process / twin process ≥ {GOAL:.0f}× end to end: "
+          f"{verdict(ratio['process_to_process_cpu'])} by CPU time "
+          f"({ratio['process_to_process_cpu']:.1f}×), "
+          f"{verdict(ratio['process_to_process_wall'])} by wall clock "
+          f"({ratio['process_to_process_wall']:.1f}×, load average {os.getloadavg()[0]:.2f})")
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2) + "\n")
 

@@ -7,7 +7,7 @@ pub mod model_description;
 
 use std::path::{Path, PathBuf};
 
-pub use archive::{unpack, UnpackLimits, Unpacked};
+pub use archive::{fmu_cache_root, unpack, unpack_fmu, UnpackLimits, Unpacked};
 pub use library::{
     file_uri, FmuMessage, Instance, Library, StateCapabilities, StateHandle, StepEnd,
 };
@@ -53,7 +53,27 @@ impl UnpackedFmu {
     }
 
     pub fn open_with_limits(path: &Path, limits: UnpackLimits) -> Result<Self, ImportError> {
-        let unpacked = unpack(path, limits)?;
+        let cached = unpack_fmu(path, limits)?;
+        if cached.is_cached() {
+            // A cache entry that lost its files (removed by hand, or by another process's
+            // eviction racing this open) is no reason to fail: a private copy then.
+            match Self::read(path, cached) {
+                Ok(fmu) if fmu.binary().is_file() => return Ok(fmu),
+                _ => return Self::read(path, unpack(path, limits)?),
+            }
+        }
+        Self::read(path, cached)
+    }
+
+    /// The library for this platform, as the modelDescription names it.
+    fn binary(&self) -> PathBuf {
+        self.unpacked
+            .path()
+            .join("binaries/linux64")
+            .join(format!("{}.so", self.model_description.model_identifier))
+    }
+
+    fn read(path: &Path, unpacked: Unpacked) -> Result<Self, ImportError> {
         let md_path = unpacked.path().join("modelDescription.xml");
         let xml = std::fs::read_to_string(&md_path).map_err(|e| ImportError::Archive {
             path: path.to_owned(),
