@@ -204,15 +204,23 @@ impl Stepper {
         true
     }
 
-    /// The corrector's latent variances V(f) per floor at the current point.
-    pub fn latent_variance(&mut self) -> Result<Option<[f64; 3]>, WatchError> {
-        let Some(l) = &self.learner else {
+    /// The corrector's instance with its interface (None: the twin has no corrector).
+    fn learner_instance(&mut self) -> Result<Option<(&mut Learner, &mut Instance)>, WatchError> {
+        let Some(l) = &mut self.learner else {
             return Ok(None);
         };
         let instance = self.nodes[l.node]
             .instance
             .as_mut()
             .ok_or(WatchError::NotStarted)?;
+        Ok(Some((l, instance)))
+    }
+
+    /// The corrector's latent variances V(f) per floor at the current point.
+    pub fn latent_variance(&mut self) -> Result<Option<[f64; 3]>, WatchError> {
+        let Some((l, instance)) = self.learner_instance()? else {
+            return Ok(None);
+        };
         let mut v = [0.0; 3];
         instance.get_real(&l.latent, &mut v)?;
         Ok(Some(v))
@@ -220,13 +228,9 @@ impl Stepper {
 
     /// The corrector's training-set size.
     pub fn training_points(&mut self) -> Result<Option<i32>, WatchError> {
-        let Some(l) = &self.learner else {
+        let Some((l, instance)) = self.learner_instance()? else {
             return Ok(None);
         };
-        let instance = self.nodes[l.node]
-            .instance
-            .as_mut()
-            .ok_or(WatchError::NotStarted)?;
         let mut n = [0];
         instance.get_integer(&[l.points], &mut n)?;
         Ok(Some(n[0]))
@@ -235,13 +239,9 @@ impl Stepper {
     /// The current point joins the corrector's training sets, with these measured
     /// accelerations, at the next step.
     pub fn learn_current(&mut self, measured: [f64; 3]) -> Result<(), WatchError> {
-        let Some(l) = &mut self.learner else {
+        let Some((l, instance)) = self.learner_instance()? else {
             return Ok(());
         };
-        let instance = self.nodes[l.node]
-            .instance
-            .as_mut()
-            .ok_or(WatchError::NotStarted)?;
         instance.set_real(&l.measured, &measured)?;
         instance.set_boolean(&[l.learn], &[true])?;
         l.pending = true;
