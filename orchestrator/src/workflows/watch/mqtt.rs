@@ -274,18 +274,14 @@ mod tests {
 
     #[test]
     fn mqtt_urls_are_read_and_bad_ones_are_refused_with_the_form() {
-        let url = MqttUrl::parse("mqtt://127.0.0.1:18830/lab/frame/samples")
-            .unwrap()
-            .unwrap();
+        let parse = |text: &str| MqttUrl::parse(text).expect("an mqtt:// URL");
+        let url = parse("mqtt://127.0.0.1:18830/lab/frame/samples").expect("valid");
         assert_eq!(url.host, "127.0.0.1");
         assert_eq!(url.port, 18830);
         assert_eq!(url.topic, "lab/frame/samples");
         assert_eq!(url.alerts_topic(), "lab/frame/samples/alerts");
         assert_eq!(url.default_client_id(), "twin-watch-lab-frame-samples");
-        assert_eq!(
-            MqttUrl::parse("mqtt://broker/t").unwrap().unwrap().port,
-            1883
-        );
+        assert_eq!(parse("mqtt://broker/t").expect("valid").port, 1883);
         assert!(MqttUrl::parse("data.csv").is_none());
         for bad in [
             "mqtt://host",
@@ -293,7 +289,7 @@ mod tests {
             "mqtt://:1883/t",
             "mqtt://h/a/#",
         ] {
-            let e = MqttUrl::parse(bad).unwrap().unwrap_err().to_string();
+            let e = parse(bad).expect_err("refused").to_string();
             assert!(
                 e.contains(bad) && e.contains("mqtt://HOST[:PORT]/TOPIC"),
                 "{e}"
