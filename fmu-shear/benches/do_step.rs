@@ -6,7 +6,13 @@
 //! - `record_1024_steps`: one 20 s record of 1024 steps (throughput in steps);
 //! - `single_step`: one step;
 //! - `record_1024_steps_contact23`: the record with the bumper between floors 2 and 3 switched on
-//!   (0.5 mm gap, 9000 N/m), where the sub-steps are integrated one by one and split at the gap.
+//!   (0.5 mm gap, 9000 N/m): the exact flows of the contact regions, split at the gap;
+//! - `record_1024_steps_contact23_fixed64`: the same with `integrator = 1`, 64 RK4 sub-steps split
+//!   at the gap (the former path);
+//! - `record_1024_steps_cubic3` / `_cubic3_fixed64`: cubic stiffness on storey 3 (1e9 N/m³),
+//!   error-controlled Dormand–Prince 5(4) / 64 RK4 sub-steps;
+//! - `record_1024_steps_friction1` / `_friction1_fixed64`: friction on floor 1 (0.1 N, 1 mm/s),
+//!   likewise.
 
 // Drives the FMU through its C functions, as a host does.
 #![allow(unsafe_code)]
@@ -51,6 +57,10 @@ fn ok(status: fmi2Status, call: &str) {
 
 impl Slave {
     fn new(booleans: &[(&str, bool)]) -> Slave {
+        Slave::with(booleans, &[])
+    }
+
+    fn with(booleans: &[(&str, bool)], integers: &[(&str, i32)]) -> Slave {
         // A C-variadic logger cannot be written in stable Rust; the FMU accepts none.
         let callbacks = fmi2CallbackFunctions {
             logger: None,
@@ -91,6 +101,17 @@ impl Slave {
             ok(
                 unsafe { fmu_shear::fmi2SetBoolean(component, &vr, 1, &value) },
                 "fmi2SetBoolean",
+            );
+        }
+        for &(name, value) in integers {
+            let vr = info()
+                .by_name(name)
+                .unwrap_or_else(|| panic!("{name} is a variable"))
+                .vr;
+            // SAFETY: one value reference and one value.
+            ok(
+                unsafe { fmu_shear::fmi2SetInteger(component, &vr, 1, &value) },
+                "fmi2SetInteger",
             );
         }
         ok(
@@ -162,12 +183,19 @@ fn do_step(c: &mut Criterion) {
     group.bench_function("record_1024_steps", |b| {
         b.iter(|| linear.record(black_box(&force)))
     });
-    // About 100× slower per record: fewer samples keep the group under 30 s.
-    group.sample_size(20);
-    let mut contact = Slave::new(&[("contact23_enabled", true)]);
-    group.bench_function("record_1024_steps_contact23", |b| {
-        b.iter(|| contact.record(black_box(&force)))
-    });
+    for (id, enabled) in [
+        ("contact23", "contact23_enabled"),
+        ("cubic3", "cubic3_enabled"),
+        ("friction1", "friction1_enabled"),
+    ] {
+        for (suffix, integrator, samples) in [("", 0, 30), ("_fixed64", 1, 20)] {
+            group.sample_size(samples);
+            let mut slave = Slave::with(&[(enabled, true)], &[("integrator", integrator)]);
+            group.bench_function(format!("record_1024_steps_{id}{suffix}"), |b| {
+                b.iter(|| slave.record(black_box(&force)))
+            });
+        }
+    }
     group.sample_size(30);
 
     group.throughput(Throughput::Elements(1));

@@ -15,7 +15,7 @@
 use numerics::ode::{self, rk4_substeps};
 
 use crate::effects::Switches;
-use crate::model::{ShearModel, ShearParameters};
+use crate::model::{ShearModel, ShearParameters, ADAPTIVE_TOLERANCE};
 
 pub type State = [f64; 6];
 
@@ -111,6 +111,44 @@ pub fn rk4_with_events(
         h,
         substeps,
     )
+}
+
+/// Error-controlled Dormand–Prince 5(4) over `[0, h]` from `x` to [`ADAPTIVE_TOLERANCE`], split
+/// at every switch of the effects: [`numerics::ode::dopri5_with_events`] on the model's
+/// right-hand side. `step` carries the trial step from one call to the next.
+pub fn dopri5_with_events(
+    model: &ShearModel,
+    x: &State,
+    u0: f64,
+    slope: f64,
+    h: f64,
+    step: &mut f64,
+) -> State {
+    // Displacements and velocities each against the largest of their kind over the step.
+    let error_norm = |error: &State, a: &State, b: &State| -> f64 {
+        let largest = |range: std::ops::Range<usize>| {
+            range
+                .map(|i| a[i].abs().max(b[i].abs()))
+                .fold(f64::MIN_POSITIVE, f64::max)
+        };
+        let (sy, sv) = (largest(0..3), largest(3..6));
+        let worst_y = error[..3].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sy;
+        let worst_v = error[3..].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sv;
+        worst_y.max(worst_v) / ADAPTIVE_TOLERANCE
+    };
+    let mut control = ode::Adaptive {
+        error_norm,
+        step: *step,
+    };
+    let x = ode::dopri5_with_events(
+        |tau, x: &State| rhs(model, x, u0 + slope * tau),
+        |x: &State| model.effects.switches(&[x[0], x[1], x[2]]),
+        x,
+        h,
+        &mut control,
+    );
+    *step = control.step;
+    x
 }
 
 #[cfg(test)]

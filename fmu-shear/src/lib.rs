@@ -7,8 +7,9 @@
 pub mod effects;
 pub mod integrate;
 pub mod model;
+pub mod piecewise;
 pub mod variables;
 
-pub use model::{ShearModel, ShearParameters, DEFAULT_SUBSTEPS};
+pub use model::{Integrator, ShearModel, ShearParameters, DEFAULT_SUBSTEPS};
 
 fmi2::export_fmu!(crate::model::ShearModel);

@@ -18,6 +18,7 @@ pub const MASS: u32 = 30;
 pub const DAMPING: u32 = 33;
 pub const STIFFNESS: u32 = 36;
 pub const SUBSTEPS: u32 = 40;
+pub const INTEGRATOR: u32 = 41;
 
 pub const MODEL_IDENTIFIER: &str = "fmu_shear";
 
@@ -156,7 +157,13 @@ fn variables() -> Vec<Variable> {
         Variable::integer_parameter("substeps", SUBSTEPS, DEFAULT_SUBSTEPS as i32)
             .min(1.0)
             .max(10000.0)
-            .describe("RK4 sub-steps per communication step"),
+            .describe("RK4 sub-steps per communication step: the linear model's step map; with effects, when integrator = 1"),
+    );
+    v.push(
+        Variable::integer_parameter("integrator", INTEGRATOR, 0)
+            .min(0.0)
+            .max(1.0)
+            .describe("with effects: 0 exact step maps per contact region (contacts alone) or error-controlled Dormand-Prince 5(4) (other effects), split at contact kinks; 1 RK4 with substeps fixed sub-steps, split at contact kinks"),
     );
     v.extend(Effects::all_variables());
     v

@@ -6,7 +6,7 @@ use fmu_shear::effects::discovered::{value_reference, Slot};
 use fmu_shear::effects::{Effects, Function, Site, Term};
 use fmu_shear::integrate::{rhs, State};
 use fmu_shear::variables::{info, ACC, FORCE};
-use fmu_shear::{ShearModel, ShearParameters};
+use fmu_shear::{Integrator, ShearModel, ShearParameters};
 use numerics::ode::rk4_substeps;
 
 mod common;
@@ -52,10 +52,14 @@ fn relative_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     worst / peak
 }
 
+/// A model with `terms`, stepped by the fixed RK4 sub-steps (`integrator` = 1), so that the
+/// laws are compared at the same sub-steps as the references here.
 fn with_terms(params: ShearParameters, terms: &[Term]) -> ShearModel {
     let mut effects = Effects::default();
     effects.switch_on_terms(terms).expect("valid terms");
-    ShearModel::new(params, effects)
+    let mut model = ShearModel::new(params, effects);
+    model.integrator = Integrator::FixedSubsteps;
+    model
 }
 
 /// Storey `x` with coefficient k is k more stiffness in that storey. Both runs go through the
@@ -150,6 +154,7 @@ fn the_two_ramps_at_a_storey_are_the_contact_bumper_split_at_the_same_kinks() {
     effects.contact.effect_mut(2).gap = gap;
     effects.contact.effect_mut(2).stiffness = k_c;
     let mut contact = ShearModel::new(params(), effects);
+    contact.integrator = Integrator::FixedSubsteps;
     let switches = ramps.effects.switches(&[1e-3, 2e-3, 2.5e-3]);
     assert_eq!(switches.len, 2, "one switch per ramp");
     let a = drive(&mut ramps, &f);
@@ -178,6 +183,7 @@ fn terms_set_through_the_variables_equal_switch_on_terms() {
     ];
     let mut by_api = with_terms(params(), &terms);
     let mut by_variables = ShearModel::new(params(), Effects::default());
+    by_variables.integrator = Integrator::FixedSubsteps;
     for (i, term) in terms.iter().enumerate() {
         let index = i + 1;
         let enabled = format!("discovered{index}_enabled");

@@ -226,6 +226,12 @@ impl<E: Effect> Library<E> {
     pub fn enable(&mut self, location: usize, on: bool) {
         self.enabled[location] = on;
     }
+    pub fn is_enabled(&self, location: usize) -> bool {
+        self.enabled[location]
+    }
+    pub fn effect(&self, location: usize) -> &E {
+        &self.effects[location]
+    }
 }
 
 /// Up to two switch values per contact location and one per discovered ramp term.
