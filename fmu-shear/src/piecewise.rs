@@ -44,6 +44,9 @@ struct Region {
     levels: Vec<Flow>,
     /// Pieces between checks are `h / 2^check_level`.
     check_level: u32,
+    /// `(ρ h)⁴ / 384` with ρ the region's rate bound: the cubic Hermite interpolant's error over
+    /// the whole step, per unit of drift amplitude.
+    whole_step_error: f64,
 }
 
 /// What the cached flows were built for.
@@ -217,9 +220,11 @@ impl ContactMaps {
         } else {
             0
         };
+        let rate_step = Self::rate_bound(&a) * self.key.step;
         Ok(Region {
             levels,
             check_level,
+            whole_step_error: rate_step.powi(4) / 384.0,
         })
     }
 
@@ -257,6 +262,53 @@ impl ContactMaps {
         false
     }
 
+    /// Whether the whole step from `a` to `b` (in `region`) stays clear of every switch: no
+    /// crossing, and each switch's cubic Hermite interpolant at least twice its interpolation
+    /// error bound `(ρ h)⁴/384 · D` from zero, with `D = √(2E/k_s)` the largest drift of storey s
+    /// the energy E (kinetic, storey springs, closed bumpers; the larger of the two ends) allows.
+    fn clear(&mut self, region: usize, a: &State, b: &State) -> Result<bool, ExactError> {
+        if self.region_of(b) != region {
+            return Ok(false);
+        }
+        let error = self.region(region)?.whole_step_error;
+        let (m, k, h) = (self.key.mass, self.key.stiffness, self.key.step);
+        let energy = |x: &State| -> f64 {
+            let mut e = 0.0;
+            for s in 0..3 {
+                let (d, _) = drift(x, s);
+                e += 0.5 * m[s] * x[3 + s] * x[3 + s] + 0.5 * k[s] * d * d;
+                if let Some(c) = &self.key.contacts[s] {
+                    let f = c.force_at(d);
+                    if c.stiffness > 0.0 {
+                        e += 0.5 * f * f / c.stiffness;
+                    }
+                }
+            }
+            e
+        };
+        let e = energy(a).max(energy(b));
+        for (s, contact) in self.key.contacts.iter().enumerate() {
+            let Some(c) = contact else { continue };
+            let amplitude = (2.0 * e / k[s]).sqrt();
+            let margin = 2.0 * error * amplitude;
+            if !margin.is_finite() {
+                return Ok(false);
+            }
+            let (da, va) = drift(a, s);
+            let (db, vb) = drift(b, s);
+            let offsets = [
+                (c.side != crate::effects::contact::SIDE_NEGATIVE).then_some(c.gap),
+                (c.side != crate::effects::contact::SIDE_POSITIVE).then_some(-c.gap),
+            ];
+            for offset in offsets.into_iter().flatten() {
+                if hermite_distance(da - offset, db - offset, h * va, h * vb) <= margin {
+                    return Ok(false);
+                }
+            }
+        }
+        Ok(true)
+    }
+
     /// One communication step from `x0` with the net input `u0 + slope·τ`.
     pub fn advance(&mut self, x0: &State, u0: f64, slope: f64) -> Result<State, ExactError> {
         let total: u64 = 1 << DEPTH;
@@ -264,18 +316,30 @@ impl ContactMaps {
         let mut x = *x0;
         let mut pos: u64 = 0;
         let mut region = self.region_of(&x);
+        // The whole step at once when every switch stays clear of zero by more than its cubic
+        // interpolant's error bound (twice it), from the drift amplitude the energy allows.
+        let whole = self.apply(region, &x, total, u0, slope)?;
+        if self.clear(region, &x, &whole)? {
+            return Ok(whole);
+        }
         while pos < total {
             let check = self.region(region)?.check_level;
-            // The largest aligned piece no longer than the check size.
-            let mut size = (total >> check).min(if pos == 0 {
-                total
-            } else {
-                pos & pos.wrapping_neg()
-            });
+            // The largest power of two of ticks left, no longer than the check size (a flow is
+            // the same wherever the piece starts: the input's value is in the state).
+            let left = total - pos;
+            let mut size = (total >> check).min(1 << (63 - left.leading_zeros()));
             let mut end = self.apply(region, &x, size, u0 + slope * (pos as f64 * tick), slope)?;
             if !self.flagged(region, &x, &end, size as f64 * tick) {
                 x = end;
                 pos += size;
+                continue;
+            }
+            if let Some((ticks, past)) =
+                self.newton_event(region, &x, &end, pos, size, tick, u0, slope)?
+            {
+                x = past;
+                pos += ticks;
+                region = self.region_of(&x);
                 continue;
             }
             // Bisect: the flagged piece is [pos, pos + size] from x to end.
@@ -305,6 +369,113 @@ impl ContactMaps {
         Ok(x)
     }
 
+    /// The state `n` ticks after `x` (at tick `pos`), as the flows of the binary digits of `n`.
+    #[allow(clippy::too_many_arguments)]
+    fn after_ticks(
+        &mut self,
+        region: usize,
+        x: &State,
+        pos: u64,
+        n: u64,
+        tick: f64,
+        u0: f64,
+        slope: f64,
+    ) -> Result<State, ExactError> {
+        let mut x = *x;
+        let mut at = pos;
+        let mut rest = n;
+        while rest > 0 {
+            let digit = 1u64 << (63 - rest.leading_zeros());
+            x = self.apply(region, &x, digit, u0 + slope * (at as f64 * tick), slope)?;
+            at += digit;
+            rest -= digit;
+        }
+        Ok(x)
+    }
+
+    /// The first crossing inside a flagged piece `[pos, pos + size]` (from `a` to `b`), found
+    /// from the switches' cubic Hermite interpolants and one Newton step on the exact flow:
+    /// `(ticks, state)` of the first tick past it, checked (the region unchanged one tick
+    /// before, changed at it), or `None` when the estimate does not check out (the caller
+    /// bisects).
+    #[allow(clippy::too_many_arguments)]
+    fn newton_event(
+        &mut self,
+        region: usize,
+        a: &State,
+        b: &State,
+        pos: u64,
+        size: u64,
+        tick: f64,
+        u0: f64,
+        slope: f64,
+    ) -> Result<Option<(u64, State)>, ExactError> {
+        let dt = size as f64 * tick;
+        // The earliest root of the interpolants: (θ, storey, offset).
+        let mut first: Option<(f64, usize, f64)> = None;
+        for (s, contact) in self.key.contacts.iter().enumerate() {
+            let Some(c) = contact else { continue };
+            let (da, va) = drift(a, s);
+            let (db, vb) = drift(b, s);
+            let offsets = [
+                (c.side != crate::effects::contact::SIDE_NEGATIVE).then_some(c.gap),
+                (c.side != crate::effects::contact::SIDE_POSITIVE).then_some(-c.gap),
+            ];
+            for offset in offsets.into_iter().flatten() {
+                if let Some(theta) = hermite_root(da - offset, db - offset, dt * va, dt * vb) {
+                    if first.is_none_or(|(t, _, _)| theta < t) {
+                        first = Some((theta, s, offset));
+                    }
+                }
+            }
+        }
+        let Some((theta, storey, offset)) = first else {
+            return Ok(None);
+        };
+        // Start the Newton step a little before the estimate (the interpolant's error is about
+        // 1e-5 of the piece at the check size), so that it starts on this side.
+        let back = 2.0 + 1e-4 * size as f64;
+        let k1 = ((theta * size as f64 - back).max(0.0).floor() as u64).min(size - 1);
+        let x1 = self.after_ticks(region, a, pos, k1, tick, u0, slope)?;
+        if self.region_of(&x1) != region {
+            return Ok(None);
+        }
+        let (d, v) = drift(&x1, storey);
+        let sigma = d - offset;
+        if v == 0.0 || !(sigma / v).is_finite() {
+            return Ok(None);
+        }
+        let ahead = -sigma / v / tick;
+        if !(0.0..=(size - k1) as f64).contains(&ahead) {
+            return Ok(None);
+        }
+        // The tick just before the crossing, then step a tick at a time (at most 4) until past.
+        let k2 = k1 + (ahead.ceil() as u64).max(1) - 1;
+        let mut before = self.after_ticks(region, &x1, pos + k1, k2 - k1, tick, u0, slope)?;
+        if self.region_of(&before) != region {
+            return Ok(None);
+        }
+        let mut at = k2;
+        for _ in 0..4 {
+            if at >= size {
+                return Ok(None);
+            }
+            let past = self.apply(
+                region,
+                &before,
+                1,
+                u0 + slope * ((pos + at) as f64 * tick),
+                slope,
+            )?;
+            at += 1;
+            if self.region_of(&past) != region {
+                return Ok(Some((at, past)));
+            }
+            before = past;
+        }
+        Ok(None)
+    }
+
     /// The region's flow over `size` ticks (a power of two) from `x` with the input at `u`.
     #[inline]
     fn apply(
@@ -332,6 +503,91 @@ impl ContactMaps {
     }
 }
 
+/// The earliest θ ∈ (0, 1] where the cubic Hermite interpolant (values `p0`, `p1`, slopes per
+/// unit θ `m0`, `m1`) changes sign, if it does: bisection on the cubic, bracketed by the ends or
+/// by its extremum on the other side.
+fn hermite_root(p0: f64, p1: f64, m0: f64, m1: f64) -> Option<f64> {
+    let b = 3.0 * (p1 - p0) - 2.0 * m0 - m1;
+    let c = 2.0 * (p0 - p1) + m0 + m1;
+    let p = |t: f64| p0 + t * (m0 + t * (b + t * c));
+    let positive = p0 > 0.0;
+    let other = |t: f64| (p(t) > 0.0) != positive;
+    // The far end of the bracket: the smallest stationary point on the other side, else 1.
+    let mut hi: Option<f64> = None;
+    let (qa, qb, qc) = (3.0 * c, 2.0 * b, m0);
+    let mut stationary = [f64::NAN; 2];
+    if qa == 0.0 {
+        if qb != 0.0 {
+            stationary[0] = -qc / qb;
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            stationary[0] = q / qa;
+            if q != 0.0 {
+                stationary[1] = qc / q;
+            }
+        }
+    }
+    for t in stationary {
+        if t > 0.0 && t < 1.0 && other(t) && hi.is_none_or(|h| t < h) {
+            hi = Some(t);
+        }
+    }
+    if hi.is_none() && other(1.0) {
+        hi = Some(1.0);
+    }
+    let mut hi = hi?;
+    let mut lo = 0.0f64;
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if other(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+        // Finer than the Newton step needs (it starts 1e-4 of the piece before the estimate).
+        if hi - lo < 1e-7 {
+            break;
+        }
+    }
+    Some(hi)
+}
+
+/// The smallest |p(θ)| of the cubic Hermite interpolant on θ ∈ [0, 1] (values `p0`, `p1`,
+/// slopes per unit θ `m0`, `m1`), 0 when it crosses zero.
+fn hermite_distance(p0: f64, p1: f64, m0: f64, m1: f64) -> f64 {
+    if hermite_crosses(p0, p1, m0, m1) {
+        return 0.0;
+    }
+    let b = 3.0 * (p1 - p0) - 2.0 * m0 - m1;
+    let c = 2.0 * (p0 - p1) + m0 + m1;
+    let p = |t: f64| p0 + t * (m0 + t * (b + t * c));
+    let mut smallest = p0.abs().min(p1.abs());
+    let (qa, qb, qc) = (3.0 * c, 2.0 * b, m0);
+    let mut consider = |t: f64| {
+        if t > 0.0 && t < 1.0 {
+            smallest = smallest.min(p(t).abs());
+        }
+    };
+    if qa == 0.0 {
+        if qb != 0.0 {
+            consider(-qc / qb);
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            consider(q / qa);
+            if q != 0.0 {
+                consider(qc / q);
+            }
+        }
+    }
+    smallest
+}
+
 /// Whether the cubic Hermite interpolant on θ ∈ [0, 1] with values `p0`, `p1` and slopes (per
 /// unit θ) `m0`, `m1` takes the other sign than `p0` somewhere inside (ends of the same sign).
 #[inline]
@@ -339,6 +595,11 @@ fn hermite_crosses(p0: f64, p1: f64, m0: f64, m1: f64) -> bool {
     let positive = p0 > 0.0;
     if (p1 > 0.0) != positive {
         return true;
+    }
+    // p = p0 h00 + p1 h01 + m0 h10 + m1 h11 with h00 + h01 = 1, h00, h01 ≥ 0 and |h10|, |h11|
+    // ≤ 4/27: no crossing when the ends are further from zero than the slopes can bend it.
+    if p0.abs().min(p1.abs()) > 0.15 * (m0.abs() + m1.abs()) {
+        return false;
     }
     // p(θ) = p0 + m0 θ + B θ² + C θ³; p'(θ) = m0 + 2B θ + 3C θ².
     let b = 3.0 * (p1 - p0) - 2.0 * m0 - m1;
