@@ -561,9 +561,11 @@ fn a_contact_acts_only_once_the_drift_exceeds_the_gap() {
         side: 0,
     });
     let (w, wt) = synth_record(&wide).expect("wide gap");
-    // The structure without effects steps by the linear model's affine step map and the one with
-    // a contact by direct RK4 sub-steps: the same arithmetic up to rounding (measured ≤ 1e-13 of
-    // the peak), so "nothing changes" is checked to 1e-11 of the peak.
+    // The structure without effects steps by the linear model's affine RK4 step map and the one
+    // with a contact by the open region's exact flow (fmu-shear's piecewise path): they differ by
+    // RK4's own error at synth's sub-steps (measured 6.4e-9 of the peak; 1e-13 when both were
+    // RK4), so "nothing changes" is checked to 1e-7 of the peak — a gap that closes changes the
+    // response by percents.
     for f in 0..3 {
         let peak = linear.clean_acc[f]
             .iter()
@@ -573,7 +575,7 @@ fn a_contact_acts_only_once_the_drift_exceeds_the_gap() {
             .zip(&linear.clean_acc[f])
             .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         assert!(
-            worst <= 1e-11 * peak,
+            worst <= 1e-7 * peak,
             "a gap never closed changes nothing: floor {}: {worst:e} of {peak:e}",
             f + 1
         );
@@ -600,14 +602,14 @@ fn a_contact_acts_only_once_the_drift_exceeds_the_gap() {
     assert_eq!(e.fmu_prefix, "contact23");
     let before = (0..1024).filter(|&k| (k as f64) / 51.2 < first).count();
     for f in 0..3 {
-        // Equal up to rounding: the linear structure steps by its affine step map, the one with
-        // a contact by direct RK4 sub-steps (see the wide-gap check above).
+        // Equal up to RK4's error: the linear structure steps by its affine RK4 step map, the one
+        // with a contact by the exact flows (see the wide-gap check above; measured 2.8e-9).
         let peak = linear.clean_acc[f]
             .iter()
             .fold(0.0f64, |m, x| m.max(x.abs()));
         let before_diff = max_abs_diff(&c.clean_acc[f][..before], &linear.clean_acc[f][..before]);
         assert!(
-            before_diff <= 1e-11 * peak,
+            before_diff <= 1e-7 * peak,
             "floor {}: identical before the first contact ({before_diff:e})",
             f + 1
         );
