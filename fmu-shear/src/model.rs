@@ -47,6 +47,10 @@ pub enum Integrator {
     /// RK4 with `substeps` fixed sub-steps, split at the kinks (the integrator before the exact
     /// and error-controlled paths, kept for comparison).
     FixedSubsteps,
+    /// Contacts alone as [`Integrator::Exact`]; any other effect RK4 with `substeps` fixed
+    /// sub-steps, split at the kinks: the cheap setting for the many simulations of a fit, whose
+    /// result is then scored with [`Integrator::Exact`].
+    ExactContactsElseFixed,
 }
 
 /// The relative local error per step of the error-controlled path (per displacement and
@@ -174,7 +178,11 @@ impl ShearModel {
         if self.integrator == Integrator::FixedSubsteps {
             return integrate::rk4_with_events(self, x0, u0, slope, h, self.params.substeps);
         }
-        if ContactMaps::applies(self) {
+        let contacts_alone = ContactMaps::applies(self);
+        if !contacts_alone && self.integrator == Integrator::ExactContactsElseFixed {
+            return integrate::rk4_with_events(self, x0, u0, slope, h, self.params.substeps);
+        }
+        if contacts_alone {
             if !self.contact_maps.as_ref().is_some_and(|m| m.fits(self, h)) {
                 self.contact_maps = Some(Box::new(ContactMaps::new(self, h)));
             }
@@ -292,6 +300,7 @@ impl CoSimModel for ShearModel {
             return Ok(match self.integrator {
                 Integrator::Exact => 0,
                 Integrator::FixedSubsteps => 1,
+                Integrator::ExactContactsElseFixed => 2,
             });
         }
         self.effects
@@ -317,10 +326,14 @@ impl CoSimModel for ShearModel {
             self.integrator = match value {
                 0 => Integrator::Exact,
                 1 => Integrator::FixedSubsteps,
+                2 => Integrator::ExactContactsElseFixed,
                 _ => {
                     return Err(ModelError::InvalidValue {
                         name: "integrator".into(),
-                        reason: format!("{value} is neither 0 (exact) nor 1 (fixed sub-steps)"),
+                        reason: format!(
+                            "{value} is none of 0 (exact), 1 (fixed sub-steps), 2 (exact for \
+                             contacts alone, fixed sub-steps otherwise)"
+                        ),
                     })
                 }
             };

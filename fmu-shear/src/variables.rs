@@ -157,13 +157,13 @@ fn variables() -> Vec<Variable> {
         Variable::integer_parameter("substeps", SUBSTEPS, DEFAULT_SUBSTEPS as i32)
             .min(1.0)
             .max(10000.0)
-            .describe("RK4 sub-steps per communication step: the linear model's step map; with effects, when integrator = 1"),
+            .describe("RK4 sub-steps per communication step: the linear model's step map; with effects, when integrator = 1 (or 2 and not contacts alone)"),
     );
     v.push(
         Variable::integer_parameter("integrator", INTEGRATOR, 0)
             .min(0.0)
-            .max(1.0)
-            .describe("with effects: 0 exact step maps per contact region (contacts alone) or error-controlled Dormand-Prince 5(4) (other effects), split at contact kinks; 1 RK4 with substeps fixed sub-steps, split at contact kinks"),
+            .max(2.0)
+            .describe("with effects: 0 exact step maps per contact region (contacts alone) or error-controlled Dormand-Prince 5(4) (other effects), split at contact kinks; 1 RK4 with substeps fixed sub-steps, split at contact kinks; 2 exact for contacts alone, otherwise as 1"),
     );
     v.extend(Effects::all_variables());
     v

@@ -130,10 +130,40 @@ fn errors_with(
 fn the_variables_select_the_integrator() {
     let mut m = model(&[], &[], &[]);
     assert_eq!(m.get_integer(INTEGRATOR), Ok(0));
-    assert!(m.set_integer(INTEGRATOR, 2).is_err());
+    assert!(m.set_integer(INTEGRATOR, 3).is_err());
+    assert!(m.set_integer(INTEGRATOR, -1).is_err());
+    m.set_integer(INTEGRATOR, 2).expect("2");
+    assert_eq!(m.get_integer(INTEGRATOR), Ok(2));
     m.set_integer(INTEGRATOR, 1).expect("1");
     assert_eq!(m.get_integer(INTEGRATOR), Ok(1));
     assert_eq!(m.get_integer(SUBSTEPS), Ok(64));
+}
+
+/// `integrator = 2` (what a diagnosis fits with): contacts alone step exactly, as with 0, to
+/// the bit; any other effect, alone or with a contact, steps with `substeps` fixed RK4
+/// sub-steps, as with 1, to the bit.
+#[test]
+fn integrator_2_is_exact_for_contacts_alone_and_fixed_otherwise() {
+    let force = random_force(1.0, 0x5eed_2023);
+    let run = |reals: &[(&str, f64)], booleans: &[&str], integrator: i32| {
+        let integers = [("integrator", integrator), ("substeps", 16)];
+        simulate(model(reals, &integers, booleans), &force)
+    };
+    let contact = [("contact23_gap", 5e-4), ("contact23_stiffness", 9000.0)];
+    let contact_on = ["contact23_enabled"];
+    assert_eq!(run(&contact, &contact_on, 2), run(&contact, &contact_on, 0));
+    assert_ne!(run(&contact, &contact_on, 2), run(&contact, &contact_on, 1));
+    let both = [
+        ("contact23_gap", 5e-4),
+        ("contact23_stiffness", 9000.0),
+        ("cubic3_stiffness", 1e9),
+    ];
+    let both_on = ["contact23_enabled", "cubic3_enabled"];
+    let cubic_on = ["cubic3_enabled"];
+    for (reals, booleans) in [(&both[2..], &cubic_on[..]), (&both[..], &both_on[..])] {
+        assert_eq!(run(reals, booleans, 2), run(reals, booleans, 1));
+        assert_ne!(run(reals, booleans, 2), run(reals, booleans, 0));
+    }
 }
 
 /// The bumper of the examples and harder cases: one-sided at the ground, three at once with

@@ -88,7 +88,7 @@ use fmu_shear::effects::{Law, Placement};
 use serde::Serialize;
 
 use crate::cosim::import::ImportError;
-use crate::cosim::import::{Fmu, ModelDescription};
+use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
 use crate::twin::run::{run_and_compare_with, Compared, Tolerance};
@@ -432,6 +432,30 @@ fn with_switches(physics: &Twin, candidate: Option<&Candidate>) -> Result<Twin> 
     Ok(out)
 }
 
+/// The twin a candidate is fitted with: the shear FMU at `substeps` RK4 sub-steps, and, where
+/// the FMU has the choice (`integrator` = 2), contacts alone still stepped exactly (they are
+/// cheaper so than by sub-steps) while every other effect takes the fixed sub-steps instead of
+/// the error-controlled path, whose tolerance the scoring run keeps.
+fn fitting_twin(twin: &Twin, substeps: i32) -> Result<Twin> {
+    let mut coarse = twin.duplicate();
+    let component = coarse
+        .component_mut(PHYSICS)
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let chooses = UnpackedFmu::open(&component.fmu_path)?
+        .model_description
+        .variable("integrator")
+        .is_some();
+    component
+        .parameters
+        .insert("substeps".into(), ParameterValue::Integer(substeps));
+    if chooses {
+        component
+            .parameters
+            .insert("integrator".into(), ParameterValue::Integer(2));
+    }
+    Ok(coarse)
+}
+
 /// Fit `parameters` (with `priors`) of `twin`'s physics on the masked samples and score the
 /// fit on the whole record and on the held-out samples.
 #[allow(clippy::too_many_arguments)]
@@ -462,17 +486,7 @@ fn fit(
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
-        Some(substeps) => {
-            let mut coarse = twin.duplicate();
-            coarse
-                .component_mut(PHYSICS)
-                .ok_or_else(|| {
-                    DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
-                })?
-                .parameters
-                .insert("substeps".into(), ParameterValue::Integer(substeps));
-            calibrate(&coarse, data, &setup)?
-        }
+        Some(substeps) => calibrate(&fitting_twin(twin, substeps)?, data, &setup)?,
         None => calibrate(twin, data, &setup)?,
     };
     let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
