@@ -8,6 +8,7 @@ pub mod effects;
 pub mod integrate;
 pub mod model;
 pub mod piecewise;
+pub mod sensitivity;
 pub mod variables;
 
 pub use model::{Integrator, ShearModel, ShearParameters, DEFAULT_SUBSTEPS};

@@ -87,6 +87,9 @@ pub struct ShearModel {
     /// of the state, so that a restored state steps on exactly).
     #[serde(default)]
     pub adaptive_step: f64,
+    /// The forward sensitivities of the linear model, when switched on (`sensitivity`).
+    #[serde(default)]
+    pub sensitivities: crate::sensitivity::Sensitivities,
 }
 
 impl ShearModel {
@@ -102,6 +105,7 @@ impl ShearModel {
             integrator: Integrator::default(),
             contact_maps: None,
             adaptive_step: 0.0,
+            sensitivities: Default::default(),
         }
     }
 
@@ -152,7 +156,14 @@ impl ShearModel {
                 self.step_map = Some(Box::new(integrate::LinearStepMap::new(self, h)));
             }
             match &self.step_map {
-                Some(map) => map.apply(&x0, f0, fs),
+                Some(map) => {
+                    if self.sensitivities.on {
+                        let mut sensitivities = std::mem::take(&mut self.sensitivities);
+                        sensitivities.advance(self, map, &x0, f0, fs, h);
+                        self.sensitivities = sensitivities;
+                    }
+                    map.apply(&x0, f0, fs)
+                }
                 None => x0,
             }
         };
@@ -253,6 +264,18 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i]
                 } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
                     self.params.stiffness[i]
+                } else if let Some(k) = vr
+                    .checked_sub(SENSITIVITY)
+                    .filter(|&k| k < 27)
+                    .map(|k| k as usize)
+                {
+                    if !self.sensitivities.on || self.effects.any_enabled() {
+                        f64::NAN
+                    } else {
+                        let x = [y[0], y[1], y[2], v[0], v[1], v[2]];
+                        self.sensitivities
+                            .acceleration(self, &x, self.net_input(), k / 9, k % 9)
+                    }
                 } else {
                     return self
                         .effects
@@ -348,6 +371,9 @@ impl CoSimModel for ShearModel {
     }
 
     fn get_boolean(&mut self, vr: u32) -> Result<bool, ModelError> {
+        if vr == SENSITIVITIES {
+            return Ok(self.sensitivities.on);
+        }
         self.effects
             .get_boolean(vr)
             .ok_or(ModelError::UnknownVariable {
@@ -357,6 +383,10 @@ impl CoSimModel for ShearModel {
     }
 
     fn set_boolean(&mut self, vr: u32, value: bool) -> Result<(), ModelError> {
+        if vr == SENSITIVITIES {
+            self.sensitivities.on = value;
+            return Ok(());
+        }
         self.effects
             .set_boolean(vr, value)
             .ok_or(ModelError::UnknownVariable {

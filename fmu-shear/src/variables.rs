@@ -19,6 +19,10 @@ pub const DAMPING: u32 = 33;
 pub const STIFFNESS: u32 = 36;
 pub const SUBSTEPS: u32 = 40;
 pub const INTEGRATOR: u32 = 41;
+pub const SENSITIVITIES: u32 = 42;
+/// `d_acc{f}_d_{p}` is SENSITIVITY + 9 (f − 1) + the index of p in
+/// [`crate::sensitivity::PARAMETERS`].
+pub const SENSITIVITY: u32 = 50;
 
 pub const MODEL_IDENTIFIER: &str = "fmu_shear";
 
@@ -71,6 +75,24 @@ fn units() -> Vec<Unit> {
             kg: 1,
             m: 0,
             s: -2,
+        },
+        Unit {
+            name: "m/(s2.kg)",
+            kg: -1,
+            m: 1,
+            s: -2,
+        },
+        Unit {
+            name: "m/(kg.s)",
+            kg: -1,
+            m: 1,
+            s: -1,
+        },
+        Unit {
+            name: "m/kg",
+            kg: -1,
+            m: 1,
+            s: 0,
         },
         Unit {
             name: "N/m3",
@@ -165,6 +187,28 @@ fn variables() -> Vec<Variable> {
             .max(2.0)
             .describe("with effects: 0 exact step maps per contact region (contacts alone) or error-controlled Dormand-Prince 5(4) (other effects), split at contact kinks; 1 RK4 with substeps fixed sub-steps, split at contact kinks; 2 exact for contacts alone, otherwise as 1"),
     );
+    v.push(
+        Variable::boolean_parameter("sensitivities", SENSITIVITIES, false).describe(
+            "carry the forward sensitivities of the accelerations to m1..m3, c1..c3, k1..k3 (the linear model: with an effect on they are NaN)",
+        ),
+    );
+    for f in 0..3u32 {
+        for (j, p) in crate::sensitivity::PARAMETERS.iter().enumerate() {
+            let unit = ["m/(s2.kg)", "m/(kg.s)", "m/kg"][j / 3];
+            let floor = f + 1;
+            v.push(
+                Variable::real_output(
+                    &format!("d_acc{floor}_d_{p}"),
+                    SENSITIVITY + 9 * f + j as u32,
+                    unit,
+                )
+                .describe(&format!(
+                    "derivative of acc{floor} with respect to {p} along the run (NaN unless sensitivities is on and no effect is)"
+                ))
+                .depends_on(&[FORCE, CONTROL_FORCE]),
+            );
+        }
+    }
     v.extend(Effects::all_variables());
     v
 }

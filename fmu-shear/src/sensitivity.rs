@@ -1,0 +1,207 @@
+//! Forward sensitivities of the linear model: the derivatives of the floor accelerations with
+//! respect to the nine structural parameters (`m1..m3`, `c1..c3`, `k1..k3`), carried along the
+//! run when the `sensitivities` parameter is on, so that a calibration gets its Jacobian from
+//! one run instead of one extra run per parameter.
+//!
+//! They are the derivatives of the FMU's own discrete map, not of the ODE: the linear model's
+//! step is `x' = Φ x + g₀ u + g₁ u̇` with `Φ, g₀, g₁` the RK4 sub-steps composed
+//! ([`crate::integrate::LinearStepMap`]), so the sensitivity `s = ∂x/∂θ` steps as
+//! `s' = Φ s + Φ_θ x + g₀_θ u + g₁_θ u̇`. The derivative maps come from RK4 on the augmented
+//! linear system `z = [x, s, u, u̇]`, `ż = F z`, with
+//! `F = [[A, 0, b, 0], [A_θ, A, b_θ, 0], [0, 0, 0, 1], [0, 0, 0, 0]]`: one RK4 sub-step of a
+//! linear autonomous system is the polynomial `R(δF) = I + δF + (δF)²/2 + (δF)³/6 + (δF)⁴/24`,
+//! and on this block-triangular `F` its lower-left block is the derivative of `R(δA)` (the
+//! input held as a state ramps exactly as RK4 evaluates it at its stages). The sub-steps
+//! composed, `R(δF)^N` by repeated squaring, give `Φ_θ, g₀_θ, g₁_θ` in its `s` rows.
+//!
+//! The accelerations `a(x, u)` then give `∂a/∂θ = a_θ(x, u) + A_a s`, `A_a` the acceleration
+//! rows of `A`. With any effect on the model is not linear and the outputs are NaN.
+
+use nalgebra::SMatrix;
+use serde::{Deserialize, Serialize};
+
+use crate::integrate::{LinearStepMap, State};
+use crate::model::{ShearModel, ShearParameters};
+
+/// The parameters with sensitivities, in output order.
+pub const PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
+
+type Augmented = SMatrix<f64, 14, 14>;
+
+/// The derivative maps of one communication step, for the current parameters and step size.
+#[derive(Clone, Debug)]
+pub struct SensitivityMaps {
+    step: f64,
+    params: ShearParameters,
+    /// Per parameter: `Φ_θ` (row-major), `g₀_θ`, `g₁_θ`.
+    phi: [[State; 6]; 9],
+    g0: [State; 9],
+    g1: [State; 9],
+}
+
+/// The sensitivity states `∂[y, ẏ]/∂θ` of the nine parameters (part of the FMU state).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Sensitivities {
+    pub on: bool,
+    pub states: [State; 9],
+    #[serde(skip)]
+    maps: Option<Box<SensitivityMaps>>,
+}
+
+impl Sensitivities {
+    /// Step the sensitivities with the linear step `map` from `x0`, the net input `u0` with
+    /// slope `slope` over the step.
+    pub fn advance(
+        &mut self,
+        model: &ShearModel,
+        map: &LinearStepMap,
+        x0: &State,
+        u0: f64,
+        slope: f64,
+        h: f64,
+    ) {
+        if !self
+            .maps
+            .as_ref()
+            .is_some_and(|m| m.step == h && m.params == model.params)
+        {
+            self.maps = Some(Box::new(SensitivityMaps::new(model, h)));
+        }
+        let Some(maps) = self.maps.as_ref() else {
+            return;
+        };
+        for (j, s) in self.states.iter_mut().enumerate() {
+            let propagated = map.apply(s, 0.0, 0.0);
+            *s = std::array::from_fn(|i| {
+                let row = &maps.phi[j][i];
+                propagated[i]
+                    + row.iter().zip(x0).map(|(a, b)| a * b).sum::<f64>()
+                    + maps.g0[j][i] * u0
+                    + maps.g1[j][i] * slope
+            });
+        }
+    }
+
+    /// `∂a_floor/∂θ_j` at the state `x` and net input `u`.
+    pub fn acceleration(
+        &self,
+        model: &ShearModel,
+        x: &State,
+        u: f64,
+        floor: usize,
+        j: usize,
+    ) -> f64 {
+        let s = &self.states[j];
+        let through_state = model.acceleration(&[s[0], s[1], s[2]], &[s[3], s[4], s[5]], 0.0);
+        acceleration_derivative(model, x, u, j)[floor] + through_state[floor]
+    }
+}
+
+/// `∂a/∂θ_j` at a fixed state and input (linear model).
+pub fn acceleration_derivative(model: &ShearModel, x: &State, u: f64, j: usize) -> [f64; 3] {
+    let (y, v) = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
+    let m = &model.params.mass;
+    let (group, i) = (j / 3, j % 3);
+    if group == 0 {
+        let a = model.acceleration(&y, &v, u);
+        let mut out = [0.0; 3];
+        out[i] = -a[i] / m[i];
+        return out;
+    }
+    // Storey i's force grows by its drift (stiffness) or drift rate (damping) per unit of θ.
+    let storey = |q: &[f64; 3]| if i == 0 { q[0] } else { q[i] - q[i - 1] };
+    let ds = if group == 1 { storey(&v) } else { storey(&y) };
+    // Storey i pushes floor i back and floor i − 1 forward.
+    let mut rhs = [0.0; 3];
+    rhs[i] = -ds;
+    if i > 0 {
+        rhs[i - 1] = ds;
+    }
+    [rhs[0] / m[0], rhs[1] / m[1], rhs[2] / m[2]]
+}
+
+impl SensitivityMaps {
+    pub fn new(model: &ShearModel, h: f64) -> Self {
+        let unit = |c: usize| -> State {
+            let mut e = [0.0; 6];
+            e[c] = 1.0;
+            e
+        };
+        // The acceleration rows of A and b: the linear accelerations on unit states and input.
+        let mut base = Augmented::zeros();
+        for i in 0..3 {
+            base[(i, 3 + i)] = 1.0;
+            base[(6 + i, 9 + i)] = 1.0;
+        }
+        base[(12, 13)] = 1.0;
+        let accel =
+            |x: &State, u: f64| model.acceleration(&[x[0], x[1], x[2]], &[x[3], x[4], x[5]], u);
+        for c in 0..6 {
+            let a = accel(&unit(c), 0.0);
+            for r in 0..3 {
+                base[(3 + r, c)] = a[r];
+                base[(9 + r, 6 + c)] = a[r];
+            }
+        }
+        let b = accel(&[0.0; 6], 1.0);
+        for r in 0..3 {
+            base[(3 + r, 12)] = b[r];
+        }
+        let substeps = model.params.substeps.max(1);
+        let delta = h / f64::from(substeps);
+        let mut maps = SensitivityMaps {
+            step: h,
+            params: model.params.clone(),
+            phi: [[[0.0; 6]; 6]; 9],
+            g0: [[0.0; 6]; 9],
+            g1: [[0.0; 6]; 9],
+        };
+        for j in 0..9 {
+            let mut f = base;
+            for c in 0..6 {
+                let d = acceleration_derivative(model, &unit(c), 0.0, j);
+                for r in 0..3 {
+                    f[(9 + r, c)] = d[r];
+                }
+            }
+            let d = acceleration_derivative(model, &[0.0; 6], 1.0, j);
+            for r in 0..3 {
+                f[(9 + r, 12)] = d[r];
+            }
+            let p = power(&rk4_substep(&(f * delta)), substeps);
+            for r in 0..6 {
+                for c in 0..6 {
+                    maps.phi[j][r][c] = p[(6 + r, c)];
+                }
+                maps.g0[j][r] = p[(6 + r, 12)];
+                maps.g1[j][r] = p[(6 + r, 13)];
+            }
+        }
+        maps
+    }
+}
+
+/// RK4's map of one step of `ż = F z` for `hf = δF`: `I + hf (I + hf/2 (I + hf/3 (I + hf/4)))`.
+fn rk4_substep(hf: &Augmented) -> Augmented {
+    let id = Augmented::identity();
+    let mut r = id + hf / 4.0;
+    r = id + hf * r / 3.0;
+    r = id + hf * r / 2.0;
+    id + hf * r
+}
+
+/// `m^n` by repeated squaring.
+fn power(m: &Augmented, mut n: u32) -> Augmented {
+    let mut result = Augmented::identity();
+    let mut square = *m;
+    while n > 0 {
+        if n & 1 == 1 {
+            result *= square;
+        }
+        n >>= 1;
+        if n > 0 {
+            square = square * square;
+        }
+    }
+    result
+}
