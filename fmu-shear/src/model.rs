@@ -158,9 +158,8 @@ impl ShearModel {
             match &self.step_map {
                 Some(map) => {
                     if self.sensitivities.on {
-                        let mut sensitivities = std::mem::take(&mut self.sensitivities);
-                        sensitivities.advance(self, map, &x0, f0, fs, h);
-                        self.sensitivities = sensitivities;
+                        self.sensitivities
+                            .advance(&self.params, map, &x0, f0, fs, h);
                     }
                     map.apply(&x0, f0, fs)
                 }
@@ -269,12 +268,13 @@ impl CoSimModel for ShearModel {
                     .filter(|&k| k < 27)
                     .map(|k| k as usize)
                 {
-                    if !self.sensitivities.on || self.effects.any_enabled() {
+                    if !self.sensitivities.on {
                         f64::NAN
                     } else {
                         let x = [y[0], y[1], y[2], v[0], v[1], v[2]];
+                        let u = self.net_input();
                         self.sensitivities
-                            .acceleration(self, &x, self.net_input(), k / 9, k % 9)
+                            .output(&self.params, &self.effects, &x, u, k)
                     }
                 } else {
                     return self

@@ -20,8 +20,9 @@
 use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
 
+use crate::effects::Effects;
 use crate::integrate::{LinearStepMap, State};
-use crate::model::{ShearModel, ShearParameters};
+use crate::model::ShearParameters;
 
 /// The parameters with sensitivities, in output order.
 pub const PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
@@ -46,6 +47,9 @@ pub struct Sensitivities {
     pub states: [State; 9],
     #[serde(skip)]
     maps: Option<Box<SensitivityMaps>>,
+    /// The 27 outputs for the current state, and the net input they were computed with.
+    #[serde(skip)]
+    outputs: Option<(f64, [f64; 27])>,
 }
 
 impl Sensitivities {
@@ -53,7 +57,7 @@ impl Sensitivities {
     /// slope `slope` over the step.
     pub fn advance(
         &mut self,
-        model: &ShearModel,
+        params: &ShearParameters,
         map: &LinearStepMap,
         x0: &State,
         u0: f64,
@@ -63,10 +67,11 @@ impl Sensitivities {
         if !self
             .maps
             .as_ref()
-            .is_some_and(|m| m.step == h && m.params == model.params)
+            .is_some_and(|m| m.step == h && m.params == *params)
         {
-            self.maps = Some(Box::new(SensitivityMaps::new(model, h)));
+            self.maps = Some(Box::new(SensitivityMaps::new(params, h)));
         }
+        self.outputs = None;
         let Some(maps) = self.maps.as_ref() else {
             return;
         };
@@ -82,28 +87,67 @@ impl Sensitivities {
         }
     }
 
-    /// `∂a_floor/∂θ_j` at the state `x` and net input `u`.
-    pub fn acceleration(
-        &self,
-        model: &ShearModel,
+    /// Output `k`: `∂a_f/∂θ_j` for `k = 9 f + j`, at the state `x` and net input `u` (the 27
+    /// computed together, once per state and input).
+    pub fn output(
+        &mut self,
+        params: &ShearParameters,
+        effects: &Effects,
         x: &State,
         u: f64,
-        floor: usize,
-        j: usize,
+        k: usize,
     ) -> f64 {
-        let s = &self.states[j];
-        let through_state = model.acceleration(&[s[0], s[1], s[2]], &[s[3], s[4], s[5]], 0.0);
-        acceleration_derivative(model, x, u, j)[floor] + through_state[floor]
+        match self.outputs {
+            Some((at, values)) if at.to_bits() == u.to_bits() => values[k],
+            _ => {
+                let values = if effects.any_enabled() {
+                    [f64::NAN; 27]
+                } else {
+                    self.all_outputs(params, x, u)
+                };
+                self.outputs = Some((u, values));
+                values[k]
+            }
+        }
+    }
+
+    fn all_outputs(&self, params: &ShearParameters, x: &State, u: f64) -> [f64; 27] {
+        let mut out = [0.0; 27];
+        let a = linear_acceleration(params, x, u);
+        for (j, s) in self.states.iter().enumerate() {
+            let through_state = linear_acceleration(params, s, 0.0);
+            let direct = derivative_at(params, x, &a, j);
+            for f in 0..3 {
+                out[9 * f + j] = direct[f] + through_state[f];
+            }
+        }
+        out
     }
 }
 
+/// The linear model's floor accelerations for the state `x` and net input `u`.
+fn linear_acceleration(p: &ShearParameters, x: &State, u: f64) -> [f64; 3] {
+    let (m, c, k) = (&p.mass, &p.damping, &p.stiffness);
+    let s = [
+        k[0] * x[0] + c[0] * x[3],
+        k[1] * (x[1] - x[0]) + c[1] * (x[4] - x[3]),
+        k[2] * (x[2] - x[1]) + c[2] * (x[5] - x[4]),
+    ];
+    [(u - s[0] + s[1]) / m[0], (s[2] - s[1]) / m[1], -s[2] / m[2]]
+}
+
 /// `∂a/∂θ_j` at a fixed state and input (linear model).
-pub fn acceleration_derivative(model: &ShearModel, x: &State, u: f64, j: usize) -> [f64; 3] {
+pub fn acceleration_derivative(params: &ShearParameters, x: &State, u: f64, j: usize) -> [f64; 3] {
+    let a = linear_acceleration(params, x, u);
+    derivative_at(params, x, &a, j)
+}
+
+/// `∂a/∂θ_j` at the state `x` whose accelerations are `a`.
+fn derivative_at(p: &ShearParameters, x: &State, a: &[f64; 3], j: usize) -> [f64; 3] {
     let (y, v) = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
-    let m = &model.params.mass;
+    let m = &p.mass;
     let (group, i) = (j / 3, j % 3);
     if group == 0 {
-        let a = model.acceleration(&y, &v, u);
         let mut out = [0.0; 3];
         out[i] = -a[i] / m[i];
         return out;
@@ -121,7 +165,7 @@ pub fn acceleration_derivative(model: &ShearModel, x: &State, u: f64, j: usize) 
 }
 
 impl SensitivityMaps {
-    pub fn new(model: &ShearModel, h: f64) -> Self {
+    pub fn new(params: &ShearParameters, h: f64) -> Self {
         let unit = |c: usize| -> State {
             let mut e = [0.0; 6];
             e[c] = 1.0;
@@ -134,8 +178,7 @@ impl SensitivityMaps {
             base[(6 + i, 9 + i)] = 1.0;
         }
         base[(12, 13)] = 1.0;
-        let accel =
-            |x: &State, u: f64| model.acceleration(&[x[0], x[1], x[2]], &[x[3], x[4], x[5]], u);
+        let accel = |x: &State, u: f64| linear_acceleration(params, x, u);
         for c in 0..6 {
             let a = accel(&unit(c), 0.0);
             for r in 0..3 {
@@ -147,11 +190,11 @@ impl SensitivityMaps {
         for r in 0..3 {
             base[(3 + r, 12)] = b[r];
         }
-        let substeps = model.params.substeps.max(1);
+        let substeps = params.substeps.max(1);
         let delta = h / f64::from(substeps);
         let mut maps = SensitivityMaps {
             step: h,
-            params: model.params.clone(),
+            params: params.clone(),
             phi: [[[0.0; 6]; 6]; 9],
             g0: [[0.0; 6]; 9],
             g1: [[0.0; 6]; 9],
@@ -159,12 +202,12 @@ impl SensitivityMaps {
         for j in 0..9 {
             let mut f = base;
             for c in 0..6 {
-                let d = acceleration_derivative(model, &unit(c), 0.0, j);
+                let d = acceleration_derivative(params, &unit(c), 0.0, j);
                 for r in 0..3 {
                     f[(9 + r, c)] = d[r];
                 }
             }
-            let d = acceleration_derivative(model, &[0.0; 6], 1.0, j);
+            let d = acceleration_derivative(params, &[0.0; 6], 1.0, j);
             for r in 0..3 {
                 f[(9 + r, 12)] = d[r];
             }

@@ -24,6 +24,7 @@ pub mod simulator;
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -181,6 +182,41 @@ struct Target<'a> {
     noise_mean: [f64; 3],
     noise_var: f64,
     budget: usize,
+    /// The FMU's forward sensitivities of the accelerations to the calibrated parameters, when
+    /// it offers them for all of them.
+    sensitivity: Option<Sensitivity>,
+}
+
+/// Where an FMU gives `∂acc_f/∂p` along a run: the Boolean parameter that switches them on and
+/// the outputs `d_acc{f}_d_{p}`, floor-major in the calibrated parameters' order. The shear FMU
+/// carries them for its linear model (`fmu_shear::sensitivity`); with an effect on they are
+/// NaN, and the calibration falls back to finite differences.
+struct Sensitivity {
+    switch: u32,
+    outputs: Vec<u32>,
+    /// Set once a sensitivity run gave non-finite values: finite differences from then on.
+    failed: AtomicBool,
+}
+
+impl Sensitivity {
+    fn find(fmu: &Fmu, parameters: &[String]) -> Option<Self> {
+        let md = &fmu.model_description;
+        let switch = md.variable("sensitivities").filter(|v| {
+            v.scalar_type == ScalarType::Boolean
+                && v.causality == crate::cosim::import::Causality::Parameter
+        })?;
+        let mut outputs = Vec::with_capacity(3 * parameters.len());
+        for f in 1..=3 {
+            for p in parameters {
+                outputs.push(md.variable(&format!("d_acc{f}_d_{p}"))?.value_reference);
+            }
+        }
+        Some(Sensitivity {
+            switch: switch.value_reference,
+            outputs,
+            failed: AtomicBool::new(false),
+        })
+    }
 }
 
 impl Target<'_> {
@@ -217,6 +253,57 @@ fn raw_residuals(
     Some(r)
 }
 
+/// The residuals `y − ŷ` for parameters `z` and their Jacobian `∂(y − ŷ)/∂z` (rows as the
+/// residuals), from one run with the FMU's sensitivities; None when the FMU has none for these
+/// parameters, refused them, or gave non-finite ones (then never again for this calibration).
+fn sensitivity_jacobian(
+    sim: &mut Simulator,
+    target: &Target,
+    z: &[f64],
+) -> Option<(Vec<f64>, DMatrix<f64>)> {
+    let sensitivity = target.sensitivity.as_ref()?;
+    if sensitivity.failed.load(Ordering::Relaxed) {
+        return None;
+    }
+    let values = target.values(z);
+    if values.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let p = z.len();
+    let mut outputs = sim.acc_vrs().to_vec();
+    outputs.extend(&sensitivity.outputs);
+    let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
+    sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
+        .ok()?;
+    let per = target.n_used();
+    let mut r = Vec::with_capacity(3 * per);
+    let mut jac = DMatrix::zeros(3 * per, p);
+    // ∂u_j/∂z_j: the prior's scale, times the value where the prior is on the log.
+    let scale: Vec<f64> = (0..p)
+        .map(|j| {
+            let prior = &target.priors[j];
+            match prior.space {
+                Space::Linear => prior.sd(),
+                Space::Log => prior.sd() * values[j],
+            }
+        })
+        .collect();
+    for f in 0..3 {
+        for (i, &k) in target.used.iter().enumerate() {
+            r.push(target.data.acc[f][k] - out[f][k]);
+            for j in 0..p {
+                let d = out[3 + f * p + j][k];
+                if !d.is_finite() {
+                    sensitivity.failed.store(true, Ordering::Relaxed);
+                    return None;
+                }
+                jac[(f * per + i, j)] = -d * scale[j];
+            }
+        }
+    }
+    Some((r, jac))
+}
+
 fn sse_per_floor(r: &[f64], per_floor: usize) -> [f64; 3] {
     [0, 1, 2].map(|f| {
         r[f * per_floor..(f + 1) * per_floor]
@@ -234,7 +321,11 @@ struct Problem<'s, 'a> {
     z: DVector<f64>,
     residuals: Option<DVector<f64>>,
     buf: RefCell<[Vec<f64>; 3]>,
+    /// Simulations used, a Jacobian from sensitivities counted as the p runs it replaces: what
+    /// the budget bounds.
     evaluations: RefCell<usize>,
+    /// FMU runs made.
+    runs: RefCell<usize>,
     /// Simulations this least-squares solve may use.
     budget: usize,
 }
@@ -242,6 +333,7 @@ struct Problem<'s, 'a> {
 impl Problem<'_, '_> {
     fn weighted(&self, z: &[f64]) -> Option<DVector<f64>> {
         *self.evaluations.borrow_mut() += 1;
+        *self.runs.borrow_mut() += 1;
         let mut sim = self.sim.borrow_mut();
         let r = raw_residuals(&mut sim, self.target, z, &mut self.buf.borrow_mut())?;
         let per = self.target.n_used();
@@ -293,6 +385,27 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
             return None;
         }
         let base = self.residuals.clone()?;
+        let sensitive = {
+            let mut sim = self.sim.borrow_mut();
+            sensitivity_jacobian(&mut sim, self.target, self.z.as_slice())
+        };
+        if let Some((_, model)) = sensitive {
+            // Counted as the p runs it replaces, so a start's budget buys the same iterations.
+            *self.evaluations.borrow_mut() += self.z.len();
+            *self.runs.borrow_mut() += 1;
+            let per = self.target.n_used();
+            let mut jac = DMatrix::zeros(base.len(), self.z.len());
+            for i in 0..model.nrows() {
+                let w = self.weights[i / per];
+                for j in 0..self.z.len() {
+                    jac[(i, j)] = w * model[(i, j)];
+                }
+            }
+            for j in 0..self.z.len() {
+                jac[(model.nrows() + j, j)] = 1.0;
+            }
+            return Some(jac);
+        }
         let mut jac = DMatrix::zeros(base.len(), self.z.len());
         for j in 0..self.z.len() {
             let h = 1e-6 * self.z[j].abs().max(1.0);
@@ -335,7 +448,8 @@ struct StartResult {
     z: Vec<f64>,
     s: [f64; 3],
     objective: f64,
-    evaluations: usize,
+    /// FMU runs made.
+    runs: usize,
 }
 
 fn run_start<'a>(
@@ -347,6 +461,7 @@ fn run_start<'a>(
     let mut s = target.noise_mean;
     let mut z = z0;
     let mut evaluations = 0;
+    let mut runs = 0;
     let mut buf: [Vec<f64>; 3] = Default::default();
     for _outer in 0..5 {
         let weights = s.map(|sf| (-sf / 2.0).exp());
@@ -358,6 +473,7 @@ fn run_start<'a>(
             residuals: None,
             buf: RefCell::new(Default::default()),
             evaluations: RefCell::new(0),
+            runs: RefCell::new(0),
             budget: target.budget.saturating_sub(evaluations),
         };
         problem.set_params(&DVector::from_vec(z.clone()));
@@ -367,9 +483,11 @@ fn run_start<'a>(
             .with_patience(25)
             .minimize(problem);
         evaluations += *problem.evaluations.borrow();
+        runs += *problem.runs.borrow();
         z = problem.z.as_slice().to_vec();
         let r = raw_residuals(sim, target, &z, &mut buf)?;
         evaluations += 1;
+        runs += 1;
         let sse = sse_per_floor(&r, per);
         let s_new = [0, 1, 2].map(|f| {
             optimal_log_noise(
@@ -392,18 +510,20 @@ fn run_start<'a>(
         z,
         s,
         objective,
-        evaluations: evaluations + 1,
+        runs: runs + 1,
     })
 }
 
-/// The Laplace approximation at (z, s): covariance of (z, s).
-fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Option<DMatrix<f64>> {
-    let p = z.len();
-    let per = target.n_used();
+/// The residuals at `z` and their Jacobian by central differences (2p runs).
+fn central_differences(
+    sim: &mut Simulator,
+    target: &Target,
+    z: &[f64],
+) -> Option<(Vec<f64>, DMatrix<f64>)> {
     let mut buf: [Vec<f64>; 3] = Default::default();
     let r0 = raw_residuals(sim, target, z, &mut buf)?;
-    let mut jac = DMatrix::zeros(r0.len(), p);
-    for j in 0..p {
+    let mut jac = DMatrix::zeros(r0.len(), z.len());
+    for j in 0..z.len() {
         let h = 1e-4 * z[j].abs().max(1.0);
         let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
         zp[j] += h;
@@ -414,6 +534,23 @@ fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Opti
             jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * h);
         }
     }
+    Some((r0, jac))
+}
+
+/// The Laplace approximation at (z, s): covariance of (z, s).
+/// Also the FMU runs it made.
+fn laplace(
+    sim: &mut Simulator,
+    target: &Target,
+    z: &[f64],
+    s: [f64; 3],
+) -> Option<(DMatrix<f64>, usize)> {
+    let p = z.len();
+    let per = target.n_used();
+    let ((r0, jac), runs) = match sensitivity_jacobian(sim, target, z) {
+        Some(exact) => (exact, 1),
+        None => (central_differences(sim, target, z)?, 2 * p + 1),
+    };
     let sse = sse_per_floor(&r0, per);
     let mut hess = DMatrix::zeros(p + 3, p + 3);
     for f in 0..3 {
@@ -435,7 +572,7 @@ fn laplace(sim: &mut Simulator, target: &Target, z: &[f64], s: [f64; 3]) -> Opti
     for a in 0..p {
         hess[(a, a)] += 1.0;
     }
-    hess.try_inverse()
+    Some((hess.try_inverse()?, runs))
 }
 
 /// The samples the likelihood uses: after the transient, where the mask (if any) is set.
@@ -529,6 +666,7 @@ pub fn calibrate(
         noise_mean,
         noise_var: setup.noise_log_variance,
         budget: setup.simulations_per_start.max(1),
+        sensitivity: Sensitivity::find(&fmu, &setup.parameters),
     };
 
     // Starts: the prior mean, then draws from the prior widened ×3.
@@ -609,11 +747,11 @@ pub fn calibrate(
     for r in results {
         for (i, res) in r? {
             if let Some(res) = res {
-                simulations += res.evaluations;
+                simulations += res.runs;
                 outcomes.push(StartOutcome {
                     start: i,
                     neg_log_posterior: res.objective,
-                    evaluations: res.evaluations,
+                    evaluations: res.runs,
                 });
                 if best.as_ref().map_or(true, |b| res.objective < b.objective) {
                     best = Some(res);
@@ -632,7 +770,7 @@ pub fn calibrate(
         data.dt,
         "laplace",
     )?;
-    let cov = laplace(&mut sim, &target, &best.z, best.s).ok_or_else(|| {
+    let (cov, laplace_runs) = laplace(&mut sim, &target, &best.z, best.s).ok_or_else(|| {
         CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
     })?;
     let values = target.values(&best.z);
@@ -682,7 +820,7 @@ pub fn calibrate(
         samples_used,
         nmse,
         starts: outcomes,
-        simulations: simulations + 2 * p + 2,
+        simulations: simulations + laplace_runs + 1,
         seconds: started.elapsed().as_secs_f64(),
     })
 }

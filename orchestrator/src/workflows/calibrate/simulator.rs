@@ -75,12 +75,44 @@ impl<'a> Simulator<'a> {
         outputs: &[u32],
         out: &mut [Vec<f64>],
     ) -> Result<(), TwinError> {
+        self.run(vrs, values, None, outputs, out)
+    }
+
+    /// Like [`Simulator::record`], with the Boolean parameter `switch` (e.g. the shear FMU's
+    /// `sensitivities`) set for this run only.
+    pub fn record_switched(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        switch: u32,
+        outputs: &[u32],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), TwinError> {
+        self.run(vrs, values, Some(switch), outputs, out)
+    }
+
+    /// Floor f's acceleration `acc_vrs()[f]`.
+    pub fn acc_vrs(&self) -> [u32; 3] {
+        self.acc_vrs
+    }
+
+    fn run(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        switch: Option<u32>,
+        outputs: &[u32],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), TwinError> {
         {
             let mut inst = self.instance.borrow_mut();
             inst.reset()?;
             inst.setup_experiment(self.start, None)?;
             inst.enter_initialization_mode()?;
             apply_parameters(self.fmu, &mut inst, &self.base)?;
+            if let Some(switch) = switch {
+                inst.set_boolean(&[switch], &[true])?;
+            }
             inst.set_real(vrs, values)?;
             inst.exit_initialization_mode()?;
         }
