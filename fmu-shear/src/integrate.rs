@@ -58,6 +58,11 @@ impl LinearStepMap {
         }
     }
 
+    /// `Φ`, row-major.
+    pub fn matrix(&self) -> &[[f64; 6]; 6] {
+        &self.phi
+    }
+
     pub fn fits(&self, params: &ShearParameters, step: f64) -> bool {
         self.step == step && self.params == *params
     }

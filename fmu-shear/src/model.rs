@@ -210,6 +210,18 @@ impl ShearModel {
         x
     }
 
+    /// Sensitivity output `k` (NaN unless they are on).
+    fn sensitivity_output(&mut self, k: usize) -> f64 {
+        if !self.sensitivities.on {
+            return f64::NAN;
+        }
+        let (y, v) = (&self.displacement, &self.velocity);
+        let x = [y[0], y[1], y[2], v[0], v[1], v[2]];
+        let u = self.net_input();
+        self.sensitivities
+            .output(&self.params, &self.effects, &x, u, k)
+    }
+
     fn net_input(&self) -> f64 {
         self.force.value - self.control_force.value
     }
@@ -244,6 +256,10 @@ impl CoSimModel for ShearModel {
     }
 
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError> {
+        // The sensitivities first: a calibration reads 27 of them per step.
+        if let Some(k) = vr.checked_sub(SENSITIVITY).filter(|&k| k < 27) {
+            return Ok(self.sensitivity_output(k as usize));
+        }
         let (y, v) = (self.displacement, self.velocity);
         let value = match vr {
             FORCE => self.force.value,
@@ -263,19 +279,6 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i]
                 } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
                     self.params.stiffness[i]
-                } else if let Some(k) = vr
-                    .checked_sub(SENSITIVITY)
-                    .filter(|&k| k < 27)
-                    .map(|k| k as usize)
-                {
-                    if !self.sensitivities.on {
-                        f64::NAN
-                    } else {
-                        let x = [y[0], y[1], y[2], v[0], v[1], v[2]];
-                        let u = self.net_input();
-                        self.sensitivities
-                            .output(&self.params, &self.effects, &x, u, k)
-                    }
                 } else {
                     return self
                         .effects

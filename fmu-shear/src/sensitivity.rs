@@ -34,17 +34,22 @@ type Augmented = SMatrix<f64, 14, 14>;
 pub struct SensitivityMaps {
     step: f64,
     params: ShearParameters,
-    /// Per parameter: `Φ_θ` (row-major), `g₀_θ`, `g₁_θ`.
-    phi: [[State; 6]; 9],
-    g0: [State; 9],
-    g1: [State; 9],
+    /// `Φ_θ[i][c][j]`: row i, column c of parameter j's `Φ_θ`; `g₀_θ[i][j]`, `g₁_θ[i][j]`
+    /// (the parameters innermost, as the states).
+    phi: [[Row; 6]; 6],
+    g0: [Row; 6],
+    g1: [Row; 6],
 }
+
+/// One component of the state across the nine parameters.
+pub type Row = [f64; 9];
 
 /// The sensitivity states `∂[y, ẏ]/∂θ` of the nine parameters (part of the FMU state).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Sensitivities {
     pub on: bool,
-    pub states: [State; 9],
+    /// `states[i][j] = ∂x_i/∂θ_j`.
+    pub states: [Row; 6],
     #[serde(skip)]
     maps: Option<Box<SensitivityMaps>>,
     /// The 27 outputs for the current state, and the net input they were computed with.
@@ -75,16 +80,20 @@ impl Sensitivities {
         let Some(maps) = self.maps.as_ref() else {
             return;
         };
-        for (j, s) in self.states.iter_mut().enumerate() {
-            let propagated = map.apply(s, 0.0, 0.0);
-            *s = std::array::from_fn(|i| {
-                let row = &maps.phi[j][i];
-                propagated[i]
-                    + row.iter().zip(x0).map(|(a, b)| a * b).sum::<f64>()
-                    + maps.g0[j][i] * u0
-                    + maps.g1[j][i] * slope
-            });
-        }
+        // S' = Φ S + Σ_c Φ_θ[·][c] x0[c] + g₀_θ u0 + g₁_θ u̇, nine parameters at a time.
+        let phi = map.matrix();
+        let s = &self.states;
+        let next: [Row; 6] = std::array::from_fn(|i| {
+            let mut row: Row = std::array::from_fn(|j| maps.g0[i][j] * u0 + maps.g1[i][j] * slope);
+            for c in 0..6 {
+                let (a, b) = (phi[i][c], x0[c]);
+                for j in 0..9 {
+                    row[j] += a * s[c][j] + maps.phi[i][c][j] * b;
+                }
+            }
+            row
+        });
+        self.states = next;
     }
 
     /// Output `k`: `∂a_f/∂θ_j` for `k = 9 f + j`, at the state `x` and net input `u` (the 27
@@ -97,7 +106,7 @@ impl Sensitivities {
         u: f64,
         k: usize,
     ) -> f64 {
-        match self.outputs {
+        match &self.outputs {
             Some((at, values)) if at.to_bits() == u.to_bits() => values[k],
             _ => {
                 let values = if effects.any_enabled() {
@@ -112,13 +121,50 @@ impl Sensitivities {
     }
 
     fn all_outputs(&self, params: &ShearParameters, x: &State, u: f64) -> [f64; 27] {
+        let (c, k) = (&params.damping, &params.stiffness);
+        let inv_m = params.mass.map(|m| 1.0 / m);
+        // Storey drifts and drift rates of the state, and the storey forces.
+        let storeys = |q: &State| {
+            (
+                [q[0], q[1] - q[0], q[2] - q[1]],
+                [q[3], q[4] - q[3], q[5] - q[4]],
+            )
+        };
+        let (d, dv) = storeys(x);
+        let force = |d: &[f64; 3], dv: &[f64; 3], i: usize| k[i] * d[i] + c[i] * dv[i];
+        let push = |s: [f64; 3], u: f64| {
+            [
+                (u - s[0] + s[1]) * inv_m[0],
+                (s[2] - s[1]) * inv_m[1],
+                -s[2] * inv_m[2],
+            ]
+        };
+        let a = push([force(&d, &dv, 0), force(&d, &dv, 1), force(&d, &dv, 2)], u);
         let mut out = [0.0; 27];
-        let a = linear_acceleration(params, x, u);
-        for (j, s) in self.states.iter().enumerate() {
-            let through_state = linear_acceleration(params, s, 0.0);
-            let direct = derivative_at(params, x, &a, j);
+        for j in 0..9 {
+            let state: State = std::array::from_fn(|i| self.states[i][j]);
+            let (sd, sdv) = storeys(&state);
+            let mut da = push(
+                [
+                    force(&sd, &sdv, 0),
+                    force(&sd, &sdv, 1),
+                    force(&sd, &sdv, 2),
+                ],
+                0.0,
+            );
+            let (group, i) = (j / 3, j % 3);
+            if group == 0 {
+                da[i] -= a[i] * inv_m[i];
+            } else {
+                // Storey i's force grows by its drift rate (damping) or drift (stiffness).
+                let ds = if group == 1 { dv[i] } else { d[i] };
+                da[i] -= ds * inv_m[i];
+                if i > 0 {
+                    da[i - 1] += ds * inv_m[i - 1];
+                }
+            }
             for f in 0..3 {
-                out[9 * f + j] = direct[f] + through_state[f];
+                out[9 * f + j] = da[f];
             }
         }
         out
@@ -195,9 +241,9 @@ impl SensitivityMaps {
         let mut maps = SensitivityMaps {
             step: h,
             params: params.clone(),
-            phi: [[[0.0; 6]; 6]; 9],
-            g0: [[0.0; 6]; 9],
-            g1: [[0.0; 6]; 9],
+            phi: [[[0.0; 9]; 6]; 6],
+            g0: [[0.0; 9]; 6],
+            g1: [[0.0; 9]; 6],
         };
         for j in 0..9 {
             let mut f = base;
@@ -214,10 +260,10 @@ impl SensitivityMaps {
             let p = power(&rk4_substep(&(f * delta)), substeps);
             for r in 0..6 {
                 for c in 0..6 {
-                    maps.phi[j][r][c] = p[(6 + r, c)];
+                    maps.phi[r][c][j] = p[(6 + r, c)];
                 }
-                maps.g0[j][r] = p[(6 + r, 12)];
-                maps.g1[j][r] = p[(6 + r, 13)];
+                maps.g0[r][j] = p[(6 + r, 12)];
+                maps.g1[r][j] = p[(6 + r, 13)];
             }
         }
         maps
