@@ -894,12 +894,18 @@ pub struct Recorder {
 
 impl Recorder {
     pub fn new(watched: Vec<(String, Port)>) -> Self {
+        Self::with_capacity(watched, 0)
+    }
+
+    /// A recorder with room for `samples` samples per column (no reallocation while a run of
+    /// known length records).
+    pub fn with_capacity(watched: Vec<(String, Port)>, samples: usize) -> Self {
         let (names, ports): (Vec<String>, Vec<Port>) = watched.into_iter().unzip();
-        let columns = vec![Vec::new(); ports.len()];
+        let columns = vec![Vec::with_capacity(samples); ports.len()];
         Recorder {
             ports,
             names,
-            time: Vec::new(),
+            time: Vec::with_capacity(samples),
             columns,
         }
     }

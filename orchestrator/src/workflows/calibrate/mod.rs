@@ -19,6 +19,7 @@
 //! Uncertainty: the Hessian of `J` at the optimum (Gauss–Newton for the model part, from a
 //! central-difference Jacobian; exact for the noise part and the cross terms), inverted.
 
+pub mod lm;
 pub mod prior;
 pub mod simulator;
 
@@ -27,8 +28,7 @@ use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use nalgebra::{DMatrix, DVector};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use serde::Serialize;
@@ -74,6 +74,9 @@ pub struct CalibrationSetup {
     /// Where the first start begins, by parameter name (the prior mean for a name not given):
     /// a refinement from a model already fitted starts there.
     pub initial: BTreeMap<String, f64>,
+    /// Further starts by value (a parameter not named at its prior mean), after the first and
+    /// before the random draws, within `starts` in all.
+    pub starts_at: Vec<BTreeMap<String, f64>>,
 }
 
 impl Default for CalibrationSetup {
@@ -92,6 +95,7 @@ impl Default for CalibrationSetup {
             mask: None,
             simulations_per_start: SIMULATIONS_PER_START,
             initial: BTreeMap::new(),
+            starts_at: Vec::new(),
         }
     }
 }
@@ -289,17 +293,23 @@ fn sensitivity_jacobian(
         })
         .collect();
     for f in 0..3 {
-        for (i, &k) in target.used.iter().enumerate() {
-            r.push(target.data.acc[f][k] - out[f][k]);
-            for j in 0..p {
-                let d = out[3 + f * p + j][k];
-                if !d.is_finite() {
-                    sensitivity.failed.store(true, Ordering::Relaxed);
-                    return None;
-                }
-                jac[(f * per + i, j)] = -d * scale[j];
+        r.extend(
+            target
+                .used
+                .iter()
+                .map(|&k| target.data.acc[f][k] - out[f][k]),
+        );
+        for (j, scale) in scale.iter().enumerate() {
+            let d = &out[3 + f * p + j];
+            let mut column = jac.column_mut(j);
+            for (i, &k) in target.used.iter().enumerate() {
+                column[f * per + i] = -d[k] * scale;
             }
         }
+    }
+    if jac.iter().any(|d| !d.is_finite()) {
+        sensitivity.failed.store(true, Ordering::Relaxed);
+        return None;
     }
     Some((r, jac))
 }
@@ -318,14 +328,14 @@ struct Problem<'s, 'a> {
     sim: RefCell<&'s mut Simulator<'a>>,
     target: &'s Target<'a>,
     weights: [f64; 3],
-    z: DVector<f64>,
-    residuals: Option<DVector<f64>>,
     buf: RefCell<[Vec<f64>; 3]>,
     /// Simulations used, a Jacobian from sensitivities counted as the p runs it replaces: what
     /// the budget bounds.
     evaluations: RefCell<usize>,
     /// FMU runs made.
     runs: RefCell<usize>,
+    /// The model Jacobian from the last trial's sensitivities, and where it was taken.
+    at_hand: RefCell<Option<(Vec<f64>, DMatrix<f64>)>>,
     /// Simulations this least-squares solve may use.
     budget: usize,
 }
@@ -335,7 +345,15 @@ impl Problem<'_, '_> {
         *self.evaluations.borrow_mut() += 1;
         *self.runs.borrow_mut() += 1;
         let mut sim = self.sim.borrow_mut();
-        let r = raw_residuals(&mut sim, self.target, z, &mut self.buf.borrow_mut())?;
+        // With sensitivities, every trial runs with them: an accepted trial's Jacobian is then
+        // at hand, for less than a run of its own.
+        let r = match sensitivity_jacobian(&mut sim, self.target, z) {
+            Some((r, model)) => {
+                *self.at_hand.borrow_mut() = Some((z.to_vec(), model));
+                r
+            }
+            None => raw_residuals(&mut sim, self.target, z, &mut self.buf.borrow_mut())?,
+        };
         let per = self.target.n_used();
         let mut out = DVector::zeros(r.len() + z.len());
         for (i, x) in r.iter().enumerate() {
@@ -348,71 +366,52 @@ impl Problem<'_, '_> {
     }
 }
 
-/// Parameters the FMU refuses (or that diverge) look like a very bad fit, so the optimiser
-/// backs off instead of stopping.
-const REFUSED_RESIDUAL: f64 = 1e6;
-
 /// Simulations one start may use by default. Starts that reach the optimum need 350–800 on the examples
 /// (9 parameters); starts that wander in a flat region used up to 15,000 without improving.
 pub const SIMULATIONS_PER_START: usize = 1500;
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, z: &DVector<f64>) {
-        self.z = z.clone();
-        self.residuals = self.weighted(z.as_slice());
+impl lm::LeastSquares for Problem<'_, '_> {
+    fn residuals(&mut self, z: &[f64]) -> Option<DVector<f64>> {
+        self.weighted(z)
     }
 
-    fn params(&self) -> DVector<f64> {
-        self.z.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        let m = 3 * self.target.n_used() + self.z.len();
-        Some(
-            self.residuals
-                .clone()
-                .unwrap_or_else(|| DVector::from_element(m, REFUSED_RESIDUAL)),
-        )
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        // A start that has not settled within its budget is abandoned (LM stops on None).
+    fn jacobian(&mut self, z: &[f64], base: &DVector<f64>) -> Option<DMatrix<f64>> {
+        // A start that has not settled within its budget is abandoned.
         if *self.evaluations.borrow() > self.budget {
             return None;
         }
-        let base = self.residuals.clone()?;
-        let sensitive = {
+        let at_hand = self
+            .at_hand
+            .borrow_mut()
+            .take()
+            .filter(|(at, _)| at.as_slice() == z)
+            .map(|(_, model)| model);
+        let sensitive = at_hand.or_else(|| {
             let mut sim = self.sim.borrow_mut();
-            sensitivity_jacobian(&mut sim, self.target, self.z.as_slice())
-        };
-        if let Some((_, model)) = sensitive {
-            // Counted as the p runs it replaces, so a start's budget buys the same iterations.
-            *self.evaluations.borrow_mut() += self.z.len();
+            let (_, model) = sensitivity_jacobian(&mut sim, self.target, z)?;
             *self.runs.borrow_mut() += 1;
+            Some(model)
+        });
+        if let Some(model) = sensitive {
+            // Counted as the p runs it replaces, so a start's budget buys the same iterations.
+            *self.evaluations.borrow_mut() += z.len();
             let per = self.target.n_used();
-            let mut jac = DMatrix::zeros(base.len(), self.z.len());
-            for i in 0..model.nrows() {
-                let w = self.weights[i / per];
-                for j in 0..self.z.len() {
-                    jac[(i, j)] = w * model[(i, j)];
+            let mut jac = DMatrix::zeros(base.len(), z.len());
+            for j in 0..z.len() {
+                for i in 0..model.nrows() {
+                    jac[(i, j)] = self.weights[i / per] * model[(i, j)];
                 }
-            }
-            for j in 0..self.z.len() {
                 jac[(model.nrows() + j, j)] = 1.0;
             }
             return Some(jac);
         }
-        let mut jac = DMatrix::zeros(base.len(), self.z.len());
-        for j in 0..self.z.len() {
-            let h = 1e-6 * self.z[j].abs().max(1.0);
-            let mut z = self.z.clone();
-            z[j] += h;
-            let shifted = self.weighted(z.as_slice())?;
-            jac.set_column(j, &((shifted - &base) / h));
+        let mut jac = DMatrix::zeros(base.len(), z.len());
+        for j in 0..z.len() {
+            let h = 1e-6 * z[j].abs().max(1.0);
+            let mut shifted_z = z.to_vec();
+            shifted_z[j] += h;
+            let shifted = self.weighted(&shifted_z)?;
+            jac.set_column(j, &((shifted - base) / h));
         }
         Some(jac)
     }
@@ -469,22 +468,17 @@ fn run_start<'a>(
             sim: RefCell::new(&mut *sim),
             target,
             weights,
-            z: DVector::from_vec(z.clone()),
-            residuals: None,
             buf: RefCell::new(Default::default()),
             evaluations: RefCell::new(0),
             runs: RefCell::new(0),
+            at_hand: RefCell::new(None),
             budget: target.budget.saturating_sub(evaluations),
         };
-        problem.set_params(&DVector::from_vec(z.clone()));
-        let (problem, _report) = LevenbergMarquardt::new()
-            .with_ftol(1e-9)
-            .with_xtol(1e-9)
-            .with_patience(25)
-            .minimize(problem);
+        if let Some(r0) = problem.weighted(&z) {
+            z = lm::minimize(&mut problem, z, r0, lm::Settings::default()).0;
+        }
         evaluations += *problem.evaluations.borrow();
         runs += *problem.runs.borrow();
-        z = problem.z.as_slice().to_vec();
         let r = raw_residuals(sim, target, &z, &mut buf)?;
         evaluations += 1;
         runs += 1;
@@ -672,20 +666,25 @@ pub fn calibrate(
     // Starts: the prior mean, then draws from the prior widened ×3.
     let mut rng = StdRng::seed_from_u64(setup.seed);
     let p = setup.parameters.len();
+    let at = |given: &BTreeMap<String, f64>| -> Vec<f64> {
+        setup
+            .parameters
+            .iter()
+            .zip(&target.priors)
+            .map(|(name, prior)| match given.get(name) {
+                Some(&v) if prior.space == Space::Linear || v > 0.0 => {
+                    (prior.coordinate(v) - prior.mean) / prior.sd()
+                }
+                _ => 0.0,
+            })
+            .collect()
+    };
     let starts: Vec<Vec<f64>> = (0..setup.starts.max(1))
         .map(|i| {
             if i == 0 {
-                setup
-                    .parameters
-                    .iter()
-                    .zip(&target.priors)
-                    .map(|(name, prior)| match setup.initial.get(name) {
-                        Some(&v) if prior.space == Space::Linear || v > 0.0 => {
-                            (prior.coordinate(v) - prior.mean) / prior.sd()
-                        }
-                        _ => 0.0,
-                    })
-                    .collect()
+                at(&setup.initial)
+            } else if let Some(given) = setup.starts_at.get(i - 1) {
+                at(given)
             } else {
                 (0..p)
                     .map(|_| 3.0 * rng.sample::<f64, _>(StandardNormal))

@@ -131,10 +131,11 @@ impl<'a> Simulator<'a> {
         );
         let force = system.add_signal("force", self.force.to_vec());
         system.connect(force, node, 0).map_err(master_error)?;
-        let mut recorder = Recorder::new(
+        let mut recorder = Recorder::with_capacity(
             (0..outputs.len())
                 .map(|i| (i.to_string(), Port::Output(node, i)))
                 .collect(),
+            self.force.len(),
         );
         let clock = Clock::new(self.start, self.dt, (self.force.len() - 1) as u64);
         system
