@@ -87,6 +87,7 @@ pub fn add_physics(
         options,
         baseline,
         &initial,
+        Vec::new(),
     )?;
     let mut result = stage1;
     if refine {
@@ -112,6 +113,7 @@ pub fn add_physics(
             options,
             baseline,
             &BTreeMap::new(),
+            Vec::new(),
         )?;
     }
     let mut chosen = switched.duplicate();

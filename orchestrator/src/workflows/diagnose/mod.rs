@@ -472,6 +472,7 @@ fn fit(
     options: &DiagnoseOptions,
     baseline_evidence: f64,
     initial: &BTreeMap<String, f64>,
+    starts_at: Vec<BTreeMap<String, f64>>,
 ) -> Result<Fitted> {
     let setup = CalibrationSetup {
         parameters: parameters.clone(),
@@ -483,6 +484,7 @@ fn fit(
         mask: Some(mask.to_vec()),
         simulations_per_start,
         initial: initial.clone(),
+        starts_at,
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
@@ -786,6 +788,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 options,
                 baseline_evidence,
                 &BTreeMap::new(),
+                Vec::new(),
             ),
             Job::Effect(c) => {
                 let twin = with_switches(&physics, Some(c))?;
@@ -803,6 +806,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                     options,
                     baseline_evidence,
                     &BTreeMap::new(),
+                    c.starts_at(&scales),
                 )
             }
         }?;

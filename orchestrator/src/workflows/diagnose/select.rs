@@ -144,6 +144,7 @@ impl Context<'_> {
                 o,
                 self.baseline_evidence,
                 &BTreeMap::new(),
+                c.starts_at(self.scales),
             )
         });
         candidates.iter().copied().zip(results).collect()
@@ -191,6 +192,7 @@ impl Context<'_> {
             self.options,
             self.baseline_evidence,
             &initial,
+            Vec::new(),
         )
     }
 
@@ -229,6 +231,7 @@ impl Context<'_> {
             self.options,
             self.baseline_evidence,
             &initial,
+            Vec::new(),
         )
     }
 }
