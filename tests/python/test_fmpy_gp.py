@@ -337,7 +337,9 @@ class _Collect(logging.Handler):
         self.records.append(record)
 
 
-SHEAR_UNUSED = tuple(f"{q}{i}" for q in ("disp", "vel", "drift") for i in FLOORS)
+SHEAR_UNUSED = tuple(f"{q}{i}" for q in ("disp", "vel", "drift") for i in FLOORS) + tuple(
+    f"d_acc{i}_d_{p}{j}" for i in FLOORS for p in "mck" for j in FLOORS
+)
 CONTAINER_OUTPUTS = (
     tuple(f"shear_{n}" for n in ACCELERATIONS) + tuple(f"gp_{n}" for n in OUTPUTS) + ("gp_training_points",)
 )

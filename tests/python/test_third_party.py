@@ -89,7 +89,9 @@ class _Collect(logging.Handler):
 
 def _description(name: str, sequential: bool) -> dict:
     """The container: two instances of fmu_shear.fmu, every port exposed or linked explicitly."""
-    unused = ("disp1", "disp2", "disp3", "vel1", "vel2", "vel3", "drift1", "drift2", "drift3")
+    unused = ("disp1", "disp2", "disp3", "vel1", "vel2", "vel3", "drift1", "drift2", "drift3") + tuple(
+        f"d_acc{i}_d_{p}{j}" for i in (1, 2, 3) for p in "mck" for j in (1, 2, 3)
+    )
     return {
         "name": name,
         "step_size": STEP,
