@@ -8,8 +8,10 @@
 //! Print the table with `cargo test -p fmu-shear --test convergence -- --nocapture`.
 
 use fmi2::CoSimModel;
-use fmu_shear::variables::{info, ACC, FORCE, INTEGRATOR, SUBSTEPS};
+use fmu_shear::variables::{info, INTEGRATOR, SUBSTEPS};
 use fmu_shear::{ShearModel, DEFAULT_SUBSTEPS};
+
+mod common;
 
 /// The examples' sampling: 51.2 Hz, 1024 steps = 20 s.
 const STEP: f64 = 1.0 / 51.2;
@@ -83,13 +85,9 @@ fn simulate(mut model: ShearModel, force: &[f64]) -> ([Vec<f64>; 3], usize) {
     let mut acc: [Vec<f64>; 3] = Default::default();
     let mut closed = 0;
     for n in 0..STEPS {
-        model.set_real(FORCE, force[n]).expect("force");
-        model
-            .set_real_input_derivative(FORCE, (force[n + 1] - force[n]) / STEP)
-            .expect("slope");
-        model.do_step(n as f64 * STEP, STEP).expect("step");
-        for (floor, series) in acc.iter_mut().enumerate() {
-            series.push(model.get_real(ACC + floor as u32).expect("acc"));
+        let a = common::step_ramped(&mut model, force, n, STEP);
+        for (series, a) in acc.iter_mut().zip(a) {
+            series.push(a);
         }
         if (model.displacement[2] - model.displacement[1]).abs() > 5e-4 {
             closed += 1;

@@ -7,8 +7,10 @@
 //! -- --nocapture`.
 
 use fmi2::CoSimModel;
-use fmu_shear::variables::{info, ACC, FORCE, INTEGRATOR, SUBSTEPS};
+use fmu_shear::variables::{info, FORCE, INTEGRATOR, SUBSTEPS};
 use fmu_shear::ShearModel;
+
+mod common;
 
 const STEP: f64 = 1.0 / 51.2;
 const STEPS: usize = 1024;
@@ -65,13 +67,9 @@ fn model(reals: &[(&str, f64)], integers: &[(&str, i32)], booleans: &[&str]) -> 
 fn simulate(mut model: ShearModel, force: &[f64]) -> [Vec<f64>; 3] {
     let mut acc: [Vec<f64>; 3] = Default::default();
     for n in 0..STEPS {
-        model.set_real(FORCE, force[n]).expect("force");
-        model
-            .set_real_input_derivative(FORCE, (force[n + 1] - force[n]) / STEP)
-            .expect("slope");
-        model.do_step(n as f64 * STEP, STEP).expect("step");
-        for (floor, series) in acc.iter_mut().enumerate() {
-            series.push(model.get_real(ACC + floor as u32).expect("acc"));
+        let a = common::step_ramped(&mut model, force, n, STEP);
+        for (series, a) in acc.iter_mut().zip(a) {
+            series.push(a);
         }
     }
     acc

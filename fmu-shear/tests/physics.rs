@@ -93,14 +93,7 @@ fn drive(model: &mut ShearModel, force: &[f64]) -> (Vec<[f64; 3]>, Vec<[f64; 3]>
     let mut acc = Vec::with_capacity(force.len());
     let mut disp = Vec::with_capacity(force.len());
     for n in 0..force.len() - 1 {
-        model.set_real(FORCE, force[n]).expect("force");
-        model
-            .set_real_input_derivative(FORCE, (force[n + 1] - force[n]) / STEP)
-            .expect("slope");
-        model.do_step(n as f64 * STEP, STEP).expect("step");
-        acc.push(std::array::from_fn(|i| {
-            model.get_real(ACC + i as u32).expect("acc")
-        }));
+        acc.push(common::step_ramped(model, force, n, STEP));
         disp.push(model.displacement);
     }
     (acc, disp)
