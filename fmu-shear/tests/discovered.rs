@@ -5,7 +5,7 @@ use fmi2::CoSimModel;
 use fmu_shear::effects::discovered::{value_reference, Slot};
 use fmu_shear::effects::{Effects, Function, Site, Term};
 use fmu_shear::integrate::{rhs, State};
-use fmu_shear::variables::{info, ACC, FORCE};
+use fmu_shear::variables::info;
 use fmu_shear::{Integrator, ShearModel, ShearParameters};
 use numerics::ode::rk4_substeps;
 
@@ -30,14 +30,7 @@ fn force(steps: usize) -> Vec<f64> {
 /// The accelerations after each step, the model driven as a host drives it.
 fn drive(model: &mut ShearModel, force: &[f64]) -> Vec<[f64; 3]> {
     (0..force.len() - 1)
-        .map(|n| {
-            model.set_real(FORCE, force[n]).expect("force");
-            model
-                .set_real_input_derivative(FORCE, (force[n + 1] - force[n]) / STEP)
-                .expect("slope");
-            model.do_step(n as f64 * STEP, STEP).expect("step");
-            std::array::from_fn(|i| model.get_real(ACC + i as u32).expect("acc"))
-        })
+        .map(|n| common::step_ramped(model, force, n, STEP))
         .collect()
 }
 
