@@ -1,7 +1,6 @@
 //! Zero-time blocks of the master: functions of their inputs evaluated at each communication
-//! point: the LQR controller, the active-learning supervisor and the hybrid test's actuator
-//! and interface.
+//! point: the LQR controller and the active-learning supervisor (the hybrid test's actuator and
+//! interface blocks live with their workflow, `workflows/hybrid/blocks.rs`).
 
-pub mod actuator;
 pub mod lqr;
 pub mod supervisor;

@@ -1,6 +1,6 @@
 //! The hybrid test on the master algorithm: the two substructures as two instances of the
 //! `fmu_substructure` FMU (role 0 numerical, role 1 physical), the actuator and the interface
-//! bookkeeping as blocks ([`crate::blocks::actuator`]), one communication step per control step
+//! bookkeeping as blocks ([`super::blocks`]), one communication step per control step
 //! `h = dt / substeps`. The same computation as [`super::run`]:
 //!
 //! at each communication point `t_k`, in zero time and in node order (Gauss–Seidel),
@@ -16,8 +16,8 @@ use std::cell::RefCell;
 use std::path::Path;
 use std::rc::Rc;
 
+use super::blocks::{ActuatorBlock, InterfaceBlock, InterfaceLog};
 use super::{HybridError, HybridRun, Result, Structure};
-use crate::blocks::actuator::{ActuatorBlock, InterfaceBlock, InterfaceLog};
 use crate::cosim::import::{Fmu, Instance};
 use crate::cosim::master::{Clock, MasterError, Port, System};
 

@@ -35,6 +35,7 @@ use numerics::actuator::EnergyMonitor;
 use numerics::substructure::{Frame, Imposed, Numerical, Physical};
 use serde::Serialize;
 
+pub mod blocks;
 pub mod experiment;
 pub mod fmus;
 pub mod identify;

@@ -18,8 +18,8 @@ use std::rc::Rc;
 
 use numerics::actuator::EnergyMonitor;
 
+use super::{HybridError, HybridRun};
 use crate::cosim::master::{Block, MasterError};
-use crate::workflows::hybrid::{HybridError, HybridRun};
 
 fn same_point<const N: usize>(
     last: &Option<(f64, Vec<f64>, [f64; N])>,
