@@ -158,6 +158,64 @@ impl Measurement {
     }
 }
 
+impl Measurement {
+    /// A record from columns in memory (the Python package's arrays), checked as a file is:
+    /// equal lengths, finite numbers, at least 2 samples, time increasing on a uniform grid.
+    /// `origin` names it in messages (no line numbers: sample indices from 0).
+    pub fn from_columns(
+        origin: &Path,
+        time: Vec<f64>,
+        force: Vec<f64>,
+        acc: [Vec<f64>; 3],
+        extra: HashMap<String, Vec<f64>>,
+    ) -> Result<Self, DataError> {
+        let err = |message: String| DataError {
+            path: origin.to_owned(),
+            line: None,
+            message,
+        };
+        let n = time.len();
+        let named = [("time", &time), ("force", &force)]
+            .into_iter()
+            .chain(["acc1", "acc2", "acc3"].into_iter().zip(acc.iter()))
+            .chain(extra.iter().map(|(name, c)| (name.as_str(), c)));
+        for (name, column) in named {
+            if column.len() != n {
+                return Err(err(format!(
+                    "'{name}' has {} samples, 'time' has {n}",
+                    column.len()
+                )));
+            }
+            if let Some(k) = column.iter().position(|v| !v.is_finite()) {
+                return Err(err(format!(
+                    "'{name}' is {} at sample {k}; only finite numbers are accepted",
+                    column[k]
+                )));
+            }
+        }
+        if n < 2 {
+            return Err(err(format!("{n} samples; at least 2 are needed")));
+        }
+        if let Some(k) = (1..n).find(|&k| time[k] <= time[k - 1]) {
+            return Err(err(format!(
+                "time {} at sample {k} does not increase (previous {})",
+                time[k],
+                time[k - 1]
+            )));
+        }
+        let dt =
+            uniform_step(&time).map_err(|(k, message)| err(format!("sample {k}: {message}")))?;
+        Ok(Measurement {
+            path: origin.to_owned(),
+            time,
+            force,
+            acc,
+            dt,
+            extra,
+        })
+    }
+}
+
 /// The sampling interval of a uniformly sampled time column. Times in files are rounded (the
 /// examples to 1 µs), so each sample may sit off the grid by a little; more than 1 % of a step
 /// is non-uniform sampling. The rate is snapped to a round number of mHz when that moves the end

@@ -1,0 +1,154 @@
+//! `Record`: a measurement (`time,force,acc1,acc2,acc3`), from a CSV file or numpy arrays;
+//! `synth`: a synthetic record with hidden effects and its truth.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use numpy::{PyArray1, PyReadonlyArray1};
+use orchestrator::synth::{csv_text, synth_record, Scenario};
+use orchestrator::twin::data::Measurement;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::{detached, to_object, to_py, Kind};
+
+/// A measurement record: time (s), force (N), the floor accelerations acc1..acc3 (m/s²),
+/// uniformly sampled; extra columns kept by name.
+#[pyclass(module = "shear_twin._native", frozen)]
+pub struct Record {
+    pub(crate) measurement: Measurement,
+}
+
+fn column(values: &[f64], py: Python<'_>) -> Py<PyAny> {
+    PyArray1::from_slice(py, values).into_any().unbind()
+}
+
+#[pymethods]
+impl Record {
+    /// A record from arrays: `time`, `force`, `acc1`, `acc2`, `acc3` (1-D float arrays of one
+    /// length), checked as a CSV file is; `extra` more named columns (e.g. `control`).
+    #[new]
+    #[pyo3(signature = (time, force, acc1, acc2, acc3, *, extra = None, name = "<arrays>"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        time: PyReadonlyArray1<'_, f64>,
+        force: PyReadonlyArray1<'_, f64>,
+        acc1: PyReadonlyArray1<'_, f64>,
+        acc2: PyReadonlyArray1<'_, f64>,
+        acc3: PyReadonlyArray1<'_, f64>,
+        extra: Option<HashMap<String, PyReadonlyArray1<'_, f64>>>,
+        name: &str,
+    ) -> PyResult<Self> {
+        let extra = extra
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(k, v)| (k, v.as_array().to_vec()))
+            .collect();
+        let vec = |a: &PyReadonlyArray1<'_, f64>| a.as_array().to_vec();
+        let measurement = Measurement::from_columns(
+            Path::new(name),
+            vec(&time),
+            vec(&force),
+            [vec(&acc1), vec(&acc2), vec(&acc3)],
+            extra,
+        )
+        .map_err(|e| to_py(Kind::Data, e))?;
+        Ok(Record { measurement })
+    }
+
+    /// Read a measurement CSV; a bad file raises `DataError` naming the file, line and problem.
+    #[staticmethod]
+    fn read(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let measurement = detached(py, || {
+            Measurement::read(&path).map_err(|e| to_py(Kind::Data, e))
+        })?;
+        Ok(Record { measurement })
+    }
+
+    /// Write the record as the measurement CSV `twin` reads.
+    fn write(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let text = csv_text(&self.measurement);
+        detached(py, || {
+            orchestrator::fsutil::write_text_atomically(&path, &text)
+                .map_err(|e| to_py(Kind::Data, e))
+        })
+    }
+
+    /// Where the record came from (a file, or the name given to arrays).
+    #[getter]
+    fn path(&self) -> String {
+        self.measurement.path.display().to_string()
+    }
+
+    /// The sampling interval, s.
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.measurement.dt
+    }
+
+    /// The record's length, s.
+    #[getter]
+    fn duration(&self) -> f64 {
+        self.measurement.duration()
+    }
+
+    fn __len__(&self) -> usize {
+        self.measurement.len()
+    }
+
+    /// The columns as numpy arrays, by name (`pandas.DataFrame(record.to_dict())`).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let m = &self.measurement;
+        let d = PyDict::new(py);
+        d.set_item("time", column(&m.time, py))?;
+        d.set_item("force", column(&m.force, py))?;
+        for (f, acc) in m.acc.iter().enumerate() {
+            d.set_item(format!("acc{}", f + 1), column(acc, py))?;
+        }
+        let mut names: Vec<&String> = m.extra.keys().collect();
+        names.sort();
+        for name in names {
+            d.set_item(name, column(&m.extra[name], py))?;
+        }
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Record('{}', {} samples at {} Hz)",
+            self.path(),
+            self.measurement.len(),
+            1.0 / self.measurement.dt
+        )
+    }
+}
+
+/// A synthetic record of `twin synth`'s structure: `scenario` is the scenario JSON as a dict
+/// (see `twin synth --help`; every field optional). Returns the record and the truth (a dict:
+/// what the data file does not say). With `out`, the record is also written there.
+#[pyfunction]
+#[pyo3(signature = (scenario, out = None))]
+pub fn synth<'py>(
+    py: Python<'py>,
+    scenario: &Bound<'py, PyAny>,
+    out: Option<PathBuf>,
+) -> PyResult<(Record, Bound<'py, PyAny>)> {
+    let value: serde_json::Value =
+        pythonize::depythonize(scenario).map_err(|e| to_py(Kind::Synth, anyhow::anyhow!(e)))?;
+    let (mut measurement, truth) = detached(py, || {
+        let scenario =
+            Scenario::from_json(&value, "scenario").map_err(|e| to_py(Kind::Synth, e))?;
+        let (record, truth) = synth_record(&scenario).map_err(|e| to_py(Kind::Synth, e))?;
+        let truth = serde_json::to_value(&truth).map_err(|e| to_py(Kind::Synth, e))?;
+        Ok((record.measurement, truth))
+    })?;
+    if let Some(path) = &out {
+        let text = csv_text(&measurement);
+        detached(py, || {
+            orchestrator::fsutil::write_text_atomically(path, &text)
+                .map_err(|e| to_py(Kind::Synth, e))
+        })?;
+        measurement.path = path.clone();
+    }
+    Ok((Record { measurement }, to_object(py, &truth)?))
+}
