@@ -32,6 +32,10 @@ from ._native import (
     WatchError,
 )
 
+for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseError, ControlError,
+               WatchError, SynthError):
+    _error.__module__ = "shear_twin"
+
 __all__ = [
     "Twin", "Record", "Report", "Comparison", "synth",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",

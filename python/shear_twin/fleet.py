@@ -3,7 +3,7 @@
 A manifest (JSON) lists the structures, each with its twin and record::
 
     {"seed": 1,
-     "tasks": ["compare", "diagnose", "calibrate"],
+     "tasks": ["compare", "diagnose", "calibrate"], "calibrate_starts": 12,
      "structures": [{"name": "bridge-17", "twin": "twins/b17.ssp", "record": "b17/today.csv"}, ...]}
 
 Paths are relative to the manifest. Per structure one task: compare the twin with the record
@@ -84,6 +84,7 @@ def load_manifest(path: str | os.PathLike) -> dict[str, Any]:
             "record": str(base / s["record"]),
             "seed": int(s.get("seed", seed + i)),
             "tasks": list(s.get("tasks", tasks)),
+            "starts": int(manifest.get("calibrate_starts", 12)),
         })
     return {"tasks": tasks, "seed": seed, "structures": specs}
 
@@ -118,13 +119,13 @@ def run_structure(spec: dict[str, Any]) -> dict[str, Any]:
                 new_twin, _ = twin.add_physics(record, diagnosis=diagnosis, threads=1)
                 row["nmse_after"] = _worst(new_twin.compare(record).nmse)
             elif diagnosis.action == "recalibrate" and "calibrate" in spec["tasks"]:
-                new_twin, _ = twin.calibrate(record, seed=spec["seed"], threads=1)
+                new_twin, _ = twin.calibrate(record, seed=spec["seed"], starts=spec["starts"], threads=1)
                 row["nmse_after"] = _worst(new_twin.compare(record).nmse)
             elif diagnosis.action == "sensor_fault":
                 sensor = diagnosis.to_dict().get("sensor") or {}
                 row["effect"] = f"sensor floor {sensor.get('floor')}, gain {sensor.get('gain', float('nan')):.3f}"
         elif "calibrate" in spec["tasks"]:
-            new_twin, _ = twin.calibrate(record, seed=spec["seed"], threads=1)
+            new_twin, _ = twin.calibrate(record, seed=spec["seed"], starts=spec["starts"], threads=1)
             row["action"] = "calibrate"
             row["nmse_after"] = _worst(new_twin.compare(record).nmse)
     except st.ShearTwinError as e:
@@ -245,7 +246,7 @@ def plot(frame: Any, summary: dict[str, Any], path: Path) -> None:
 #: The hidden effects of a synthetic fleet, in turn: (label, scenario fields).
 HIDDEN = [
     ("none", {}),
-    ("contact 2-3", {"effects": [{"kind": "contact", "location": [2, 3], "gap": 5e-4, "stiffness": 9000}]}),
+    ("contact 2-3", {"effects": [{"kind": "contact", "location": [2, 3], "gap": 2e-4, "stiffness": 9000}]}),
     ("k2 -15 %", {"changes": [{"at": 0.0, "parameter": "k2", "factor": 0.85}]}),
     ("cubic storey 2", {"effects": [{"kind": "cubic", "location": [2], "stiffness": 5e9}]}),
 ]

@@ -16,6 +16,7 @@ pub mod calibrate;
 pub mod compare;
 pub mod control;
 pub mod diagnose;
+pub mod fleet;
 pub mod hybrid;
 pub mod init;
 pub mod learn;
@@ -69,6 +70,10 @@ pub enum Command {
     /// stepped per sample, rolling NMSE, failing windows online, alerts as JSON lines,
     /// checkpoints to resume from.
     Watch(watch::WatchArgs),
+    /// Run compare, diagnose and calibrate for many structures (a manifest) as tasks on Dask:
+    /// a LocalCluster, or `--scheduler tcp://HOST:PORT`; a fleet report (CSV, Parquet, plot).
+    /// Runs `python -m shear_twin.fleet` in the project's venv; `twin fleet --help` is its help.
+    Fleet(fleet::FleetArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -86,6 +91,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Control(args) => control::run(&args),
         Command::Hybrid(args) => hybrid::run(&args),
         Command::Watch(args) => watch::run(&args),
+        Command::Fleet(args) => fleet::run(&args),
     }
 }
 
