@@ -313,6 +313,7 @@ impl Twin {
     /// candidates (`["contact@2-3", "cubic@2"]`).
     #[pyo3(signature = (record, *, effects = None, transient = 2.0, tolerance = None,
                         threads = None, block = 1.0))]
+    #[allow(clippy::too_many_arguments)]
     fn diagnose<'py>(
         &self,
         py: Python<'py>,

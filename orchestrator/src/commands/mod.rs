@@ -72,7 +72,7 @@ pub enum Command {
     Watch(watch::WatchArgs),
     /// Run compare, diagnose and calibrate for many structures (a manifest) as tasks on Dask:
     /// a LocalCluster, or `--scheduler tcp://HOST:PORT`; a fleet report (CSV, Parquet, plot).
-    /// Runs `python -m shear_twin.fleet` in the project's venv; `twin fleet --help` is its help.
+    /// Runs `python -m shear_twin.fleet` in the project's venv (`twin fleet -- --help`: its options).
     Fleet(fleet::FleetArgs),
 }
 
