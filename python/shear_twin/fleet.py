@@ -190,7 +190,7 @@ def summarise(rows: list[dict[str, Any]], wall: float, workers: int) -> dict[str
         "task_seconds_median": statistics.median(times),
         "overhead_per_task_seconds": (wall * workers - total) / n,
         "errors": sum(1 for r in rows if r["error"]),
-        "actions": {a: sum(1 for r in rows if r["action"] == a) for a in sorted({str(r["action"]) for r in rows})},
+        "actions": {a: sum(1 for r in rows if str(r["action"]) == a) for a in sorted({str(r["action"]) for r in rows})},
     }
 
 

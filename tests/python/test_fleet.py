@@ -142,8 +142,16 @@ def test_a_killed_worker_loses_nothing_and_counts_nothing_twice(synthetic_fleet,
 
 
 def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path):
+    # Compare only (the diagnoses ran above), to keep the test short.
+    manifest = json.loads(synthetic_fleet.read_text())
+    manifest["tasks"] = ["compare"]
+    for s in manifest["structures"]:
+        s["twin"] = str(synthetic_fleet.parent / s["twin"])
+        s["record"] = str(synthetic_fleet.parent / s["record"])
+    compare_only = tmp_path / "manifest.json"
+    compare_only.write_text(json.dumps(manifest))
     out = tmp_path / "report"
-    done = subprocess.run([str(REPO / "target/release/twin"), "fleet", str(synthetic_fleet), "--workers", "2",
+    done = subprocess.run([str(REPO / "target/release/twin"), "fleet", str(compare_only), "--workers", "2",
                            "--out", str(out)], capture_output=True, text=True, cwd=REPO,
                           env={**os.environ, "TWIN_PYTHON": sys.executable})
     assert done.returncode == 0, done.stderr
@@ -153,3 +161,5 @@ def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path):
     assert (out / "fleet.svg").stat().st_size > 1000
     summary = json.loads((out / "fleet-summary.json").read_text())
     assert summary["structures"] == 5 and summary["workers"] == 2
+    assert summary["actions"] == {"compare": 4, "None": 1}  # the bad record: no action, an error
+    assert "structures/min" in done.stdout
