@@ -28,12 +28,13 @@ mirrored step by step:
 - jobs: the recalibration (m, c, k under Table 1's priors, 8 starts, 1,500 simulations a start)
   and every candidate of the library (its own parameters and priors, `Candidate::parameters`,
   3 starts, 250 simulations a start), the physics held at the twin's values, `substeps` = 16
-  while fitting;
+  while fitting (ours fits at 8, contacts stepped exactly: `integrator` = 2);
 - one fit: z the parameters standardised by their priors; starts the prior mean then 3·N(0, 1)
   draws (numpy, seed 1: not ours' draws); per start up to 5 rounds of (least squares in z at
   fixed noise: residuals e^{−s_f/2}(y − ŷ) on the fitted samples plus z, scipy
-  `least_squares(method="lm")` — MINPACK's LM, ours is a port of it — with the forward-difference
-  Jacobian ours uses, h = 1e-6·max(|z_j|, 1), ftol = xtol = 1e-9, at most 25·(p + 1) residual
+  `least_squares(method="lm")` — MINPACK's LM; ours is LM on the normal equations — with the
+  forward-difference Jacobian ours uses for effect parameters (for m, c, k ours takes the FMU's
+  sensitivities), h = 1e-6·max(|z_j|, 1), ftol = xtol = 1e-9, at most 25·(p + 1) residual
   evaluations, the start's simulation budget enforced at each Jacobian as ours does) then a
   Newton update of each s_f, until every s_f moves < 1e-3; the best J wins; Laplace at it
   (central differences, h = 1e-4·max(|z_j|, 1)) → log evidence − baseline; the fit then scored
@@ -783,8 +784,8 @@ def main() -> None:
               f"the better one); worst-floor held-out NMSE ours {rows[n]['ours_held_out_worst']:.3f} %, "
               f"peer {rows[n]['peer_held_out_worst']:.3f} %")
     print(f"  all {len(both)} jobs: worst-floor held-out NMSE within 5 % of ours in {close}")
-    print("  (scipy's 'lm' is MINPACK's LM and ours a port of it, with the same forward-difference Jacobian, but the")
-    print("   start draws differ (numpy vs Rust RNG) and so can the local optimum a multi-start fit ends in)")
+    print("  (scipy's 'lm' is MINPACK's LM, ours LM on the normal equations with the FMU's sensitivities for m, c, k;")
+    print("   the start draws differ (numpy vs Rust RNG) and so can the local optimum a multi-start fit ends in)")
     # What a simulation costs each side (job seconds / simulations): the peer drives 1024 steps
     # through ctypes from Python; ours runs in-process, and without an effect the FMU's linear
     # step map makes a recalibration simulation far cheaper than a candidate's.
