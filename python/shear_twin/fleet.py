@@ -190,8 +190,16 @@ def summarise(rows: list[dict[str, Any]], wall: float, workers: int) -> dict[str
         "task_seconds_median": statistics.median(times),
         "overhead_per_task_seconds": (wall * workers - total) / n,
         "errors": sum(1 for r in rows if r["error"]),
-        "actions": {a: sum(1 for r in rows if str(r["action"]) == a) for a in sorted({str(r["action"]) for r in rows})},
+        "actions": _count(r["action"] if r["action"] is not None else "error" for r in rows),
     }
+
+
+def _count(labels) -> dict[str, int]:
+    """How many of each label (a row that failed before its action counts as ``error``)."""
+    counts: dict[str, int] = {}
+    for label in labels:
+        counts[label] = counts.get(label, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 def write_report(rows: list[dict[str, Any]], summary: dict[str, Any], out: str | os.PathLike) -> None:

@@ -161,5 +161,5 @@ def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path):
     assert (out / "fleet.svg").stat().st_size > 1000
     summary = json.loads((out / "fleet-summary.json").read_text())
     assert summary["structures"] == 5 and summary["workers"] == 2
-    assert summary["actions"] == {"compare": 4, "None": 1}  # the bad record: no action, an error
+    assert summary["actions"] == {"compare": 4, "error": 1}  # the bad record: no action, an error
     assert "structures/min" in done.stdout
