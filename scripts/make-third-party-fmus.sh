@@ -68,6 +68,12 @@ cp "$work/LowPass.fmu" "$containers/LowPass.fmu"
 unused='["fmu_shear.fmu", "disp1"], ["fmu_shear.fmu", "disp2"], ["fmu_shear.fmu", "disp3"],
         ["fmu_shear.fmu", "vel1"], ["fmu_shear.fmu", "vel2"], ["fmu_shear.fmu", "vel3"],
         ["fmu_shear.fmu", "drift1"], ["fmu_shear.fmu", "drift2"], ["fmu_shear.fmu", "drift3"]'
+# …and the 27 sensitivity outputs d_acc{f}_d_{p}.
+for f in 1 2 3; do
+  for p in m1 m2 m3 c1 c2 c3 k1 k2 k3; do
+    unused+=", [\"fmu_shear.fmu\", \"d_acc${f}_d_${p}\"]"
+  done
+done
 cat >"$containers/shear_container.json" <<EOF
 {
   "name": "shear_container.fmu",
