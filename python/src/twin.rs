@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use numpy::PyArray1;
 use orchestrator::cosim::import::Fmu;
-use orchestrator::twin::run::{nmse_on, run_and_compare_with, Compared, Tolerance, VALIDATION_CAP};
+use orchestrator::twin::run::{nmse_on, run_and_compare_with};
 use orchestrator::twin::{ParameterValue, Twin as CoreTwin};
 use orchestrator::workflows::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
 use orchestrator::workflows::control::{run_control, ControlOptions, EstimatorChoice, StateUnit};
@@ -18,7 +18,6 @@ use orchestrator::workflows::watch::supervise::LearnOptions;
 use orchestrator::workflows::watch::{watch, StreamSource, WatchOptions};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use serde_json::json;
 
 use crate::record::Record;
 use crate::{detached, invalid, to_object, to_py, Kind};
@@ -179,38 +178,9 @@ impl Twin {
             run_and_compare_with(&self.twin, data, transient, tolerance, |_, _| {})
                 .map_err(|e| to_py(Kind::Twin, e))
         })?;
-        let Compared {
-            prediction,
-            comparison,
-            noise_variance,
-            noise_source,
-            parameter_variance,
-            noise_nmse,
-            band_nmse,
-            tolerance,
-        } = compared;
-        let explained = [0, 1, 2].map(|f| noise_nmse[f] + band_nmse[f]);
         // The same report as `twin compare --report`.
-        let report = json!({
-            "twin": self.twin.describe(),
-            "data": data.path.display().to_string(),
-            "nmse": comparison.nmse,
-            "failing_windows": comparison.failing_windows,
-            "noise_variance": noise_variance,
-            "noise_variance_source": noise_source,
-            "band": {
-                "parameter_uncertainty": parameter_variance.is_some(),
-                "noise_nmse": noise_nmse,
-                "parameter_nmse": band_nmse,
-                "explained_nmse": explained,
-            },
-            "tolerance": tolerance.value,
-            "tolerance_source": tolerance.source,
-            "windows_below_tolerance": comparison.windows_below_tolerance,
-            "transient": transient,
-            "samples": data.len(),
-            "sample_interval": data.dt,
-        });
+        let report = orchestrator::report::json::compare(&self.twin, data, &compared, transient);
+        let prediction = compared.prediction;
         let predictions = PyDict::new(py);
         predictions.set_item("time", floats(py, &prediction.time))?;
         for (f, acc) in prediction.acc.iter().enumerate() {
@@ -278,30 +248,17 @@ impl Twin {
                 let nmse = nmse_on(&new_twin, v, transient).map_err(|e| to_py(kind, e))?;
                 validated.push((v.path.display().to_string(), nmse));
             }
-            let worst_floor = |n: &[f64; 3]| n.iter().copied().fold(0.0, f64::max);
-            new_twin.validation_nmse = validated
-                .iter()
-                .map(|(_, n)| worst_floor(n))
-                .filter(|w| *w <= VALIDATION_CAP)
-                .reduce(f64::max);
+            new_twin.validation_nmse = orchestrator::report::json::validation_nmse(&validated);
             // `twin calibrate --report`'s fields, less `out` (nothing is written here).
-            let report = json!({
-                "twin": self.twin.describe(),
-                "data": data.path.display().to_string(),
-                "transient": transient,
-                "parameters": calibration.parameters,
-                "correlation": calibration.correlation,
-                "noise_variance": calibration.noise_variance,
-                "noise_log_sd": calibration.noise_log_sd,
-                "neg_log_posterior": calibration.neg_log_posterior,
-                "nmse": calibration.nmse,
-                "validation": validated.iter().map(|(p, n)| json!({"data": p, "nmse": n, "accepted": worst_floor(n) <= VALIDATION_CAP})).collect::<Vec<_>>(),
-                "validation_nmse": new_twin.validation_nmse,
-                "tolerance": Tolerance::resolve(&new_twin, None),
-                "starts": calibration.starts,
-                "simulations": calibration.simulations,
-                "seconds": calibration.seconds,
-            });
+            let report = orchestrator::report::json::calibrate(
+                &self.twin,
+                &new_twin,
+                None,
+                data,
+                transient,
+                &calibration,
+                &validated,
+            );
             let new_twin = Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?;
             Ok((new_twin, report))
         })?;

@@ -3,11 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use serde_json::json;
 
 use super::{nmse_on, run_and_compare, write_json};
 use crate::twin::data::Measurement;
-use crate::twin::run::{Tolerance, VALIDATION_CAP};
+use crate::twin::run::Tolerance;
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
@@ -87,36 +86,21 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             nmse_on(&new_twin, v, args.transient)?,
         ));
     }
-    // The worst validation NMSE sets the default tolerance of compare and diagnose; records
-    // above the cap show something the twin does not know and are no measure of its fidelity.
-    let worst_floor = |n: &[f64; 3]| n.iter().copied().fold(0.0, f64::max);
-    new_twin.validation_nmse = validated
-        .iter()
-        .map(|(_, n)| worst_floor(n))
-        .filter(|w| *w <= VALIDATION_CAP)
-        .reduce(f64::max);
+    // The worst validation NMSE sets the default tolerance of compare and diagnose.
+    new_twin.validation_nmse = crate::report::json::validation_nmse(&validated);
 
     // All computed: now write, each file atomically.
     new_twin.write(&args.out)?;
     if let Some(path) = &args.report {
-        let report = json!({
-            "twin": twin.describe(),
-            "out": args.out.display().to_string(),
-            "data": data.path.display().to_string(),
-            "transient": args.transient,
-            "parameters": calibration.parameters,
-            "correlation": calibration.correlation,
-            "noise_variance": calibration.noise_variance,
-            "noise_log_sd": calibration.noise_log_sd,
-            "neg_log_posterior": calibration.neg_log_posterior,
-            "nmse": calibration.nmse,
-            "validation": validated.iter().map(|(p, n)| json!({"data": p, "nmse": n, "accepted": worst_floor(n) <= VALIDATION_CAP})).collect::<Vec<_>>(),
-            "validation_nmse": new_twin.validation_nmse,
-            "tolerance": Tolerance::resolve(&new_twin, None),
-            "starts": calibration.starts,
-            "simulations": calibration.simulations,
-            "seconds": calibration.seconds,
-        });
+        let report = crate::report::json::calibrate(
+            &twin,
+            &new_twin,
+            Some(&args.out),
+            &data,
+            args.transient,
+            &calibration,
+            &validated,
+        );
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
@@ -184,7 +168,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             n[0],
             n[1],
             n[2],
-            if worst_floor(n) <= VALIDATION_CAP {
+            if crate::report::json::accepted_for_validation(n) {
                 ""
             } else {
                 " (above the cap: not taken as the twin's validation level)"

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use serde_json::json;
 
 use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
@@ -102,15 +101,15 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             )
         }
     };
+    let report = crate::report::json::compare(&twin, &data, &compared, args.transient);
     let Compared {
         prediction,
         comparison,
-        noise_variance,
-        noise_source,
         parameter_variance,
         noise_nmse,
         band_nmse,
         tolerance,
+        ..
     } = compared;
 
     // Everything is computed before anything is written: a failure leaves no partial output.
@@ -118,27 +117,6 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_atomically(path, |f| write_predictions(f, &prediction))?;
     }
     if let Some(path) = &args.report {
-        let explained = [0, 1, 2].map(|f| noise_nmse[f] + band_nmse[f]);
-        let report = json!({
-            "twin": twin.describe(),
-            "data": data.path.display().to_string(),
-            "nmse": comparison.nmse,
-            "failing_windows": comparison.failing_windows,
-            "noise_variance": noise_variance,
-            "noise_variance_source": noise_source,
-            "band": {
-                "parameter_uncertainty": parameter_variance.is_some(),
-                "noise_nmse": noise_nmse,
-                "parameter_nmse": band_nmse,
-                "explained_nmse": explained,
-            },
-            "tolerance": tolerance.value,
-            "tolerance_source": tolerance.source,
-            "windows_below_tolerance": comparison.windows_below_tolerance,
-            "transient": args.transient,
-            "samples": data.len(),
-            "sample_interval": data.dt,
-        });
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {

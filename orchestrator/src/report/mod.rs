@@ -1,7 +1,8 @@
 //! The plots: a model against a record (`plot`: the time histories of the paper's Figure 4 and
 //! the frequency responses of its Figure 3), a diagnosis (`diagnose_plot`), active learning
 //! (`learn_plot`) and `twin run`'s outputs (`run_plot`). The JSON reports are written by the
-//! commands from the workflows' serialisable results.
+//! commands from the workflows' serialisable results; those of compare and calibrate are built
+//! here (`json`), for the CLI and the Python package alike.
 //!
 //! Only SVG is written: text goes out as `<text>` elements, so nothing here needs system fonts.
 
@@ -10,6 +11,7 @@ use std::path::PathBuf;
 pub mod control_plot;
 pub mod diagnose_plot;
 pub mod hybrid_plot;
+pub mod json;
 pub mod learn_plot;
 pub mod plot;
 

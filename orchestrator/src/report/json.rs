@@ -1,0 +1,93 @@
+//! The JSON reports of `twin compare` and `twin calibrate`, built in one place for the CLI and
+//! the Python package (`shear_twin`), so both give the same fields.
+
+use std::path::Path;
+
+use serde_json::{json, Value};
+
+use crate::twin::data::Measurement;
+use crate::twin::run::{Compared, Tolerance, VALIDATION_CAP};
+use crate::twin::Twin;
+use crate::workflows::calibrate::Calibration;
+
+/// `twin compare --report`: `compared` is `twin` run on `data` after `transient` seconds.
+pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: f64) -> Value {
+    let explained = [0, 1, 2].map(|f| compared.noise_nmse[f] + compared.band_nmse[f]);
+    json!({
+        "twin": twin.describe(),
+        "data": data.path.display().to_string(),
+        "nmse": compared.comparison.nmse,
+        "failing_windows": compared.comparison.failing_windows,
+        "noise_variance": compared.noise_variance,
+        "noise_variance_source": compared.noise_source,
+        "band": {
+            "parameter_uncertainty": compared.parameter_variance.is_some(),
+            "noise_nmse": compared.noise_nmse,
+            "parameter_nmse": compared.band_nmse,
+            "explained_nmse": explained,
+        },
+        "tolerance": compared.tolerance.value,
+        "tolerance_source": compared.tolerance.source,
+        "windows_below_tolerance": compared.comparison.windows_below_tolerance,
+        "transient": transient,
+        "samples": data.len(),
+        "sample_interval": data.dt,
+    })
+}
+
+/// Whether a validation record's NMSE (per floor, %) counts as the twin's validation level.
+pub fn accepted_for_validation(nmse: &[f64; 3]) -> bool {
+    worst_floor(nmse) <= VALIDATION_CAP
+}
+
+/// The twin's validation NMSE from its validation records (name, NMSE per floor): the worst
+/// floor of the worst record under [`VALIDATION_CAP`]; records above it show something the
+/// twin does not know and are no measure of its fidelity.
+pub fn validation_nmse(validated: &[(String, [f64; 3])]) -> Option<f64> {
+    validated
+        .iter()
+        .filter(|(_, n)| accepted_for_validation(n))
+        .map(|(_, n)| worst_floor(n))
+        .reduce(f64::max)
+}
+
+fn worst_floor(n: &[f64; 3]) -> f64 {
+    n.iter().copied().fold(0.0, f64::max)
+}
+
+/// `twin calibrate --report`: `twin` calibrated on `data` into `calibrated` (written to `out`,
+/// when it is), checked on the `validated` records.
+pub fn calibrate(
+    twin: &Twin,
+    calibrated: &Twin,
+    out: Option<&Path>,
+    data: &Measurement,
+    transient: f64,
+    calibration: &Calibration,
+    validated: &[(String, [f64; 3])],
+) -> Value {
+    let mut report = json!({
+        "twin": twin.describe(),
+        "data": data.path.display().to_string(),
+        "transient": transient,
+        "parameters": calibration.parameters,
+        "correlation": calibration.correlation,
+        "noise_variance": calibration.noise_variance,
+        "noise_log_sd": calibration.noise_log_sd,
+        "neg_log_posterior": calibration.neg_log_posterior,
+        "nmse": calibration.nmse,
+        "validation": validated
+            .iter()
+            .map(|(p, n)| json!({"data": p, "nmse": n, "accepted": accepted_for_validation(n)}))
+            .collect::<Vec<_>>(),
+        "validation_nmse": calibrated.validation_nmse,
+        "tolerance": Tolerance::resolve(calibrated, None),
+        "starts": calibration.starts,
+        "simulations": calibration.simulations,
+        "seconds": calibration.seconds,
+    });
+    if let (Some(out), Some(fields)) = (out, report.as_object_mut()) {
+        fields.insert("out".into(), json!(out.display().to_string()));
+    }
+    report
+}
