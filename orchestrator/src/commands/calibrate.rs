@@ -4,10 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::{nmse_on, run_and_compare, write_json};
+use super::{run_and_compare, write_json};
 use crate::twin::data::Measurement;
 use crate::twin::run::Tolerance;
 use crate::twin::Twin;
+use crate::workflows::calibrate::{calibrate_validated, read_priors, CalibrationSetup, Validated};
+use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
@@ -27,12 +29,12 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub priors: Option<PathBuf>,
     /// Seconds at the start of the record left out of the likelihood.
-    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = CalibrationSetup::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Optimiser starts (the prior mean plus draws from the widened prior).
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = CalibrationSetup::default().starts)]
     pub starts: usize,
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = CalibrationSetup::default().seed)]
     pub seed: u64,
     /// Other records to report the calibrated twin's NMSE on.
     #[arg(long, num_args = 1..)]
@@ -46,7 +48,6 @@ pub struct CalibrateArgs {
 }
 
 pub fn run(args: &CalibrateArgs) -> Result<()> {
-    use crate::workflows::calibrate::{calibrate, calibrated_twin, read_priors, CalibrationSetup};
     if args.twin.as_deref() == Some(args.out.as_path()) {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
@@ -54,9 +55,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         );
     }
     if let Some(plot) = &args.plot {
-        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
-            bail!("{}: only .svg plots are supported", plot.display());
-        }
+        check_svg(plot)?;
     }
     let data = Measurement::read(&args.data)?;
     let validation = args
@@ -77,17 +76,12 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     if let Some(path) = &args.priors {
         setup.priors = read_priors(path).map_err(anyhow::Error::msg)?;
     }
-    let calibration = calibrate(&twin, &data, &setup)?;
-    let mut new_twin = calibrated_twin(&twin, &calibration)?;
-    let mut validated = Vec::new();
-    for v in &validation {
-        validated.push((
-            v.path.display().to_string(),
-            nmse_on(&new_twin, v, args.transient)?,
-        ));
-    }
-    // The worst validation NMSE sets the default tolerance of compare and diagnose.
-    new_twin.validation_nmse = crate::report::json::validation_nmse(&validated);
+    let validation: Vec<&Measurement> = validation.iter().collect();
+    let Validated {
+        twin: new_twin,
+        calibration,
+        validated,
+    } = calibrate_validated(&twin, &data, &validation, &setup)?;
 
     // All computed: now write, each file atomically.
     new_twin.write(&args.out)?;

@@ -3,16 +3,17 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 
 use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::run::Prediction;
-use crate::twin::run::{compare_with, run_and_compare_with};
 use crate::twin::Twin;
-use crate::workflows::control::{predict_controlled, ControllerSpec};
+use crate::workflows::compare::{compare, CompareOptions};
+use crate::workflows::control::ControllerSpec;
+use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct CompareArgs {
@@ -49,7 +50,7 @@ pub struct CompareArgs {
     #[arg(long, requires = "controller")]
     pub controller_q: Option<f64>,
     /// Seconds at the start left out of the error measures.
-    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = CompareOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Practical significance, NMSE %: an out-of-band window whose NMSE is below it on every
     /// floor that left the band is not a failing window. Default: 2 × the twin's worst
@@ -58,49 +59,33 @@ pub struct CompareArgs {
     pub tolerance: Option<f64>,
 }
 
+impl CompareArgs {
+    /// The library's options from the flags.
+    pub fn options(&self) -> CompareOptions {
+        CompareOptions {
+            transient: self.transient,
+            tolerance: self.tolerance,
+            latent_threshold: self.latent_threshold,
+            controller_q: self.controller_q,
+        }
+    }
+}
+
 pub fn run(args: &CompareArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
-        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
-            bail!("{}: only .svg plots are supported", plot.display());
-        }
+        check_svg(plot)?;
     }
-    if let Some(t) = args.latent_threshold {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!("--latent-threshold must be a positive number, was {t}");
-        }
-    }
-    if let Some(t) = args.tolerance {
-        if !(t >= 0.0 && t.is_finite()) {
-            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
-        }
-    }
+    let options = args.options();
+    options.validate()?;
     let data = Measurement::read(&args.data)?;
-    if args.transient >= data.duration() {
-        bail!(
-            "--transient {} s leaves nothing of {} ({} s long)",
-            args.transient,
-            data.path.display(),
-            data.duration()
-        );
-    }
+    options.validate_for(&data)?;
     let twin = Twin::load(args.twin.as_deref())?;
-    let compared = match &args.controller {
-        None => run_and_compare_with(&twin, &data, args.transient, args.tolerance, progress_bar())?,
-        Some(path) => {
-            let spec = ControllerSpec::load(path)?;
-            let mut progress = progress_bar();
-            let prediction =
-                predict_controlled(&twin, &data, &spec, args.controller_q, &mut progress)?;
-            compare_with(
-                &twin,
-                &data,
-                args.transient,
-                args.tolerance,
-                prediction,
-                None,
-            )
-        }
-    };
+    let spec = args
+        .controller
+        .as_deref()
+        .map(ControllerSpec::load)
+        .transpose()?;
+    let compared = compare(&twin, &data, &options, spec.as_ref(), progress_bar())?;
     let report = crate::report::json::compare(&twin, &data, &compared, args.transient);
     let Compared {
         prediction,

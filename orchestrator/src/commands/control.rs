@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 
 use super::{progress_bar, write_json, write_text_atomically};
 use crate::report::control_plot::plot_control;
@@ -12,10 +12,10 @@ use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::control::closed_loop::Gap;
 use crate::workflows::control::{
-    run_control, ControlOptions, EstimatorChoice, Retune, ScheduleOptions, StateUnit,
-    VarianceTrigger,
+    run_control, sensor_noise, twin_for_control, ControlOptions, EstimatorChoice, Retune,
+    ScheduleOptions, StateUnit, VarianceTrigger,
 };
-use fmu_shear::effects::kind::{Kind, Law, Side};
+use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct ControlArgs {
@@ -29,16 +29,16 @@ pub struct ControlArgs {
     #[arg(long = "q", required = true, num_args = 1.., allow_negative_numbers = true)]
     pub q: Vec<f64>,
     /// Control weight R (N⁻², > 0).
-    #[arg(long = "r", default_value_t = 0.1)]
+    #[arg(long = "r", default_value_t = ControlOptions::default().r)]
     pub r: f64,
     /// Unit of the designed state: q and R mean something only with it.
-    #[arg(long, value_enum, default_value_t = StateUnit::M)]
+    #[arg(long, value_enum, default_value_t = ControlOptions::default().unit)]
     pub state_unit: StateUnit,
     /// How the controller estimates the state from the measured accelerations.
-    #[arg(long, value_enum, default_value_t = EstimatorChoice::Integrate)]
+    #[arg(long, value_enum, default_value_t = ControlOptions::default().estimator)]
     pub estimator: EstimatorChoice,
     /// Corner (Hz) of the integrating estimator's drift removal.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = ControlOptions::default().highpass_hz)]
     pub highpass: f64,
     /// Controller samples per record sample (default: from the fastest closed-loop pole).
     #[arg(long)]
@@ -48,7 +48,7 @@ pub struct ControlArgs {
     #[arg(long)]
     pub sensor_noise: Option<f64>,
     /// Seed of the sensor noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = ControlOptions::default().seed)]
     pub seed: u64,
     /// A gap to watch for contact besides the twin's own: `2-3:5e-4[:negative|positive|both]`
     /// (storey by its floors, gap in m).
@@ -58,7 +58,7 @@ pub struct ControlArgs {
     /// initiations at or below --target-contacts.
     #[arg(long)]
     pub retune: bool,
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = Retune::default().target)]
     pub target_contacts: usize,
     /// Largest peak control force (N) a retuned design may use.
     #[arg(long)]
@@ -69,13 +69,13 @@ pub struct ControlArgs {
     pub schedule: bool,
     /// Fraction of the gap: the high gain comes on when the projected drift passes
     /// (1 − margin)·gap.
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = ScheduleOptions::default().margin)]
     pub margin: f64,
     /// Seconds ahead the drift is projected (drift + lookahead · drift rate).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = ScheduleOptions::default().lookahead)]
     pub lookahead: f64,
     /// Seconds the high gain stays on after the last trigger (against chattering).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = ScheduleOptions::default().dwell)]
     pub dwell: f64,
     /// The schedule also switches up when the twin's GP corrector's latent variance exceeds
     /// this, (m/s²)², every floor: `auto` (default: when the twin has a corrector, above its
@@ -101,106 +101,51 @@ pub struct ControlArgs {
     pub ssp_q: Option<f64>,
 }
 
-fn parse_gap(text: &str) -> Result<Gap> {
-    let parts: Vec<&str> = text.split(':').collect();
-    let usage = || {
-        format!("--gap {text}: expected STOREY:GAP[:SIDE], e.g. 2-3:5e-4:negative (storey 1-2, 2-3 or 0-1)")
-    };
-    if !(2..=3).contains(&parts.len()) {
-        bail!(usage());
+impl ControlArgs {
+    /// The library's options from the flags, checked.
+    pub fn options(&self) -> Result<ControlOptions> {
+        // q, r and --max-force first (the latter even without --retune), then the texts.
+        let mut options = ControlOptions {
+            qs: self.q.clone(),
+            r: self.r,
+            unit: self.state_unit,
+            estimator: self.estimator,
+            highpass_hz: self.highpass,
+            substeps: self.substeps,
+            seed: self.seed,
+            retune: Some(Retune {
+                target: self.target_contacts,
+                max_force: self.max_force,
+            }),
+            estimator_costs: self.estimator_costs,
+            ..ControlOptions::default()
+        };
+        options.validate()?;
+        options.retune = options.retune.filter(|_| self.retune);
+        options.sensor_noise = sensor_noise(self.sensor_noise)?.0;
+        options.gaps = self
+            .gap
+            .iter()
+            .map(|g| Gap::parse(g))
+            .collect::<Result<Vec<_>, _>>()?;
+        let variance = VarianceTrigger::parse(&self.variance_threshold)?;
+        options.schedule = self.schedule.then_some(ScheduleOptions {
+            margin: self.margin,
+            lookahead: self.lookahead,
+            dwell: self.dwell,
+            variance,
+        });
+        Ok(options)
     }
-    let storey = match parts[0] {
-        "0-1" => 1,
-        "1-2" => 2,
-        "2-3" => 3,
-        _ => bail!(usage()),
-    };
-    let gap: f64 = parts[1].parse().with_context(usage)?;
-    if !(gap.is_finite() && gap > 0.0) {
-        bail!("--gap {text}: the gap must be a positive number of metres");
-    }
-    let side = match parts.get(2) {
-        None => Side::Both,
-        Some(s) => Side::parse(s).with_context(usage)?,
-    };
-    let start: Vec<f64> = Kind::Contact
-        .real_params()
-        .iter()
-        .map(|p| p.start)
-        .collect();
-    let mut reals = start;
-    reals[0] = gap;
-    let law = Law::new(Kind::Contact, &reals, side).context("contact law")?;
-    Ok(Gap { storey, law })
 }
 
 pub fn run(args: &ControlArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
-        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
-            bail!("{}: only .svg plots are supported", plot.display());
-        }
+        check_svg(plot)?;
     }
-    for &q in &args.q {
-        if !(q.is_finite() && q >= 0.0) {
-            bail!("--q {q}: the state weight must be a finite number ≥ 0");
-        }
-    }
-    if !(args.r.is_finite() && args.r > 0.0) {
-        bail!(
-            "--r {}: the control weight must be a finite number > 0",
-            args.r
-        );
-    }
-    if let Some(m) = args.max_force {
-        if !(m.is_finite() && m > 0.0) {
-            bail!("--max-force {m}: must be a positive number of newtons");
-        }
-    }
-    let sensor_noise = match args.sensor_noise {
-        Some(s) if s.is_finite() && s >= 0.0 => (s > 0.0).then_some([s; 3]),
-        Some(s) => bail!("--sensor-noise {s}: must be a number ≥ 0 (m/s²)"),
-        None => None,
-    };
-    let gaps = args
-        .gap
-        .iter()
-        .map(|g| parse_gap(g))
-        .collect::<Result<Vec<_>>>()?;
-    let variance = match args.variance_threshold.as_str() {
-        "auto" => VarianceTrigger::Auto,
-        "off" => VarianceTrigger::Off,
-        text => match text.parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 => VarianceTrigger::Value(v),
-            _ => bail!("--variance-threshold {text}: expected auto, off or a positive number"),
-        },
-    };
+    let options = args.options()?;
     let data = Measurement::read(&args.data)?;
-    let mut twin = Twin::load(args.twin.as_deref())?;
-    if args.sensor_noise == Some(0.0) {
-        twin.noise_variance = None;
-    }
-    let options = ControlOptions {
-        qs: args.q.clone(),
-        r: args.r,
-        unit: args.state_unit,
-        estimator: args.estimator,
-        highpass_hz: args.highpass,
-        substeps: args.substeps,
-        sensor_noise,
-        seed: args.seed,
-        gaps,
-        retune: args.retune.then_some(Retune {
-            target: args.target_contacts,
-            max_force: args.max_force,
-        }),
-        schedule: args.schedule.then_some(ScheduleOptions {
-            margin: args.margin,
-            lookahead: args.lookahead,
-            dwell: args.dwell,
-            variance,
-        }),
-        estimator_costs: args.estimator_costs,
-    };
+    let twin = twin_for_control(&Twin::load(args.twin.as_deref())?, args.sensor_noise);
     let mut progress = progress_bar();
     let outcome = run_control(&twin, &data, &options, &mut progress)?;
     let svg = match &args.plot {

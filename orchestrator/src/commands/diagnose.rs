@@ -8,7 +8,9 @@ use anyhow::{bail, Result};
 use super::{write_json, write_text_atomically};
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
-use crate::workflows::diagnose::{diagnose, Candidate, DiagnoseOptions, Diagnosis, Progress};
+use crate::workflows::diagnose::{
+    diagnose, parse_candidates, DiagnoseOptions, Diagnosis, Progress,
+};
 
 #[derive(clap::Args)]
 pub struct DiagnoseArgs {
@@ -29,10 +31,10 @@ pub struct DiagnoseArgs {
     #[arg(long, num_args = 1..)]
     pub effects: Vec<String>,
     /// Seconds at the start left out of every error measure and fit.
-    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Length (s) of the alternating fitted / held-out blocks.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().block)]
     pub block: f64,
     /// Worker threads (default: all cores).
     #[arg(long)]
@@ -61,23 +63,29 @@ pub(super) fn options(transient: f64, threads: Option<usize>) -> Result<Diagnose
     Ok(o)
 }
 
-pub fn run(args: &DiagnoseArgs) -> Result<()> {
-    let mut o = options(args.transient, args.threads)?;
-    o.block = args.block;
-    o.always_fit = args.always_fit;
-    if let Some(t) = args.tolerance {
-        if !(t >= 0.0 && t.is_finite()) {
-            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
+impl DiagnoseArgs {
+    /// The library's options from the flags.
+    pub fn options(&self) -> Result<DiagnoseOptions> {
+        let mut o = DiagnoseOptions {
+            transient: self.transient,
+            block: self.block,
+            always_fit: self.always_fit,
+            tolerance: self.tolerance,
+            ..DiagnoseOptions::default()
+        };
+        if let Some(t) = self.threads {
+            o.threads = t;
         }
-        o.tolerance = Some(t);
+        o.validate()?;
+        if !self.effects.is_empty() {
+            o.candidates = parse_candidates(&self.effects)?;
+        }
+        Ok(o)
     }
-    if !args.effects.is_empty() {
-        o.candidates = args
-            .effects
-            .iter()
-            .map(|e| Candidate::parse(e).map_err(anyhow::Error::msg))
-            .collect::<Result<_>>()?;
-    }
+}
+
+pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    let mut o = args.options()?;
     let data = Measurement::read(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
     // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).

@@ -9,8 +9,8 @@ use super::{write_json, write_text_atomically};
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::learn::{
-    prepare, run_modes, table, LearnOptions, Mode, ModeResult, Stretch, CHANGE_RUN, N_INITIAL,
-    REFIT_EVERY, REFIT_GROWTH, REFIT_ITERATIONS,
+    chosen_modes, learned_twin, prepare, run_modes, table, LearnOptions, Mode, ModeResult,
+    Stretch, FORGETTING,
 };
 
 /// `--mode`: the query decision (the adaptive mode's forgetting factor is `--forgetting`).
@@ -40,7 +40,7 @@ pub struct LearnArgs {
     #[arg(long, value_enum, default_value_t = ModeArg::Adaptive)]
     pub mode: ModeArg,
     /// Forgetting factor f_f of the adaptive mode, in (0, 1]; 1 = plain adaptive.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = FORGETTING)]
     pub forgetting: f64,
     /// `all`: uniform, fixed, adaptive f_f = 1, 0.999, 0.99, 0.9 (overrides --mode).
     #[arg(long, value_enum)]
@@ -62,50 +62,69 @@ pub struct LearnArgs {
     /// record.
     #[arg(long)]
     pub threshold: Option<f64>,
-    #[arg(long, default_value_t = fmu_gp_corrector::DEFAULT_LAGS)]
+    #[arg(long, default_value_t = LearnOptions::default().lags)]
     pub lags: usize,
     #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
     pub target: super::Target,
     /// Seconds at the start of each record neither streamed nor scored.
-    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = LearnOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// N_initial: points of the first record in the initial training set.
-    #[arg(long, default_value_t = N_INITIAL)]
+    #[arg(long, default_value_t = LearnOptions::default().initial)]
     pub initial: usize,
     /// At least this many queries between hyperparameter refits (warm-started); 0: never.
-    #[arg(long, default_value_t = REFIT_EVERY)]
+    #[arg(long, default_value_t = LearnOptions::default().refit_every)]
     pub refit_every: u32,
     /// Refit once the queries since the last fit reach this fraction of the training set at
     /// that fit (0: every --refit-every queries).
-    #[arg(long, default_value_t = REFIT_GROWTH)]
+    #[arg(long, default_value_t = LearnOptions::default().refit_growth)]
     pub refit_growth: f64,
     /// L-BFGS iterations of a warm-started refit up to 512 training points; beyond, the same
     /// work (an iteration costs O(n³)), but at least 10.
-    #[arg(long, default_value_t = REFIT_ITERATIONS)]
+    #[arg(long, default_value_t = LearnOptions::default().refit_iterations)]
     pub refit_iterations: u64,
     /// Recompute the NMSE over the record after every this many queries.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = LearnOptions::default().nmse_every)]
     pub nmse_every: usize,
     /// Consecutive queried samples that flag a possible change of the structure.
-    #[arg(long, default_value_t = CHANGE_RUN)]
+    #[arg(long, default_value_t = LearnOptions::default().change_run)]
     pub change_run: usize,
 }
 
-pub fn run(args: &LearnArgs) -> Result<()> {
-    if !(args.forgetting > 0.0 && args.forgetting <= 1.0) {
-        bail!("--forgetting must be in (0, 1], was {}", args.forgetting);
-    }
-    if !(args.refit_growth >= 0.0 && args.refit_growth.is_finite()) {
-        bail!(
-            "--refit-growth must be a non-negative fraction, was {}",
-            args.refit_growth
-        );
-    }
-    if let Some(t) = args.threshold {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!("--threshold must be a positive number, was {t}");
+impl ModeArg {
+    fn name(self) -> &'static str {
+        match self {
+            ModeArg::Uniform => "uniform",
+            ModeArg::Fixed => "fixed",
+            ModeArg::Adaptive => "adaptive",
         }
     }
+}
+
+impl LearnArgs {
+    /// The library's options and modes from the flags, checked.
+    pub fn options(&self) -> Result<(LearnOptions, Vec<Mode>)> {
+        let modes = chosen_modes(self.mode.name(), self.forgetting, self.modes.is_some())?;
+        let options = LearnOptions {
+            lags: self.lags,
+            target: self.target.into(),
+            transient: self.transient,
+            initial: self.initial,
+            threshold: self.threshold,
+            refit_every: self.refit_every,
+            refit_growth: self.refit_growth,
+            refit_iterations: self.refit_iterations,
+            nmse_every: self.nmse_every.max(1),
+            change_run: self.change_run,
+            ..LearnOptions::default()
+        };
+        options.validate()?;
+        Ok((options, modes))
+    }
+}
+
+pub fn run(args: &LearnArgs) -> Result<()> {
+    let (options, modes) = args.options()?;
     if let Some(out) = &args.out {
         if args.modes.is_some() {
             bail!("--out keeps the corrector of one mode: give --mode, not --modes all");
@@ -117,28 +136,6 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             );
         }
     }
-    let options = LearnOptions {
-        lags: args.lags,
-        target: args.target.into(),
-        transient: args.transient,
-        initial: args.initial,
-        threshold: args.threshold,
-        refit_every: args.refit_every,
-        refit_growth: args.refit_growth,
-        refit_iterations: args.refit_iterations,
-        nmse_every: args.nmse_every.max(1),
-        change_run: args.change_run,
-        ..LearnOptions::default()
-    };
-    let modes = if args.modes.is_some() {
-        Mode::all()
-    } else {
-        match args.mode {
-            ModeArg::Uniform => vec![Mode::Uniform],
-            ModeArg::Fixed => vec![Mode::Fixed],
-            ModeArg::Adaptive => vec![Mode::Adaptive(args.forgetting)],
-        }
-    };
     let records = args
         .data
         .iter()
@@ -194,14 +191,11 @@ pub fn run(args: &LearnArgs) -> Result<()> {
     );
 
     if let (Some(path), [result]) = (&args.out, results.as_slice()) {
-        let trained = result
-            .final_gps
-            .to_training_file(options.lags, options.target);
-        crate::workflows::train::with_corrector(&twin, &trained)?.write(path)?;
+        learned_twin(&twin, result, &options)?.write(path)?;
         println!(
             "wrote {} (the corrector as learned: {} points)",
             path.display(),
-            trained.inputs.len()
+            result.final_gps.to_training_file(options.lags, options.target).inputs.len()
         );
     }
     let report_path = args
@@ -220,23 +214,8 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         }
     }
     if let Some(path) = report_path {
-        let report = serde_json::json!({
-            "twin": twin.describe(),
-            "records": args.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "lags": options.lags,
-            "target": options.target.name(),
-            "transient": options.transient,
-            "initial": options.initial,
-            "uniform_every": options.uniform_every,
-            "refit_every_queries": options.refit_every,
-            "refit_growth": options.refit_growth,
-            "refit_iterations": options.refit_iterations,
-            "nmse_every_queries": options.nmse_every,
-            "change_run": options.change_run,
-            "threshold_option": options.threshold,
-            "seconds": seconds,
-            "modes": results,
-        });
+        let records: Vec<String> = args.data.iter().map(|p| p.display().to_string()).collect();
+        let report = crate::report::json::learn(&twin, &records, &options, seconds, &results);
         write_json(&path, &report)?;
         println!("wrote {}", path.display());
     }

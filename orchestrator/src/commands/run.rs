@@ -7,12 +7,6 @@ use anyhow::Result;
 use crate::cosim::master::Algorithm;
 use crate::cosim::run::RunOptions;
 
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-pub enum AlgorithmArg {
-    GaussSeidel,
-    Jacobi,
-}
-
 #[derive(clap::Args)]
 pub struct RunArgs {
     /// The FMI 2.0 co-simulation FMU (.fmu) or SSP system (.ssp) to run.
@@ -48,8 +42,8 @@ pub struct RunArgs {
     /// (each component sees what the ones before it produced at this point, until nothing
     /// changes) or jacobi (every component reads the outputs as the last step left them, as
     /// fmpy's simulate_ssp does).
-    #[arg(long, value_enum, default_value_t = AlgorithmArg::GaussSeidel)]
-    pub algorithm: AlgorithmArg,
+    #[arg(long, value_enum, default_value_t = RunOptions::default().algorithm)]
+    pub algorithm: Algorithm,
     /// Plot (.svg) of every recorded numeric column against time.
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -69,10 +63,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         sets: args.sets.clone(),
         output_all: args.output_all,
         hold_inputs: args.hold_inputs,
-        algorithm: match args.algorithm {
-            AlgorithmArg::GaussSeidel => Algorithm::GaussSeidel,
-            AlgorithmArg::Jacobi => Algorithm::Jacobi,
-        },
+        algorithm: args.algorithm,
     };
     let result = crate::cosim::run::run(&args.model, &options, super::progress_bar())?;
     super::write_atomically(&args.output, |f| Ok(result.write_csv(f)?))?;

@@ -3,11 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use serde_json::json;
 
-use super::{nmse_on, write_json};
+use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
+use crate::workflows::train::{train_selected, LagSelection, TrainOptions, SELECTION_STRIDE};
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -21,17 +21,17 @@ pub struct TrainArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Lags q: the GP's inputs are the current and q previous physics accelerations and forces.
-    #[arg(long, default_value_t = fmu_gp_corrector::DEFAULT_LAGS)]
+    #[arg(long, default_value_t = TrainOptions::default().lags)]
     pub lags: usize,
     /// What the GP models: the discrepancy measured − physics (default), or the measured
     /// acceleration itself (the reference paper's zero-mean form).
     #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
     pub target: super::Target,
     /// Seconds at the start of the record not used for training.
-    #[arg(long, default_value_t = crate::evaluation::compare::DEFAULT_TRANSIENT, value_parser = super::transient_seconds)]
+    #[arg(long, default_value_t = TrainOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
     /// Train on every n-th sample after the transient (a GP fit costs O(N³)).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = TrainOptions::default().stride)]
     pub stride: usize,
     /// Choose the lags among these (e.g. 1,3,5,7,9,11) by the lowest total negative log
     /// marginal likelihood of the three GPs, fitted on every `--selection-stride`-th sample;
@@ -39,15 +39,31 @@ pub struct TrainArgs {
     #[arg(long, value_delimiter = ',', num_args = 1..)]
     pub select_lags: Vec<usize>,
     /// Every n-th sample for the lag selection's fits.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = SELECTION_STRIDE)]
     pub selection_stride: usize,
     /// JSON report of the training.
     #[arg(long)]
     pub report: Option<PathBuf>,
 }
 
+impl TrainArgs {
+    /// The library's options from the flags, and the lag selection when asked for.
+    pub fn options(&self) -> (TrainOptions, Option<LagSelection>) {
+        let options = TrainOptions {
+            lags: self.lags,
+            target: self.target.into(),
+            transient: self.transient,
+            stride: self.stride,
+        };
+        let selection = (!self.select_lags.is_empty()).then(|| LagSelection {
+            candidates: self.select_lags.clone(),
+            stride: self.selection_stride,
+        });
+        (options, selection)
+    }
+}
+
 pub fn run(args: &TrainArgs) -> Result<()> {
-    use crate::workflows::train::{train, TrainOptions};
     if args.twin.as_deref() == Some(args.out.as_path()) {
         bail!(
             "--out {} is the input twin; the old twin is kept, so write the new one elsewhere",
@@ -56,67 +72,31 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let data = Measurement::read(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
-    if args.stride == 0 {
-        bail!("--stride must be at least 1");
+    let (options, selection) = args.options();
+    options.validate()?;
+    if let Some(s) = &selection {
+        s.validate()?;
     }
-    let mut options = TrainOptions {
-        lags: args.lags,
-        target: args.target.into(),
-        transient: args.transient,
-        stride: args.stride,
-    };
-    let mut selection = Vec::new();
-    if !args.select_lags.is_empty() {
-        if args
-            .select_lags
-            .iter()
-            .any(|&q| q == 0 || q > fmu_gp_corrector::training::MAX_LAGS)
-        {
-            bail!(
-                "--select-lags: each count must be in 1..={}, got {:?}",
-                fmu_gp_corrector::training::MAX_LAGS,
-                args.select_lags
-            );
-        }
-        if args.selection_stride == 0 {
-            bail!("--selection-stride must be at least 1");
-        }
-        selection = crate::workflows::train::select_lags(
-            &twin,
-            &data,
-            &args.select_lags,
-            &TrainOptions {
-                stride: args.selection_stride,
-                ..options.clone()
-            },
-        )?;
+    let trained = train_selected(&twin, &data, &options, selection.as_ref())?;
+    if !trained.selection.is_empty() {
         println!("lags   NLML (floors 1 / 2 / 3)                 total");
-        for s in &selection {
+        for s in &trained.selection {
             println!(
                 "{:>4}   {:>11.1} / {:>11.1} / {:>11.1}   {:>11.1}",
                 s.lags, s.nlml[0], s.nlml[1], s.nlml[2], s.total
             );
         }
-        options.lags = selection[0].lags;
         println!(
             "chosen: {} lags (lowest negative log marginal likelihood)",
-            options.lags
+            trained.summary.lags
         );
     }
-    let (trained, summary) = train(&twin, &data, &options)?;
-    let nmse = nmse_on(&trained, &data, args.transient)?;
-    trained.write(&args.out)?;
+    trained.twin.write(&args.out)?;
     if let Some(path) = &args.report {
-        let report = json!({
-            "twin": twin.describe(),
-            "data": data.path.display().to_string(),
-            "out": args.out.display().to_string(),
-            "training": summary,
-            "lag_selection": selection,
-            "nmse": nmse,
-        });
+        let report = crate::report::json::train(&twin, &data, Some(&args.out), &trained);
         write_json(path, &report)?;
     }
+    let (summary, nmse) = (&trained.summary, trained.nmse);
     println!(
         "trained the corrector on {}: {} points, {} inputs ({} lags), target {}, {:.2} s",
         data.path.display(),

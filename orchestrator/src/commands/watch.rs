@@ -6,13 +6,13 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 
 use crate::twin::Twin;
+use crate::workflows::options::check_tolerance;
 use crate::workflows::watch::background::DiagnosisOptions;
-use crate::workflows::watch::mqtt::MqttUrl;
 use crate::workflows::watch::supervise::LearnOptions;
-use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions};
+use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW};
 
 #[derive(clap::Args)]
 pub struct WatchArgs {
@@ -46,10 +46,10 @@ pub struct WatchArgs {
     /// exists at the start, the watcher resumes from it, skipping the samples it consumed.
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = CHECKPOINT_EVERY)]
     pub checkpoint_every: u64,
     /// Seconds of the rolling NMSE.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = WINDOW)]
     pub window: f64,
     /// Practical significance, NMSE % (as `twin compare`'s); default: 2 × the twin's worst
     /// validation NMSE, else 0.5 %.
@@ -66,11 +66,11 @@ pub struct WatchArgs {
     pub no_diagnosis: bool,
     /// Seconds of the stream a failing window's diagnosis is run on (the last ones when it
     /// starts).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = DiagnosisOptions::default().record)]
     pub diagnosis_record: f64,
     /// Seconds after a failing window opens that its diagnosis starts if the window is still
     /// open (it starts at once when the window closes).
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = DiagnosisOptions::default().after)]
     pub diagnosis_after: f64,
     /// With a GP corrector: query where its latent variance V(f) exceeds this (m²/s⁴);
     /// default: the largest V(f) over the first 100 samples after the transient.
@@ -84,80 +84,47 @@ pub struct WatchArgs {
     pub budget: u32,
     /// With a GP corrector: refit its hyperparameters after this many learned points (0:
     /// never; a refit holds the stream up for as long as it takes).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = LearnOptions::default().refit_every)]
     pub refit_every: u32,
 }
 
+impl WatchArgs {
+    /// The library's options from the flags, checked.
+    pub fn options(&self) -> Result<WatchOptions> {
+        check_tolerance(self.tolerance)?;
+        let source = StreamSource::parse(
+            &self.source,
+            self.follow,
+            self.idle,
+            self.client_id.clone(),
+        )?;
+        let options = WatchOptions {
+            learning: LearnOptions {
+                threshold: self.query_threshold,
+                learn: !self.no_learning,
+                budget: self.budget,
+                refit_every: self.refit_every,
+            },
+            diagnosis: (!self.no_diagnosis).then_some(DiagnosisOptions {
+                record: self.diagnosis_record,
+                after: self.diagnosis_after,
+            }),
+            checkpoint: self.checkpoint.clone(),
+            checkpoint_every: self.checkpoint_every,
+            window: self.window,
+            tolerance: self.tolerance,
+            transient: self.transient,
+            rate: self.rate,
+            ..WatchOptions::new(source, self.alerts.clone())
+        };
+        options.validate()?;
+        Ok(options)
+    }
+}
+
 pub fn run(args: &WatchArgs) -> Result<()> {
-    if let Some(t) = args.tolerance {
-        if !(t >= 0.0 && t.is_finite()) {
-            bail!("--tolerance must be a non-negative NMSE in %, was {t}");
-        }
-    }
-    if let Some(idle) = args.idle {
-        if !(idle >= 0.0 && idle.is_finite()) {
-            bail!("--idle must be a non-negative number of seconds, was {idle}");
-        }
-    }
-    let mqtt = MqttUrl::parse(&args.source).transpose()?;
-    if args.client_id.is_some() && mqtt.is_none() {
-        bail!("--client-id is for an mqtt:// source");
-    }
-    let source = if let Some(url) = mqtt {
-        if args.follow {
-            bail!("--follow is for a file source; an MQTT source is followed anyway");
-        }
-        StreamSource::Mqtt {
-            url,
-            client_id: args.client_id.clone(),
-            idle: args.idle.map(Duration::from_secs_f64),
-        }
-    } else if args.source == "-" {
-        if args.follow {
-            bail!("--follow is for a file source; standard input is read to its end");
-        }
-        StreamSource::Stdin
-    } else {
-        StreamSource::File {
-            path: PathBuf::from(&args.source),
-            follow: args.follow,
-            idle: Duration::from_secs_f64(args.idle.unwrap_or(10.0)),
-        }
-    };
-    for (name, value) in [
-        ("--diagnosis-record", args.diagnosis_record),
-        ("--diagnosis-after", args.diagnosis_after),
-    ] {
-        if !(value >= 0.0 && value.is_finite()) {
-            bail!("{name} must be a non-negative number of seconds, was {value}");
-        }
-    }
-    if let Some(t) = args.query_threshold {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!("--query-threshold must be a positive variance (m²/s⁴), was {t}");
-        }
-    }
+    let options = args.options()?;
     let twin = Twin::load(args.twin.as_deref())?;
-    let options = WatchOptions {
-        learning: LearnOptions {
-            threshold: args.query_threshold,
-            learn: !args.no_learning,
-            budget: args.budget,
-            refit_every: args.refit_every,
-        },
-        diagnosis: (!args.no_diagnosis).then_some(DiagnosisOptions {
-            record: args.diagnosis_record,
-            after: args.diagnosis_after,
-        }),
-        source,
-        alerts: args.alerts.clone(),
-        checkpoint: args.checkpoint.clone(),
-        checkpoint_every: args.checkpoint_every,
-        window: args.window,
-        tolerance: args.tolerance,
-        transient: args.transient,
-        rate: args.rate,
-    };
     let spinner = std::io::stderr().is_terminal().then(|| {
         let s = indicatif::ProgressBar::new_spinner();
         s.enable_steady_tick(Duration::from_millis(120));

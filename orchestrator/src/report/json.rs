@@ -91,3 +91,50 @@ pub fn calibrate(
     }
     report
 }
+
+/// `twin train --report`: the training, the lag selection, the corrected twin's NMSE.
+pub fn train(
+    twin: &Twin,
+    data: &Measurement,
+    out: Option<&Path>,
+    trained: &crate::workflows::train::Trained,
+) -> Value {
+    let mut report = json!({
+        "twin": twin.describe(),
+        "data": data.path.display().to_string(),
+        "training": trained.summary,
+        "lag_selection": trained.selection,
+        "nmse": trained.nmse,
+    });
+    if let Some(out) = out {
+        report["out"] = json!(out.display().to_string());
+    }
+    report
+}
+
+/// `twin learn --report`: the options and each mode's results.
+pub fn learn(
+    twin: &Twin,
+    records: &[String],
+    options: &crate::workflows::learn::LearnOptions,
+    seconds: f64,
+    results: &[crate::workflows::learn::ModeResult],
+) -> Value {
+    json!({
+        "twin": twin.describe(),
+        "records": records,
+        "lags": options.lags,
+        "target": options.target.name(),
+        "transient": options.transient,
+        "initial": options.initial,
+        "uniform_every": options.uniform_every,
+        "refit_every_queries": options.refit_every,
+        "refit_growth": options.refit_growth,
+        "refit_iterations": options.refit_iterations,
+        "nmse_every_queries": options.nmse_every,
+        "change_run": options.change_run,
+        "threshold_option": options.threshold,
+        "seconds": seconds,
+        "modes": results,
+    })
+}

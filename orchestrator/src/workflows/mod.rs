@@ -2,9 +2,11 @@
 //! active learning, diagnosis, control and the simulated hybrid test.
 
 pub mod calibrate;
+pub mod compare;
 pub mod control;
 pub mod diagnose;
 pub mod hybrid;
 pub mod learn;
+pub mod options;
 pub mod train;
 pub mod watch;

@@ -30,6 +30,8 @@ pub enum TrainError {
     Twin(#[from] TwinError),
     #[error("train: {0}")]
     Setup(String),
+    #[error(transparent)]
+    Options(#[from] crate::workflows::options::InvalidOption),
 }
 
 #[derive(Debug, Clone)]
@@ -324,4 +326,91 @@ fn with_resource(source: &Path, target: &Path, name: &str, bytes: &[u8]) -> Resu
     zip.write_all(bytes).map_err(|e| bad(e.to_string()))?;
     zip.finish().map_err(|e| bad(e.to_string()))?;
     Ok(())
+}
+
+/// `--selection-stride`'s default: the lag selection's fits on every 4th sample.
+pub const SELECTION_STRIDE: usize = 4;
+
+impl TrainOptions {
+    pub fn validate(&self) -> Result<(), crate::workflows::options::InvalidOption> {
+        use crate::workflows::options::InvalidOption;
+        if self.stride == 0 {
+            return Err(InvalidOption("--stride must be at least 1".into()));
+        }
+        crate::workflows::options::check_transient(self.transient)
+    }
+}
+
+/// `--select-lags Q,…` with `--selection-stride`: choose the lags among `candidates`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LagSelection {
+    pub candidates: Vec<usize>,
+    pub stride: usize,
+}
+
+impl LagSelection {
+    pub fn validate(&self) -> Result<(), crate::workflows::options::InvalidOption> {
+        use crate::workflows::options::InvalidOption;
+        if self
+            .candidates
+            .iter()
+            .any(|&q| q == 0 || q > fmu_gp_corrector::training::MAX_LAGS)
+        {
+            return Err(InvalidOption(format!(
+                "--select-lags: each count must be in 1..={}, got {:?}",
+                fmu_gp_corrector::training::MAX_LAGS,
+                self.candidates
+            )));
+        }
+        if self.stride == 0 {
+            return Err(InvalidOption(
+                "--selection-stride must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What `twin train` computes: the twin with its corrector, the training's summary, the lag
+/// selection's scores (best first; empty without one) and the corrected twin's NMSE % per
+/// floor on the training record.
+pub struct Trained {
+    pub twin: Twin,
+    pub summary: TrainSummary,
+    pub selection: Vec<LagScore>,
+    pub nmse: [f64; 3],
+}
+
+/// `twin train` as a whole: the lags chosen first when `selection` is given (overriding
+/// `options.lags`), the corrector trained, the corrected twin's NMSE on the record.
+pub fn train_selected(
+    twin: &Twin,
+    data: &Measurement,
+    options: &TrainOptions,
+    selection: Option<&LagSelection>,
+) -> Result<Trained, TrainError> {
+    options.validate()?;
+    let mut options = options.clone();
+    let mut scores = Vec::new();
+    if let Some(s) = selection {
+        s.validate()?;
+        scores = select_lags(
+            twin,
+            data,
+            &s.candidates,
+            &TrainOptions {
+                stride: s.stride,
+                ..options.clone()
+            },
+        )?;
+        options.lags = scores[0].lags;
+    }
+    let (trained, summary) = train(twin, data, &options)?;
+    let nmse = crate::twin::run::nmse_on(&trained, data, options.transient)?;
+    Ok(Trained {
+        twin: trained,
+        summary,
+        selection: scores,
+        nmse,
+    })
 }

@@ -172,7 +172,7 @@ pub enum Port {
     Signal(usize),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Algorithm {
     #[default]
     GaussSeidel,

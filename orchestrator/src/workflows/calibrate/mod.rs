@@ -22,6 +22,7 @@
 pub mod lm;
 pub mod prior;
 pub mod simulator;
+pub mod validated;
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -36,7 +37,8 @@ use serde::Serialize;
 use crate::cosim::import::{Fmu, ScalarType};
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
-pub use prior::{default_prior, read_priors, Prior, Space};
+pub use prior::{default_prior, priors_from_json, read_priors, Prior, Space};
+pub use validated::{calibrate_validated, CalibrateRunError, Validated};
 use simulator::Simulator;
 
 /// The default set of calibrated parameters.

@@ -79,13 +79,17 @@ pub fn default_prior(name: &str, current: f64) -> Prior {
 /// Priors from a JSON file: `{"k1": {"space": "linear", "mean": 4021, "variance": 10000}, ...}`.
 pub fn read_priors(path: &Path) -> Result<BTreeMap<String, Prior>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    priors_from_json(&text, &path.display().to_string())
+}
+
+/// Priors from JSON text (`read_priors`' format); `origin` names it in errors.
+pub fn priors_from_json(text: &str, origin: &str) -> Result<BTreeMap<String, Prior>, String> {
     let priors: BTreeMap<String, Prior> =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_str(text).map_err(|e| format!("{origin}: {e}"))?;
     for (name, p) in &priors {
         if !(p.mean.is_finite() && p.variance.is_finite() && p.variance > 0.0) {
             return Err(format!(
-                "{}: prior of '{name}' needs a finite mean and a positive variance",
-                path.display()
+                "{origin}: prior of '{name}' needs a finite mean and a positive variance"
             ));
         }
     }

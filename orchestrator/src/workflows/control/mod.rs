@@ -8,6 +8,7 @@
 
 pub mod closed_loop;
 pub mod design;
+pub mod options;
 pub mod ssp;
 
 use numerics::lqr::{Estimator, Schedule, ShearMatrices, FLOORS};
@@ -21,6 +22,7 @@ use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
 use closed_loop::{simulate, ContactEvent, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
 pub use design::{design, structure_of, Design, StateUnit};
+pub use options::{sensor_noise, twin_for_control};
 
 /// Errors of `twin control`.
 #[derive(Debug, thiserror::Error)]

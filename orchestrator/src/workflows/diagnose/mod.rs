@@ -74,6 +74,7 @@
 pub mod add;
 pub mod candidate;
 pub mod discover;
+mod options;
 pub mod report;
 pub mod select;
 pub mod sensor;
@@ -141,6 +142,7 @@ pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
 pub use add::{add_physics, effects_from_report};
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
 pub use discover::Found;
+pub use options::parse_candidates;
 pub use report::*;
 pub use sensor::{SensorFit, SensorSd};
 

@@ -60,6 +60,14 @@ pub enum WatchError {
     NotStarted,
     #[error("{0}")]
     Options(String),
+    #[error("the alert callback: {0}")]
+    Callback(String),
+}
+
+impl From<crate::workflows::options::InvalidOption> for WatchError {
+    fn from(e: crate::workflows::options::InvalidOption) -> Self {
+        WatchError::Options(e.0)
+    }
 }
 
 fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> WatchError {
@@ -105,6 +113,110 @@ pub struct WatchOptions {
     pub diagnosis: Option<DiagnosisOptions>,
     /// The active-learning supervisor of a twin with a GP corrector.
     pub learning: LearnOptions,
+}
+
+/// `--checkpoint-every`'s default, samples.
+pub const CHECKPOINT_EVERY: u64 = 512;
+/// `--window`'s default, s.
+pub const WINDOW: f64 = 2.0;
+/// `--idle`'s default for a followed file, s (an MQTT source waits for ever by default).
+pub const FILE_IDLE: f64 = 10.0;
+
+impl WatchOptions {
+    /// The defaults for `source`, alerts to `alerts`: checkpoints every 512 samples (none
+    /// without a path), a 2 s rolling NMSE, the twin's tolerance, the 2 s transient, the rate
+    /// from the samples, the background diagnosis and the corrector's learning on.
+    pub fn new(source: StreamSource, alerts: PathBuf) -> Self {
+        WatchOptions {
+            source,
+            alerts,
+            checkpoint: None,
+            checkpoint_every: CHECKPOINT_EVERY,
+            window: WINDOW,
+            tolerance: None,
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
+            rate: None,
+            diagnosis: Some(DiagnosisOptions::default()),
+            learning: LearnOptions::default(),
+        }
+    }
+
+    /// The options `watch` does not check itself (it checks the window, the checkpoint
+    /// interval, the rate and the budget).
+    pub fn validate(&self) -> Result<(), WatchError> {
+        crate::workflows::options::check_tolerance(self.tolerance)?;
+        if let Some(d) = &self.diagnosis {
+            for (name, value) in [
+                ("--diagnosis-record", d.record),
+                ("--diagnosis-after", d.after),
+            ] {
+                if !(value >= 0.0 && value.is_finite()) {
+                    return Err(WatchError::Options(format!(
+                        "{name} must be a non-negative number of seconds, was {value}"
+                    )));
+                }
+            }
+        }
+        if let Some(t) = self.learning.threshold {
+            if !(t > 0.0 && t.is_finite()) {
+                return Err(WatchError::Options(format!(
+                    "--query-threshold must be a positive variance (m²/s⁴), was {t}"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl StreamSource {
+    /// `--source`: `-` (standard input), `mqtt://HOST[:PORT]/TOPIC`, else a CSV file; with
+    /// `--follow`, `--idle` (s; a followed file's default 10 s, a broker's: never) and
+    /// `--client-id` (MQTT only).
+    pub fn parse(
+        text: &str,
+        follow: bool,
+        idle: Option<f64>,
+        client_id: Option<String>,
+    ) -> Result<StreamSource, WatchError> {
+        if let Some(idle) = idle {
+            if !(idle >= 0.0 && idle.is_finite()) {
+                return Err(WatchError::Options(format!(
+                    "--idle must be a non-negative number of seconds, was {idle}"
+                )));
+            }
+        }
+        let mqtt = MqttUrl::parse(text).transpose()?;
+        if client_id.is_some() && mqtt.is_none() {
+            return Err(WatchError::Options(
+                "--client-id is for an mqtt:// source".into(),
+            ));
+        }
+        Ok(if let Some(url) = mqtt {
+            if follow {
+                return Err(WatchError::Options(
+                    "--follow is for a file source; an MQTT source is followed anyway".into(),
+                ));
+            }
+            StreamSource::Mqtt {
+                url,
+                client_id,
+                idle: idle.map(Duration::from_secs_f64),
+            }
+        } else if text == "-" {
+            if follow {
+                return Err(WatchError::Options(
+                    "--follow is for a file source; standard input is read to its end".into(),
+                ));
+            }
+            StreamSource::Stdin
+        } else {
+            StreamSource::File {
+                path: PathBuf::from(text),
+                follow,
+                idle: Duration::from_secs_f64(idle.unwrap_or(FILE_IDLE)),
+            }
+        })
+    }
 }
 
 /// What the progress display shows.
@@ -469,6 +581,8 @@ fn floats(x: [f64; 3]) -> Value {
 }
 
 struct Watcher<'a> {
+    /// Told of every alert written (its JSON object); an error stops the watch.
+    on_alert: &'a mut dyn FnMut(&Value) -> Result<(), String>,
     state: State,
     stepper: Stepper,
     alerts: Alerts,
@@ -496,6 +610,7 @@ impl Watcher<'_> {
             if let Some(m) = self.reader.mqtt() {
                 m.publish_alert(body.to_string())?;
             }
+            (self.on_alert)(body).map_err(WatchError::Callback)?;
         }
         Ok(())
     }
@@ -780,7 +895,18 @@ impl Watcher<'_> {
 pub fn watch(
     twin: &Twin,
     options: &WatchOptions,
+    progress: impl FnMut(&Status),
+) -> Result<Summary, WatchError> {
+    watch_with_alerts(twin, options, progress, &mut |_| Ok(()))
+}
+
+/// [`watch`], with `on_alert` told of each alert as it is written (the Python package's
+/// callback); an error it returns ends the watch with [`WatchError::Callback`].
+pub fn watch_with_alerts(
+    twin: &Twin,
+    options: &WatchOptions,
     mut progress: impl FnMut(&Status),
+    on_alert: &mut dyn FnMut(&Value) -> Result<(), String>,
 ) -> Result<Summary, WatchError> {
     let noise_variance = twin
         .noise_variance
@@ -903,6 +1029,7 @@ pub fn watch(
         b
     });
     let mut w = Watcher {
+        on_alert,
         state,
         stepper,
         alerts,
