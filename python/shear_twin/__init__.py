@@ -9,7 +9,13 @@ not the CLI in a subprocess), the GIL released while they run::
     comparison = twin.compare(record)            # Comparison: .nmse, .predictions, .report
     diagnosis = twin.diagnose(record)            # Report: .action, .effects, ...
     new_twin, added = twin.add_physics(record, diagnosis=diagnosis)
+    control = twin.control(record, [1e3], retune=True, schedule=True, ssp="controlled.ssp")
+    twin.watch("mqtt://127.0.0.1:1883/shear", "alerts.jsonl", on_alert=print)
+    corrected, training = twin.train(record)
+    ran = st.run("controlled.ssp", step=1 / control.control_rate_hz)     # RunResult: .columns, .to_frame()
 
+Every ``twin`` command has its call (README.md, *Python and fleets*, has the table), with the
+CLI's options as keyword arguments (None: the library's default, the CLI's) and its report.
 Errors are ``ShearTwinError`` subclasses whose message is the CLI's. Fleets of structures run
 on Dask: ``shear_twin.fleet``.
 """
@@ -17,6 +23,8 @@ on Dask: ``shear_twin.fleet``.
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from . import _native
@@ -26,20 +34,23 @@ from ._native import (
     DataError,
     DiagnoseError,
     Record,
+    RunError,
     ShearTwinError,
     SynthError,
+    TrainError,
     TwinError,
     WatchError,
 )
 
 for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseError, ControlError,
-               WatchError, SynthError):
+               WatchError, SynthError, TrainError, RunError):
     _error.__module__ = "shear_twin"
 
 __all__ = [
-    "Twin", "Record", "Report", "Comparison", "synth",
+    "Twin", "Record", "Report", "Comparison", "Control", "RunResult", "synth", "run", "pack_fmu",
+    "init", "record_from_frame",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",
-    "ControlError", "WatchError", "SynthError",
+    "ControlError", "WatchError", "SynthError", "TrainError", "RunError",
 ]
 
 
@@ -85,6 +96,10 @@ class Comparison(Report):
         super().__init__(report)
         self.predictions = predictions
 
+    def to_frame(self):
+        """The predictions as a pandas DataFrame (the CLI's ``--predictions`` CSV)."""
+        return _frame(self.predictions)
+
 
 class Twin:
     """A twin (an SSP archive around the shear FMU). Every operation leaves it unchanged and
@@ -122,49 +137,257 @@ class Twin:
     def __repr__(self) -> str:
         return repr(self._native)
 
-    def compare(self, record: Record, *, transient: float = 2.0,
-                tolerance: float | None = None) -> Comparison:
-        out = self._native.compare(record, transient=transient, tolerance=tolerance)
+    def compare(self, record: Record, *, transient: float | None = None,
+                tolerance: float | None = None, controller: str | os.PathLike | Report | dict | None = None,
+                controller_q: float | None = None) -> Comparison:
+        """``twin compare``: run the twin on the record's force and compare its accelerations
+        with the measured ones. ``controller``: a ``twin control`` report (a path, or the report
+        ``Twin.control`` returned) whose design ``controller_q`` (default the first stable one)
+        closes the loop. None means the CLI's default (``transient`` 2 s; ``tolerance`` 2 × the
+        twin's worst validation NMSE, else 0.5 %)."""
+        out = self._native.compare(record, transient=transient, tolerance=tolerance,
+                                   controller=_report_or_path(controller), controller_q=controller_q)
         return Comparison(out["report"], out["predictions"])
 
-    def calibrate(self, record: Record, *, parameters: list[str] | None = None, starts: int = 12,
-                  seed: int = 1, transient: float = 2.0, validate: list[Record] = (),
-                  threads: int | None = None) -> tuple["Twin", Report]:
-        twin, report = self._native.calibrate(record, parameters=parameters, starts=starts, seed=seed,
-                                              transient=transient, validate=list(validate),
+    def calibrate(self, record: Record, *, parameters: list[str] | None = None,
+                  priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
+                  seed: int | None = None, transient: float | None = None,
+                  validate: Sequence[Record] = (), threads: int | None = None) -> tuple["Twin", Report]:
+        """``twin calibrate``: MAP calibration of ``parameters`` (default m1..3, c1..3, k1..3)
+        and the noise variances; ``priors`` as the CLI's ``--priors`` file's JSON; the
+        ``validate`` records' worst NMSE sets the new twin's tolerance. Defaults (None): 12
+        starts, seed 1, transient 2 s, all cores. Returns the calibrated twin and the report."""
+        twin, report = self._native.calibrate(record, parameters=parameters, priors=priors, starts=starts,
+                                              seed=seed, transient=transient, validate=list(validate),
                                               threads=threads)
         return Twin(twin), Report(report)
 
-    def diagnose(self, record: Record, *, effects: list[str] | None = None, transient: float = 2.0,
+    def diagnose(self, record: Record, *, effects: list[str] | None = None, transient: float | None = None,
                  tolerance: float | None = None, threads: int | None = None,
-                 block: float = 1.0) -> Report:
+                 block: float | None = None, always_fit: bool = False) -> Report:
+        """``twin diagnose``: none, recalibrate, add physics (which effect, where, how strong),
+        sensor fault or update the data-based model, with the evidence. ``effects`` limits the
+        candidates (``["contact@2-3", "cubic@2"]``). Defaults (None): transient 2 s, 1 s blocks,
+        all cores, the twin's tolerance."""
         return Report(self._native.diagnose(record, effects=effects, transient=transient,
-                                            tolerance=tolerance, threads=threads, block=block))
+                                            tolerance=tolerance, threads=threads, block=block,
+                                            always_fit=always_fit))
 
     def add_physics(self, record: Record, *, effects: list[str] | None = None,
                     diagnosis: Report | dict[str, Any] | None = None, refine: bool = False,
-                    transient: float = 2.0, threads: int | None = None) -> tuple["Twin", Report]:
+                    transient: float | None = None, threads: int | None = None) -> tuple["Twin", Report]:
+        """``twin add-physics``: switch effects on (``effects``, or all of a ``diagnosis``
+        report's) and estimate them on the record. Returns the new twin and the report."""
         if isinstance(diagnosis, Report):
             diagnosis = diagnosis.to_dict()
         twin, report = self._native.add_physics(record, effects=effects, diagnosis=diagnosis,
                                                 refine=refine, transient=transient, threads=threads)
         return Twin(twin), Report(report)
 
-    def control(self, record: Record, q: list[float], *, r: float = 0.1, state_unit: str = "m",
-                estimator: str = "integrate", highpass: float = 0.5, seed: int = 1) -> Report:
-        return Report(self._native.control(record, list(q), r=r, state_unit=state_unit,
-                                           estimator=estimator, highpass=highpass, seed=seed))
+    def control(self, record: Record, q: Sequence[float], *, r: float | None = None,
+                state_unit: str | None = None, estimator: str | None = None,
+                highpass: float | None = None, substeps: int | None = None,
+                sensor_noise: float | None = None, seed: int | None = None, gaps: Sequence[str] = (),
+                retune: bool = False, target_contacts: int | None = None, max_force: float | None = None,
+                schedule: bool = False, margin: float | None = None, lookahead: float | None = None,
+                dwell: float | None = None, variance_threshold: str | float | None = None,
+                estimator_costs: bool = False, ssp: str | os.PathLike | None = None,
+                ssp_q: float | None = None) -> Control:
+        """``twin control``: an LQR design per ``q`` on the twin's structure, run in the loop on
+        the record's force, passive and under each design. ``retune``: the smallest q (on a grid
+        up to 100 × the smallest) keeping the contact initiations ≤ ``target_contacts`` (3)
+        within ``max_force``; ``schedule``: gain scheduling (``margin`` 0.4, ``lookahead``
+        0.02 s, ``dwell`` 0.5 s, ``variance_threshold`` "auto", "off" or a number); ``gaps``:
+        ``"2-3:5e-4[:negative|positive|both]"``; ``ssp``: also write the controlled system (the
+        design ``ssp_q``) as an SSP archive. Defaults (None) as the CLI's: R 0.1, state in m,
+        the integrating estimator, 0.5 Hz, the twin's calibrated sensor noise, seed 1.
+        Returns the report with the time histories (``Control.responses``)."""
+        if variance_threshold is not None and not isinstance(variance_threshold, str):
+            variance_threshold = repr(float(variance_threshold))
+        out = self._native.control(record, [float(x) for x in q], r=r, state_unit=state_unit,
+                                   estimator=estimator, highpass=highpass, substeps=substeps,
+                                   sensor_noise=sensor_noise, seed=seed, gaps=list(gaps), retune=retune,
+                                   target_contacts=target_contacts, max_force=max_force,
+                                   schedule=schedule, margin=margin, lookahead=lookahead, dwell=dwell,
+                                   variance_threshold=variance_threshold,
+                                   estimator_costs=estimator_costs, ssp=_path(ssp), ssp_q=ssp_q)
+        return Control(out)
 
-    def watch(self, source: str, alerts: str, *, follow: bool = False, idle: float = 10.0,
-              window: float = 2.0, tolerance: float | None = None, transient: float = 2.0,
-              diagnosis: bool = True, diagnosis_record: float = 20.0,
-              diagnosis_after: float = 5.0, checkpoint: str | None = None) -> Report:
-        summary = self._native.watch(str(source), str(alerts), follow=follow, idle=idle,
-                                     window=window, tolerance=tolerance, transient=transient,
-                                     diagnosis=diagnosis, diagnosis_record=diagnosis_record,
-                                     diagnosis_after=diagnosis_after,
-                                     checkpoint=None if checkpoint is None else str(checkpoint))
+    def watch(self, source: str | os.PathLike, alerts: str | os.PathLike, *,
+              on_alert: Callable[[dict[str, Any]], Any] | None = None, client_id: str | None = None,
+              follow: bool = False, idle: float | None = None, checkpoint: str | os.PathLike | None = None,
+              checkpoint_every: int | None = None, window: float | None = None,
+              tolerance: float | None = None, transient: float | None = None, rate: float | None = None,
+              diagnosis: bool = True, diagnosis_record: float | None = None,
+              diagnosis_after: float | None = None, query_threshold: float | None = None,
+              learning: bool = True, budget: int | None = None, refit_every: int | None = None) -> Report:
+        """``twin watch``: the operational twin on a stream. ``source``: ``"-"`` (standard
+        input, read to its end), ``"mqtt://HOST[:PORT]/TOPIC"`` (QoS 1, a persistent session
+        with ``client_id``; alerts also published to TOPIC/alerts) or a CSV file (``follow``:
+        as it grows, until ``idle`` s (10) pass without a line). Alerts go to ``alerts`` as JSON
+        lines; ``on_alert(alert)`` is called with each alert (a dict) as it is written — an
+        exception it raises stops the watch and is raised here. ``diagnosis=False`` is
+        ``--no-diagnosis``, ``learning=False`` ``--no-learning``. Returns the ``end`` alert's
+        summary."""
+        summary = self._native.watch(
+            str(source), str(alerts), on_alert=on_alert, client_id=client_id, follow=follow, idle=idle,
+            checkpoint=_path(checkpoint), checkpoint_every=checkpoint_every, window=window,
+            tolerance=tolerance, transient=transient, rate=rate, diagnosis=diagnosis,
+            diagnosis_record=diagnosis_record, diagnosis_after=diagnosis_after,
+            query_threshold=query_threshold, learning=learning, budget=budget, refit_every=refit_every)
         return Report(summary)
+
+    def train(self, record: Record, *, lags: int | None = None, target: str | None = None,
+              transient: float | None = None, stride: int | None = None,
+              select_lags: Sequence[int] | None = None,
+              selection_stride: int | None = None) -> tuple["Twin", Report]:
+        """``twin train``: the GP bias corrector trained on the record and put behind the
+        physics. ``target``: "discrepancy" (default) or "measured"; ``select_lags``: choose the
+        lags among these by the lowest negative log marginal likelihood (fits on every
+        ``selection_stride``-th sample, 4). Returns the twin with the corrector and the
+        report."""
+        twin, report = self._native.train(record, lags=lags, target=target, transient=transient,
+                                          stride=stride,
+                                          select_lags=None if select_lags is None else list(select_lags),
+                                          selection_stride=selection_stride)
+        return Twin(twin), Report(report)
+
+    def learn(self, records: Sequence[Record], *, mode: str | None = None, forgetting: float | None = None,
+              all_modes: bool = False, threshold: float | None = None, lags: int | None = None,
+              target: str | None = None, transient: float | None = None, initial: int | None = None,
+              refit_every: int | None = None, refit_growth: float | None = None,
+              refit_iterations: int | None = None, nmse_every: int | None = None,
+              change_run: int | None = None) -> tuple[Report, "Twin | None"]:
+        """``twin learn``: stream-based active learning of the GP corrector over ``records`` in
+        order (the paper's Algorithm 1). ``mode``: "uniform", "fixed" or "adaptive" (default,
+        with ``forgetting`` 1); ``all_modes``: the six modes of Table 2 (``--modes all``).
+        Returns the report and, for one mode, the twin with the corrector as learned (the CLI's
+        ``--out``), else None."""
+        report, twin = self._native.learn(list(records), mode=mode, forgetting=forgetting,
+                                          all_modes=all_modes, threshold=threshold, lags=lags,
+                                          target=target, transient=transient, initial=initial,
+                                          refit_every=refit_every, refit_growth=refit_growth,
+                                          refit_iterations=refit_iterations, nmse_every=nmse_every,
+                                          change_run=change_run)
+        return Report(report), None if twin is None else Twin(twin)
+
+
+def _path(p: str | os.PathLike | None) -> str | None:
+    return None if p is None else os.fspath(p)
+
+
+def _report_or_path(r: str | os.PathLike | Report | dict | None) -> str | dict | None:
+    if r is None or isinstance(r, dict):
+        return r
+    if isinstance(r, Report):
+        return r.to_dict()
+    return os.fspath(r)
+
+
+def _frame(columns: dict[str, Any]):
+    import pandas as pd
+
+    return pd.DataFrame(columns)
+
+
+class Control(Report):
+    """``twin control``'s report (``designs``, ``passive``, ``retune``, ``schedule``, …) with
+    the time histories: ``responses["passive"]``, ``responses[q]`` for each stable design and
+    ``responses["scheduled"]``, each a dict of numpy arrays ``time``, ``acc1``..``acc3``,
+    ``control`` (``frame(key)``: as a DataFrame)."""
+
+    def __init__(self, out: dict[str, Any]):
+        super().__init__(out["report"])
+        self.responses: dict[Any, dict[str, Any]] = {"passive": out["passive"]}
+        for design, response in zip(out["report"]["designs"], out["designs"]):
+            if response is not None:
+                self.responses[design["q"]] = response
+        if out["scheduled"] is not None:
+            self.responses["scheduled"] = out["scheduled"]
+
+    def frame(self, key: Any = "passive"):
+        """One response as a pandas DataFrame."""
+        return _frame(self.responses[key])
+
+
+class RunResult:
+    """``twin run``'s recording: ``columns`` (``time`` first, then every output in
+    modelDescription order) as numpy arrays; ``start``, ``stop``, ``step``; ``terminated``
+    (the component that ended the run and when, or None)."""
+
+    def __init__(self, columns: dict[str, Any], info: dict[str, Any]):
+        self.columns = columns
+        self.start: float = info["start"]
+        self.stop: float = info["stop"]
+        self.step: float = info["step"]
+        self.terminated: tuple[str, float] | None = info["terminated"]
+
+    def __getitem__(self, name: str) -> Any:
+        return self.columns[name]
+
+    def to_frame(self):
+        """The recording as a pandas DataFrame (the CLI's ``--output`` CSV)."""
+        return _frame(self.columns)
+
+    def __repr__(self) -> str:
+        return f"RunResult({len(self.columns) - 1} columns, {len(self.columns['time'])} points)"
+
+
+def run(model: str | os.PathLike, *, start: float | None = None, stop: float | None = None,
+        step: float | None = None, input: str | os.PathLike | Any = None,
+        sets: dict[str, float | int | bool | str] | None = None, output_all: bool = False,
+        hold_inputs: bool = False, algorithm: str | None = None) -> RunResult:
+    """``twin run``: run any FMI 2.0 co-simulation FMU (``.fmu``) or SSP system (``.ssp``) and
+    record its outputs. ``input``: a CSV path or a DataFrame (``time``, then columns named like
+    the model's inputs, or ``component.variable`` in a system); ``sets``: start values by name;
+    ``algorithm``: "gauss-seidel" (default) or "jacobi". None: the model's DefaultExperiment,
+    then fmpy's rules, as the CLI."""
+    scratch = None
+    if input is not None and not isinstance(input, (str, os.PathLike)):
+        import tempfile
+
+        scratch = tempfile.NamedTemporaryFile("w", suffix=".csv", delete=False)
+        input.to_csv(scratch, index=False)
+        scratch.close()
+        input = scratch.name
+    try:
+        columns, info = _native.run(os.fspath(model), start=start, stop=stop, step=step,
+                                    input=_path(input), sets=sets, output_all=output_all,
+                                    hold_inputs=hold_inputs, algorithm=algorithm)
+    finally:
+        if scratch is not None:
+            os.unlink(scratch.name)
+    return RunResult(columns, info)
+
+
+def pack_fmu(model_description: str | os.PathLike, library: str | os.PathLike, out: str | os.PathLike, *,
+             documentation: str | os.PathLike | None = None, resources: str | os.PathLike | None = None) -> str:
+    """``twin pack-fmu``: a built FMU library and its modelDescription.xml into a ``.fmu``
+    archive. Returns the modelIdentifier."""
+    return _native.pack_fmu(os.fspath(model_description), os.fspath(library), os.fspath(out),
+                            documentation=_path(documentation), resources=_path(resources))
+
+
+def init(out: str | os.PathLike) -> Twin:
+    """``twin init``: write the default twin (the shear FMU, default parameters) as an SSP
+    archive; returns it."""
+    twin = Twin.default()
+    twin.save(os.fspath(out))
+    return twin
+
+
+def record_from_frame(frame: Any, name: str = "<DataFrame>") -> Record:
+    """A record from a pandas DataFrame with columns ``time``, ``force``, ``acc1``..``acc3``
+    (others kept as extra columns, e.g. ``control``), checked as a CSV file is."""
+    import numpy as np
+
+    main = ("time", "force", "acc1", "acc2", "acc3")
+    missing = [c for c in main if c not in frame.columns]
+    if missing:
+        raise DataError(f"{name}: no column {', '.join(repr(c) for c in missing)}")
+    col = {c: np.ascontiguousarray(frame[c].to_numpy(dtype=np.float64)) for c in frame.columns}
+    extra = {c: v for c, v in col.items() if c not in main}
+    return Record(*(col[c] for c in main), extra=extra or None, name=name)
 
 
 def synth(scenario: dict[str, Any], out: str | None = None) -> tuple[Record, dict[str, Any]]:

@@ -174,6 +174,21 @@ def run_fleet(manifest: str | os.PathLike | dict[str, Any], *, scheduler: str | 
     return rows, summarise(rows, wall, n_workers)
 
 
+def fleet(manifest: str | os.PathLike | dict[str, Any], *, scheduler: str | None = None,
+          workers: int = 2, out: str | os.PathLike | None = None) -> tuple[Any, dict[str, Any]]:
+    """``twin fleet MANIFEST [--scheduler …] [--workers N] [--out DIR]`` as a call: the fleet's
+    rows as a pandas DataFrame (one per structure, in the manifest's order) and the summary;
+    with ``out``, the report is written there too (fleet.csv, fleet.parquet,
+    fleet-summary.json, fleet.svg). The CLI writes to ``out/fleet`` by default; here nothing is
+    written unless ``out`` is given."""
+    import pandas as pd
+
+    rows, summary = run_fleet(manifest, scheduler=scheduler, workers=workers)
+    if out is not None:
+        write_report(rows, summary, out)
+    return pd.DataFrame(rows, columns=COLUMNS), summary
+
+
 def summarise(rows: list[dict[str, Any]], wall: float, workers: int) -> dict[str, Any]:
     """Throughput and overhead: ``overhead_per_task`` = (wall × workers − Σ task times) / tasks,
     the time a worker spends per task outside the task's own work (scheduling, transfer,

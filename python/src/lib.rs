@@ -13,6 +13,7 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
 mod record;
+mod run;
 mod twin;
 
 create_exception!(
@@ -59,6 +60,18 @@ create_exception!(
 );
 create_exception!(
     _native,
+    TrainError,
+    ShearTwinError,
+    "A GP corrector that cannot be trained or learned."
+);
+create_exception!(
+    _native,
+    RunError,
+    ShearTwinError,
+    "An FMU or SSP system that cannot be run (`twin run`), or an FMU that cannot be packed."
+);
+create_exception!(
+    _native,
     SynthError,
     ShearTwinError,
     "A synthetic scenario that cannot be made."
@@ -74,6 +87,8 @@ pub(crate) enum Kind {
     Control,
     Watch,
     Synth,
+    Train,
+    Run,
 }
 
 /// The error as the CLI prints it (`twin: error: {err:#}` without the prefix), as `kind`.
@@ -87,12 +102,30 @@ pub(crate) fn to_py(kind: Kind, err: impl Into<anyhow::Error>) -> PyErr {
         Kind::Control => ControlError::new_err(message),
         Kind::Watch => WatchError::new_err(message),
         Kind::Synth => SynthError::new_err(message),
+        Kind::Train => TrainError::new_err(message),
+        Kind::Run => RunError::new_err(message),
     }
 }
 
 /// The message of an option Python passed that the library would refuse less clearly.
 pub(crate) fn invalid(kind: Kind, message: impl Into<String>) -> PyErr {
     to_py(kind, anyhow::Error::msg(message.into()))
+}
+
+/// A keyword argument naming one of a CLI flag's values (`estimator="kalman"`), read as the
+/// CLI reads `--FLAG VALUE`.
+pub(crate) fn choice<T: clap::ValueEnum>(kind: Kind, flag: &str, text: &str) -> PyResult<T> {
+    T::from_str(text, false).map_err(|_| {
+        let names: Vec<String> = T::value_variants()
+            .iter()
+            .filter_map(|v| v.to_possible_value())
+            .map(|p| p.get_name().to_string())
+            .collect();
+        invalid(
+            kind,
+            format!("--{flag} {text}: expected one of {}", names.join(", ")),
+        )
+    })
 }
 
 /// Run `work` without the GIL, a panic caught and turned into `ShearTwinError`.
@@ -132,8 +165,12 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ControlError", py.get_type::<ControlError>())?;
     m.add("WatchError", py.get_type::<WatchError>())?;
     m.add("SynthError", py.get_type::<SynthError>())?;
+    m.add("TrainError", py.get_type::<TrainError>())?;
+    m.add("RunError", py.get_type::<RunError>())?;
     m.add_class::<record::Record>()?;
     m.add_class::<twin::Twin>()?;
     m.add_function(wrap_pyfunction!(record::synth, m)?)?;
+    m.add_function(wrap_pyfunction!(run::run, m)?)?;
+    m.add_function(wrap_pyfunction!(run::pack_fmu, m)?)?;
     Ok(())
 }

@@ -2,25 +2,31 @@
 //! compare, calibrate, diagnose, add physics, control, watch — each with the GIL released.
 
 use std::path::PathBuf;
-use std::time::Duration;
 
 use numpy::PyArray1;
 use orchestrator::cosim::import::Fmu;
-use orchestrator::twin::run::{nmse_on, run_and_compare_with};
+use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, Twin as CoreTwin};
-use orchestrator::workflows::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
-use orchestrator::workflows::control::{run_control, ControlOptions, EstimatorChoice, StateUnit};
-use orchestrator::workflows::diagnose::{
-    add_physics, diagnose, effects_from_report, Addition, Candidate, DiagnoseOptions,
+use orchestrator::workflows::calibrate::{calibrate_validated, priors_from_json, CalibrationSetup};
+use orchestrator::workflows::compare::{compare, CompareOptions};
+use orchestrator::workflows::control::closed_loop::{Gap, Response};
+use orchestrator::workflows::control::{
+    run_control, twin_for_control, ControlOptions, ControllerSpec, Retune,
+    ScheduleOptions, VarianceTrigger,
 };
+use orchestrator::workflows::diagnose::{
+    add_physics, diagnose, effects_from_report, parse_candidates, Addition, Candidate,
+    DiagnoseOptions,
+};
+use orchestrator::workflows::learn::{chosen_modes, learned_twin, prepare, run_modes, LearnOptions};
+use orchestrator::workflows::train::{train_selected, LagSelection, TrainOptions};
 use orchestrator::workflows::watch::background::DiagnosisOptions;
-use orchestrator::workflows::watch::supervise::LearnOptions;
-use orchestrator::workflows::watch::{watch, StreamSource, WatchOptions};
+use orchestrator::workflows::watch::{watch_with_alerts, StreamSource, WatchError, WatchOptions};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::record::Record;
-use crate::{detached, invalid, to_object, to_py, Kind};
+use crate::{choice, detached, invalid, to_object, to_py, Kind};
 
 /// A twin: the shear FMU (and a GP corrector, when trained) with its parameters, noise
 /// variances and calibration, as an SSP archive. Open one with `Twin.open(path)`; every
@@ -48,55 +54,26 @@ fn floats<'py>(py: Python<'py>, values: &[f64]) -> Bound<'py, PyAny> {
     PyArray1::from_slice(py, values).into_any()
 }
 
-fn check_tolerance(kind: Kind, tolerance: Option<f64>) -> PyResult<()> {
-    match tolerance {
-        Some(t) if !(t >= 0.0 && t.is_finite()) => Err(invalid(
-            kind,
-            format!("--tolerance must be a non-negative NMSE in %, was {t}"),
-        )),
-        _ => Ok(()),
+/// A closed-loop response as numpy arrays: `time`, `acc1`.., `control`.
+fn response<'py>(py: Python<'py>, r: &Response) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("time", floats(py, &r.time))?;
+    for (f, acc) in r.acc.iter().enumerate() {
+        d.set_item(format!("acc{}", f + 1), floats(py, acc))?;
     }
+    d.set_item("control", floats(py, &r.control))?;
+    Ok(d)
 }
 
-fn check_transient(kind: Kind, transient: f64, record: &Record) -> PyResult<()> {
-    let data = &record.measurement;
-    if !(transient >= 0.0 && transient.is_finite()) {
-        return Err(invalid(
-            kind,
-            format!("--transient {transient}: must be a non-negative number of seconds"),
-        ));
+/// A `twin control` report given as a path, or as the report itself (a dict).
+fn controller_spec(kind: Kind, value: &Bound<'_, PyAny>) -> PyResult<ControllerSpec> {
+    if let Ok(path) = value.extract::<PathBuf>() {
+        return ControllerSpec::load(&path).map_err(|e| to_py(kind, e));
     }
-    if transient >= data.duration() {
-        return Err(invalid(
-            kind,
-            format!(
-                "--transient {} s leaves nothing of {} ({} s long)",
-                transient,
-                data.path.display(),
-                data.duration()
-            ),
-        ));
-    }
-    Ok(())
-}
-
-fn diagnose_options(
-    transient: f64,
-    threads: Option<usize>,
-    tolerance: Option<f64>,
-) -> PyResult<DiagnoseOptions> {
-    let mut o = DiagnoseOptions {
-        transient,
-        tolerance,
-        ..DiagnoseOptions::default()
-    };
-    if let Some(t) = threads {
-        if t == 0 {
-            return Err(invalid(Kind::Diagnose, "--threads must be at least 1"));
-        }
-        o.threads = t;
-    }
-    Ok(o)
+    let json: serde_json::Value =
+        pythonize::depythonize(value).map_err(|e| invalid(kind, e.to_string()))?;
+    ControllerSpec::from_json(&json.to_string(), "the controller report")
+        .map_err(|e| to_py(kind, e))
 }
 
 #[pymethods]
@@ -160,26 +137,40 @@ impl Twin {
         format!("Twin({})", self.twin.describe())
     }
 
-    /// `twin compare`: run the twin on the record's force, compare with its accelerations.
-    /// Returns `{"report": <the CLI's JSON report>, "predictions": {"time", "acc1".. [,
-    /// "latent_var1".., "sd1"..]: arrays}, "residual_sd": ...}`.
-    #[pyo3(signature = (record, *, transient = 2.0, tolerance = None))]
+    /// `twin compare`: run the twin on the record's force (in a closed loop with a `twin
+    /// control` report's controller when `controller` is given), compare with its
+    /// accelerations. Returns `{"report": <the CLI's JSON report>, "predictions": {"time",
+    /// "acc1".. [, "latent_var1".., "sd1"..]: arrays}}`.
+    #[pyo3(signature = (record, *, transient = None, tolerance = None, controller = None,
+                        controller_q = None))]
     fn compare<'py>(
         &self,
         py: Python<'py>,
         record: &Record,
-        transient: f64,
+        transient: Option<f64>,
         tolerance: Option<f64>,
+        controller: Option<&Bound<'py, PyAny>>,
+        controller_q: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        check_tolerance(Kind::Twin, tolerance)?;
-        check_transient(Kind::Twin, transient, record)?;
+        let kind = Kind::Twin;
+        let defaults = CompareOptions::default();
+        let options = CompareOptions {
+            transient: transient.unwrap_or(defaults.transient),
+            tolerance,
+            controller_q,
+            ..defaults
+        };
+        options.validate().map_err(|e| to_py(kind, e))?;
         let data = &record.measurement;
+        options.validate_for(data).map_err(|e| to_py(kind, e))?;
+        let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
         let compared = detached(py, || {
-            run_and_compare_with(&self.twin, data, transient, tolerance, |_, _| {})
-                .map_err(|e| to_py(Kind::Twin, e))
+            compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
+                .map_err(|e| to_py(kind, e))
         })?;
         // The same report as `twin compare --report`.
-        let report = orchestrator::report::json::compare(&self.twin, data, &compared, transient);
+        let report =
+            orchestrator::report::json::compare(&self.twin, data, &compared, options.transient);
         let prediction = compared.prediction;
         let predictions = PyDict::new(py);
         predictions.set_item("time", floats(py, &prediction.time))?;
@@ -203,63 +194,56 @@ impl Twin {
     }
 
     /// `twin calibrate`: MAP calibration of `parameters` (default m1..3, c1..3, k1..3) and the
-    /// noise variances on the record; `validate` records set the twin's tolerance. Returns the
-    /// calibrated twin and the CLI's report (this twin is kept as it is).
-    #[pyo3(signature = (record, *, parameters = None, starts = 12, seed = 1, transient = 2.0,
-                        validate = Vec::new(), threads = None))]
+    /// noise variances on the record; `priors` overrides default priors (`{"k1": {"space":
+    /// "linear", "mean": 4021, "variance": 10000}}`); `validate` records set the twin's
+    /// tolerance. Returns the calibrated twin and the CLI's report (this twin is kept as it is).
+    #[pyo3(signature = (record, *, parameters = None, priors = None, starts = None, seed = None,
+                        transient = None, validate = Vec::new(), threads = None))]
     #[allow(clippy::too_many_arguments)]
     fn calibrate<'py>(
         &self,
         py: Python<'py>,
         record: &Record,
         parameters: Option<Vec<String>>,
-        starts: usize,
-        seed: u64,
-        transient: f64,
+        priors: Option<&Bound<'py, PyAny>>,
+        starts: Option<usize>,
+        seed: Option<u64>,
+        transient: Option<f64>,
         validate: Vec<PyRef<'py, Record>>,
         threads: Option<usize>,
     ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
-        check_transient(Kind::Calibrate, transient, record)?;
-        let mut setup = CalibrationSetup {
-            transient,
-            starts,
-            seed,
-            ..CalibrationSetup::default()
-        };
+        let kind = Kind::Calibrate;
+        let mut setup = CalibrationSetup::default();
         if let Some(p) = parameters {
             setup.parameters = p;
         }
-        if let Some(t) = threads {
-            if t == 0 {
-                return Err(invalid(Kind::Calibrate, "threads must be at least 1"));
-            }
-            setup.threads = t;
+        if let Some(priors) = priors {
+            let value: serde_json::Value =
+                pythonize::depythonize(priors).map_err(|e| invalid(kind, e.to_string()))?;
+            setup.priors =
+                priors_from_json(&value.to_string(), "priors").map_err(|m| invalid(kind, m))?;
         }
+        setup.starts = starts.unwrap_or(setup.starts);
+        setup.seed = seed.unwrap_or(setup.seed);
+        setup.transient = transient.unwrap_or(setup.transient);
+        setup.threads = threads.unwrap_or(setup.threads);
         let data = &record.measurement;
-        let validation: Vec<&orchestrator::twin::data::Measurement> =
-            validate.iter().map(|r| &r.measurement).collect();
+        setup.validate(data).map_err(|e| to_py(kind, e))?;
+        let validation: Vec<&Measurement> = validate.iter().map(|r| &r.measurement).collect();
         let (new_twin, report) = detached(py, || {
-            let kind = Kind::Calibrate;
-            let calibration = calibrate(&self.twin, data, &setup).map_err(|e| to_py(kind, e))?;
-            let mut new_twin =
-                calibrated_twin(&self.twin, &calibration).map_err(|e| to_py(kind, e))?;
-            let mut validated = Vec::new();
-            for v in &validation {
-                let nmse = nmse_on(&new_twin, v, transient).map_err(|e| to_py(kind, e))?;
-                validated.push((v.path.display().to_string(), nmse));
-            }
-            new_twin.validation_nmse = orchestrator::report::json::validation_nmse(&validated);
+            let v = calibrate_validated(&self.twin, data, &validation, &setup)
+                .map_err(|e| to_py(kind, e))?;
             // `twin calibrate --report`'s fields, less `out` (nothing is written here).
             let report = orchestrator::report::json::calibrate(
                 &self.twin,
-                &new_twin,
+                &v.twin,
                 None,
                 data,
-                transient,
-                &calibration,
-                &validated,
+                setup.transient,
+                &v.calibration,
+                &v.validated,
             );
-            let new_twin = Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?;
+            let new_twin = Twin::holding_fmus(v.twin).map_err(|e| to_py(kind, e))?;
             Ok((new_twin, report))
         })?;
         Ok((new_twin, to_object(py, &report)?))
@@ -268,32 +252,36 @@ impl Twin {
     /// `twin diagnose`: none, recalibrate, add physics, sensor fault or update the data-based
     /// model, with the evidence. Returns the CLI's JSON report as a dict. `effects` limits the
     /// candidates (`["contact@2-3", "cubic@2"]`).
-    #[pyo3(signature = (record, *, effects = None, transient = 2.0, tolerance = None,
-                        threads = None, block = 1.0))]
+    #[pyo3(signature = (record, *, effects = None, transient = None, tolerance = None,
+                        threads = None, block = None, always_fit = false))]
     #[allow(clippy::too_many_arguments)]
     fn diagnose<'py>(
         &self,
         py: Python<'py>,
         record: &Record,
         effects: Option<Vec<String>>,
-        transient: f64,
+        transient: Option<f64>,
         tolerance: Option<f64>,
         threads: Option<usize>,
-        block: f64,
+        block: Option<f64>,
+        always_fit: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        check_tolerance(Kind::Diagnose, tolerance)?;
-        check_transient(Kind::Diagnose, transient, record)?;
-        let mut o = diagnose_options(transient, threads, tolerance)?;
-        o.block = block;
-        if let Some(effects) = effects {
-            o.candidates = effects
-                .iter()
-                .map(|e| Candidate::parse(e).map_err(|m| invalid(Kind::Diagnose, m)))
-                .collect::<PyResult<_>>()?;
-        }
+        let kind = Kind::Diagnose;
+        let mut o = DiagnoseOptions {
+            tolerance,
+            always_fit,
+            ..DiagnoseOptions::default()
+        };
+        o.transient = transient.unwrap_or(o.transient);
+        o.threads = threads.unwrap_or(o.threads);
+        o.block = block.unwrap_or(o.block);
         let data = &record.measurement;
+        o.validate_for(data).map_err(|e| to_py(kind, e))?;
+        if let Some(effects) = effects {
+            o.candidates = parse_candidates(&effects).map_err(|e| to_py(kind, e))?;
+        }
         let d = detached(py, || {
-            diagnose(&self.twin, data, &o).map_err(|e| to_py(Kind::Diagnose, e))
+            diagnose(&self.twin, data, &o).map_err(|e| to_py(kind, e))
         })?;
         to_object(py, &d)
     }
@@ -302,7 +290,7 @@ impl Twin {
     /// `diagnosis` report's), estimate them on the record (`refine`: with the physics too, as
     /// the CLI does when the diagnosis recalibrated). Returns the new twin and the report.
     #[pyo3(signature = (record, *, effects = None, diagnosis = None, refine = false,
-                        transient = 2.0, threads = None))]
+                        transient = None, threads = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_physics<'py>(
         &self,
@@ -311,11 +299,14 @@ impl Twin {
         effects: Option<Vec<String>>,
         diagnosis: Option<&Bound<'py, PyAny>>,
         refine: bool,
-        transient: f64,
+        transient: Option<f64>,
         threads: Option<usize>,
     ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
         let kind = Kind::Diagnose;
-        let o = diagnose_options(transient, threads, None)?;
+        let mut o = DiagnoseOptions::default();
+        o.transient = transient.unwrap_or(o.transient);
+        o.threads = threads.unwrap_or(o.threads);
+        o.validate().map_err(|e| to_py(kind, e))?;
         let (candidates, refine) = match (effects, diagnosis) {
             (Some(_), Some(_)) => {
                 return Err(invalid(kind, "give effects or a diagnosis, not both"));
@@ -367,138 +358,342 @@ impl Twin {
     }
 
     /// `twin control`: LQR designs (one per `q`) on the twin's structure, run in the loop on
-    /// the record's force. Returns the CLI's JSON report.
-    #[pyo3(signature = (record, q, *, r = 0.1, state_unit = "m", estimator = "integrate",
-                        highpass = 0.5, seed = 1))]
+    /// the record's force, passive and under each design; `retune`, `schedule` as the CLI's;
+    /// `ssp`: also write the controlled system as an SSP archive. Returns `{"report": <the
+    /// CLI's JSON report>, "passive": {...}, "designs": [{...} or None], "scheduled": {...} or
+    /// None}`, each response as arrays `time`, `acc1`.., `control`.
+    #[pyo3(signature = (record, q, *, r = None, state_unit = None, estimator = None,
+                        highpass = None, substeps = None, sensor_noise = None, seed = None,
+                        gaps = Vec::new(), retune = false, target_contacts = None,
+                        max_force = None, schedule = false, margin = None, lookahead = None,
+                        dwell = None, variance_threshold = None, estimator_costs = false,
+                        ssp = None, ssp_q = None))]
     #[allow(clippy::too_many_arguments)]
     fn control<'py>(
         &self,
         py: Python<'py>,
         record: &Record,
         q: Vec<f64>,
-        r: f64,
-        state_unit: &str,
-        estimator: &str,
-        highpass: f64,
-        seed: u64,
-    ) -> PyResult<Bound<'py, PyAny>> {
+        r: Option<f64>,
+        state_unit: Option<&str>,
+        estimator: Option<&str>,
+        highpass: Option<f64>,
+        substeps: Option<usize>,
+        sensor_noise: Option<f64>,
+        seed: Option<u64>,
+        gaps: Vec<String>,
+        retune: bool,
+        target_contacts: Option<usize>,
+        max_force: Option<f64>,
+        schedule: bool,
+        margin: Option<f64>,
+        lookahead: Option<f64>,
+        dwell: Option<f64>,
+        variance_threshold: Option<&str>,
+        estimator_costs: bool,
+        ssp: Option<PathBuf>,
+        ssp_q: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let kind = Kind::Control;
-        for &q in &q {
-            if !(q.is_finite() && q >= 0.0) {
-                return Err(invalid(
-                    kind,
-                    format!("--q {q}: the state weight must be a finite number ≥ 0"),
-                ));
-            }
-        }
-        if !(r.is_finite() && r > 0.0) {
-            return Err(invalid(
-                kind,
-                format!("--r {r}: the control weight must be a finite number > 0"),
-            ));
-        }
-        let unit = match state_unit {
-            "m" => StateUnit::M,
-            "mm" => StateUnit::Mm,
-            other => return Err(invalid(kind, format!("state_unit '{other}': m or mm"))),
-        };
-        let estimator = match estimator {
-            "integrate" => EstimatorChoice::Integrate,
-            "kalman" => EstimatorChoice::Kalman,
-            other => {
-                return Err(invalid(
-                    kind,
-                    format!("estimator '{other}': integrate or kalman"),
-                ))
-            }
-        };
-        let options = ControlOptions {
+        let err = |e: orchestrator::workflows::options::InvalidOption| to_py(kind, e);
+        let d = ControlOptions::default();
+        let rd = Retune::default();
+        let sd = ScheduleOptions::default();
+        let mut options = ControlOptions {
             qs: q,
-            r,
-            unit,
-            estimator,
-            highpass_hz: highpass,
-            substeps: None,
-            sensor_noise: None,
-            seed,
-            gaps: Vec::new(),
-            retune: None,
-            schedule: None,
-            estimator_costs: false,
+            r: r.unwrap_or(d.r),
+            unit: match state_unit {
+                Some(t) => choice(kind, "state-unit", t)?,
+                None => d.unit,
+            },
+            estimator: match estimator {
+                Some(t) => choice(kind, "estimator", t)?,
+                None => d.estimator,
+            },
+            highpass_hz: highpass.unwrap_or(d.highpass_hz),
+            substeps: substeps.or(d.substeps),
+            seed: seed.unwrap_or(d.seed),
+            retune: Some(Retune {
+                target: target_contacts.unwrap_or(rd.target),
+                max_force,
+            }),
+            estimator_costs,
+            ..ControlOptions::default()
         };
+        options.validate().map_err(err)?;
+        options.retune = options.retune.filter(|_| retune);
+        options.sensor_noise = orchestrator::workflows::control::sensor_noise(sensor_noise)
+            .map_err(err)?
+            .0;
+        options.gaps = gaps
+            .iter()
+            .map(|g| Gap::parse(g))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(err)?;
+        let variance = match variance_threshold {
+            Some(t) => VarianceTrigger::parse(t).map_err(err)?,
+            None => sd.variance,
+        };
+        options.schedule = schedule.then_some(ScheduleOptions {
+            margin: margin.unwrap_or(sd.margin),
+            lookahead: lookahead.unwrap_or(sd.lookahead),
+            dwell: dwell.unwrap_or(sd.dwell),
+            variance,
+        });
         let data = &record.measurement;
-        let report = detached(py, || {
-            let outcome = run_control(&self.twin, data, &options, &mut |_, _| {})
+        let outcome = detached(py, || {
+            let twin = twin_for_control(&self.twin, sensor_noise);
+            let outcome = run_control(&twin, data, &options, &mut |_, _| {})
                 .map_err(|e| to_py(kind, e))?;
-            serde_json::to_value(&outcome.report).map_err(|e| to_py(kind, e))
+            if let Some(path) = &ssp {
+                let span = (data.time[0], *data.time.last().unwrap_or(&data.time[0]));
+                orchestrator::workflows::control::ssp::write_controlled_ssp(
+                    &twin,
+                    &outcome.report,
+                    ssp_q,
+                    Some(span),
+                    path,
+                )
+                .map_err(|e| {
+                    to_py(
+                        kind,
+                        anyhow::Error::from(e).context(format!("--ssp {}", path.display())),
+                    )
+                })?;
+            }
+            Ok(outcome)
         })?;
-        to_object(py, &report)
+        let out = PyDict::new(py);
+        out.set_item("report", to_object(py, &outcome.report)?)?;
+        out.set_item("passive", response(py, &outcome.passive)?)?;
+        let designs = outcome
+            .designs
+            .iter()
+            .map(|d| d.as_ref().map(|r| response(py, r)).transpose())
+            .collect::<PyResult<Vec<_>>>()?;
+        out.set_item("designs", designs)?;
+        out.set_item(
+            "scheduled",
+            outcome
+                .scheduled
+                .as_ref()
+                .map(|r| response(py, r))
+                .transpose()?,
+        )?;
+        Ok(out)
     }
 
-    /// `twin watch --source FILE`: the operational twin on a stream in a CSV file (read to its
-    /// end; `follow`: as it grows until `idle` s pass without a line). Alerts go to `alerts`
-    /// as JSON lines; returns the `end` alert's summary.
-    #[pyo3(signature = (source, alerts, *, follow = false, idle = 10.0, window = 2.0,
-                        tolerance = None, transient = 2.0, diagnosis = true,
-                        diagnosis_record = 20.0, diagnosis_after = 5.0, checkpoint = None))]
+    /// `twin watch`: the operational twin on a stream — `source` `-` (standard input), a CSV
+    /// file (read to its end; `follow`: as it grows until `idle` s pass without a line) or
+    /// `mqtt://HOST[:PORT]/TOPIC`. Alerts go to `alerts` as JSON lines (and to TOPIC/alerts
+    /// from MQTT); `on_alert(alert: dict)` is called for each one as it is written, with the
+    /// GIL (an exception it raises stops the watch and is raised here). Returns the `end`
+    /// alert's summary.
+    #[pyo3(signature = (source, alerts, *, on_alert = None, client_id = None, follow = false,
+                        idle = None, checkpoint = None, checkpoint_every = None, window = None,
+                        tolerance = None, transient = None, rate = None, diagnosis = true,
+                        diagnosis_record = None, diagnosis_after = None,
+                        query_threshold = None, learning = true, budget = None,
+                        refit_every = None))]
     #[allow(clippy::too_many_arguments)]
     fn watch<'py>(
         &self,
         py: Python<'py>,
-        source: PathBuf,
+        source: &Bound<'py, PyAny>,
         alerts: PathBuf,
+        on_alert: Option<Py<PyAny>>,
+        client_id: Option<String>,
         follow: bool,
-        idle: f64,
-        window: f64,
-        tolerance: Option<f64>,
-        transient: f64,
-        diagnosis: bool,
-        diagnosis_record: f64,
-        diagnosis_after: f64,
+        idle: Option<f64>,
         checkpoint: Option<PathBuf>,
+        checkpoint_every: Option<u64>,
+        window: Option<f64>,
+        tolerance: Option<f64>,
+        transient: Option<f64>,
+        rate: Option<f64>,
+        diagnosis: bool,
+        diagnosis_record: Option<f64>,
+        diagnosis_after: Option<f64>,
+        query_threshold: Option<f64>,
+        learning: bool,
+        budget: Option<u32>,
+        refit_every: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let kind = Kind::Watch;
-        check_tolerance(kind, tolerance)?;
-        if !(idle >= 0.0 && idle.is_finite()) {
-            return Err(invalid(
-                kind,
-                format!("--idle must be a non-negative number of seconds, was {idle}"),
-            ));
-        }
-        for (name, value) in [
-            ("--diagnosis-record", diagnosis_record),
-            ("--diagnosis-after", diagnosis_after),
-        ] {
-            if !(value >= 0.0 && value.is_finite()) {
-                return Err(invalid(
-                    kind,
-                    format!("{name} must be a non-negative number of seconds, was {value}"),
-                ));
-            }
-        }
-        let options = WatchOptions {
-            source: StreamSource::File {
-                path: source,
-                follow,
-                idle: Duration::from_secs_f64(idle),
-            },
-            alerts,
-            checkpoint,
-            checkpoint_every: 512,
-            window,
-            tolerance,
-            transient,
-            rate: None,
-            diagnosis: diagnosis.then_some(DiagnosisOptions {
-                record: diagnosis_record,
-                after: diagnosis_after,
-            }),
-            learning: LearnOptions::default(),
-        };
+        let err = |e: WatchError| to_py(kind, e);
+        let source = source.extract::<PathBuf>()?.display().to_string();
+        orchestrator::workflows::options::check_tolerance(tolerance)
+            .map_err(|e| to_py(kind, e))?;
+        let stream = StreamSource::parse(&source, follow, idle, client_id).map_err(err)?;
+        let mut options = WatchOptions::new(stream, alerts);
+        let d = DiagnosisOptions::default();
+        options.checkpoint = checkpoint;
+        options.checkpoint_every = checkpoint_every.unwrap_or(options.checkpoint_every);
+        options.window = window.unwrap_or(options.window);
+        options.tolerance = tolerance;
+        options.transient = transient.unwrap_or(options.transient);
+        options.rate = rate;
+        options.diagnosis = diagnosis.then_some(DiagnosisOptions {
+            record: diagnosis_record.unwrap_or(d.record),
+            after: diagnosis_after.unwrap_or(d.after),
+        });
+        options.learning.threshold = query_threshold;
+        options.learning.learn = learning;
+        options.learning.budget = budget.unwrap_or(options.learning.budget);
+        options.learning.refit_every = refit_every.unwrap_or(options.learning.refit_every);
+        options.validate().map_err(err)?;
+        // The callback's exception, kept to be raised here as it was.
+        let mut raised: Option<PyErr> = None;
         let summary = detached(py, || {
-            let summary = watch(&self.twin, &options, |_| {}).map_err(|e| to_py(kind, e))?;
-            serde_json::to_value(&summary).map_err(|e| to_py(kind, e))
+            let mut on_alert_fn = |alert: &serde_json::Value| -> Result<(), String> {
+                let Some(callback) = &on_alert else {
+                    return Ok(());
+                };
+                Python::attach(|py| {
+                    let called = to_object(py, alert).and_then(|a| callback.call1(py, (a,)));
+                    called.map(|_| ()).map_err(|e| {
+                        let message = e.to_string();
+                        raised = Some(e);
+                        message
+                    })
+                })
+            };
+            let summary = watch_with_alerts(&self.twin, &options, |_| {}, &mut on_alert_fn);
+            match summary {
+                Ok(s) => serde_json::to_value(&s).map_err(|e| to_py(kind, e)),
+                Err(WatchError::Callback(_)) if raised.is_some() => {
+                    Err(raised.take().expect("the callback's error"))
+                }
+                Err(e) => Err(err(e)),
+            }
         })?;
         to_object(py, &summary)
+    }
+
+    /// `twin train`: the GP bias corrector trained on the record and put behind the physics
+    /// (`select_lags`: the lags chosen among these by the marginal likelihood). Returns the
+    /// twin with the corrector and the CLI's report (less `out`).
+    #[pyo3(signature = (record, *, lags = None, target = None, transient = None, stride = None,
+                        select_lags = None, selection_stride = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn train<'py>(
+        &self,
+        py: Python<'py>,
+        record: &Record,
+        lags: Option<usize>,
+        target: Option<&str>,
+        transient: Option<f64>,
+        stride: Option<usize>,
+        select_lags: Option<Vec<usize>>,
+        selection_stride: Option<usize>,
+    ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
+        let kind = Kind::Train;
+        let d = TrainOptions::default();
+        let options = TrainOptions {
+            lags: lags.unwrap_or(d.lags),
+            target: match target {
+                Some(t) => choice::<orchestrator::commands::Target>(kind, "target", t)?.into(),
+                None => d.target,
+            },
+            transient: transient.unwrap_or(d.transient),
+            stride: stride.unwrap_or(d.stride),
+        };
+        options.validate().map_err(|e| to_py(kind, e))?;
+        let selection = select_lags.map(|candidates| LagSelection {
+            candidates,
+            stride: selection_stride.unwrap_or(orchestrator::workflows::train::SELECTION_STRIDE),
+        });
+        if let Some(s) = &selection {
+            s.validate().map_err(|e| to_py(kind, e))?;
+        }
+        let data = &record.measurement;
+        let (twin, report) = detached(py, || {
+            let trained = train_selected(&self.twin, data, &options, selection.as_ref())
+                .map_err(|e| to_py(kind, e))?;
+            let report = orchestrator::report::json::train(&self.twin, data, None, &trained);
+            Ok((
+                Twin::holding_fmus(trained.twin).map_err(|e| to_py(kind, e))?,
+                report,
+            ))
+        })?;
+        Ok((twin, to_object(py, &report)?))
+    }
+
+    /// `twin learn`: stream-based active learning of the GP corrector over `records` (the
+    /// paper's Algorithm 1), in `mode` (uniform, fixed, adaptive with `forgetting`) or, with
+    /// `all_modes`, the six modes of Table 2 in parallel. Returns the CLI's report and, for one
+    /// mode, the twin with the corrector as learned (None for several).
+    #[pyo3(signature = (records, *, mode = None, forgetting = None, all_modes = false,
+                        threshold = None, lags = None, target = None, transient = None,
+                        initial = None, refit_every = None, refit_growth = None,
+                        refit_iterations = None, nmse_every = None, change_run = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn learn<'py>(
+        &self,
+        py: Python<'py>,
+        records: Vec<PyRef<'py, Record>>,
+        mode: Option<&str>,
+        forgetting: Option<f64>,
+        all_modes: bool,
+        threshold: Option<f64>,
+        lags: Option<usize>,
+        target: Option<&str>,
+        transient: Option<f64>,
+        initial: Option<usize>,
+        refit_every: Option<u32>,
+        refit_growth: Option<f64>,
+        refit_iterations: Option<u64>,
+        nmse_every: Option<usize>,
+        change_run: Option<usize>,
+    ) -> PyResult<(Bound<'py, PyAny>, Option<Twin>)> {
+        use orchestrator::workflows::learn::{FORGETTING, MODE};
+        let kind = Kind::Train;
+        let modes = chosen_modes(
+            mode.unwrap_or(MODE),
+            forgetting.unwrap_or(FORGETTING),
+            all_modes,
+        )
+        .map_err(|e| to_py(kind, e))?;
+        let d = LearnOptions::default();
+        let options = LearnOptions {
+            lags: lags.unwrap_or(d.lags),
+            target: match target {
+                Some(t) => choice::<orchestrator::commands::Target>(kind, "target", t)?.into(),
+                None => d.target,
+            },
+            transient: transient.unwrap_or(d.transient),
+            initial: initial.unwrap_or(d.initial),
+            threshold,
+            refit_every: refit_every.unwrap_or(d.refit_every),
+            refit_growth: refit_growth.unwrap_or(d.refit_growth),
+            refit_iterations: refit_iterations.unwrap_or(d.refit_iterations),
+            nmse_every: nmse_every.unwrap_or(d.nmse_every).max(1),
+            change_run: change_run.unwrap_or(d.change_run),
+            ..d
+        };
+        options.validate().map_err(|e| to_py(kind, e))?;
+        if records.is_empty() {
+            return Err(invalid(kind, "give at least one record"));
+        }
+        let data: Vec<Measurement> = records.iter().map(|r| r.measurement.clone()).collect();
+        let (report, learned) = detached(py, || {
+            let started = std::time::Instant::now();
+            let streams = prepare(&self.twin, &data, &options).map_err(|e| to_py(kind, e))?;
+            let results = run_modes(&streams, &modes, &options).map_err(|e| to_py(kind, e))?;
+            let seconds = started.elapsed().as_secs_f64();
+            let names: Vec<String> = data.iter().map(|m| m.path.display().to_string()).collect();
+            let report =
+                orchestrator::report::json::learn(&self.twin, &names, &options, seconds, &results);
+            let learned = match results.as_slice() {
+                [one] => Some(
+                    learned_twin(&self.twin, one, &options)
+                        .map_err(|e| to_py(kind, e))
+                        .and_then(|t| Twin::holding_fmus(t).map_err(|e| to_py(kind, e)))?,
+                ),
+                _ => None,
+            };
+            Ok((report, learned))
+        })?;
+        Ok((to_object(py, &report)?, learned))
     }
 }

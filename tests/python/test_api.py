@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -152,3 +153,259 @@ def test_errors_of_options_are_exceptions():
         st.Twin.default().diagnose(record, effects=["nonsense@9"])
     with pytest.raises(st.TwinError, match="leaves nothing"):
         st.Twin.default().compare(record, transient=100.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Every command as a call: train, learn, run, control's retune / schedule / SSP, watch from
+# standard input and MQTT with a callback, fleet; errors with the CLI's messages.
+
+def cli_error(*args: str) -> str:
+    done = cli(*args)
+    assert done.returncode != 0, done.stdout
+    return done.stderr.strip().removeprefix("twin: error: ")
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    """The default twin calibrated on dataset1 with 2 starts (a twin with noise variances)."""
+    twin, _ = st.Twin.default().calibrate(st.Record.read(str(DATA / "dataset1.csv")), starts=2)
+    return twin
+
+
+def test_train_is_the_cli_training(tmp_path):
+    out, report = tmp_path / "t.ssp", tmp_path / "t.json"
+    done = cli("train", "--data", "data/dataset1.csv", "--stride", "8", "--out", str(out), "--report", str(report))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads(report.read_text())
+    twin, trained = st.Twin.default().train(st.Record.read("data/dataset1.csv"), stride=8)
+    assert trained.nmse == expected["nmse"]  # the same fit: equal to the bit
+    assert trained.training["points"] == expected["training"]["points"]
+    assert set(trained.keys()) == set(expected.keys()) - {"out"}
+    # The twin has its corrector: the comparison carries its latent variances.
+    c = twin.compare(st.Record.read("data/dataset1.csv"))
+    assert c.nmse == pytest.approx(trained.nmse, rel=1e-12)
+    assert "latent_var1" in c.to_frame().columns
+
+
+def test_train_selects_lags_and_refuses_a_zero_stride():
+    record = st.Record.read(str(DATA / "dataset1.csv"))
+    _, trained = st.Twin.default().train(record, stride=16, select_lags=[1, 3], selection_stride=16)
+    assert sorted(s["lags"] for s in trained.lag_selection) == [1, 3]
+    assert trained.training["lags"] == trained.lag_selection[0]["lags"]
+    message = cli_error("train", "--data", "data/dataset1.csv", "--out", "/tmp/never.ssp", "--stride", "0")
+    with pytest.raises(st.TrainError) as caught:
+        st.Twin.default().train(record, stride=0)
+    assert str(caught.value) == message == "--stride must be at least 1"
+    with pytest.raises(st.TrainError, match="--target nonsense: expected one of discrepancy, measured"):
+        st.Twin.default().train(record, target="nonsense")
+
+
+def test_learn_is_the_cli_learning(tmp_path):
+    report = tmp_path / "l.json"
+    args = ["--mode", "uniform", "--initial", "64", "--nmse-every", "50"]
+    done = cli("learn", "--data", "data/dataset1.csv", "data/dataset2.csv", *args, "--report", str(report))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads(report.read_text())
+    records = [st.Record.read("data/dataset1.csv"), st.Record.read("data/dataset2.csv")]
+    learned, twin = st.Twin.default().learn(records, mode="uniform", initial=64, nmse_every=50)
+    assert set(learned.keys()) == set(expected.keys())
+    [mode], [cli_mode] = learned.modes, expected["modes"]
+    assert mode["mode"] == cli_mode["mode"] == "uniform"
+    for ours, theirs in zip(mode["records"], cli_mode["records"]):
+        assert ours["queries"] == theirs["queries"] and ours["final_nmse"] == theirs["final_nmse"]
+    assert mode["final_gps_nmse"] == cli_mode["final_gps_nmse"]
+    # One mode: the twin with the corrector as learned.
+    assert twin is not None and "corrector" in twin.parameters
+    message = cli_error("learn", "--data", "data/dataset1.csv", "--forgetting", "2")
+    with pytest.raises(st.TrainError) as caught:
+        st.Twin.default().learn(records, forgetting=2.0)
+    assert str(caught.value) == message
+
+
+def test_run_is_the_cli_run(tmp_path):
+    fmu = REPO / "target" / "fmu" / "fmu_shear.fmu"
+    output = tmp_path / "run.csv"
+    done = cli("run", str(fmu), "--stop", "0.5", "--set", "k2=3000", "--output", str(output))
+    assert done.returncode == 0, done.stderr
+    expected = pd.read_csv(output)
+    ran = st.run(fmu, stop=0.5, sets={"k2": 3000})
+    frame = ran.to_frame()
+    assert list(frame.columns) == list(expected.columns)
+    np.testing.assert_allclose(frame.to_numpy(), expected.to_numpy(), rtol=1e-15, atol=0)
+    assert ran.stop == 0.5 and ran.terminated is None
+    message = cli_error("run", str(fmu), "--set", "nonsense=1", "--output", str(tmp_path / "x.csv"))
+    with pytest.raises(st.RunError) as caught:
+        st.run(fmu, sets={"nonsense": 1})
+    assert str(caught.value) == message
+    with pytest.raises(st.RunError, match="--algorithm sideways: expected one of gauss-seidel, jacobi"):
+        st.run(fmu, algorithm="sideways")
+
+
+def test_control_retunes_schedules_and_exports_an_ssp(calibrated, tmp_path):
+    record = st.Record.read(str(DATA / "dataset3.csv"))
+    calibrated.save(str(tmp_path / "c.ssp"))
+    report, ssp = tmp_path / "control.json", tmp_path / "controlled.ssp"
+    flags = ["--q", "10", "--gap", "2-3:5e-4", "--retune", "--schedule"]
+    done = cli("control", "--twin", str(tmp_path / "c.ssp"), "--data", str(DATA / "dataset3.csv"), *flags,
+               "--report", str(report), "--ssp", str(tmp_path / "cli.ssp"))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads(report.read_text())
+    control = calibrated.control(record, [10], gaps=["2-3:5e-4"], retune=True, schedule=True, ssp=ssp)
+    assert control.retune == expected["retune"] and control.retune["chosen_q"] > 10
+    assert control.schedule["contacts"] == expected["schedule"]["contacts"]
+    assert control.passive["contacts"] == expected["passive"]["contacts"]
+    # The time histories: the passive structure's and the scheduled one's, at the record's rate.
+    passive = control.frame("passive")
+    assert list(passive.columns) == ["time", "acc1", "acc2", "acc3", "control"]
+    assert len(passive) == len(record) and not passive["control"].any()
+    assert control.responses["scheduled"]["control"].std() > 0
+    # The SSP runs in any SSP tool; here through shear_twin.run.
+    step = 1.0 / control.control_rate_hz  # the controller's, which the FMU insists on
+    ran = st.run(ssp, stop=800 * step, step=step)
+    assert "lqr.control_force" in ran.columns and len(ran["time"]) == 801
+    # The same system as the CLI's --ssp: the same recording.
+    from_cli = st.run(tmp_path / "cli.ssp", stop=800 * step, step=step).to_frame()
+    pd.testing.assert_frame_equal(ran.to_frame(), from_cli)
+    # And a compare closes the loop with the report's controller.
+    looped = calibrated.compare(record, controller=control)
+    assert looped.nmse != calibrated.compare(record).nmse
+
+
+def test_control_options_raise_the_cli_messages(tmp_path):
+    record = st.Record.read(str(DATA / "dataset1.csv"))
+    twin = st.Twin.default()
+    for flags, kwargs in [
+        (["--gap", "2-4:5e-4"], {"gaps": ["2-4:5e-4"]}),
+        (["--gap", "2-3:-1"], {"gaps": ["2-3:-1"]}),
+        (["--schedule", "--variance-threshold", "maybe"], {"schedule": True, "variance_threshold": "maybe"}),
+        (["--max-force", "0"], {"max_force": 0.0}),
+        (["--sensor-noise=-1"], {"sensor_noise": -1.0}),
+    ]:
+        message = cli_error("control", "--data", "data/dataset1.csv", "--q", "1e3", *flags,
+                            "--report", str(tmp_path / "never.json"))
+        with pytest.raises(st.ControlError) as caught:
+            twin.control(record, [1e3], **kwargs)
+        assert str(caught.value) == message, flags
+
+
+def test_watch_calls_back_per_alert_and_raises_what_the_callback_raised(calibrated, tmp_path):
+    record, _ = st.synth({"seed": 4, "duration": 8.0, "effects": [{"kind": "contact", "location": [2, 3], "gap": 2e-4, "stiffness": 9000}]},
+                         out=str(tmp_path / "s.csv"))
+    seen = []
+    summary = calibrated.watch(tmp_path / "s.csv", tmp_path / "alerts.jsonl", on_alert=seen.append,
+                               diagnosis=False)
+    written = [json.loads(line) for line in (tmp_path / "alerts.jsonl").read_text().splitlines()]
+    assert seen == written and seen[-1]["kind"] == "end"
+    assert summary.samples == len(record)
+
+    class Stop(Exception):
+        pass
+
+    def stop(alert):
+        raise Stop(alert["kind"])
+
+    with pytest.raises(Stop):
+        calibrated.watch(tmp_path / "s.csv", tmp_path / "alerts2.jsonl", on_alert=stop, diagnosis=False)
+    message = cli_error("watch", "--source", "-", "--follow", "--alerts", str(tmp_path / "a.jsonl"))
+    with pytest.raises(st.WatchError) as caught:
+        calibrated.watch("-", tmp_path / "a.jsonl", follow=True)
+    assert str(caught.value) == message
+
+
+def test_watch_reads_standard_input(calibrated, tmp_path):
+    calibrated.save(str(tmp_path / "c.ssp"))
+    script = ("import sys, shear_twin as st; "
+              f"s = st.Twin.open({str(tmp_path / 'c.ssp')!r}).watch('-', {str(tmp_path / 'a.jsonl')!r}, diagnosis=False); "
+              "print(s.samples)")
+    done = subprocess.run([sys.executable, "-c", script], input=(DATA / "dataset1.csv").read_text(),
+                          capture_output=True, text=True, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    assert int(done.stdout) == 1024
+
+
+def _mqtt_publish(port: int, topic: str, payloads: list[str]) -> None:
+    """Publish `payloads` (QoS 0) as an MQTT 3.1.1 client would: CONNECT, PUBLISHes,
+    DISCONNECT. Written out here (a few bytes each) rather than adding an MQTT client package
+    to the test environment."""
+    import socket
+
+    def packet(kind: int, body: bytes) -> bytes:
+        n, length = len(body), b""
+        while True:
+            byte, n = n % 128, n // 128
+            length += bytes([byte | (128 if n else 0)])
+            if not n:
+                return bytes([kind]) + length + body
+
+    def text(s: str) -> bytes:
+        b = s.encode()
+        return len(b).to_bytes(2, "big") + b
+
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(packet(0x10, text("MQTT") + bytes([4, 2]) + (60).to_bytes(2, "big") + text("pytest-pub")))
+        assert s.recv(4)[:1] == b"\x20"  # CONNACK
+        for p in payloads:
+            s.sendall(packet(0x30, text(topic) + p.encode()))
+        s.sendall(packet(0xE0, b""))
+
+
+def test_watch_from_mqtt_calls_back_per_alert(calibrated, tmp_path):
+    mosquitto = next((p for p in ("/usr/sbin/mosquitto", "/usr/bin/mosquitto") if Path(p).exists()), None)
+    if mosquitto is None:
+        pytest.fail("mosquitto is not installed: run scripts/prerequisites.sh as root, or apt-get install mosquitto")
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    config = tmp_path / "mosquitto.conf"
+    config.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n")
+    broker = subprocess.Popen([mosquitto, "-c", str(config)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "mosquitto did not listen"
+                time.sleep(0.02)
+        connected = threading.Event()
+        seen = []
+
+        def on_alert(alert):
+            seen.append(alert)
+            if alert["kind"] == "connection" and alert["state"] == "connected":
+                connected.set()
+
+        result = {}
+        watcher = threading.Thread(target=lambda: result.update(summary=calibrated.watch(
+            f"mqtt://127.0.0.1:{port}/shear/data", tmp_path / "alerts.jsonl", on_alert=on_alert,
+            idle=3.0, diagnosis=False)))
+        watcher.start()
+        assert connected.wait(20), seen
+        lines = (DATA / "dataset1.csv").read_text().splitlines()[1:]
+        # Messages of 64 lines each, without a header (the usual columns).
+        _mqtt_publish(port, "shear/data", ["\n".join(lines[i:i + 64]) for i in range(0, len(lines), 64)])
+        watcher.join(60)
+        assert not watcher.is_alive()
+    finally:
+        broker.terminate()
+        broker.wait(10)
+    summary = result["summary"]
+    assert summary.samples == len(lines) == 1024
+    written = [json.loads(line) for line in (tmp_path / "alerts.jsonl").read_text().splitlines()]
+    assert seen == written and seen[-1]["kind"] == "end"
+
+
+def test_fleet_as_a_call(tmp_path):
+    from shear_twin import fleet
+
+    manifest = fleet.make_synthetic_fleet(tmp_path / "f", 2, duration=6.0, seed=5)
+    m = json.loads(manifest.read_text())
+    m["tasks"] = ["compare"]
+    manifest.write_text(json.dumps(m))
+    frame, summary = fleet.fleet(manifest, workers=1, out=tmp_path / "report")
+    assert list(frame["structure"]) == ["s000", "s001"] and summary["structures"] == 2
+    assert frame["error"].isna().all()
+    assert list(pd.read_csv(tmp_path / "report" / "fleet.csv")["structure"]) == ["s000", "s001"]
