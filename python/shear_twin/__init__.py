@@ -390,6 +390,13 @@ def record_from_frame(frame: Any, name: str = "<DataFrame>") -> Record:
     return Record(*(col[c] for c in main), extra=extra or None, name=name)
 
 
-def synth(scenario: dict[str, Any], out: str | None = None) -> tuple[Record, dict[str, Any]]:
-    """A synthetic record of ``twin synth``'s structure and its truth (the hidden effects)."""
-    return _native.synth(scenario, None if out is None else str(out))
+def synth(scenario: dict[str, Any], out: str | os.PathLike | None = None, *,
+          controller: str | os.PathLike | Report | dict | None = None,
+          controller_q: float | None = None) -> tuple[Record, dict[str, Any]]:
+    """``twin synth``: a synthetic record of the frame (``scenario``: the scenario JSON as a
+    dict, every field optional — the CLI's flags are its fields) and its truth (the hidden
+    effects: the ``--truth`` file). ``out``: also write the record there. ``controller``: a
+    ``twin control`` report whose design ``controller_q`` (default the first stable one) runs in
+    the structure's loop; the record gets a ``control`` column."""
+    return _native.synth(scenario, _path(out), controller=_report_or_path(controller),
+                         controller_q=controller_q)

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use numpy::{PyArray1, PyReadonlyArray1};
-use orchestrator::synth::{csv_text, synth_record, Scenario};
+use orchestrator::synth::{csv_text, synth_controlled, InLoopController, Scenario};
 use orchestrator::twin::data::Measurement;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -125,20 +125,33 @@ impl Record {
 
 /// A synthetic record of `twin synth`'s structure: `scenario` is the scenario JSON as a dict
 /// (see `twin synth --help`; every field optional). Returns the record and the truth (a dict:
-/// what the data file does not say). With `out`, the record is also written there.
+/// what the data file does not say). With `out`, the record is also written there; with
+/// `controller` (a `twin control` report, its path or the dict), its design `controller_q`
+/// (default: the first stable one) runs in the structure's loop and the record gets a
+/// `control` column.
 #[pyfunction]
-#[pyo3(signature = (scenario, out = None))]
+#[pyo3(signature = (scenario, out = None, *, controller = None, controller_q = None))]
 pub fn synth<'py>(
     py: Python<'py>,
     scenario: &Bound<'py, PyAny>,
     out: Option<PathBuf>,
+    controller: Option<&Bound<'py, PyAny>>,
+    controller_q: Option<f64>,
 ) -> PyResult<(Record, Bound<'py, PyAny>)> {
     let value: serde_json::Value =
         pythonize::depythonize(scenario).map_err(|e| to_py(Kind::Synth, anyhow::anyhow!(e)))?;
+    let spec = controller
+        .map(|c| crate::twin::controller_spec(Kind::Synth, c))
+        .transpose()?;
     let (mut measurement, truth) = detached(py, || {
         let scenario =
             Scenario::from_json(&value, "scenario").map_err(|e| to_py(Kind::Synth, e))?;
-        let (record, truth) = synth_record(&scenario).map_err(|e| to_py(Kind::Synth, e))?;
+        let control = spec
+            .map(|spec| InLoopController::from_report(spec, controller_q, scenario.seed))
+            .transpose()
+            .map_err(|e| to_py(Kind::Synth, e))?;
+        let (record, truth) =
+            synth_controlled(&scenario, control).map_err(|e| to_py(Kind::Synth, e))?;
         let truth = serde_json::to_value(&truth).map_err(|e| to_py(Kind::Synth, e))?;
         Ok((record.measurement, truth))
     })?;

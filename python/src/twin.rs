@@ -66,7 +66,7 @@ fn response<'py>(py: Python<'py>, r: &Response) -> PyResult<Bound<'py, PyDict>> 
 }
 
 /// A `twin control` report given as a path, or as the report itself (a dict).
-fn controller_spec(kind: Kind, value: &Bound<'_, PyAny>) -> PyResult<ControllerSpec> {
+pub(crate) fn controller_spec(kind: Kind, value: &Bound<'_, PyAny>) -> PyResult<ControllerSpec> {
     if let Ok(path) = value.extract::<PathBuf>() {
         return ControllerSpec::load(&path).map_err(|e| to_py(kind, e));
     }

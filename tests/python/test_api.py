@@ -409,3 +409,20 @@ def test_fleet_as_a_call(tmp_path):
     assert list(frame["structure"]) == ["s000", "s001"] and summary["structures"] == 2
     assert frame["error"].isna().all()
     assert list(pd.read_csv(tmp_path / "report" / "fleet.csv")["structure"]) == ["s000", "s001"]
+
+
+def test_synth_with_a_controller_in_the_loop_is_the_cli_record(calibrated, tmp_path):
+    record = st.Record.read(str(DATA / "dataset1.csv"))
+    control = calibrated.control(record, [1e3])
+    (tmp_path / "control.json").write_text(control.to_json())
+    (tmp_path / "scenario.json").write_text(json.dumps({"seed": 5, "duration": 4.0}))
+    done = cli("synth", "--scenario", str(tmp_path / "scenario.json"), "--controller", str(tmp_path / "control.json"),
+               "--out", str(tmp_path / "cli.csv"))
+    assert done.returncode == 0, done.stderr
+    ours, _ = st.synth({"seed": 5, "duration": 4.0}, controller=control)
+    theirs = st.Record.read(str(tmp_path / "cli.csv")).to_dict()
+    assert set(ours.to_dict()) == set(theirs) and "control" in theirs
+    for name, column in ours.to_dict().items():
+        # The CLI's file holds 9 significant digits (csv::round9).
+        np.testing.assert_allclose(column, theirs[name], rtol=1e-8, atol=1e-12, err_msg=name)
+    assert np.abs(theirs["control"]).max() > 0

@@ -217,20 +217,11 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     let scenario = args.scenario()?;
     let control = match &args.controller {
         None => None,
-        Some(path) => {
-            let spec = ControllerSpec::load(path)?;
-            // Refuse a bad report or design now, before the record is made.
-            spec.controller(args.controller_q, 1.0 / spec.control_rate_hz)?;
-            let q = args.controller_q;
-            let interval = 1.0 / spec.control_rate_hz;
-            let sd = spec.sensor_noise_sd.unwrap_or([0.0; 3]);
-            Some(InLoopController {
-                make: Box::new(move |dt| spec.controller(q, dt).map_err(|e| e.to_string())),
-                interval,
-                sensor_sd: sd,
-                seed: scenario.seed,
-            })
-        }
+        Some(path) => Some(InLoopController::from_report(
+            ControllerSpec::load(path)?,
+            args.controller_q,
+            scenario.seed,
+        )?),
     };
     let (record, truth) = synth_controlled(&scenario, control)?;
     let elapsed = started.elapsed();
