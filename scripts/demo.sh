@@ -21,8 +21,10 @@ cd "$root"
 # and the CLI, then the shear_twin package built from python/ into .venv: the Python part and
 # the fleet at the end need it, and a package built from older sources would not be this
 # checkout's.
+echo "== set-up: .venv (scripts/setup-python.sh), the FMUs and the CLI, the shear_twin package =="
 scripts/setup-python.sh
 scripts/build-fmus.sh
+echo "building the shear_twin package into .venv (maturin, release; minutes the first time)"
 scripts/install-python-package.sh
 twin=target/release/twin
 out=out/demo
