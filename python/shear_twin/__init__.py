@@ -139,39 +139,45 @@ class Twin:
 
     def compare(self, record: Record, *, transient: float | None = None,
                 tolerance: float | None = None, controller: str | os.PathLike | Report | dict | None = None,
-                controller_q: float | None = None) -> Comparison:
+                controller_q: float | None = None, plot: str | os.PathLike | None = None,
+                frf: bool = False, latent_threshold: float | None = None) -> Comparison:
         """``twin compare``: run the twin on the record's force and compare its accelerations
         with the measured ones. ``controller``: a ``twin control`` report (a path, or the report
         ``Twin.control`` returned) whose design ``controller_q`` (default the first stable one)
         closes the loop. None means the CLI's default (``transient`` 2 s; ``tolerance`` 2 × the
-        twin's worst validation NMSE, else 0.5 %)."""
+        twin's worst validation NMSE, else 0.5 %). ``plot``: the CLI's ``--plot`` (.svg; with
+        ``frf`` the frequency view, and with a corrector ``PLOT-latent.svg`` against
+        ``latent_threshold``)."""
         out = self._native.compare(record, transient=transient, tolerance=tolerance,
-                                   controller=_report_or_path(controller), controller_q=controller_q)
+                                   controller=_report_or_path(controller), controller_q=controller_q,
+                                   plot=_path(plot), frf=frf, latent_threshold=latent_threshold)
         return Comparison(out["report"], out["predictions"])
 
     def calibrate(self, record: Record, *, parameters: list[str] | None = None,
                   priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
                   seed: int | None = None, transient: float | None = None,
-                  validate: Sequence[Record] = (), threads: int | None = None) -> tuple["Twin", Report]:
+                  validate: Sequence[Record] = (), threads: int | None = None,
+                  plot: str | os.PathLike | None = None) -> tuple["Twin", Report]:
         """``twin calibrate``: MAP calibration of ``parameters`` (default m1..3, c1..3, k1..3)
         and the noise variances; ``priors`` as the CLI's ``--priors`` file's JSON; the
         ``validate`` records' worst NMSE sets the new twin's tolerance. Defaults (None): 12
         starts, seed 1, transient 2 s, all cores. Returns the calibrated twin and the report."""
         twin, report = self._native.calibrate(record, parameters=parameters, priors=priors, starts=starts,
                                               seed=seed, transient=transient, validate=list(validate),
-                                              threads=threads)
+                                              threads=threads, plot=_path(plot))
         return Twin(twin), Report(report)
 
     def diagnose(self, record: Record, *, effects: list[str] | None = None, transient: float | None = None,
                  tolerance: float | None = None, threads: int | None = None,
-                 block: float | None = None, always_fit: bool = False) -> Report:
+                 block: float | None = None, always_fit: bool = False,
+                 plot: str | os.PathLike | None = None) -> Report:
         """``twin diagnose``: none, recalibrate, add physics (which effect, where, how strong),
         sensor fault or update the data-based model, with the evidence. ``effects`` limits the
         candidates (``["contact@2-3", "cubic@2"]``). Defaults (None): transient 2 s, 1 s blocks,
         all cores, the twin's tolerance."""
         return Report(self._native.diagnose(record, effects=effects, transient=transient,
                                             tolerance=tolerance, threads=threads, block=block,
-                                            always_fit=always_fit))
+                                            always_fit=always_fit, plot=_path(plot)))
 
     def add_physics(self, record: Record, *, effects: list[str] | None = None,
                     diagnosis: Report | dict[str, Any] | None = None, refine: bool = False,
@@ -192,7 +198,7 @@ class Twin:
                 schedule: bool = False, margin: float | None = None, lookahead: float | None = None,
                 dwell: float | None = None, variance_threshold: str | float | None = None,
                 estimator_costs: bool = False, ssp: str | os.PathLike | None = None,
-                ssp_q: float | None = None) -> Control:
+                ssp_q: float | None = None, plot: str | os.PathLike | None = None) -> Control:
         """``twin control``: an LQR design per ``q`` on the twin's structure, run in the loop on
         the record's force, passive and under each design. ``retune``: the smallest q (on a grid
         up to 100 × the smallest) keeping the contact initiations ≤ ``target_contacts`` (3)
@@ -210,7 +216,8 @@ class Twin:
                                    target_contacts=target_contacts, max_force=max_force,
                                    schedule=schedule, margin=margin, lookahead=lookahead, dwell=dwell,
                                    variance_threshold=variance_threshold,
-                                   estimator_costs=estimator_costs, ssp=_path(ssp), ssp_q=ssp_q)
+                                   estimator_costs=estimator_costs, ssp=_path(ssp), ssp_q=ssp_q,
+                                   plot=_path(plot))
         return Control(out)
 
     def watch(self, source: str | os.PathLike, alerts: str | os.PathLike, *,
@@ -257,18 +264,19 @@ class Twin:
               target: str | None = None, transient: float | None = None, initial: int | None = None,
               refit_every: int | None = None, refit_growth: float | None = None,
               refit_iterations: int | None = None, nmse_every: int | None = None,
-              change_run: int | None = None) -> tuple[Report, "Twin | None"]:
+              change_run: int | None = None,
+              out_dir: str | os.PathLike | None = None) -> tuple[Report, "Twin | None"]:
         """``twin learn``: stream-based active learning of the GP corrector over ``records`` in
         order (the paper's Algorithm 1). ``mode``: "uniform", "fixed" or "adaptive" (default,
         with ``forgetting`` 1); ``all_modes``: the six modes of Table 2 (``--modes all``).
         Returns the report and, for one mode, the twin with the corrector as learned (the CLI's
-        ``--out``), else None."""
+        ``--out``), else None; ``out_dir``: one plot per mode there (``learn-MODE.svg``)."""
         report, twin = self._native.learn(list(records), mode=mode, forgetting=forgetting,
                                           all_modes=all_modes, threshold=threshold, lags=lags,
                                           target=target, transient=transient, initial=initial,
                                           refit_every=refit_every, refit_growth=refit_growth,
                                           refit_iterations=refit_iterations, nmse_every=nmse_every,
-                                          change_run=change_run)
+                                          change_run=change_run, out_dir=_path(out_dir))
         return Report(report), None if twin is None else Twin(twin)
 
 
@@ -336,7 +344,8 @@ class RunResult:
 def run(model: str | os.PathLike, *, start: float | None = None, stop: float | None = None,
         step: float | None = None, input: str | os.PathLike | Any = None,
         sets: dict[str, float | int | bool | str] | None = None, output_all: bool = False,
-        hold_inputs: bool = False, algorithm: str | None = None) -> RunResult:
+        hold_inputs: bool = False, algorithm: str | None = None,
+        plot: str | os.PathLike | None = None) -> RunResult:
     """``twin run``: run any FMI 2.0 co-simulation FMU (``.fmu``) or SSP system (``.ssp``) and
     record its outputs. ``input``: a CSV path or a DataFrame (``time``, then columns named like
     the model's inputs, or ``component.variable`` in a system); ``sets``: start values by name;
@@ -353,7 +362,7 @@ def run(model: str | os.PathLike, *, start: float | None = None, stop: float | N
     try:
         columns, info = _native.run(os.fspath(model), start=start, stop=stop, step=step,
                                     input=_path(input), sets=sets, output_all=output_all,
-                                    hold_inputs=hold_inputs, algorithm=algorithm)
+                                    hold_inputs=hold_inputs, algorithm=algorithm, plot=_path(plot))
     finally:
         if scratch is not None:
             os.unlink(scratch.name)

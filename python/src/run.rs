@@ -19,7 +19,8 @@ use crate::{choice, detached, to_py, Kind};
 /// `step`, `terminated` (the component that ended the run and when, or None).
 #[pyfunction]
 #[pyo3(signature = (model, *, start = None, stop = None, step = None, input = None,
-                    sets = None, output_all = false, hold_inputs = false, algorithm = None))]
+                    sets = None, output_all = false, hold_inputs = false, algorithm = None,
+                    plot = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn run<'py>(
     py: Python<'py>,
@@ -32,8 +33,17 @@ pub fn run<'py>(
     output_all: bool,
     hold_inputs: bool,
     algorithm: Option<&str>,
+    plot: Option<PathBuf>,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
     let kind = Kind::Run;
+    if let Some(plot) = &plot {
+        if plot.extension().and_then(|e| e.to_str()) != Some("svg") {
+            return Err(crate::invalid(
+                kind,
+                format!("--plot {}: only .svg is supported", plot.display()),
+            ));
+        }
+    }
     let mut texts = Vec::new();
     for (name, value) in sets.unwrap_or_default() {
         // As `--set NAME=VALUE` is read: the value's text (Python's bools as the CLI's).
@@ -58,7 +68,20 @@ pub fn run<'py>(
         },
     };
     let result = detached(py, || {
-        orchestrator::cosim::run::run(&model, &options, |_, _| {}).map_err(|e| to_py(kind, e))
+        let result = orchestrator::cosim::run::run(&model, &options, |_, _| {})
+            .map_err(|e| to_py(kind, e))?;
+        if let Some(plot) = &plot {
+            let title = model
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let svg = orchestrator::report::run_plot::plot_run(&result, &title).map_err(|m| {
+                crate::invalid(kind, format!("cannot draw {}: {m}", plot.display()))
+            })?;
+            orchestrator::fsutil::write_text_atomically(plot, &svg)
+                .map_err(|e| to_py(kind, e))?;
+        }
+        Ok(result)
     })?;
     let columns = PyDict::new(py);
     columns.set_item("time", numpy::PyArray1::from_slice(py, &result.time))?;

@@ -8,7 +8,9 @@ use orchestrator::cosim::import::Fmu;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, Twin as CoreTwin};
 use orchestrator::workflows::calibrate::{calibrate_validated, priors_from_json, CalibrationSetup};
+use orchestrator::report::control_plot::plot_control;
 use orchestrator::workflows::compare::{compare, CompareOptions};
+use orchestrator::workflows::options::check_svg;
 use orchestrator::workflows::control::closed_loop::{Gap, Response};
 use orchestrator::workflows::control::{
     run_control, twin_for_control, ControlOptions, ControllerSpec, Retune,
@@ -142,7 +144,8 @@ impl Twin {
     /// accelerations. Returns `{"report": <the CLI's JSON report>, "predictions": {"time",
     /// "acc1".. [, "latent_var1".., "sd1"..]: arrays}}`.
     #[pyo3(signature = (record, *, transient = None, tolerance = None, controller = None,
-                        controller_q = None))]
+                        controller_q = None, plot = None, frf = false, latent_threshold = None))]
+    #[allow(clippy::too_many_arguments)]
     fn compare<'py>(
         &self,
         py: Python<'py>,
@@ -151,22 +154,35 @@ impl Twin {
         tolerance: Option<f64>,
         controller: Option<&Bound<'py, PyAny>>,
         controller_q: Option<f64>,
+        plot: Option<PathBuf>,
+        frf: bool,
+        latent_threshold: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let kind = Kind::Twin;
+        if let Some(path) = &plot {
+            check_svg(path).map_err(|e| to_py(kind, e))?;
+        }
         let defaults = CompareOptions::default();
         let options = CompareOptions {
             transient: transient.unwrap_or(defaults.transient),
             tolerance,
             controller_q,
-            ..defaults
+            latent_threshold,
         };
         options.validate().map_err(|e| to_py(kind, e))?;
         let data = &record.measurement;
         options.validate_for(data).map_err(|e| to_py(kind, e))?;
         let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
         let compared = detached(py, || {
-            compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
-                .map_err(|e| to_py(kind, e))
+            let compared = compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
+                .map_err(|e| to_py(kind, e))?;
+            if let Some(path) = &plot {
+                orchestrator::workflows::compare::plot(
+                    &self.twin, data, &compared, &options, path, frf,
+                )
+                .map_err(|e| to_py(kind, e))?;
+            }
+            Ok(compared)
         })?;
         // The same report as `twin compare --report`.
         let report =
@@ -198,7 +214,7 @@ impl Twin {
     /// "linear", "mean": 4021, "variance": 10000}}`); `validate` records set the twin's
     /// tolerance. Returns the calibrated twin and the CLI's report (this twin is kept as it is).
     #[pyo3(signature = (record, *, parameters = None, priors = None, starts = None, seed = None,
-                        transient = None, validate = Vec::new(), threads = None))]
+                        transient = None, validate = Vec::new(), threads = None, plot = None))]
     #[allow(clippy::too_many_arguments)]
     fn calibrate<'py>(
         &self,
@@ -211,8 +227,12 @@ impl Twin {
         transient: Option<f64>,
         validate: Vec<PyRef<'py, Record>>,
         threads: Option<usize>,
+        plot: Option<PathBuf>,
     ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
         let kind = Kind::Calibrate;
+        if let Some(path) = &plot {
+            check_svg(path).map_err(|e| to_py(kind, e))?;
+        }
         let mut setup = CalibrationSetup::default();
         if let Some(p) = parameters {
             setup.parameters = p;
@@ -233,6 +253,15 @@ impl Twin {
         let (new_twin, report) = detached(py, || {
             let v = calibrate_validated(&self.twin, data, &validation, &setup)
                 .map_err(|e| to_py(kind, e))?;
+            if let Some(path) = &plot {
+                orchestrator::workflows::calibrate::validated::plot(
+                    &v.twin,
+                    data,
+                    setup.transient,
+                    path,
+                )
+                .map_err(|e| to_py(kind, e))?;
+            }
             // `twin calibrate --report`'s fields, less `out` (nothing is written here).
             let report = orchestrator::report::json::calibrate(
                 &self.twin,
@@ -253,7 +282,7 @@ impl Twin {
     /// model, with the evidence. Returns the CLI's JSON report as a dict. `effects` limits the
     /// candidates (`["contact@2-3", "cubic@2"]`).
     #[pyo3(signature = (record, *, effects = None, transient = None, tolerance = None,
-                        threads = None, block = None, always_fit = false))]
+                        threads = None, block = None, always_fit = false, plot = None))]
     #[allow(clippy::too_many_arguments)]
     fn diagnose<'py>(
         &self,
@@ -265,6 +294,7 @@ impl Twin {
         threads: Option<usize>,
         block: Option<f64>,
         always_fit: bool,
+        plot: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let kind = Kind::Diagnose;
         let mut o = DiagnoseOptions {
@@ -281,7 +311,14 @@ impl Twin {
             o.candidates = parse_candidates(&effects).map_err(|e| to_py(kind, e))?;
         }
         let d = detached(py, || {
-            diagnose(&self.twin, data, &o).map_err(|e| to_py(kind, e))
+            let d = diagnose(&self.twin, data, &o).map_err(|e| to_py(kind, e))?;
+            if let Some(path) = &plot {
+                let svg = orchestrator::report::diagnose_plot::draw_diagnosis(&d)
+                    .map_err(|e| to_py(kind, e))?;
+                orchestrator::fsutil::write_text_atomically(path, &svg)
+                    .map_err(|e| to_py(kind, e))?;
+            }
+            Ok(d)
         })?;
         to_object(py, &d)
     }
@@ -367,7 +404,7 @@ impl Twin {
                         gaps = Vec::new(), retune = false, target_contacts = None,
                         max_force = None, schedule = false, margin = None, lookahead = None,
                         dwell = None, variance_threshold = None, estimator_costs = false,
-                        ssp = None, ssp_q = None))]
+                        ssp = None, ssp_q = None, plot = None))]
     #[allow(clippy::too_many_arguments)]
     fn control<'py>(
         &self,
@@ -393,8 +430,12 @@ impl Twin {
         estimator_costs: bool,
         ssp: Option<PathBuf>,
         ssp_q: Option<f64>,
+        plot: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let kind = Kind::Control;
+        if let Some(path) = &plot {
+            check_svg(path).map_err(|e| to_py(kind, e))?;
+        }
         let err = |e: orchestrator::workflows::options::InvalidOption| to_py(kind, e);
         let d = ControlOptions::default();
         let rd = Retune::default();
@@ -445,6 +486,19 @@ impl Twin {
             let twin = twin_for_control(&self.twin, sensor_noise);
             let outcome = run_control(&twin, data, &options, &mut |_, _| {})
                 .map_err(|e| to_py(kind, e))?;
+            let svg = match &plot {
+                Some(path) => Some((
+                    path,
+                    plot_control(
+                        &outcome,
+                        &format!("twin control on {}", data.path.display()),
+                    )
+                    .map_err(|m| {
+                        invalid(kind, format!("cannot draw {}: {m}", path.display()))
+                    })?,
+                )),
+                None => None,
+            };
             if let Some(path) = &ssp {
                 let span = (data.time[0], *data.time.last().unwrap_or(&data.time[0]));
                 orchestrator::workflows::control::ssp::write_controlled_ssp(
@@ -460,6 +514,10 @@ impl Twin {
                         anyhow::Error::from(e).context(format!("--ssp {}", path.display())),
                     )
                 })?;
+            }
+            if let Some((path, text)) = svg {
+                orchestrator::fsutil::write_text_atomically(path, &text)
+                    .map_err(|e| to_py(kind, e))?;
             }
             Ok(outcome)
         })?;
@@ -626,7 +684,8 @@ impl Twin {
     #[pyo3(signature = (records, *, mode = None, forgetting = None, all_modes = false,
                         threshold = None, lags = None, target = None, transient = None,
                         initial = None, refit_every = None, refit_growth = None,
-                        refit_iterations = None, nmse_every = None, change_run = None))]
+                        refit_iterations = None, nmse_every = None, change_run = None,
+                        out_dir = None))]
     #[allow(clippy::too_many_arguments)]
     fn learn<'py>(
         &self,
@@ -645,6 +704,7 @@ impl Twin {
         refit_iterations: Option<u64>,
         nmse_every: Option<usize>,
         change_run: Option<usize>,
+        out_dir: Option<PathBuf>,
     ) -> PyResult<(Bound<'py, PyAny>, Option<Twin>)> {
         use orchestrator::workflows::learn::{FORGETTING, MODE};
         let kind = Kind::Train;
@@ -684,6 +744,10 @@ impl Twin {
             let names: Vec<String> = data.iter().map(|m| m.path.display().to_string()).collect();
             let report =
                 orchestrator::report::json::learn(&self.twin, &names, &options, seconds, &results);
+            if let Some(dir) = &out_dir {
+                orchestrator::workflows::learn::write_plots(&results, dir)
+                    .map_err(|e| to_py(kind, e))?;
+            }
             let learned = match results.as_slice() {
                 [one] => Some(
                     learned_twin(&self.twin, one, &options)

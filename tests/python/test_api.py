@@ -207,7 +207,9 @@ def test_learn_is_the_cli_learning(tmp_path):
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
     records = [st.Record.read("data/dataset1.csv"), st.Record.read("data/dataset2.csv")]
-    learned, twin = st.Twin.default().learn(records, mode="uniform", initial=64, nmse_every=50)
+    learned, twin = st.Twin.default().learn(records, mode="uniform", initial=64, nmse_every=50,
+                                            out_dir=tmp_path / "plots")
+    assert (tmp_path / "plots" / "learn-uniform.svg").stat().st_size > 1000
     assert set(learned.keys()) == set(expected.keys())
     [mode], [cli_mode] = learned.modes, expected["modes"]
     assert mode["mode"] == cli_mode["mode"] == "uniform"
@@ -247,10 +249,12 @@ def test_control_retunes_schedules_and_exports_an_ssp(calibrated, tmp_path):
     report, ssp = tmp_path / "control.json", tmp_path / "controlled.ssp"
     flags = ["--q", "10", "--gap", "2-3:5e-4", "--retune", "--schedule"]
     done = cli("control", "--twin", str(tmp_path / "c.ssp"), "--data", str(DATA / "dataset3.csv"), *flags,
-               "--report", str(report), "--ssp", str(tmp_path / "cli.ssp"))
+               "--report", str(report), "--ssp", str(tmp_path / "cli.ssp"), "--plot", str(tmp_path / "cli.svg"))
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
-    control = calibrated.control(record, [10], gaps=["2-3:5e-4"], retune=True, schedule=True, ssp=ssp)
+    control = calibrated.control(record, [10], gaps=["2-3:5e-4"], retune=True, schedule=True, ssp=ssp,
+                                 plot=tmp_path / "py.svg")
+    assert (tmp_path / "py.svg").read_bytes() == (tmp_path / "cli.svg").read_bytes()
     assert control.retune == expected["retune"] and control.retune["chosen_q"] > 10
     assert control.schedule["contacts"] == expected["schedule"]["contacts"]
     assert control.passive["contacts"] == expected["passive"]["contacts"]
@@ -426,3 +430,20 @@ def test_synth_with_a_controller_in_the_loop_is_the_cli_record(calibrated, tmp_p
         # The CLI's file holds 9 significant digits (csv::round9).
         np.testing.assert_allclose(column, theirs[name], rtol=1e-8, atol=1e-12, err_msg=name)
     assert np.abs(theirs["control"]).max() > 0
+
+
+def test_plots_are_the_cli_plots(tmp_path):
+    """`plot=` draws what `--plot` draws, byte for byte (the same data, title and drawing)."""
+    done = cli("compare", "--data", "data/dataset3.csv", "--plot", str(tmp_path / "cli.svg"), "--frf")
+    assert done.returncode == 0, done.stderr
+    st.Twin.default().compare(st.Record.read("data/dataset3.csv"), plot=tmp_path / "py.svg", frf=True)
+    assert (tmp_path / "py.svg").read_bytes() == (tmp_path / "cli.svg").read_bytes()
+    fmu = REPO / "target" / "fmu" / "fmu_shear.fmu"
+    done = cli("run", str(fmu), "--stop", "0.5", "--output", str(tmp_path / "r.csv"), "--plot", str(tmp_path / "run-cli.svg"))
+    assert done.returncode == 0, done.stderr
+    st.run(fmu, stop=0.5, plot=tmp_path / "run-py.svg")
+    assert (tmp_path / "run-py.svg").read_bytes() == (tmp_path / "run-cli.svg").read_bytes()
+    message = cli_error("compare", "--data", "data/dataset1.csv", "--plot", str(tmp_path / "x.png"))
+    with pytest.raises(st.TwinError) as caught:
+        st.Twin.default().compare(st.Record.read("data/dataset1.csv"), plot=tmp_path / "x.png")
+    assert str(caught.value) == message

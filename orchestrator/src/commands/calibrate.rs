@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::{run_and_compare, write_json};
+use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::run::Tolerance;
 use crate::twin::Twin;
@@ -98,9 +98,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        let comparison = run_and_compare(&new_twin, &data, args.transient, |_, _| {})?.comparison;
-        let title = format!("calibrated on {}", data.path.display());
-        crate::report::plot_comparison(&comparison, &data.force, &title, path, false)?;
+        crate::workflows::calibrate::validated::plot(&new_twin, &data, args.transient, path)?;
     }
 
     println!(

@@ -7,7 +7,6 @@ use anyhow::Result;
 
 use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
-use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::run::Prediction;
 use crate::twin::Twin;
@@ -95,31 +94,20 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         band_nmse,
         tolerance,
         ..
-    } = compared;
+    } = &compared;
+    let (noise_nmse, band_nmse) = (*noise_nmse, *band_nmse);
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
-        write_atomically(path, |f| write_predictions(f, &prediction))?;
+        write_atomically(path, |f| write_predictions(f, prediction))?;
     }
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        let title = format!("{} on {}", twin.describe(), data.path.display());
-        crate::report::plot_comparison(&comparison, &data.force, &title, path, args.frf)?;
-        if let Some(latent) = &prediction.latent_var {
-            let threshold = match (args.latent_threshold, twin.noise_variance) {
-                (Some(t), _) => [t; 3],
-                (None, Some(v)) => v,
-                (None, None) => [0, 1, 2].map(|f| {
-                    crate::workflows::learn::PAPER_THRESHOLD
-                        * variance(&data.acc[f][comparison.first..])
-                }),
-            };
-            crate::report::plot_latent_variance(&comparison, latent, threshold, &title, path)?;
-        }
+        crate::workflows::compare::plot(&twin, &data, &compared, &options, path, args.frf)?;
     }
-    print_summary(&twin, &data, &comparison);
+    print_summary(&twin, &data, comparison);
     if parameter_variance.is_some() {
         println!(
             "band: noise + parameter uncertainty, explains NMSE {:.3} / {:.3} / {:.3} % \

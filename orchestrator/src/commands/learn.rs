@@ -3,13 +3,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
-use super::{write_json, write_text_atomically};
+use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::learn::{
-    chosen_modes, learned_twin, prepare, run_modes, table, LearnOptions, Mode, ModeResult,
+    chosen_modes, learned_twin, prepare, run_modes, table, write_plots, LearnOptions, Mode,
     Stretch, FORGETTING,
 };
 
@@ -203,13 +203,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         .clone()
         .or_else(|| args.out_dir.as_ref().map(|d| d.join("learn.json")));
     if let Some(dir) = &args.out_dir {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
-        for r in &results {
-            let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
-            let svg = crate::report::learn_plot::plot_mode(r)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            write_text_atomically(&path, &svg)?;
+        for path in write_plots(&results, dir)? {
             println!("wrote {}", path.display());
         }
     }
@@ -220,13 +214,4 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
-}
-
-impl ModeResult {
-    fn mode_tag(&self) -> String {
-        match self.forgetting_factor {
-            Some(f) => Mode::Adaptive(f).tag(),
-            None => self.mode.clone(),
-        }
-    }
 }

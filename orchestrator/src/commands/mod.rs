@@ -9,7 +9,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 use crate::twin::run::Progress;
-pub(crate) use crate::twin::run::{run_and_compare, Compared};
+pub(crate) use crate::twin::run::Compared;
 
 pub mod add_physics;
 pub mod calibrate;

@@ -87,3 +87,32 @@ pub fn compare(
         }
     })
 }
+
+/// `twin compare --plot PATH [--frf]`: measured, predicted, ±3σ band, residual and failing
+/// windows (and the frequency-response view); with a corrector, the latent-variance view
+/// beside it (`PATH-latent.svg`) against `options.latent_threshold` (default: each floor's
+/// calibrated noise variance, else 1e-3 × its measured variance on this record).
+pub fn plot(
+    twin: &Twin,
+    data: &Measurement,
+    compared: &Compared,
+    options: &CompareOptions,
+    path: &std::path::Path,
+    frf: bool,
+) -> Result<(), crate::report::ReportError> {
+    let title = format!("{} on {}", twin.describe(), data.path.display());
+    let comparison = &compared.comparison;
+    crate::report::plot_comparison(comparison, &data.force, &title, path, frf)?;
+    if let Some(latent) = &compared.prediction.latent_var {
+        let threshold = match (options.latent_threshold, twin.noise_variance) {
+            (Some(t), _) => [t; 3],
+            (None, Some(v)) => v,
+            (None, None) => [0, 1, 2].map(|f| {
+                crate::workflows::learn::PAPER_THRESHOLD
+                    * crate::evaluation::stats::variance(&data.acc[f][comparison.first..])
+            }),
+        };
+        crate::report::plot_latent_variance(comparison, latent, threshold, &title, path)?;
+    }
+    Ok(())
+}

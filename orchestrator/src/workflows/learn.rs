@@ -125,6 +125,8 @@ pub enum LearnError {
     /// Records or options that cannot be learned from.
     #[error("{0}")]
     Setup(String),
+    #[error(transparent)]
+    Write(#[from] crate::fsutil::WriteError),
     #[error("running the physics on {record}")]
     Physics {
         record: String,
@@ -1280,4 +1282,32 @@ pub fn learned_twin(
         .final_gps
         .to_training_file(options.lags, options.target);
     crate::workflows::train::with_corrector(twin, &trained)
+}
+
+impl ModeResult {
+    /// A file-name-safe tag of the mode (`learn-TAG.svg`).
+    pub fn mode_tag(&self) -> String {
+        match self.forgetting_factor {
+            Some(f) => Mode::Adaptive(f).tag(),
+            None => self.mode.clone(),
+        }
+    }
+}
+
+/// `twin learn --out-dir DIR`'s plots: one SVG per mode, `DIR/learn-TAG.svg`; their paths.
+pub fn write_plots(
+    results: &[ModeResult],
+    dir: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, LearnError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| LearnError::Setup(format!("{}: cannot create: {e}", dir.display())))?;
+    let mut written = Vec::new();
+    for r in results {
+        let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
+        let svg = crate::report::learn_plot::plot_mode(r)
+            .map_err(|e| LearnError::Setup(format!("{}: {e}", path.display())))?;
+        crate::fsutil::write_text_atomically(&path, &svg)?;
+        written.push(path);
+    }
+    Ok(written)
 }
