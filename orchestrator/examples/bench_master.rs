@@ -5,7 +5,7 @@
 //!
 //!   cargo run --release -p orchestrator --example bench_master -- [--data D.csv] [--repetitions N]
 //!
-//! The FMU is the default twin's (`TWIN_FMU_DIR`, or target/fmu beside the build).
+//! The FMU is the default twin's (`TWIN_FMU_DIR`, else the one built into the binary).
 
 use std::time::Instant;
 

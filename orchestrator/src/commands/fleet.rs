@@ -41,14 +41,8 @@ pub fn run(args: &FleetArgs) -> Result<()> {
     let python = python();
     let mut command = Command::new(&python);
     command.arg("-m").arg("shear_twin.fleet").args(&args.args);
-    // The runner's twins find the built FMUs as this binary does (`target/fmu` beside it).
-    if std::env::var_os("TWIN_FMU_DIR").is_none() {
-        if let Ok(fmu) = crate::twin::find_fmu(crate::twin::SHEAR_FMU) {
-            if let Some(dir) = fmu.parent() {
-                command.env("TWIN_FMU_DIR", dir);
-            }
-        }
-    }
+    // The runner's twins find their FMUs as this binary does: `TWIN_FMU_DIR` when set (it is
+    // inherited), else the ones built into the package.
     let status = command.status().with_context(|| {
         format!(
             "cannot run {} -m shear_twin.fleet (install the package: scripts/test.sh, or \

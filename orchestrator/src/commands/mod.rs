@@ -16,6 +16,7 @@ pub mod calibrate;
 pub mod compare;
 pub mod control;
 pub mod diagnose;
+pub mod export_fmus;
 pub mod fleet;
 pub mod hybrid;
 pub mod init;
@@ -47,6 +48,9 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Package a built FMU library and its modelDescription.xml into a .fmu archive.
     PackFmu(pack_fmu::PackArgs),
+    /// Write the FMUs built into this twin (shear, GP corrector, LQR, substructure) as
+    /// DIR/<modelIdentifier>.fmu, for other FMI tools.
+    ExportFmus(export_fmus::ExportFmusArgs),
     /// Write the default twin (the shear FMU, default parameters) as an SSP archive.
     Init(init::InitArgs),
     /// Make a synthetic measurement record (the synthetic physical twin) and its truth JSON.
@@ -82,6 +86,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Calibrate(args) => calibrate::run(&args),
         Command::Train(args) => train::run(&args),
         Command::PackFmu(args) => pack_fmu::run(args),
+        Command::ExportFmus(args) => export_fmus::run(&args),
         Command::Init(args) => init::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Learn(args) => learn::run(&args),

@@ -11,6 +11,7 @@
 //! default tolerance of `twin compare` and `twin diagnose`.
 
 pub mod data;
+pub mod embedded;
 pub mod run;
 
 use std::collections::BTreeMap;
@@ -118,26 +119,35 @@ pub struct Twin {
     keep_alive: Vec<std::sync::Arc<dyn std::any::Any + Send + Sync>>,
 }
 
-/// Where the built FMUs are: `$TWIN_FMU_DIR`, `<exe dir>/../fmu` (the `target/fmu` beside a
-/// cargo-built `twin`), then `target/fmu` under the working directory.
+/// Where an FMU of the twin is: `$TWIN_FMU_DIR/<file_name>` when that is set (a developer's
+/// freshly built FMUs), else the one built into this binary, written into the per-user FMU
+/// cache on first use ([`embedded`]).
 pub fn find_fmu(file_name: &str) -> Result<PathBuf, TwinError> {
-    let mut candidates = Vec::new();
+    let not_found = |message: String| TwinError::Invalid {
+        path: PathBuf::from(file_name),
+        message,
+    };
     if let Some(dir) = std::env::var_os("TWIN_FMU_DIR") {
-        candidates.push(PathBuf::from(dir).join(file_name));
-    }
-    if let Ok(exe) = std::env::current_exe() {
-        if let Some(dir) = exe.parent().and_then(Path::parent) {
-            candidates.push(dir.join("fmu").join(file_name));
+        let path = PathBuf::from(dir).join(file_name);
+        if path.is_file() {
+            return Ok(path);
+        }
+        if embedded::embedded(file_name).is_none() {
+            return Err(not_found(format!(
+                "not in TWIN_FMU_DIR ({}) nor built into this binary; build the FMUs with \
+                 scripts/build-fmus.sh",
+                path.display()
+            )));
         }
     }
-    candidates.push(PathBuf::from("target/fmu").join(file_name));
-    candidates.iter().find(|p| p.is_file()).cloned().ok_or_else(|| TwinError::Invalid {
-        path: PathBuf::from(file_name),
-        message: format!(
-            "not found (looked in {}); build the FMUs with scripts/build-fmus.sh or set TWIN_FMU_DIR",
-            candidates.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
-        ),
-    })
+    let fmu = embedded::embedded(file_name).ok_or_else(|| {
+        not_found(
+            "not built into this binary; set TWIN_FMU_DIR to the FMUs of scripts/build-fmus.sh"
+                .into(),
+        )
+    })?;
+    embedded::path_of(fmu)
+        .map_err(|e| not_found(format!("cannot write the FMU built into this binary: {e}")))
 }
 
 impl Twin {

@@ -77,6 +77,10 @@ fn cache_keys_in_use() -> std::sync::MutexGuard<'static, BTreeSet<String>> {
         .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
+/// The cache's folder of the FMU archives built into the binary (`crate::twin::embedded`),
+/// which [`evict`] leaves alone.
+pub const EMBEDDED_ARCHIVES: &str = "embedded";
+
 /// How many FMUs the cache keeps; beyond, the oldest idle ones are removed when one is added.
 const CACHE_ENTRIES: usize = 16;
 
@@ -210,7 +214,9 @@ fn evict(root: &Path, keep: &str, in_use: &BTreeSet<String>) {
         .flatten()
         .filter(|e| {
             let name = e.file_name();
-            name != keep && !name.to_str().is_some_and(|n| in_use.contains(n))
+            name != keep
+                && name != EMBEDDED_ARCHIVES
+                && !name.to_str().is_some_and(|n| in_use.contains(n))
         })
         .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
         .collect();

@@ -30,7 +30,7 @@ const PHYSICAL_INPUTS: [&str; 4] = ["y2_start", "v2_start", "y2_end", "v2_end"];
 const PHYSICAL_OUTPUTS: [&str; 4] = ["measured_force", "y3", "v3", "relative"];
 
 /// [`super::run`] on the master with the `fmu_substructure` FMU found like the other FMUs
-/// (`TWIN_FMU_DIR`, then `target/fmu`).
+/// (`TWIN_FMU_DIR`, else the one built into the binary).
 pub fn run_on_master(
     s: &Structure,
     excitation: &[f64],
