@@ -42,7 +42,12 @@ assert len(nmse) == 3 and all(1000 < n < 10000 for n in nmse), nmse
 EOF
 ls "$work/home/.cache/shear-twin/fmu/embedded/"fmu_shear-*.fmu >/dev/null 2>&1 \
   || fail "the installed twin did not write its shear FMU into the fresh cache"
-echo "test-installs: cargo install --path orchestrator, twin init, twin compare: $((SECONDS - start)) s"
+# All four FMUs travel with it: written out, each a non-empty archive.
+(cd "$work/compare" && "${as_user[@]}" "$twin" export-fmus --out fmus >/dev/null)
+for id in fmu_shear fmu_gp_corrector fmu_lqr fmu_substructure; do
+  [ -s "$work/compare/fmus/$id.fmu" ] || fail "twin export-fmus wrote no $id.fmu"
+done
+echo "test-installs: cargo install --path orchestrator, twin init, compare, export-fmus: $((SECONDS - start)) s"
 
 # 2. pip install
 start=$SECONDS
