@@ -67,7 +67,8 @@ echo "== twin diagnose on dataset3: which action, which effect, where, how stron
   --report "$out/diagnose-dataset3.json" --plot "$out/diagnose-dataset3.svg"
 
 echo
-echo "== twin add-physics: switch the diagnosed effect on, estimate it on dataset3 =="
+echo "== twin add-physics: switch the diagnosed effect on, estimate it on dataset3, then refit it with"
+echo "   the structure over dataset3 and the twin's own records (datasets 1-3: a multi-record MAP) =="
 "$twin" add-physics --twin "$out/calibrated.ssp" --diagnosis "$out/diagnose-dataset3.json" \
   --data data/dataset3.csv --out "$out/with-contact.ssp" --report "$out/add-physics-dataset3.json"
 
@@ -123,10 +124,13 @@ echo "-- an actuator 5 control steps late, then with third-order delay compensat
   --report "$out/hybrid-delay.json"
 "$twin" hybrid run --twin "$out/calibrated.ssp" --peak 5 --a-err 0 --delay 0.0048828125 --compensate 3 \
   --report "$out/hybrid-delay-compensated.json"
-echo "-- the law the hybrid test learned, added to the twin, on dataset3 --"
-"$twin" add-physics --twin "$out/calibrated.ssp" --hybrid "$out/hybrid-run.json" --out "$out/with-hybrid-contact.ssp"
-"$twin" compare --twin "$out/with-hybrid-contact.ssp" --data data/dataset3.csv \
-  --report "$out/compare-with-hybrid-contact-dataset3.json"
+echo "-- the law the hybrid test learned, added to the twin (held), the structure refitted over its records, on datasets 1-3 --"
+"$twin" add-physics --twin "$out/calibrated.ssp" --hybrid "$out/hybrid-run.json" --out "$out/with-hybrid-contact.ssp" \
+  --report "$out/add-physics-hybrid.json"
+for n in 1 2 3; do
+  "$twin" compare --twin "$out/with-hybrid-contact.ssp" --data "data/dataset$n.csv" \
+    --report "$out/compare-with-hybrid-contact-dataset$n.json"
+done
 
 echo
 echo "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample;"

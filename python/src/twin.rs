@@ -324,10 +324,12 @@ impl Twin {
     }
 
     /// `twin add-physics`: switch effects on (`effects=["contact@2-3"]`, or all of a
-    /// `diagnosis` report's), estimate them on the record (`refine`: with the physics too, as
-    /// the CLI does when the diagnosis recalibrated). Returns the new twin and the report.
+    /// `diagnosis` report's), estimate them on the record, then refit them jointly with the
+    /// structure over the record and `records` (default: the records the twin remembers from
+    /// `twin calibrate`). `refine` is accepted and ignored, as in the CLI. Returns the new twin
+    /// and the report (NMSE per record before and after).
     #[pyo3(signature = (record, *, effects = None, diagnosis = None, refine = false,
-                        transient = None, threads = None))]
+                        transient = None, threads = None, records = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_physics<'py>(
         &self,
@@ -338,27 +340,30 @@ impl Twin {
         refine: bool,
         transient: Option<f64>,
         threads: Option<usize>,
+        records: Option<Vec<PyRef<'py, Record>>>,
     ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
         let kind = Kind::Diagnose;
         let mut o = DiagnoseOptions::default();
         o.transient = transient.unwrap_or(o.transient);
         o.threads = threads.unwrap_or(o.threads);
         o.validate().map_err(|e| to_py(kind, e))?;
-        let (candidates, refine) = match (effects, diagnosis) {
+        let _ = refine;
+        let others: Vec<orchestrator::twin::data::Measurement> = match records {
+            Some(given) => given.iter().map(|r| r.measurement.clone()).collect(),
+            None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
+        };
+        let candidates = match (effects, diagnosis) {
             (Some(_), Some(_)) => {
                 return Err(invalid(kind, "give effects or a diagnosis, not both"));
             }
-            (Some(effects), None) => (
-                effects
-                    .iter()
-                    .map(|e| {
-                        Candidate::parse(e)
-                            .map(Addition::Library)
-                            .map_err(|m| invalid(kind, m))
-                    })
-                    .collect::<PyResult<Vec<_>>>()?,
-                refine,
-            ),
+            (Some(effects), None) => effects
+                .iter()
+                .map(|e| {
+                    Candidate::parse(e)
+                        .map(Addition::Library)
+                        .map_err(|m| invalid(kind, m))
+                })
+                .collect::<PyResult<Vec<_>>>()?,
             (None, Some(report)) => {
                 // The report as the CLI reads it: through the same file reader.
                 let value: serde_json::Value =
@@ -369,7 +374,7 @@ impl Twin {
                     .map_err(|e| to_py(kind, e))?;
                 serde_json::to_writer(file.as_file(), &value).map_err(|e| to_py(kind, e))?;
                 let path = file.path().to_path_buf();
-                let (candidates, moved) = effects_from_report(&path).map_err(|e| {
+                let (candidates, _) = effects_from_report(&path).map_err(|e| {
                     // Name the argument, not the temporary file.
                     invalid(
                         kind,
@@ -377,13 +382,13 @@ impl Twin {
                             .replace(&path.display().to_string(), "the diagnosis"),
                     )
                 })?;
-                (candidates, refine || moved)
+                candidates
             }
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
         let data = &record.measurement;
         let (new_twin, report) = detached(py, || {
-            let (new_twin, report) = add_physics(&self.twin, data, &candidates, refine, &o)
+            let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;
             let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
             Ok((

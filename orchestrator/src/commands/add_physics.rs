@@ -1,5 +1,6 @@
 //! `twin add-physics`: switch an effect of the shear FMU's library on, estimate its parameters
-//! and write the new twin.
+//! jointly with the structure's over the new record and the records the twin was calibrated and
+//! validated on, and write the new twin.
 
 use std::path::PathBuf;
 
@@ -8,8 +9,11 @@ use anyhow::{bail, Result};
 use super::diagnose::options;
 use super::write_json;
 use crate::twin::data::Measurement;
-use crate::twin::Twin;
-use crate::workflows::diagnose::{add_physics, effects_from_report, Addition, Candidate};
+use crate::twin::{RecordRef, RecordRole, Twin};
+use crate::workflows::diagnose::{
+    add_hybrid_contact, add_physics, effects_from_report, with_record, Addition, Candidate,
+    DiagnoseOptions, Progress, RecordNmse,
+};
 
 #[derive(clap::Args)]
 pub struct AddPhysicsArgs {
@@ -25,22 +29,27 @@ pub struct AddPhysicsArgs {
     )]
     pub effect: Vec<String>,
     /// Take the contact law a `twin hybrid run` report identified from its interface
-    /// measurements (its run with the smallest |a_err|): contact between floors 2 and 3, set
-    /// as identified, nothing refitted.
-    #[arg(long, conflicts_with_all = ["diagnosis", "refine"])]
+    /// measurements (its run with the smallest |a_err|): contact between floors 2 and 3, held
+    /// as identified, the structure refitted with it over the records.
+    #[arg(long, conflicts_with = "diagnosis")]
     pub hybrid: Option<PathBuf>,
-    /// Take the effects from a `twin diagnose` report instead (all of them, in order; with the
-    /// physics refined too when the diagnosis took a recalibration as one of its moves).
+    /// Take the effects from a `twin diagnose` report instead (all of them, in order).
     #[arg(long)]
     pub diagnosis: Option<PathBuf>,
-    /// The record its parameters are estimated on.
+    /// The new record the effects are estimated on (with --hybrid: one more record to refit
+    /// over).
     #[arg(long, required_unless_present = "hybrid")]
     pub data: Option<PathBuf>,
+    /// The records to refit over beside --data; default: those the twin was calibrated and
+    /// validated on (stored in it by `twin calibrate`).
+    #[arg(long, num_args = 1..)]
+    pub records: Vec<PathBuf>,
     /// The new twin (.ssp).
     #[arg(long)]
     pub out: PathBuf,
-    /// Refine the nine physics parameters jointly with the effect's.
-    #[arg(long)]
+    /// Accepted for compatibility and ignored: the physics is always refitted with the effects,
+    /// over every record.
+    #[arg(long, hide = true)]
     pub refine: bool,
     /// JSON report.
     #[arg(long)]
@@ -51,62 +60,152 @@ pub struct AddPhysicsArgs {
     pub threads: Option<usize>,
 }
 
-pub fn run(args: &AddPhysicsArgs) -> Result<()> {
-    if let Some(path) = &args.hybrid {
-        let twin = Twin::load(Some(&args.twin))?;
-        let (new_twin, law, a_err) =
-            crate::workflows::hybrid::experiment::add_identified_contact(&twin, path)?;
-        new_twin.write(&args.out)?;
-        if let Some(report) = &args.report {
-            write_json(report, &law)?;
-        }
-        println!(
-            "effect        contact@2-3:negative from the hybrid test (a_err {a_err:+.3}): gap \
-             {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
-            law.gap, law.gap_sd, law.contact_stiffness, law.contact_stiffness_sd
-        );
-        println!("wrote {}", args.out.display());
-        return Ok(());
+/// The records to refit over: `--records`, else the twin's own (checked against their hashes).
+fn other_records(
+    args: &AddPhysicsArgs,
+    twin: &Twin,
+    text: &mut String,
+) -> Result<Vec<Measurement>> {
+    use std::fmt::Write;
+    if !args.records.is_empty() {
+        return Ok(args
+            .records
+            .iter()
+            .map(|p| Measurement::read(p))
+            .collect::<Result<Vec<_>, _>>()?);
     }
-    let o = options(args.transient, args.threads)?;
-    let (candidates, refine) = match (args.effect.is_empty(), &args.diagnosis) {
-        (false, _) => (
-            args.effect
-                .iter()
-                .map(|e| {
-                    Candidate::parse(e)
-                        .map(Addition::Library)
-                        .map_err(anyhow::Error::msg)
-                })
-                .collect::<Result<Vec<_>>>()?,
-            args.refine,
-        ),
-        (true, Some(path)) => {
-            let (candidates, moved) = effects_from_report(path)?;
-            if moved && !args.refine {
-                println!(
-                    "the diagnosis recalibrated the physics with the effects: refining it too"
-                );
-            }
-            (candidates, args.refine || moved)
+    if twin.records.is_empty() {
+        writeln!(
+            text,
+            "the twin remembers no records (calibrated before they were stored?): refitting on \
+             --data alone; give --records D1.csv D2.csv to refit over them too"
+        )?;
+    }
+    Ok(twin.load_records()?)
+}
+
+/// The new twin's records: every record it was fitted on.
+fn fitted_records(paths: &[PathBuf]) -> Result<Vec<RecordRef>> {
+    let mut out: Vec<RecordRef> = Vec::new();
+    for p in paths {
+        let r = RecordRef::of(p, RecordRole::Calibration)?;
+        if !out.iter().any(|o| o.sha256 == r.sha256) {
+            out.push(r);
         }
+    }
+    Ok(out)
+}
+
+fn print_records(text: &mut String, records: &[RecordNmse]) {
+    use std::fmt::Write;
+    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    let _ = writeln!(text, "NMSE per record and floor, before → after:");
+    for r in records {
+        let _ = writeln!(
+            text,
+            "  {:<28} {} → {}",
+            r.record,
+            pct(&r.nmse_before),
+            pct(&r.nmse_after)
+        );
+    }
+}
+
+pub fn run(args: &AddPhysicsArgs) -> Result<()> {
+    if args.refine {
+        println!("--refine is no longer needed: the physics is always refitted with the effects");
+    }
+    let mut o = options(args.transient, args.threads)?;
+    // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).
+    let spinner = indicatif::ProgressBar::new_spinner();
+    spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+    spinner.set_message("reading the twin and its records");
+    let shown = spinner.clone();
+    o.progress = Some(Progress(std::sync::Arc::new(move |what: &str| {
+        shown.set_message(what.to_string())
+    })));
+    let result = fit_and_write(args, &o);
+    spinner.finish_and_clear();
+    let printout = result?;
+    print!("{printout}");
+    Ok(())
+}
+
+/// Everything but the spinner; what to print, once the spinner is gone.
+fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
+    use std::fmt::Write;
+    let mut text = String::new();
+    let twin = Twin::load(Some(&args.twin))?;
+    let others = other_records(args, &twin, &mut text)?;
+    let data = args.data.as_deref().map(Measurement::read).transpose()?;
+    // In the refit's order: the twin's records, then the new one.
+    let mut paths: Vec<PathBuf> = others.iter().map(|m| m.path.clone()).collect();
+    paths.extend(data.iter().map(|d| d.path.clone()));
+    if let Some(path) = &args.hybrid {
+        let all: Vec<&Measurement> = match &data {
+            Some(d) => with_record(d, &others).0,
+            None => others.iter().collect(),
+        };
+        if all.is_empty() {
+            bail!(
+                "no record to refit the structure over: the twin remembers none; give --data \
+                 D.csv or --records D1.csv ..."
+            );
+        }
+        let (mut new_twin, report) = add_hybrid_contact(&twin, path, &all, o)?;
+        new_twin.records = fitted_records(&paths)?;
+        new_twin.write(&args.out)?;
+        if let Some(out) = &args.report {
+            write_json(out, &report)?;
+        }
+        let law = &report.law;
+        let _ = writeln!(
+            text,
+            "effect        contact@2-3:negative from the hybrid test (a_err {:+.3}), held: gap \
+             {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
+            report.a_err, law.gap, law.gap_sd, law.contact_stiffness, law.contact_stiffness_sd
+        );
+        let _ = writeln!(
+            text,
+            "structure refitted over {} records:",
+            report.records.len()
+        );
+        for p in &report.refined_physics {
+            let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+        }
+        print_records(&mut text, &report.records);
+        print_tolerance(&mut text, &new_twin);
+        let _ = writeln!(text, "wrote {}", args.out.display());
+        return Ok(text);
+    }
+    let candidates = match (args.effect.is_empty(), &args.diagnosis) {
+        (false, _) => args
+            .effect
+            .iter()
+            .map(|e| {
+                Candidate::parse(e)
+                    .map(Addition::Library)
+                    .map_err(anyhow::Error::msg)
+            })
+            .collect::<Result<Vec<_>>>()?,
+        (true, Some(path)) => effects_from_report(path)?.0,
         (true, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
     };
-    let Some(data) = &args.data else {
+    let Some(data) = &data else {
         bail!("give --data D.csv: the record the effects are estimated on");
     };
-    let data = Measurement::read(data)?;
-    let twin = Twin::load(Some(&args.twin))?;
-    let (new_twin, report) = add_physics(&twin, &data, &candidates, refine, &o)?;
+    let (mut new_twin, report) = add_physics(&twin, data, &others, &candidates, o)?;
+    new_twin.records = fitted_records(&paths)?;
     new_twin.write(&args.out)?;
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
     let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
     for effect in &report.effects {
-        println!("effect        {}", effect.name.label);
+        let _ = writeln!(text, "effect        {}", effect.name.label);
         for t in &effect.terms {
-            println!(
+            let _ = writeln!(
+                text,
                 "  {:<14} {:.4e} ± {:.2e}{}",
                 t.function,
                 t.coefficient,
@@ -118,18 +217,40 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
         }
         for (k, v) in &effect.parameters {
             if k != "side" && effect.terms.is_empty() {
-                println!(
+                let _ = writeln!(
+                    text,
                     "  {k:<14} {v:.4e} ± {:.2e}",
                     effect.sd.get(k).copied().unwrap_or(0.0)
                 );
             }
         }
     }
+    let _ = writeln!(
+        text,
+        "structure refitted with the effects over {} records:",
+        report.records.len()
+    );
     for p in &report.refined_physics {
-        println!("  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+        let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
     }
-    println!("NMSE before   {}", pct(&report.nmse_before));
-    println!("NMSE after    {}", pct(&report.nmse_after));
-    println!("wrote {}", args.out.display());
-    Ok(())
+    let _ = writeln!(
+        text,
+        "NMSE on {} with the effects alone (physics held): {}",
+        report.record,
+        pct(&report.nmse_effects_alone)
+    );
+    print_records(&mut text, &report.records);
+    print_tolerance(&mut text, &new_twin);
+    writeln!(text, "wrote {}", args.out.display())?;
+    Ok(text)
+}
+
+fn print_tolerance(text: &mut String, twin: &Twin) {
+    use std::fmt::Write;
+    let t = crate::twin::run::Tolerance::resolve(twin, None);
+    let _ = writeln!(
+        text,
+        "tolerance of compare and diagnose: {:.3} % NMSE ({})",
+        t.value, t.source
+    );
 }

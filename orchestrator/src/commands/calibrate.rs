@@ -7,7 +7,7 @@ use anyhow::{bail, Result};
 use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::run::Tolerance;
-use crate::twin::Twin;
+use crate::twin::{RecordRef, RecordRole, Twin};
 use crate::workflows::calibrate::{calibrate_validated, read_priors, CalibrationSetup, Validated};
 use crate::workflows::options::check_svg;
 
@@ -78,10 +78,18 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     }
     let validation: Vec<&Measurement> = validation.iter().collect();
     let Validated {
-        twin: new_twin,
+        twin: mut new_twin,
         calibration,
         validated,
     } = calibrate_validated(&twin, &data, &validation, &setup)?;
+    // The records, for `twin add-physics` to refit over.
+    new_twin.records = std::iter::once(RecordRef::of(&args.data, RecordRole::Calibration))
+        .chain(
+            args.validate
+                .iter()
+                .map(|p| RecordRef::of(p, RecordRole::Validation)),
+        )
+        .collect::<Result<_, _>>()?;
 
     // All computed: now write, each file atomically.
     new_twin.write(&args.out)?;

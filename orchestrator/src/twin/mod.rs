@@ -8,7 +8,10 @@
 //! validated: the Laplace posterior covariance of the calibrated physics parameters
 //! (`covariance.A.B`, one Real per pair A ≤ B, in the parameters' own units), which widens the
 //! comparison's band, and the worst validation NMSE (`validation_nmse`, %), which sets the
-//! default tolerance of `twin compare` and `twin diagnose`.
+//! default tolerance of `twin compare` and `twin diagnose`. And the records the twin was fitted
+//! and validated on (`record{i}.path`, absolute, `record{i}.sha256` of the file's bytes,
+//! `record{i}.role`: String parameters), so that `twin add-physics` can refit over them and a
+//! moved or changed file is named as such.
 
 pub mod data;
 pub mod embedded;
@@ -112,6 +115,8 @@ pub struct Twin {
     pub parameter_covariance: Option<ParameterCovariance>,
     /// Worst-floor NMSE (%) of the worst validation record the twin was accepted on.
     pub validation_nmse: Option<f64>,
+    /// The records it was calibrated and validated on (stored with the noise variances).
+    pub records: Vec<RecordRef>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
     /// Keeps what `fmu_path`s point into (the unpacked archive, a trained FMU's scratch
@@ -184,6 +189,7 @@ impl Twin {
             default_experiment: None,
             parameter_covariance: None,
             validation_nmse: None,
+            records: Vec::new(),
             source: None,
             keep_alive: Vec::new(),
         })
@@ -207,6 +213,7 @@ impl Twin {
             default_experiment: self.default_experiment,
             parameter_covariance: self.parameter_covariance.clone(),
             validation_nmse: self.validation_nmse,
+            records: self.records.clone(),
             source: self.source.clone(),
             keep_alive: self.keep_alive.clone(),
         }
@@ -315,13 +322,33 @@ impl Twin {
         let mut noise_variance = None;
         let mut parameter_covariance = None;
         let mut validation_nmse = None;
+        let mut records = Vec::new();
         for binding in parsed.system_bindings {
             let ssv = std::fs::read_to_string(unpacked.path().join(&binding))
                 .map_err(|e| invalid(format!("{binding}: {e}")))?;
-            let values: BTreeMap<String, ParameterValue> = parse_ssv(&ssv)
-                .map_err(|m| invalid(format!("{binding}: {m}")))?
-                .into_iter()
-                .collect();
+            let mut values: BTreeMap<String, ParameterValue> = BTreeMap::new();
+            let mut strings: BTreeMap<String, String> = BTreeMap::new();
+            for (name, value) in
+                ssp::parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?
+            {
+                let value = match value {
+                    SsvValue::Real(x) => ParameterValue::Real(x),
+                    SsvValue::Integer(i) => ParameterValue::Integer(i),
+                    SsvValue::Boolean(b) => ParameterValue::Boolean(b),
+                    SsvValue::String(text) => {
+                        strings.insert(name, text);
+                        continue;
+                    }
+                    other => {
+                        return Err(invalid(format!(
+                            "{binding}: parameter '{name}': {other:?} is not a Real, Integer, \
+                             Boolean or String"
+                        )))
+                    }
+                };
+                values.insert(name, value);
+            }
+            records = read_records(&strings).map_err(|m| invalid(format!("{binding}: {m}")))?;
             let get = |i: usize| match values.get(&format!("noise_variance{i}")) {
                 Some(ParameterValue::Real(x)) if *x > 0.0 && x.is_finite() => Ok(*x),
                 Some(other) => Err(invalid(format!(
@@ -350,6 +377,7 @@ impl Twin {
             default_experiment: parsed.start_time.zip(parsed.stop_time),
             parameter_covariance,
             validation_nmse,
+            records,
             source: Some(path.to_owned()),
             keep_alive: vec![std::sync::Arc::new(unpacked)],
         })
@@ -396,7 +424,9 @@ impl Twin {
                 let values = self.system_values();
                 zip.start_file("resources/twin.ssv", options)
                     .map_err(zip_err)?;
-                zip.write_all(ssv_xml("twin", &values).as_bytes())?;
+                zip.write_all(
+                    ssv_xml_with_strings("twin", &values, &self.system_strings()).as_bytes(),
+                )?;
             }
             zip.finish().map_err(zip_err)?;
             Ok(())
@@ -430,6 +460,23 @@ impl Twin {
             values.insert("validation_nmse".into(), ParameterValue::Real(v));
         }
         values
+    }
+
+    /// The system's String parameters in `resources/twin.ssv`: the records.
+    fn system_strings(&self) -> BTreeMap<String, String> {
+        let mut out = BTreeMap::new();
+        for (i, r) in self.records.iter().enumerate() {
+            let n = i + 1;
+            out.insert(format!("record{n}.path"), r.path.display().to_string());
+            out.insert(format!("record{n}.sha256"), r.sha256.clone());
+            out.insert(format!("record{n}.role"), r.role.name().to_owned());
+        }
+        out
+    }
+
+    /// The twin's records, read and checked against their hashes (see [`RecordRef::load`]).
+    pub fn load_records(&self) -> Result<Vec<data::Measurement>, TwinError> {
+        self.records.iter().map(RecordRef::load).collect()
     }
 
     fn ssd_xml(&self) -> String {
@@ -478,6 +525,11 @@ impl Twin {
         }
         for name in self.system_values().keys() {
             connector(&mut w, name, "parameter", "Real");
+        }
+        if self.noise_variance.is_some() {
+            for name in self.system_strings().keys() {
+                connector(&mut w, name, "parameter", "String");
+            }
         }
         w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
             .expect(ok);
@@ -632,6 +684,15 @@ pub fn apply_parameters(
 }
 
 fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String {
+    ssv_xml_with_strings(name, parameters, &BTreeMap::new())
+}
+
+/// A parameter set with String parameters beside the others.
+fn ssv_xml_with_strings(
+    name: &str,
+    parameters: &BTreeMap<String, ParameterValue>,
+    strings: &BTreeMap<String, String>,
+) -> String {
     let ok = "writing XML to memory cannot fail";
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
@@ -658,6 +719,16 @@ fn ssv_xml(name: &str, parameters: &BTreeMap<String, ParameterValue>) -> String 
         w.write_event(Event::End(BytesEnd::new("ssv:Parameter")))
             .expect(ok);
     }
+    for (pname, text) in strings {
+        let mut p = BytesStart::new("ssv:Parameter");
+        p.push_attribute(("name", pname.as_str()));
+        w.write_event(Event::Start(p)).expect(ok);
+        let mut e = BytesStart::new("ssv:String");
+        e.push_attribute(("value", text.as_str()));
+        w.write_event(Event::Empty(e)).expect(ok);
+        w.write_event(Event::End(BytesEnd::new("ssv:Parameter")))
+            .expect(ok);
+    }
     w.write_event(Event::End(BytesEnd::new("ssv:Parameters")))
         .expect(ok);
     w.write_event(Event::End(BytesEnd::new("ssv:ParameterSet")))
@@ -670,6 +741,113 @@ fn finish_xml(w: Writer<Vec<u8>>) -> String {
     let mut s = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
     s.push('\n');
     s
+}
+
+/// What a twin did with a record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordRole {
+    /// Its parameters were fitted on it.
+    Calibration,
+    /// It was run on it after the fit, as evidence of fidelity (or of what it does not know).
+    Validation,
+}
+
+impl RecordRole {
+    pub fn name(self) -> &'static str {
+        match self {
+            RecordRole::Calibration => "calibration",
+            RecordRole::Validation => "validation",
+        }
+    }
+    fn parse(s: &str) -> Option<Self> {
+        match s {
+            "calibration" => Some(RecordRole::Calibration),
+            "validation" => Some(RecordRole::Validation),
+            _ => None,
+        }
+    }
+}
+
+/// A record a twin was fitted or validated on: where it was (absolute) and the SHA-256 of its
+/// bytes, so that it can be read again and a moved or changed file is refused by name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordRef {
+    pub path: PathBuf,
+    pub sha256: String,
+    pub role: RecordRole,
+}
+
+/// The SHA-256 of `bytes` in lower-case hex.
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+impl RecordRef {
+    /// The record at `path` as it is now.
+    pub fn of(path: &Path, role: RecordRole) -> Result<Self, TwinError> {
+        let io = |source| TwinError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        let absolute = std::fs::canonicalize(path).map_err(io)?;
+        let bytes = std::fs::read(&absolute).map_err(io)?;
+        Ok(RecordRef {
+            path: absolute,
+            sha256: sha256_hex(&bytes),
+            role,
+        })
+    }
+
+    /// Read the record again, refusing a file that is gone or no longer the one the twin saw.
+    pub fn load(&self) -> Result<data::Measurement, TwinError> {
+        let role = self.role.name();
+        let bytes = std::fs::read(&self.path).map_err(|e| {
+            TwinError::Message(format!(
+                "the twin's {role} record {} cannot be read ({e}): moved or deleted? Give the \
+                 records explicitly (--records D1.csv D2.csv ...)",
+                self.path.display()
+            ))
+        })?;
+        let now = sha256_hex(&bytes);
+        if now != self.sha256 {
+            return Err(TwinError::Message(format!(
+                "the twin's {role} record {} changed since the twin was fitted on it (SHA-256 \
+                 {}, now {now}); give the records explicitly (--records D1.csv D2.csv ...)",
+                self.path.display(),
+                self.sha256
+            )));
+        }
+        data::Measurement::read(&self.path).map_err(|e| TwinError::Message(e.to_string()))
+    }
+}
+
+/// The records from `record{i}.path`, `.sha256`, `.role` String parameters, i = 1, 2, …
+fn read_records(strings: &BTreeMap<String, String>) -> Result<Vec<RecordRef>, String> {
+    let mut out = Vec::new();
+    for i in 1.. {
+        let key = |what: &str| format!("record{i}.{what}");
+        let Some(path) = strings.get(&key("path")) else {
+            break;
+        };
+        let sha256 = strings
+            .get(&key("sha256"))
+            .filter(|h| h.len() == 64 && h.bytes().all(|b| b.is_ascii_hexdigit()))
+            .ok_or_else(|| format!("{} is missing or not a SHA-256 in hex", key("sha256")))?;
+        let role = strings
+            .get(&key("role"))
+            .and_then(|r| RecordRole::parse(r))
+            .ok_or_else(|| format!("{} must be 'calibration' or 'validation'", key("role")))?;
+        out.push(RecordRef {
+            path: PathBuf::from(path),
+            sha256: sha256.clone(),
+            role,
+        });
+    }
+    Ok(out)
 }
 
 /// The covariance from `covariance.A.B` entries: the names are those with a diagonal entry,

@@ -139,6 +139,9 @@ pub struct Calibration {
     pub samples_used: usize,
     /// NMSE per floor on the calibration record, after the transient.
     pub nmse: [f64; 3],
+    /// Every record's noise variances and NMSE, in the order given (one for a single-record
+    /// calibration, the same as the fields above).
+    pub records: Vec<RecordCalibration>,
     pub starts: Vec<StartOutcome>,
     pub simulations: usize,
     pub seconds: f64,
@@ -176,16 +179,24 @@ impl Calibration {
     }
 }
 
-/// What one calibration works on, shared by the threads.
-struct Target<'a> {
-    fmu: &'a Fmu,
-    base: BTreeMap<String, ParameterValue>,
+/// One record of a calibration: its samples the likelihood uses and its own noise prior.
+struct RecordTarget<'a> {
     data: &'a Measurement,
     /// Sample indices the likelihood uses.
     used: Vec<usize>,
+    /// Prior mean of log σ²_f for this record: from its own measured variance.
+    noise_mean: [f64; 3],
+}
+
+/// What one calibration works on, shared by the threads: one or more records, one parameter
+/// vector. The residuals are the records' in turn, each floor-major (record r, floor f is
+/// block `3 r + f`, with its own noise variance).
+struct Target<'a> {
+    fmu: &'a Fmu,
+    base: BTreeMap<String, ParameterValue>,
+    records: Vec<RecordTarget<'a>>,
     vrs: Vec<u32>,
     priors: Vec<Prior>,
-    noise_mean: [f64; 3],
     noise_var: f64,
     budget: usize,
     /// The FMU's forward sensitivities of the accelerations to the calibrated parameters, when
@@ -232,15 +243,49 @@ impl Target<'_> {
             .map(|(z, p)| p.value(p.mean + p.sd() * z))
             .collect()
     }
-    fn n_used(&self) -> usize {
-        self.used.len()
+    /// The residual blocks (record, floor) as (first row, rows).
+    fn blocks(&self) -> Vec<(usize, usize)> {
+        let mut at = 0;
+        let mut out = Vec::with_capacity(3 * self.records.len());
+        for r in &self.records {
+            for _ in 0..3 {
+                out.push((at, r.used.len()));
+                at += r.used.len();
+            }
+        }
+        out
+    }
+    fn rows(&self) -> usize {
+        3 * self.records.iter().map(|r| r.used.len()).sum::<usize>()
+    }
+    /// Every block's prior mean of log σ², in block order.
+    fn noise_means(&self) -> Vec<f64> {
+        self.records.iter().flat_map(|r| r.noise_mean).collect()
     }
 }
 
-/// Residuals `y − ŷ` after the transient for parameters `z`, or None if the FMU refused them
-/// (out of range, or the simulation diverged).
+/// One simulator per record (its force), for one thread.
+fn simulators<'a>(target: &Target<'a>, name: &str) -> Result<Vec<Simulator<'a>>, TwinError> {
+    target
+        .records
+        .iter()
+        .map(|r| {
+            Simulator::new(
+                target.fmu,
+                target.base.clone(),
+                &r.data.force,
+                r.data.time[0],
+                r.data.dt,
+                name,
+            )
+        })
+        .collect()
+}
+
+/// Residuals `y − ŷ` after the transient for parameters `z`, every record in turn, or None if
+/// the FMU refused them (out of range, or the simulation diverged).
 fn raw_residuals(
-    sim: &mut Simulator,
+    sims: &mut [Simulator],
     target: &Target,
     z: &[f64],
     buf: &mut [Vec<f64>; 3],
@@ -249,21 +294,24 @@ fn raw_residuals(
     if values.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    sim.simulate(&target.vrs, &values, buf).ok()?;
-    let mut r = Vec::with_capacity(3 * target.n_used());
-    for f in 0..3 {
-        for &k in &target.used {
-            r.push(target.data.acc[f][k] - buf[f][k]);
+    let mut r = Vec::with_capacity(target.rows());
+    for (sim, record) in sims.iter_mut().zip(&target.records) {
+        sim.simulate(&target.vrs, &values, buf).ok()?;
+        for f in 0..3 {
+            for &k in &record.used {
+                r.push(record.data.acc[f][k] - buf[f][k]);
+            }
         }
     }
     Some(r)
 }
 
 /// The residuals `y − ŷ` for parameters `z` and their Jacobian `∂(y − ŷ)/∂z` (rows as the
-/// residuals), from one run with the FMU's sensitivities; None when the FMU has none for these
-/// parameters, refused them, or gave non-finite ones (then never again for this calibration).
+/// residuals), from one run per record with the FMU's sensitivities; None when the FMU has none
+/// for these parameters, refused them, or gave non-finite ones (then never again for this
+/// calibration).
 fn sensitivity_jacobian(
-    sim: &mut Simulator,
+    sims: &mut [Simulator],
     target: &Target,
     z: &[f64],
 ) -> Option<(Vec<f64>, DMatrix<f64>)> {
@@ -276,14 +324,9 @@ fn sensitivity_jacobian(
         return None;
     }
     let p = z.len();
-    let mut outputs = sim.acc_vrs().to_vec();
-    outputs.extend(&sensitivity.outputs);
-    let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
-    sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
-        .ok()?;
-    let per = target.n_used();
-    let mut r = Vec::with_capacity(3 * per);
-    let mut jac = DMatrix::zeros(3 * per, p);
+    let rows = target.rows();
+    let mut r = Vec::with_capacity(rows);
+    let mut jac = DMatrix::zeros(rows, p);
     // ∂u_j/∂z_j: the prior's scale, times the value where the prior is on the log.
     let scale: Vec<f64> = (0..p)
         .map(|j| {
@@ -294,20 +337,30 @@ fn sensitivity_jacobian(
             }
         })
         .collect();
-    for f in 0..3 {
-        r.extend(
-            target
-                .used
-                .iter()
-                .map(|&k| target.data.acc[f][k] - out[f][k]),
-        );
-        for (j, scale) in scale.iter().enumerate() {
-            let d = &out[3 + f * p + j];
-            let mut column = jac.column_mut(j);
-            for (i, &k) in target.used.iter().enumerate() {
-                column[f * per + i] = -d[k] * scale;
+    let mut row0 = 0;
+    for (sim, record) in sims.iter_mut().zip(&target.records) {
+        let mut outputs = sim.acc_vrs().to_vec();
+        outputs.extend(&sensitivity.outputs);
+        let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
+        sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
+            .ok()?;
+        let per = record.used.len();
+        for f in 0..3 {
+            r.extend(
+                record
+                    .used
+                    .iter()
+                    .map(|&k| record.data.acc[f][k] - out[f][k]),
+            );
+            for (j, scale) in scale.iter().enumerate() {
+                let d = &out[3 + f * p + j];
+                let mut column = jac.column_mut(j);
+                for (i, &k) in record.used.iter().enumerate() {
+                    column[row0 + f * per + i] = -d[k] * scale;
+                }
             }
         }
+        row0 += 3 * per;
     }
     if jac.iter().any(|d| !d.is_finite()) {
         sensitivity.failed.store(true, Ordering::Relaxed);
@@ -316,20 +369,20 @@ fn sensitivity_jacobian(
     Some((r, jac))
 }
 
-fn sse_per_floor(r: &[f64], per_floor: usize) -> [f64; 3] {
-    [0, 1, 2].map(|f| {
-        r[f * per_floor..(f + 1) * per_floor]
-            .iter()
-            .map(|x| x * x)
-            .sum()
-    })
+/// The sum of squares of every block (record, floor) of `r`.
+fn sse_per_block(r: &[f64], blocks: &[(usize, usize)]) -> Vec<f64> {
+    blocks
+        .iter()
+        .map(|&(a, n)| r[a..a + n].iter().map(|x| x * x).sum())
+        .collect()
 }
 
 /// The least-squares problem in `z` for fixed noise variances.
 struct Problem<'s, 'a> {
-    sim: RefCell<&'s mut Simulator<'a>>,
+    sims: RefCell<&'s mut [Simulator<'a>]>,
     target: &'s Target<'a>,
-    weights: [f64; 3],
+    /// Each residual's weight `e^{−s/2}`, by the noise variance of its block.
+    weights: Vec<f64>,
     buf: RefCell<[Vec<f64>; 3]>,
     /// Simulations used, a Jacobian from sensitivities counted as the p runs it replaces: what
     /// the budget bounds.
@@ -345,21 +398,20 @@ struct Problem<'s, 'a> {
 impl Problem<'_, '_> {
     fn weighted(&self, z: &[f64]) -> Option<DVector<f64>> {
         *self.evaluations.borrow_mut() += 1;
-        *self.runs.borrow_mut() += 1;
-        let mut sim = self.sim.borrow_mut();
+        *self.runs.borrow_mut() += self.target.records.len();
+        let mut sims = self.sims.borrow_mut();
         // With sensitivities, every trial runs with them: an accepted trial's Jacobian is then
         // at hand, for less than a run of its own.
-        let r = match sensitivity_jacobian(&mut sim, self.target, z) {
+        let r = match sensitivity_jacobian(&mut sims, self.target, z) {
             Some((r, model)) => {
                 *self.at_hand.borrow_mut() = Some((z.to_vec(), model));
                 r
             }
-            None => raw_residuals(&mut sim, self.target, z, &mut self.buf.borrow_mut())?,
+            None => raw_residuals(&mut sims, self.target, z, &mut self.buf.borrow_mut())?,
         };
-        let per = self.target.n_used();
         let mut out = DVector::zeros(r.len() + z.len());
-        for (i, x) in r.iter().enumerate() {
-            out[i] = x * self.weights[i / per];
+        for (i, (x, w)) in r.iter().zip(&self.weights).enumerate() {
+            out[i] = x * w;
         }
         for (j, zj) in z.iter().enumerate() {
             out[r.len() + j] = *zj;
@@ -389,19 +441,18 @@ impl lm::LeastSquares for Problem<'_, '_> {
             .filter(|(at, _)| at.as_slice() == z)
             .map(|(_, model)| model);
         let sensitive = at_hand.or_else(|| {
-            let mut sim = self.sim.borrow_mut();
-            let (_, model) = sensitivity_jacobian(&mut sim, self.target, z)?;
-            *self.runs.borrow_mut() += 1;
+            let mut sims = self.sims.borrow_mut();
+            let (_, model) = sensitivity_jacobian(&mut sims, self.target, z)?;
+            *self.runs.borrow_mut() += self.target.records.len();
             Some(model)
         });
         if let Some(model) = sensitive {
             // Counted as the p runs it replaces, so a start's budget buys the same iterations.
             *self.evaluations.borrow_mut() += z.len();
-            let per = self.target.n_used();
             let mut jac = DMatrix::zeros(base.len(), z.len());
             for j in 0..z.len() {
                 for i in 0..model.nrows() {
-                    jac[(i, j)] = self.weights[i / per] * model[(i, j)];
+                    jac[(i, j)] = self.weights[i] * model[(i, j)];
                 }
                 jac[(model.nrows() + j, j)] = 1.0;
             }
@@ -434,40 +485,51 @@ fn optimal_log_noise(n: f64, sse: f64, mean: f64, var: f64, start: f64) -> f64 {
     s
 }
 
-fn neg_log_posterior(target: &Target, sse: [f64; 3], s: [f64; 3], z: &[f64]) -> f64 {
-    let n = target.n_used() as f64;
+fn neg_log_posterior(target: &Target, sse: &[f64], s: &[f64], z: &[f64]) -> f64 {
     let mut j = 0.5 * z.iter().map(|x| x * x).sum::<f64>();
-    for f in 0..3 {
-        j += n * s[f] / 2.0
-            + sse[f] * (-s[f]).exp() / 2.0
-            + (s[f] - target.noise_mean[f]).powi(2) / (2.0 * target.noise_var);
+    for (((&(_, n), sse), s), mean) in target
+        .blocks()
+        .iter()
+        .zip(sse)
+        .zip(s)
+        .zip(target.noise_means())
+    {
+        j += n as f64 * s / 2.0
+            + sse * (-s).exp() / 2.0
+            + (s - mean).powi(2) / (2.0 * target.noise_var);
     }
     j
 }
 
 struct StartResult {
     z: Vec<f64>,
-    s: [f64; 3],
+    /// log σ² of every block (record, floor).
+    s: Vec<f64>,
     objective: f64,
     /// FMU runs made.
     runs: usize,
 }
 
 fn run_start<'a>(
-    sim: &mut Simulator<'a>,
+    sims: &mut [Simulator<'a>],
     target: &Target<'a>,
     z0: Vec<f64>,
 ) -> Option<StartResult> {
-    let per = target.n_used();
-    let mut s = target.noise_mean;
+    let blocks = target.blocks();
+    let means = target.noise_means();
+    let records = target.records.len();
+    let mut s = means.clone();
     let mut z = z0;
     let mut evaluations = 0;
     let mut runs = 0;
     let mut buf: [Vec<f64>; 3] = Default::default();
     for _outer in 0..5 {
-        let weights = s.map(|sf| (-sf / 2.0).exp());
+        let mut weights = Vec::with_capacity(target.rows());
+        for (&(_, n), sb) in blocks.iter().zip(&s) {
+            weights.extend(std::iter::repeat((-sb / 2.0).exp()).take(n));
+        }
         let mut problem = Problem {
-            sim: RefCell::new(&mut *sim),
+            sims: RefCell::new(&mut *sims),
             target,
             weights,
             buf: RefCell::new(Default::default()),
@@ -481,51 +543,47 @@ fn run_start<'a>(
         }
         evaluations += *problem.evaluations.borrow();
         runs += *problem.runs.borrow();
-        let r = raw_residuals(sim, target, &z, &mut buf)?;
+        let r = raw_residuals(sims, target, &z, &mut buf)?;
         evaluations += 1;
-        runs += 1;
-        let sse = sse_per_floor(&r, per);
-        let s_new = [0, 1, 2].map(|f| {
-            optimal_log_noise(
-                per as f64,
-                sse[f],
-                target.noise_mean[f],
-                target.noise_var,
-                s[f],
-            )
-        });
-        let settled = (0..3).all(|f| (s_new[f] - s[f]).abs() < 1e-3);
+        runs += records;
+        let sse = sse_per_block(&r, &blocks);
+        let s_new: Vec<f64> = (0..blocks.len())
+            .map(|b| {
+                optimal_log_noise(blocks[b].1 as f64, sse[b], means[b], target.noise_var, s[b])
+            })
+            .collect();
+        let settled = s_new.iter().zip(&s).all(|(a, b)| (a - b).abs() < 1e-3);
         s = s_new;
         if settled {
             break;
         }
     }
-    let r = raw_residuals(sim, target, &z, &mut buf)?;
-    let objective = neg_log_posterior(target, sse_per_floor(&r, per), s, &z);
+    let r = raw_residuals(sims, target, &z, &mut buf)?;
+    let objective = neg_log_posterior(target, &sse_per_block(&r, &blocks), &s, &z);
     objective.is_finite().then_some(StartResult {
         z,
         s,
         objective,
-        runs: runs + 1,
+        runs: runs + records,
     })
 }
 
-/// The residuals at `z` and their Jacobian by central differences (2p runs).
+/// The residuals at `z` and their Jacobian by central differences (2p runs per record).
 fn central_differences(
-    sim: &mut Simulator,
+    sims: &mut [Simulator],
     target: &Target,
     z: &[f64],
 ) -> Option<(Vec<f64>, DMatrix<f64>)> {
     let mut buf: [Vec<f64>; 3] = Default::default();
-    let r0 = raw_residuals(sim, target, z, &mut buf)?;
+    let r0 = raw_residuals(sims, target, z, &mut buf)?;
     let mut jac = DMatrix::zeros(r0.len(), z.len());
     for j in 0..z.len() {
         let h = 1e-4 * z[j].abs().max(1.0);
         let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
         zp[j] += h;
         zm[j] -= h;
-        let rp = raw_residuals(sim, target, &zp, &mut buf)?;
-        let rm = raw_residuals(sim, target, &zm, &mut buf)?;
+        let rp = raw_residuals(sims, target, &zp, &mut buf)?;
+        let rm = raw_residuals(sims, target, &zm, &mut buf)?;
         for i in 0..r0.len() {
             jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * h);
         }
@@ -533,37 +591,39 @@ fn central_differences(
     Some((r0, jac))
 }
 
-/// The Laplace approximation at (z, s): covariance of (z, s).
-/// Also the FMU runs it made.
+/// The Laplace approximation at (z, s): covariance of (z, s), `s` every block's log σ² after
+/// the parameters. Also the FMU runs it made.
 fn laplace(
-    sim: &mut Simulator,
+    sims: &mut [Simulator],
     target: &Target,
     z: &[f64],
-    s: [f64; 3],
+    s: &[f64],
 ) -> Option<(DMatrix<f64>, usize)> {
     let p = z.len();
-    let per = target.n_used();
-    let ((r0, jac), runs) = match sensitivity_jacobian(sim, target, z) {
-        Some(exact) => (exact, 1),
-        None => (central_differences(sim, target, z)?, 2 * p + 1),
+    let records = target.records.len();
+    let blocks = target.blocks();
+    let ((r0, jac), runs) = match sensitivity_jacobian(sims, target, z) {
+        Some(exact) => (exact, records),
+        None => (central_differences(sims, target, z)?, (2 * p + 1) * records),
     };
-    let sse = sse_per_floor(&r0, per);
-    let mut hess = DMatrix::zeros(p + 3, p + 3);
-    for f in 0..3 {
-        let w = (-s[f]).exp();
-        let rows = f * per..(f + 1) * per;
+    let sse = sse_per_block(&r0, &blocks);
+    let q = blocks.len();
+    let mut hess = DMatrix::zeros(p + q, p + q);
+    for (b, &(start, per)) in blocks.iter().enumerate() {
+        let w = (-s[b]).exp();
+        let rows = start..start + per;
         let jf = jac.rows(rows.start, per);
         let rf = DVector::from_column_slice(&r0[rows]);
         let jtj = jf.transpose() * jf;
         let jtr = jf.transpose() * rf;
         for a in 0..p {
-            for b in 0..p {
-                hess[(a, b)] += w * jtj[(a, b)];
+            for c in 0..p {
+                hess[(a, c)] += w * jtj[(a, c)];
             }
-            hess[(a, p + f)] = -w * jtr[a];
-            hess[(p + f, a)] = -w * jtr[a];
+            hess[(a, p + b)] = -w * jtr[a];
+            hess[(p + b, a)] = -w * jtr[a];
         }
-        hess[(p + f, p + f)] = sse[f] * w / 2.0 + 1.0 / target.noise_var;
+        hess[(p + b, p + b)] = sse[b] * w / 2.0 + 1.0 / target.noise_var;
     }
     for a in 0..p {
         hess[(a, a)] += 1.0;
@@ -575,35 +635,80 @@ fn laplace(
 /// Also the first sample after the transient.
 fn used_samples(
     data: &Measurement,
-    setup: &CalibrationSetup,
+    mask: Option<&[bool]>,
+    transient: f64,
 ) -> Result<(usize, Vec<usize>), CalibrateError> {
-    let first = crate::evaluation::stats::first_after_transient(&data.time, setup.transient);
-    if let Some(mask) = &setup.mask {
+    let first = crate::evaluation::stats::first_after_transient(&data.time, transient);
+    if let Some(mask) = mask {
         if mask.len() != data.len() {
             return Err(CalibrateError::Setup(format!(
-                "the sample mask has {} entries for a record of {} samples",
+                "{}: the sample mask has {} entries for a record of {} samples",
+                data.path.display(),
                 mask.len(),
                 data.len()
             )));
         }
     }
     let used: Vec<usize> = (first..data.len())
-        .filter(|&k| setup.mask.as_ref().map_or(true, |m| m[k]))
+        .filter(|&k| mask.map_or(true, |m| m[k]))
         .collect();
     if used.len() < 10 {
         return Err(CalibrateError::Setup(format!(
-            "the transient cut-off of {} s and the sample mask leave {} samples",
-            setup.transient,
+            "{}: the transient cut-off of {} s and the sample mask leave {} samples",
+            data.path.display(),
+            transient,
             used.len()
         )));
     }
     Ok((first, used))
 }
 
-/// Calibrate the physics component of `twin` on `data`.
+/// One record of a multi-record calibration, with the samples its likelihood uses (`mask`,
+/// after the transient; all when None).
+#[derive(Clone, Copy)]
+pub struct RecordInput<'a> {
+    pub data: &'a Measurement,
+    pub mask: Option<&'a [bool]>,
+}
+
+/// What a calibration found on one of its records: that record's own noise variances (which
+/// also hold what the model still misses there) and the fit's NMSE on it.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordCalibration {
+    pub record: String,
+    pub noise_variance: [f64; 3],
+    /// Posterior sd of log σ²_f.
+    pub noise_log_sd: [f64; 3],
+    pub samples_used: usize,
+    /// NMSE per floor on the record, after the transient.
+    pub nmse: [f64; 3],
+}
+
+/// Calibrate the physics component of `twin` on `data` (the one record of
+/// [`calibrate_records`], its mask `setup.mask`).
 pub fn calibrate(
     twin: &Twin,
     data: &Measurement,
+    setup: &CalibrationSetup,
+) -> Result<Calibration, CalibrateError> {
+    calibrate_records(
+        twin,
+        &[RecordInput {
+            data,
+            mask: setup.mask.as_deref(),
+        }],
+        setup,
+    )
+}
+
+/// Calibrate the physics component of `twin` on several records at once: one parameter vector,
+/// each record with its own per-floor noise variances (their priors centred on that record's
+/// measured variance), the Laplace posterior over all of it. `setup.mask` is not used (each
+/// record brings its own). The calibration's `noise_variance`, `noise_log_sd`, `samples_used`
+/// and `nmse` are the first record's; `records` has every record's.
+pub fn calibrate_records(
+    twin: &Twin,
+    inputs: &[RecordInput],
     setup: &CalibrationSetup,
 ) -> Result<Calibration, CalibrateError> {
     let started = Instant::now();
@@ -611,7 +716,24 @@ pub fn calibrate(
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
-    let (first, used) = used_samples(data, setup)?;
+    if inputs.is_empty() {
+        return Err(CalibrateError::Setup("no record to calibrate on".into()));
+    }
+    let mut records = Vec::with_capacity(inputs.len());
+    let mut firsts = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let (first, used) = used_samples(input.data, input.mask, setup.transient)?;
+        let noise_mean = [0, 1, 2].map(|f| {
+            let y: Vec<f64> = used.iter().map(|&k| input.data.acc[f][k]).collect();
+            (setup.noise_fraction * crate::evaluation::stats::variance(&y)).ln()
+        });
+        firsts.push(first);
+        records.push(RecordTarget {
+            data: input.data,
+            used,
+            noise_mean,
+        });
+    }
     if setup.parameters.is_empty() {
         return Err(CalibrateError::Setup("no parameter to calibrate".into()));
     }
@@ -644,10 +766,6 @@ pub fn calibrate(
         vrs.push(var.value_reference);
         priors.push(prior);
     }
-    let noise_mean = [0, 1, 2].map(|f| {
-        let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
-        (setup.noise_fraction * crate::evaluation::stats::variance(&y)).ln()
-    });
     let mut base = component.parameters.clone();
     for name in &setup.parameters {
         base.remove(name);
@@ -655,11 +773,9 @@ pub fn calibrate(
     let target = Target {
         fmu: &fmu,
         base,
-        data,
-        used,
+        records,
         vrs,
         priors,
-        noise_mean,
         noise_var: setup.noise_log_variance,
         budget: setup.simulations_per_start.max(1),
         sensitivity: Sensitivity::find(&fmu, &setup.parameters),
@@ -714,17 +830,10 @@ pub fn calibrate(
                     let target = &target;
                     scope.spawn(
                         move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
-                            let mut sim = Simulator::new(
-                                target.fmu,
-                                target.base.clone(),
-                                &target.data.force,
-                                target.data.time[0],
-                                target.data.dt,
-                                "calibration",
-                            )?;
+                            let mut sims = simulators(target, "calibration")?;
                             Ok(chunk
                                 .into_iter()
-                                .map(|(i, z0)| (i, run_start(&mut sim, target, z0)))
+                                .map(|(i, z0)| (i, run_start(&mut sims, target, z0)))
                                 .collect())
                         },
                     )
@@ -763,15 +872,8 @@ pub fn calibrate(
     outcomes.sort_by_key(|o| o.start);
     let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
 
-    let mut sim = Simulator::new(
-        &fmu,
-        target.base.clone(),
-        &data.force,
-        data.time[0],
-        data.dt,
-        "laplace",
-    )?;
-    let (cov, laplace_runs) = laplace(&mut sim, &target, &best.z, best.s).ok_or_else(|| {
+    let mut sims = simulators(&target, "laplace")?;
+    let (cov, laplace_runs) = laplace(&mut sims, &target, &best.z, &best.s).ok_or_else(|| {
         CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
     })?;
     let values = target.values(&best.z);
@@ -806,22 +908,38 @@ pub fn calibrate(
         }
         None => f64::NEG_INFINITY,
     };
-    let samples_used = target.n_used();
     let mut buf: [Vec<f64>; 3] = Default::default();
-    sim.simulate(&target.vrs, &values, &mut buf)?;
-    let nmse = [0, 1, 2]
-        .map(|f| crate::evaluation::compare::nmse(&data.acc[f][first..], &buf[f][first..]));
+    let mut fitted = Vec::with_capacity(target.records.len());
+    for (r, ((sim, record), &first)) in sims
+        .iter_mut()
+        .zip(&target.records)
+        .zip(&firsts)
+        .enumerate()
+    {
+        sim.simulate(&target.vrs, &values, &mut buf)?;
+        let data = record.data;
+        fitted.push(RecordCalibration {
+            record: data.path.display().to_string(),
+            noise_variance: [0, 1, 2].map(|f| best.s[3 * r + f].exp()),
+            noise_log_sd: [0, 1, 2].map(|f| cov[(p + 3 * r + f, p + 3 * r + f)].max(0.0).sqrt()),
+            samples_used: record.used.len(),
+            nmse: [0, 1, 2]
+                .map(|f| crate::evaluation::compare::nmse(&data.acc[f][first..], &buf[f][first..])),
+        });
+    }
+    let own = fitted[0].clone();
     Ok(Calibration {
         parameters,
         correlation,
-        noise_variance: best.s.map(f64::exp),
-        noise_log_sd: [0, 1, 2].map(|f| cov[(p + f, p + f)].max(0.0).sqrt()),
+        noise_variance: own.noise_variance,
+        noise_log_sd: own.noise_log_sd,
         neg_log_posterior: best.objective,
         log_evidence,
-        samples_used,
-        nmse,
+        samples_used: own.samples_used,
+        nmse: own.nmse,
+        records: fitted,
         starts: outcomes,
-        simulations: simulations + laplace_runs + 1,
+        simulations: simulations + laplace_runs + target.records.len(),
         seconds: started.elapsed().as_secs_f64(),
     })
 }
@@ -841,6 +959,8 @@ pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, C
     out.noise_variance = Some(calibration.noise_variance);
     out.parameter_covariance = Some(calibration.covariance());
     out.validation_nmse = None;
+    // The records the input twin was fitted on are not this one's (the caller adds them).
+    out.records = Vec::new();
     Ok(out)
 }
 
@@ -857,7 +977,7 @@ pub fn fixed_log_evidence(
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
-    let (_, used) = used_samples(data, setup)?;
+    let (_, used) = used_samples(data, setup.mask.as_deref(), setup.transient)?;
     let mut sim = Simulator::new(
         &fmu,
         component.parameters.clone(),

@@ -139,7 +139,10 @@ pub enum DiagnoseError {
 }
 
 pub type Result<T, E = DiagnoseError> = std::result::Result<T, E>;
-pub use add::{add_physics, effects_from_report};
+pub use add::{
+    add_hybrid_contact, add_physics, effects_from_report, refit_over_records, with_record,
+    HybridAddReport, Refit, JOINT_STARTS,
+};
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
 pub use discover::Found;
 pub use options::parse_candidates;

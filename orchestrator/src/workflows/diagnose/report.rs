@@ -290,10 +290,30 @@ pub struct AddPhysicsReport {
     pub effect: EffectReport,
     /// Every effect added, in order.
     pub effects: Vec<EffectReport>,
+    /// The structure's parameters after the joint refit over every record.
     pub refined_physics: Vec<Estimate>,
+    /// NMSE per floor on `record` before and after the joint refit.
     pub nmse_before: [f64; 3],
     pub nmse_after: [f64; 3],
+    /// On `record` after the first stage (the effects alone, the physics held).
+    pub nmse_effects_alone: [f64; 3],
+    /// Log Bayes factor of the first stage against the twin as it was, on `record`.
     pub evidence: f64,
+    /// `record`'s noise variances in the joint fit.
     pub noise_variance: [f64; 3],
+    /// Every record of the joint refit, `record` first.
+    pub records: Vec<RecordNmse>,
+    /// The new twin's validation NMSE (worst floor of its worst record under the cap): twice
+    /// it is `twin compare`'s default tolerance.
+    pub validation_nmse: Option<f64>,
     pub seconds: f64,
+}
+
+/// One record of a joint refit: NMSE per floor before and after, and its noise variances.
+#[derive(Clone, Debug, Serialize)]
+pub struct RecordNmse {
+    pub record: String,
+    pub nmse_before: [f64; 3],
+    pub nmse_after: [f64; 3],
+    pub noise_variance: [f64; 3],
 }
