@@ -40,6 +40,10 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("JSON")
 }
 
+fn strs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
@@ -171,7 +175,10 @@ fn the_diagnosed_contact_refitted_over_every_record_passes_compare_on_all_three(
     // The new twin's validation level is its worst record's (measured 0.130 %).
     let level = r["validation_nmse"].as_f64().expect("validation NMSE");
     let worst_record = records.iter().map(|r| worst(&r.2)).fold(0.0, f64::max);
-    assert!((level - worst_record).abs() < 1e-9, "{level} {worst_record}");
+    assert!(
+        (level - worst_record).abs() < 1e-9,
+        "{level} {worst_record}"
+    );
     let nmse = compare_passes_on_every_record(dir.path(), &added);
     for (n, (name, _, after)) in records.iter().enumerate() {
         for f in 0..3 {
@@ -255,7 +262,6 @@ fn a_changed_or_moved_record_is_refused_and_records_can_be_given() {
         a.extend(extra.iter().map(|x| x.to_string()));
         a
     };
-    let strs = |v: &[String]| -> Vec<&str> { v.iter().map(String::as_str).collect() };
     // Changed: a line appended.
     let mut text = std::fs::read_to_string(&copy).expect("read");
     let last = text.lines().last().expect("a last line").to_owned();
@@ -280,9 +286,6 @@ fn a_changed_or_moved_record_is_refused_and_records_can_be_given() {
         "--report",
         s(&report),
     ])));
-    let records = json(&report)["records"]
-        .as_array()
-        .expect("records")
-        .len();
+    let records = json(&report)["records"].as_array().expect("records").len();
     assert_eq!(records, 2);
 }

@@ -38,8 +38,8 @@ use crate::cosim::import::{Fmu, ScalarType};
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{default_prior, priors_from_json, read_priors, Prior, Space};
-pub use validated::{calibrate_validated, CalibrateRunError, Validated};
 use simulator::Simulator;
+pub use validated::{calibrate_validated, CalibrateRunError, Validated};
 
 /// The default set of calibrated parameters.
 pub const DEFAULT_PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
