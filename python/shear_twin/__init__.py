@@ -181,13 +181,18 @@ class Twin:
 
     def add_physics(self, record: Record, *, effects: list[str] | None = None,
                     diagnosis: Report | dict[str, Any] | None = None, refine: bool = False,
-                    transient: float | None = None, threads: int | None = None) -> tuple["Twin", Report]:
+                    transient: float | None = None, threads: int | None = None,
+                    records: Sequence[Record] | None = None) -> tuple["Twin", Report]:
         """``twin add-physics``: switch effects on (``effects``, or all of a ``diagnosis``
-        report's) and estimate them on the record. Returns the new twin and the report."""
+        report's), estimate them on the record, then refit them jointly with the structure over
+        the record and ``records`` (default: those the twin remembers from its calibration;
+        ``--records``). ``refine`` is accepted and ignored, as in the CLI. Returns the new twin
+        and the report (NMSE per record before and after)."""
         if isinstance(diagnosis, Report):
             diagnosis = diagnosis.to_dict()
         twin, report = self._native.add_physics(record, effects=effects, diagnosis=diagnosis,
-                                                refine=refine, transient=transient, threads=threads)
+                                                refine=refine, transient=transient, threads=threads,
+                                                records=None if records is None else list(records))
         return Twin(twin), Report(report)
 
     def control(self, record: Record, q: Sequence[float], *, r: float | None = None,

@@ -65,8 +65,8 @@ class Twin:
                  tolerance: float | None = None, threads: int | None = None, block: float | None = None,
                  always_fit: bool = False, plot: str | None = None) -> dict[str, Any]: ...
     def add_physics(self, record: Record, *, effects: list[str] | None = None, diagnosis: dict[str, Any] | None = None,
-                    refine: bool = False, transient: float | None = None,
-                    threads: int | None = None) -> tuple[Twin, dict[str, Any]]: ...
+                    refine: bool = False, transient: float | None = None, threads: int | None = None,
+                    records: list[Record] | None = None) -> tuple[Twin, dict[str, Any]]: ...
     def control(self, record: Record, q: list[float], *, r: float | None = None, state_unit: str | None = None,
                 estimator: str | None = None, highpass: float | None = None, substeps: int | None = None,
                 sensor_noise: float | None = None, seed: int | None = None, gaps: list[str] = ...,

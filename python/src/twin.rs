@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use numpy::PyArray1;
 use orchestrator::cosim::import::Fmu;
 use orchestrator::twin::data::Measurement;
-use orchestrator::twin::{ParameterValue, Twin as CoreTwin};
+use orchestrator::twin::{ParameterValue, RecordRef, RecordRole, Twin as CoreTwin};
 use orchestrator::workflows::calibrate::{calibrate_validated, priors_from_json, CalibrationSetup};
 use orchestrator::report::control_plot::plot_control;
 use orchestrator::workflows::compare::{compare, CompareOptions};
@@ -272,7 +272,19 @@ impl Twin {
                 &v.calibration,
                 &v.validated,
             );
-            let new_twin = Twin::holding_fmus(v.twin).map_err(|e| to_py(kind, e))?;
+            // The records read from files, for `add_physics` to refit over, as `twin
+            // calibrate` stores them (records made from arrays have no file to name).
+            let mut calibrated = v.twin;
+            let roles = std::iter::once((data, RecordRole::Calibration))
+                .chain(validation.iter().map(|m| (*m, RecordRole::Validation)));
+            let mut stored = Vec::new();
+            for (m, role) in roles {
+                if m.path.is_file() {
+                    stored.push(RecordRef::of(&m.path, role).map_err(|e| to_py(kind, e))?);
+                }
+            }
+            calibrated.records = stored;
+            let new_twin = Twin::holding_fmus(calibrated).map_err(|e| to_py(kind, e))?;
             Ok((new_twin, report))
         })?;
         Ok((new_twin, to_object(py, &report)?))

@@ -101,6 +101,9 @@ def test_diagnose_and_add_physics_find_the_contact(tmp_path):
     assert diagnosis.action == "add_physics"
     assert diagnosis.effect["label"].startswith("contact@2-3")
     new_twin, added = twin.add_physics(record, diagnosis=diagnosis)
+    # Calibrated from a file, the twin remembers its record, as `twin calibrate`'s does: the
+    # effects are refitted over dataset3 and dataset1.
+    assert sorted(Path(r["record"]).name for r in added.records) == ["dataset1.csv", "dataset3.csv"]
     # The demo's measured fall is 68.6 % → 0.32 %; a 10× fall is the bar.
     assert max(added.nmse_after) < max(added.nmse_before) / 10
     assert new_twin.compare(record).nmse == pytest.approx(added.nmse_after, rel=1e-9)
