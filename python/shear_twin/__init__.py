@@ -48,7 +48,7 @@ for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseErr
 
 __all__ = [
     "Twin", "Record", "Report", "Comparison", "Control", "RunResult", "synth", "run", "pack_fmu",
-    "init", "record_from_frame",
+    "export_fmus", "init", "record_from_frame",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",
     "ControlError", "WatchError", "SynthError", "TrainError", "RunError",
 ]
@@ -380,6 +380,12 @@ def pack_fmu(model_description: str | os.PathLike, library: str | os.PathLike, o
     archive. Returns the modelIdentifier."""
     return _native.pack_fmu(os.fspath(model_description), os.fspath(library), os.fspath(out),
                             documentation=_path(documentation), resources=_path(resources))
+
+
+def export_fmus(out: str | os.PathLike) -> list[str]:
+    """``twin export-fmus``: write the FMUs built into the package (shear, GP corrector, LQR,
+    substructure) as ``out/<modelIdentifier>.fmu``, for other FMI tools; returns their paths."""
+    return [str(p) for p in _native.export_fmus(os.fspath(out))]
 
 
 def init(out: str | os.PathLike) -> Twin:

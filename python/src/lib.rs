@@ -172,5 +172,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(record::synth, m)?)?;
     m.add_function(wrap_pyfunction!(run::run, m)?)?;
     m.add_function(wrap_pyfunction!(run::pack_fmu, m)?)?;
+    m.add_function(wrap_pyfunction!(run::export_fmus, m)?)?;
     Ok(())
 }

@@ -124,3 +124,18 @@ pub fn pack_fmu(
         orchestrator::cosim::pack::pack_fmu(&contents, &out).map_err(|e| to_py(Kind::Run, e))
     })
 }
+
+/// `twin export-fmus`: the FMUs built into this package (shear, GP corrector, LQR,
+/// substructure) written as `out/<modelIdentifier>.fmu`, for other FMI tools. Returns their
+/// paths.
+#[pyfunction]
+pub fn export_fmus(py: Python<'_>, out: PathBuf) -> PyResult<Vec<PathBuf>> {
+    detached(py, || {
+        orchestrator::twin::embedded::export(&out).map_err(|e| {
+            to_py(
+                Kind::Run,
+                anyhow::Error::from(e).context(format!("writing the FMUs into {}", out.display())),
+            )
+        })
+    })
+}

@@ -450,3 +450,13 @@ def test_plots_are_the_cli_plots(tmp_path):
     with pytest.raises(st.TwinError) as caught:
         st.Twin.default().compare(st.Record.read("data/dataset1.csv"), plot=tmp_path / "x.png")
     assert str(caught.value) == message
+
+
+def test_export_fmus_writes_what_the_cli_writes(tmp_path):
+    done = cli("export-fmus", "--out", str(tmp_path / "cli"))
+    assert done.returncode == 0, done.stderr
+    written = st.export_fmus(tmp_path / "py")
+    assert sorted(Path(p).name for p in written) == sorted(p.name for p in (tmp_path / "cli").iterdir())
+    assert len(written) == 4
+    for p in written:
+        assert Path(p).read_bytes() == (tmp_path / "cli" / Path(p).name).read_bytes()
