@@ -2,7 +2,7 @@
 //! its `role` parameter chooses.
 
 use fmi2::{CoSimModel, InstantiateContext, ModelError, ModelInfo};
-use numerics::substructure::{Frame, Imposed, Numerical, Physical};
+use numerics::substructure::{Frame, Imposed, Numerical, Physical, Split};
 use serde::{Deserialize, Serialize};
 
 use crate::variables::{self as vars, *};
@@ -44,13 +44,16 @@ fn invalid(name: &str, reason: String) -> ModelError {
 }
 
 fn role_reason(value: i32) -> String {
-    format!("{value}: 0 (numerical substructure) or 1 (physical substructure)")
+    format!(
+        "{value}: 0 (numerical substructure), 1 (physical, specimen floor 3) or 2 (physical, \
+         specimen floors 2-3)"
+    )
 }
 
 impl Parameters {
     /// Every parameter, whichever the role uses: the first bad one, by its name.
     pub fn check(&self) -> Result<(), ModelError> {
-        if !(0..=1).contains(&self.role) {
+        if !(ROLE_NUMERICAL..=ROLE_PHYSICAL_FLOORS_2_3).contains(&self.role) {
             return Err(invalid("role", role_reason(self.role)));
         }
         let f = &self.frame;
@@ -138,7 +141,16 @@ fn unknown(vr: u32, kind: &'static str) -> ModelError {
 
 impl SubstructureModel {
     fn physical_role(&self) -> bool {
-        self.params.role == ROLE_PHYSICAL
+        self.params.role != ROLE_NUMERICAL
+    }
+
+    /// What the physical role's specimen holds.
+    fn split(&self) -> Split {
+        if self.params.role == ROLE_PHYSICAL_FLOORS_2_3 {
+            Split::SpecimenFloors23
+        } else {
+            Split::SpecimenFloor3
+        }
     }
 
     fn imposed(&self) -> Imposed {
@@ -192,13 +204,19 @@ impl SubstructureModel {
             V1 => n.v[0],
             Y2 => n.y[1],
             V2 => n.v[1],
-            MEASURED_FORCE | Y3 | V3 | RELATIVE if numerical => 0.0,
+            MEASURED_FORCE | Y3 | V3 | RELATIVE | A2 if numerical => 0.0,
             MEASURED_FORCE => {
                 let p = self.end_of_motion();
-                self.params
-                    .frame
-                    .interface_force(self.motion[2], self.motion[3], &p)
+                let a2 = self.imposed().acceleration_at_end();
+                self.params.frame.interface_force(
+                    self.split(),
+                    self.motion[2],
+                    self.motion[3],
+                    a2,
+                    &p,
+                )
             }
+            A2 => self.imposed().acceleration_at_end(),
             Y3 => self.end_of_motion().y3,
             V3 => self.end_of_motion().v3,
             RELATIVE => self.motion[2] - self.end_of_motion().y3,
@@ -250,7 +268,7 @@ impl CoSimModel for SubstructureModel {
     fn set_integer(&mut self, vr: u32, value: i32) -> Result<(), ModelError> {
         match vr {
             ROLE => {
-                if !(0..=1).contains(&value) {
+                if !(ROLE_NUMERICAL..=ROLE_PHYSICAL_FLOORS_2_3).contains(&value) {
                     return Err(invalid("role", role_reason(value)));
                 }
                 self.params.role = value;

@@ -4,7 +4,8 @@ use std::sync::OnceLock;
 
 use fmi2::{DefaultExperiment, ModelInfo, Unit, Variable};
 
-/// Integer parameter: 0 numerical, 1 physical.
+/// Integer parameter: 0 numerical, 1 physical (specimen floor 3), 2 physical (specimen floors
+/// 2 and 3, the paper's split).
 pub const ROLE: u32 = 1;
 /// m1..m3, c1..c3, k1..k3.
 pub const MASS: u32 = 10;
@@ -34,11 +35,16 @@ pub const MEASURED_FORCE: u32 = 60;
 pub const Y3: u32 = 61;
 pub const V3: u32 = 62;
 pub const RELATIVE: u32 = 63;
+pub const A2: u32 = 64;
 
 pub const MODEL_IDENTIFIER: &str = "fmu_substructure";
 
 pub const ROLE_NUMERICAL: i32 = 0;
+/// The specimen is storey 3 with the bumper and floor 3, moved at floor 2.
 pub const ROLE_PHYSICAL: i32 = 1;
+/// The specimen is floors 2 and 3 (the reference paper's eqs 13–14): the measured force
+/// carries floor 2's inertia.
+pub const ROLE_PHYSICAL_FLOORS_2_3: i32 = 2;
 
 /// The shear FMU's defaults for the structure; the bumper of the hybrid test's setup.
 pub const DEFAULT_MASS: f64 = 5.2;
@@ -56,6 +62,7 @@ fn units() -> Vec<Unit> {
         unit("kg", 1, 0, 0),
         unit("m", 0, 1, 0),
         unit("m/s", 0, 1, -1),
+        unit("m/s2", 0, 1, -2),
         unit("N", 1, 1, -2),
         unit("N/s", 1, 1, -3),
         unit("N.s/m", 1, 0, -1),
@@ -66,11 +73,15 @@ fn units() -> Vec<Unit> {
 fn variables() -> Vec<Variable> {
     let mut v = vec![Variable::integer_parameter("role", ROLE, ROLE_NUMERICAL)
         .min(0.0)
-        .max(1.0)
-        .describe("0: numerical substructure (floors 1-2, storeys 1-2); 1: physical substructure (storey 3 with the bumper, floor 3). A role ignores the other's inputs; the other's outputs read 0")];
+        .max(2.0)
+        .describe("0: numerical substructure (floor 1 with storeys 1-2, and floor 2: the specimen's floor 2 under role 2, the twin's model of it as a predictor whose inertia the master takes out of interface_force); 1: physical substructure, specimen floor 3 (storey 3 with the bumper and floor 3, moved at floor 2); 2: physical substructure, specimen floors 2-3 (the reference paper's eqs 13-14: role 1 with floor 2's mass m2, whose inertia is in the measured force). A role ignores the other's inputs; the other's outputs read 0")];
     for i in 0..3u32 {
         let n = i + 1;
-        let side = if n == 3 { "physical" } else { "numerical" };
+        let side = match n {
+            1 => "numerical",
+            2 => "numerical; physical in role 2",
+            _ => "physical",
+        };
         v.push(
             Variable::real_parameter(&format!("m{n}"), MASS + i, "kg", DEFAULT_MASS)
                 .min(0.0)
@@ -128,11 +139,11 @@ fn variables() -> Vec<Variable> {
     );
     v.push(
         Variable::real_input("interface_force", INTERFACE_FORCE, "N", 0.0)
-            .describe("numerical role: the measured interface force F_m at the step's start; floor 2 is loaded by -F_m"),
+            .describe("numerical role: floor 2's load at the step's start, acting as -interface_force on floor 2: the measured force F_m when the specimen is floor 3; F_m less the numerical floor 2's inertia when the specimen holds floor 2 (the master's added-mass correction)"),
     );
     v.push(
         Variable::real_input("interface_force_rate", INTERFACE_FORCE_RATE, "N/s", 0.0)
-            .describe("numerical role: slope of F_m over the coming step (F_m(tau) = interface_force + interface_force_rate * tau)"),
+            .describe("numerical role: slope of floor 2's load over the coming step (load(tau) = interface_force + interface_force_rate * tau)"),
     );
     for (name, vr, unit, what) in [
         (
@@ -186,11 +197,17 @@ fn variables() -> Vec<Variable> {
             "measured_force",
             MEASURED_FORCE,
             "N",
-            "the interface force F_m = c3 (v2 - v3) + k3 (y2 - y3) + contact_stiffness * max(0, y2 - y3 - gap)",
+            "the interface force F_m = c3 (v2 - v3) + k3 (y2 - y3) + contact_stiffness * max(0, y2 - y3 - gap), plus m2 a2 in role 2",
         ),
         ("y3", Y3, "m", "floor 3's displacement"),
         ("v3", V3, "m/s", "floor 3's velocity"),
         ("relative", RELATIVE, "m", "y2 - y3, the bumper's closure"),
+        (
+            "a2",
+            A2,
+            "m/s2",
+            "floor 2's acceleration (the imposed Hermite's), what an accelerometer on the specimen's floor 2 reads",
+        ),
     ] {
         v.push(
             Variable::real_output(name, vr, unit)
@@ -210,7 +227,7 @@ pub fn info() -> &'static ModelInfo {
         ModelInfo::new(
             "HybridSubstructure",
             MODEL_IDENTIFIER,
-            "A substructure of the simulated real-time hybrid test of a three-storey shear frame: numerical (floors 1-2, role 0) or physical (storey 3 with a one-sided bumper and floor 3, its bottom moved by the actuator, role 1); RK4",
+            "A substructure of the simulated real-time hybrid test of a three-storey shear frame: numerical (floor 1 and floor 2's model, role 0) or physical: storey 3 with a one-sided bumper and floor 3, moved at floor 2 by the actuator (role 1), or with floor 2's mass too, the reference paper's split (role 2); RK4",
             env!("CARGO_PKG_VERSION"),
             variables(),
             units(),

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use fmi2::{Causality, CoSimModel, InstantiateContext, Start, VarType};
 use fmu_substructure::variables::*;
 use fmu_substructure::SubstructureModel;
-use numerics::substructure::{Frame, Imposed, Numerical, Physical};
+use numerics::substructure::{Frame, Imposed, Numerical, Physical, Split};
 
 fn committed_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../modelDescription/fmu_substructure.xml")
@@ -73,7 +73,7 @@ fn the_table_has_both_roles_interfaces() {
             .depends_on
             .is_empty());
     }
-    for name in ["measured_force", "y3", "v3", "relative"] {
+    for name in ["measured_force", "y3", "v3", "relative", "a2"] {
         assert_eq!(
             check(name, VarType::Real, Causality::Output).depends_on,
             vec![Y2_START, V2_START, Y2_END, V2_END]
@@ -129,12 +129,21 @@ fn the_numerical_role_is_the_shared_model() {
     }
 }
 
-/// The physical role's outputs are the specimen at the end of the motion set, and the step
-/// keeps that state; the numerical outputs read 0.
+/// The physical roles' outputs are the specimen at the end of the motion set (role 2's force
+/// with floor 2's inertia), and the step keeps that state; the numerical outputs read 0.
 #[test]
-fn the_physical_role_is_the_shared_model() {
+fn the_physical_roles_are_the_shared_model() {
+    for (role, split) in [
+        (ROLE_PHYSICAL, Split::SpecimenFloor3),
+        (ROLE_PHYSICAL_FLOORS_2_3, Split::SpecimenFloors23),
+    ] {
+        physical_role_is_the_shared_model(role, split);
+    }
+}
+
+fn physical_role_is_the_shared_model(role: i32, split: Split) {
     let (f, h) = (frame(), 1e-3);
-    let mut m = model(ROLE_PHYSICAL, &f, h);
+    let mut m = model(role, &f, h);
     let mut reference = Physical::default();
     let (mut y0, mut v0) = (0.0, 0.0);
     for k in 0..200 {
@@ -145,8 +154,15 @@ fn the_physical_role_is_the_shared_model() {
         }
         let imposed = Imposed { y0, v0, y1, v1, h };
         reference.step(&f, h, &imposed, 0.0);
-        let expected = f.interface_force(y1, v1, &reference);
+        let a2 = imposed.acceleration_at_end();
+        let expected = f.interface_force(split, y1, v1, a2, &reference);
         assert_eq!(m.get_real(MEASURED_FORCE).expect("fm"), expected);
+        assert_eq!(m.get_real(A2).expect("a2"), a2);
+        let storey3 = f.storey3_force(y1, v1, &reference);
+        match split {
+            Split::SpecimenFloor3 => assert_eq!(expected, storey3),
+            Split::SpecimenFloors23 => assert_eq!(expected, f.mass[1] * a2 + storey3),
+        }
         assert_eq!(m.get_real(RELATIVE).expect("yr"), y1 - reference.y3);
         m.do_step(k as f64 * h, h).expect("step");
         // The kept state; the outputs now preview the same motion again, until the next is set.
@@ -161,7 +177,7 @@ fn the_physical_role_is_the_shared_model() {
 #[test]
 fn bad_parameters_are_refused_by_name() {
     let mut m = SubstructureModel::instantiate(&InstantiateContext::default()).expect("model");
-    let e = m.set_integer(ROLE, 2).expect_err("role 2");
+    let e = m.set_integer(ROLE, 3).expect_err("role 3");
     assert!(e.to_string().contains("'role'"), "{e}");
     for (vr, value, name) in [
         (MASS + 1, 0.0, "'m2'"),

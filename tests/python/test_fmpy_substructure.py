@@ -1,6 +1,7 @@
 """The hybrid test's substructure FMU (`fmu_substructure`) under fmpy: validation, the physical
-role driven step by step through `fmpy.fmi2.FMU2Slave` with a prescribed actuator motion against
-an independent numpy model of storey 3, the bumper and floor 3, and bad parameters refused.
+roles driven step by step through `fmpy.fmi2.FMU2Slave` with a prescribed actuator motion against
+an independent numpy model of storey 3, the bumper and floor 3 (and floor 2's inertia when the
+specimen holds floor 2, role 2), and bad parameters refused.
 
 The FMU is `target/fmu/fmu_substructure.fmu` (scripts/build-fmus.sh), or the file named by the
 environment variable SUBSTRUCTURE_FMU.
@@ -28,6 +29,8 @@ H = 1.0 / 51.2 / 8
 STEPS = 2048
 #: Storey 3, floor 3 and the bumper (the hybrid test's structure).
 PHYSICAL = {"m3": 4.9, "c3": 2.6, "k3": 4650.0, "gap": 5e-4, "contact_stiffness": 9000.0}
+#: Floor 2's mass, in the specimen under role 2.
+M2 = 5.3
 
 
 @pytest.fixture(scope="module")
@@ -69,10 +72,11 @@ def _motion(steps: int, h: float):
     return y, v
 
 
-def _reference(y, v, h, substeps):
+def _reference(y, v, h, substeps, m2=0.0):
     """Storey 3 + bumper + floor 3 with floor 2 moving as the cubic Hermite between the control
     steps (in power form), RK4 at `substeps` steps per control step; the measured force at every
-    control step."""
+    control step, with floor 2's inertia `m2` times the Hermite's acceleration at the step's end
+    (0 at the first point: floor 2 at rest); and that acceleration."""
     m, c, k, d, knl = (PHYSICAL[n] for n in ("m3", "c3", "k3", "gap", "contact_stiffness"))
 
     def force(y2, v2, y3, v3):
@@ -81,6 +85,7 @@ def _reference(y, v, h, substeps):
 
     y3, v3 = 0.0, 0.0
     out = [force(y[0], v[0], y3, v3)]
+    accelerations = [0.0]
     hs = h / substeps
     for i in range(len(y) - 1):
         y0, v0, y1, v1 = float(y[i]), float(v[i]), float(y[i + 1]), float(v[i + 1])
@@ -100,24 +105,33 @@ def _reference(y, v, h, substeps):
             k4p, k4v = v3 + hs * k3v, acc(t0 + hs, y3 + hs * k3p, v3 + hs * k3v)
             y3 += hs / 6 * (k1p + 2 * k2p + 2 * k3p + k4p)
             v3 += hs / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        out.append(force(y1, v1, y3, v3))
-    return np.array(out)
+        end = 2.0 * a2 + 6.0 * a3 * h
+        accelerations.append(end)
+        out.append(force(y1, v1, y3, v3) + m2 * end)
+    return np.array(out), np.array(accelerations)
 
 
-def _drive_physical(fmu, y, v, h, substeps):
-    """The physical role through FMU2Slave: at each point set the motion of the control step
+def _drive_physical(fmu, y, v, h, substeps, role=1):
+    """A physical role through FMU2Slave: at each point set the motion of the control step
     that ends there, read the measured force (the specimen at the end of that motion), step."""
-    slave, vrs = _slave(fmu, f"physical-{substeps}")
-    slave.setInteger([vrs["role"], vrs["substeps"]], [1, substeps])
-    slave.setReal([vrs[n] for n in PHYSICAL] + [vrs["control_step"]], list(PHYSICAL.values()) + [h])
+    slave, vrs = _slave(fmu, f"physical-{role}-{substeps}")
+    slave.setInteger([vrs["role"], vrs["substeps"]], [role, substeps])
+    slave.setReal(
+        [vrs[n] for n in PHYSICAL] + [vrs["control_step"], vrs["m2"]],
+        list(PHYSICAL.values()) + [h, M2],
+    )
     slave.exitInitializationMode()
     motion = [vrs[n] for n in ("y2_start", "v2_start", "y2_end", "v2_end")]
     out = []
     y3 = []
+    accelerations = []
     for i in range(len(y)):
         start = (y[i - 1], v[i - 1]) if i > 0 else (y[0], v[0])
         slave.setReal(motion, [start[0], start[1], y[i], v[i]])
-        fm, relative, d3 = slave.getReal([vrs["measured_force"], vrs["relative"], vrs["y3"]])
+        fm, relative, d3, a2 = slave.getReal(
+            [vrs["measured_force"], vrs["relative"], vrs["y3"], vrs["a2"]]
+        )
+        accelerations.append(a2)
         assert relative == pytest.approx(y[i] - d3, abs=1e-18)
         out.append(fm)
         y3.append(d3)
@@ -126,7 +140,7 @@ def _drive_physical(fmu, y, v, h, substeps):
         slave.doStep(currentCommunicationPoint=i * h, communicationStepSize=h)
     slave.terminate()
     slave.freeInstance()
-    return np.array(out), np.array(y3)
+    return np.array(out), np.array(y3), np.array(accelerations)
 
 
 def test_validate_fmu_reports_no_problem(fmu):
@@ -139,8 +153,8 @@ def test_the_physical_role_is_storey_3_with_the_bumper(fmu):
     # Floor 2 starts at rest: the first point's motion is then none at all.
     v = v.copy()
     v[0] = 0.0
-    by_fmu, y3 = _drive_physical(fmu, y, v, H, 1)
-    independent = _reference(y, v, H, 1)
+    by_fmu, y3, _ = _drive_physical(fmu, y, v, H, 1)
+    independent, _ = _reference(y, v, H, 1)
     closed = np.sum(y - y3 > PHYSICAL["gap"])
     assert closed > 50, f"the bumper is closed at only {closed} of {STEPS} control steps"
     # The same RK4 on the same Hermite, written twice: agreement to rounding (measured 2.3e-15
@@ -148,10 +162,30 @@ def test_the_physical_role_is_storey_3_with_the_bumper(fmu):
     np.testing.assert_allclose(by_fmu, independent, rtol=0, atol=1e-12 * np.max(np.abs(independent)))
     # Against a converged reference (64 RK4 steps per control step), the FMU at 8: the bar
     # (measured 8.3e-8 %; 3.4e-4 % at one step per control step).
-    converged = _reference(y, v, H, 64)
-    at_8, _ = _drive_physical(fmu, y, v, H, 8)
+    converged, _ = _reference(y, v, H, 64)
+    at_8, _, _ = _drive_physical(fmu, y, v, H, 8)
     error = nmse(converged[:, None], at_8[:, None])
     assert np.all(error < NMSE_BAR), f"NMSE {error} %"
+
+
+def test_role_2_adds_floor_2s_inertia_to_the_measured_force(fmu):
+    """The specimen holding floor 2 (the reference paper's split): the measured force is role
+    1's plus m2 times floor 2's acceleration, the imposed Hermite's at the motion's end, which
+    the FMU also reads out as `a2`."""
+    y, v = _motion(STEPS, H)
+    v = v.copy()
+    v[0] = 0.0
+    by_fmu, _, a2 = _drive_physical(fmu, y, v, H, 1, role=2)
+    independent, accelerations = _reference(y, v, H, 1, m2=M2)
+    scale = np.max(np.abs(independent))
+    # Written twice from the same Hermite: agreement to rounding of the inertia term (measured
+    # 2.4e-15 of the peak force).
+    worst = np.max(np.abs(by_fmu - independent)) / scale
+    print(f"role 2 against the numpy model: {worst:.2e} of the peak force")
+    assert worst < 1e-9
+    np.testing.assert_allclose(a2, accelerations, rtol=0, atol=1e-9 * np.max(np.abs(accelerations)))
+    # The inertia is a real part of the force here: m2 a2 against the whole.
+    assert np.max(np.abs(M2 * accelerations)) > 0.1 * scale
 
 
 def test_bad_parameters_are_refused(fmu):
@@ -163,5 +197,5 @@ def test_bad_parameters_are_refused(fmu):
         slave.freeInstance()
     slave, vrs = _slave(fmu, "bad-role")
     with pytest.raises(FMICallException):
-        slave.setInteger([vrs["role"]], [2])
+        slave.setInteger([vrs["role"]], [3])
     slave.freeInstance()

@@ -16,7 +16,7 @@ use crate::workflows::hybrid::experiment::{
     read_excitation, runs, threshold_curve, Coupling, InterfaceNoise, RunSummary, Setup,
     ThresholdPoint,
 };
-use crate::workflows::hybrid::{unit_peak, Structure};
+use crate::workflows::hybrid::{unit_peak, Split, Structure};
 use numerics::actuator::{ActuatorSpec, Compensation};
 use numerics::excitation::ExcitationSpec;
 
@@ -75,6 +75,12 @@ pub struct Common {
     /// the numerical substructure.
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     pub energy_factor: f64,
+    /// Where the structure is cut, by what the specimen (the physical substructure) holds:
+    /// specimen-floors-2-3 (the paper's eqs 13–14: the actuator drives floor 2, whose mass is
+    /// in the measured force) or specimen-floor-3 (storey 3 moved at floor 2; floor 2's mass
+    /// numerical).
+    #[arg(long, default_value_t = Split::SpecimenFloors23)]
+    pub split: Split,
     /// How the substructures are coupled: auto (one ODE for an actuator without dynamics, as
     /// the paper's simplified simulation; the stepped loop otherwise), monolithic or stepped.
     #[arg(long, value_enum, default_value_t = Coupling::Auto)]
@@ -112,6 +118,10 @@ pub struct RunArgs {
     /// Sensor noise sd on the interface force, N.
     #[arg(long, default_value_t = 1e-3)]
     pub force_noise: f64,
+    /// Sensor noise sd on the specimen's floor-2 acceleration, m/s² (used when the specimen
+    /// holds floor 2: the force carries its inertia).
+    #[arg(long, default_value_t = 1e-3)]
+    pub acceleration_noise: f64,
 }
 
 /// What the reports share: the substructures' parameters and how the test was set up.
@@ -123,6 +133,8 @@ struct Header {
     control_step: f64,
     excitation: String,
     actuator: ActuatorSpec,
+    /// What the specimen held: specimen-floors-2-3 (the paper's) or specimen-floor-3.
+    split: Split,
     coupling: Coupling,
 }
 
@@ -186,10 +198,12 @@ fn setup(c: &Common) -> Result<(Setup, Header)> {
         control_step: dt / f64::from(c.substeps),
         excitation: source,
         actuator,
+        split: c.split,
         coupling: Coupling::Auto,
     };
     let setup = Setup {
         structure,
+        split: c.split,
         unit: unit_peak(&signal)?,
         dt,
         substeps: c.substeps,
@@ -245,6 +259,7 @@ fn threshold_command(a: &ThresholdArgs) -> Result<()> {
     check_a_err(&a_errs)?;
     let (setup, header) = setup(&a.common)?;
     let curve = threshold_curve(&setup, &a_errs)?;
+    println!("split: {}", setup.split.describe());
     let plot = match &a.common.plot {
         Some(path) => Some((
             path,
@@ -290,6 +305,7 @@ fn run_command(a: &RunArgs) -> Result<()> {
     for (name, x) in [
         ("--displacement-noise", a.displacement_noise),
         ("--force-noise", a.force_noise),
+        ("--acceleration-noise", a.acceleration_noise),
     ] {
         if !(x.is_finite() && x >= 0.0) {
             bail!("{name} must be a non-negative number, was {x}");
@@ -299,6 +315,7 @@ fn run_command(a: &RunArgs) -> Result<()> {
     let noise = InterfaceNoise {
         displacement: a.displacement_noise,
         force: a.force_noise,
+        acceleration: a.acceleration_noise,
         seed: a.common.seed,
     };
     let outcomes = runs(&setup, a.peak, &a_errs, noise)?;
@@ -319,6 +336,7 @@ fn run_command(a: &RunArgs) -> Result<()> {
     if let Some((path, svg)) = plot {
         write_text_atomically(path, &svg)?;
     }
+    println!("split: {}", setup.split.describe());
     for r in &report.runs {
         if let Some(why) = &r.stopped {
             println!("a_err {:+.3}: {why}", r.a_err);
@@ -347,8 +365,14 @@ fn run_command(a: &RunArgs) -> Result<()> {
         ] {
             match law {
                 Some(l) => println!(
-                    "  contact law from the {what}: gap {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
-                    l.gap, l.gap_sd, l.contact_stiffness, l.contact_stiffness_sd
+                    "  contact law from the {what}: gap {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m{}",
+                    l.gap,
+                    l.gap_sd,
+                    l.contact_stiffness,
+                    l.contact_stiffness_sd,
+                    l.specimen_mass
+                        .map(|m| format!(", floor 2's mass {m:.4} kg"))
+                        .unwrap_or_default()
                 ),
                 None => println!("  contact law from the {what}: not identifiable (too few contacts)"),
             }

@@ -5,8 +5,10 @@
 //!   motion imposed on the physical side over the control step (the cubic Hermite from the last
 //!   achieved position and rate to the new ones, the new rate from the last three positions:
 //!   only displacements cross the interface);
-//! * [`InterfaceBlock`]: the measured force → the numerical side's `interface_force` and its
-//!   linear extrapolation slope, with the test's bookkeeping: the energy monitor, the bumper's
+//! * [`InterfaceBlock`]: the measured force → floor 2's load on the numerical side
+//!   (`numerics::substructure::floor2_load`: the force, less the numerical floor 2's inertia
+//!   when the specimen holds floor 2) as its `interface_force`, and its linear extrapolation
+//!   slope, with the test's bookkeeping: the energy monitor, the bumper's
 //!   contact times and the interface log (a [`HybridRun`] filled as the run goes).
 //!
 //! Each is stateful, one call per communication point; a second call at the same point with the
@@ -17,6 +19,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use numerics::actuator::EnergyMonitor;
+use numerics::substructure::{floor2_load, Frame, SampledMotion, Split};
 
 use super::{HybridError, HybridRun};
 use crate::cosim::master::{Block, MasterError};
@@ -53,10 +56,7 @@ fn same_point<const N: usize>(
 pub struct ActuatorBlock {
     actuator: Box<dyn FnMut(f64) -> f64>,
     h: f64,
-    y2p: f64,
-    v2p: f64,
-    y2p_previous: f64,
-    steps: u64,
+    achieved: SampledMotion,
     last: Option<(f64, Vec<f64>, [f64; 4])>,
 }
 
@@ -70,10 +70,7 @@ impl ActuatorBlock {
         ActuatorBlock {
             actuator,
             h,
-            y2p: 0.0,
-            v2p: 0.0,
-            y2p_previous: 0.0,
-            steps: 0,
+            achieved: SampledMotion::default(),
             last: None,
         }
     }
@@ -90,22 +87,12 @@ impl Block for ActuatorBlock {
             return Ok(());
         }
         let out = if self.last.is_none() {
-            [self.y2p, self.v2p, self.y2p, self.v2p]
+            let (y, v) = (self.achieved.y, self.achieved.v);
+            [y, v, y, v]
         } else {
-            let h = self.h;
             let achieved = (self.actuator)(inputs[0]);
-            // The achieved motion's rate, from its last three positions (second order).
-            let v_end = if self.steps == 0 {
-                (achieved - self.y2p) / h
-            } else {
-                (3.0 * achieved - 4.0 * self.y2p + self.y2p_previous) / (2.0 * h)
-            };
-            self.steps += 1;
-            let out = [self.y2p, self.v2p, achieved, v_end];
-            self.y2p_previous = self.y2p;
-            self.y2p = achieved;
-            self.v2p = v_end;
-            out
+            let m = self.achieved.advance(achieved, self.h);
+            [m.y0, m.v0, m.y1, m.v1]
         };
         outputs.copy_from_slice(&out);
         self.last = Some((time, inputs.to_vec(), out));
@@ -120,19 +107,24 @@ pub struct InterfaceLog {
     pub stopped: Option<HybridError>,
 }
 
-/// Inputs: `y1`, `y2` (numerical side), `y2p` (the achieved displacement, the actuator block's
-/// `y2_end`), the measured force, `y3`, `relative` (physical side). Outputs: `interface_force`
-/// and `interface_force_rate` for the numerical side (the force extrapolated linearly from the
-/// last two measurements).
+/// Inputs: `y1`, `y2` (numerical side), `y2p` (the achieved displacement, the actuator
+/// block's `y2_end`), the measured force, `y3`, `relative`, `a2` (physical side).
+/// Outputs: `interface_force` and `interface_force_rate` for the numerical side (floor 2's
+/// load, extrapolated linearly from the last two).
 pub struct InterfaceBlock {
     log: Rc<RefCell<InterfaceLog>>,
+    split: Split,
+    frame: Frame,
     excitation: Vec<f64>,
     dt: f64,
     substeps: u32,
     h: f64,
     gap: f64,
     monitor: EnergyMonitor,
-    fm: f64,
+    /// Floor 2's motion on the numerical side, for its acceleration.
+    numerical_motion: SampledMotion,
+    /// The last load.
+    load: f64,
     y1_before: f64,
     closed: bool,
     points: u64,
@@ -140,17 +132,19 @@ pub struct InterfaceBlock {
 }
 
 impl InterfaceBlock {
-    pub const INPUTS: usize = 6;
+    pub const INPUTS: usize = 7;
     pub const OUTPUTS: usize = 2;
 
-    /// `excitation` at `dt`, `substeps` control steps a sample; the bumper's `gap` (for the
-    /// contact times); the energy monitor's `energy_factor`.
+    /// The test cut at `split` of the structure `frame` (the bumper's gap for the contact
+    /// times, floor 2's mass for the load); `excitation` at `dt`, `substeps`
+    /// control steps a sample; the energy monitor's `energy_factor`.
     pub fn new(
         log: Rc<RefCell<InterfaceLog>>,
+        split: Split,
+        frame: Frame,
         excitation: Vec<f64>,
         dt: f64,
         substeps: u32,
-        gap: f64,
         energy_factor: f64,
     ) -> Result<Self, HybridError> {
         let monitor = EnergyMonitor::new(energy_factor, f64::INFINITY)
@@ -159,17 +153,21 @@ impl InterfaceBlock {
             let mut l = log.borrow_mut();
             l.run.excitation = excitation.clone();
             l.run.max_relative = f64::NEG_INFINITY;
+            l.run.split = split;
             l.run.interface.step = dt / f64::from(substeps);
         }
         Ok(InterfaceBlock {
             log,
+            split,
+            frame,
             excitation,
             dt,
             substeps,
             h: dt / f64::from(substeps),
-            gap,
+            gap: frame.gap,
             monitor,
-            fm: 0.0,
+            numerical_motion: SampledMotion::default(),
+            load: 0.0,
             y1_before: 0.0,
             closed: false,
             points: 0,
@@ -195,7 +193,7 @@ impl Block for InterfaceBlock {
         if same_point(&self.last, time, inputs, outputs, "interface")? {
             return Ok(());
         }
-        let [y1, y2n, y2p, fm, y3, yr] = [0, 1, 2, 3, 4, 5].map(|i| inputs[i]);
+        let [y1, y2n, y2p, fm, y3, yr, a2p] = std::array::from_fn(|i| inputs[i]);
         let k = self.points;
         self.points += 1;
         let h = self.h;
@@ -218,6 +216,7 @@ impl Block for InterfaceBlock {
                 run.interface.y2p.push(y2p);
                 run.interface.y3.push(y3);
                 run.interface.force.push(fm);
+                run.interface.a2p.push(a2p);
                 run.max_relative = run.max_relative.max(yr);
                 let now = yr > self.gap;
                 if now && !self.closed {
@@ -250,8 +249,15 @@ impl Block for InterfaceBlock {
             run.y3.push(y3);
             run.force.push(fm);
         }
-        let out = [fm, (fm - self.fm) / h];
-        self.fm = fm;
+        // The numerical floor 2's acceleration, estimated as the achieved motion's is.
+        let a2n = if k > 0 {
+            self.numerical_motion.advance(y2n, h).acceleration_at_end()
+        } else {
+            0.0
+        };
+        let load = floor2_load(self.split, &self.frame, fm, a2n);
+        let out = [load, (load - self.load) / h];
+        self.load = load;
         self.y1_before = y1;
         outputs.copy_from_slice(&out);
         self.last = Some((time, inputs.to_vec(), out));

@@ -8,11 +8,16 @@
 //! least-squares covariance `σ² (XᵀX)⁻¹` for the linear coefficients at the best gap, and for
 //! the gap the curvature of the profile residual (`sd_d² = 2σ² / (∂²SSE/∂d²)`).
 //!
+//! When the specimen holds floor 2 (the paper's split) the measured force carries floor 2's
+//! inertia too: `F_m = m₂ a₂ + k₃ y_r + c₃ ẏ_r + k_nl max(0, y_r − d)` with `a₂` the
+//! specimen's floor-2 accelerometer, still linear for a fixed gap: `m₂` is a fourth
+//! coefficient, identified with the others (`specimen_mass`).
+//!
 //! Identified from the *commanded* displacement `y₂ₙ` instead of the measured `y₂ₚ`, the same
 //! fit shows how an actuator's amplitude error biases the law: its `y_r` is off by
 //! `a_err · y₂ₙ`.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// An identified contact law with its posterior sd.
@@ -29,29 +34,44 @@ pub struct ContactLaw {
     pub residual_rms: f64,
     /// Samples with the bumper closed under the identified gap.
     pub closed_samples: usize,
+    /// Floor 2's mass, identified with the law when the measured force carries its inertia
+    /// (the specimen holds floor 2); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub specimen_mass: Option<f64>,
 }
 
 struct Fit {
     sse: f64,
-    theta: Vector3<f64>,
-    gram: Matrix3<f64>,
+    theta: DVector<f64>,
+    gram: DMatrix<f64>,
 }
 
-fn fit_at(d: f64, yr: &[f64], vr: &[f64], force: &[f64]) -> Option<Fit> {
-    let mut gram = Matrix3::zeros();
-    let mut rhs = Vector3::zeros();
-    for ((&y, &v), &f) in yr.iter().zip(vr).zip(force) {
-        let x = Vector3::new(y, v, (y - d).max(0.0));
-        gram += x * x.transpose();
-        rhs += x * f;
+/// The regressors at one sample: `y_r`, `ẏ_r`, `max(0, y_r − d)` and floor 2's acceleration
+/// when there is one.
+fn regressors(d: f64, y: f64, v: f64, a: Option<f64>) -> DVector<f64> {
+    match a {
+        Some(a) => DVector::from_column_slice(&[y, v, (y - d).max(0.0), a]),
+        None => DVector::from_column_slice(&[y, v, (y - d).max(0.0)]),
     }
-    let theta = gram.try_inverse().map(|g| g * rhs)?;
+}
+
+fn fit_at(d: f64, yr: &[f64], vr: &[f64], ar: Option<&[f64]>, force: &[f64]) -> Option<Fit> {
+    let p = if ar.is_some() { 4 } else { 3 };
+    let mut gram = DMatrix::zeros(p, p);
+    let mut rhs = DVector::zeros(p);
+    for (k, ((&y, &v), &f)) in yr.iter().zip(vr).zip(force).enumerate() {
+        let x = regressors(d, y, v, ar.map(|a| a[k]));
+        gram += &x * x.transpose();
+        rhs += &x * f;
+    }
+    let theta = gram.clone().try_inverse().map(|g| g * rhs)?;
     let sse = yr
         .iter()
         .zip(vr)
         .zip(force)
-        .map(|((&y, &v), &f)| {
-            let x = Vector3::new(y, v, (y - d).max(0.0));
+        .enumerate()
+        .map(|(k, ((&y, &v), &f))| {
+            let x = regressors(d, y, v, ar.map(|a| a[k]));
             (f - x.dot(&theta)).powi(2)
         })
         .sum();
@@ -59,10 +79,20 @@ fn fit_at(d: f64, yr: &[f64], vr: &[f64], force: &[f64]) -> Option<Fit> {
 }
 
 /// Identify the law from `y2` (floor 2's displacement on the physical side, or the command),
-/// `y3` and the measured force, sampled every `dt`. `None` when the bumper never closes far
-/// enough to be seen (fewer than 10 samples beyond the best gap) or the fit is singular.
-pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<ContactLaw> {
-    let n = y2.len().min(y3.len()).min(force.len());
+/// `y3` and the measured force, sampled every `dt`, with `a2` floor 2's measured acceleration
+/// when the force carries its inertia. `None` when the bumper never closes far enough to be
+/// seen (fewer than 10 samples beyond the best gap) or the fit is singular.
+pub fn identify(
+    y2: &[f64],
+    y3: &[f64],
+    a2: Option<&[f64]>,
+    force: &[f64],
+    dt: f64,
+) -> Option<ContactLaw> {
+    let mut n = y2.len().min(y3.len()).min(force.len());
+    if let Some(a) = a2 {
+        n = n.min(a.len());
+    }
     if n < 10 {
         return None;
     }
@@ -73,6 +103,8 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
         .map(|k| (yr_all[k + 1] - yr_all[k - 1]) / (2.0 * dt))
         .collect();
     let f: Vec<f64> = force[1..n - 1].to_vec();
+    let ar: Option<Vec<f64>> = a2.map(|a| a[1..n - 1].to_vec());
+    let ar = ar.as_deref();
     let top = yr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !(top > 0.0) {
         return None;
@@ -82,7 +114,7 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
     let mut best = (f64::INFINITY, 0.0);
     for i in 1..scan {
         let d = top * i as f64 / scan as f64;
-        if let Some(fit) = fit_at(d, &yr, &vr, &f) {
+        if let Some(fit) = fit_at(d, &yr, &vr, ar, &f) {
             if fit.sse < best.0 {
                 best = (fit.sse, d);
             }
@@ -92,7 +124,7 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
     let (mut a, mut b) = ((best.1 - step).max(0.0), (best.1 + step).min(top));
     let golden = 0.5 * (5f64.sqrt() - 1.0);
     let sse = |d: f64| {
-        fit_at(d, &yr, &vr, &f)
+        fit_at(d, &yr, &vr, ar, &f)
             .map(|x| x.sse)
             .unwrap_or(f64::INFINITY)
     };
@@ -106,12 +138,12 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
         }
     }
     let d = 0.5 * (a + b);
-    let fit = fit_at(d, &yr, &vr, &f)?;
+    let fit = fit_at(d, &yr, &vr, ar, &f)?;
     let closed = yr.iter().filter(|&&y| y > d).count();
     if closed < 10 {
         return None;
     }
-    let dof = (yr.len() as f64 - 4.0).max(1.0);
+    let dof = (yr.len() as f64 - 1.0 - fit.theta.len() as f64).max(1.0);
     let sigma2 = fit.sse / dof;
     let cov = fit.gram.try_inverse()? * sigma2;
     // The profile's curvature in d, by central differences of width h.
@@ -131,6 +163,7 @@ pub fn identify(y2: &[f64], y3: &[f64], force: &[f64], dt: f64) -> Option<Contac
         storey_damping: fit.theta[1],
         residual_rms: (fit.sse / yr.len() as f64).sqrt(),
         closed_samples: closed,
+        specimen_mass: ar.map(|_| fit.theta[3]),
     })
 }
 
@@ -162,9 +195,27 @@ mod tests {
                 k3 * y + c3 * v + knl * (y - d).max(0.0)
             })
             .collect();
-        let law = identify(&y2, &y3, &force, dt).expect("identified");
+        let law = identify(&y2, &y3, None, &force, dt).expect("identified");
         assert!((law.gap - d).abs() < 1e-3 * d, "{law:?}");
         assert!((law.contact_stiffness - knl).abs() < 1e-3 * knl, "{law:?}");
         assert!((law.storey_stiffness - k3).abs() < 1e-3 * k3, "{law:?}");
+        assert!(law.specimen_mass.is_none());
+        // The specimen holding floor 2: its inertia in the force, its acceleration measured.
+        let m2 = 5.3;
+        let a2: Vec<f64> = (0..n)
+            .map(|k| {
+                if k == 0 || k + 1 == n {
+                    0.0
+                } else {
+                    (y2[k + 1] - 2.0 * y2[k] + y2[k - 1]) / (dt * dt)
+                }
+            })
+            .collect();
+        let with_inertia: Vec<f64> = force.iter().zip(&a2).map(|(f, a)| f + m2 * a).collect();
+        let law = identify(&y2, &y3, Some(&a2), &with_inertia, dt).expect("identified");
+        assert!((law.gap - d).abs() < 1e-3 * d, "{law:?}");
+        assert!((law.contact_stiffness - knl).abs() < 1e-3 * knl, "{law:?}");
+        let mass = law.specimen_mass.expect("a mass");
+        assert!((mass - m2).abs() < 1e-3 * m2, "{law:?}");
     }
 }
