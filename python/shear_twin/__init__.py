@@ -33,6 +33,7 @@ from ._native import (
     ControlError,
     DataError,
     DiagnoseError,
+    HybridError,
     Record,
     RunError,
     ShearTwinError,
@@ -43,14 +44,14 @@ from ._native import (
 )
 
 for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseError, ControlError,
-               WatchError, SynthError, TrainError, RunError):
+               WatchError, SynthError, TrainError, RunError, HybridError):
     _error.__module__ = "shear_twin"
 
 __all__ = [
     "Twin", "Record", "Report", "Comparison", "Control", "RunResult", "synth", "run", "pack_fmu",
     "export_fmus", "init", "record_from_frame",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",
-    "ControlError", "WatchError", "SynthError", "TrainError", "RunError",
+    "ControlError", "WatchError", "SynthError", "TrainError", "RunError", "HybridError",
 ]
 
 
@@ -283,6 +284,43 @@ class Twin:
                                           refit_iterations=refit_iterations, nmse_every=nmse_every,
                                           change_run=change_run, out_dir=_path(out_dir))
         return Report(report), None if twin is None else Twin(twin)
+
+    def hybrid_threshold(self, *, a_err: Sequence[float] | None = None, **common: Any) -> Report:
+        """``twin hybrid threshold`` on this twin's structure (its m, c, k; ``Twin.default()``
+        for the CLI without ``--twin``): the peak excitation force at which the bumper between
+        floors 2 and 3 first closes, for each amplitude error ``a_err`` (default −0.1 to 0.1 by
+        0.02). ``common``: the options both hybrid commands take — ``excitation`` (a
+        ``time,force`` CSV), ``seed``, ``duration``, ``sample_rate``, ``substeps``, ``gap``,
+        ``contact_stiffness``, ``delay``, ``lag``, ``compensate``, ``energy_factor``, ``split``
+        ("specimen-floors-2-3", the paper's, or "specimen-floor-3"), ``coupling`` ("auto",
+        "monolithic", "stepped"), ``plot`` — None for the CLI's defaults. Returns the report."""
+        return Report(self._native.hybrid_threshold(a_err=None if a_err is None else list(a_err),
+                                                    **_hybrid(common)))
+
+    def hybrid_run(self, *, peak: float | None = None, a_err: Sequence[float] | None = None,
+                   displacement_noise: float | None = None, force_noise: float | None = None,
+                   acceleration_noise: float | None = None, **common: Any) -> Report:
+        """``twin hybrid run`` on this twin's structure: the test at ``peak`` N (5) for each
+        amplitude error ``a_err`` (default 0 and 0.05) — contacts, floor 2's spectrum and
+        harmonics, the contact law identified from the interface measured with
+        ``displacement_noise`` (1e-6 m), ``force_noise`` (1e-3 N) and, when the specimen holds
+        floor 2, ``acceleration_noise`` (1e-3 m/s², its accelerometer). ``common``: as
+        ``hybrid_threshold``'s. Returns the report (for ``add_physics``' hybrid law)."""
+        return Report(self._native.hybrid_run(peak=peak, a_err=None if a_err is None else list(a_err),
+                                              displacement_noise=displacement_noise,
+                                              force_noise=force_noise,
+                                              acceleration_noise=acceleration_noise, **_hybrid(common)))
+
+
+_HYBRID_COMMON = ("excitation", "seed", "duration", "sample_rate", "substeps", "gap", "contact_stiffness",
+                  "delay", "lag", "compensate", "energy_factor", "split", "coupling", "plot")
+
+
+def _hybrid(common: dict[str, Any]) -> dict[str, Any]:
+    unknown = sorted(set(common) - set(_HYBRID_COMMON))
+    if unknown:
+        raise TypeError(f"unexpected keyword argument(s): {', '.join(unknown)}")
+    return {k: _path(v) if k in ("excitation", "plot") else v for k, v in common.items()}
 
 
 def _path(p: str | os.PathLike | None) -> str | None:

@@ -16,6 +16,7 @@ class WatchError(ShearTwinError): ...
 class SynthError(ShearTwinError): ...
 class TrainError(ShearTwinError): ...
 class RunError(ShearTwinError): ...
+class HybridError(ShearTwinError): ...
 
 class Record:
     def __init__(
@@ -92,6 +93,21 @@ class Twin:
               refit_every: int | None = None, refit_growth: float | None = None,
               refit_iterations: int | None = None, nmse_every: int | None = None,
               change_run: int | None = None, out_dir: str | None = None) -> tuple[dict[str, Any], Twin | None]: ...
+    def hybrid_threshold(self, *, a_err: list[float] | None = None, excitation: str | None = None,
+                         seed: int | None = None, duration: float | None = None, sample_rate: float | None = None,
+                         substeps: int | None = None, gap: float | None = None,
+                         contact_stiffness: float | None = None, delay: float | None = None,
+                         lag: float | None = None, compensate: int | None = None,
+                         energy_factor: float | None = None, split: str | None = None,
+                         coupling: str | None = None, plot: str | None = None) -> dict[str, Any]: ...
+    def hybrid_run(self, *, peak: float | None = None, a_err: list[float] | None = None,
+                   displacement_noise: float | None = None, force_noise: float | None = None,
+                   acceleration_noise: float | None = None, excitation: str | None = None, seed: int | None = None, duration: float | None = None,
+                   sample_rate: float | None = None, substeps: int | None = None, gap: float | None = None,
+                   contact_stiffness: float | None = None, delay: float | None = None, lag: float | None = None,
+                   compensate: int | None = None, energy_factor: float | None = None,
+                   split: str | None = None, coupling: str | None = None,
+                   plot: str | None = None) -> dict[str, Any]: ...
 
 def run(model: str, *, start: float | None = None, stop: float | None = None, step: float | None = None,
         input: str | None = None, sets: dict[str, float | int | bool | str] | None = None,

@@ -72,6 +72,12 @@ create_exception!(
 );
 create_exception!(
     _native,
+    HybridError,
+    ShearTwinError,
+    "A simulated hybrid test that cannot be set up or run."
+);
+create_exception!(
+    _native,
     SynthError,
     ShearTwinError,
     "A synthetic scenario that cannot be made."
@@ -89,6 +95,7 @@ pub(crate) enum Kind {
     Synth,
     Train,
     Run,
+    Hybrid,
 }
 
 /// The error as the CLI prints it (`twin: error: {err:#}` without the prefix), as `kind`.
@@ -104,6 +111,7 @@ pub(crate) fn to_py(kind: Kind, err: impl Into<anyhow::Error>) -> PyErr {
         Kind::Synth => SynthError::new_err(message),
         Kind::Train => TrainError::new_err(message),
         Kind::Run => RunError::new_err(message),
+        Kind::Hybrid => HybridError::new_err(message),
     }
 }
 
@@ -167,6 +175,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SynthError", py.get_type::<SynthError>())?;
     m.add("TrainError", py.get_type::<TrainError>())?;
     m.add("RunError", py.get_type::<RunError>())?;
+    m.add("HybridError", py.get_type::<HybridError>())?;
     m.add_class::<record::Record>()?;
     m.add_class::<twin::Twin>()?;
     m.add_function(wrap_pyfunction!(record::synth, m)?)?;

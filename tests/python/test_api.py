@@ -460,3 +460,35 @@ def test_export_fmus_writes_what_the_cli_writes(tmp_path):
     assert len(written) == 4
     for p in written:
         assert Path(p).read_bytes() == (tmp_path / "cli" / Path(p).name).read_bytes()
+
+
+def test_hybrid_threshold_and_run_are_the_cli_reports(tmp_path):
+    short = ["--duration", "12", "--a-err", "0", "--a-err", "0.05"]
+    done = cli("hybrid", "threshold", *short, "--report", str(tmp_path / "t.json"))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads((tmp_path / "t.json").read_text())
+    twin = st.Twin.default()
+    threshold = twin.hybrid_threshold(duration=12.0, a_err=[0.0, 0.05])
+    assert threshold.thresholds == expected["thresholds"]  # the same computation: equal to the bit
+    assert {k: v for k, v in threshold.to_dict().items() if k != "seconds"} == \
+        {k: v for k, v in expected.items() if k != "seconds"}
+    done = cli("hybrid", "run", *short, "--report", str(tmp_path / "r.json"))
+    assert done.returncode == 0, done.stderr
+    run = twin.hybrid_run(duration=12.0, a_err=[0.0, 0.05], plot=tmp_path / "run.svg")
+    assert run.to_dict() == json.loads((tmp_path / "r.json").read_text())
+    assert (tmp_path / "run.svg").stat().st_size > 1000
+    message = cli_error("hybrid", "run", "--a-err=-2", "--report", str(tmp_path / "never.json"))
+    with pytest.raises(st.HybridError) as caught:
+        twin.hybrid_run(a_err=[-2.0])
+    assert str(caught.value) == message
+    with pytest.raises(st.HybridError, match="--coupling sideways: expected one of auto, monolithic, stepped"):
+        twin.hybrid_threshold(coupling="sideways")
+    # The split: the paper's by default, the other by name, as the CLI's --split.
+    assert threshold.split == "specimen-floors-2-3"
+    done = cli("hybrid", "threshold", *short, "--split", "specimen-floor-3", "--report", str(tmp_path / "t3.json"))
+    assert done.returncode == 0, done.stderr
+    other = twin.hybrid_threshold(duration=12.0, a_err=[0.0, 0.05], split="specimen-floor-3")
+    assert other.thresholds == json.loads((tmp_path / "t3.json").read_text())["thresholds"]
+    assert other.split == "specimen-floor-3"
+    with pytest.raises(st.HybridError, match="unknown split 'floor-9'"):
+        twin.hybrid_threshold(split="floor-9")

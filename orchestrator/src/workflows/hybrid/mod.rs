@@ -58,6 +58,7 @@ pub mod experiment;
 pub mod fmus;
 pub mod identify;
 pub mod monolithic;
+pub mod options;
 pub mod spectrum;
 
 /// What can stop a hybrid test.
