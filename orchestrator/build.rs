@@ -74,7 +74,10 @@ fn embed_fmus() {
         for path in [&contents.model_description, &crate_dir.join("Cargo.toml")] {
             println!("cargo:rerun-if-changed={}", path.display());
         }
-        for dir in [&contents.documentation, &contents.resources].into_iter().flatten() {
+        for dir in [&contents.documentation, &contents.resources]
+            .into_iter()
+            .flatten()
+        {
             println!("cargo:rerun-if-changed={}", dir.display());
         }
         table.push((format!("{id}.fmu"), archive));
@@ -174,14 +177,24 @@ fn build_libraries(workspace: &Path, out_dir: &Path) -> PathBuf {
 
     // Rebuild when a source of an FMU (its crate or a workspace crate it uses) changes: the
     // files listed in the libraries' dep-info, those under the workspace, and the lock file.
-    println!("cargo:rerun-if-changed={}", workspace.join("Cargo.lock").display());
-    println!("cargo:rerun-if-changed={}", workspace.join("Cargo.toml").display());
+    println!(
+        "cargo:rerun-if-changed={}",
+        workspace.join("Cargo.lock").display()
+    );
+    println!(
+        "cargo:rerun-if-changed={}",
+        workspace.join("Cargo.toml").display()
+    );
     let mut sources = std::collections::BTreeSet::new();
     for (krate, _) in FMUS {
         let dep_info = libraries.join(format!("lib{}.d", krate.replace('-', "_")));
         let text = std::fs::read_to_string(&dep_info)
             .unwrap_or_else(|err| panic!("reading {}: {err}", dep_info.display()));
-        sources.extend(dep_info_paths(&text).into_iter().filter(|p| p.starts_with(workspace)));
+        sources.extend(
+            dep_info_paths(&text)
+                .into_iter()
+                .filter(|p| p.starts_with(workspace)),
+        );
     }
     for crate_dir in ["fmi2", "numerics"] {
         sources.insert(workspace.join(crate_dir).join("Cargo.toml"));

@@ -78,8 +78,7 @@ pub fn run<'py>(
             let svg = orchestrator::report::run_plot::plot_run(&result, &title).map_err(|m| {
                 crate::invalid(kind, format!("cannot draw {}: {m}", plot.display()))
             })?;
-            orchestrator::fsutil::write_text_atomically(plot, &svg)
-                .map_err(|e| to_py(kind, e))?;
+            orchestrator::fsutil::write_text_atomically(plot, &svg).map_err(|e| to_py(kind, e))?;
         }
         Ok(result)
     })?;

@@ -5,22 +5,24 @@ use std::path::PathBuf;
 
 use numpy::PyArray1;
 use orchestrator::cosim::import::Fmu;
+use orchestrator::report::control_plot::plot_control;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, RecordRef, RecordRole, Twin as CoreTwin};
 use orchestrator::workflows::calibrate::{calibrate_validated, priors_from_json, CalibrationSetup};
-use orchestrator::report::control_plot::plot_control;
 use orchestrator::workflows::compare::{compare, CompareOptions};
-use orchestrator::workflows::options::check_svg;
 use orchestrator::workflows::control::closed_loop::{Gap, Response};
 use orchestrator::workflows::control::{
-    run_control, twin_for_control, ControlOptions, ControllerSpec, Retune,
-    ScheduleOptions, VarianceTrigger,
+    run_control, twin_for_control, ControlOptions, ControllerSpec, Retune, ScheduleOptions,
+    VarianceTrigger,
 };
 use orchestrator::workflows::diagnose::{
     add_physics, diagnose, effects_from_report, parse_candidates, Addition, Candidate,
     DiagnoseOptions,
 };
-use orchestrator::workflows::learn::{chosen_modes, learned_twin, prepare, run_modes, LearnOptions};
+use orchestrator::workflows::learn::{
+    chosen_modes, learned_twin, prepare, run_modes, LearnOptions,
+};
+use orchestrator::workflows::options::check_svg;
 use orchestrator::workflows::train::{train_selected, LagSelection, TrainOptions};
 use orchestrator::workflows::watch::background::DiagnosisOptions;
 use orchestrator::workflows::watch::{watch_with_alerts, StreamSource, WatchError, WatchOptions};
@@ -501,8 +503,8 @@ impl Twin {
         let data = &record.measurement;
         let outcome = detached(py, || {
             let twin = twin_for_control(&self.twin, sensor_noise);
-            let outcome = run_control(&twin, data, &options, &mut |_, _| {})
-                .map_err(|e| to_py(kind, e))?;
+            let outcome =
+                run_control(&twin, data, &options, &mut |_, _| {}).map_err(|e| to_py(kind, e))?;
             let svg = match &plot {
                 Some(path) => Some((
                     path,
@@ -510,9 +512,7 @@ impl Twin {
                         &outcome,
                         &format!("twin control on {}", data.path.display()),
                     )
-                    .map_err(|m| {
-                        invalid(kind, format!("cannot draw {}: {m}", path.display()))
-                    })?,
+                    .map_err(|m| invalid(kind, format!("cannot draw {}: {m}", path.display())))?,
                 )),
                 None => None,
             };
@@ -597,8 +597,7 @@ impl Twin {
         let kind = Kind::Watch;
         let err = |e: WatchError| to_py(kind, e);
         let source = source.extract::<PathBuf>()?.display().to_string();
-        orchestrator::workflows::options::check_tolerance(tolerance)
-            .map_err(|e| to_py(kind, e))?;
+        orchestrator::workflows::options::check_tolerance(tolerance).map_err(|e| to_py(kind, e))?;
         let stream = StreamSource::parse(&source, follow, idle, client_id).map_err(err)?;
         let mut options = WatchOptions::new(stream, alerts);
         let d = DiagnosisOptions::default();

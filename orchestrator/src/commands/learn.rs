@@ -195,7 +195,11 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         println!(
             "wrote {} (the corrector as learned: {} points)",
             path.display(),
-            result.final_gps.to_training_file(options.lags, options.target).inputs.len()
+            result
+                .final_gps
+                .to_training_file(options.lags, options.target)
+                .inputs
+                .len()
         );
     }
     let report_path = args

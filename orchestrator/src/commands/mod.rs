@@ -8,8 +8,8 @@ use std::path::Path;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use crate::twin::run::Progress;
 pub(crate) use crate::twin::run::Compared;
+use crate::twin::run::Progress;
 
 pub mod add_physics;
 pub mod calibrate;

@@ -12,7 +12,9 @@ use crate::twin::Twin;
 use crate::workflows::options::check_tolerance;
 use crate::workflows::watch::background::DiagnosisOptions;
 use crate::workflows::watch::supervise::LearnOptions;
-use crate::workflows::watch::{watch, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW};
+use crate::workflows::watch::{
+    watch, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW,
+};
 
 #[derive(clap::Args)]
 pub struct WatchArgs {
@@ -92,12 +94,8 @@ impl WatchArgs {
     /// The library's options from the flags, checked.
     pub fn options(&self) -> Result<WatchOptions> {
         check_tolerance(self.tolerance)?;
-        let source = StreamSource::parse(
-            &self.source,
-            self.follow,
-            self.idle,
-            self.client_id.clone(),
-        )?;
+        let source =
+            StreamSource::parse(&self.source, self.follow, self.idle, self.client_id.clone())?;
         let options = WatchOptions {
             learning: LearnOptions {
                 threshold: self.query_threshold,

@@ -124,7 +124,9 @@ fn process_directory() -> io::Result<&'static Path> {
     if let Some(dir) = DIR.get() {
         return Ok(dir.path());
     }
-    let dir = tempfile::Builder::new().prefix("shear-twin-fmu-").tempdir()?;
+    let dir = tempfile::Builder::new()
+        .prefix("shear-twin-fmu-")
+        .tempdir()?;
     Ok(DIR.get_or_init(|| dir).path())
 }
 
@@ -160,7 +162,10 @@ mod tests {
         let recent = dir.path().join("fmu_shear-00000000000000bb.fmu");
         for (path, age) in [(&old, 48), (&recent, 1)] {
             std::fs::write(path, b"old").expect("write");
-            let f = std::fs::File::options().write(true).open(path).expect("open");
+            let f = std::fs::File::options()
+                .write(true)
+                .open(path)
+                .expect("open");
             f.set_modified(SystemTime::now() - Duration::from_secs(age * 3600))
                 .expect("mtime");
         }
