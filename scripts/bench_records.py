@@ -1,5 +1,5 @@
 """A measurement CSV as the Python peers of the benchmarks read it, the way `twin` reads it
-(orchestrator/src/twin/data.rs): columns time, force, acc1..3; the step from the ends of the time
+(orchestrator/src/record/read.rs): columns time, force, acc1..3; the step from the ends of the time
 column, snapped to a round rate in mHz when that moves the end of the grid by at most 1 µs
 (51.2 Hz -> 1/51.2 s); the first sample at least `transient` seconds after the start."""
 from __future__ import annotations

@@ -2,8 +2,8 @@
 //!
 //! - `cosim`: the co-simulation layer — FMU import, the master algorithm, SSP, FMU packing and
 //!   `twin run`; it knows nothing of the shear structure;
-//! - `twin`: the twin as an SSP archive around the shear FMU, its measurement records and
-//!   running it on one;
+//! - `record`: measurement records in and out (the one reader and writer of the CSV format);
+//! - `twin`: the twin as an SSP archive around the shear FMU and running it on a record;
 //! - `evaluation`: statistics and the comparison of a run with a record;
 //! - `workflows`: calibrate, train, learn, diagnose (with forward selection and discovery),
 //!   control, the hybrid test;
@@ -18,6 +18,7 @@ pub mod commands;
 pub mod cosim;
 pub mod evaluation;
 pub mod fsutil;
+pub mod record;
 pub mod report;
 pub mod synth;
 pub mod twin;

@@ -5,8 +5,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use numpy::{PyArray1, PyReadonlyArray1};
-use orchestrator::synth::{csv_text, synth_controlled, InLoopController, Scenario};
-use orchestrator::twin::data::Measurement;
+use orchestrator::record::{csv_text, Measurement};
+use orchestrator::synth::{synth_controlled, InLoopController, Scenario};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 

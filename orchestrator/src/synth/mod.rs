@@ -148,14 +148,13 @@
 //! hysteresis states, if any), and the [`Truth`] (with, per quadratic damper, the energy it
 //! dissipated).
 
-mod csv;
 mod flags;
 mod force;
 mod scenario;
 mod structure;
 mod truth;
 
-pub use csv::{csv_text, format_g9};
+pub use crate::record::{csv_text, format_g9};
 pub use flags::{parse_change_flag, parse_effect_flag};
 pub use force::{band_limited_force, envelope};
 pub use scenario::{
@@ -176,8 +175,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::twin::data::Measurement;
-use csv::{round9, round_time};
+use crate::record::write::{round9, round_time};
+use crate::record::Measurement;
 use structure::Hysteretic;
 use truth::Stats;
 
@@ -589,7 +588,7 @@ pub fn synth_controlled(
         generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
         scenario: s.to_json(),
         record: RecordTruth {
-            columns: crate::twin::data::REQUIRED_COLUMNS.iter().map(|c| c.to_string()).collect(),
+            columns: crate::record::REQUIRED_COLUMNS.iter().map(|c| c.to_string()).collect(),
             samples: n,
             sample_rate: s.sample_rate,
             sample_interval: dt,

@@ -13,7 +13,8 @@
 //! `record{i}.role`: String parameters), so that `twin add-physics` can refit over them and a
 //! moved or changed file is named as such.
 
-pub mod data;
+/// Measurement records live in [`crate::record`]; this path is kept for code written before.
+pub use crate::record as data;
 pub mod embedded;
 pub mod run;
 

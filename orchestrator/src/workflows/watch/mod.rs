@@ -24,6 +24,8 @@ use serde_json::{json, Value};
 use crate::cosim::import::ImportError;
 use crate::evaluation::compare::CompareOptions;
 use crate::fsutil::{write_text_atomically, WriteError};
+use crate::record::LineLayout;
+pub use crate::record::{nominal_step, DEFAULT_HEADER};
 use crate::twin::run::Tolerance;
 use crate::twin::{Twin, TwinError};
 use background::{Background, DiagnosisOptions, Finished};
@@ -259,8 +261,6 @@ pub struct Summary {
     pub tolerance: f64,
 }
 
-/// The columns of an MQTT message without a header line.
-pub const DEFAULT_HEADER: &str = "time,force,acc1,acc2,acc3";
 /// What the active-learning supervisor did over the stream.
 #[derive(Debug, Clone, Serialize)]
 pub struct LearningSummary {
@@ -394,71 +394,19 @@ impl LineReader {
     }
 }
 
-/// Column positions of the stream's header.
-struct Header {
-    width: usize,
-    time: usize,
-    force: usize,
-    acc: [usize; 3],
-}
+/// The stream's column positions, as the record module reads a header line.
+struct Header(LineLayout);
 
 impl Header {
     fn parse(line: &str) -> Result<Self, WatchError> {
-        let names: Vec<&str> = line.split(',').map(str::trim).collect();
-        let at = |name: &str| {
-            names.iter().position(|n| *n == name).ok_or_else(|| {
-                WatchError::Header(format!(
-                    "'{line}' has no column '{name}' (it must have time,force,acc1,acc2,acc3)"
-                ))
-            })
-        };
-        Ok(Header {
-            width: names.len(),
-            time: at("time")?,
-            force: at("force")?,
-            acc: [at("acc1")?, at("acc2")?, at("acc3")?],
-        })
+        LineLayout::parse(line)
+            .map(Header)
+            .map_err(WatchError::Header)
     }
 
-    /// (time, force, accelerations), or why the line is not a sample.
     fn sample(&self, line: &str) -> Result<(f64, f64, [f64; 3]), String> {
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() != self.width {
-            return Err(format!(
-                "{} fields, the header has {}",
-                fields.len(),
-                self.width
-            ));
-        }
-        let value = |i: usize, name: &str| -> Result<f64, String> {
-            match fields[i].parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                Ok(v) => Err(format!("'{name}' is {v}; only finite numbers are accepted")),
-                Err(_) => Err(format!("'{name}' is not a number: '{}'", fields[i])),
-            }
-        };
-        Ok((
-            value(self.time, "time")?,
-            value(self.force, "force")?,
-            [
-                value(self.acc[0], "acc1")?,
-                value(self.acc[1], "acc2")?,
-                value(self.acc[2], "acc3")?,
-            ],
-        ))
+        self.0.sample(line)
     }
-}
-
-/// The sampling interval from one step of printed times: the coarsest round rate (1, 0.1,
-/// 0.01 or 0.001 Hz) whose interval is within the times' 1 µs printing of it, else the step.
-pub fn nominal_step(step: f64) -> f64 {
-    for resolution in [1.0, 0.1, 0.01, 0.001] {
-        let rate = (1.0 / step / resolution).round() * resolution;
-        if rate > 0.0 && (1.0 / rate - step).abs() <= 2e-6 {
-            return 1.0 / rate;
-        }
-    }
-    step
 }
 
 /// Per-sample processing times in logarithmic bins (5 % wide, from 10 ns): constant memory.

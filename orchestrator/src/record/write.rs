@@ -1,13 +1,15 @@
-//! The measurement CSV as `data/` has it.
+//! Writing a record as the measurement CSV `data/` has: times to 1 µs, values to 9 significant
+//! digits.
 
-use crate::twin::data::Measurement;
+use super::Measurement;
 
 /// A value as the CSV writes it (9 significant digits), read back.
-pub(super) fn round9(x: f64) -> f64 {
+pub(crate) fn round9(x: f64) -> f64 {
     format_g9(x).parse().unwrap_or(x)
 }
 
-pub(super) fn round_time(t: f64) -> f64 {
+/// A time as the CSV writes it (to 1 µs), read back.
+pub(crate) fn round_time(t: f64) -> f64 {
     format!("{t:.6}").parse().unwrap_or(t)
 }
 

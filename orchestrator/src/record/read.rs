@@ -1,11 +1,9 @@
-//! Measurement files: `time,force,acc1,acc2,acc3` (s, N, m/s²), uniform sampling. Extra columns
-//! are kept by name and ignored unless asked for. A bad file is refused with its name, the line
-//! and the problem.
+//! Reading a measurement file or columns in memory into a [`Measurement`].
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-pub const REQUIRED_COLUMNS: [&str; 5] = ["time", "force", "acc1", "acc2", "acc3"];
+use super::REQUIRED_COLUMNS;
 
 #[derive(Debug, thiserror::Error)]
 #[error("{path}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -97,21 +95,7 @@ impl Measurement {
                 ));
             }
             for (i, field) in record.iter().enumerate() {
-                let value: f64 = field.parse().map_err(|_| {
-                    err(
-                        line(),
-                        format!("'{}' is not a number: '{field}'", header[i]),
-                    )
-                })?;
-                if !value.is_finite() {
-                    return Err(err(
-                        line(),
-                        format!(
-                            "'{}' is {value}; only finite numbers are accepted",
-                            header[i]
-                        ),
-                    ));
-                }
+                let value = parse_value(&header[i], field).map_err(|m| err(line(), m))?;
                 columns[i].push(value);
             }
         }
@@ -213,6 +197,15 @@ impl Measurement {
             dt,
             extra,
         })
+    }
+}
+
+/// One field of column `name` as a finite number, or why it is not one.
+pub(super) fn parse_value(name: &str, field: &str) -> Result<f64, String> {
+    match field.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(format!("'{name}' is {v}; only finite numbers are accepted")),
+        Err(_) => Err(format!("'{name}' is not a number: '{field}'")),
     }
 }
 
