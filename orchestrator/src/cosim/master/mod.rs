@@ -19,8 +19,8 @@ mod system;
 pub use clock::Clock;
 pub use decimated::Decimated;
 pub use system::{
-    Algorithm, Block, NodeId, Observer, Port, PortType, Recorder, Recording, RunEnd, Slave, System,
-    TypedPort,
+    Algorithm, Block, NodeId, Observer, Port, PortType, Recorder, Recording, RunEnd, SavedNode,
+    SavedState, Slave, System, TypedPort,
 };
 
 #[derive(Debug, thiserror::Error)]

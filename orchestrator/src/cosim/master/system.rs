@@ -79,6 +79,19 @@ pub trait Slave {
     fn step(&mut self, time: f64, step: f64) -> Result<StepEnd, MasterError> {
         self.do_step(time, step).map(|()| StepEnd::Completed)
     }
+    /// The slave's whole state as bytes (an FMU's serialised `fmi2FMUstate`), for
+    /// [`System::save`]. Slaves that cannot save their state say so.
+    fn save_state(&mut self) -> Result<Vec<u8>, MasterError> {
+        Err(MasterError::Config(
+            "this slave cannot save its state".into(),
+        ))
+    }
+    /// Put the slave back in a state [`Slave::save_state`] gave.
+    fn restore_state(&mut self, _state: &[u8]) -> Result<(), MasterError> {
+        Err(MasterError::Config(
+            "this slave cannot restore a state".into(),
+        ))
+    }
 }
 
 impl Slave for Instance {
@@ -121,6 +134,12 @@ impl Slave for Instance {
     }
     fn step(&mut self, time: f64, step: f64) -> Result<StepEnd, MasterError> {
         Ok(Instance::step(self, time, step)?)
+    }
+    fn save_state(&mut self) -> Result<Vec<u8>, MasterError> {
+        Ok(Instance::state_bytes(self)?)
+    }
+    fn restore_state(&mut self, state: &[u8]) -> Result<(), MasterError> {
+        Ok(Instance::restore_state_bytes(self, state)?)
     }
 }
 
@@ -364,11 +383,40 @@ fn integer_value(v: f64, node: &str, port: usize) -> Result<i32, MasterError> {
     }
 }
 
-/// A co-simulation system. Build it, then `run`.
+/// A signal fed into the system from outside: replayed samples (one per communication point of a
+/// run), or values given point by point ([`System::set_input`]).
+struct Signal {
+    name: String,
+    samples: Vec<f64>,
+    /// The value at the current communication point …
+    now: f64,
+    /// … and at the next one (the slope over the step is `(next − now) / h`).
+    next: f64,
+}
+
+/// A system's state between two communication steps: every slave's own state, every node's
+/// outputs, the signals' values and the time of the current point. See [`System::save`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SavedState {
+    pub time: f64,
+    pub signals: Vec<f64>,
+    pub nodes: Vec<SavedNode>,
+}
+
+/// One slave's part of a [`SavedState`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SavedNode {
+    pub name: String,
+    pub state: Vec<u8>,
+    pub outputs: Vec<f64>,
+}
+
+/// A co-simulation system. Build it, then `run` it over a clock, or step it one communication
+/// point at a time: [`System::set_input`] → [`System::initialize`] (the first point) or
+/// [`System::step`] (each next one) → [`System::value`]. `run` is written on the same steps.
 pub struct System {
     nodes: Vec<Node>,
-    /// Replayed signals: one sample per communication point.
-    signals: Vec<(String, Vec<f64>)>,
+    signals: Vec<Signal>,
     pub algorithm: Algorithm,
     pub recording: Recording,
     /// Send input slopes to the slaves that can interpolate inputs (default); off, every input
@@ -378,6 +426,8 @@ pub struct System {
     coupled: bool,
     /// Whether some connection is sampled (fixed when the run starts).
     sampling: bool,
+    /// The current communication point's time, once the system is stepping.
+    time: Option<f64>,
 }
 
 impl Default for System {
@@ -396,6 +446,7 @@ impl System {
             interpolate_inputs: true,
             coupled: false,
             sampling: false,
+            time: None,
         }
     }
 
@@ -463,9 +514,16 @@ impl System {
         NodeId(self.nodes.len() - 1)
     }
 
-    /// A measured signal replayed as an input: `samples[k]` at `t_k`, linear in between.
+    /// A measured signal replayed as an input: `samples[k]` at `t_k`, linear in between. A
+    /// system stepped point by point takes its values from [`System::set_input`] instead (give
+    /// no samples).
     pub fn add_signal(&mut self, name: &str, samples: Vec<f64>) -> Port {
-        self.signals.push((name.to_owned(), samples));
+        self.signals.push(Signal {
+            name: name.to_owned(),
+            samples,
+            now: 0.0,
+            next: 0.0,
+        });
         Port::Signal(self.signals.len() - 1)
     }
 
@@ -551,21 +609,20 @@ impl System {
         &self.nodes[id.0].name
     }
 
-    fn value(&self, port: Port, k: usize) -> f64 {
+    /// A port's value at the current communication point: a node's output as the point's
+    /// evaluation left it, or a signal's value there.
+    pub fn value(&self, port: Port) -> f64 {
         match port {
             Port::Output(NodeId(n), p) => self.nodes[n].outputs[p],
-            Port::Signal(s) => {
-                let samples = &self.signals[s].1;
-                samples[k.min(samples.len() - 1)]
-            }
+            Port::Signal(s) => self.signals[s].now,
         }
     }
 
     /// A sampled connection's value: the source's outputs as the last step left them.
-    fn held_value(&self, port: Port, k: usize) -> f64 {
+    fn held_value(&self, port: Port) -> f64 {
         match port {
             Port::Output(NodeId(n), p) => self.nodes[n].held[p],
-            Port::Signal(_) => self.value(port, k),
+            Port::Signal(_) => self.value(port),
         }
     }
 
@@ -620,14 +677,14 @@ impl System {
     }
 
     /// Copy node `i`'s connected inputs; true if any changed.
-    fn gather_inputs(&mut self, i: usize, k: usize) -> bool {
+    fn gather_inputs(&mut self, i: usize) -> bool {
         let mut changed = false;
         for p in 0..self.nodes[i].sources.len() {
             if let Some(port) = self.nodes[i].sources[p] {
                 let v = if self.nodes[i].sampled[p] {
-                    self.held_value(port, k)
+                    self.held_value(port)
                 } else {
-                    self.value(port, k)
+                    self.value(port)
                 };
                 changed |= self.nodes[i].inputs[p].to_bits() != v.to_bits();
                 self.nodes[i].inputs[p] = v;
@@ -642,8 +699,8 @@ impl System {
         }
         changed
     }
-    /// Zero-time evaluation of every node at communication point `k`.
-    fn propagate(&mut self, k: usize, time: f64) -> Result<(), MasterError> {
+    /// Zero-time evaluation of every node at the current communication point.
+    fn propagate(&mut self, time: f64) -> Result<(), MasterError> {
         match self.algorithm {
             Algorithm::GaussSeidel => {
                 // Each pass can settle one more link of a chain through non-feedthrough outputs;
@@ -653,7 +710,7 @@ impl System {
                     for i in 0..self.nodes.len() {
                         // Outputs are functions of the inputs at a fixed point in time: a node
                         // whose inputs did not move since the last pass needs no new call.
-                        let inputs_moved = self.gather_inputs(i, k);
+                        let inputs_moved = self.gather_inputs(i);
                         if pass == 0 || inputs_moved {
                             changed |= self.evaluate_node(i, time)?;
                         }
@@ -669,7 +726,7 @@ impl System {
             }
             Algorithm::Jacobi => {
                 for i in 0..self.nodes.len() {
-                    self.gather_inputs(i, k);
+                    self.gather_inputs(i);
                 }
                 for i in 0..self.nodes.len() {
                     self.evaluate_node(i, time)?;
@@ -679,9 +736,9 @@ impl System {
         }
     }
 
-    /// Input slopes over `[t_k, t_{k+1}]` for slaves that interpolate: the replayed signals'
-    /// segments. Values coming from other nodes are held (slope 0).
-    fn set_input_derivatives(&mut self, k: usize, step: f64) -> Result<(), MasterError> {
+    /// Input slopes over the step for slaves that interpolate: the signals' segments from this
+    /// point's value to the next's. Values coming from other nodes are held (slope 0).
+    fn set_input_derivatives(&mut self, step: f64) -> Result<(), MasterError> {
         // Only Real inputs are interpolated (the connected ones: `input_groups[0]`); the
         // others are held.
         let signals = &self.signals;
@@ -698,11 +755,7 @@ impl System {
             node.reals.clear();
             for &p in &real.ports {
                 node.reals.push(match node.sources[p] {
-                    Some(Port::Signal(s)) => {
-                        let samples = &signals[s].1;
-                        let now = samples[k.min(samples.len() - 1)];
-                        (samples.get(k + 1).copied().unwrap_or(now) - now) / step
-                    }
+                    Some(Port::Signal(s)) => (signals[s].next - signals[s].now) / step,
                     _ => 0.0,
                 });
             }
@@ -747,17 +800,25 @@ impl System {
         )
     }
 
-    fn check_wiring(&mut self, steps: u64) -> Result<(), MasterError> {
-        for (name, samples) in &self.signals {
-            if (samples.len() as u64) < steps + 1 {
+    /// Every signal has a sample for each of the run's `steps + 1` points.
+    fn check_samples(&self, steps: u64) -> Result<(), MasterError> {
+        for signal in &self.signals {
+            if (signal.samples.len() as u64) < steps + 1 {
                 return Err(MasterError::Config(format!(
-                    "signal '{name}' has {} samples; {} communication points need {}",
-                    samples.len(),
+                    "signal '{}' has {} samples; {} communication points need {}",
+                    signal.name,
+                    signal.samples.len(),
                     steps + 1,
                     steps + 1
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// Fix what the wiring implies before the first point: which nodes feed others, which
+    /// connections are sampled, each slave's connected ports by type, who takes input slopes.
+    fn check_wiring(&mut self) -> Result<(), MasterError> {
         self.coupled = self.nodes.iter().any(|n| {
             n.sources
                 .iter()
@@ -798,16 +859,10 @@ impl System {
         Ok(())
     }
 
-    fn observe(
-        &self,
-        observers: &mut [&mut dyn Observer],
-        time: f64,
-        k: usize,
-        buffer: &mut Vec<f64>,
-    ) {
+    fn observe(&self, observers: &mut [&mut dyn Observer], time: f64, buffer: &mut Vec<f64>) {
         for observer in observers.iter_mut() {
             buffer.clear();
-            buffer.extend(observer.ports().iter().map(|&p| self.value(p, k)));
+            buffer.extend(observer.ports().iter().map(|&p| self.value(p)));
             observer.record(time, buffer);
             if !observer.text_ports().is_empty() {
                 let texts: Vec<&str> = observer
@@ -820,6 +875,182 @@ impl System {
         }
     }
 
+    // -----------------------------------------------------------------------------------------
+    // Stepping: one communication point at a time. `run` is these same calls in a loop.
+
+    /// The value `signal` takes at the next communication point: the one [`System::initialize`]
+    /// or [`System::step`] goes to. Between the current point and that one the signal is linear
+    /// (its slope goes to the slaves that interpolate inputs).
+    pub fn set_input(&mut self, signal: Port, value: f64) -> Result<(), MasterError> {
+        match signal {
+            Port::Signal(s) if s < self.signals.len() => {
+                self.signals[s].next = value;
+                Ok(())
+            }
+            other => Err(MasterError::Config(format!(
+                "{other:?} is not one of the system's signals"
+            ))),
+        }
+    }
+
+    /// Start stepping at the first communication point `time`: the wiring fixed, the signals
+    /// at the values [`System::set_input`] gave, every node evaluated there. The slaves must
+    /// be initialised (out of initialisation mode) at `time`.
+    pub fn initialize(&mut self, time: f64) -> Result<(), MasterError> {
+        self.check_wiring()?;
+        self.enter_first_point(time).map_err(at_time(time))
+    }
+
+    /// One communication step from the current point to `to`: input slopes to the signals'
+    /// next values, every slave stepped, then every node evaluated at `to` with those values.
+    /// A slave that ends the simulation itself stops the step there (`StepEnd::Terminated`:
+    /// the outputs as the step left them; the system does not step again).
+    pub fn step(&mut self, to: f64) -> Result<StepEnd, MasterError> {
+        let from = self.time.ok_or_else(|| {
+            MasterError::Config("the system was stepped before it was initialised".into())
+        })?;
+        if let Some((end, _)) = self.step_slaves(to).map_err(at_time(from))? {
+            self.read_all_outputs().map_err(at_time(end))?;
+            self.time = None;
+            return Ok(StepEnd::Terminated { at: end });
+        }
+        if self.sampling {
+            self.hold_outputs().map_err(at_time(to))?;
+        }
+        self.propagate(to).map_err(at_time(to))?;
+        Ok(StepEnd::Completed)
+    }
+
+    /// The current communication point's time (None before [`System::initialize`]).
+    pub fn time(&self) -> Option<f64> {
+        self.time
+    }
+
+    /// A node's slave, for what the wiring does not carry (a learning flag, a status output).
+    /// None for a block.
+    pub fn slave_mut(&mut self, node: NodeId) -> Option<&mut dyn Slave> {
+        match &mut self.nodes.get_mut(node.0)?.kind {
+            Kind::Slave { slave, .. } => Some(slave.as_mut()),
+            Kind::Block(_) => None,
+        }
+    }
+
+    /// The nodes' names, in the order they were added.
+    pub fn node_names(&self) -> impl Iterator<Item = &str> {
+        self.nodes.iter().map(|n| n.name.as_str())
+    }
+
+    /// The system's state at the current point: what [`System::restore`] needs to go on from
+    /// here exactly. Refused when a node is a block (its state is its own) or a slave cannot
+    /// save its state.
+    pub fn save(&mut self) -> Result<SavedState, MasterError> {
+        let time = self.time.ok_or_else(|| {
+            MasterError::Config("the system was saved before it was initialised".into())
+        })?;
+        let mut nodes = Vec::with_capacity(self.nodes.len());
+        for node in &mut self.nodes {
+            let Kind::Slave { slave, .. } = &mut node.kind else {
+                return Err(MasterError::Block {
+                    block: node.name.clone(),
+                    message: "a block's state cannot be saved".into(),
+                });
+            };
+            nodes.push(SavedNode {
+                name: node.name.clone(),
+                state: slave.save_state()?,
+                outputs: node.outputs.clone(),
+            });
+        }
+        Ok(SavedState {
+            time,
+            signals: self.signals.iter().map(|s| s.now).collect(),
+            nodes,
+        })
+    }
+
+    /// Go on from a state [`System::save`] gave, on a system wired the same way (its slaves
+    /// initialised): the next call is [`System::step`].
+    pub fn restore(&mut self, saved: &SavedState) -> Result<(), MasterError> {
+        if saved.nodes.len() != self.nodes.len() || saved.signals.len() != self.signals.len() {
+            return Err(MasterError::Config(format!(
+                "the saved state has {} nodes and {} signals, the system {} and {}",
+                saved.nodes.len(),
+                saved.signals.len(),
+                self.nodes.len(),
+                self.signals.len()
+            )));
+        }
+        self.check_wiring()?;
+        for (node, s) in self.nodes.iter_mut().zip(&saved.nodes) {
+            if s.name != node.name || s.outputs.len() != node.outputs.len() {
+                return Err(MasterError::Config(format!(
+                    "the saved state is for node '{}' with {} outputs, the system's is '{}' \
+                     with {}",
+                    s.name,
+                    s.outputs.len(),
+                    node.name,
+                    node.outputs.len()
+                )));
+            }
+            let Kind::Slave { slave, .. } = &mut node.kind else {
+                return Err(MasterError::Block {
+                    block: node.name.clone(),
+                    message: "a block's state cannot be restored".into(),
+                });
+            };
+            slave.restore_state(&s.state)?;
+            node.outputs.clone_from(&s.outputs);
+        }
+        for (signal, &v) in self.signals.iter_mut().zip(&saved.signals) {
+            signal.now = v;
+            signal.next = v;
+        }
+        self.time = Some(saved.time);
+        Ok(())
+    }
+
+    /// The first point: the signals take their set values, every node is evaluated.
+    fn enter_first_point(&mut self, time: f64) -> Result<(), MasterError> {
+        for signal in &mut self.signals {
+            signal.now = signal.next;
+        }
+        self.time = Some(time);
+        if self.sampling {
+            self.hold_outputs()?;
+        }
+        self.propagate(time)
+    }
+
+    /// Every slave stepped from the current point to `to`, the signals' slopes given first
+    /// and their values moved on to `to`'s. Some((end, node)) when a slave ended the
+    /// simulation at `end`.
+    fn step_slaves(&mut self, to: f64) -> Result<Option<(f64, usize)>, MasterError> {
+        let time = self.time.unwrap_or(to);
+        let step = to - time;
+        self.set_input_derivatives(step)?;
+        for signal in &mut self.signals {
+            signal.now = signal.next;
+        }
+        self.time = Some(to);
+        for i in 0..self.nodes.len() {
+            let Kind::Slave { slave, .. } = &mut self.nodes[i].kind else {
+                continue;
+            };
+            if let StepEnd::Terminated { at } = slave.step(time, step)? {
+                self.time = Some(at);
+                return Ok(Some((at, i)));
+            }
+        }
+        Ok(None)
+    }
+
+    fn read_all_outputs(&mut self) -> Result<(), MasterError> {
+        for node in &mut self.nodes {
+            node.read_outputs()?;
+        }
+        Ok(())
+    }
+
     fn run_points(
         &mut self,
         steps: u64,
@@ -827,60 +1058,58 @@ impl System {
         observers: &mut [&mut dyn Observer],
         mut progress: impl FnMut(u64, u64),
     ) -> Result<RunEnd, MasterError> {
-        self.check_wiring(steps)?;
+        self.check_samples(steps)?;
+        self.check_wiring()?;
         for observer in observers.iter_mut() {
             observer.will_record(steps as usize + 1);
         }
         let mut buffer = Vec::new();
-        for k in 0..=steps {
-            let time = time_of(k);
-            let at = |e: MasterError| MasterError::AtTime {
-                time,
-                inner: Box::new(e),
-            };
+        let first = time_of(0);
+        for signal in &mut self.signals {
+            signal.next = signal.samples[0];
+        }
+        self.enter_first_point(first).map_err(at_time(first))?;
+        self.observe(observers, first, &mut buffer);
+        for k in 1..=steps {
+            let (from, time) = (time_of(k - 1), time_of(k));
+            for signal in &mut self.signals {
+                signal.next = signal.samples[k as usize];
+            }
+            if let Some((end, i)) = self.step_slaves(time).map_err(at_time(from))? {
+                // The slave's last successful time is the run's last point, recorded as the
+                // step left it.
+                self.read_all_outputs().map_err(at_time(end))?;
+                self.observe(observers, end, &mut buffer);
+                self.time = None;
+                return Ok(RunEnd::Terminated {
+                    at: end,
+                    node: self.nodes[i].name.clone(),
+                });
+            }
+            progress(k, steps);
             if self.sampling {
-                self.hold_outputs().map_err(at)?;
+                self.hold_outputs().map_err(at_time(time))?;
             }
-            if k > 0 && self.recording == Recording::BeforeInputs {
+            if self.recording == Recording::BeforeInputs {
                 if !self.sampling {
-                    for node in &mut self.nodes {
-                        node.read_outputs().map_err(at)?;
-                    }
+                    self.read_all_outputs().map_err(at_time(time))?;
                 }
-                self.observe(observers, time, k as usize, &mut buffer);
-                self.propagate(k as usize, time).map_err(at)?;
+                self.observe(observers, time, &mut buffer);
+                self.propagate(time).map_err(at_time(time))?;
             } else {
-                self.propagate(k as usize, time).map_err(at)?;
-                self.observe(observers, time, k as usize, &mut buffer);
+                self.propagate(time).map_err(at_time(time))?;
+                self.observe(observers, time, &mut buffer);
             }
-            if k == steps {
-                break;
-            }
-            let step = time_of(k + 1) - time;
-            self.set_input_derivatives(k as usize, step).map_err(at)?;
-            for i in 0..self.nodes.len() {
-                let Kind::Slave { slave, .. } = &mut self.nodes[i].kind else {
-                    continue;
-                };
-                if let StepEnd::Terminated { at: end } = slave.step(time, step).map_err(at)? {
-                    // The slave's last successful time is the run's last point, recorded as
-                    // the step left it.
-                    for node in &mut self.nodes {
-                        node.read_outputs().map_err(|e| MasterError::AtTime {
-                            time: end,
-                            inner: Box::new(e),
-                        })?;
-                    }
-                    self.observe(observers, end, k as usize + 1, &mut buffer);
-                    return Ok(RunEnd::Terminated {
-                        at: end,
-                        node: self.nodes[i].name.clone(),
-                    });
-                }
-            }
-            progress(k + 1, steps);
         }
         Ok(RunEnd::Completed)
+    }
+}
+
+/// An error at a communication point says which.
+fn at_time(time: f64) -> impl Fn(MasterError) -> MasterError {
+    move |e| MasterError::AtTime {
+        time,
+        inner: Box::new(e),
     }
 }
 
@@ -1007,6 +1236,18 @@ mod tests {
             self.steps.push((time, step));
             self.x += self.u * step + 0.5 * self.slope * step * step;
             self.u += self.slope * step;
+            Ok(())
+        }
+        fn save_state(&mut self) -> Result<Vec<u8>, MasterError> {
+            Ok([self.x, self.u, self.slope]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect())
+        }
+        fn restore_state(&mut self, state: &[u8]) -> Result<(), MasterError> {
+            let value =
+                |i: usize| f64::from_le_bytes(state[8 * i..8 * i + 8].try_into().expect("8 bytes"));
+            (self.x, self.u, self.slope) = (value(0), value(1), value(2));
             Ok(())
         }
     }
@@ -1197,6 +1438,107 @@ mod tests {
             x += h * u;
         }
         assert_eq!(calls.get(), steps as usize + 1, "one evaluation per point");
+    }
+
+    /// A: ẋ = u from a signal (interpolated), a block doubling A's x, B integrating that: a
+    /// coupled system. `signal` None: the samples are set point by point.
+    fn coupled(samples: Option<Vec<f64>>) -> (System, Port, [Port; 2]) {
+        let mut system = System::new();
+        let a = system.add_slave("a", Box::new(Integrator::new(true)), vec![10], vec![0]);
+        let double = system.add_block(
+            "double",
+            Box::new(|_t: f64, inputs: &[f64], outputs: &mut [f64]| {
+                outputs[0] = 2.0 * inputs[0];
+                Ok(())
+            }),
+            1,
+            1,
+        );
+        let b = system.add_slave("b", Box::new(Integrator::new(false)), vec![10], vec![0]);
+        let s = system.add_signal("u", samples.unwrap_or_default());
+        system.connect(s, a, 0).expect("connect");
+        system
+            .connect(Port::Output(a, 0), double, 0)
+            .expect("connect");
+        system
+            .connect(Port::Output(double, 0), b, 0)
+            .expect("connect");
+        (system, s, [Port::Output(a, 0), Port::Output(b, 0)])
+    }
+
+    #[test]
+    fn stepping_point_by_point_is_the_run() {
+        let h = 0.25;
+        let samples: Vec<f64> = (0..9).map(|k| (0.7 * k as f64).sin()).collect();
+        let steps = samples.len() as u64 - 1;
+        let (mut batch, _, ports) = coupled(Some(samples.clone()));
+        let mut rec = Recorder::new(vec![("a".into(), ports[0]), ("b".into(), ports[1])]);
+        batch
+            .run(Clock::new(0.0, h, steps), &mut [&mut rec], |_, _| {})
+            .expect("runs");
+
+        let (mut stepped, u, ports) = coupled(None);
+        assert!(stepped.step(h).is_err(), "a step before the first point");
+        stepped.set_input(u, samples[0]).expect("a signal");
+        stepped.initialize(0.0).expect("the first point");
+        let mut values = vec![ports.map(|p| stepped.value(p))];
+        for (k, &sample) in samples.iter().enumerate().skip(1) {
+            stepped.set_input(u, sample).expect("a signal");
+            let end = stepped.step(k as f64 * h).expect("a step");
+            assert_eq!(end, StepEnd::Completed);
+            values.push(ports.map(|p| stepped.value(p)));
+        }
+        for (k, v) in values.iter().enumerate() {
+            assert_eq!(v[0].to_bits(), rec.columns[0][k].to_bits(), "a at k = {k}");
+            assert_eq!(v[1].to_bits(), rec.columns[1][k].to_bits(), "b at k = {k}");
+        }
+        assert!(
+            stepped.set_input(ports[0], 1.0).is_err(),
+            "an output is no input"
+        );
+    }
+
+    #[test]
+    fn a_saved_state_goes_on_in_another_system() {
+        let h = 0.5;
+        let samples = [0.0, 1.0, 3.0, 2.0, -1.0, 0.5];
+        let system = || {
+            let mut system = System::new();
+            let a = system.add_slave("a", Box::new(Integrator::new(true)), vec![10], vec![0]);
+            let s = system.add_signal("u", Vec::new());
+            system.connect(s, a, 0).expect("connect");
+            (system, s, Port::Output(a, 0))
+        };
+        let (mut first, u, x) = system();
+        first.set_input(u, samples[0]).expect("a signal");
+        first.initialize(0.0).expect("the first point");
+        let mut saved = None;
+        let mut rest = Vec::new();
+        for (k, &sample) in samples.iter().enumerate().skip(1) {
+            first.set_input(u, sample).expect("a signal");
+            first.step(k as f64 * h).expect("a step");
+            if k == 2 {
+                saved = Some(first.save().expect("saves"));
+            } else if k > 2 {
+                rest.push(first.value(x));
+            }
+        }
+        let saved = saved.expect("saved at k = 2");
+        assert_eq!(saved.time, 1.0);
+        let (mut second, u, x) = system();
+        second.restore(&saved).expect("restores");
+        assert_eq!(second.time(), Some(1.0));
+        for (k, &sample) in samples.iter().enumerate().skip(3) {
+            second.set_input(u, sample).expect("a signal");
+            second.step(k as f64 * h).expect("a step");
+            assert_eq!(second.value(x).to_bits(), rest[k - 3].to_bits(), "k = {k}");
+        }
+        // A system with a block has no state of its own to save.
+        let (mut with_block, u, _) = coupled(None);
+        with_block.set_input(u, 0.0).expect("a signal");
+        with_block.initialize(0.0).expect("the first point");
+        let err = with_block.save().expect_err("a block");
+        assert!(err.to_string().contains("double"), "{err}");
     }
 
     #[test]
