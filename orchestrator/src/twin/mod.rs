@@ -17,6 +17,7 @@
 pub use crate::record as data;
 pub mod embedded;
 pub mod run;
+pub mod system;
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -601,43 +602,11 @@ impl Twin {
             .expect(ok);
         finish_xml(w)
     }
-
-    // -----------------------------------------------------------------------------------------
-    // Running
-
-    /// Open every component's FMU, instantiate it, apply the twin's parameters and initialise.
-    /// Returns the FMUs (keep them alive while the instances run) and the instances.
-    pub fn instantiate(
-        &self,
-        start_time: f64,
-    ) -> Result<Vec<(Component, Fmu, Instance)>, TwinError> {
-        let mut out = Vec::new();
-        for c in &self.components {
-            let open = || -> Result<(Fmu, Instance), TwinError> {
-                let fmu = Fmu::open(&c.fmu_path)?;
-                let mut instance = fmu.instantiate(&c.name)?;
-                instance.setup_experiment(start_time, None)?;
-                instance.enter_initialization_mode()?;
-                apply_parameters(&fmu, &mut instance, &c.parameters)?;
-                instance.exit_initialization_mode()?;
-                Ok((fmu, instance))
-            };
-            // Name the twin and the component, not the temporary directory the FMU sits in.
-            let (fmu, instance) = open().map_err(|e| TwinError::Component {
-                twin: self.describe(),
-                component: c.name.clone(),
-                fmu: format!("resources/{}", c.fmu_name),
-                inner: Box::new(strip_temporary_path(e, &c.fmu_path)),
-            })?;
-            out.push((c.clone(), fmu, instance));
-        }
-        Ok(out)
-    }
 }
 
 /// An error's text with the unpacked FMU's temporary path taken out (the caller names the
 /// component instead).
-fn strip_temporary_path(e: TwinError, fmu_path: &Path) -> TwinError {
+pub(crate) fn strip_temporary_path(e: TwinError, fmu_path: &Path) -> TwinError {
     let text = e.to_string();
     let shown = fmu_path.display().to_string();
     if text.contains(&shown) {

@@ -3,11 +3,11 @@
 
 use std::time::{Duration, Instant};
 
-use crate::cosim::import::Instance;
-use crate::cosim::master::{Clock, MasterError, Port, Recorder, System};
+use crate::cosim::master::{Clock, MasterError, Recorder};
 use crate::evaluation::compare::{compare, CompareOptions, Comparison};
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
+use crate::twin::system::{SystemBuilder, SystemError};
 use crate::twin::{ParameterValue, Twin, TwinError, OUTPUTS, PHYSICS};
 
 #[derive(Debug, thiserror::Error)]
@@ -18,6 +18,16 @@ pub enum RunError {
     Master(#[from] MasterError),
     #[error("twin: {0}")]
     Wiring(String),
+}
+
+impl From<SystemError> for RunError {
+    fn from(e: SystemError) -> Self {
+        match e {
+            SystemError::Twin(e) => RunError::Twin(e),
+            SystemError::Master(e) => RunError::Master(e),
+            SystemError::Wiring(message) => RunError::Wiring(message),
+        }
+    }
 }
 
 /// Predicted accelerations at every sample of the measurement.
@@ -60,73 +70,12 @@ pub fn run_twin(
     mut progress: impl FnMut(u64, u64),
 ) -> Result<Prediction, RunError> {
     let start = data.time[0];
-    let instances = twin.instantiate(start)?;
-    let mut system = System::new();
-    let mut nodes = Vec::new();
-    // Keep the FMUs loaded for as long as their instances run.
-    let mut loaded = Vec::new();
-    for (component, fmu, instance) in instances {
-        // Ports: every connector the twin's connections use on this component.
-        let inputs: Vec<String> = twin
-            .connections
-            .iter()
-            .filter(|c| c.end_element.as_deref() == Some(&component.name))
-            .map(|c| c.end_connector.clone())
-            .collect();
-        let outputs: Vec<String> = twin
-            .connections
-            .iter()
-            .filter(|c| c.start_element.as_deref() == Some(&component.name))
-            .map(|c| c.start_connector.clone())
-            .collect();
-        let vr = |name: &String| fmu.value_reference(name).map_err(TwinError::from);
-        let input_vrs = inputs.iter().map(vr).collect::<Result<Vec<_>, _>>()?;
-        let output_vrs = outputs.iter().map(vr).collect::<Result<Vec<_>, _>>()?;
-        let boxed: Box<Instance> = Box::new(instance);
-        let id = system.add_slave(&component.name, boxed, input_vrs, output_vrs);
-        nodes.push((component.name.clone(), id, inputs, outputs));
-        loaded.push(fmu);
+    let mut inputs = vec![("force", data.force.clone())];
+    if let Some(control) = data.extra.get("control") {
+        inputs.push(("control_force", control.clone()));
     }
-    let signal_for = |name: &str| -> Option<Vec<f64>> {
-        match name {
-            "force" => Some(data.force.clone()),
-            "control_force" => data.extra.get("control").cloned(),
-            _ => None,
-        }
-    };
-    // Ports by name: (node, index of the named connector among its inputs or outputs).
-    let find_node = |name: &str| {
-        nodes
-            .iter()
-            .find(|(n, ..)| n == name)
-            .ok_or_else(|| RunError::Wiring(format!("no component '{name}'")))
-    };
-    let port_of =
-        |names: &[String], connector: &str| names.iter().position(|c| c == connector).unwrap_or(0);
-    let mut signals = std::collections::HashMap::new();
-    for conn in &twin.connections {
-        let Some(end) = &conn.end_element else {
-            continue;
-        };
-        let (_, to, inputs, _) = find_node(end)?;
-        let port_index = port_of(inputs, &conn.end_connector);
-        let from = match &conn.start_element {
-            None => {
-                let Some(samples) = signal_for(&conn.start_connector) else {
-                    continue;
-                };
-                *signals
-                    .entry(conn.start_connector.clone())
-                    .or_insert_with(|| system.add_signal(&conn.start_connector, samples))
-            }
-            Some(start_el) => {
-                let (_, from_id, _, outputs) = find_node(start_el)?;
-                Port::Output(*from_id, port_of(outputs, &conn.start_connector))
-            }
-        };
-        system.connect(from, *to, port_index)?;
-    }
-    let mut watched = Vec::new();
+    let builder = SystemBuilder::open(twin)?;
+    let mut running = builder.build(start, inputs)?;
     let system_outputs = twin.system_outputs();
     let optional = [
         "latent_var1",
@@ -136,33 +85,20 @@ pub fn run_twin(
         "sd2",
         "sd3",
     ];
+    let mut watched = Vec::new();
     for output in OUTPUTS.iter().chain(
         optional
             .iter()
             .filter(|o| system_outputs.iter().any(|s| s == *o)),
     ) {
-        let conn = twin
-            .connections
-            .iter()
-            .find(|c| c.end_element.is_none() && c.end_connector == *output)
-            .ok_or_else(|| {
-                RunError::Wiring(format!("no connection feeds the system output '{output}'"))
-            })?;
-        let start_el = conn
-            .start_element
-            .as_ref()
-            .ok_or_else(|| RunError::Wiring(format!("'{output}' is fed by no component")))?;
-        let (_, id, _, outputs) = find_node(start_el)?;
-        watched.push((
-            (*output).to_owned(),
-            Port::Output(*id, port_of(outputs, &conn.start_connector)),
-        ));
+        watched.push(((*output).to_owned(), running.system_output(twin, output)?));
     }
     let mut recorder = Recorder::new(watched);
     let clock = Clock::new(start, data.dt, (data.len() - 1) as u64);
-    system.run(clock, &mut [&mut recorder], &mut progress)?;
-    drop(system);
-    drop(loaded);
+    running
+        .system
+        .run(clock, &mut [&mut recorder], &mut progress)?;
+    drop(running);
     let column = |name: &str| recorder.column(name).map(<[f64]>::to_vec);
     let triple = |prefix: &str| -> Option<[Vec<f64>; 3]> {
         Some([

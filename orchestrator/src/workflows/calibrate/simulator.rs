@@ -8,7 +8,8 @@ use std::rc::Rc;
 
 use crate::cosim::import::{Fmu, Instance, StepEnd};
 use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
-use crate::twin::{apply_parameters, ParameterValue, TwinError, OUTPUTS};
+use crate::twin::system::initialise;
+use crate::twin::{ParameterValue, TwinError, OUTPUTS};
 
 /// One FMU instance run on the master, the record's force replayed into its `force` input.
 /// Between runs the simulator resets the instance and sets its parameters.
@@ -107,14 +108,12 @@ impl<'a> Simulator<'a> {
         {
             let mut inst = self.instance.borrow_mut();
             inst.reset()?;
-            inst.setup_experiment(self.start, None)?;
-            inst.enter_initialization_mode()?;
-            apply_parameters(self.fmu, &mut inst, &self.base)?;
-            if let Some(switch) = switch {
-                inst.set_boolean(&[switch], &[true])?;
-            }
-            inst.set_real(vrs, values)?;
-            inst.exit_initialization_mode()?;
+            initialise(self.fmu, &mut inst, self.start, &self.base, |inst| {
+                if let Some(switch) = switch {
+                    inst.set_boolean(&[switch], &[true])?;
+                }
+                Ok(inst.set_real(vrs, values)?)
+            })?;
         }
         for o in out.iter_mut() {
             o.clear();

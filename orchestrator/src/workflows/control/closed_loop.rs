@@ -9,10 +9,10 @@ use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace, FLOORS, STATES
 
 use super::ControlError;
 use crate::blocks::lqr::{trigger_code, LqrBlock, Scheduled, SensorNoise};
-use crate::cosim::import::Instance;
-use crate::cosim::master::{Clock, Decimated, NodeId, Observer, Port, Recording, System};
+use crate::cosim::master::{Clock, NodeId, Observer, Port, Recording};
 use crate::twin::data::Measurement;
-use crate::twin::{ParameterValue, Twin, PHYSICS};
+use crate::twin::system::{SystemBuilder, SystemError};
+use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 use crate::workflows::train::CORRECTOR;
 
 /// A gap watched for contact: the storey (1-based: storey 3 joins floors 2 and 3) and its law.
@@ -299,64 +299,61 @@ pub fn simulate(
 ) -> Result<Response, ControlError> {
     let substeps = setup.substeps.max(1);
     let start = data.time[0];
-    let instances = twin.instantiate(start)?;
-    let mut loaded = Vec::new();
-    let mut physics: Option<(Instance, Vec<u32>, Vec<u32>)> = None;
-    let mut corrector: Option<(Instance, Vec<u32>, Vec<u32>)> = None;
-    for (component, fmu, instance) in instances {
-        if component.name == CORRECTOR && setup.corrector {
-            let vr = |name: &str| {
-                fmu.value_reference(name)
-                    .map_err(|e| ControlError::Twin(e.to_string()))
-            };
-            let mut inputs = Vec::new();
-            for f in 1..=FLOORS {
-                inputs.push(vr(&format!("physics_acc{f}"))?);
-            }
-            inputs.push(vr("force")?);
-            let outputs = (1..=FLOORS)
-                .map(|f| vr(&format!("latent_var{f}")))
-                .collect::<Result<Vec<_>, _>>()?;
-            corrector = Some((instance, inputs, outputs));
-        } else if component.name == PHYSICS {
-            let vr = |name: &str| {
-                fmu.value_reference(name)
-                    .map_err(|e| ControlError::Twin(e.to_string()))
-            };
-            let inputs = vec![vr("force")?, vr("control_force")?];
-            let mut outputs = Vec::new();
-            for prefix in ["acc", "disp", "vel"] {
-                for f in 1..=FLOORS {
-                    outputs.push(vr(&format!("{prefix}{f}"))?);
-                }
-            }
-            for gap in &setup.gaps {
-                outputs.push(vr(&format!("drift{}", gap.storey))?);
-            }
-            physics = Some((instance, inputs, outputs));
-        }
-        loaded.push(fmu);
+    let builder = SystemBuilder::open(twin)?;
+    if builder.fmu(PHYSICS).is_none() {
+        return Err(ControlError::Twin(format!(
+            "{} has no '{PHYSICS}' component",
+            twin.describe()
+        )));
     }
-    let (instance, inputs, outputs) = physics.ok_or_else(|| {
-        ControlError::Twin(format!("{} has no '{PHYSICS}' component", twin.describe()))
-    })?;
-    let mut system = System::new();
+    let mut running = builder.empty();
     // Observed as the sensors read the structure: at each point before the controller's new
     // force acts (floor 1's acceleration jumps with it), which is what a record holds.
-    system.recording = Recording::BeforeInputs;
-    let plant = system.add_slave(PHYSICS, Box::new(instance), inputs, outputs);
-    let force = system.add_signal("force", upsample(&data.force, substeps));
-    system.connect(force, plant, 0)?;
+    running.system.recording = Recording::BeforeInputs;
+    let mut outputs = Vec::new();
+    for prefix in ["acc", "disp", "vel"] {
+        for f in 1..=FLOORS {
+            outputs.push(format!("{prefix}{f}"));
+        }
+    }
+    for gap in &setup.gaps {
+        outputs.push(format!("drift{}", gap.storey));
+    }
+    let plant = builder
+        .add_component(
+            &mut running,
+            PHYSICS,
+            start,
+            vec!["force".into(), "control_force".into()],
+            outputs,
+            None,
+        )
+        .map_err(system_error)?;
+    let force = running
+        .system
+        .add_signal("force", upsample(&data.force, substeps));
+    running.system.connect(force, plant, 0)?;
     let dt = data.dt / substeps as f64;
     // The corrector keeps the record's rate (its lags are the record's samples).
-    let latent = match corrector {
-        Some((instance, inputs, outputs)) => {
-            let slow = Decimated::new(Box::new(instance), substeps)?;
-            let node = system.add_slave(CORRECTOR, Box::new(slow), inputs, outputs);
+    let latent = match builder.fmu(CORRECTOR) {
+        Some(_) if setup.corrector => {
+            let mut inputs: Vec<String> = (1..=FLOORS).map(|f| format!("physics_acc{f}")).collect();
+            inputs.push("force".into());
+            let outputs = (1..=FLOORS).map(|f| format!("latent_var{f}")).collect();
+            let node = builder
+                .add_component(
+                    &mut running,
+                    CORRECTOR,
+                    start,
+                    inputs,
+                    outputs,
+                    Some(substeps),
+                )
+                .map_err(system_error)?;
             for f in 0..FLOORS {
-                system.connect(Port::Output(plant, f), node, f)?;
+                running.system.connect(Port::Output(plant, f), node, f)?;
             }
-            system.connect(force, node, FLOORS)?;
+            running.system.connect(force, node, FLOORS)?;
             Some(node)
         }
         None if setup.corrector => {
@@ -366,7 +363,7 @@ pub fn simulate(
                 twin.describe()
             )))
         }
-        None => None,
+        _ => None,
     };
     let controller: Option<NodeId> = match law {
         None => None,
@@ -430,27 +427,41 @@ pub fn simulate(
             };
             let state_at = LqrBlock::INPUTS + latent_inputs;
             let n_inputs = state_at + if exact { STATES } else { 0 };
-            let node = system.add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
+            let node = running
+                .system
+                .add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
             for f in 0..FLOORS {
-                system.connect_sampled(Port::Output(plant, f), node, f)?;
+                running
+                    .system
+                    .connect_sampled(Port::Output(plant, f), node, f)?;
             }
-            system.connect(force, node, 3)?;
+            running.system.connect(force, node, 3)?;
             if let Some(c) = latent {
                 for f in 0..FLOORS {
-                    system.connect_sampled(Port::Output(c, f), node, LqrBlock::INPUTS + f)?;
+                    running.system.connect_sampled(
+                        Port::Output(c, f),
+                        node,
+                        LqrBlock::INPUTS + f,
+                    )?;
                 }
             }
             if exact {
                 for s in 0..STATES {
-                    system.connect_sampled(Port::Output(plant, FLOORS + s), node, state_at + s)?;
+                    running.system.connect_sampled(
+                        Port::Output(plant, FLOORS + s),
+                        node,
+                        state_at + s,
+                    )?;
                 }
             }
-            system.connect(Port::Output(node, 0), plant, 1)?;
+            running.system.connect(Port::Output(node, 0), plant, 1)?;
             Some(node)
         }
     };
     // Passive: the control force stays at the FMU's own 0, and the observer reads zeros.
-    let zero = system.add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
+    let zero = running
+        .system
+        .add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
     let mut ports: Vec<Port> = (0..FLOORS).map(|f| Port::Output(plant, f)).collect();
     match controller {
         Some(node) => ports.extend([
@@ -479,7 +490,8 @@ pub fn simulate(
     };
     let steps = ((data.len() - 1) * substeps) as u64;
     let clock = Clock::new(start, dt, steps);
-    system
+    running
+        .system
         .run(clock, &mut [&mut observer], progress)
         .map_err(|e| {
             let text = e.to_string();
@@ -489,8 +501,7 @@ pub fn simulate(
                 ControlError::Master(e)
             }
         })?;
-    drop(system);
-    drop(loaded);
+    drop(running);
     let mut response = observer.response;
     let points = observer.points.max(1) as f64;
     response.control_rms = (observer.sum_sq / points).sqrt();
@@ -498,6 +509,17 @@ pub fn simulate(
     response.drift_trigger_fraction = observer.drift_points as f64 / points;
     response.variance_trigger_fraction = observer.variance_points as f64 / points;
     Ok(response)
+}
+
+/// A variable the FMU lacks is the twin's fault (as before the builder); an FMU that cannot be
+/// opened or initialised is the twin file's.
+fn system_error(e: SystemError) -> ControlError {
+    match e {
+        SystemError::Twin(TwinError::Import(e)) => ControlError::Twin(e.to_string()),
+        SystemError::Twin(e) => ControlError::TwinFile(e),
+        SystemError::Master(e) => ControlError::Master(e),
+        SystemError::Wiring(message) => ControlError::Twin(message),
+    }
 }
 
 #[cfg(test)]
