@@ -532,7 +532,7 @@ struct Watcher<'a> {
     /// Told of every alert written (its JSON object); an error stops the watch.
     on_alert: &'a mut dyn FnMut(&Value) -> Result<(), String>,
     state: State,
-    stepper: Stepper,
+    stepper: Stepper<'a>,
     alerts: Alerts,
     reader: LineReader,
     background: Option<Background>,

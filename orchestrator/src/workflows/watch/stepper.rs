@@ -1,185 +1,69 @@
-//! The twin's FMUs stepped one sample at a time, in the order and with the calls `run_twin`'s
-//! master makes (inputs set and outputs read at a point, Gauss–Seidel passes while coupled
-//! outputs move, the measured force's slope to the next sample for FMUs that interpolate
-//! inputs, then the step), so a stream gives the batch run's prediction.
+//! The twin's system stepped one sample at a time: built by `twin::system` as `run_twin` builds
+//! it, the measured force its one driven input, and driven through the master's step-at-a-time
+//! calls (the force for the next point → `System::step` → the accelerations), so a stream gets
+//! the batch run's prediction from the same stepping code.
 
-use std::collections::BTreeMap;
-
-use crate::cosim::import::{Fmu, ImportError, Instance};
-use crate::twin::{apply_parameters, ParameterValue, Twin, TwinError, OUTPUTS};
+use crate::cosim::import::StepEnd;
+use crate::cosim::master::{MasterError, NodeId, Port, SavedNode, SavedState};
+use crate::twin::system::{SystemBuilder, SystemError, TwinSystem};
+use crate::twin::{ParameterValue, Twin, TwinError, OUTPUTS};
 
 use super::WatchError;
 
-/// Where an FMU input comes from.
-#[derive(Debug, Clone, Copy)]
-enum Source {
-    /// The measured force.
-    Force,
-    /// Another node's output (node, output port).
-    Node(usize, usize),
-}
-
-struct Node {
-    name: String,
-    // Dropped before `fmu`, whose library it runs in.
-    instance: Option<Instance>,
-    fmu: Fmu,
-    parameters: BTreeMap<String, ParameterValue>,
-    input_vrs: Vec<u32>,
-    sources: Vec<Source>,
-    output_vrs: Vec<u32>,
-    inputs: Vec<f64>,
-    outputs: Vec<f64>,
-    slopes: Vec<f64>,
-    /// The outputs were read after the last step with the inputs as they are now.
-    fresh: bool,
-}
+/// The system input the stream drives.
+const FORCE: &str = "force";
 
 /// The GP corrector's learning interface: the measured accelerations and the learn flag it
 /// takes, the latent variances and training-set size it gives.
 struct Learner {
-    node: usize,
-    measured: [u32; 3],
+    component: String,
+    measured: Vec<u32>,
     learn: u32,
-    latent: [u32; 3],
+    latent: Vec<u32>,
     points: u32,
-    /// Learn the point at the next step (then the flag is lowered again).
+    /// Lower the learn flag after the next step.
     pending: bool,
 }
 
-pub struct Stepper {
-    nodes: Vec<Node>,
-    /// The system's accelerations: (node, output port) per floor.
-    acc: [(usize, usize); 3],
-    coupled: bool,
-    /// The last point's force and time (None before the first point of a segment).
-    last: Option<(f64, f64)>,
+/// The running system and where its ports are.
+struct Running {
+    system: TwinSystem,
+    force: Port,
+    /// The system's accelerations, per floor.
+    acc: Vec<Port>,
+    learner: Option<NodeId>,
+}
+
+pub struct Stepper<'t> {
+    builder: SystemBuilder<'t>,
+    running: Option<Running>,
     learner: Option<Learner>,
 }
 
-impl Stepper {
-    /// Load the twin's FMUs and wire them as `run_twin` does; instances come with [`Stepper::start`].
-    pub fn new(twin: &Twin) -> Result<Self, WatchError> {
-        let mut nodes = Vec::new();
-        for c in &twin.components {
-            let fmu = Fmu::open(&c.fmu_path).map_err(|e| component_error(twin, &c.name, e))?;
-            let outputs: Vec<String> = twin
-                .connections
-                .iter()
-                .filter(|x| x.start_element.as_deref() == Some(&c.name))
-                .map(|x| x.start_connector.clone())
-                .collect();
-            let output_vrs = outputs
-                .iter()
-                .map(|n| fmu.value_reference(n))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| component_error(twin, &c.name, e))?;
-            nodes.push((c, fmu, outputs, output_vrs));
-        }
-        let find = |name: &str| nodes.iter().position(|(c, ..)| c.name == name);
-        let mut built = Vec::new();
-        for (c, _, _, _) in &nodes {
-            let mut input_vrs = Vec::new();
-            let mut sources = Vec::new();
-            for conn in twin
-                .connections
-                .iter()
-                .filter(|x| x.end_element.as_deref() == Some(&c.name))
-            {
-                let source = match &conn.start_element {
-                    None if conn.start_connector == "force" => Source::Force,
-                    // Other system inputs (a control force) are not in the stream.
-                    None => continue,
-                    Some(from) => {
-                        let n = find(from).ok_or_else(|| {
-                            WatchError::Twin(TwinError::Message(format!(
-                                "a connection starts at no component '{from}'"
-                            )))
-                        })?;
-                        let port = nodes[n]
-                            .2
-                            .iter()
-                            .position(|o| *o == conn.start_connector)
-                            .unwrap_or(0);
-                        Source::Node(n, port)
-                    }
-                };
-                let fmu = &nodes[find(&c.name).unwrap_or(0)].1;
-                let vr = fmu
-                    .value_reference(&conn.end_connector)
-                    .map_err(|e| component_error(twin, &c.name, e))?;
-                input_vrs.push(vr);
-                sources.push(source);
-            }
-            built.push((input_vrs, sources));
-        }
-        let coupled = built
-            .iter()
-            .any(|(_, s)| s.iter().any(|s| matches!(s, Source::Node(..))));
-        let mut acc = [(0, 0); 3];
-        for (f, output) in OUTPUTS.iter().enumerate() {
-            let conn = twin
-                .connections
-                .iter()
-                .find(|c| c.end_element.is_none() && c.end_connector == *output)
-                .ok_or_else(|| {
-                    WatchError::Twin(TwinError::Message(format!(
-                        "no connection feeds the system output '{output}'"
-                    )))
-                })?;
-            let from = conn.start_element.as_deref().unwrap_or("");
-            let n = find(from).ok_or_else(|| {
-                WatchError::Twin(TwinError::Message(format!(
-                    "'{output}' is fed by no component"
-                )))
-            })?;
-            let port = nodes[n]
-                .2
-                .iter()
-                .position(|o| *o == conn.start_connector)
-                .unwrap_or(0);
-            acc[f] = (n, port);
-        }
-        let nodes = nodes
-            .into_iter()
-            .zip(built)
-            .map(|((c, fmu, _, output_vrs), (input_vrs, sources))| Node {
-                name: c.name.clone(),
-                instance: None,
-                fmu,
-                parameters: c.parameters.clone(),
-                inputs: vec![0.0; input_vrs.len()],
-                slopes: vec![0.0; input_vrs.len()],
-                outputs: vec![0.0; output_vrs.len()],
-                fresh: false,
-                input_vrs,
-                sources,
-                output_vrs,
-            })
-            .collect::<Vec<Node>>();
-        let learner = nodes.iter().enumerate().find_map(|(i, node)| {
-            let vr = |name: &str| node.fmu.value_reference(name).ok();
-            let three = |stem: &str| -> Option<[u32; 3]> {
-                Some([
-                    vr(&format!("{stem}1"))?,
-                    vr(&format!("{stem}2"))?,
-                    vr(&format!("{stem}3"))?,
-                ])
+impl<'t> Stepper<'t> {
+    /// Open the twin's FMUs; the system comes with [`Stepper::start`].
+    pub fn new(twin: &'t Twin) -> Result<Self, WatchError> {
+        let builder = SystemBuilder::open(twin)?;
+        let learner = twin.components.iter().find_map(|c| {
+            let fmu = builder.fmu(&c.name)?;
+            let vr = |name: &str| fmu.value_reference(name).ok();
+            let floors = |stem: &str| -> Option<Vec<u32>> {
+                (1..=OUTPUTS.len())
+                    .map(|f| vr(&format!("{stem}{f}")))
+                    .collect()
             };
             Some(Learner {
-                node: i,
-                measured: three("measured_acc")?,
+                component: c.name.clone(),
+                measured: floors("measured_acc")?,
                 learn: vr("learn")?,
-                latent: three("latent_var")?,
+                latent: floors("latent_var")?,
                 points: vr("training_points")?,
                 pending: false,
             })
         });
         Ok(Stepper {
-            nodes,
-            acc,
-            coupled,
-            last: None,
+            builder,
+            running: None,
             learner,
         })
     }
@@ -195,167 +79,142 @@ impl Stepper {
         let Some(l) = &self.learner else {
             return false;
         };
-        let node = &mut self.nodes[l.node];
-        if node.fmu.value_reference(name).is_err() {
-            return false;
-        }
-        node.parameters
-            .insert(name.to_owned(), ParameterValue::Integer(value));
-        true
+        self.builder
+            .set_parameter(&l.component, name, ParameterValue::Integer(value))
     }
 
-    /// The corrector's instance with its interface (None: the twin has no corrector).
-    fn learner_instance(&mut self) -> Result<Option<(&mut Learner, &mut Instance)>, WatchError> {
+    fn running(&mut self) -> Result<&mut Running, WatchError> {
+        self.running.as_mut().ok_or(WatchError::NotStarted)
+    }
+
+    /// The corrector's slave with its interface (None: the twin has no corrector).
+    fn learner_slave(
+        &mut self,
+    ) -> Result<Option<(&mut Learner, &mut dyn crate::cosim::master::Slave)>, WatchError> {
         let Some(l) = &mut self.learner else {
             return Ok(None);
         };
-        let instance = self.nodes[l.node]
-            .instance
-            .as_mut()
+        let running = self.running.as_mut().ok_or(WatchError::NotStarted)?;
+        let slave = running
+            .learner
+            .and_then(|node| running.system.system.slave_mut(node))
             .ok_or(WatchError::NotStarted)?;
-        Ok(Some((l, instance)))
+        Ok(Some((l, slave)))
     }
 
     /// The corrector's latent variances V(f) per floor at the current point.
     pub fn latent_variance(&mut self) -> Result<Option<[f64; 3]>, WatchError> {
-        let Some((l, instance)) = self.learner_instance()? else {
+        let Some((l, slave)) = self.learner_slave()? else {
             return Ok(None);
         };
         let mut v = [0.0; 3];
-        instance.get_real(&l.latent, &mut v)?;
+        slave.get_real(&l.latent, &mut v).map_err(master)?;
         Ok(Some(v))
     }
 
     /// The corrector's training-set size.
     pub fn training_points(&mut self) -> Result<Option<i32>, WatchError> {
-        let Some((l, instance)) = self.learner_instance()? else {
+        let Some((l, slave)) = self.learner_slave()? else {
             return Ok(None);
         };
         let mut n = [0];
-        instance.get_integer(&[l.points], &mut n)?;
+        slave.get_integer(&[l.points], &mut n).map_err(master)?;
         Ok(Some(n[0]))
     }
 
     /// The current point joins the corrector's training sets, with these measured
     /// accelerations, at the next step.
     pub fn learn_current(&mut self, measured: [f64; 3]) -> Result<(), WatchError> {
-        let Some((l, instance)) = self.learner_instance()? else {
+        let Some((l, slave)) = self.learner_slave()? else {
             return Ok(());
         };
-        instance.set_real(&l.measured, &measured)?;
-        instance.set_boolean(&[l.learn], &[true])?;
+        slave.set_real(&l.measured, &measured).map_err(master)?;
+        slave.set_boolean(&[l.learn], &[true]).map_err(master)?;
         l.pending = true;
         Ok(())
     }
 
-    /// (Re)start every FMU at rest at `start` (s): new instances, the twin's parameters,
-    /// initialised.
+    /// (Re)start the twin's system at rest at `start` (s): new instances, the twin's
+    /// parameters, initialised; the first point comes with [`Stepper::advance`].
     pub fn start(&mut self, start: f64) -> Result<(), WatchError> {
-        for node in &mut self.nodes {
-            node.instance = None;
-            let mut instance = node.fmu.instantiate(&node.name)?;
-            instance.setup_experiment(start, None)?;
-            instance.enter_initialization_mode()?;
-            apply_parameters(&node.fmu, &mut instance, &node.parameters)?;
-            instance.exit_initialization_mode()?;
-            node.instance = Some(instance);
-            node.fresh = false;
-        }
+        self.running = None;
+        let twin = self.builder.twin();
+        let system = self
+            .builder
+            .build(start, vec![(FORCE, Vec::new())])
+            .map_err(system_error)?;
+        let force = system.signal(FORCE).ok_or_else(|| {
+            WatchError::Twin(TwinError::Message(format!(
+                "{} takes no '{FORCE}' input",
+                twin.describe()
+            )))
+        })?;
+        let acc = OUTPUTS
+            .iter()
+            .map(|output| system.system_output(twin, output))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(system_error)?;
+        let learner = self
+            .learner
+            .as_ref()
+            .and_then(|l| system.node(&l.component));
+        self.running = Some(Running {
+            system,
+            force,
+            acc,
+            learner,
+        });
         if let Some(l) = &mut self.learner {
             l.pending = false;
         }
-        self.last = None;
         Ok(())
     }
 
-    /// Advance to the point `time` with force `force` (stepping from the last point with the
-    /// force's ramp) and return the predicted accelerations there.
+    /// Go to the point `time` with force `force` (the step from the last point, with the
+    /// force's ramp; the first point of a segment is evaluated where it is) and return the
+    /// predicted accelerations there.
     pub fn advance(&mut self, time: f64, force: f64) -> Result<[f64; 3], WatchError> {
-        if let Some((t0, f0)) = self.last {
-            let step = time - t0;
-            let slope = (force - f0) / step;
-            for node in &mut self.nodes {
-                let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
-                if instance.can_interpolate_inputs() && !node.input_vrs.is_empty() {
-                    for (s, source) in node.slopes.iter_mut().zip(&node.sources) {
-                        *s = match source {
-                            Source::Force => slope,
-                            Source::Node(..) => 0.0,
-                        };
-                    }
-                    instance.set_real_input_derivatives(&node.input_vrs, &node.slopes)?;
-                }
-            }
-            for node in &mut self.nodes {
-                let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
-                instance.do_step(t0, step)?;
-                node.fresh = false;
+        let running = self.running.as_mut().ok_or(WatchError::NotStarted)?;
+        let system = &mut running.system.system;
+        system.set_input(running.force, force).map_err(master)?;
+        if system.time().is_some() {
+            if let StepEnd::Terminated { at } = system.step(time).map_err(master)? {
+                return Err(WatchError::Twin(TwinError::Message(format!(
+                    "a component of the twin ended the simulation at t = {at} s"
+                ))));
             }
             if let Some(l) = &mut self.learner {
                 if l.pending {
                     l.pending = false;
-                    let instance = self.nodes[l.node]
-                        .instance
-                        .as_mut()
+                    let slave = running
+                        .learner
+                        .and_then(|node| system.slave_mut(node))
                         .ok_or(WatchError::NotStarted)?;
-                    instance.set_boolean(&[l.learn], &[false])?;
+                    slave.set_boolean(&[l.learn], &[false]).map_err(master)?;
                 }
             }
-        }
-        self.last = Some((time, force));
-        let passes = if self.coupled {
-            self.nodes.len() + 2
         } else {
-            1
-        };
-        for _ in 0..passes {
-            let mut changed = false;
-            for i in 0..self.nodes.len() {
-                let mut same = self.nodes[i].fresh;
-                for p in 0..self.nodes[i].sources.len() {
-                    let value = match self.nodes[i].sources[p] {
-                        Source::Force => force,
-                        Source::Node(n, o) => self.nodes[n].outputs[o],
-                    };
-                    same &= value.to_bits() == self.nodes[i].inputs[p].to_bits();
-                    self.nodes[i].inputs[p] = value;
-                }
-                if same {
-                    // Read after this step with these very inputs: the outputs stand.
-                    continue;
-                }
-                let node = &mut self.nodes[i];
-                let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
-                if !node.input_vrs.is_empty() {
-                    instance.set_real(&node.input_vrs, &node.inputs)?;
-                }
-                let before = node.outputs.clone();
-                instance.get_real(&node.output_vrs, &mut node.outputs)?;
-                node.fresh = true;
-                changed |= before
-                    .iter()
-                    .zip(&node.outputs)
-                    .any(|(a, b)| a.to_bits() != b.to_bits());
-            }
-            if !changed {
-                break;
-            }
+            system.initialize(time).map_err(master)?;
         }
-        Ok(self.acc.map(|(n, o)| self.nodes[n].outputs[o]))
+        let mut acc = [0.0; 3];
+        for (a, &port) in acc.iter_mut().zip(&running.acc) {
+            *a = system.value(port);
+        }
+        Ok(acc)
     }
 
     /// Every FMU's state, serialised (refused when an FMU does not declare serialisable states).
     pub fn save(&mut self) -> Result<Vec<NodeState>, WatchError> {
-        let mut out = Vec::new();
-        for node in &mut self.nodes {
-            let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
-            out.push(NodeState {
-                component: node.name.clone(),
-                state: instance.state_bytes()?,
-                outputs: node.outputs.clone(),
-            });
-        }
-        Ok(out)
+        let saved = self.running()?.system.system.save().map_err(master)?;
+        Ok(saved
+            .nodes
+            .into_iter()
+            .map(|n| NodeState {
+                component: n.name,
+                state: n.state,
+                outputs: n.outputs,
+            })
+            .collect())
     }
 
     /// Put the FMUs (started) back in saved states; `last`: the last point's (time, force).
@@ -364,26 +223,45 @@ impl Stepper {
         states: &[NodeState],
         last: Option<(f64, f64)>,
     ) -> Result<(), WatchError> {
-        if states.len() != self.nodes.len() {
+        let running = self.running()?;
+        let system = &mut running.system.system;
+        let names: Vec<&str> = system.node_names().collect();
+        if states.len() != names.len() {
             return Err(WatchError::Checkpoint(format!(
                 "it holds {} FMU states, the twin has {} components",
                 states.len(),
-                self.nodes.len()
+                names.len()
             )));
         }
-        for (node, saved) in self.nodes.iter_mut().zip(states) {
-            if saved.component != node.name || saved.outputs.len() != node.outputs.len() {
+        for (name, saved) in names.iter().zip(states) {
+            if saved.component != *name {
                 return Err(WatchError::Checkpoint(format!(
-                    "its FMU state is for component '{}', the twin's is '{}'",
-                    saved.component, node.name
+                    "its FMU state is for component '{}', the twin's is '{name}'",
+                    saved.component
                 )));
             }
-            let instance = node.instance.as_mut().ok_or(WatchError::NotStarted)?;
-            instance.restore_state_bytes(&saved.state)?;
-            node.outputs.clone_from(&saved.outputs);
-            node.fresh = false;
         }
-        self.last = last;
+        let Some((time, force)) = last else {
+            // Saved right after a start, before the segment's first point: the instances are
+            // as started.
+            return Ok(());
+        };
+        let saved = SavedState {
+            time,
+            signals: vec![force],
+            nodes: states
+                .iter()
+                .map(|s| SavedNode {
+                    name: s.component.clone(),
+                    state: s.state.clone(),
+                    outputs: s.outputs.clone(),
+                })
+                .collect(),
+        };
+        system.restore(&saved).map_err(|e| match e {
+            MasterError::Config(message) => WatchError::Checkpoint(message),
+            other => master(other),
+        })?;
         // The corrector's learn flag may have been raised when the state was saved: lowered
         // after the next step either way.
         if let Some(l) = &mut self.learner {
@@ -392,8 +270,11 @@ impl Stepper {
         Ok(())
     }
 
+    /// The last point's (time, force), None before a segment's first point.
     pub fn last(&self) -> Option<(f64, f64)> {
-        self.last
+        let running = self.running.as_ref()?;
+        let time = running.system.system.time()?;
+        Some((time, running.system.system.value(running.force)))
     }
 }
 
@@ -405,11 +286,21 @@ pub struct NodeState {
     pub outputs: Vec<f64>,
 }
 
-fn component_error(twin: &Twin, component: &str, e: ImportError) -> WatchError {
-    WatchError::Twin(TwinError::Component {
-        twin: twin.describe(),
-        component: component.to_owned(),
-        fmu: String::new(),
-        inner: Box::new(TwinError::Import(e)),
-    })
+/// An FMU's refusal stays an import error (with or without the time the master adds).
+fn master(e: MasterError) -> WatchError {
+    match e {
+        MasterError::Import(e) => WatchError::Import(e),
+        MasterError::AtTime { inner, .. } if matches!(*inner, MasterError::Import(_)) => {
+            master(*inner)
+        }
+        other => WatchError::Twin(TwinError::Message(other.to_string())),
+    }
+}
+
+fn system_error(e: SystemError) -> WatchError {
+    match e {
+        SystemError::Twin(e) => WatchError::Twin(e),
+        SystemError::Master(e) => master(e),
+        SystemError::Wiring(message) => WatchError::Twin(TwinError::Message(message)),
+    }
 }
