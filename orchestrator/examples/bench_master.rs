@@ -58,7 +58,7 @@ fn master_run(fmu: &Fmu, data: &Measurement) -> Result<Vec<f64>> {
         vec![fmu.value_reference("force")?],
         outputs,
     );
-    let force = system.add_signal("force", data.force.clone());
+    let force = system.add_signal("force", data.force().to_vec());
     system.connect(force, node, 0)?;
     let mut recorder = Recorder::new(
         OUTPUTS
@@ -90,11 +90,11 @@ fn direct_run(fmu: &Fmu, data: &Measurement) -> Result<Vec<f64>> {
     let mut acc1 = Vec::with_capacity(n);
     let mut out = [0.0; 3];
     for k in 0..n {
-        instance.set_real(&force, &[data.force[k]])?;
+        instance.set_real(&force, &[data.force()[k]])?;
         if k + 1 < n {
             instance.set_real_input_derivatives(
                 &force,
-                &[(data.force[k + 1] - data.force[k]) / data.dt],
+                &[(data.force()[k + 1] - data.force()[k]) / data.dt],
             )?;
         }
         instance.get_real(&outputs, &mut out)?;

@@ -32,7 +32,7 @@ fn records_nmse(prediction: &orchestrator::run::Prediction, record: &Path) -> [f
         .position(|t| t - data.time[0] >= orchestrator::compare::DEFAULT_TRANSIENT)
         .expect("samples after the transient");
     [0, 1, 2]
-        .map(|f| orchestrator::compare::nmse(&data.acc[f][first..], &prediction.acc[f][first..]))
+        .map(|f| orchestrator::compare::nmse(&data.acc(f)[first..], &prediction.acc[f][first..]))
 }
 
 /// The twin calibrated on dataset1, made once per test binary.

@@ -47,7 +47,8 @@ fn record(change: impl FnOnce(&mut Scenario)) -> Measurement {
 fn faulty(floor: usize, gain: f64, offset: f64, drift: f64) -> Measurement {
     let mut data = record(|_| {});
     let t0 = data.time[0];
-    for (a, t) in data.acc[floor - 1].iter_mut().zip(&data.time) {
+    let time = data.time.clone();
+    for (a, t) in data.acc_mut(floor - 1).iter_mut().zip(&time) {
         *a = gain * *a + offset + drift * (t - t0);
     }
     data
@@ -113,7 +114,7 @@ fn a_gain_error_on_each_floor_is_a_sensor_fault_there() {
 #[test]
 fn an_offset_and_a_drift_are_sensor_faults() {
     let data = record(|_| {});
-    let scale = [0, 1, 2].map(|f| rms(&data.acc[f]));
+    let scale = [0, 1, 2].map(|f| rms(data.acc(f)));
     eprintln!("acceleration RMS per floor: {scale:?} m/s²");
     // An offset of 0.3 × floor 2's RMS; a drift reaching 0.5 × floor 3's RMS after 12 s.
     let offset = 0.3 * scale[1];
@@ -144,7 +145,7 @@ fn a_dead_channel_is_a_sensor_fault_of_gain_zero() {
         state ^= state << 17;
         (state >> 11) as f64 / (1u64 << 53) as f64
     };
-    for a in data.acc[0].iter_mut() {
+    for a in data.acc_mut(0).iter_mut() {
         let (u, v) = (uniform().max(1e-300), uniform());
         *a = NOISE_SD * (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos();
     }

@@ -211,8 +211,8 @@ fn the_csv_reads_back_exactly_and_has_the_five_columns_only() {
     });
     let r = record(&s).measurement;
     assert_eq!(r.time, m.time);
-    assert_eq!(r.force, m.force);
-    assert_eq!(r.acc, m.acc);
+    assert_eq!(r.force(), m.force());
+    assert_eq!(r.accs(), m.accs());
     assert_eq!(r.dt, m.dt);
     // The format follows %.9g.
     assert_eq!(format_g9(5.70246556e-05), "5.70246556e-05");
@@ -230,10 +230,10 @@ fn the_default_record_looks_like_dataset1() {
     let data =
         Measurement::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/dataset1.csv"))
             .expect("dataset1");
-    let data_acc = [rms(&data.acc[0]), rms(&data.acc[1]), rms(&data.acc[2])];
+    let data_acc = [rms(&data.acc(0)), rms(&data.acc(1)), rms(&data.acc(2))];
     println!(
         "dataset1: force RMS {:.4} N, acc RMS {data_acc:.4?}",
-        rms(&data.force)
+        rms(&data.force())
     );
     for seed in 1..=4 {
         let r = record(&Scenario {
@@ -241,12 +241,12 @@ fn the_default_record_looks_like_dataset1() {
             ..Scenario::default()
         })
         .measurement;
-        let acc = [rms(&r.acc[0]), rms(&r.acc[1]), rms(&r.acc[2])];
+        let acc = [rms(&r.acc(0)), rms(&r.acc(1)), rms(&r.acc(2))];
         println!(
             "seed {seed}: force RMS {:.4} N, acc RMS {acc:.4?}",
-            rms(&r.force)
+            rms(&r.force())
         );
-        assert!((rms(&r.force) - 0.25).abs() < 1e-6, "force RMS as asked");
+        assert!((rms(&r.force()) - 0.25).abs() < 1e-6, "force RMS as asked");
         for f in 0..3 {
             let ratio = acc[f] / data_acc[f];
             assert!(
@@ -405,13 +405,13 @@ fn a_linear_record_is_the_linear_models_response() {
         println!("floor {}: max |synth − exact| / RMS = {rel:.2e}", f + 1);
         assert!(rel < 2e-7, "floor {}: {rel:e}", f + 1);
         // The written values are the clean ones rounded to 9 digits (no noise asked for).
-        let written = max_abs_diff(&r.measurement.acc[f], &r.clean_acc[f]) / rms(&exact[f]);
+        let written = max_abs_diff(&r.measurement.acc(f), &r.clean_acc[f]) / rms(&exact[f]);
         assert!(written < 1e-7, "{written:e}");
     }
     assert_eq!(truth.noise.acc_sd, [0.0; 3]);
-    let view = twin_view(&params, &r.measurement.force, r.measurement.dt, 64);
+    let view = twin_view(&params, &r.measurement.force(), r.measurement.dt, 64);
     for f in 0..3 {
-        let e = nmse(&r.measurement.acc[f][102..], &view[f][102..]);
+        let e = nmse(&r.measurement.acc(f)[102..], &view[f][102..]);
         println!(
             "floor {}: NMSE of the twin's view (linear force between samples) = {e:.3} %",
             f + 1
@@ -437,12 +437,13 @@ fn a_linear_record_is_the_linear_models_response() {
     held.force.between_samples = BetweenSamples::Linear;
     let h = record(&held);
     assert_eq!(
-        h.measurement.force, r.measurement.force,
+        h.measurement.force(),
+        r.measurement.force(),
         "the same force samples"
     );
-    let view = twin_view(&params, &h.measurement.force, h.measurement.dt, 64);
+    let view = twin_view(&params, &h.measurement.force(), h.measurement.dt, 64);
     for f in 0..3 {
-        let e = nmse(&h.measurement.acc[f][102..], &view[f][102..]);
+        let e = nmse(&h.measurement.acc(f)[102..], &view[f][102..]);
         println!(
             "floor {}: NMSE of the twin's view, force linear between samples = {e:.1e} %",
             f + 1
@@ -465,7 +466,7 @@ fn the_force_has_no_power_above_its_band() {
         let fine_above = power_fraction_above(&fine, hf, band);
         let r = record(&s);
         let samples_above = if band < 25.6 {
-            power_fraction_above(&r.measurement.force, 1.0 / 51.2, band)
+            power_fraction_above(&r.measurement.force(), 1.0 / 51.2, band)
         } else {
             0.0
         };
@@ -505,7 +506,7 @@ fn an_amplitude_window_raises_the_force_rms_by_its_gain() {
         let pick = |keep: &dyn Fn(f64) -> bool| -> Vec<f64> {
             (0..m.len())
                 .filter(|&k| keep(m.time[k]))
-                .map(|k| m.force[k])
+                .map(|k| m.force()[k])
                 .collect()
         };
         let inside = rms(&pick(&|t| (13.25..=16.75).contains(&t)));
@@ -528,7 +529,7 @@ fn an_amplitude_window_raises_the_force_rms_by_its_gain() {
                 .map(|k| x[k])
                 .collect()
         };
-        let same_seed = rms(&plateau(&m.force)) / rms(&plateau(&plain.force));
+        let same_seed = rms(&plateau(&m.force())) / rms(&plateau(&plain.force()));
         println!("        inside, against the same seed without the window: {same_seed:.3}");
         assert!(
             (same_seed / 3.0 - 1.0).abs() < 0.05,

@@ -1,19 +1,21 @@
-//! `Record`: a measurement (`time,force,acc1,acc2,acc3`), from a CSV file or numpy arrays;
+//! `Record`: a measurement (`time`, the excitation `force` or `ground_acc`, responses `acc<i>`,
+//! `vel<i>`, `disp<i>`, units in the names), from a CSV file or numpy arrays;
 //! `synth`: a synthetic record with hidden effects and its truth.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use numpy::{PyArray1, PyReadonlyArray1};
-use orchestrator::record::{csv_text, Measurement};
+use orchestrator::record::{csv_text, ColumnMap, Measurement, ReadOptions};
 use orchestrator::synth::{synth_controlled, InLoopController, Scenario};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::{detached, to_object, to_py, Kind};
 
-/// A measurement record: time (s), force (N), the floor accelerations acc1..acc3 (m/s²),
-/// uniformly sampled; extra columns kept by name.
+/// A measurement record: time (s), the excitation (`force`, N, or `ground_acc`, m/s²) and
+/// the measured responses (`acc<i>`, `vel<i>`, `disp<i>`), in SI on the nominal sampling grid;
+/// a `control` column kept by name.
 #[pyclass(module = "shear_twin._native", frozen)]
 pub struct Record {
     pub(crate) measurement: Measurement,
@@ -21,6 +23,29 @@ pub struct Record {
 
 fn column(values: &[f64], py: Python<'_>) -> Py<PyAny> {
     PyArray1::from_slice(py, values).into_any().unbind()
+}
+
+impl Record {
+    /// The record for a workflow written for the paper's rig (a force, acc1..acc3); a record
+    /// without them raises `DataError` naming the missing column.
+    pub(crate) fn paper(&self) -> PyResult<&Measurement> {
+        self.measurement
+            .require_paper_rig()
+            .map_err(|e| to_py(Kind::Data, e))?;
+        Ok(&self.measurement)
+    }
+}
+
+/// A column map from a dict (`{"dotx1 (m/s)": "vel1"}`) or the path of a MAP.json.
+fn column_map(columns: Option<&Bound<'_, PyAny>>) -> PyResult<ColumnMap> {
+    let Some(columns) = columns else {
+        return Ok(ColumnMap::default());
+    };
+    if let Ok(map) = columns.extract::<std::collections::BTreeMap<String, String>>() {
+        return ColumnMap::new(map).map_err(|e| to_py(Kind::Data, anyhow::anyhow!(e)));
+    }
+    let path: PathBuf = columns.extract()?;
+    ColumnMap::read(&path).map_err(|e| to_py(Kind::Data, e))
 }
 
 #[pymethods]
@@ -56,13 +81,43 @@ impl Record {
         Ok(Record { measurement })
     }
 
-    /// Read a measurement CSV; a bad file raises `DataError` naming the file, line and problem.
+    /// Read a measurement CSV (`columns`: a column map, a dict or a MAP.json path, as `twin
+    /// --columns`); a bad file raises `DataError` naming the file, line and problem.
     #[staticmethod]
-    fn read(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+    #[pyo3(signature = (path, *, columns = None))]
+    fn read(py: Python<'_>, path: PathBuf, columns: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let columns = column_map(columns)?;
         let measurement = detached(py, || {
-            Measurement::read(&path).map_err(|e| to_py(Kind::Data, e))
+            Measurement::read_with(&path, &ReadOptions { columns })
+                .map_err(|e| to_py(Kind::Data, e))
         })?;
         Ok(Record { measurement })
+    }
+
+    /// A record from named arrays: `{"time": ..., "ground_acc (g)": ..., "acc2": ...}` (names
+    /// as a CSV header has them, mapped through `columns`), checked as a CSV file is.
+    #[staticmethod]
+    #[pyo3(signature = (arrays, *, columns = None, name = "<arrays>"))]
+    fn from_arrays(
+        arrays: &Bound<'_, PyDict>,
+        columns: Option<&Bound<'_, PyAny>>,
+        name: &str,
+    ) -> PyResult<Self> {
+        let columns = column_map(columns)?;
+        let mut named = Vec::with_capacity(arrays.len());
+        for (key, value) in arrays.iter() {
+            let values: PyReadonlyArray1<'_, f64> = value.extract()?;
+            named.push((key.extract::<String>()?, values.as_array().to_vec()));
+        }
+        let measurement = Measurement::from_named_columns(Path::new(name), named, &columns)
+            .map_err(|e| to_py(Kind::Data, e))?;
+        Ok(Record { measurement })
+    }
+
+    /// The measured channels' names, the excitation first (`["force", "acc1", ...]`).
+    #[getter]
+    fn channels(&self) -> Vec<String> {
+        self.measurement.channel_names()
     }
 
     /// Write the record as the measurement CSV `twin` reads.
@@ -96,14 +151,13 @@ impl Record {
         self.measurement.len()
     }
 
-    /// The columns as numpy arrays, by name (`pandas.DataFrame(record.to_dict())`).
+    /// The columns as numpy arrays (SI), by name (`pandas.DataFrame(record.to_dict())`).
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let m = &self.measurement;
         let d = PyDict::new(py);
         d.set_item("time", column(&m.time, py))?;
-        d.set_item("force", column(&m.force, py))?;
-        for (f, acc) in m.acc.iter().enumerate() {
-            d.set_item(format!("acc{}", f + 1), column(acc, py))?;
+        for signal in m.channels() {
+            d.set_item(signal.channel.name(), column(&signal.values, py))?;
         }
         let mut names: Vec<&String> = m.extra.keys().collect();
         names.sort();

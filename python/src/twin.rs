@@ -172,7 +172,7 @@ impl Twin {
             latent_threshold,
         };
         options.validate().map_err(|e| to_py(kind, e))?;
-        let data = &record.measurement;
+        let data = record.paper()?;
         options.validate_for(data).map_err(|e| to_py(kind, e))?;
         let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
         let compared = detached(py, || {
@@ -249,9 +249,12 @@ impl Twin {
         setup.seed = seed.unwrap_or(setup.seed);
         setup.transient = transient.unwrap_or(setup.transient);
         setup.threads = threads.unwrap_or(setup.threads);
-        let data = &record.measurement;
+        let data = record.paper()?;
         setup.validate(data).map_err(|e| to_py(kind, e))?;
-        let validation: Vec<&Measurement> = validate.iter().map(|r| &r.measurement).collect();
+        let validation: Vec<&Measurement> = validate
+            .iter()
+            .map(|r| r.paper())
+            .collect::<PyResult<_>>()?;
         let (new_twin, report) = detached(py, || {
             let v = calibrate_validated(&self.twin, data, &validation, &setup)
                 .map_err(|e| to_py(kind, e))?;
@@ -319,7 +322,7 @@ impl Twin {
         o.transient = transient.unwrap_or(o.transient);
         o.threads = threads.unwrap_or(o.threads);
         o.block = block.unwrap_or(o.block);
-        let data = &record.measurement;
+        let data = record.paper()?;
         o.validate_for(data).map_err(|e| to_py(kind, e))?;
         if let Some(effects) = effects {
             o.candidates = parse_candidates(&effects).map_err(|e| to_py(kind, e))?;
@@ -363,7 +366,10 @@ impl Twin {
         o.validate().map_err(|e| to_py(kind, e))?;
         let _ = refine;
         let others: Vec<orchestrator::twin::data::Measurement> = match records {
-            Some(given) => given.iter().map(|r| r.measurement.clone()).collect(),
+            Some(given) => given
+                .iter()
+                .map(|r| r.paper().cloned())
+                .collect::<PyResult<_>>()?,
             None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
         };
         let candidates = match (effects, diagnosis) {
@@ -400,7 +406,7 @@ impl Twin {
             }
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
-        let data = &record.measurement;
+        let data = record.paper()?;
         let (new_twin, report) = detached(py, || {
             let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;
@@ -500,7 +506,7 @@ impl Twin {
             dwell: dwell.unwrap_or(sd.dwell),
             variance,
         });
-        let data = &record.measurement;
+        let data = record.paper()?;
         let outcome = detached(py, || {
             let twin = twin_for_control(&self.twin, sensor_noise);
             let outcome =
@@ -680,7 +686,7 @@ impl Twin {
         if let Some(s) = &selection {
             s.validate().map_err(|e| to_py(kind, e))?;
         }
-        let data = &record.measurement;
+        let data = record.paper()?;
         let (twin, report) = detached(py, || {
             let trained = train_selected(&self.twin, data, &options, selection.as_ref())
                 .map_err(|e| to_py(kind, e))?;
@@ -751,7 +757,10 @@ impl Twin {
         if records.is_empty() {
             return Err(invalid(kind, "give at least one record"));
         }
-        let data: Vec<Measurement> = records.iter().map(|r| r.measurement.clone()).collect();
+        let data: Vec<Measurement> = records
+            .iter()
+            .map(|r| r.paper().cloned())
+            .collect::<PyResult<_>>()?;
         let (report, learned) = detached(py, || {
             let started = std::time::Instant::now();
             let streams = prepare(&self.twin, &data, &options).map_err(|e| to_py(kind, e))?;

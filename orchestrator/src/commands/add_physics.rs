@@ -17,6 +17,8 @@ use crate::workflows::diagnose::{
 
 #[derive(clap::Args)]
 pub struct AddPhysicsArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp) to extend.
     #[arg(long)]
     pub twin: PathBuf,
@@ -71,7 +73,7 @@ fn other_records(
         return Ok(args
             .records
             .iter()
-            .map(|p| Measurement::read(p))
+            .map(|p| args.columns.read_record(p))
             .collect::<Result<Vec<_>, _>>()?);
     }
     if twin.records.is_empty() {
@@ -137,7 +139,11 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
     let mut text = String::new();
     let twin = Twin::load(Some(&args.twin))?;
     let others = other_records(args, &twin, &mut text)?;
-    let data = args.data.as_deref().map(Measurement::read).transpose()?;
+    let data = args
+        .data
+        .as_deref()
+        .map(|p| args.columns.read_record(p))
+        .transpose()?;
     // In the refit's order: the twin's records, then the new one.
     let mut paths: Vec<PathBuf> = others.iter().map(|m| m.path.clone()).collect();
     paths.extend(data.iter().map(|d| d.path.clone()));

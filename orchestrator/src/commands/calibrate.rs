@@ -13,6 +13,8 @@ use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// Measurement CSV to calibrate on.
     #[arg(long)]
     pub data: PathBuf,
@@ -57,11 +59,11 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         check_svg(plot)?;
     }
-    let data = Measurement::read(&args.data)?;
+    let data = args.columns.read_record(&args.data)?;
     let validation = args
         .validate
         .iter()
-        .map(|p| Measurement::read(p))
+        .map(|p| args.columns.read_record(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
     let mut setup = CalibrationSetup {

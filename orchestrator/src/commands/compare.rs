@@ -16,6 +16,8 @@ use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct CompareArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp); the default twin when absent.
     #[arg(long)]
     pub twin: Option<PathBuf>,
@@ -76,7 +78,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     let options = args.options();
     options.validate()?;
-    let data = Measurement::read(&args.data)?;
+    let data = args.columns.read_record(&args.data)?;
     options.validate_for(&data)?;
     let twin = Twin::load(args.twin.as_deref())?;
     let spec = args

@@ -8,7 +8,6 @@ use anyhow::{Context, Result};
 
 use super::{progress_bar, write_json, write_text_atomically};
 use crate::report::control_plot::plot_control;
-use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::control::closed_loop::Gap;
 use crate::workflows::control::{
@@ -19,6 +18,8 @@ use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct ControlArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp) whose structure is controlled (its calibrated m, c, k; its effects).
     #[arg(long)]
     pub twin: Option<PathBuf>,
@@ -144,7 +145,7 @@ pub fn run(args: &ControlArgs) -> Result<()> {
         check_svg(plot)?;
     }
     let options = args.options()?;
-    let data = Measurement::read(&args.data)?;
+    let data = args.columns.read_record(&args.data)?;
     let twin = twin_for_control(&Twin::load(args.twin.as_deref())?, args.sensor_noise);
     let mut progress = progress_bar();
     let outcome = run_control(&twin, &data, &options, &mut progress)?;

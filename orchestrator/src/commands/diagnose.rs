@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 
 use super::{write_json, write_text_atomically};
-use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::diagnose::{
     diagnose, parse_candidates, DiagnoseOptions, Diagnosis, Progress,
@@ -14,6 +13,8 @@ use crate::workflows::diagnose::{
 
 #[derive(clap::Args)]
 pub struct DiagnoseArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp) to diagnose, made by `twin calibrate` (its noise variances set the
     /// noise level).
     #[arg(long)]
@@ -86,7 +87,7 @@ impl DiagnoseArgs {
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = args.options()?;
-    let data = Measurement::read(&args.data)?;
+    let data = args.columns.read_record(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
     // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).
     let spinner = indicatif::ProgressBar::new_spinner();

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 
 use super::write_json;
-use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::learn::{
     chosen_modes, learned_twin, prepare, run_modes, table, write_plots, LearnOptions, Mode,
@@ -29,6 +28,8 @@ pub enum AllModes {
 
 #[derive(clap::Args)]
 pub struct LearnArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp) whose physics the GPs correct (e.g. from `twin calibrate`); the default
     /// twin when absent. Only its physics is used.
     #[arg(long)]
@@ -139,7 +140,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
     let records = args
         .data
         .iter()
-        .map(|p| Measurement::read(p))
+        .map(|p| args.columns.read_record(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
     let started = std::time::Instant::now();

@@ -8,6 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+use crate::record::{ColumnMap, Measurement, ReadOptions};
 pub(crate) use crate::twin::run::Compared;
 use crate::twin::run::Progress;
 
@@ -145,4 +146,28 @@ pub(crate) fn progress_bar() -> impl FnMut(u64, u64) {
         }
     });
     move |done, total| progress.tick(done, total)
+}
+
+/// `--columns MAP.json` of the commands that read records.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ColumnsArg {
+    /// Header names the records use for the twin's, as a JSON object, e.g.
+    /// `{"dotx1 (m/s)": "vel1", "fp (N)": "force"}` (a key without a unit matches the name
+    /// with any unit, which goes with it).
+    #[arg(long, value_name = "MAP.json")]
+    pub columns: Option<std::path::PathBuf>,
+}
+
+impl ColumnsArg {
+    /// Read a record for a command written for the paper's rig: the column map applied, a
+    /// record without a force or without acc1..acc3 refused at once, naming the column.
+    pub fn read_record(&self, path: &Path) -> Result<Measurement> {
+        let columns = match &self.columns {
+            Some(map) => ColumnMap::read(map)?,
+            None => ColumnMap::default(),
+        };
+        let record = Measurement::read_with(path, &ReadOptions { columns })?;
+        record.require_paper_rig()?;
+        Ok(record)
+    }
 }

@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 
 use super::write_json;
-use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use crate::workflows::train::{train_selected, LagSelection, TrainOptions, SELECTION_STRIDE};
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
+    #[command(flatten)]
+    pub columns: super::ColumnsArg,
     /// The twin (.ssp) whose physics the corrector corrects; the default twin when absent.
     #[arg(long)]
     pub twin: Option<PathBuf>,
@@ -70,7 +71,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             args.out.display()
         );
     }
-    let data = Measurement::read(&args.data)?;
+    let data = args.columns.read_record(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
     let (options, selection) = args.options();
     options.validate()?;

@@ -1,9 +1,15 @@
-//! Reading a measurement file or columns in memory into a [`Measurement`].
+//! Reading a record (a CSV file, or columns in memory) into a [`Measurement`]: its channels in
+//! SI, on the nominal sampling grid the times were rounded from.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use super::REQUIRED_COLUMNS;
+use ::structure::channel::{
+    parse_header_field, split_unit, Channel, ExcitationKind, Quantity, Unit,
+};
+
+use super::grid::{nominal_grid, resolution, GridError};
+use super::{ColumnMap, REQUIRED_COLUMNS};
 
 #[derive(Debug, thiserror::Error)]
 #[error("{path}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -13,16 +19,55 @@ pub struct DataError {
     pub message: String,
 }
 
+/// Columns kept by name beside the channels: the control force a controlled record carries
+/// (N), which `twin` replays into a twin that takes one.
+pub const EXTRA_COLUMNS: [&str; 1] = ["control"];
+
+/// One measured column: what it measures, the unit it was written in, its values in SI.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signal {
+    pub channel: Channel,
+    pub unit: Unit,
+    pub values: Vec<f64>,
+}
+
+/// A record: the excitation and the measured responses, in SI, sampled on the grid
+/// `time[k] = time[0] + k·dt`.
 #[derive(Debug, Clone)]
 pub struct Measurement {
     pub path: PathBuf,
+    /// The nominal grid the samples were taken on (recovered from rounded times, or from a
+    /// start time and a rate).
     pub time: Vec<f64>,
-    pub force: Vec<f64>,
-    pub acc: [Vec<f64>; 3],
-    /// The sampling interval, recovered exactly from the (rounded) time column.
+    /// The sampling interval of the nominal grid.
     pub dt: f64,
+    /// `force` (N) or `ground_acc` (m/s²).
+    pub excitation: Signal,
+    /// `acc<i>` (m/s²), `vel<i>` (m/s), `disp<i>` (m), in the order of the file's columns; at
+    /// least one.
+    pub responses: Vec<Signal>,
+    /// Other columns kept by name ([`EXTRA_COLUMNS`]).
     pub extra: HashMap<String, Vec<f64>>,
+    /// The file's header line, for messages about its columns (None: not from a file).
+    pub header_line: Option<u64>,
 }
+
+/// How to read a record beyond its own header.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// Header names the file uses for the twin's (`--columns MAP.json`).
+    pub columns: ColumnMap,
+}
+
+fn acc_channel(floor: usize) -> Channel {
+    Channel::Response {
+        quantity: Quantity::Acceleration,
+        floor,
+    }
+}
+
+/// The paper's rig has an accelerometer on each of its three floors.
+const PAPER_FLOORS: usize = 3;
 
 impl Measurement {
     pub fn len(&self) -> usize {
@@ -35,7 +80,139 @@ impl Measurement {
         self.dt * (self.len().saturating_sub(1)) as f64
     }
 
+    /// The record in the paper's columns (`force`, `acc1..acc3`, SI), unchecked beyond equal
+    /// lengths: for records the twin makes itself (synth, a stream's kept samples).
+    pub fn paper_rig(
+        path: PathBuf,
+        time: Vec<f64>,
+        force: Vec<f64>,
+        acc: [Vec<f64>; 3],
+        dt: f64,
+        extra: HashMap<String, Vec<f64>>,
+    ) -> Measurement {
+        let responses = acc
+            .into_iter()
+            .enumerate()
+            .map(|(f, values)| Signal {
+                channel: acc_channel(f + 1),
+                unit: Unit::MetrePerSecond2,
+                values,
+            })
+            .collect();
+        Measurement {
+            path,
+            time,
+            dt,
+            excitation: Signal {
+                channel: Channel::Excitation(ExcitationKind::Force),
+                unit: Unit::Newton,
+                values: force,
+            },
+            responses,
+            extra,
+            header_line: None,
+        }
+    }
+
+    /// Every channel: the excitation, then the responses.
+    pub fn channels(&self) -> impl Iterator<Item = &Signal> {
+        std::iter::once(&self.excitation).chain(&self.responses)
+    }
+
+    /// A measured channel's values (SI), if the record has it.
+    pub fn channel(&self, channel: Channel) -> Option<&[f64]> {
+        self.channels()
+            .find(|s| s.channel == channel)
+            .map(|s| s.values.as_slice())
+    }
+
+    /// Whether the record has what the workflows written for the paper's rig need: a force and
+    /// an accelerometer on floors 1 to 3. Err names the first missing column.
+    pub fn require_paper_rig(&self) -> Result<(), DataError> {
+        let err = |message: String| DataError {
+            path: self.path.clone(),
+            line: self.header_line,
+            message,
+        };
+        if self.excitation.channel != Channel::Excitation(ExcitationKind::Force) {
+            return Err(err(format!(
+                "missing column 'force': this command needs the force; the record is excited \
+                 by '{}'",
+                self.excitation.channel.name()
+            )));
+        }
+        for floor in 1..=PAPER_FLOORS {
+            if self.channel(acc_channel(floor)).is_none() {
+                return Err(err(format!(
+                    "missing column 'acc{floor}': this command needs an accelerometer on each of \
+                     floors 1 to {PAPER_FLOORS}; the record has {}",
+                    self.channel_names().join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The channels' names, excitation first.
+    pub fn channel_names(&self) -> Vec<String> {
+        self.channels().map(|s| s.channel.name()).collect()
+    }
+
+    /// The force (N). Panics unless [`Measurement::require_paper_rig`] holds, as it does for
+    /// every record the paper-rig workflows are given (the commands and the Python package
+    /// check it when they read one).
+    pub fn force(&self) -> &[f64] {
+        self.paper_force_checked();
+        &self.excitation.values
+    }
+
+    /// Floor `f`'s acceleration (m/s², `f` from 0). Panics unless
+    /// [`Measurement::require_paper_rig`] holds.
+    pub fn acc(&self, f: usize) -> &[f64] {
+        self.channel(acc_channel(f + 1))
+            .unwrap_or_else(|| panic!("{}: no column acc{}", self.path.display(), f + 1))
+    }
+
+    /// The three floors' accelerations. Panics unless [`Measurement::require_paper_rig`] holds.
+    pub fn accs(&self) -> [&[f64]; 3] {
+        std::array::from_fn(|f| self.acc(f))
+    }
+
+    /// Floor `f`'s acceleration to change in place (a sensor fault planted by a test).
+    pub fn acc_mut(&mut self, f: usize) -> &mut Vec<f64> {
+        let path = self.path.display().to_string();
+        self.responses
+            .iter_mut()
+            .find(|s| s.channel == acc_channel(f + 1))
+            .map(|s| &mut s.values)
+            .unwrap_or_else(|| panic!("{path}: no column acc{}", f + 1))
+    }
+
+    /// The force to change in place.
+    pub fn force_mut(&mut self) -> &mut Vec<f64> {
+        self.paper_force_checked();
+        &mut self.excitation.values
+    }
+
+    fn paper_force_checked(&self) {
+        assert!(
+            self.excitation.channel == Channel::Excitation(ExcitationKind::Force),
+            "{}: the excitation is '{}', not 'force'",
+            self.path.display(),
+            self.excitation.channel.name()
+        );
+    }
+
+    /// Read a record as its header says (see [`Measurement::read_with`]).
     pub fn read(path: &Path) -> Result<Self, DataError> {
+        Self::read_with(path, &ReadOptions::default())
+    }
+
+    /// Read a CSV record: leading `#` lines may give `# rate = <Hz>` and `# start = <s>` for a
+    /// file without a time column; the header names the columns, each `name` or `name (unit)`
+    /// (mapped through `options.columns` first); every value is converted to SI and the times
+    /// are put back on the nominal grid they were rounded from.
+    pub fn read_with(path: &Path, options: &ReadOptions) -> Result<Self, DataError> {
         let err = |line: Option<u64>, message: String| DataError {
             path: path.to_owned(),
             line,
@@ -53,33 +230,32 @@ impl Measurement {
                 1 + bytes[..at].iter().filter(|&&b| b == b'\n').count() as u64
             })
         };
+        let (comments, comment_lines) =
+            leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
+        let header_line = comment_lines + 1;
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
+            .comment(Some(b'#'))
             .from_reader(bytes.as_slice());
         let header: Vec<String> = reader
             .headers()
-            .map_err(|e| err(Some(1), format!("bad header: {e}")))?
+            .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
             .iter()
             .map(str::to_owned)
             .collect();
-        let mut index = HashMap::new();
-        for (i, name) in header.iter().enumerate() {
-            if index.insert(name.clone(), i).is_some() {
-                return Err(err(Some(1), format!("column '{name}' appears twice")));
-            }
+        if header.iter().all(|h| h.is_empty()) {
+            return Err(err(
+                Some(header_line),
+                format!(
+                    "missing columns: no header (the paper's header is {})",
+                    REQUIRED_COLUMNS.join(",")
+                ),
+            ));
         }
-        for required in REQUIRED_COLUMNS {
-            if !index.contains_key(required) {
-                return Err(err(
-                    Some(1),
-                    format!(
-                        "missing column '{required}' (the header must have {})",
-                        REQUIRED_COLUMNS.join(",")
-                    ),
-                ));
-            }
-        }
+        let layout =
+            Layout::parse(&header, &options.columns).map_err(|m| err(Some(header_line), m))?;
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+        let mut time_resolution = Vec::new();
         // One record reused for every row (a fresh one per row was a tenth of the read's time).
         let mut record = csv::StringRecord::new();
         while reader
@@ -98,72 +274,100 @@ impl Measurement {
                 let value = parse_value(&header[i], field).map_err(|m| err(line(), m))?;
                 columns[i].push(value);
             }
+            if let Some(t) = layout.time {
+                time_resolution.push(resolution(&record[t]));
+            }
         }
-        let n = columns[0].len();
+        let n = columns.first().map_or(0, Vec::len);
         if n < 2 {
             return Err(err(None, format!("{n} data rows; at least 2 are needed")));
         }
-        let time = std::mem::take(&mut columns[index["time"]]);
-        for k in 1..n {
-            if time[k] <= time[k - 1] {
-                return Err(err(
-                    Some(k as u64 + 2),
-                    format!(
-                        "time {} does not increase (previous {})",
-                        time[k],
-                        time[k - 1]
-                    ),
-                ));
+        let first_data_line = header_line + 1;
+        let (t0, dt) = match layout.time {
+            Some(t) => {
+                if let Some(rate) = comments.rate {
+                    return Err(err(
+                        Some(1),
+                        format!("'# rate = {rate}' and a time column: give one or the other"),
+                    ));
+                }
+                let time = &columns[t];
+                nominal_grid(time, &time_resolution).map_err(|e| {
+                    grid_error(e, |k| err(Some(first_data_line + k as u64), String::new()))
+                })?
             }
-        }
-        let dt = uniform_step(&time).map_err(|(k, message)| err(Some(k as u64 + 2), message))?;
-        let take =
-            |columns: &mut Vec<Vec<f64>>, name: &str| std::mem::take(&mut columns[index[name]]);
-        let force = take(&mut columns, "force");
-        let acc = [
-            take(&mut columns, "acc1"),
-            take(&mut columns, "acc2"),
-            take(&mut columns, "acc3"),
-        ];
-        let extra = header
+            None => {
+                let rate = comments.rate.ok_or_else(|| {
+                    err(
+                        Some(header_line),
+                        "no 'time' column: give the sample rate in a comment line before the \
+                         header, '# rate = <Hz>' (and '# start = <s>' unless it is 0)"
+                            .to_owned(),
+                    )
+                })?;
+                (comments.start.unwrap_or(0.0), 1.0 / rate)
+            }
+        };
+        let mut take = |i: usize, unit: Unit| -> Vec<f64> {
+            let mut values = std::mem::take(&mut columns[i]);
+            let factor = unit.to_si();
+            if factor != 1.0 {
+                values.iter_mut().for_each(|v| *v *= factor);
+            }
+            values
+        };
+        let (ex_index, ex_channel, ex_unit) = layout.excitation;
+        let excitation = Signal {
+            channel: ex_channel,
+            unit: ex_unit,
+            values: take(ex_index, ex_unit),
+        };
+        let responses = layout
+            .responses
             .iter()
-            .enumerate()
-            .filter(|(_, name)| !REQUIRED_COLUMNS.contains(&name.as_str()))
-            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[i])))
+            .map(|&(i, channel, unit)| Signal {
+                channel,
+                unit,
+                values: take(i, unit),
+            })
+            .collect();
+        let extra = layout
+            .extra
+            .iter()
+            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[*i])))
             .collect();
         Ok(Measurement {
             path: path.to_owned(),
-            time,
-            force,
-            acc,
+            time: (0..n).map(|k| t0 + k as f64 * dt).collect(),
             dt,
+            excitation,
+            responses,
             extra,
+            header_line: Some(header_line),
         })
     }
-}
 
-impl Measurement {
-    /// A record from columns in memory (the Python package's arrays), checked as a file is:
-    /// equal lengths, finite numbers, at least 2 samples, time increasing on a uniform grid.
+    /// A record from named columns in memory (the Python package's arrays), checked as a file
+    /// is: names (`name` or `name (unit)`, mapped through `columns`), equal lengths, finite
+    /// numbers, at least 2 samples, the times on a uniform grid (taken as written to 1 µs).
     /// `origin` names it in messages (no line numbers: sample indices from 0).
-    pub fn from_columns(
+    pub fn from_named_columns(
         origin: &Path,
-        time: Vec<f64>,
-        force: Vec<f64>,
-        acc: [Vec<f64>; 3],
-        extra: HashMap<String, Vec<f64>>,
+        named: Vec<(String, Vec<f64>)>,
+        columns: &ColumnMap,
     ) -> Result<Self, DataError> {
         let err = |message: String| DataError {
             path: origin.to_owned(),
             line: None,
             message,
         };
-        let n = time.len();
-        let named = [("time", &time), ("force", &force)]
-            .into_iter()
-            .chain(["acc1", "acc2", "acc3"].into_iter().zip(acc.iter()))
-            .chain(extra.iter().map(|(name, c)| (name.as_str(), c)));
-        for (name, column) in named {
+        let header: Vec<String> = named.iter().map(|(name, _)| name.clone()).collect();
+        let layout = Layout::parse(&header, columns).map_err(err)?;
+        let time_index = layout
+            .time
+            .ok_or_else(|| err("no 'time' column".to_owned()))?;
+        let n = named[time_index].1.len();
+        for (name, column) in &named {
             if column.len() != n {
                 return Err(err(format!(
                     "'{name}' has {} samples, 'time' has {n}",
@@ -180,24 +384,207 @@ impl Measurement {
         if n < 2 {
             return Err(err(format!("{n} samples; at least 2 are needed")));
         }
-        if let Some(k) = (1..n).find(|&k| time[k] <= time[k - 1]) {
-            return Err(err(format!(
-                "time {} at sample {k} does not increase (previous {})",
-                time[k],
-                time[k - 1]
-            )));
-        }
-        let dt =
-            uniform_step(&time).map_err(|(k, message)| err(format!("sample {k}: {message}")))?;
+        let mut columns: Vec<Vec<f64>> = named.into_iter().map(|(_, c)| c).collect();
+        // Arrays carry no printed resolution: their times are taken as written to 1 µs.
+        let (t0, dt) = nominal_grid(&columns[time_index], &vec![1e-6; n])
+            .map_err(|e| grid_error(e, |k| err(format!("sample {k}"))))?;
+        let mut take = |i: usize, unit: Unit| -> Vec<f64> {
+            let factor = unit.to_si();
+            std::mem::take(&mut columns[i])
+                .into_iter()
+                .map(|v| v * factor)
+                .collect()
+        };
+        let (ex_index, ex_channel, ex_unit) = layout.excitation;
+        let excitation = Signal {
+            channel: ex_channel,
+            unit: ex_unit,
+            values: take(ex_index, ex_unit),
+        };
+        let responses = layout
+            .responses
+            .iter()
+            .map(|&(i, channel, unit)| Signal {
+                channel,
+                unit,
+                values: take(i, unit),
+            })
+            .collect();
+        let extra = layout
+            .extra
+            .iter()
+            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[*i])))
+            .collect();
         Ok(Measurement {
             path: origin.to_owned(),
-            time,
-            force,
-            acc,
+            time: (0..n).map(|k| t0 + k as f64 * dt).collect(),
             dt,
+            excitation,
+            responses,
+            extra,
+            header_line: None,
+        })
+    }
+
+    /// A record in the paper's columns from arrays (SI), checked as a file is; `extra` more
+    /// named columns (e.g. `control`).
+    pub fn from_columns(
+        origin: &Path,
+        time: Vec<f64>,
+        force: Vec<f64>,
+        acc: [Vec<f64>; 3],
+        extra: HashMap<String, Vec<f64>>,
+    ) -> Result<Self, DataError> {
+        let mut named = vec![("time".to_owned(), time), ("force".to_owned(), force)];
+        for (f, a) in acc.into_iter().enumerate() {
+            named.push((format!("acc{}", f + 1), a));
+        }
+        let mut extra: Vec<(String, Vec<f64>)> = extra.into_iter().collect();
+        extra.sort_by(|a, b| a.0.cmp(&b.0));
+        named.extend(extra);
+        Self::from_named_columns(origin, named, &ColumnMap::default())
+    }
+}
+
+/// The message of a sampling problem at sample `k`, placed by `at(k)` (a line or a sample).
+fn grid_error(e: GridError, at: impl Fn(usize) -> DataError) -> DataError {
+    let mut error = at(e.sample);
+    error.message = if error.message.is_empty() {
+        e.message
+    } else {
+        format!("{}: {}", error.message, e.message)
+    };
+    error
+}
+
+/// Where each column goes.
+struct Layout {
+    time: Option<usize>,
+    excitation: (usize, Channel, Unit),
+    responses: Vec<(usize, Channel, Unit)>,
+    extra: Vec<(usize, String)>,
+}
+
+impl Layout {
+    fn parse(header: &[String], map: &ColumnMap) -> Result<Layout, String> {
+        let mut time = None;
+        let mut excitation: Option<(usize, Channel, Unit)> = None;
+        let mut responses: Vec<(usize, Channel, Unit)> = Vec::new();
+        let mut extra = Vec::new();
+        let mut seen: BTreeMap<String, &str> = BTreeMap::new();
+        for (i, field) in header.iter().enumerate() {
+            let named = map.apply(field);
+            let (name, _) = split_unit(&named);
+            if EXTRA_COLUMNS.contains(&name) {
+                if seen.insert(name.to_owned(), field).is_some() {
+                    return Err(format!("column '{name}' appears twice"));
+                }
+                extra.push((i, name.to_owned()));
+                continue;
+            }
+            let (channel, unit) = parse_header_field(&named).map_err(|e| {
+                if named == *field {
+                    e.to_string()
+                } else {
+                    format!("{e} (mapped from '{field}')")
+                }
+            })?;
+            if let Some(first) = seen.insert(channel.name(), field) {
+                return Err(if first == field {
+                    format!("column '{field}' appears twice")
+                } else {
+                    format!(
+                        "columns '{first}' and '{field}' are both '{}'",
+                        channel.name()
+                    )
+                });
+            }
+            match channel {
+                Channel::Time => time = Some(i),
+                Channel::Excitation(_) => {
+                    if let Some((_, other, _)) = excitation {
+                        return Err(format!(
+                            "columns '{}' and '{field}': a record has one excitation, \
+                             'force' or 'ground_acc'",
+                            other.name()
+                        ));
+                    }
+                    excitation = Some((i, channel, unit));
+                }
+                Channel::Response { .. } => responses.push((i, channel, unit)),
+            }
+        }
+        let excitation = excitation.ok_or_else(|| {
+            format!(
+                "missing column 'force' or 'ground_acc' (the excitation; the paper's header is {})",
+                REQUIRED_COLUMNS.join(",")
+            )
+        })?;
+        if responses.is_empty() {
+            return Err(format!(
+                "no response column: at least one of acc<i>, vel<i>, disp<i> (the paper's header is {})",
+                REQUIRED_COLUMNS.join(",")
+            ));
+        }
+        Ok(Layout {
+            time,
+            excitation,
+            responses,
             extra,
         })
     }
+}
+
+/// What the comment lines before the header say.
+#[derive(Debug, Default)]
+struct Comments {
+    rate: Option<f64>,
+    start: Option<f64>,
+}
+
+/// The `#` lines (and blank lines) before the header: `# rate = 1000` (Hz), `# start = 12.5`
+/// (s); other comments are free text. Returns them and how many lines they take.
+fn leading_comments(bytes: &[u8]) -> Result<(Comments, u64), (u64, String)> {
+    let text = String::from_utf8_lossy(&bytes[..bytes.len().min(64 * 1024)]);
+    let mut comments = Comments::default();
+    let mut lines = 0;
+    for line in text.lines() {
+        let trimmed = line.trim();
+        if !(trimmed.is_empty() || trimmed.starts_with('#')) {
+            break;
+        }
+        lines += 1;
+        let Some(body) = trimmed.strip_prefix('#') else {
+            continue;
+        };
+        let Some((key, value)) = body.split_once(['=', ':']) else {
+            continue;
+        };
+        let key = key.trim().to_ascii_lowercase();
+        let value = value.trim();
+        let number = |unit: &str| -> Result<f64, (u64, String)> {
+            let text = value.strip_suffix(unit).unwrap_or(value).trim();
+            text.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| (lines, format!("'# {key} = {value}' is not a number")))
+        };
+        match key.as_str() {
+            "rate" => {
+                let rate = number("Hz")?;
+                if rate <= 0.0 {
+                    return Err((
+                        lines,
+                        format!("'# rate = {value}': the rate must be positive"),
+                    ));
+                }
+                comments.rate = Some(rate);
+            }
+            "start" => comments.start = Some(number("s")?),
+            _ => {}
+        }
+    }
+    Ok((comments, lines))
 }
 
 /// One field of column `name` as a finite number, or why it is not one.
@@ -208,37 +595,10 @@ pub(super) fn parse_value(name: &str, field: &str) -> Result<f64, String> {
         Err(_) => Err(format!("'{name}' is not a number: '{field}'")),
     }
 }
-
-/// The sampling interval of a uniformly sampled time column. Times in files are rounded (the
-/// examples to 1 µs), so each sample may sit off the grid by a little; more than 1 % of a step
-/// is non-uniform sampling. The rate is snapped to a round number of mHz when that moves the end
-/// of the grid by at most 1 µs, so 51.2 Hz gives exactly 1/51.2 s.
-fn uniform_step(time: &[f64]) -> Result<f64, (usize, String)> {
-    let n = time.len();
-    let mut dt = (time[n - 1] - time[0]) / (n - 1) as f64;
-    let tolerance = 0.01 * dt;
-    for (k, t) in time.iter().enumerate() {
-        let grid = time[0] + k as f64 * dt;
-        if (t - grid).abs() > tolerance {
-            return Err((
-                k,
-                format!("non-uniform sampling: time {t} is off the {dt} s grid (expected {grid})"),
-            ));
-        }
-    }
-    let rate = 1.0 / dt;
-    let snapped = (rate * 1000.0).round() / 1000.0;
-    // Keep the snapped rate when the grid it gives ends within 1 µs (the examples' printed
-    // precision) of the measured one.
-    if snapped > 0.0 && ((1.0 / snapped) - dt).abs() * (n - 1) as f64 <= 1e-6 {
-        dt = 1.0 / snapped;
-    }
-    Ok(dt)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ::structure::channel::Channel;
     use std::io::Write;
 
     fn file(text: &str) -> tempfile::NamedTempFile {
@@ -268,10 +628,32 @@ mod tests {
     fn refuses_bad_files_naming_file_line_and_problem() {
         let cases = [
             (
-                "time,force,acc1,acc2\n0,1,2,3\n1,1,2,3\n",
-                None,
-                "missing column 'acc3'",
+                "time,acc1,acc2\n0,1,2\n1,1,2\n",
+                Some(1),
+                "missing column 'force' or 'ground_acc'",
             ),
+            ("time,force\n0,1\n1,1\n", Some(1), "no response column"),
+            (
+                "time,force,acc1,speed\n0,1,2,3\n1,1,2,3\n",
+                Some(1),
+                "column 'speed'",
+            ),
+            (
+                "time,force,acc1 (furlong/s2)\n0,1,2\n1,1,2\n",
+                Some(1),
+                "unknown unit 'furlong/s2'",
+            ),
+            (
+                "time,force,acc1 (mm/s)\n0,1,2\n1,1,2\n",
+                Some(1),
+                "not one of a",
+            ),
+            (
+                "time,force,acc1,acc1\n0,1,2,2\n1,1,2,2\n",
+                Some(1),
+                "appears twice",
+            ),
+            ("force,acc1\n0,1\n1,1\n", Some(1), "# rate"),
             (
                 "time,force,acc1,acc2,acc3\n0,1,2,3,4\n1,1,NaN,3,4\n",
                 Some(3),
@@ -314,5 +696,89 @@ mod tests {
                 assert_eq!(e.line, Some(l), "{shown}");
             }
         }
+    }
+
+    #[test]
+    fn units_are_converted_to_si() {
+        let f = file("time,force (kN),acc1 (g),vel2 (mm/s),disp3 (mm)\n0,1,1,1,1\n0.5,2,2,2,2\n");
+        let m = Measurement::read(f.path()).expect("reads");
+        assert_eq!(m.excitation.values, vec![1e3, 2e3]);
+        assert_eq!(m.excitation.unit, Unit::KiloNewton);
+        let value = |name: &str| m.channel(Channel::parse(name).expect("name")).expect(name)[1];
+        assert_eq!(value("acc1"), 2.0 * 9.80665);
+        assert_eq!(value("vel2"), 2e-3);
+        assert_eq!(value("disp3"), 2e-3);
+    }
+
+    #[test]
+    fn a_column_map_renames_and_keeps_or_sets_units() {
+        let f = file("t,fp (N),dotx1 (mm/s),ag\n0,1,1,1\n0.5,2,2,2\n");
+        let map: BTreeMap<String, String> = [
+            ("t", "time"),
+            ("fp (N)", "force"),
+            ("dotx1", "vel1"),
+            ("ag", "acc2 (g)"),
+        ]
+        .into_iter()
+        .map(|(a, b)| (a.to_owned(), b.to_owned()))
+        .collect();
+        let columns = ColumnMap::new(map).expect("map");
+        let m = Measurement::read_with(f.path(), &ReadOptions { columns }).expect("reads");
+        assert_eq!(m.channel_names(), ["force", "vel1", "acc2"]);
+        assert_eq!(m.responses[0].values, vec![1e-3, 2e-3]);
+        assert_eq!(m.responses[1].values, vec![9.80665, 2.0 * 9.80665]);
+        let bad = ColumnMap::new([("x".to_owned(), "speed".to_owned())].into()).expect_err("bad");
+        assert!(bad.contains("'speed'"), "{bad}");
+    }
+
+    #[test]
+    fn a_subset_with_ground_motion_reads_and_is_refused_where_the_rig_is_needed() {
+        let f = file("time,ground_acc (g),acc3\n0,0.1,1\n0.01,0.2,2\n0.02,0.1,1\n");
+        let m = Measurement::read(f.path()).expect("reads");
+        assert_eq!(m.channel_names(), ["ground_acc", "acc3"]);
+        let e = m.require_paper_rig().expect_err("no force");
+        assert!(e.to_string().contains("'force'"), "{e}");
+        let f = file("time,force,acc1,acc3\n0,0.1,1,1\n0.01,0.2,2,2\n");
+        let e = Measurement::read(f.path())
+            .expect("reads")
+            .require_paper_rig()
+            .expect_err("no acc2");
+        assert!(e.to_string().contains("'acc2'"), "{e}");
+    }
+
+    #[test]
+    fn a_start_and_a_rate_stand_for_the_time_column() {
+        let f = file("# logger 7\n# rate = 1000 Hz\n# start = 12.5\nforce,acc1\n1,2\n3,4\n5,6\n");
+        let m = Measurement::read(f.path()).expect("reads");
+        assert_eq!(m.dt, 1e-3);
+        assert_eq!(m.time, vec![12.5, 12.5 + 1e-3, 12.5 + 2e-3]);
+        // Lines are counted from the file's first, comments included.
+        let f = file("# rate = 10\nforce,acc1\n1,2\n3,x\n");
+        let e = Measurement::read(f.path()).expect_err("bad value");
+        assert_eq!(e.line, Some(4), "{e}");
+    }
+
+    #[test]
+    fn times_rounded_to_a_millisecond_step_on_the_exact_grid() {
+        let mut text = String::from("time,force,acc1\n");
+        for k in 0..5000 {
+            text.push_str(&format!("{:.3},1,2\n", 12.0 + k as f64 / 51.2));
+        }
+        let m = Measurement::read(file(&text).path()).expect("reads");
+        assert_eq!(m.dt, 1.0 / 51.2);
+        assert_eq!(m.time[4999], 12.0 + 4999.0 * (1.0 / 51.2));
+    }
+
+    #[test]
+    fn irregular_sampling_is_refused_naming_the_line() {
+        let mut text = String::from("# a comment\ntime,force,acc1\n");
+        for k in 0..100 {
+            let t = k as f64 * 0.01 + if k == 60 { 0.003 } else { 0.0 };
+            text.push_str(&format!("{t:.6},1,2\n"));
+        }
+        let f = file(&text);
+        let e = Measurement::read(f.path()).expect_err("irregular");
+        assert_eq!(e.line, Some(63), "{e}");
+        assert!(e.to_string().contains("non-uniform"), "{e}");
     }
 }

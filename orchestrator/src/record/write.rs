@@ -8,11 +8,6 @@ pub(crate) fn round9(x: f64) -> f64 {
     format_g9(x).parse().unwrap_or(x)
 }
 
-/// A time as the CSV writes it (to 1 µs), read back.
-pub(crate) fn round_time(t: f64) -> f64 {
-    format!("{t:.6}").parse().unwrap_or(t)
-}
-
 /// `%.9g`: 9 significant digits, trailing zeros removed, exponent form below 1e-4 or from 1e9.
 pub fn format_g9(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
@@ -37,26 +32,28 @@ pub fn format_g9(x: f64) -> String {
     }
 }
 
-/// The record as CSV text: `time,force,acc1,acc2,acc3`, then `control` when the record has
-/// a control force.
+/// The record as CSV text, in SI: `time`, the excitation, the responses (the paper's
+/// `time,force,acc1,acc2,acc3`), then `control` when the record has a control force.
 pub fn csv_text(m: &Measurement) -> String {
     let control = m.extra.get("control").filter(|c| c.len() == m.len());
-    let mut text = String::with_capacity(80 * (m.len() + 1));
-    text.push_str("time,force,acc1,acc2,acc3");
+    let channels: Vec<&[f64]> = m.channels().map(|s| s.values.as_slice()).collect();
+    let mut text = String::with_capacity(16 * (channels.len() + 2) * (m.len() + 1));
+    text.push_str("time");
+    for name in m.channel_names() {
+        text.push(',');
+        text.push_str(&name);
+    }
     text.push_str(if control.is_some() {
         ",control\n"
     } else {
         "\n"
     });
     for k in 0..m.len() {
-        text.push_str(&format!(
-            "{:.6},{},{},{},{}",
-            m.time[k],
-            format_g9(m.force[k]),
-            format_g9(m.acc[0][k]),
-            format_g9(m.acc[1][k]),
-            format_g9(m.acc[2][k])
-        ));
+        text.push_str(&format!("{:.6}", m.time[k]));
+        for column in &channels {
+            text.push(',');
+            text.push_str(&format_g9(column[k]));
+        }
         if let Some(c) = control {
             text.push(',');
             text.push_str(&format_g9(c[k]));

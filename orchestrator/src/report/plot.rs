@@ -952,7 +952,7 @@ mod tests {
         // Stand-in prediction, only for the picture: the measurement through a centred
         // [1/4, 1/2, 1/4] smoother, with floor 3 in anti-phase between 12 and 13 s (a residual
         // of twice the response there, ~13 band sds: severe enough for a failing window).
-        let predicted = m.acc.clone().map(|acc| {
+        let predicted = m.accs().map(<[f64]>::to_vec).map(|acc| {
             let n = acc.len();
             (0..n)
                 .map(|k| {
@@ -962,7 +962,8 @@ mod tests {
         });
         // The band: what the smoothing leaves, before floor 3 is pushed off.
         let noise_variance = [0, 1, 2].map(|f| {
-            let residual = m.acc[f]
+            let residual = m
+                .acc(f)
                 .iter()
                 .zip(&predicted[f])
                 .map(|(y, p)| (y - p).powi(2));
@@ -976,7 +977,7 @@ mod tests {
         }
         let c = compare(
             &m.time,
-            &m.acc,
+            &m.accs().map(<[f64]>::to_vec),
             &predicted,
             noise_variance,
             None,
@@ -995,7 +996,7 @@ mod tests {
         let path = dir.path().join("dataset1.svg");
         plot_comparison(
             &c,
-            &m.force,
+            &m.force(),
             "dataset 1 — smoothed stand-in prediction",
             &path,
             true,

@@ -175,7 +175,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::record::write::{round9, round_time};
+use crate::record::write::round9;
 use crate::record::Measurement;
 use structure::Hysteretic;
 use truth::Stats;
@@ -518,7 +518,8 @@ pub fn synth_controlled(
         .iter()
         .map(|x| round9(x + force_sd * gauss()))
         .collect();
-    let time: Vec<f64> = (0..n).map(|k| round_time(k as f64 * dt)).collect();
+    // The nominal grid, as reading the written CSV gives it back.
+    let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
     let mut extra = HashMap::new();
     if let Some(mut cs) = control_at_samples {
         // The last sample's control force: as the controller left it.
@@ -527,14 +528,8 @@ pub fn synth_controlled(
         }
         extra.insert("control".to_owned(), cs.into_iter().map(round9).collect());
     }
-    let measurement = Measurement {
-        path: PathBuf::from("<synthetic>"),
-        time,
-        force,
-        acc,
-        dt,
-        extra,
-    };
+    let measurement =
+        Measurement::paper_rig(PathBuf::from("<synthetic>"), time, force, acc, dt, extra);
 
     // The truth.
     let period = n as f64 / s.sample_rate;

@@ -791,7 +791,12 @@ impl RecordRef {
                 self.sha256
             )));
         }
-        data::Measurement::read(&self.path).map_err(|e| TwinError::Message(e.to_string()))
+        let record =
+            data::Measurement::read(&self.path).map_err(|e| TwinError::Message(e.to_string()))?;
+        record
+            .require_paper_rig()
+            .map_err(|e| TwinError::Message(e.to_string()))?;
+        Ok(record)
     }
 }
 

@@ -70,7 +70,7 @@ pub fn run_twin(
     mut progress: impl FnMut(u64, u64),
 ) -> Result<Prediction, RunError> {
     let start = data.time[0];
-    let mut inputs = vec![("force", data.force.clone())];
+    let mut inputs = vec![("force", data.force().to_vec())];
     if let Some(control) = data.extra.get("control") {
         inputs.push(("control_force", control.clone()));
     }
@@ -240,7 +240,7 @@ pub fn compare_with(
     let (noise_variance, noise_source) = match twin.noise_variance {
         Some(v) => (v, "twin (calibrated)"),
         None => (
-            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc[f])),
+            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc(f))),
             "prior: 2 % of the measured variance",
         ),
     };
@@ -262,14 +262,14 @@ pub fn compare_with(
     };
     let comparison = compare(
         &data.time,
-        &data.acc,
+        &data.accs().map(<[f64]>::to_vec),
         &prediction.acc,
         noise_variance,
         band_sd.as_ref(),
         options,
     );
     let first = comparison.first;
-    let record_var = [0, 1, 2].map(|f| variance(&data.acc[f][first..]));
+    let record_var = [0, 1, 2].map(|f| variance(&data.acc(f)[first..]));
     let noise_nmse = [0, 1, 2].map(|f| 100.0 * noise_variance[f] / record_var[f]);
     let band_nmse = [0, 1, 2].map(|f| match &parameter_variance {
         Some(pv) if pv[f].len() > first => {

@@ -102,14 +102,14 @@ pub fn plot(
 ) -> Result<(), crate::report::ReportError> {
     let title = format!("{} on {}", twin.describe(), data.path.display());
     let comparison = &compared.comparison;
-    crate::report::plot_comparison(comparison, &data.force, &title, path, frf)?;
+    crate::report::plot_comparison(comparison, &data.force(), &title, path, frf)?;
     if let Some(latent) = &compared.prediction.latent_var {
         let threshold = match (options.latent_threshold, twin.noise_variance) {
             (Some(t), _) => [t; 3],
             (None, Some(v)) => v,
             (None, None) => [0, 1, 2].map(|f| {
                 crate::workflows::learn::PAPER_THRESHOLD
-                    * crate::evaluation::stats::variance(&data.acc[f][comparison.first..])
+                    * crate::evaluation::stats::variance(&data.acc(f)[comparison.first..])
             }),
         };
         crate::report::plot_latent_variance(comparison, latent, threshold, &title, path)?;

@@ -285,7 +285,7 @@ pub fn prepare(
                         prediction.acc[0][k],
                         prediction.acc[1][k],
                         prediction.acc[2][k],
-                        data.force[k],
+                        data.force()[k],
                     ]
                 })
                 .collect();
@@ -306,11 +306,11 @@ pub fn prepare(
                 targets: (0..data.len())
                     .map(|k| {
                         [0, 1, 2]
-                            .map(|f| options.target.target(data.acc[f][k], prediction.acc[f][k]))
+                            .map(|f| options.target.target(data.acc(f)[k], prediction.acc[f][k]))
                     })
                     .collect(),
                 physics: prediction.acc.clone(),
-                measured: data.acc.clone(),
+                measured: data.accs().map(<[f64]>::to_vec),
                 first,
             })
         })

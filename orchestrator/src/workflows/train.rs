@@ -116,7 +116,7 @@ fn fit_floors(
         inputs: used.iter().map(|&k| inputs[k].clone()).collect(),
         targets: used
             .iter()
-            .map(|&k| [0, 1, 2].map(|f| options.target.target(data.acc[f][k], physics[f][k])))
+            .map(|&k| [0, 1, 2].map(|f| options.target.target(data.acc(f)[k], physics[f][k])))
             .collect(),
         hyperparameters: None,
     };
@@ -179,7 +179,7 @@ pub fn select_lags(
 
 fn physics_samples(data: &Measurement, acc: &[Vec<f64>; 3]) -> Vec<Sample> {
     (0..data.len())
-        .map(|k| [acc[0][k], acc[1][k], acc[2][k], data.force[k]])
+        .map(|k| [acc[0][k], acc[1][k], acc[2][k], data.force()[k]])
         .collect()
 }
 

@@ -273,7 +273,7 @@ fn simulators<'a>(target: &Target<'a>, name: &str) -> Result<Vec<Simulator<'a>>,
             Simulator::new(
                 target.fmu,
                 target.base.clone(),
-                &r.data.force,
+                &r.data.force(),
                 r.data.time[0],
                 r.data.dt,
                 name,
@@ -299,7 +299,7 @@ fn raw_residuals(
         sim.simulate(&target.vrs, &values, buf).ok()?;
         for f in 0..3 {
             for &k in &record.used {
-                r.push(record.data.acc[f][k] - buf[f][k]);
+                r.push(record.data.acc(f)[k] - buf[f][k]);
             }
         }
     }
@@ -350,7 +350,7 @@ fn sensitivity_jacobian(
                 record
                     .used
                     .iter()
-                    .map(|&k| record.data.acc[f][k] - out[f][k]),
+                    .map(|&k| record.data.acc(f)[k] - out[f][k]),
             );
             for (j, scale) in scale.iter().enumerate() {
                 let d = &out[3 + f * p + j];
@@ -724,7 +724,7 @@ pub fn calibrate_records(
     for input in inputs {
         let (first, used) = used_samples(input.data, input.mask, setup.transient)?;
         let noise_mean = [0, 1, 2].map(|f| {
-            let y: Vec<f64> = used.iter().map(|&k| input.data.acc[f][k]).collect();
+            let y: Vec<f64> = used.iter().map(|&k| input.data.acc(f)[k]).collect();
             (setup.noise_fraction * crate::evaluation::stats::variance(&y)).ln()
         });
         firsts.push(first);
@@ -924,7 +924,7 @@ pub fn calibrate_records(
             noise_log_sd: [0, 1, 2].map(|f| cov[(p + 3 * r + f, p + 3 * r + f)].max(0.0).sqrt()),
             samples_used: record.used.len(),
             nmse: [0, 1, 2]
-                .map(|f| crate::evaluation::compare::nmse(&data.acc[f][first..], &buf[f][first..])),
+                .map(|f| crate::evaluation::compare::nmse(&data.acc(f)[first..], &buf[f][first..])),
         });
     }
     let own = fitted[0].clone();
@@ -981,7 +981,7 @@ pub fn fixed_log_evidence(
     let mut sim = Simulator::new(
         &fmu,
         component.parameters.clone(),
-        &data.force,
+        &data.force(),
         data.time[0],
         data.dt,
         "evidence",
@@ -991,12 +991,12 @@ pub fn fixed_log_evidence(
     let n = used.len() as f64;
     let mut log_evidence = 0.0;
     for f in 0..3 {
-        let y: Vec<f64> = used.iter().map(|&k| data.acc[f][k]).collect();
+        let y: Vec<f64> = used.iter().map(|&k| data.acc(f)[k]).collect();
         let var = crate::evaluation::stats::variance(&y);
         let noise_mean = (setup.noise_fraction * var).ln();
         let sse: f64 = used
             .iter()
-            .map(|&k| (data.acc[f][k] - buf[f][k]).powi(2))
+            .map(|&k| (data.acc(f)[k] - buf[f][k]).powi(2))
             .sum();
         let v = setup.noise_log_variance;
         let s = optimal_log_noise(n, sse, noise_mean, v, noise_mean);

@@ -331,7 +331,7 @@ pub fn simulate(
         .map_err(system_error)?;
     let force = running
         .system
-        .add_signal("force", upsample(&data.force, substeps));
+        .add_signal("force", upsample(&data.force(), substeps));
     running.system.connect(force, plant, 0)?;
     let dt = data.dt / substeps as f64;
     // The corrector keeps the record's rate (its lags are the record's samples).

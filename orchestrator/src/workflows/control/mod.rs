@@ -380,7 +380,7 @@ impl Runner<'_> {
         let outcome = self.run_law(Gains::Fixed(design.gain), state)?;
         Ok(match outcome {
             Ok(r) => {
-                let peaks = resonance_peaks(&self.data.force, &r, self.data.dt, &self.resonances);
+                let peaks = resonance_peaks(&self.data.force(), &r, self.data.dt, &self.resonances);
                 let (att, mean) = attenuation(&self.passive_peaks, &peaks, &self.resonances);
                 (
                     DesignRun {
@@ -433,9 +433,9 @@ fn estimator_of(
             // The model's error as a force on floor 1: 5 % of the record's force RMS per
             // sample; the sensors' noise as the twin calibrated it (else 1 % of the measured
             // RMS).
-            let force_rms = rms(&data.force).max(1e-6);
+            let force_rms = rms(&data.force()).max(1e-6);
             let sensor_sd =
-                noise_sd.unwrap_or_else(|| [0, 1, 2].map(|f| (0.01 * rms(&data.acc[f])).max(1e-6)));
+                noise_sd.unwrap_or_else(|| [0, 1, 2].map(|f| (0.01 * rms(&data.acc(f))).max(1e-6)));
             Estimator::Kalman {
                 process_sd: 0.05 * force_rms,
                 sensor_sd: sensor_sd.map(|s| s.max(1e-9)),
@@ -496,7 +496,7 @@ pub fn run_control(
             gaps.push(g.clone());
         }
     }
-    let force_peak = data.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
         plant,
         substeps,
@@ -527,7 +527,7 @@ pub fn run_control(
         runs_total: runs_total as u64,
     };
     let passive = runner.run(None)?;
-    runner.passive_peaks = resonance_peaks(&data.force, &passive, data.dt, &resonances);
+    runner.passive_peaks = resonance_peaks(&data.force(), &passive, data.dt, &resonances);
 
     let mut design_runs = Vec::new();
     let mut responses = Vec::new();
@@ -648,7 +648,7 @@ pub fn run_control(
                     Some(twin.noise_variance.unwrap_or_else(|| {
                         [0, 1, 2].map(|f| {
                             crate::workflows::learn::PAPER_THRESHOLD
-                                * crate::evaluation::stats::variance(&data.acc[f])
+                                * crate::evaluation::stats::variance(&data.acc(f))
                         })
                     }))
                 }
@@ -673,7 +673,7 @@ pub fn run_control(
             let r = runner.run_law(gains, state);
             runner.setup.corrector = false;
             let r = r?.map_err(ControlError::Unstable)?;
-            let peaks = resonance_peaks(&data.force, &r, data.dt, &resonances);
+            let peaks = resonance_peaks(&data.force(), &r, data.dt, &resonances);
             let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
             let report = ScheduleReport {
                 q_low: low.design.q,
@@ -745,7 +745,7 @@ pub fn run_control(
             } else {
                 match runner.run_law(Gains::Fixed(first.design.gain), state)? {
                     Ok(r) => {
-                        let peaks = resonance_peaks(&data.force, &r, data.dt, &resonances);
+                        let peaks = resonance_peaks(&data.force(), &r, data.dt, &resonances);
                         let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
                         (att, mean, r.control_rms, r.contacts.len())
                     }
@@ -812,7 +812,7 @@ pub fn run_control(
         passive,
         designs: responses,
         scheduled: scheduled_response,
-        force: data.force.clone(),
+        force: data.force().to_vec(),
         dt: data.dt,
     })
 }
@@ -932,7 +932,7 @@ pub fn predict_controlled(
     let design = spec.design(q)?;
     let plant = spec.structure()?.state_space(spec.state_scale)?;
     let substeps = (spec.control_rate_hz * data.dt).round().max(1.0) as usize;
-    let force_peak = data.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
         plant,
         substeps,

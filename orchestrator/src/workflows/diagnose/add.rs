@@ -51,7 +51,7 @@ pub fn add_physics(
     let after: Vec<usize> = (first..n).collect();
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let reals = PhysicsReals::of(&physics)?;
-    let scales = prior_scales(&reals, &base_run, &data.force, first)?;
+    let scales = prior_scales(&reals, &base_run, &data.force(), first)?;
     let mut switched = physics.duplicate();
     let mut effect_params = Vec::new();
     let mut initial = BTreeMap::new();
@@ -145,8 +145,9 @@ pub fn with_record<'a>(
     data: &'a Measurement,
     records: &'a [Measurement],
 ) -> (Vec<&'a Measurement>, usize) {
-    let same =
-        |a: &Measurement, b: &Measurement| a.time == b.time && a.force == b.force && a.acc == b.acc;
+    let same = |a: &Measurement, b: &Measurement| {
+        a.time == b.time && a.force() == b.force() && a.accs() == b.accs()
+    };
     let mut all: Vec<&Measurement> = Vec::new();
     for r in records {
         if !all.iter().any(|a| same(a, r)) {

@@ -531,7 +531,7 @@ pub(super) fn missing(
             acceleration: &run.acc,
         };
         let mut residual: [Vec<f64>; 3] =
-            [0, 1, 2].map(|f| (0..n).map(|k| data.acc[f][k] - run.acc[f][k]).collect());
+            [0, 1, 2].map(|f| (0..n).map(|k| data.acc(f)[k] - run.acc[f][k]).collect());
         for t in terms {
             let share = term_response(&linear, &states, t, data.dt);
             for f in 0..3 {
@@ -544,7 +544,7 @@ pub(super) fn missing(
             linear,
             states,
             residual,
-            variance: [0, 1, 2].map(|f| variance(&data.acc[f][ctx.first..])),
+            variance: [0, 1, 2].map(|f| variance(&data.acc(f)[ctx.first..])),
             dt: data.dt,
             fitted: &fitted_idx,
             held_out: ctx.held_out,

@@ -319,7 +319,7 @@ fn run_physics(
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
-    let mut sim = Simulator::new(&fmu, base, &data.force, data.time[0], data.dt, "diagnose")?;
+    let mut sim = Simulator::new(&fmu, base, &data.force(), data.time[0], data.dt, "diagnose")?;
     let mut out: Vec<Vec<f64>> = vec![Vec::new(); RECORDED.len()];
     sim.record(&vrs, values, &outputs, &mut out)?;
     let mut it = out.into_iter();
@@ -504,8 +504,8 @@ fn fit(
     let after: Vec<usize> = (first..data.len()).collect();
     Ok(Fitted {
         evidence: calibration.log_evidence - baseline_evidence,
-        nmse_after: nmse_on(&data.acc, &run.acc, &after),
-        nmse_held_out: nmse_on(&data.acc, &run.acc, held_out),
+        nmse_after: nmse_on(&data.accs().map(<[f64]>::to_vec), &run.acc, &after),
+        nmse_held_out: nmse_on(&data.accs().map(<[f64]>::to_vec), &run.acc, held_out),
         run,
         calibration,
     })
@@ -613,10 +613,14 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let physics = physics_only(twin);
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let nmse_before = comparison.nmse;
-    let nmse_before_held_out = nmse_on(&data.acc, &prediction.acc, &held_out);
+    let nmse_before_held_out = nmse_on(
+        &data.accs().map(<[f64]>::to_vec),
+        &prediction.acc,
+        &held_out,
+    );
     let noise_nmse_on = |idx: &[usize]| {
         [0, 1, 2].map(|f| {
-            let y: Vec<f64> = idx.iter().map(|&k| data.acc[f][k]).collect();
+            let y: Vec<f64> = idx.iter().map(|&k| data.acc(f)[k]).collect();
             100.0 * noise_variance[f] / variance(&y)
         })
     };
@@ -634,12 +638,12 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .map(|f| reals.get(&format!("m{}", f + 1)))
         .into_iter()
         .collect::<Result<Vec<f64>>>()?;
-    let scales = prior_scales(&reals, &base_run, &data.force, first)?;
+    let scales = prior_scales(&reals, &base_run, &data.force(), first)?;
 
     // Localisation from the residual of the twin as given.
     let floor_force: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
         (0..n)
-            .map(|k| mass[f] * (data.acc[f][k] - prediction.acc[f][k]))
+            .map(|k| mass[f] * (data.acc(f)[k] - prediction.acc[f][k]))
             .collect()
     });
     let missing_shear: [Vec<f64>; 3] = [0, 1, 2].map(|s| {
@@ -688,7 +692,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         series: Series {
             time: data.time.clone(),
             first,
-            measured: data.acc.clone(),
+            measured: data.accs().map(<[f64]>::to_vec),
             before: prediction.acc.clone(),
             after: prediction.acc.clone(),
             drift: base_run.drift.clone(),
@@ -727,7 +731,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .filter_map(|f| {
             sensor::fit_channel(
                 f,
-                &data.acc[f],
+                &data.acc(f),
                 &prediction.acc[f],
                 &data.time,
                 &fitted_idx,
@@ -1043,7 +1047,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             diagnosis.series.missing_shear[s] = (0..n)
                 .map(|k| {
                     let still: f64 = (s..3)
-                        .map(|j| mass[j] * (data.acc[j][k] - fitted.run.acc[j][k]))
+                        .map(|j| mass[j] * (data.acc(j)[k] - fitted.run.acc[j][k]))
                         .sum();
                     still - force[k]
                 })
@@ -1133,7 +1137,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             diagnosis.series.missing_shear[s] = (0..n)
                 .map(|k| {
                     let still: f64 = (s..3)
-                        .map(|j| mass[j] * (data.acc[j][k] - fitted.run.acc[j][k]))
+                        .map(|j| mass[j] * (data.acc(j)[k] - fitted.run.acc[j][k]))
                         .sum();
                     still - force[k]
                 })

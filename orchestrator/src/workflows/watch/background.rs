@@ -244,18 +244,14 @@ fn record(samples: &[Kept], dt: f64) -> Result<Measurement, String> {
         ));
     }
     let (from, to) = (samples[0][0], samples[samples.len() - 1][0]);
-    Ok(Measurement {
-        path: PathBuf::from(format!("the stream from {from:.3} s to {to:.3} s")),
-        time: samples.iter().map(|s| s[0]).collect(),
-        force: samples.iter().map(|s| s[1]).collect(),
-        acc: [
-            samples.iter().map(|s| s[2]).collect(),
-            samples.iter().map(|s| s[3]).collect(),
-            samples.iter().map(|s| s[4]).collect(),
-        ],
+    Ok(Measurement::paper_rig(
+        PathBuf::from(format!("the stream from {from:.3} s to {to:.3} s")),
+        samples.iter().map(|s| s[0]).collect(),
+        samples.iter().map(|s| s[1]).collect(),
+        [2, 3, 4].map(|i| samples.iter().map(|s| s[i]).collect()),
         dt,
-        extra: Default::default(),
-    })
+        Default::default(),
+    ))
 }
 
 /// Where the `k`-th diagnosis's report goes: beside the alerts, `ALERTS.diagnosis-k.json`.
