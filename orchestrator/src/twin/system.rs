@@ -311,3 +311,78 @@ impl TwinSystem {
 fn port_of(names: &[String], variable: &str) -> usize {
     names.iter().position(|c| c == variable).unwrap_or(0)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::cosim::import::StepEnd;
+    use crate::cosim::master::Clock;
+    use crate::twin::data::Measurement;
+    use crate::twin::run::run_twin;
+    use crate::twin::OUTPUTS;
+
+    /// The twin's system built here and stepped point by point (the force set for each next
+    /// point) predicts `run_twin`'s accelerations to the bit; a state saved halfway and restored
+    /// into a system built anew goes on to the same bits.
+    #[test]
+    fn the_built_system_stepped_point_by_point_is_run_twin() {
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/dataset1.csv");
+        let data = Measurement::read(&csv).expect("dataset one reads");
+        let twin = Twin::default_twin().expect("the default twin");
+        let batch = run_twin(&twin, &data, |_, _| {}).expect("run_twin");
+        let clock = Clock::new(data.time[0], data.dt, (data.len() - 1) as u64);
+        let builder = SystemBuilder::open(&twin).expect("the FMUs open");
+        let start = |builder: &SystemBuilder| {
+            let running = builder
+                .build(clock.start, vec![("force", Vec::new())])
+                .expect("builds");
+            let force = running.signal("force").expect("the force is driven");
+            let acc: Vec<Port> = OUTPUTS
+                .iter()
+                .map(|o| running.system_output(&twin, o).expect("an output"))
+                .collect();
+            (running, force, acc)
+        };
+        let (mut running, force, acc) = start(&builder);
+        let half = data.len() / 2;
+        let mut saved = None;
+        for k in 0..data.len() {
+            let system = &mut running.system;
+            system.set_input(force, data.force[k]).expect("the force");
+            if k == 0 {
+                system.initialize(clock.time(0)).expect("the first point");
+            } else {
+                let end = system.step(clock.time(k as u64)).expect("a step");
+                assert_eq!(end, StepEnd::Completed);
+            }
+            for (f, &port) in acc.iter().enumerate() {
+                assert_eq!(
+                    system.value(port).to_bits(),
+                    batch.acc[f][k].to_bits(),
+                    "floor {} at sample {k}",
+                    f + 1
+                );
+            }
+            if k == half {
+                saved = Some(system.save().expect("the shear FMU saves its state"));
+            }
+        }
+        let (mut resumed, force, acc) = start(&builder);
+        let system = &mut resumed.system;
+        system.restore(&saved.expect("saved")).expect("restores");
+        for k in half + 1..data.len() {
+            system.set_input(force, data.force[k]).expect("the force");
+            system.step(clock.time(k as u64)).expect("a step");
+            for (f, &port) in acc.iter().enumerate() {
+                assert_eq!(
+                    system.value(port).to_bits(),
+                    batch.acc[f][k].to_bits(),
+                    "resumed: floor {} at sample {k}",
+                    f + 1
+                );
+            }
+        }
+    }
+}
