@@ -350,7 +350,7 @@ mod tests {
         let mut saved = None;
         for k in 0..data.len() {
             let system = &mut running.system;
-            system.set_input(force, data.force[k]).expect("the force");
+            system.set_input(force, data.force()[k]).expect("the force");
             if k == 0 {
                 system.initialize(clock.time(0)).expect("the first point");
             } else {
@@ -373,7 +373,7 @@ mod tests {
         let system = &mut resumed.system;
         system.restore(&saved.expect("saved")).expect("restores");
         for k in half + 1..data.len() {
-            system.set_input(force, data.force[k]).expect("the force");
+            system.set_input(force, data.force()[k]).expect("the force");
             system.step(clock.time(k as u64)).expect("a step");
             for (f, &port) in acc.iter().enumerate() {
                 assert_eq!(
