@@ -12,10 +12,12 @@
 //! with `L = e_K` for a force at floor K and `L = −M 1` for ground acceleration `u = a_g`; an
 //! accelerometer reads the absolute acceleration `ÿ + a_g` (`ÿ` under a force).
 //!
-//! [`channel`] says what a record measures and in which units.
+//! [`channel`] says what a record measures and in which units; [`effects`] is the catalogue of
+//! the forces `g(y, ẏ)` (kinds, sites, parameters, force laws).
 
 pub mod building;
 pub mod channel;
+pub mod effects;
 
 pub use building::{Excitation, StateSpace, Structure, StructureError, MAX_STOREYS};
 pub use channel::{Channel, ChannelError, Quantity, Unit};

@@ -1,67 +1,30 @@
-//! The optional-effect library `g(y, ẏ)`: forces that eq. (1) does not have, each kind in its
-//! own file behind [`Effect`]. Adding a kind is one new file, one field in [`Effects`] and its
-//! line in `Effects::all_variables` / the dispatch below.
+//! The optional-effect library `g(y, ẏ)` as the FMU carries it: its variables, value
+//! references and storage. The kinds themselves (their parameters, force laws and site names)
+//! are the catalogue in `structure::effects`; adding a kind is a file there, one field in
+//! [`Effects`] and its line in `Effects::all_variables` / the dispatch below.
 //! The exception is [`discovered`]: up to six generic terms `coefficient · f(x, v)` whose
 //! function and site are parameters too, for the forces a diagnosis finds by regression.
 //!
 //! Sign convention: an effect adds to `g`, the left-hand side of `M ÿ + C ẏ + K y + g = φ u`, so
 //! a restoring force is positive along the displacement that causes it.
 
-pub mod contact;
-pub mod cubic;
 pub mod discovered;
-pub mod friction;
-pub mod kind;
 
 use fmi2::{ModelError, Variable};
 use serde::{Deserialize, Serialize};
+use structure::building::PAPER_STOREYS;
 
-pub use contact::Contact;
-pub use cubic::Cubic;
-pub use discovered::{Discovered, Function, Site, Term, MAX_TERMS};
-pub use friction::Friction;
-pub use kind::{Kind, Law, Placement, Side};
+pub use discovered::{Discovered, MAX_TERMS};
+pub use structure::effects::{
+    add_storey_force, contact, cubic, drift, friction, kind, Contact, Cubic, Effect, Friction,
+    Function, Kind, Law, Placement, RealParam, Side, Site, Term,
+};
 
-/// Displacements and velocities of floors 1..3 (ground excluded).
-pub type Floors = [f64; 3];
+/// The storeys of the FMU's building (its floors 1..N, ground excluded).
+pub const STOREYS: usize = PAPER_STOREYS;
 
-/// A real parameter of an effect kind, as it appears in the variable table.
-pub struct RealParam {
-    pub suffix: &'static str,
-    pub unit: &'static str,
-    pub start: f64,
-    /// Smallest allowed value; `strictly` excludes it.
-    pub min: f64,
-    pub strictly: bool,
-    pub description: &'static str,
-}
-
-/// One kind of physical effect at one location (a storey or a floor).
-pub trait Effect: Clone + std::fmt::Debug + Serialize + for<'de> Deserialize<'de> {
-    /// Kind name as the diagnosis reports it: "contact", "cubic", "friction".
-    const KIND: &'static str;
-    /// Locations this kind can sit at (3 storeys or 3 floors).
-    const LOCATIONS: usize = 3;
-    /// Variable-name prefix at `location` (0-based), e.g. "contact23".
-    fn prefix(location: usize) -> String;
-    /// Human description of the location, for the modelDescription.
-    fn where_(location: usize) -> String;
-    fn real_params() -> &'static [RealParam];
-    /// Integer parameters: (suffix, start, min, max, description).
-    fn integer_params() -> &'static [(&'static str, i32, i32, i32, &'static str)] {
-        &[]
-    }
-    /// The effect with its parameters at their start values.
-    fn at_start(location: usize) -> Self;
-    fn real(&self, index: usize) -> f64;
-    fn set_real(&mut self, index: usize, value: f64);
-    fn integer(&self, _index: usize) -> i32 {
-        0
-    }
-    fn set_integer(&mut self, _index: usize, _value: i32) {}
-    /// Add this effect's force at `location` to `g`.
-    fn add_force(&self, location: usize, y: &Floors, v: &Floors, g: &mut Floors);
-}
+/// Displacements and velocities of floors 1..N (ground excluded).
+pub type Floors = [f64; STOREYS];
 
 /// Value-reference layout of a library: base + 10·location + slot, where slot 0 is the `enabled`
 /// Boolean, 1..=7 the reals and 8..=9 the integers.
@@ -81,14 +44,14 @@ impl<E: Effect> Library<E> {
     pub fn new(base_vr: u32) -> Self {
         Library {
             base_vr,
-            enabled: vec![false; E::LOCATIONS],
-            effects: (0..E::LOCATIONS).map(E::at_start).collect(),
+            enabled: vec![false; E::sites(STOREYS)],
+            effects: (0..E::sites(STOREYS)).map(E::at_start).collect(),
         }
     }
 
     pub fn variables(base_vr: u32) -> Vec<Variable> {
         let mut vars = Vec::new();
-        for location in 0..E::LOCATIONS {
+        for location in 0..E::sites(STOREYS) {
             let prefix = E::prefix(location);
             let vr0 = base_vr + SLOTS_PER_LOCATION * location as u32;
             vars.push(
@@ -140,7 +103,7 @@ impl<E: Effect> Library<E> {
     fn locate(&self, vr: u32) -> Option<(usize, u32)> {
         let offset = vr.checked_sub(self.base_vr)?;
         let location = (offset / SLOTS_PER_LOCATION) as usize;
-        (location < E::LOCATIONS).then_some((location, offset % SLOTS_PER_LOCATION))
+        (location < E::sites(STOREYS)).then_some((location, offset % SLOTS_PER_LOCATION))
     }
 
     pub fn owns(&self, vr: u32) -> bool {
@@ -235,7 +198,7 @@ impl<E: Effect> Library<E> {
 }
 
 /// Up to two switch values per contact location and one per discovered ramp term.
-pub const MAX_SWITCHES: usize = 2 * 3 + MAX_TERMS;
+pub const MAX_SWITCHES: usize = 2 * STOREYS + MAX_TERMS;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Switches {
@@ -338,7 +301,7 @@ impl Effects {
     /// `g(y, ẏ)`: the sum of every enabled effect's force on each floor.
     #[inline]
     pub fn force(&self, y: &Floors, v: &Floors) -> Floors {
-        let mut g = [0.0; 3];
+        let mut g = [0.0; STOREYS];
         self.contact.add_forces(y, v, &mut g);
         self.cubic.add_forces(y, v, &mut g);
         self.friction.add_forces(y, v, &mut g);
@@ -390,22 +353,37 @@ impl Effects {
     }
 }
 
-/// Inter-storey drift of storey `s` (0-based: storey 0 is ground–floor 1): `y_s − y_{s−1}`.
-#[inline]
-pub fn drift(y: &Floors, storey: usize) -> f64 {
-    if storey == 0 {
-        y[0]
-    } else {
-        y[storey] - y[storey - 1]
-    }
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// Apply a storey force `f` (positive when it resists a positive drift): on the upper floor of
-/// the storey `+f`, on the lower floor (if not the ground) `−f`.
-#[inline]
-pub fn add_storey_force(storey: usize, f: f64, g: &mut Floors) {
-    g[storey] += f;
-    if storey > 0 {
-        g[storey - 1] -= f;
+    /// The law of each kind is the force the model adds: at a location, along its drift or
+    /// velocity.
+    #[test]
+    fn each_law_is_the_models_force() {
+        let y = [1e-3, -2e-3, 4e-3];
+        let v = [0.02, -0.01, 0.005];
+        for kind in Kind::ALL {
+            for location in 0..kind.sites(STOREYS) {
+                let reals: Vec<f64> = kind.real_params().iter().map(|p| 2.0 * p.start).collect();
+                let law = Law::new(kind, &reals, Side::Negative).expect("enough parameters");
+                assert_eq!(law.reals(), reals);
+                let mut effects = Effects::default();
+                let mut g = [0.0; 3];
+                let expected = match kind.placement() {
+                    Placement::Storey => {
+                        let f = law.force_at(drift(&y, location));
+                        add_storey_force(location, f, &mut g);
+                        g
+                    }
+                    Placement::Floor => {
+                        g[location] = law.force_at(v[location]);
+                        g
+                    }
+                };
+                effects.switch_on(location, law);
+                assert_eq!(effects.force(&y, &v), expected, "{kind:?} at {location}");
+            }
+        }
     }
 }

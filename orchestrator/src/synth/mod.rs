@@ -169,15 +169,16 @@ pub use truth::{
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use fmu_shear::effects::{drift, Effects};
+use ::structure::effects::drift;
+use fmu_shear::effects::Effects;
 use fmu_shear::{ShearModel, ShearParameters};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use self::structure::Hysteretic;
 use crate::record::write::round9;
 use crate::record::Measurement;
-use structure::Hysteretic;
 use truth::Stats;
 
 /// What can go wrong making a synthetic record. The messages say where (the scenario file and

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use super::{Result, SynthError};
-use fmu_shear::effects::{Contact, Cubic, Friction, Kind, Law, Side};
+use ::structure::effects::{Contact, Cubic, Friction, Kind, Law, Side};
 use fmu_shear::ShearParameters;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};

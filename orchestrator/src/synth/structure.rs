@@ -1,7 +1,8 @@
 //! The synthetic structure's equations beside the shear model: the Bouc–Wen hysteresis and
 //! the quadratic (velocity-squared) damping, effects the FMU's library lacks.
 
-use fmu_shear::effects::{add_storey_force, drift, Floors};
+use ::structure::effects::{add_storey_force, drift};
+use fmu_shear::effects::Floors;
 use fmu_shear::ShearModel;
 use numerics::ode::rk4_with_events;
 

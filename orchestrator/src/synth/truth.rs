@@ -1,7 +1,7 @@
 //! The truth JSON: how a record was made, and what the fine grid saw.
 
-use fmu_shear::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
-use fmu_shear::effects::drift;
+use ::structure::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
+use ::structure::effects::drift;
 use fmu_shear::ShearModel;
 use serde::Serialize;
 use serde_json::{json, Value};

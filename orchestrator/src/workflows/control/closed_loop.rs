@@ -4,8 +4,8 @@
 //! schedule's switches and the contact initiations (the drift of a storey with a contact crossing
 //! its gap, open → closed), all online.
 
-use fmu_shear::effects::kind::{Kind, Law, Side};
 use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace, FLOORS, STATES};
+use structure::effects::{Kind, Law, Side};
 
 use super::ControlError;
 use crate::blocks::lqr::{trigger_code, LqrBlock, Scheduled, SensorNoise};
@@ -50,7 +50,7 @@ pub fn twin_gaps(twin: &Twin) -> Vec<Gap> {
     };
     let kind = Kind::Contact;
     let mut gaps = Vec::new();
-    for location in 0..kind.locations() {
+    for location in 0..kind.sites(FLOORS) {
         let prefix = kind.prefix(location);
         let on = matches!(
             physics.parameters.get(&format!("{prefix}_enabled")),

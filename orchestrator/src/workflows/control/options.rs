@@ -1,8 +1,8 @@
 //! `twin control`'s options: their defaults, checks and the texts of `--gap`,
 //! `--variance-threshold` and `--sensor-noise`, once for the CLI and the Python package.
 
-use fmu_shear::effects::kind::{Kind, Law, Side};
 use numerics::lqr::FLOORS;
+use structure::effects::{Kind, Law, Side};
 
 use super::closed_loop::Gap;
 use super::{ControlOptions, EstimatorChoice, Retune, ScheduleOptions, StateUnit, VarianceTrigger};

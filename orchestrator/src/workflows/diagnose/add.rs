@@ -379,7 +379,8 @@ pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Addition>, bool)> {
 
 /// One effect of a report: a library label, or a discovered effect with its terms.
 fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, String> {
-    use fmu_shear::effects::discovered::{Function, Site, Term};
+    use structure::building::PAPER_STOREYS;
+    use structure::effects::{Function, Site, Term};
     let label = e
         .get("label")
         .and_then(|l| l.as_str())
@@ -387,7 +388,7 @@ fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, St
     let Some(site) = label.strip_prefix("discovered@") else {
         return Candidate::parse(label).map(Addition::Library);
     };
-    let site = Site::parse(site)
+    let site = Site::parse(site, PAPER_STOREYS)
         .ok_or_else(|| format!("effect '{label}': the site must be storey1..3 or floor1..3"))?;
     let terms = e
         .get("terms")

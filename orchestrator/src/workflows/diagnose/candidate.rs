@@ -5,9 +5,10 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use fmu_shear::effects::discovered::{variable_name, Site, Slot, Term};
-use fmu_shear::effects::Placement;
-pub use fmu_shear::effects::{Kind, Side};
+use structure::effects::discovered::{variable_name, Slot};
+use structure::effects::Placement;
+pub use structure::effects::{Kind, Side};
+use structure::effects::{Site, Term};
 
 use crate::twin::ParameterValue;
 use crate::workflows::calibrate::Prior;
@@ -34,9 +35,9 @@ pub struct Scales {
 }
 
 impl Candidate {
-    /// Every candidate of the library: contact at each storey and side, cubic per storey,
-    /// friction per floor (15).
-    pub fn library() -> Vec<Candidate> {
+    /// Every candidate of the library in a building of `storeys` storeys: contact at each
+    /// storey and side, cubic per storey, friction per floor (15 for three storeys).
+    pub fn library(storeys: usize) -> Vec<Candidate> {
         let mut all = Vec::new();
         for kind in Kind::ALL {
             let sides: &[Side] = if kind.has_side() {
@@ -44,7 +45,7 @@ impl Candidate {
             } else {
                 &[Side::Both]
             };
-            for at in 1..=kind.locations() {
+            for at in 1..=kind.sites(storeys) {
                 for &side in sides {
                     all.push(Candidate { kind, at, side });
                 }
@@ -299,13 +300,14 @@ impl Addition {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use structure::building::PAPER_STOREYS;
 
     #[test]
     fn labels_parse_back() {
-        for c in Candidate::library() {
+        for c in Candidate::library(PAPER_STOREYS) {
             assert_eq!(Candidate::parse(&c.label()), Ok(c), "{}", c.label());
         }
-        assert_eq!(Candidate::library().len(), 15);
+        assert_eq!(Candidate::library(PAPER_STOREYS).len(), 15);
         let c = Candidate::parse("contact@0-1").unwrap();
         assert_eq!((c.at, c.side, c.location()), (1, Side::Both, vec![0, 1]));
         assert_eq!(c.prefix(), "contact01");

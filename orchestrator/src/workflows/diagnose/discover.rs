@@ -37,7 +37,8 @@ use std::time::Instant;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use serde::Serialize;
 
-use fmu_shear::effects::discovered::{Function, Site, Term};
+use structure::building::PAPER_STOREYS;
+use structure::effects::{Function, Site, Term};
 
 use super::{
     effect_report, estimates, select, worst, Addition, Candidate, DiagnoseError, DiscoveryReport,
@@ -161,7 +162,7 @@ fn columns(site: Site, x: &[f64], v: &[f64]) -> Vec<Column> {
             Function::RampUp | Function::RampDown => {
                 [0.8, 0.9, 0.95].iter().map(|&q| quantile(x, q)).collect()
             }
-            _ => vec![fmu_shear::effects::discovered::DEFAULT_SCALE],
+            _ => vec![structure::effects::discovered::DEFAULT_SCALE],
         };
         for scale in scales {
             if scale > 0.0 && scale.is_finite() {
@@ -387,7 +388,7 @@ pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
     let base: Vec<usize> = (0..q).collect();
     let mut best: Option<(f64, Vec<Term>, String)> = None;
     let mut sites = Vec::new();
-    for site in Site::ALL {
+    for site in Site::all(PAPER_STOREYS) {
         let (x, v) = site_states(&problem.states, site);
         let after = |s: &[f64]| s[problem.first..].to_vec();
         let cols = columns(site, &after(&x), &after(&v));

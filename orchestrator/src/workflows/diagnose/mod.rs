@@ -85,8 +85,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use fmu_shear::effects::{Law, Placement};
 use serde::Serialize;
+use structure::building::PAPER_STOREYS;
+use structure::effects::{Law, Placement};
 
 use crate::cosim::import::ImportError;
 use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
@@ -243,7 +244,7 @@ impl Default for DiagnoseOptions {
             transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             block: 1.0,
             gates: Gates::default(),
-            candidates: Candidate::library(),
+            candidates: Candidate::library(PAPER_STOREYS),
             starts: 3,
             recalibration_starts: 8,
             simulations_per_start: 250,

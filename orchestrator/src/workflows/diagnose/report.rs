@@ -102,8 +102,8 @@ impl EffectName {
                     location: site.map(|s| vec![s.at()]).unwrap_or_default(),
                     side: None,
                     site: site.map(|s| match s {
-                        fmu_shear::effects::discovered::Site::Storey(_) => "storey",
-                        fmu_shear::effects::discovered::Site::Floor(_) => "floor",
+                        structure::effects::Site::Storey(_) => "storey",
+                        structure::effects::Site::Floor(_) => "floor",
                     }),
                     label: a.label(),
                 }

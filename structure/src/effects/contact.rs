@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{add_storey_force, drift, Effect, Floors, RealParam};
+use super::{add_storey_force, drift, Effect, RealParam};
 
 /// Which direction of drift closes the gap.
 pub const SIDE_BOTH: i32 = 0;
@@ -116,7 +116,7 @@ impl Effect for Contact {
         self.side = value;
     }
     #[inline]
-    fn add_force(&self, location: usize, y: &Floors, _v: &Floors, g: &mut Floors) {
+    fn add_force(&self, location: usize, y: &[f64], _v: &[f64], g: &mut [f64]) {
         add_storey_force(location, self.force_at(drift(y, location)), g);
     }
 }

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Effect, Floors, RealParam};
+use super::{Effect, RealParam};
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Friction {
@@ -66,7 +66,7 @@ impl Effect for Friction {
         }
     }
     #[inline]
-    fn add_force(&self, location: usize, _y: &Floors, v: &Floors, g: &mut Floors) {
+    fn add_force(&self, location: usize, _y: &[f64], v: &[f64], g: &mut [f64]) {
         g[location] += self.force_at(v[location]);
     }
 }

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{add_storey_force, drift, Effect, Floors, RealParam};
+use super::{add_storey_force, drift, Effect, RealParam};
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Cubic {
@@ -51,7 +51,7 @@ impl Effect for Cubic {
         self.stiffness = value;
     }
     #[inline]
-    fn add_force(&self, location: usize, y: &Floors, _v: &Floors, g: &mut Floors) {
+    fn add_force(&self, location: usize, y: &[f64], _v: &[f64], g: &mut [f64]) {
         add_storey_force(location, self.force_at(drift(y, location)), g);
     }
 }

@@ -1,6 +1,6 @@
-//! The library described as data, for code outside the FMU (the diagnosis, the synthetic
-//! structure): which kinds there are, where each sits, its parameters with their defaults, and
-//! its force law as a function. It reads the kinds' own files, so it cannot drift from the model.
+//! The kinds as data, for every crate (the shear FMU, the diagnosis, the synthetic structure):
+//! which kinds there are, where each sits, its parameters with their defaults, and its force law
+//! as a function. It reads the kinds' own files, so it cannot drift from them.
 
 use serde::{Deserialize, Serialize};
 
@@ -93,12 +93,13 @@ impl Kind {
         }
     }
 
-    /// How many locations the kind has (3 storeys or 3 floors).
-    pub fn locations(self) -> usize {
+    /// How many sites the kind has in a building of `storeys` storeys (its storeys or its
+    /// floors).
+    pub fn sites(self, storeys: usize) -> usize {
         match self {
-            Kind::Contact => Contact::LOCATIONS,
-            Kind::Cubic => Cubic::LOCATIONS,
-            Kind::Friction => Friction::LOCATIONS,
+            Kind::Contact => Contact::sites(storeys),
+            Kind::Cubic => Cubic::sites(storeys),
+            Kind::Friction => Friction::sites(storeys),
         }
     }
 
@@ -212,37 +213,6 @@ impl Law {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effects::Effects;
-
-    /// The law of each kind is the force the model adds: at a location, along its drift or
-    /// velocity.
-    #[test]
-    fn each_law_is_the_models_force() {
-        let y = [1e-3, -2e-3, 4e-3];
-        let v = [0.02, -0.01, 0.005];
-        for kind in Kind::ALL {
-            for location in 0..kind.locations() {
-                let reals: Vec<f64> = kind.real_params().iter().map(|p| 2.0 * p.start).collect();
-                let law = Law::new(kind, &reals, Side::Negative).expect("enough parameters");
-                assert_eq!(law.reals(), reals);
-                let mut effects = Effects::default();
-                let mut g = [0.0; 3];
-                let expected = match kind.placement() {
-                    Placement::Storey => {
-                        let f = law.force_at(super::super::drift(&y, location));
-                        super::super::add_storey_force(location, f, &mut g);
-                        g
-                    }
-                    Placement::Floor => {
-                        g[location] = law.force_at(v[location]);
-                        g
-                    }
-                };
-                effects.switch_on(location, law);
-                assert_eq!(effects.force(&y, &v), expected, "{kind:?} at {location}");
-            }
-        }
-    }
 
     #[test]
     fn names_and_sides_read_back() {
