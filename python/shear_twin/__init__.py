@@ -434,18 +434,19 @@ def init(out: str | os.PathLike) -> Twin:
     return twin
 
 
-def record_from_frame(frame: Any, name: str = "<DataFrame>") -> Record:
-    """A record from a pandas DataFrame with columns ``time``, ``force``, ``acc1``..``acc3``
-    (others kept as extra columns, e.g. ``control``), checked as a CSV file is."""
+def record_from_frame(frame: Any, name: str = "<DataFrame>", *,
+                      columns: dict[str, str] | str | os.PathLike | None = None) -> Record:
+    """A record from a pandas DataFrame whose column names are a CSV header's (``time``,
+    ``force`` or ``ground_acc``, ``acc<i>``/``vel<i>``/``disp<i>``, units as ``"acc2 (g)"``,
+    ``control``; ``columns`` maps other names, as ``twin --columns``), checked as a CSV file
+    is."""
     import numpy as np
 
-    main = ("time", "force", "acc1", "acc2", "acc3")
-    missing = [c for c in main if c not in frame.columns]
-    if missing:
-        raise DataError(f"{name}: no column {', '.join(repr(c) for c in missing)}")
-    col = {c: np.ascontiguousarray(frame[c].to_numpy(dtype=np.float64)) for c in frame.columns}
-    extra = {c: v for c, v in col.items() if c not in main}
-    return Record(*(col[c] for c in main), extra=extra or None, name=name)
+    arrays = {str(c): np.ascontiguousarray(frame[c].to_numpy(dtype=np.float64))
+              for c in frame.columns}
+    if isinstance(columns, os.PathLike):
+        columns = os.fspath(columns)
+    return Record.from_arrays(arrays, columns=columns, name=name)
 
 
 def synth(scenario: dict[str, Any], out: str | os.PathLike | None = None, *,
