@@ -36,10 +36,11 @@ pub struct Signal {
 #[derive(Debug, Clone)]
 pub struct Measurement {
     pub path: PathBuf,
-    /// The nominal grid the samples were taken on (recovered from rounded times, or from a
-    /// start time and a rate).
+    /// The times as written (reports give them back so); without a time column, the grid
+    /// from the start time and the rate. The twin steps on the nominal grid
+    /// `time[0] + k·dt`, never on these differences.
     pub time: Vec<f64>,
-    /// The sampling interval of the nominal grid.
+    /// The sampling interval of the nominal grid (recovered from rounded times).
     pub dt: f64,
     /// `force` (N) or `ground_acc` (m/s²).
     pub excitation: Signal,
@@ -338,7 +339,10 @@ impl Measurement {
             .collect();
         Ok(Measurement {
             path: path.to_owned(),
-            time: (0..n).map(|k| t0 + k as f64 * dt).collect(),
+            time: match layout.time {
+                Some(t) => std::mem::take(&mut columns[t]),
+                None => (0..n).map(|k| t0 + k as f64 * dt).collect(),
+            },
             dt,
             excitation,
             responses,
@@ -386,7 +390,7 @@ impl Measurement {
         }
         let mut columns: Vec<Vec<f64>> = named.into_iter().map(|(_, c)| c).collect();
         // Arrays carry no printed resolution: their times are taken as written to 1 µs.
-        let (t0, dt) = nominal_grid(&columns[time_index], &vec![1e-6; n])
+        let (_, dt) = nominal_grid(&columns[time_index], &vec![1e-6; n])
             .map_err(|e| grid_error(e, |k| err(format!("sample {k}"))))?;
         let mut take = |i: usize, unit: Unit| -> Vec<f64> {
             let factor = unit.to_si();
@@ -417,7 +421,7 @@ impl Measurement {
             .collect();
         Ok(Measurement {
             path: origin.to_owned(),
-            time: (0..n).map(|k| t0 + k as f64 * dt).collect(),
+            time: std::mem::take(&mut columns[time_index]),
             dt,
             excitation,
             responses,
@@ -766,7 +770,9 @@ mod tests {
         }
         let m = Measurement::read(file(&text).path()).expect("reads");
         assert_eq!(m.dt, 1.0 / 51.2);
-        assert_eq!(m.time[4999], 12.0 + 4999.0 * (1.0 / 51.2));
+        // The times stay as written; the grid the twin steps on is time[0] + k·dt.
+        assert_eq!(m.time[4999], 109.637);
+        assert_eq!(m.time[0] + 4999.0 * m.dt, 12.0 + 4999.0 * (1.0 / 51.2));
     }
 
     #[test]

@@ -8,6 +8,11 @@ pub(crate) fn round9(x: f64) -> f64 {
     format_g9(x).parse().unwrap_or(x)
 }
 
+/// A time as the CSV writes it (to 1 µs), read back.
+pub(crate) fn round_time(t: f64) -> f64 {
+    format!("{t:.6}").parse().unwrap_or(t)
+}
+
 /// `%.9g`: 9 significant digits, trailing zeros removed, exponent form below 1e-4 or from 1e9.
 pub fn format_g9(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {

@@ -177,7 +177,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use self::structure::Hysteretic;
-use crate::record::write::round9;
+use crate::record::write::{round9, round_time};
 use crate::record::Measurement;
 use truth::Stats;
 
@@ -519,8 +519,7 @@ pub fn synth_controlled(
         .iter()
         .map(|x| round9(x + force_sd * gauss()))
         .collect();
-    // The nominal grid, as reading the written CSV gives it back.
-    let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let time: Vec<f64> = (0..n).map(|k| round_time(k as f64 * dt)).collect();
     let mut extra = HashMap::new();
     if let Some(mut cs) = control_at_samples {
         // The last sample's control force: as the controller left it.
