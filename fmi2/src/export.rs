@@ -142,11 +142,12 @@ unsafe fn c_slice_mut<'a, T>(ptr: *mut T, n: usize) -> Option<&'a mut [T]> {
     }
 }
 
-fn lookup<'a, M: CoSimModel>(
+fn lookup<M: CoSimModel>(
+    model: &M,
     var_type: VarType,
     vr: u32,
-) -> Result<&'a crate::variables::Variable, CallError> {
-    M::info().find(var_type, vr).ok_or_else(|| {
+) -> Result<&'static crate::variables::Variable, CallError> {
+    model.table().find(var_type, vr).ok_or_else(|| {
         CallError::Refused(format!(
             "unknown value reference {vr} for a {} variable",
             var_type.xml_name()
@@ -190,7 +191,7 @@ fn check_settable<M: CoSimModel>(
 ) -> Result<(), CallError> {
     let initialized = matches!(inst.state, FsmState::StepComplete);
     for &vr in vrs {
-        let var = lookup::<M>(var_type, vr)?;
+        let var = lookup(&inst.model, var_type, vr)?;
         var.settable(initialized).map_err(CallError::Refused)?;
     }
     Ok(())
@@ -250,7 +251,16 @@ pub unsafe fn instantiate<M: CoSimModel>(
             ));
             return std::ptr::null_mut();
         }
-        let expected = &M::info().guid;
+        // The model first: its table (and so the GUID the host must pass) may depend on what
+        // it reads from its resources.
+        let model = match M::instantiate(&context) {
+            Ok(model) => model,
+            Err(e) => {
+                logger_only(&format!("fmi2Instantiate: {e}"));
+                return std::ptr::null_mut();
+            }
+        };
+        let expected = &model.table().guid;
         // SAFETY: as above.
         match unsafe { from_c_str(guid) } {
             Some(g) if g == *expected => {}
@@ -262,13 +272,7 @@ pub unsafe fn instantiate<M: CoSimModel>(
                 return std::ptr::null_mut();
             }
         }
-        match M::instantiate(&context) {
-            Ok(model) => Instance::new(context, logger, model).into_ptr(),
-            Err(e) => {
-                logger_only(&format!("fmi2Instantiate: {e}"));
-                std::ptr::null_mut()
-            }
-        }
+        Instance::new(context, logger, model).into_ptr()
     }))
     .unwrap_or_else(|payload| {
         let text = panic_text(payload.as_ref());
@@ -420,7 +424,7 @@ macro_rules! getter {
                     return refuse("vr or value is null but nvr > 0");
                 };
                 for &$vr in vrs {
-                    lookup::<M>($var_type, $vr)?;
+                    lookup(&inst.model, $var_type, $vr)?;
                 }
                 let $model = &mut inst.model;
                 for (slot, &$vr) in out.iter_mut().zip(vrs) {
@@ -476,7 +480,7 @@ pub unsafe fn get_string<M: CoSimModel>(
         };
         let mut strings = Vec::with_capacity(n);
         for &r in vrs {
-            lookup::<M>(VarType::String, r)?;
+            lookup(&inst.model, VarType::String, r)?;
             strings.push(crate::instance::to_c_string(&inst.model.get_string(r)?));
         }
         inst.string_buffer = strings;
@@ -504,7 +508,7 @@ pub unsafe fn set_real<M: CoSimModel>(
         check_settable(inst, VarType::Real, vrs)?;
         for (&r, &x) in vrs.iter().zip(values) {
             if !x.is_finite() {
-                let name = &lookup::<M>(VarType::Real, r)?.name;
+                let name = &lookup(&inst.model, VarType::Real, r)?.name;
                 return refuse(format!(
                     "value of '{name}' (vr {r}) is {x}; only finite reals are accepted"
                 ));
@@ -626,6 +630,11 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(c: fmi2Component, state: fmi2FMUstate
     with_instance::<M>(c, "fmi2SetFMUstate", mask::SET_STATE, |inst| {
         // SAFETY: promised by the caller; from_ptr checks null and magic.
         match unsafe { Snapshot::<M>::from_ptr(state) } {
+            Some(snapshot) if snapshot.guid() != inst.model.table().guid => refuse(format!(
+                "FMUstate is of a model with GUID {} but this instance's is {}",
+                snapshot.guid(),
+                inst.model.table().guid
+            )),
             Some(snapshot) => {
                 inst.restore(snapshot);
                 Ok(fmi2OK)
@@ -719,7 +728,7 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
     size: usize,
     state: *mut fmi2FMUstate,
 ) -> fmi2Status {
-    with_instance::<M>(c, "fmi2DeSerializeFMUstate", mask::ANY_LIVE, |_inst| {
+    with_instance::<M>(c, "fmi2DeSerializeFMUstate", mask::ANY_LIVE, |inst| {
         // SAFETY: promised by the caller.
         let Some(data) = (unsafe { c_slice(bytes as *const u8, size) }) else {
             return refuse("serializedState is null but size > 0");
@@ -727,7 +736,8 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
         if state.is_null() {
             return refuse("FMUstate is null");
         }
-        let snapshot = Snapshot::<M>::from_bytes(data).map_err(CallError::Refused)?;
+        let snapshot = Snapshot::<M>::from_bytes(data, &inst.model.table().guid)
+            .map_err(CallError::Refused)?;
         // SAFETY: non-null slot; an older state in it is replaced (and freed) as the standard allows.
         unsafe {
             Snapshot::<M>::free(*state);
@@ -750,7 +760,7 @@ pub unsafe fn set_real_input_derivatives<M: CoSimModel>(
     value: *const fmi2Real,
 ) -> fmi2Status {
     with_instance::<M>(c, "fmi2SetRealInputDerivatives", mask::SET, |inst| {
-        if !M::info().can_interpolate_inputs {
+        if !inst.model.table().can_interpolate_inputs {
             return refuse("this FMU cannot interpolate inputs (canInterpolateInputs=\"false\")");
         }
         // SAFETY: promised by the caller.
@@ -762,7 +772,7 @@ pub unsafe fn set_real_input_derivatives<M: CoSimModel>(
             return refuse("vr, order or value is null but nvr > 0");
         };
         for ((&r, &k), &x) in vrs.iter().zip(orders).zip(values) {
-            let var = lookup::<M>(VarType::Real, r)?;
+            let var = lookup(&inst.model, VarType::Real, r)?;
             if var.causality != Causality::Input {
                 return refuse(format!("'{}' (vr {r}) is not an input", var.name));
             }

@@ -285,17 +285,23 @@ impl<M: CoSimModel> Snapshot<M> {
         }
     }
 
+    /// The GUID of the model configuration this state belongs to.
+    pub(crate) fn guid(&self) -> &'static str {
+        &self.model.table().guid
+    }
+
     /// Serialized form: a header naming the model's GUID, then postcard.
     pub(crate) fn to_bytes(&self) -> Result<Vec<u8>, String> {
-        let mut bytes = serialization_header::<M>();
+        let mut bytes = serialization_header(self.guid());
         let body = postcard::to_stdvec(self)
             .map_err(|e| format!("cannot serialize the FMU state: {e}"))?;
         bytes.extend_from_slice(&body);
         Ok(bytes)
     }
 
-    pub(crate) fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
-        let header = serialization_header::<M>();
+    /// A state serialized by an instance whose table has the GUID `guid`.
+    pub(crate) fn from_bytes(bytes: &[u8], guid: &str) -> Result<Self, String> {
+        let header = serialization_header(guid);
         let body = bytes.strip_prefix(header.as_slice()).ok_or(
             "the serialized FMU state was not made by this model (header or GUID differs)",
         )?;
@@ -315,9 +321,9 @@ impl<M: CoSimModel> Snapshot<M> {
     }
 }
 
-fn serialization_header<M: CoSimModel>() -> Vec<u8> {
+fn serialization_header(guid: &str) -> Vec<u8> {
     let mut h = b"STWIN-FMUSTATE-1 ".to_vec();
-    h.extend_from_slice(M::info().guid.as_bytes());
+    h.extend_from_slice(guid.as_bytes());
     h
 }
 

@@ -44,8 +44,18 @@ pub struct InstantiateContext {
 /// matching `get_*` (in any state), and puts them back if the model refuses a later one: `get_*`
 /// of a settable variable returns what its `set_*` stored.
 pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
-    /// The variable table and identity (GUID, model identifier, capabilities). Built once.
+    /// The variable table and identity (GUID, model identifier, capabilities) of the model's
+    /// default configuration. Built once.
     fn info() -> &'static ModelInfo;
+
+    /// This instance's variable table. A model whose variables depend on what it read at
+    /// `instantiate` (the shear FMU's storeys, from its resources) returns the table of that
+    /// configuration, built once per configuration and kept for the life of the library; the
+    /// layer checks the host's GUID, value references and types against it. By default
+    /// [`CoSimModel::info`].
+    fn table(&self) -> &'static ModelInfo {
+        Self::info()
+    }
 
     fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError>;
 
