@@ -1,95 +1,30 @@
 //! How `ShearModel::advance` integrates one communication step, always as RK4 with `substeps`
 //! sub-steps, in one of two ways:
 //!
-//! - **No effect enabled** (the linear model): RK4 applied to a linear system with an input
-//!   that is linear in time is itself an affine map of the state and of the input's value and
-//!   slope. That map (`LinearStepMap`: a 6×6 matrix and two columns) is computed once per
-//!   (parameters, step size) by running the very same RK4 sub-steps on unit states and inputs,
-//!   then each step is one small matrix–vector product. Equal to stepping RK4 directly up to
-//!   rounding (the tests check 1e-12), and an order of magnitude cheaper.
+//! - **No effect enabled** (the linear model, any number of storeys): RK4 applied to a linear
+//!   system with inputs that are linear in time is itself an affine map of the state and of the
+//!   inputs' values and slopes (`crate::linear::LinearStepMap`: a 2N-square matrix and four
+//!   columns), computed once per (parameters, step size), then each step is one matrix–vector
+//!   product. Equal to stepping RK4 directly up to rounding (the tests check 1e-12).
 //! - **Effects enabled**: RK4 sub-steps, split where a contact gap opens or closes. The contact
 //!   force has a kink there, and an RK4 step across a kink loses its order (errors of tens of
 //!   percent with frequent contact at 8 sub-steps); splitting the step at the crossing, located
 //!   by regula falsi on the switch function, restores it.
 
-use numerics::ode::{self, rk4_substeps};
+use numerics::ode;
 
 use crate::effects::Switches;
-use crate::model::{ShearModel, ShearParameters, ADAPTIVE_TOLERANCE};
+use crate::model::{ShearModel, ADAPTIVE_TOLERANCE};
 
 pub type State = [f64; 6];
 
-/// One communication step of the linear model: `x' = Φ x + g₀ u + g₁ u̇`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LinearStepMap {
-    pub step: f64,
-    pub params: ShearParameters,
-    phi: [[f64; 6]; 6],
-    g0: State,
-    g1: State,
-}
-
-impl LinearStepMap {
-    pub fn new(model: &ShearModel, step: f64) -> Self {
-        let run = |x0: &State, u0: f64, slope: f64| -> State {
-            rk4_substeps(
-                |tau, x: &State| rhs(model, x, u0 + slope * tau),
-                0.0,
-                x0,
-                step,
-                model.params.substeps,
-            )
-        };
-        let mut phi = [[0.0; 6]; 6];
-        for j in 0..6 {
-            let mut e = [0.0; 6];
-            e[j] = 1.0;
-            let column = run(&e, 0.0, 0.0);
-            for i in 0..6 {
-                phi[i][j] = column[i];
-            }
-        }
-        LinearStepMap {
-            step,
-            params: model.params.clone(),
-            phi,
-            g0: run(&[0.0; 6], 1.0, 0.0),
-            g1: run(&[0.0; 6], 0.0, 1.0),
-        }
-    }
-
-    /// `Φ`, row-major.
-    pub fn matrix(&self) -> &[[f64; 6]; 6] {
-        &self.phi
-    }
-
-    pub fn fits(&self, params: &ShearParameters, step: f64) -> bool {
-        self.step == step && self.params == *params
-    }
-
-    #[inline]
-    pub fn apply(&self, x: &State, u0: f64, slope: f64) -> State {
-        std::array::from_fn(|i| {
-            let row = &self.phi[i];
-            row[0] * x[0]
-                + row[1] * x[1]
-                + row[2] * x[2]
-                + row[3] * x[3]
-                + row[4] * x[4]
-                + row[5] * x[5]
-                + self.g0[i] * u0
-                + self.g1[i] * slope
-        })
-    }
-}
-
-/// `ẋ` for the state `[y, ẏ]` and a net input force on floor 1.
+/// `ẋ` for the state `[y, ẏ]` of the paper's three storeys and a net input force on floor 1
+/// (the effect paths).
 #[inline]
 pub fn rhs(model: &ShearModel, x: &State, input: f64) -> State {
-    let y = [x[0], x[1], x[2]];
-    let v = [x[3], x[4], x[5]];
-    let a = model.acceleration(&y, &v, input);
-    [v[0], v[1], v[2], a[0], a[1], a[2]]
+    let mut a = [0.0; 3];
+    model.accelerations_into(&x[..3], &x[3..], input, 0.0, &mut a);
+    [x[3], x[4], x[5], a[0], a[1], a[2]]
 }
 
 /// The switch values as numerics' stepper reads them.
@@ -160,27 +95,37 @@ pub fn dopri5_with_events(
 mod tests {
     use super::*;
     use crate::effects::Effects;
+    use crate::linear::{LinearStepMap, StepInputs};
+    use crate::model::ShearParameters;
+    use numerics::ode::rk4_substeps;
 
     /// The affine step map is the RK4 sub-steps themselves, rearranged: over a long random-ish
     /// run the two agree to rounding (bound 1e-12 of the peak).
     #[test]
     fn the_linear_step_map_equals_stepping_rk4_directly() {
         let mut params = ShearParameters::default();
-        params.mass = [4.6, 5.3, 4.9];
-        params.damping = [8.1, 3.7, 2.6];
-        params.stiffness = [3850.0, 4100.0, 4680.0];
+        params.mass = vec![4.6, 5.3, 4.9];
+        params.damping = vec![8.1, 3.7, 2.6];
+        params.stiffness = vec![3850.0, 4100.0, 4680.0];
         params.substeps = 16;
-        let model = ShearModel::new(params, Effects::default());
+        let model = ShearModel::new(params.clone(), Effects::default());
         let h = 1.0 / 51.2;
-        let map = LinearStepMap::new(&model, h);
-        let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+        let map = LinearStepMap::new(&params, h);
+        let (mut a, mut b) = (vec![0.0; 6], [0.0; 6]);
         let mut peak = 0.0f64;
         let mut worst = 0.0f64;
         for k in 0..2000 {
             let u0 = (0.37 * k as f64).sin() + 0.5 * (1.3 * k as f64).cos();
             let u1 = (0.37 * (k + 1) as f64).sin() + 0.5 * (1.3 * (k + 1) as f64).cos();
             let slope = (u1 - u0) / h;
-            a = map.apply(&a, u0, slope);
+            a = map.apply(
+                &a,
+                &StepInputs {
+                    excitation: u0,
+                    excitation_slope: slope,
+                    ..Default::default()
+                },
+            );
             b = rk4_substeps(
                 |tau, x: &State| rhs(&model, x, u0 + slope * tau),
                 0.0,
@@ -206,7 +151,7 @@ mod tests {
     fn steps_split_at_contact_converge_at_fourth_order() {
         let run = |substeps: u32| {
             let mut params = ShearParameters::default();
-            params.damping = [1.0; 3];
+            params.damping = vec![1.0; 3];
             params.substeps = substeps;
             let mut effects = Effects::default();
             effects.contact.enable(2, true);

@@ -1,10 +1,12 @@
-//! The three-storey shear model of eq. (1) with a control force and the effect library.
+//! The N-storey shear model of eq. (1) with a control force and the effect library.
 
 use crate::integrate;
 use fmi2::{CoSimModel, InstantiateContext, ModelError, ModelInfo, VarType};
 use serde::{Deserialize, Serialize};
+use structure::{Excitation, Structure};
 
-use crate::effects::{Effects, Floors};
+use crate::effects::Effects;
+use crate::linear::{LinearStepMap, StepInputs};
 use crate::variables::*;
 
 /// RK4 sub-steps per communication step: the fewest that keep the integration error (worst-floor
@@ -15,24 +17,89 @@ use crate::variables::*;
 /// `--nocapture`. The linear model's cost per step does not depend on it (`integrate`).
 pub const DEFAULT_SUBSTEPS: u32 = 64;
 
-/// The linear structure: masses of floors 1..3, damping and stiffness of storeys 1..3.
+/// The linear structure: masses of floors 1..N, damping and stiffness of storeys 1..N, what
+/// excites it and where the control force acts.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ShearParameters {
-    pub mass: [f64; 3],
-    pub damping: [f64; 3],
-    pub stiffness: [f64; 3],
+    pub mass: Vec<f64>,
+    pub damping: Vec<f64>,
+    pub stiffness: Vec<f64>,
     pub substeps: u32,
+    /// A force at a floor (the input `force`, N) or ground acceleration (`ground_acc`, m/s²).
+    #[serde(default, with = "excitation_code")]
+    pub excitation: Excitation,
+    /// The floor (1-based) the control force `control_force` acts on, against the excitation.
+    #[serde(default = "first_floor")]
+    pub control_floor: usize,
+}
+
+fn first_floor() -> usize {
+    1
+}
+
+/// The excitation in the FMU state as a number (0 ground acceleration, K a force at floor K):
+/// the serialized state is postcard, which cannot read [`Excitation`]'s tagged form.
+mod excitation_code {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use structure::Excitation;
+
+    pub fn serialize<S: Serializer>(e: &Excitation, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(match e {
+            Excitation::Force { floor } => *floor as u64,
+            Excitation::Base => 0,
+        })
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Excitation, D::Error> {
+        Ok(match u64::deserialize(d)? {
+            0 => Excitation::Base,
+            floor => Excitation::Force {
+                floor: floor as usize,
+            },
+        })
+    }
 }
 
 impl Default for ShearParameters {
-    /// The reference paper's prior means (Table 1).
+    /// The reference paper's rig at its prior means (Table 1): [`Structure::default`].
     fn default() -> Self {
+        ShearParameters::from_structure(&Structure::default())
+    }
+}
+
+impl ShearParameters {
+    /// The structure's values, the default sub-steps, the control force on floor 1.
+    pub fn from_structure(structure: &Structure) -> Self {
         ShearParameters {
-            mass: [5.2; 3],
-            damping: [(-4.605f64).exp(); 3],
-            stiffness: [4021.0; 3],
+            mass: structure.mass.clone(),
+            damping: structure.damping.clone(),
+            stiffness: structure.stiffness.clone(),
             substeps: DEFAULT_SUBSTEPS,
+            excitation: structure.excitation,
+            control_floor: 1,
         }
+    }
+
+    pub fn storeys(&self) -> usize {
+        self.mass.len()
+    }
+
+    /// The structure these parameters describe.
+    pub fn structure(&self) -> Structure {
+        Structure {
+            mass: self.mass.clone(),
+            damping: self.damping.clone(),
+            stiffness: self.stiffness.clone(),
+            excitation: self.excitation,
+        }
+    }
+
+    /// The reference paper's layout: three storeys, the force and the control force on floor 1.
+    /// The effect library is written for it (its sites, the exact contact flows).
+    pub fn is_paper_layout(&self) -> bool {
+        self.storeys() == structure::building::PAPER_STOREYS
+            && self.excitation == Excitation::Force { floor: 1 }
+            && self.control_floor == 1
     }
 }
 
@@ -69,14 +136,15 @@ pub struct RampInput {
 pub struct ShearModel {
     pub params: ShearParameters,
     pub effects: Effects,
-    /// Displacements and velocities of floors 1..3 (relative to the ground).
-    pub displacement: Floors,
-    pub velocity: Floors,
+    /// Displacements and velocities of floors 1..N (relative to the ground).
+    pub displacement: Vec<f64>,
+    pub velocity: Vec<f64>,
+    /// The excitation input: `force` (N) at the excited floor, or `ground_acc` (m/s²).
     pub force: RampInput,
     pub control_force: RampInput,
     /// The linear model's step as an affine map, cached for the current parameters and step.
     #[serde(skip)]
-    pub step_map: Option<Box<integrate::LinearStepMap>>,
+    pub step_map: Option<Box<LinearStepMap>>,
     /// How steps with effects are integrated.
     #[serde(default)]
     pub integrator: Integrator,
@@ -90,15 +158,23 @@ pub struct ShearModel {
     /// The forward sensitivities of the linear model, when switched on (`sensitivity`).
     #[serde(default)]
     pub sensitivities: crate::sensitivity::Sensitivities,
+    /// The parameters the instance started from (its structure and start values): they name
+    /// its variable table, which a restored state must share.
+    #[serde(default)]
+    origin: Option<ShearParameters>,
+    /// That table (built at `instantiate`).
+    #[serde(skip)]
+    table: Option<&'static ModelInfo>,
 }
 
 impl ShearModel {
     pub fn new(params: ShearParameters, effects: Effects) -> Self {
+        let n = params.storeys();
         ShearModel {
             params,
             effects,
-            displacement: [0.0; 3],
-            velocity: [0.0; 3],
+            displacement: vec![0.0; n],
+            velocity: vec![0.0; n],
             force: RampInput::default(),
             control_force: RampInput::default(),
             step_map: None,
@@ -106,68 +182,149 @@ impl ShearModel {
             contact_maps: None,
             adaptive_step: 0.0,
             sensitivities: Default::default(),
+            origin: None,
+            table: None,
         }
     }
 
-    /// Floor accelerations for a state and a net input force on floor 1: eq. (1) solved for ÿ.
+    pub fn storeys(&self) -> usize {
+        self.params.storeys()
+    }
+
+    /// The relative floor accelerations `ÿ` for a state, an excitation input and a control
+    /// force, written to `out`: eq. (1) solved for ÿ. Under ground acceleration an
+    /// accelerometer reads `ÿ + a_g` ([`ShearModel::absolute_acceleration`]).
     #[inline]
-    pub fn acceleration(&self, y: &Floors, v: &Floors, input: f64) -> Floors {
-        let ShearParameters {
-            mass: m,
-            damping: c,
-            stiffness: k,
-            ..
-        } = &self.params;
-        // Storey forces (positive = resisting a positive drift) of the linear springs and dampers.
-        let d = [y[0], y[1] - y[0], y[2] - y[1]];
-        let dv = [v[0], v[1] - v[0], v[2] - v[1]];
-        let s = [
-            k[0] * d[0] + c[0] * dv[0],
-            k[1] * d[1] + c[1] * dv[1],
-            k[2] * d[2] + c[2] * dv[2],
-        ];
-        let mut rhs = [input - s[0] + s[1], s[2] - s[1], -s[2]];
-        if self.effects.any_enabled() {
-            let g = self.effects.force(y, v);
+    pub fn accelerations_into(
+        &self,
+        y: &[f64],
+        v: &[f64],
+        excitation: f64,
+        control: f64,
+        out: &mut [f64],
+    ) {
+        let n = self.storeys();
+        let p = &self.params;
+        // Storey forces (positive = resisting a positive drift) of the linear springs and
+        // dampers; floor i gets the load, minus its storey's force, plus the one above.
+        let storey = |s: usize| {
+            let (d, dv) = if s == 0 {
+                (y[0], v[0])
+            } else {
+                (y[s] - y[s - 1], v[s] - v[s - 1])
+            };
+            p.stiffness[s] * d + p.damping[s] * dv
+        };
+        let mut below = storey(0);
+        for i in 0..n {
+            let load = match p.excitation {
+                Excitation::Force { floor } if floor == i + 1 => excitation,
+                _ => 0.0,
+            };
+            let load = if p.control_floor == i + 1 {
+                load - control
+            } else {
+                load
+            };
+            let mut rhs = load - below;
+            if i + 1 < n {
+                let above = storey(i + 1);
+                rhs += above;
+                below = above;
+            }
+            out[i] = rhs;
+        }
+        if self.effects.any_enabled() && n == 3 {
+            let g = self
+                .effects
+                .force(&[y[0], y[1], y[2]], &[v[0], v[1], v[2]]);
             for i in 0..3 {
-                rhs[i] -= g[i];
+                out[i] -= g[i];
             }
         }
-        [rhs[0] / m[0], rhs[1] / m[1], rhs[2] / m[2]]
+        for i in 0..n {
+            out[i] /= p.mass[i];
+        }
+        if p.excitation == Excitation::Base {
+            for a in out.iter_mut() {
+                *a -= excitation;
+            }
+        }
+    }
+
+    /// Floor accelerations for a state and an excitation input, with no control force: eq. (1)
+    /// solved for ÿ (relative to the ground). In the paper's layout the input is the net force
+    /// on floor 1, `force − control_force`.
+    pub fn acceleration(&self, y: &[f64], v: &[f64], input: f64) -> Vec<f64> {
+        let mut out = vec![0.0; self.storeys()];
+        self.accelerations_into(y, v, input, 0.0, &mut out);
+        out
+    }
+
+    /// What accelerometers read at the current state and inputs: `ÿ`, plus the ground
+    /// acceleration under base excitation.
+    pub fn absolute_acceleration(&self) -> Vec<f64> {
+        let mut out = vec![0.0; self.storeys()];
+        self.accelerations_into(
+            &self.displacement,
+            &self.velocity,
+            self.force.value,
+            self.control_force.value,
+            &mut out,
+        );
+        if self.params.excitation == Excitation::Base {
+            for a in out.iter_mut() {
+                *a += self.force.value;
+            }
+        }
+        out
+    }
+
+    fn step_inputs(&self) -> StepInputs {
+        StepInputs {
+            excitation: self.force.value,
+            excitation_slope: self.force.slope,
+            control: self.control_force.value,
+            control_slope: self.control_force.slope,
+        }
     }
 
     /// Advance the state from `t` to `t + h` with the inputs as ramps (see `integrate`).
     pub fn advance(&mut self, h: f64) {
-        let (f0, fs) = (
-            self.force.value - self.control_force.value,
-            self.force.slope - self.control_force.slope,
-        );
-        let y = &self.displacement;
-        let v = &self.velocity;
-        let x0 = [y[0], y[1], y[2], v[0], v[1], v[2]];
-        let x = if self.effects.any_enabled() {
-            self.advance_with_effects(&x0, f0, fs, h)
+        let n = self.storeys();
+        let mut x0 = Vec::with_capacity(2 * n);
+        x0.extend_from_slice(&self.displacement);
+        x0.extend_from_slice(&self.velocity);
+        if self.effects.any_enabled() && self.params.is_paper_layout() {
+            // The effect library is written for the paper's layout: the net input on floor 1.
+            let (f0, fs) = (
+                self.force.value - self.control_force.value,
+                self.force.slope - self.control_force.slope,
+            );
+            let state: integrate::State = std::array::from_fn(|i| x0[i]);
+            let x = self.advance_with_effects(&state, f0, fs, h);
+            self.displacement.copy_from_slice(&x[..3]);
+            self.velocity.copy_from_slice(&x[3..]);
         } else {
             if !self
                 .step_map
                 .as_ref()
                 .is_some_and(|m| m.fits(&self.params, h))
             {
-                self.step_map = Some(Box::new(integrate::LinearStepMap::new(self, h)));
+                self.step_map = Some(Box::new(LinearStepMap::new(&self.params, h)));
             }
-            match &self.step_map {
-                Some(map) => {
-                    if self.sensitivities.on {
-                        self.sensitivities
-                            .advance(&self.params, map, &x0, f0, fs, h);
-                    }
-                    map.apply(&x0, f0, fs)
+            let inputs = self.step_inputs();
+            if let Some(map) = &self.step_map {
+                if self.sensitivities.on {
+                    self.sensitivities
+                        .advance(&self.params, map, &x0, &inputs, h);
                 }
-                None => x0,
+                let mut x = vec![0.0; 2 * n];
+                map.apply_into(&x0, &inputs, &mut x);
+                self.displacement.copy_from_slice(&x[..n]);
+                self.velocity.copy_from_slice(&x[n..]);
             }
-        };
-        self.displacement = [x[0], x[1], x[2]];
-        self.velocity = [x[3], x[4], x[5]];
+        }
         // The input ends the step at its ramp's end value; the slope was for this step only
         // (a master that interpolates sets it again for the next one), so a host that goes on
         // setting values alone gets those values, not an old ramp extrapolated.
@@ -210,25 +367,82 @@ impl ShearModel {
         x
     }
 
-    /// Sensitivity output `k` (NaN unless they are on).
-    fn sensitivity_output(&mut self, k: usize) -> f64 {
+    /// Sensitivity output `d_acc{floor}_d_{parameter}` (NaN unless they are on).
+    fn sensitivity_output(&mut self, floor: usize, parameter: usize) -> f64 {
         if !self.sensitivities.on {
             return f64::NAN;
         }
-        let (y, v) = (&self.displacement, &self.velocity);
-        let x = [y[0], y[1], y[2], v[0], v[1], v[2]];
-        let u = self.net_input();
+        let n = self.storeys();
+        let mut x = Vec::with_capacity(2 * n);
+        x.extend_from_slice(&self.displacement);
+        x.extend_from_slice(&self.velocity);
+        let inputs = self.step_inputs();
         self.sensitivities
-            .output(&self.params, &self.effects, &x, u, k)
+            .output(&self.params, &self.effects, &x, &inputs, floor, parameter)
     }
 
-    fn net_input(&self) -> f64 {
-        self.force.value - self.control_force.value
+    /// The index (0-based) of a floor or storey in the block of value references from `first`.
+    fn index_in(&self, vr: u32, first: u32) -> Option<usize> {
+        vr.checked_sub(first)
+            .map(|i| i as usize)
+            .filter(|&i| i < self.storeys())
     }
 
-    fn floor_index(vr: u32, first: u32) -> Option<usize> {
-        vr.checked_sub(first).map(|i| i as usize).filter(|&i| i < 3)
+    /// The effect library's variables exist only in the paper's layout.
+    fn effects_apply(&self) -> bool {
+        self.params.is_paper_layout()
     }
+
+    /// An instance for the structure in `resources/structure.json` under the FMU's resources,
+    /// or the paper's rig without one.
+    pub fn from_resources(resource_dir: Option<&std::path::Path>) -> Result<Self, ModelError> {
+        let params = match resource_dir.map(|d| d.join(STRUCTURE_RESOURCE)) {
+            Some(path) if path.exists() => read_structure_resource(&path)?,
+            _ => ShearParameters::default(),
+        };
+        let mut model = ShearModel::new(params, Effects::default());
+        model.table = Some(crate::variables::table(&model.params));
+        model.origin = Some(model.params.clone());
+        Ok(model)
+    }
+}
+
+/// The resource that says which structure an FMU models, under its `resources/`.
+pub const STRUCTURE_RESOURCE: &str = "structure.json";
+
+/// What `resources/structure.json` holds: a [`Structure`] (`mass`, `damping`, `stiffness`,
+/// `excitation`) and, optionally, the control force's floor (1 when absent).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StructureResource {
+    #[serde(flatten)]
+    pub structure: Structure,
+    #[serde(default = "first_floor")]
+    pub control_floor: usize,
+}
+
+impl StructureResource {
+    /// The parameters, checked: a valid structure and a control floor it has.
+    pub fn parameters(&self) -> Result<ShearParameters, String> {
+        self.structure.validate().map_err(|e| e.to_string())?;
+        let n = self.structure.storeys();
+        if self.control_floor == 0 || self.control_floor > n {
+            return Err(format!(
+                "control_floor = {}: the structure has floors 1 to {n}",
+                self.control_floor
+            ));
+        }
+        let mut p = ShearParameters::from_structure(&self.structure);
+        p.control_floor = self.control_floor;
+        Ok(p)
+    }
+}
+
+fn read_structure_resource(path: &std::path::Path) -> Result<ShearParameters, ModelError> {
+    let fail = |why: String| ModelError::Other(format!("{}: {why}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+    let resource: StructureResource =
+        serde_json::from_str(&text).map_err(|e| fail(e.to_string()))?;
+    resource.parameters().map_err(fail)
 }
 
 fn positive(name: &str, value: f64, strictly: bool) -> Result<f64, ModelError> {
@@ -248,42 +462,52 @@ impl CoSimModel for ShearModel {
         info()
     }
 
-    fn instantiate(_context: &InstantiateContext) -> Result<Self, ModelError> {
-        Ok(ShearModel::new(
-            ShearParameters::default(),
-            Effects::default(),
-        ))
+    fn table(&self) -> &'static ModelInfo {
+        self.table.unwrap_or_else(|| {
+            crate::variables::table(self.origin.as_ref().unwrap_or(&self.params))
+        })
+    }
+
+    fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError> {
+        ShearModel::from_resources(context.resource_dir.as_deref())
     }
 
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError> {
-        // The sensitivities first: a calibration reads 27 of them per step.
-        if let Some(k) = vr.checked_sub(SENSITIVITY).filter(|&k| k < 27) {
-            return Ok(self.sensitivity_output(k as usize));
+        // The sensitivities first: a calibration reads N × 3N of them per step.
+        if let Some((floor, parameter)) = sensitivity_index(vr, self.storeys()) {
+            return Ok(self.sensitivity_output(floor, parameter));
         }
-        let (y, v) = (self.displacement, self.velocity);
         let value = match vr {
-            FORCE => self.force.value,
+            FORCE if self.params.excitation != Excitation::Base => self.force.value,
+            GROUND_ACC if self.params.excitation == Excitation::Base => self.force.value,
             CONTROL_FORCE => self.control_force.value,
             _ => {
-                if let Some(i) = Self::floor_index(vr, ACC) {
-                    self.acceleration(&y, &v, self.net_input())[i]
-                } else if let Some(i) = Self::floor_index(vr, DISP) {
-                    y[i]
-                } else if let Some(i) = Self::floor_index(vr, VEL) {
-                    v[i]
-                } else if let Some(i) = Self::floor_index(vr, DRIFT) {
-                    crate::effects::drift(&y, i)
-                } else if let Some(i) = Self::floor_index(vr, MASS) {
+                if let Some(i) = self.index_in(vr, ACC) {
+                    self.absolute_acceleration()[i]
+                } else if let Some(i) = self.index_in(vr, DISP) {
+                    self.displacement[i]
+                } else if let Some(i) = self.index_in(vr, VEL) {
+                    self.velocity[i]
+                } else if let Some(i) = self.index_in(vr, DRIFT) {
+                    let y = &self.displacement;
+                    if i == 0 {
+                        y[0]
+                    } else {
+                        y[i] - y[i - 1]
+                    }
+                } else if let Some(i) = self.index_in(vr, MASS) {
                     self.params.mass[i]
-                } else if let Some(i) = Self::floor_index(vr, DAMPING) {
+                } else if let Some(i) = self.index_in(vr, DAMPING) {
                     self.params.damping[i]
-                } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
+                } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i]
-                } else {
+                } else if self.effects_apply() {
                     return self
                         .effects
                         .get_real(vr)
                         .ok_or(ModelError::UnknownVariable { vr, kind: "Real" });
+                } else {
+                    return Err(ModelError::UnknownVariable { vr, kind: "Real" });
                 }
             }
         };
@@ -291,27 +515,31 @@ impl CoSimModel for ShearModel {
     }
 
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {
+        let table = self.table();
         let name = || {
-            info()
+            table
                 .find(VarType::Real, vr)
                 .map(|v| v.name.clone())
                 .unwrap_or_default()
         };
         match vr {
-            FORCE => self.force.value = value,
+            FORCE if self.params.excitation != Excitation::Base => self.force.value = value,
+            GROUND_ACC if self.params.excitation == Excitation::Base => self.force.value = value,
             CONTROL_FORCE => self.control_force.value = value,
             _ => {
-                if let Some(i) = Self::floor_index(vr, MASS) {
+                if let Some(i) = self.index_in(vr, MASS) {
                     self.params.mass[i] = positive(&name(), value, true)?;
-                } else if let Some(i) = Self::floor_index(vr, DAMPING) {
+                } else if let Some(i) = self.index_in(vr, DAMPING) {
                     self.params.damping[i] = positive(&name(), value, false)?;
-                } else if let Some(i) = Self::floor_index(vr, STIFFNESS) {
+                } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i] = positive(&name(), value, false)?;
-                } else {
+                } else if self.effects_apply() {
                     return self
                         .effects
                         .set_real(vr, value)
                         .unwrap_or(Err(ModelError::UnknownVariable { vr, kind: "Real" }));
+                } else {
+                    return Err(ModelError::UnknownVariable { vr, kind: "Real" });
                 }
             }
         }
@@ -400,7 +628,10 @@ impl CoSimModel for ShearModel {
 
     fn set_real_input_derivative(&mut self, vr: u32, derivative: f64) -> Result<(), ModelError> {
         match vr {
-            FORCE => self.force.slope = derivative,
+            FORCE if self.params.excitation != Excitation::Base => self.force.slope = derivative,
+            GROUND_ACC if self.params.excitation == Excitation::Base => {
+                self.force.slope = derivative
+            }
             CONTROL_FORCE => self.control_force.slope = derivative,
             _ => {
                 return Err(ModelError::UnknownVariable {
@@ -413,9 +644,16 @@ impl CoSimModel for ShearModel {
     }
 
     fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
+        if self.effects.any_enabled() && !self.params.is_paper_layout() {
+            return Err(ModelError::Other(format!(
+                "the effect library is written for the paper's layout (3 storeys, force and control on floor 1), not for {} storeys under {}",
+                self.storeys(),
+                self.params.excitation.describe()
+            )));
+        }
         self.advance(step_size);
         // Accelerations overflow a step before the state does; check what the host will read.
-        let acc = self.acceleration(&self.displacement, &self.velocity, self.net_input());
+        let acc = self.absolute_acceleration();
         let finite = self
             .displacement
             .iter()

@@ -77,9 +77,10 @@ fn key(model: &ShearModel, step: f64) -> Key {
     let lib = &model.effects.contact;
     Key {
         step,
-        mass: model.params.mass,
-        damping: model.params.damping,
-        stiffness: model.params.stiffness,
+        // The exact contact path runs in the paper's layout only (three storeys).
+        mass: std::array::from_fn(|i| model.params.mass[i]),
+        damping: std::array::from_fn(|i| model.params.damping[i]),
+        stiffness: std::array::from_fn(|i| model.params.stiffness[i]),
         contacts: std::array::from_fn(|s| lib.is_enabled(s).then(|| lib.effect(s).clone())),
     }
 }

@@ -1,5 +1,5 @@
 //! Forward sensitivities of the linear model: the derivatives of the floor accelerations with
-//! respect to the nine structural parameters (`m1..m3`, `c1..c3`, `k1..k3`), carried along the
+//! respect to the 3N structural parameters (`m1..mN`, `c1..cN`, `k1..kN`), carried along the
 //! run when the `sensitivities` parameter is on, so that a calibration gets its Jacobian from
 //! one run instead of one extra run per parameter.
 //!
@@ -17,56 +17,43 @@
 //! The accelerations `a(x, u)` then give `∂a/∂θ = a_θ(x, u) + A_a s`, `A_a` the acceleration
 //! rows of `A`. With any effect on the model is not linear and the outputs are NaN.
 
-use nalgebra::SMatrix;
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::effects::Effects;
-use crate::integrate::{LinearStepMap, State};
+use crate::linear::{AccelerationRows, LinearStepMap, StepInputs, INPUT_COLUMNS};
 use crate::model::ShearParameters;
-
-/// The parameters with sensitivities, in output order.
-pub const PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
-
-type Augmented = SMatrix<f64, 14, 14>;
 
 /// The derivative maps of one communication step, for the current parameters and step size.
 #[derive(Clone, Debug)]
 pub struct SensitivityMaps {
     step: f64,
     params: ShearParameters,
-    /// `Φ_θ[i][c][j]`: row i, column c of parameter j's `Φ_θ`; `g₀_θ[i][j]`, `g₁_θ[i][j]`
-    /// (the parameters innermost, as the states).
-    phi: [[Row; 6]; 6],
-    g0: [Row; 6],
-    g1: [Row; 6],
+    /// Per parameter, the derivative of `[Φ G]`: 2N rows of 2N + 4, row-major.
+    maps: Vec<Vec<f64>>,
 }
 
-/// One component of the state across the nine parameters.
-pub type Row = [f64; 9];
-
-/// The sensitivity states `∂[y, ẏ]/∂θ` of the nine parameters (part of the FMU state).
+/// The sensitivity states `∂[y, ẏ]/∂θ` of the 3N parameters (part of the FMU state).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Sensitivities {
     pub on: bool,
-    /// `states[i][j] = ∂x_i/∂θ_j`.
-    pub states: [Row; 6],
+    /// `states[i·3N + j] = ∂x_i/∂θ_j`, 2N × 3N (empty until the first step: zero).
+    pub states: Vec<f64>,
     #[serde(skip)]
     maps: Option<Box<SensitivityMaps>>,
-    /// The 27 outputs for the current state, and the net input they were computed with.
+    /// The N × 3N outputs for the current state, and the inputs they were computed with.
     #[serde(skip)]
-    outputs: Option<(f64, [f64; 27])>,
+    outputs: Option<(StepInputs, Vec<f64>)>,
 }
 
 impl Sensitivities {
-    /// Step the sensitivities with the linear step `map` from `x0`, the net input `u0` with
-    /// slope `slope` over the step.
+    /// Step the sensitivities with the linear step `map` from `x0` under `inputs`.
     pub fn advance(
         &mut self,
         params: &ShearParameters,
         map: &LinearStepMap,
-        x0: &State,
-        u0: f64,
-        slope: f64,
+        x0: &[f64],
+        inputs: &StepInputs,
         h: f64,
     ) {
         if !self
@@ -80,216 +67,215 @@ impl Sensitivities {
         let Some(maps) = self.maps.as_ref() else {
             return;
         };
-        // S' = Φ S + Σ_c Φ_θ[·][c] x0[c] + g₀_θ u0 + g₁_θ u̇, nine parameters at a time.
-        let phi = map.matrix();
+        let n = params.storeys();
+        let (states, count) = (2 * n, 3 * n);
+        if self.states.len() != states * count {
+            self.states = vec![0.0; states * count];
+        }
+        let width = states + INPUT_COLUMNS;
+        let u = [
+            inputs.excitation,
+            inputs.excitation_slope,
+            inputs.control,
+            inputs.control_slope,
+        ];
+        // S' = Φ S + Σ_c Φ_θ[·][c] x0[c] + G_θ u, all parameters of a row at a time.
         let s = &self.states;
-        let next: [Row; 6] = std::array::from_fn(|i| {
-            let mut row: Row = std::array::from_fn(|j| maps.g0[i][j] * u0 + maps.g1[i][j] * slope);
-            for c in 0..6 {
-                let (a, b) = (phi[i][c], x0[c]);
-                for j in 0..9 {
-                    row[j] += a * s[c][j] + maps.phi[i][c][j] * b;
+        let mut next = vec![0.0; states * count];
+        for i in 0..states {
+            let row = &mut next[i * count..(i + 1) * count];
+            for c in 0..states {
+                let a = map.phi(i, c);
+                if a != 0.0 {
+                    for (out, sc) in row.iter_mut().zip(&s[c * count..(c + 1) * count]) {
+                        *out += a * sc;
+                    }
                 }
             }
-            row
-        });
+            for (j, out) in row.iter_mut().enumerate() {
+                let d = &maps.maps[j][i * width..(i + 1) * width];
+                let mut sum = 0.0;
+                for (a, b) in d[..states].iter().zip(x0) {
+                    sum += a * b;
+                }
+                for (a, b) in d[states..].iter().zip(&u) {
+                    sum += a * b;
+                }
+                *out += sum;
+            }
+        }
         self.states = next;
     }
 
-    /// Output `k`: `∂a_f/∂θ_j` for `k = 9 f + j`, at the state `x` and net input `u` (the 27
-    /// computed together, once per state and input).
+    /// `∂acc_floor/∂θ_parameter` (both 0-based) at the state `x` and inputs (all N × 3N computed
+    /// together, once per state and input). An accelerometer's ground acceleration does not
+    /// depend on the parameters, so the relative and the absolute acceleration share them.
     pub fn output(
         &mut self,
         params: &ShearParameters,
         effects: &Effects,
-        x: &State,
-        u: f64,
-        k: usize,
+        x: &[f64],
+        inputs: &StepInputs,
+        floor: usize,
+        parameter: usize,
     ) -> f64 {
+        let count = 3 * params.storeys();
         match &self.outputs {
-            Some((at, values)) if at.to_bits() == u.to_bits() => values[k],
+            Some((at, values)) if at == inputs => values[floor * count + parameter],
             _ => {
                 let values = if effects.any_enabled() {
-                    [f64::NAN; 27]
+                    vec![f64::NAN; params.storeys() * count]
                 } else {
-                    self.all_outputs(params, x, u)
+                    self.all_outputs(params, x, inputs)
                 };
-                self.outputs = Some((u, values));
-                values[k]
+                let value = values[floor * count + parameter];
+                self.outputs = Some((*inputs, values));
+                value
             }
         }
     }
 
-    fn all_outputs(&self, params: &ShearParameters, x: &State, u: f64) -> [f64; 27] {
-        let (c, k) = (&params.damping, &params.stiffness);
-        let inv_m = params.mass.map(|m| 1.0 / m);
-        // Storey drifts and drift rates of the state, and the storey forces.
-        let storeys = |q: &State| {
-            (
-                [q[0], q[1] - q[0], q[2] - q[1]],
-                [q[3], q[4] - q[3], q[5] - q[4]],
-            )
+    fn all_outputs(&self, params: &ShearParameters, x: &[f64], inputs: &StepInputs) -> Vec<f64> {
+        let n = params.storeys();
+        let (states, count) = (2 * n, 3 * n);
+        let rows = AccelerationRows::new(params);
+        let zero = vec![0.0; states * count];
+        let s = if self.states.len() == states * count {
+            &self.states
+        } else {
+            &zero
         };
-        let (d, dv) = storeys(x);
-        let force = |d: &[f64; 3], dv: &[f64; 3], i: usize| k[i] * d[i] + c[i] * dv[i];
-        let push = |s: [f64; 3], u: f64| {
-            [
-                (u - s[0] + s[1]) * inv_m[0],
-                (s[2] - s[1]) * inv_m[1],
-                -s[2] * inv_m[2],
-            ]
-        };
-        let a = push([force(&d, &dv, 0), force(&d, &dv, 1), force(&d, &dv, 2)], u);
-        let mut out = [0.0; 27];
-        for j in 0..9 {
-            let state: State = std::array::from_fn(|i| self.states[i][j]);
-            let (sd, sdv) = storeys(&state);
-            let mut da = push(
-                [
-                    force(&sd, &sdv, 0),
-                    force(&sd, &sdv, 1),
-                    force(&sd, &sdv, 2),
-                ],
-                0.0,
-            );
-            let (group, i) = (j / 3, j % 3);
-            if group == 0 {
-                da[i] -= a[i] * inv_m[i];
-            } else {
-                // Storey i's force grows by its drift rate (damping) or drift (stiffness).
-                let ds = if group == 1 { dv[i] } else { d[i] };
-                da[i] -= ds * inv_m[i];
-                if i > 0 {
-                    da[i - 1] += ds * inv_m[i - 1];
+        let mut out = vec![0.0; n * count];
+        // A_a S.
+        for f in 0..n {
+            let row = &mut out[f * count..(f + 1) * count];
+            for c in 0..states {
+                let a = rows.a[(f, c)];
+                if a != 0.0 {
+                    for (o, sc) in row.iter_mut().zip(&s[c * count..(c + 1) * count]) {
+                        *o += a * sc;
+                    }
                 }
             }
-            for f in 0..3 {
-                out[9 * f + j] = da[f];
+        }
+        // + ∂(A_a x + b_e e + b_c c)/∂θ_j at the fixed state.
+        for j in 0..count {
+            let d = acceleration_derivative(params, x, inputs, j);
+            for f in 0..n {
+                out[f * count + j] += d[f];
             }
         }
         out
     }
 }
 
-/// The linear model's floor accelerations for the state `x` and net input `u`.
-fn linear_acceleration(p: &ShearParameters, x: &State, u: f64) -> [f64; 3] {
-    let (m, c, k) = (&p.mass, &p.damping, &p.stiffness);
-    let s = [
-        k[0] * x[0] + c[0] * x[3],
-        k[1] * (x[1] - x[0]) + c[1] * (x[4] - x[3]),
-        k[2] * (x[2] - x[1]) + c[2] * (x[5] - x[4]),
-    ];
-    [(u - s[0] + s[1]) / m[0], (s[2] - s[1]) / m[1], -s[2] / m[2]]
+/// `∂ÿ/∂θ_j` at a fixed state `x` and inputs (linear model), θ in `m1..mN, c1..cN, k1..kN`.
+pub fn acceleration_derivative(
+    params: &ShearParameters,
+    x: &[f64],
+    inputs: &StepInputs,
+    j: usize,
+) -> Vec<f64> {
+    let d = AccelerationRows::derivative(params, j);
+    let n = params.storeys();
+    (0..n)
+        .map(|f| {
+            let mut sum = 0.0;
+            for c in 0..2 * n {
+                sum += d.a[(f, c)] * x[c];
+            }
+            sum + d.b_excitation[f] * inputs.excitation + d.b_control[f] * inputs.control
+        })
+        .collect()
 }
 
-/// `∂a/∂θ_j` at a fixed state and input (linear model).
-pub fn acceleration_derivative(params: &ShearParameters, x: &State, u: f64, j: usize) -> [f64; 3] {
-    let a = linear_acceleration(params, x, u);
-    derivative_at(params, x, &a, j)
+/// A matrix and its derivative along one parameter.
+struct Dual {
+    value: DMatrix<f64>,
+    tangent: DMatrix<f64>,
 }
 
-/// `∂a/∂θ_j` at the state `x` whose accelerations are `a`.
-fn derivative_at(p: &ShearParameters, x: &State, a: &[f64; 3], j: usize) -> [f64; 3] {
-    let (y, v) = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
-    let m = &p.mass;
-    let (group, i) = (j / 3, j % 3);
-    if group == 0 {
-        let mut out = [0.0; 3];
-        out[i] = -a[i] / m[i];
-        return out;
+impl Dual {
+    fn identity(size: usize) -> Dual {
+        Dual {
+            value: DMatrix::identity(size, size),
+            tangent: DMatrix::zeros(size, size),
+        }
     }
-    // Storey i's force grows by its drift (stiffness) or drift rate (damping) per unit of θ.
-    let storey = |q: &[f64; 3]| if i == 0 { q[0] } else { q[i] - q[i - 1] };
-    let ds = if group == 1 { storey(&v) } else { storey(&y) };
-    // Storey i pushes floor i back and floor i − 1 forward.
-    let mut rhs = [0.0; 3];
-    rhs[i] = -ds;
-    if i > 0 {
-        rhs[i - 1] = ds;
+
+    fn mul(&self, other: &Dual) -> Dual {
+        Dual {
+            value: &self.value * &other.value,
+            tangent: &self.tangent * &other.value + &self.value * &other.tangent,
+        }
     }
-    [rhs[0] / m[0], rhs[1] / m[1], rhs[2] / m[2]]
+
+    /// `I + self / k`.
+    fn identity_plus(mut self, k: f64) -> Dual {
+        self.value /= k;
+        self.tangent /= k;
+        for i in 0..self.value.nrows() {
+            self.value[(i, i)] += 1.0;
+        }
+        self
+    }
 }
 
 impl SensitivityMaps {
     pub fn new(params: &ShearParameters, h: f64) -> Self {
-        let unit = |c: usize| -> State {
-            let mut e = [0.0; 6];
-            e[c] = 1.0;
-            e
-        };
-        // The acceleration rows of A and b: the linear accelerations on unit states and input.
-        let mut base = Augmented::zeros();
-        for i in 0..3 {
-            base[(i, 3 + i)] = 1.0;
-            base[(6 + i, 9 + i)] = 1.0;
-        }
-        base[(12, 13)] = 1.0;
-        let accel = |x: &State, u: f64| linear_acceleration(params, x, u);
-        for c in 0..6 {
-            let a = accel(&unit(c), 0.0);
-            for r in 0..3 {
-                base[(3 + r, c)] = a[r];
-                base[(9 + r, 6 + c)] = a[r];
-            }
-        }
-        let b = accel(&[0.0; 6], 1.0);
-        for r in 0..3 {
-            base[(3 + r, 12)] = b[r];
-        }
+        let n = params.storeys();
+        let f = AccelerationRows::new(params).augmented(true);
+        let size = f.nrows();
         let substeps = params.substeps.max(1);
         let delta = h / f64::from(substeps);
-        let mut maps = SensitivityMaps {
+        let width = 2 * n + INPUT_COLUMNS;
+        let maps = (0..3 * n)
+            .map(|j| {
+                let hf = Dual {
+                    value: &f * delta,
+                    tangent: AccelerationRows::derivative(params, j).augmented(false) * delta,
+                };
+                // RK4's polynomial by Horner, as `linear::rk4_substep`.
+                let mut r = Dual {
+                    value: hf.value.clone(),
+                    tangent: hf.tangent.clone(),
+                }
+                .identity_plus(4.0);
+                for k in [3.0, 2.0, 1.0] {
+                    r = hf.mul(&r).identity_plus(k);
+                }
+                let p = power(&r, substeps, size);
+                let mut rows = Vec::with_capacity(2 * n * width);
+                for i in 0..2 * n {
+                    for c in 0..width {
+                        rows.push(p.tangent[(i, c)]);
+                    }
+                }
+                rows
+            })
+            .collect();
+        SensitivityMaps {
             step: h,
             params: params.clone(),
-            phi: [[[0.0; 9]; 6]; 6],
-            g0: [[0.0; 9]; 6],
-            g1: [[0.0; 9]; 6],
-        };
-        for j in 0..9 {
-            let mut f = base;
-            for c in 0..6 {
-                let d = acceleration_derivative(params, &unit(c), 0.0, j);
-                for r in 0..3 {
-                    f[(9 + r, c)] = d[r];
-                }
-            }
-            let d = acceleration_derivative(params, &[0.0; 6], 1.0, j);
-            for r in 0..3 {
-                f[(9 + r, 12)] = d[r];
-            }
-            let p = power(&rk4_substep(&(f * delta)), substeps);
-            for r in 0..6 {
-                for c in 0..6 {
-                    maps.phi[r][c][j] = p[(6 + r, c)];
-                }
-                maps.g0[r][j] = p[(6 + r, 12)];
-                maps.g1[r][j] = p[(6 + r, 13)];
-            }
+            maps,
         }
-        maps
     }
 }
 
-/// RK4's map of one step of `ż = F z` for `hf = δF`: `I + hf (I + hf/2 (I + hf/3 (I + hf/4)))`.
-fn rk4_substep(hf: &Augmented) -> Augmented {
-    let id = Augmented::identity();
-    let mut r = id + hf / 4.0;
-    r = id + hf * r / 3.0;
-    r = id + hf * r / 2.0;
-    id + hf * r
-}
-
-/// `m^n` by repeated squaring.
-fn power(m: &Augmented, mut n: u32) -> Augmented {
-    let mut result = Augmented::identity();
-    let mut square = *m;
+/// `m^n` by repeated squaring, on pairs.
+fn power(m: &Dual, mut n: u32, size: usize) -> Dual {
+    let mut result = Dual::identity(size);
+    let mut square = Dual {
+        value: m.value.clone(),
+        tangent: m.tangent.clone(),
+    };
     while n > 0 {
         if n & 1 == 1 {
-            result *= square;
+            result = result.mul(&square);
         }
         n >>= 1;
         if n > 0 {
-            square = square * square;
+            square = square.mul(&square);
         }
     }
     result

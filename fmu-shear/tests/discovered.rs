@@ -16,10 +16,11 @@ const SUBSTEPS: u32 = 16;
 
 fn params() -> ShearParameters {
     ShearParameters {
-        mass: [5.0, 5.4, 4.9],
-        damping: [0.05, 0.03, 0.04],
-        stiffness: [4300.0, 3900.0, 4021.0],
+        mass: vec![5.0, 5.4, 4.9],
+        damping: vec![0.05, 0.03, 0.04],
+        stiffness: vec![4300.0, 3900.0, 4021.0],
         substeps: SUBSTEPS,
+        ..Default::default()
     }
 }
 

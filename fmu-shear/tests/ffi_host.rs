@@ -430,12 +430,12 @@ fn input_derivatives_are_first_order_on_inputs_only() {
     assert_refused(
         &s,
         s.set_input_derivatives(&[ACC], &[1], &[1.0]),
-        &["'acc1' (vr 10) is not an input"],
+        &[&format!("'acc1' (vr {ACC}) is not an input")],
     );
     assert_refused(
         &s,
         s.set_input_derivatives(&[MASS], &[1], &[1.0]),
-        &["'m1' (vr 30) is not an input"],
+        &[&format!("'m1' (vr {MASS}) is not an input")],
     );
     // A ramp of the force over one step ends at value + slope·h.
     assert_eq!(

@@ -26,10 +26,11 @@ const STEP: f64 = 1.0 / 51.2;
 /// A structure whose floors and storeys all differ, so that a swapped index shows.
 fn uneven(damping: f64) -> ShearParameters {
     ShearParameters {
-        mass: [5.0, 5.4, 4.9],
-        damping: [damping; 3],
-        stiffness: [4300.0, 3900.0, 4021.0],
+        mass: vec![5.0, 5.4, 4.9],
+        damping: vec![damping; 3],
+        stiffness: vec![4300.0, 3900.0, 4021.0],
         substeps: DEFAULT_SUBSTEPS,
+        ..Default::default()
     }
 }
 
@@ -41,12 +42,12 @@ fn vr(name: &str) -> u32 {
 }
 
 fn mass_matrix(p: &ShearParameters) -> Matrix3<f64> {
-    Matrix3::from_diagonal(&Vector3::from(p.mass))
+    Matrix3::from_diagonal(&Vector3::from_column_slice(&p.mass))
 }
 
 /// K of eq. (1): storey i joins floor i−1 (the ground for i = 1) and floor i.
 fn stiffness_matrix(p: &ShearParameters) -> Matrix3<f64> {
-    let k = p.stiffness;
+    let k = &p.stiffness;
     #[rustfmt::skip]
     let matrix = Matrix3::new(
         k[0] + k[1], -k[1],        0.0,
@@ -59,8 +60,8 @@ fn stiffness_matrix(p: &ShearParameters) -> Matrix3<f64> {
 /// ½ vᵀMv + ½ yᵀKy.
 fn energy(model: &ShearModel) -> f64 {
     let (y, v) = (
-        Vector3::from(model.displacement),
-        Vector3::from(model.velocity),
+        Vector3::from_column_slice(&model.displacement),
+        Vector3::from_column_slice(&model.velocity),
     );
     0.5 * v.dot(&(mass_matrix(&model.params) * v))
         + 0.5 * y.dot(&(stiffness_matrix(&model.params) * y))
@@ -69,7 +70,7 @@ fn energy(model: &ShearModel) -> f64 {
 /// Natural circular frequencies (ascending) and mass-normalised mode shapes (columns, φᵀMφ = I),
 /// from the symmetric eigenproblem of M^-1/2 K M^-1/2.
 fn modes(p: &ShearParameters) -> (Vector3<f64>, Matrix3<f64>) {
-    let m_inv_sqrt = Matrix3::from_diagonal(&Vector3::from(p.mass).map(|m| 1.0 / m.sqrt()));
+    let m_inv_sqrt = Matrix3::from_diagonal(&Vector3::from_column_slice(&p.mass).map(|m| 1.0 / m.sqrt()));
     let eigen = SymmetricEigen::new(m_inv_sqrt * stiffness_matrix(p) * m_inv_sqrt);
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
@@ -94,7 +95,7 @@ fn drive(model: &mut ShearModel, force: &[f64]) -> (Vec<[f64; 3]>, Vec<[f64; 3]>
     let mut disp = Vec::with_capacity(force.len());
     for n in 0..force.len() - 1 {
         acc.push(common::step_ramped(model, force, n, STEP));
-        disp.push(model.displacement);
+        disp.push(std::array::from_fn(|i| model.displacement[i]));
     }
     (acc, disp)
 }
@@ -277,8 +278,8 @@ fn undamped_free_vibration_keeps_its_energy_up_to_the_rk4_dissipation() {
             },
             Effects::default(),
         );
-        model.displacement = y0;
-        model.velocity = v0;
+        model.displacement = y0.to_vec();
+        model.velocity = v0.to_vec();
         let e0 = energy(&model);
         let mut previous = e0;
         for _ in 0..1024 {
@@ -353,8 +354,8 @@ fn free_vibration_in_a_mode_shape_stays_in_it_at_the_eigenfrequency() {
         let shape = shapes.column(mode);
         let mut model = ShearModel::new(p.clone(), Effects::default());
         let scale = 1e-3 / shape.amax();
-        model.displacement = std::array::from_fn(|i| scale * shape[i]);
-        let modal = |model: &ShearModel| shapes.transpose() * m * Vector3::from(model.displacement);
+        model.displacement = (0..3).map(|i| scale * shape[i]).collect();
+        let modal = |model: &ShearModel| shapes.transpose() * m * Vector3::from_column_slice(&model.displacement);
         let q0 = modal(&model)[mode];
         let (mut previous, mut crossings, mut leak) = (q0, Vec::new(), 0.0f64);
         for n in 1..=samples {

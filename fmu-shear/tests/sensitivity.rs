@@ -5,11 +5,13 @@
 //! sensitivity -- --nocapture`.
 
 use fmi2::CoSimModel;
-use fmu_shear::sensitivity::PARAMETERS;
-use fmu_shear::variables::{info, SENSITIVITIES, SENSITIVITY};
+use fmu_shear::variables::{info, sensitivity_vr, SENSITIVITIES, SENSITIVITY};
 use fmu_shear::ShearModel;
 
 mod common;
+
+/// The paper's rig's parameters, in output order.
+const PARAMETERS: [&str; 9] = ["m1", "m2", "m3", "c1", "c2", "c3", "k1", "k2", "k3"];
 
 const STEP: f64 = 1.0 / 51.2;
 const STEPS: usize = 1024;
@@ -43,7 +45,9 @@ fn run(values: &[f64; 9], sensitive: bool, booleans: &[&str]) -> (Vec<[f64; 3]>,
     for n in 0..STEPS {
         acc.push(common::step_ramped(&mut model, &force, n, STEP));
         sens.push(std::array::from_fn(|k| {
-            model.get_real(SENSITIVITY + k as u32).expect("sensitivity")
+            model
+                .get_real(sensitivity_vr(k / 9, k % 9, 3))
+                .expect("sensitivity")
         }));
     }
     (acc, sens)
@@ -98,6 +102,9 @@ fn sensitivities_leave_the_run_alone_and_are_nan_when_off_or_with_an_effect() {
             .iter()
             .map(|p| vr(&format!("d_acc2_d_{p}")))
             .collect::<Vec<_>>(),
-        (SENSITIVITY + 9..SENSITIVITY + 18).collect::<Vec<_>>()
+        // Floor 2's block, m1..m3, c1..c3, k1..k3 each in its own block of MAX_STOREYS.
+        [0, 1, 2, 50, 51, 52, 100, 101, 102]
+            .map(|j| SENSITIVITY + 150 + j)
+            .to_vec()
     );
 }

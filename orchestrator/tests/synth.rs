@@ -268,7 +268,8 @@ fn exact_linear_response(
     every: usize,
     samples: usize,
 ) -> [Vec<f64>; 3] {
-    let (m, c, k) = (p.mass, p.damping, p.stiffness);
+    let three = |v: &Vec<f64>| -> [f64; 3] { std::array::from_fn(|i| v[i]) };
+    let (m, c, k) = (three(&p.mass), three(&p.damping), three(&p.stiffness));
     // Stiffness and damping matrices of the shear frame.
     let matrix = |s: [f64; 3]| {
         [
@@ -388,10 +389,11 @@ fn a_linear_record_is_the_linear_models_response() {
     let s = quiet(21);
     let (r, truth) = synth_record(&s).expect("synth");
     let params = ShearParameters {
-        mass: s.mass,
-        damping: s.damping,
-        stiffness: s.stiffness,
+        mass: s.mass.to_vec(),
+        damping: s.damping.to_vec(),
+        stiffness: s.stiffness.to_vec(),
         substeps: 1,
+        ..ShearParameters::default()
     };
     let exact = exact_linear_response(
         &params,

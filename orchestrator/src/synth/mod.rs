@@ -335,10 +335,11 @@ pub fn synth_controlled(
     }
     let hysteretic = Hysteretic::new(&s.effects);
     let params = ShearParameters {
-        mass: s.mass,
-        damping: s.damping,
-        stiffness: s.stiffness,
+        mass: s.mass.to_vec(),
+        damping: s.damping.to_vec(),
+        stiffness: s.stiffness.to_vec(),
         substeps: 1,
+        ..ShearParameters::default()
     };
     let mut model = ShearModel::new(params, effects);
 
@@ -600,9 +601,9 @@ pub fn synth_controlled(
             m: s.mass,
             c: s.damping,
             k: s.stiffness,
-            final_m: model.params.mass,
-            final_c: model.params.damping,
-            final_k: model.params.stiffness,
+            final_m: std::array::from_fn(|i| model.params.mass[i]),
+            final_c: std::array::from_fn(|i| model.params.damping[i]),
+            final_k: std::array::from_fn(|i| model.params.stiffness[i]),
         },
         effects,
         changes: change_truth,

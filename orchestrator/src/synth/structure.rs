@@ -190,10 +190,12 @@ impl Hysteretic {
 
     /// The floor accelerations of the model's state, these z and the dampers.
     pub(super) fn acceleration(&self, model: &ShearModel, input: f64) -> Floors {
-        let mut a = model.acceleration(&model.displacement, &model.velocity, input);
+        let mut a = [0.0; 3];
+        model.accelerations_into(&model.displacement, &model.velocity, input, 0.0, &mut a);
         if !self.is_empty() {
             let mut power = [0.0; MAX_DAMPERS];
-            self.add_to(model, &self.z, &model.velocity, &mut a, &mut power);
+            let v = std::array::from_fn(|i| model.velocity[i]);
+            self.add_to(model, &self.z, &v, &mut a, &mut power);
         }
         a
     }
@@ -202,7 +204,8 @@ impl Hysteretic {
     fn rhs(&self, model: &ShearModel, x: &HState, input: f64) -> HState {
         let y = [x[0], x[1], x[2]];
         let v = [x[3], x[4], x[5]];
-        let mut a = model.acceleration(&y, &v, input);
+        let mut a = [0.0; 3];
+        model.accelerations_into(&y, &v, input, 0.0, &mut a);
         let mut dx = [0.0; 6 + 2 * MAX_LAWS + MAX_DAMPERS];
         self.add_to(
             model,
@@ -267,8 +270,8 @@ impl Hysteretic {
         x[W0..E0].copy_from_slice(&self.work);
         x[E0..].copy_from_slice(&self.dissipated);
         let x = self.step(model, &x, u0, slope, h);
-        model.displacement = [x[0], x[1], x[2]];
-        model.velocity = [x[3], x[4], x[5]];
+        model.displacement.copy_from_slice(&x[..3]);
+        model.velocity.copy_from_slice(&x[3..6]);
         self.z.copy_from_slice(&x[Z0..W0]);
         self.work.copy_from_slice(&x[W0..E0]);
         self.dissipated.copy_from_slice(&x[E0..]);
@@ -283,7 +286,9 @@ impl Hysteretic {
             self.max_abs_z[i] = self.max_abs_z[i].max(self.z[i].abs());
         }
         for (i, damper) in self.dampers.iter().enumerate() {
-            let v = damper.velocity(&model.velocity).abs();
+            let v = damper
+                .velocity(&std::array::from_fn(|i| model.velocity[i]))
+                .abs();
             self.max_abs_velocity[i] = self.max_abs_velocity[i].max(v);
         }
     }

@@ -199,7 +199,7 @@ impl Stats {
     }
 
     pub(super) fn observe(&mut self, model: &ShearModel, t: f64, h: f64) {
-        let y = &model.displacement;
+        let y: &[f64; 3] = &std::array::from_fn(|i| model.displacement[i]);
         for i in 0..3 {
             self.max_drift[i] = self.max_drift[i].max(drift(y, i).abs());
             self.max_disp[i] = self.max_disp[i].max(y[i].abs());

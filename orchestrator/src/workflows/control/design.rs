@@ -59,9 +59,9 @@ pub fn structure_of(twin: &Twin) -> Result<ShearMatrices, ControlError> {
         }
     };
     let mut s = ShearMatrices {
-        mass: defaults.mass,
-        damping: defaults.damping,
-        stiffness: defaults.stiffness,
+        mass: std::array::from_fn(|i| defaults.mass[i]),
+        damping: std::array::from_fn(|i| defaults.damping[i]),
+        stiffness: std::array::from_fn(|i| defaults.stiffness[i]),
     };
     for i in 0..FLOORS {
         s.mass[i] = value(&format!("m{}", i + 1), defaults.mass[i])?;

@@ -152,10 +152,11 @@ mod tests {
         for split in Split::ALL {
             let hybrid = run(&s, split, &force, dt, substeps, 0.0).expect("run");
             let params = ShearParameters {
-                mass: s.mass,
-                damping: s.damping,
-                stiffness: s.stiffness,
+                mass: s.mass.to_vec(),
+                damping: s.damping.to_vec(),
+                stiffness: s.stiffness.to_vec(),
                 substeps,
+                ..ShearParameters::default()
             };
             let mut model = ShearModel::new(params, Effects::default());
             let mut whole = vec![0.0];

@@ -1,0 +1,304 @@
+//! The linear model for any number of storeys: its system matrices, the exact RK4 step map of
+//! one communication step, and (in `sensitivity`) the derivative maps.
+//!
+//! The state is `x = [y, ẏ]` (2N, relative to the ground); two inputs, each a ramp over the step:
+//! the excitation `e` (a force at floor K, or the ground acceleration) and the control force `c`
+//! (at the control floor, acting against the excitation). `ẏ' = A_a x + b_e e + b_c c` with
+//! `A_a = −M⁻¹ [K C]`, `b_e = M⁻¹ e_K` (force) or `−1` (ground acceleration: the relative
+//! coordinates' load `−M 1 a_g` divided by `M`), `b_c = −M⁻¹ e_cf`.
+//!
+//! RK4 with `n` sub-steps on a linear system whose inputs are ramps is an affine map of the
+//! state and of the inputs' values and slopes. The inputs are held as states of an augmented
+//! autonomous system `z = [x, e, ė, c, ċ]`, `ż = F z` (each ramp integrates exactly as RK4
+//! evaluates it at its stages), and one sub-step of RK4 on `ż = F z` is the matrix polynomial
+//! `R(δF) = I + δF + (δF)²/2 + (δF)³/6 + (δF)⁴/24`; `n` sub-steps are `R(δF)ⁿ`, by repeated
+//! squaring. Its first 2N rows are `[Φ g₀ₑ g₁ₑ g₀c g₁c]`. Building it costs O(N³ log n) once per
+//! (parameters, step size); a step is then one (2N)² matrix–vector product.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use structure::Excitation;
+
+use crate::model::ShearParameters;
+
+/// Columns of the augmented system after the 2N states.
+pub const INPUT_COLUMNS: usize = 4;
+
+/// `A_a` (N × 2N, row-major in a DMatrix), `b_e` and `b_c` (N each) for the parameters.
+pub struct AccelerationRows {
+    pub a: DMatrix<f64>,
+    pub b_excitation: Vec<f64>,
+    pub b_control: Vec<f64>,
+}
+
+/// Storey `s` (0-based) joins floor `s − 1` (the ground for `s = 0`) and floor `s`: its force
+/// `k d + c ḋ`, `d = y_s − y_{s−1}`, pushes floor `s` back and floor `s − 1` forward. Adds the
+/// coefficients of that force (for the given `k` and `c`) to the acceleration rows, row `f`
+/// divided by `m_f`.
+fn add_storey(rows: &mut DMatrix<f64>, n: usize, s: usize, k: f64, c: f64, mass: &[f64]) {
+    let mut push = |floor: usize, sign: f64| {
+        let inv_m = 1.0 / mass[floor];
+        rows[(floor, s)] -= sign * k * inv_m;
+        rows[(floor, n + s)] -= sign * c * inv_m;
+        if s > 0 {
+            rows[(floor, s - 1)] += sign * k * inv_m;
+            rows[(floor, n + s - 1)] += sign * c * inv_m;
+        }
+    };
+    push(s, 1.0);
+    if s > 0 {
+        push(s - 1, -1.0);
+    }
+}
+
+impl AccelerationRows {
+    pub fn new(p: &ShearParameters) -> Self {
+        let n = p.storeys();
+        let mut a = DMatrix::zeros(n, 2 * n);
+        for s in 0..n {
+            add_storey(&mut a, n, s, p.stiffness[s], p.damping[s], &p.mass);
+        }
+        let mut b_excitation = vec![0.0; n];
+        match p.excitation {
+            Excitation::Force { floor } => b_excitation[floor - 1] = 1.0 / p.mass[floor - 1],
+            Excitation::Base => b_excitation.iter_mut().for_each(|b| *b = -1.0),
+        }
+        let mut b_control = vec![0.0; n];
+        b_control[p.control_floor - 1] = -1.0 / p.mass[p.control_floor - 1];
+        AccelerationRows {
+            a,
+            b_excitation,
+            b_control,
+        }
+    }
+
+    /// The derivative of the rows with respect to parameter `j` of `m1..mN, c1..cN, k1..kN`.
+    pub fn derivative(p: &ShearParameters, j: usize) -> Self {
+        let n = p.storeys();
+        let (group, i) = (j / n, j % n);
+        let mut d = AccelerationRows {
+            a: DMatrix::zeros(n, 2 * n),
+            b_excitation: vec![0.0; n],
+            b_control: vec![0.0; n],
+        };
+        match group {
+            0 => {
+                // Row i is divided by m_i: its derivative is the row times −1/m_i. The ground
+                // acceleration's −1 does not depend on the mass.
+                let rows = AccelerationRows::new(p);
+                let scale = -1.0 / p.mass[i];
+                for c in 0..2 * n {
+                    d.a[(i, c)] = rows.a[(i, c)] * scale;
+                }
+                if matches!(p.excitation, Excitation::Force { .. }) {
+                    d.b_excitation[i] = rows.b_excitation[i] * scale;
+                }
+                d.b_control[i] = rows.b_control[i] * scale;
+            }
+            1 => add_storey(&mut d.a, n, i, 0.0, 1.0, &p.mass),
+            _ => add_storey(&mut d.a, n, i, 1.0, 0.0, &p.mass),
+        }
+        d
+    }
+
+    /// The augmented system matrix `F` (2N + 4 square) with these rows in its acceleration block.
+    pub fn augmented(&self, with_kinematics: bool) -> DMatrix<f64> {
+        let n = self.b_control.len();
+        let size = 2 * n + INPUT_COLUMNS;
+        let mut f = DMatrix::zeros(size, size);
+        if with_kinematics {
+            for i in 0..n {
+                f[(i, n + i)] = 1.0;
+            }
+            f[(2 * n, 2 * n + 1)] = 1.0;
+            f[(2 * n + 2, 2 * n + 3)] = 1.0;
+        }
+        for r in 0..n {
+            for c in 0..2 * n {
+                f[(n + r, c)] = self.a[(r, c)];
+            }
+            f[(n + r, 2 * n)] = self.b_excitation[r];
+            f[(n + r, 2 * n + 2)] = self.b_control[r];
+        }
+        f
+    }
+}
+
+/// RK4's map of one step of `ż = F z` for `hf = δF`: `I + hf (I + hf/2 (I + hf/3 (I + hf/4)))`.
+pub fn rk4_substep(hf: &DMatrix<f64>) -> DMatrix<f64> {
+    let id = DMatrix::identity(hf.nrows(), hf.ncols());
+    let mut r = &id + hf / 4.0;
+    r = &id + hf * r / 3.0;
+    r = &id + hf * r / 2.0;
+    id + hf * r
+}
+
+/// `m^n` by repeated squaring.
+pub fn power(m: &DMatrix<f64>, mut n: u32) -> DMatrix<f64> {
+    let mut result = DMatrix::identity(m.nrows(), m.ncols());
+    let mut square = m.clone();
+    while n > 0 {
+        if n & 1 == 1 {
+            result *= &square;
+        }
+        n >>= 1;
+        if n > 0 {
+            square = &square * &square;
+        }
+    }
+    result
+}
+
+/// The inputs over one step: the excitation and the control force, each `value + slope·τ`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepInputs {
+    pub excitation: f64,
+    pub excitation_slope: f64,
+    pub control: f64,
+    pub control_slope: f64,
+}
+
+impl StepInputs {
+    fn as_array(&self) -> [f64; INPUT_COLUMNS] {
+        [
+            self.excitation,
+            self.excitation_slope,
+            self.control,
+            self.control_slope,
+        ]
+    }
+}
+
+/// One communication step of the linear model: `x' = Φ x + G [e, ė, c, ċ]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearStepMap {
+    pub step: f64,
+    pub params: ShearParameters,
+    states: usize,
+    /// `[Φ G]`, row-major, 2N rows of 2N + 4.
+    rows: Vec<f64>,
+}
+
+impl LinearStepMap {
+    pub fn new(params: &ShearParameters, step: f64) -> Self {
+        let n = params.storeys();
+        let f = AccelerationRows::new(params).augmented(true);
+        let substeps = params.substeps.max(1);
+        let p = power(&rk4_substep(&(f * (step / f64::from(substeps)))), substeps);
+        let width = 2 * n + INPUT_COLUMNS;
+        let mut rows = Vec::with_capacity(2 * n * width);
+        for r in 0..2 * n {
+            for c in 0..width {
+                rows.push(p[(r, c)]);
+            }
+        }
+        LinearStepMap {
+            step,
+            params: params.clone(),
+            states: 2 * n,
+            rows,
+        }
+    }
+
+    /// `Φ[r][c]`.
+    #[inline]
+    pub fn phi(&self, r: usize, c: usize) -> f64 {
+        self.rows[r * (self.states + INPUT_COLUMNS) + c]
+    }
+
+    pub fn fits(&self, params: &ShearParameters, step: f64) -> bool {
+        self.step == step && self.params == *params
+    }
+
+    /// The state after the step from `x` (2N) under `inputs`, written to `out`.
+    #[inline]
+    pub fn apply_into(&self, x: &[f64], inputs: &StepInputs, out: &mut [f64]) {
+        let width = self.states + INPUT_COLUMNS;
+        let u = inputs.as_array();
+        for (r, slot) in out.iter_mut().enumerate().take(self.states) {
+            let row = &self.rows[r * width..(r + 1) * width];
+            let mut sum = 0.0;
+            for (a, b) in row[..self.states].iter().zip(x) {
+                sum += a * b;
+            }
+            for (a, b) in row[self.states..].iter().zip(&u) {
+                sum += a * b;
+            }
+            *slot = sum;
+        }
+    }
+
+    pub fn apply(&self, x: &[f64], inputs: &StepInputs) -> Vec<f64> {
+        let mut out = vec![0.0; self.states];
+        self.apply_into(x, inputs, &mut out);
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Effects;
+    use crate::model::ShearModel;
+    use numerics::ode::rk4_substeps;
+    use structure::Structure;
+
+    /// Five storeys, all different, under a force at floor 4 with the control force on floor 2
+    /// and under ground acceleration: the step map built from the matrix polynomial equals RK4
+    /// stepped directly on the model's accelerations (numerics' stepper, 10 states) to rounding.
+    /// Measured worst 2.7e-15 of the peak; the bar is 1e-12.
+    #[test]
+    fn the_step_map_equals_rk4_stepped_directly_for_five_storeys() {
+        for excitation in [Excitation::Force { floor: 4 }, Excitation::Base] {
+            let structure = Structure {
+                mass: vec![4.6, 5.3, 4.9, 5.8, 4.1],
+                damping: vec![8.1, 3.7, 2.6, 1.2, 0.4],
+                stiffness: vec![3850.0, 4100.0, 4680.0, 3300.0, 5100.0],
+                excitation,
+            };
+            let mut params = ShearParameters::from_structure(&structure);
+            params.substeps = 16;
+            params.control_floor = 2;
+            let model = ShearModel::new(params.clone(), Effects::default());
+            let h = 1.0 / 51.2;
+            let map = LinearStepMap::new(&params, h);
+            let (mut a, mut b) = (vec![0.0; 10], [0.0; 10]);
+            let (mut peak, mut worst) = (0.0f64, 0.0f64);
+            for k in 0..1000 {
+                let signal = |k: usize| (0.37 * k as f64).sin() + 0.5 * (1.3 * k as f64).cos();
+                let control = |k: usize| 0.3 * (0.11 * k as f64).cos();
+                let inputs = StepInputs {
+                    excitation: signal(k),
+                    excitation_slope: (signal(k + 1) - signal(k)) / h,
+                    control: control(k),
+                    control_slope: (control(k + 1) - control(k)) / h,
+                };
+                a = map.apply(&a, &inputs);
+                b = rk4_substeps(
+                    |tau, x: &[f64; 10]| {
+                        let mut acc = [0.0; 5];
+                        model.accelerations_into(
+                            &x[..5],
+                            &x[5..],
+                            inputs.excitation + inputs.excitation_slope * tau,
+                            inputs.control + inputs.control_slope * tau,
+                            &mut acc,
+                        );
+                        std::array::from_fn(|i| if i < 5 { x[5 + i] } else { acc[i - 5] })
+                    },
+                    0.0,
+                    &b,
+                    h,
+                    16,
+                );
+                for i in 0..10 {
+                    peak = peak.max(b[i].abs());
+                    worst = worst.max((a[i] - b[i]).abs());
+                }
+            }
+            println!("{excitation:?}: {worst:e} of {peak:e}");
+            assert!(peak > 1e-4, "the run moves: peak {peak:e}");
+            assert!(worst <= 1e-12 * peak, "map vs direct RK4: {worst:e} of {peak:e}");
+        }
+    }
+}
