@@ -16,8 +16,7 @@ use orchestrator::workflows::control::{
     VarianceTrigger,
 };
 use orchestrator::workflows::diagnose::{
-    add_physics, diagnose, effects_from_report, parse_candidates, Addition, Candidate,
-    DiagnoseOptions,
+    add_physics, diagnose, effects_from_report, parse_additions, parse_candidates, DiagnoseOptions,
 };
 use orchestrator::workflows::learn::{
     chosen_modes, learned_twin, prepare, run_modes, LearnOptions,
@@ -376,14 +375,9 @@ impl Twin {
             (Some(_), Some(_)) => {
                 return Err(invalid(kind, "give effects or a diagnosis, not both"));
             }
-            (Some(effects), None) => effects
-                .iter()
-                .map(|e| {
-                    Candidate::parse(e)
-                        .map(Addition::Library)
-                        .map_err(|m| invalid(kind, m))
-                })
-                .collect::<PyResult<Vec<_>>>()?,
+            (Some(effects), None) => {
+                parse_additions(&effects).map_err(|e| invalid(kind, e.to_string()))?
+            }
             (None, Some(report)) => {
                 // The report as the CLI reads it: through the same file reader.
                 let value: serde_json::Value =

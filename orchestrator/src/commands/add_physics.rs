@@ -11,7 +11,7 @@ use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::{RecordRef, RecordRole, Twin};
 use crate::workflows::diagnose::{
-    add_hybrid_contact, add_physics, effects_from_report, with_record, Addition, Candidate,
+    add_hybrid_contact, add_physics, effects_from_report, parse_additions, with_record,
     DiagnoseOptions, Progress, RecordNmse,
 };
 
@@ -185,15 +185,7 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
         return Ok(text);
     }
     let candidates = match (args.effect.is_empty(), &args.diagnosis) {
-        (false, _) => args
-            .effect
-            .iter()
-            .map(|e| {
-                Candidate::parse(e)
-                    .map(Addition::Library)
-                    .map_err(anyhow::Error::msg)
-            })
-            .collect::<Result<Vec<_>>>()?,
+        (false, _) => parse_additions(&args.effect)?,
         (true, Some(path)) => effects_from_report(path)?.0,
         (true, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
     };

@@ -2,62 +2,52 @@
 //! change (`--change k2@8:0.85`), read into the scenario's types.
 
 use super::{Result, SynthError};
+use ::structure::building::PAPER_STOREYS;
+use ::structure::effects::{Kind, Label, Location};
 use serde_json::{Map, Value};
 
 use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamName};
 
-/// `contact@2-3:gap=5e-4,stiffness=9000,side=both`, `cubic@2`, `friction@1:force=0.2`,
-/// `hysteresis@2:stiffness=1500,yield=3e-4`, `quadratic-damping@2:coefficient=40` (storey 2,
-/// or `@1-2`) and `quadratic-damping@floor1:coefficient=40` (floor 1 to the ground; the kind
-/// may also be written `quadratic_damping`, as in the JSON).
+/// The effect's text form ([`Label`]): `contact@2-3:gap=5e-4,stiffness=9000,side=both`,
+/// `cubic@2`, `friction@1:force=0.2`, `hysteresis@2:stiffness=1500,yield=3e-4`,
+/// `quadratic-damping@2:coefficient=40` (storey 2, or `@1-2`) and
+/// `quadratic-damping@floor1:coefficient=40` (floor 1 to the ground; the kind may also be
+/// written `quadratic_damping`, as in the JSON). Read into the scenario file's form and checked
+/// as the file's effects are.
 pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
     let bad = |why: String| SynthError::Scenario(format!("--effect {text:?}: {why}"));
-    let (head, params) = match text.split_once(':') {
-        Some((h, p)) => (h, Some(p)),
-        None => (text, None),
-    };
-    let (kind, location) = head
-        .split_once('@')
-        .ok_or_else(|| bad("expected KIND@LOCATION, e.g. contact@2-3".into()))?;
-    let kind = match kind.trim() {
+    let label = Label::parse(text).map_err(|e| bad(e.to_string()))?;
+    let kind = match label.kind.as_str() {
         "quadratic-damping" => "quadratic_damping",
         other => other,
     };
     let mut o = Map::new();
     o.insert("kind".into(), Value::from(kind));
-    // A quadratic damper on a floor, to the ground: `@floor1`.
-    if let Some(floor) = location.trim().strip_prefix("floor") {
-        let floor = floor
-            .parse::<u64>()
-            .map_err(|_| bad(format!("location {location:?} is not floorN")))?;
-        o.insert("floor".into(), Value::from(floor));
-    } else {
-        let floors: Vec<Value> = location
-            .split('-')
-            .map(|p| {
-                p.trim()
-                    .parse::<u64>()
-                    .map(Value::from)
-                    .map_err(|_| bad(format!("location {location:?} is not N or N-M")))
-            })
-            .collect::<Result<_>>()?;
-        o.insert("location".into(), Value::Array(floors));
-    }
-    for pair in params
-        .into_iter()
-        .flat_map(|p| p.split(','))
-        .filter(|p| !p.trim().is_empty())
-    {
-        let (key, value) = pair
-            .split_once('=')
-            .ok_or_else(|| bad(format!("{pair:?} is not KEY=VALUE")))?;
-        let (key, value) = (key.trim(), value.trim());
+    // A library kind's site as the catalogue reads it, written in the file's form.
+    let location = match Kind::parse(kind) {
+        Some(kind) => kind.location(
+            kind.site(label.location, PAPER_STOREYS)
+                .map_err(|e| bad(e.to_string()))?,
+        ),
+        None => label.location,
+    };
+    match location {
+        // A quadratic damper on a floor, to the ground: `@floor1`.
+        Location::Floor(floor) => o.insert("floor".into(), Value::from(floor)),
+        Location::Number(n) | Location::Storey(n) => {
+            o.insert("location".into(), Value::from(vec![n]))
+        }
+        Location::Between(lower, upper) => {
+            o.insert("location".into(), Value::from(vec![lower, upper]))
+        }
+    };
+    for (key, value) in &label.params {
         let v = match value.parse::<f64>() {
             Ok(x) if x.is_finite() => Value::from(x),
-            _ if key == "side" => Value::from(value),
+            _ if key == "side" => Value::from(value.as_str()),
             _ => return Err(bad(format!("{key}={value:?}: not a finite number"))),
         };
-        o.insert(key.into(), v);
+        o.insert(key.clone(), v);
     }
     let origin = format!("--effect {text:?}");
     parse_effect(

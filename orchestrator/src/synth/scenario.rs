@@ -3,7 +3,8 @@
 use std::path::Path;
 
 use super::{Result, SynthError};
-use ::structure::effects::{Contact, Cubic, Friction, Kind, Law, Side};
+use ::structure::building::PAPER_STOREYS;
+use ::structure::effects::{Contact, Cubic, Friction, Kind, Law, Location, Side};
 use fmu_shear::ShearParameters;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -859,14 +860,18 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
     let head: EffectHead = read(at, value)?;
     let loc = at.field("location");
     let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
+    // The file's list of floor numbers as the text form's location.
+    let place = |location: &[u64]| {
+        Location::from_numbers(&location.iter().map(|&x| small(x)).collect::<Vec<_>>())
+    };
     let storey_or_adjacent = |location: &[u64]| {
-        match location[..] {
-        [s] if (1..=3).contains(&s) => Ok(small(s)),
-        [a, b] if b == a + 1 && b <= 3 => Ok(small(b)),
-        _ => Err(loc.error(format!(
+        place(location)
+            .and_then(|l| l.storey(PAPER_STOREYS))
+            .ok_or_else(|| {
+                loc.error(format!(
             "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
-        ))),
-    }
+        ))
+            })
     };
     if head.kind == "quadratic_damping" {
         let q: QuadraticDampingFile = read(at, value)?;
@@ -927,23 +932,16 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
             known.join(", ")
         )));
     }
-    // 0-based, as the library counts.
-    let location = match kind {
-        Kind::Contact => match location[..] {
-            [a, b] if b == a + 1 && b <= 3 => small(a),
-            _ => return Err(loc.error(format!(
-                "{location:?} is not a storey; expected two adjacent floors [lower, upper] with 0 = the ground: [0, 1], [1, 2] or [2, 3]"
-            ))),
-        },
-        Kind::Cubic => storey_or_adjacent(&location)? - 1,
-        Kind::Friction => match location[..] {
-            [f] if (1..=3).contains(&f) => small(f) - 1,
-            _ => {
-                return Err(loc.error(format!(
-                    "{location:?} is not a floor; expected [1], [2] or [3]"
-                )))
-            }
-        },
+    // 0-based, as the library counts; where each kind may sit is the catalogue's.
+    let location = match place(&location) {
+        Some(at) => kind
+            .site(at, PAPER_STOREYS)
+            .map_err(|e| loc.error(format!("{location:?}: {e}")))?,
+        None => {
+            return Err(loc.error(format!(
+                "{location:?} is neither a storey or floor [N] nor two floors [lower, upper]"
+            )))
+        }
     };
     let side = match fields.get("side") {
         None => Side::Both,

@@ -19,6 +19,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
+use super::label::Location;
 use super::{add_storey_force, drift, InvalidParameter};
 
 /// The parameters of one term, in value-reference order (the discriminant is the slot's offset
@@ -272,17 +273,27 @@ impl Site {
     }
 
     /// "storey 2", "floor 1" (also "storey2", case-insensitive), in a building of `storeys`
-    /// storeys.
+    /// storeys: the location of the text form (`discovered@storey2`).
     pub fn parse(text: &str, storeys: usize) -> Option<Site> {
-        let lower = text.trim().to_ascii_lowercase();
-        let (kind, number) = if let Some(rest) = lower.strip_prefix("storey") {
-            (PLACEMENT_STOREY, rest)
-        } else if let Some(rest) = lower.strip_prefix("floor") {
-            (PLACEMENT_FLOOR, rest)
-        } else {
-            return None;
+        Site::at_location(Location::parse(text).ok()?, storeys)
+    }
+
+    /// The site a location names (`storeyN` or `floorN`), if the building has it.
+    pub fn at_location(location: Location, storeys: usize) -> Option<Site> {
+        let (placement, n) = match location {
+            Location::Storey(n) => (PLACEMENT_STOREY, n),
+            Location::Floor(n) => (PLACEMENT_FLOOR, n),
+            Location::Number(_) | Location::Between(..) => return None,
         };
-        Site::from_codes(kind, number.trim().parse().ok()?, storeys)
+        Site::from_codes(placement, i32::try_from(n).ok()?, storeys)
+    }
+
+    /// The site as the text form writes it: `storey2`, `floor1`.
+    pub fn location(self) -> Location {
+        match self {
+            Site::Storey(n) => Location::Storey(n),
+            Site::Floor(n) => Location::Floor(n),
+        }
     }
 
     /// The site's `(x, v)`: drift and drift rate of a storey, displacement and velocity of a

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::contact::{SIDE_BOTH, SIDE_NEGATIVE, SIDE_POSITIVE};
+use super::label::{one_of, LabelError, Location};
 use super::{Contact, Cubic, Effect, Friction, RealParam};
 
 /// The kinds of effect the library has.
@@ -100,6 +101,41 @@ impl Kind {
             Kind::Contact => Contact::sites(storeys),
             Kind::Cubic => Cubic::sites(storeys),
             Kind::Friction => Friction::sites(storeys),
+        }
+    }
+
+    /// The site (0-based) that `location` names for this kind in a building of `storeys`
+    /// storeys: for contact two adjacent floors `L-U` (0 the ground) or `storeyN`; for cubic a
+    /// storey, `N`, `storeyN` or two adjacent floors; for friction a floor, `N` or `floorN`.
+    pub fn site(self, location: Location, storeys: usize) -> Result<usize, LabelError> {
+        match self {
+            Kind::Contact => match location {
+                Location::Between(lower, upper) if upper == lower + 1 && upper <= storeys => {
+                    Ok(lower)
+                }
+                Location::Storey(s) if (1..=storeys).contains(&s) => Ok(s - 1),
+                _ => Err(LabelError(format!(
+                    "contact acts between adjacent floors {}",
+                    one_of((1..=storeys).map(|upper| format!("{}-{upper}", upper - 1)))
+                ))),
+            },
+            Kind::Cubic => location
+                .storey(storeys)
+                .map(|s| s - 1)
+                .ok_or_else(|| LabelError(format!("cubic is at storey {}", one_of(1..=storeys)))),
+            Kind::Friction => location
+                .floor(storeys)
+                .map(|f| f - 1)
+                .ok_or_else(|| LabelError(format!("friction is at floor {}", one_of(1..=storeys)))),
+        }
+    }
+
+    /// Site `location` (0-based) as the text form writes it: `2-3` (contact), `2` (cubic's
+    /// storey, friction's floor).
+    pub fn location(self, location: usize) -> Location {
+        match self {
+            Kind::Contact => Location::Between(location, location + 1),
+            Kind::Cubic | Kind::Friction => Location::Number(location + 1),
         }
     }
 
@@ -225,5 +261,49 @@ mod tests {
         }
         assert_eq!(Kind::Contact.prefix(2), "contact23");
         assert!(Law::new(Kind::Friction, &[0.1], Side::Both).is_none());
+    }
+
+    /// Every site reads back from its text form, for buildings of 1, 3 and 12 storeys; what a
+    /// kind cannot sit at is refused saying where it can.
+    #[test]
+    fn sites_read_back_from_their_text_and_the_rest_is_refused() {
+        for storeys in [1, 3, 12] {
+            for kind in Kind::ALL {
+                assert_eq!(kind.sites(storeys), storeys);
+                for site in 0..kind.sites(storeys) {
+                    let location =
+                        Location::parse(&kind.location(site).to_string()).expect("the text form");
+                    assert_eq!(kind.site(location, storeys), Ok(site), "{kind:?} {site}");
+                }
+                assert!(kind.site(kind.location(storeys), storeys).is_err());
+            }
+        }
+        assert_eq!(Kind::Contact.site(Location::Storey(3), 3), Ok(2));
+        assert_eq!(Kind::Cubic.site(Location::Between(1, 2), 3), Ok(1));
+        let says = |kind: Kind, location| kind.site(location, 3).expect_err("refused").to_string();
+        assert_eq!(
+            says(Kind::Contact, Location::Between(1, 3)),
+            "contact acts between adjacent floors 0-1, 1-2 or 2-3"
+        );
+        assert_eq!(
+            says(Kind::Contact, Location::Number(2)),
+            says(Kind::Contact, Location::Between(3, 4))
+        );
+        assert_eq!(
+            says(Kind::Cubic, Location::Number(4)),
+            "cubic is at storey 1, 2 or 3"
+        );
+        assert_eq!(
+            says(Kind::Cubic, Location::Floor(2)),
+            "cubic is at storey 1, 2 or 3"
+        );
+        assert_eq!(
+            says(Kind::Friction, Location::Storey(2)),
+            "friction is at floor 1, 2 or 3"
+        );
+        assert_eq!(
+            says(Kind::Friction, Location::Number(0)),
+            "friction is at floor 1, 2 or 3"
+        );
     }
 }

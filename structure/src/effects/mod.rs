@@ -7,6 +7,9 @@
 //! [`discovered`] terms are the generic `coefficient · f(x, v)` forces a diagnosis finds by
 //! regression: their functions and sites.
 //!
+//! [`label`] is the one text form of an effect, `KIND@LOC[:k=v,...]`
+//! (`contact@2-3:gap=5e-4,side=positive`, `cubic@2`, `friction@1`, `discovered@storey2`).
+//!
 //! Sign convention: an effect adds to `g`, the left-hand side of `M ÿ + C ẏ + K y + g = L u`, so
 //! a restoring force is positive along the displacement that causes it. Displacements and
 //! velocities are of floors 1..N (the ground excluded), in slices of length N.
@@ -16,6 +19,7 @@ pub mod cubic;
 pub mod discovered;
 pub mod friction;
 pub mod kind;
+pub mod label;
 
 use serde::{Deserialize, Serialize};
 
@@ -24,6 +28,7 @@ pub use cubic::Cubic;
 pub use discovered::{Function, Site, Term};
 pub use friction::Friction;
 pub use kind::{Kind, Law, Placement, Side};
+pub use label::{Label, LabelError, Location};
 
 /// A real parameter of an effect kind: its name suffix (`contact23_gap`), unit, start value and
 /// smallest allowed value.

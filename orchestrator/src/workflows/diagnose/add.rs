@@ -380,16 +380,21 @@ pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Addition>, bool)> {
 /// One effect of a report: a library label, or a discovered effect with its terms.
 fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, String> {
     use structure::building::PAPER_STOREYS;
-    use structure::effects::{Function, Site, Term};
+    use structure::effects::{Function, Label, Site, Term};
     let label = e
         .get("label")
         .and_then(|l| l.as_str())
         .ok_or("an effect without a label")?;
-    let Some(site) = label.strip_prefix("discovered@") else {
-        return Candidate::parse(label).map(Addition::Library);
+    let site = match Label::parse(label) {
+        Ok(parsed) if parsed.kind == super::candidate::DISCOVERED => {
+            Site::at_location(parsed.location, PAPER_STOREYS).ok_or_else(|| {
+                format!(
+                    "effect '{label}': the site must be storey1..{PAPER_STOREYS} or floor1..{PAPER_STOREYS}"
+                )
+            })?
+        }
+        _ => return Candidate::parse(label, PAPER_STOREYS).map(Addition::Library),
     };
-    let site = Site::parse(site, PAPER_STOREYS)
-        .ok_or_else(|| format!("effect '{label}': the site must be storey1..3 or floor1..3"))?;
     let terms = e
         .get("terms")
         .and_then(|t| t.as_array())

@@ -6,9 +6,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use structure::effects::discovered::{variable_name, Slot};
-use structure::effects::Placement;
 pub use structure::effects::{Kind, Side};
-use structure::effects::{Site, Term};
+use structure::effects::{Label, Placement, Term};
 
 use crate::twin::ParameterValue;
 use crate::workflows::calibrate::Prior;
@@ -54,76 +53,50 @@ impl Candidate {
         all
     }
 
-    /// `contact@2-3:positive`, `cubic@2`, `friction@1`: the form `--effect` takes.
+    /// `contact@2-3:positive`, `cubic@2`, `friction@1`: the effect's text form
+    /// ([`Label`]), as `--effect` takes it.
     pub fn label(&self) -> String {
-        match self.kind {
-            Kind::Contact => format!("contact@{}-{}:{}", self.at - 1, self.at, self.side.name()),
-            Kind::Cubic => format!("cubic@{}", self.at),
-            Kind::Friction => format!("friction@{}", self.at),
+        let mut label = Label::new(self.kind.name(), self.kind.location(self.at - 1));
+        if self.kind.has_side() {
+            label.params.push(("side".into(), self.side.name().into()));
         }
+        label.to_string()
     }
 
-    /// Parse `KIND@LOCATION[:SIDE]`: `contact@2-3[:both|positive|negative]` (adjacent floors, 0
-    /// the ground; side both by default), `cubic@2` (storey) and `friction@1` (floor).
-    pub fn parse(text: &str) -> Result<Candidate, String> {
-        let usage =
-            "expected contact@L-U[:both|positive|negative] (adjacent floors, 0 the ground), \
-                     cubic@S (storey 1..3) or friction@F (floor 1..3)";
-        let (kind, rest) = text
-            .split_once('@')
-            .ok_or_else(|| format!("effect '{text}': {usage}"))?;
-        let (location, side) = match rest.split_once(':') {
-            Some((l, s)) => (
-                l,
-                Some(Side::parse(s).ok_or_else(|| {
-                    format!("effect '{text}': side '{s}' is not both, positive or negative")
-                })?),
-            ),
-            None => (rest, None),
-        };
-        let number = |s: &str| -> Result<usize, String> {
-            s.trim()
-                .parse::<usize>()
-                .map_err(|_| format!("effect '{text}': '{s}' is not a floor number; {usage}"))
-        };
-        let candidate = match kind {
-            "contact" => {
-                let (a, b) = location
-                    .split_once('-')
-                    .ok_or_else(|| format!("effect '{text}': {usage}"))?;
-                let (a, b) = (number(a)?, number(b)?);
-                if b != a + 1 || b > 3 {
-                    return Err(format!(
-                        "effect '{text}': contact acts between adjacent floors 0-1, 1-2 or 2-3"
-                    ));
-                }
-                Candidate {
-                    kind: Kind::Contact,
-                    at: b,
-                    side: side.unwrap_or(Side::Both),
-                }
+    /// Read a candidate of a building of `storeys` storeys from its text form ([`Label`]):
+    /// `contact@2-3[:both|positive|negative]` (adjacent floors, 0 the ground; side both by
+    /// default; also `:side=…`), `cubic@2` (storey) and `friction@1` (floor). A candidate's
+    /// other parameters are estimated, so none is given.
+    pub fn parse(text: &str, storeys: usize) -> Result<Candidate, String> {
+        let error = |why: String| format!("effect '{text}': {why}");
+        let label = Label::parse(text).map_err(|e| error(e.to_string()))?;
+        let kind = Kind::parse(&label.kind).ok_or_else(|| {
+            error(format!(
+                "unknown kind '{}'; expected contact@L-U[:both|positive|negative] (adjacent \
+                 floors, 0 the ground), cubic@S (storey 1..{storeys}) or friction@F (floor \
+                 1..{storeys})",
+                label.kind
+            ))
+        })?;
+        let mut side = Side::Both;
+        for (key, value) in &label.params {
+            if key != "side" {
+                return Err(error(format!(
+                    "'{key}' is estimated, not given; a candidate takes only contact's side"
+                )));
             }
-            "cubic" | "friction" => {
-                if side.is_some() {
-                    return Err(format!("effect '{text}': only contact has a side"));
-                }
-                let at = number(location)?;
-                if !(1..=3).contains(&at) {
-                    return Err(format!("effect '{text}': {kind} is at 1, 2 or 3"));
-                }
-                Candidate {
-                    kind: if kind == "cubic" {
-                        Kind::Cubic
-                    } else {
-                        Kind::Friction
-                    },
-                    at,
-                    side: Side::Both,
-                }
+            if !kind.has_side() {
+                return Err(error("only contact has a side".into()));
             }
-            _ => return Err(format!("effect '{text}': unknown kind '{kind}'; {usage}")),
-        };
-        Ok(candidate)
+            side = Side::parse(value).ok_or_else(|| {
+                error(format!("side '{value}' is not both, positive or negative"))
+            })?;
+        }
+        let at = kind
+            .site(label.location, storeys)
+            .map_err(|e| error(e.to_string()))?
+            + 1;
+        Ok(Candidate { kind, at, side })
     }
 
     /// The report's location: contact `[lower, upper]`, cubic `[storey]`, friction `[floor]`.
@@ -214,6 +187,9 @@ impl Candidate {
     }
 }
 
+/// The kind of the discovered terms in the text form: `discovered@storey2`.
+pub const DISCOVERED: &str = "discovered";
+
 /// What `add-physics` switches on: an effect of the library, or terms found by discovery
 /// (the shear FMU's generic `discovered` effect, all at one site).
 #[derive(Clone, Debug, PartialEq)]
@@ -227,10 +203,9 @@ impl Addition {
     pub fn label(&self) -> String {
         match self {
             Addition::Library(c) => c.label(),
-            Addition::Discovered(terms) => match terms.first().map(|t| t.site) {
-                Some(Site::Storey(n)) => format!("discovered@storey{n}"),
-                Some(Site::Floor(n)) => format!("discovered@floor{n}"),
-                None => "discovered@none".into(),
+            Addition::Discovered(terms) => match terms.first() {
+                Some(t) => Label::new(DISCOVERED, t.site.location()).to_string(),
+                None => format!("{DISCOVERED}@none"),
             },
         }
     }
@@ -305,10 +280,15 @@ mod tests {
     #[test]
     fn labels_parse_back() {
         for c in Candidate::library(PAPER_STOREYS) {
-            assert_eq!(Candidate::parse(&c.label()), Ok(c), "{}", c.label());
+            assert_eq!(
+                Candidate::parse(&c.label(), PAPER_STOREYS),
+                Ok(c),
+                "{}",
+                c.label()
+            );
         }
         assert_eq!(Candidate::library(PAPER_STOREYS).len(), 15);
-        let c = Candidate::parse("contact@0-1").unwrap();
+        let c = Candidate::parse("contact@0-1", PAPER_STOREYS).unwrap();
         assert_eq!((c.at, c.side, c.location()), (1, Side::Both, vec![0, 1]));
         assert_eq!(c.prefix(), "contact01");
     }
@@ -324,7 +304,7 @@ mod tests {
             ("cubic", "expected"),
             ("friction@x", "'x' is not a floor number"),
         ] {
-            let e = Candidate::parse(text).unwrap_err();
+            let e = Candidate::parse(text, PAPER_STOREYS).unwrap_err();
             assert!(e.contains(says) && e.contains(text), "{text}: {e}");
         }
     }

@@ -146,7 +146,7 @@ pub use add::{
 };
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
 pub use discover::Found;
-pub use options::parse_candidates;
+pub use options::{parse_additions, parse_candidates};
 pub use report::*;
 pub use sensor::{SensorFit, SensorSd};
 

@@ -1,7 +1,9 @@
 //! `twin diagnose`'s options checked, and its `--effects` read, once for the CLI and the
 //! Python package.
 
-use super::{Candidate, DiagnoseOptions};
+use structure::building::PAPER_STOREYS;
+
+use super::{Addition, Candidate, DiagnoseOptions};
 use crate::twin::data::Measurement;
 use crate::workflows::options::{
     check_threads, check_tolerance, check_transient_leaves, InvalidOption,
@@ -21,10 +23,19 @@ impl DiagnoseOptions {
     }
 }
 
-/// `--effects KIND@LOCATION[:SIDE] …` as candidates.
+/// `--effects KIND@LOCATION[:SIDE] …` as candidates (of the paper's three-storey rig, the
+/// building the diagnosis serves).
 pub fn parse_candidates(effects: &[String]) -> Result<Vec<Candidate>, InvalidOption> {
     effects
         .iter()
-        .map(|e| Candidate::parse(e).map_err(InvalidOption))
+        .map(|e| Candidate::parse(e, PAPER_STOREYS).map_err(InvalidOption))
         .collect()
+}
+
+/// `add-physics --effect KIND@LOCATION[:SIDE] …`: the library's effects to switch on.
+pub fn parse_additions(effects: &[String]) -> Result<Vec<Addition>, InvalidOption> {
+    Ok(parse_candidates(effects)?
+        .into_iter()
+        .map(Addition::Library)
+        .collect())
 }
