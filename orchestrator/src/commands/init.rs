@@ -1,19 +1,51 @@
-//! `twin init`: the default twin (the shear FMU, default parameters) as an SSP archive.
+//! `twin init`: the default twin (the shear FMU, default parameters) as an SSP archive; with
+//! `--storeys`, `--excitation` or `--nominal`, the twin of that shear building.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::twin::structure::{InitOptions, Nominal};
 use crate::twin::Twin;
 
 #[derive(clap::Args)]
 pub struct InitArgs {
     #[arg(long)]
     pub out: PathBuf,
+    /// Storeys of the building (1 to 50); 3 by default, or as many as NOMINAL.json has masses.
+    #[arg(long)]
+    pub storeys: Option<usize>,
+    /// What shakes it: `force:K` (a force at floor K, the input `force`) or `base` (ground
+    /// acceleration, the input `ground_acc`); `force:1` by default.
+    #[arg(long, value_parser = parse_excitation)]
+    pub excitation: Option<structure::Excitation>,
+    /// The nominal structure, `{"m": [...], "c": [...], "k": [...]}` in kg, N s/m, N/m: the
+    /// FMU's start values. Without it, every floor and storey is the paper's (5.2 kg,
+    /// exp(-4.605) N s/m, 4021 N/m).
+    #[arg(long, value_name = "NOMINAL.json")]
+    pub nominal: Option<PathBuf>,
+}
+
+fn parse_excitation(text: &str) -> Result<structure::Excitation, String> {
+    structure::Excitation::parse(text).map_err(|e| e.to_string())
 }
 
 pub fn run(args: &InitArgs) -> Result<()> {
-    Twin::default_twin()?.write(&args.out)?;
+    let twin = if args.storeys.is_none() && args.excitation.is_none() && args.nominal.is_none() {
+        Twin::default_twin()?
+    } else {
+        let nominal = match &args.nominal {
+            Some(path) => Some((path.clone(), Nominal::read(path)?)),
+            None => None,
+        };
+        let options = InitOptions {
+            storeys: args.storeys,
+            excitation: args.excitation,
+            nominal,
+        };
+        Twin::for_structure(&options.structure()?)?
+    };
+    twin.write(&args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

@@ -17,6 +17,7 @@
 pub use crate::record as data;
 pub mod embedded;
 pub mod run;
+pub mod structure;
 pub mod system;
 
 use std::collections::BTreeMap;

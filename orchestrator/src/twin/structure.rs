@@ -1,0 +1,218 @@
+//! The twin of any shear building: the shear FMU made for a structure (its storeys, its
+//! excitation, its nominal m/c/k), for `twin init --storeys N --excitation force:K|base`.
+//!
+//! One shear library serves every structure (`fmu_shear::variables::table`): what changes is the
+//! FMU's `modelDescription.xml`, written from the Rust variable table of that structure, and
+//! `resources/structure.json`, which the library reads at `fmi2Instantiate`. The archive is the
+//! built-in shear FMU with those two entries replaced or added.
+
+use std::collections::BTreeMap;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use fmu_shear::{ShearParameters, StructureResource};
+use structure::{Excitation, Structure};
+
+use super::{find_fmu, Component, Connection, Twin, TwinError, PHYSICS, SHEAR_FMU};
+
+/// The structure file inside the FMU (under `resources/`).
+const RESOURCE: &str = "resources/structure.json";
+
+/// An engineer's estimate from drawings: `{"m": [...], "c": [...], "k": [...]}`, SI, one value
+/// per floor / storey.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Nominal {
+    pub m: Vec<f64>,
+    pub c: Vec<f64>,
+    pub k: Vec<f64>,
+}
+
+impl Nominal {
+    pub fn read(path: &Path) -> Result<Nominal, TwinError> {
+        let invalid = |message: String| TwinError::Invalid {
+            path: path.to_owned(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|source| TwinError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|e| {
+            invalid(format!(
+                "{e}; expected {{\"m\": [...], \"c\": [...], \"k\": [...]}} (kg, N s/m, N/m)"
+            ))
+        })
+    }
+}
+
+/// What `twin init` was asked for.
+#[derive(Debug, Clone, Default)]
+pub struct InitOptions {
+    pub storeys: Option<usize>,
+    pub excitation: Option<Excitation>,
+    pub nominal: Option<(PathBuf, Nominal)>,
+}
+
+impl InitOptions {
+    /// The structure: the nominal values when given (their length is the storey count), else
+    /// the paper's floor and storey repeated; checked whole before anything is written.
+    pub fn structure(&self) -> Result<Structure, TwinError> {
+        let excitation = self.excitation.unwrap_or_default();
+        let structure = match &self.nominal {
+            Some((path, nominal)) => {
+                let invalid = |message: String| TwinError::Invalid {
+                    path: path.clone(),
+                    message,
+                };
+                let n = nominal.m.len();
+                if let Some(storeys) = self.storeys {
+                    if storeys != n {
+                        return Err(invalid(format!(
+                            "\"m\" has {n} values but --storeys is {storeys}"
+                        )));
+                    }
+                }
+                let s = Structure {
+                    mass: nominal.m.clone(),
+                    damping: nominal.c.clone(),
+                    stiffness: nominal.k.clone(),
+                    excitation,
+                };
+                s.validate().map_err(|e| invalid(e.to_string()))?;
+                s
+            }
+            None => {
+                let defaults = Structure::default();
+                let s = Structure::uniform(
+                    self.storeys.unwrap_or(defaults.storeys()),
+                    defaults.mass[0],
+                    defaults.damping[0],
+                    defaults.stiffness[0],
+                    excitation,
+                );
+                s.validate().map_err(|e| TwinError::Message(e.to_string()))?;
+                s
+            }
+        };
+        Ok(structure)
+    }
+}
+
+/// The shear FMU for `resource` as archive bytes: the built-in FMU with its modelDescription
+/// written for the structure and `resources/structure.json` added.
+pub fn shear_fmu_bytes(resource: &StructureResource) -> Result<Vec<u8>, TwinError> {
+    let params = resource
+        .parameters()
+        .map_err(|e| TwinError::Message(format!("the structure: {e}")))?;
+    let base = find_fmu(SHEAR_FMU)?;
+    let bad = |message: String| TwinError::Invalid {
+        path: base.clone(),
+        message,
+    };
+    let file = std::fs::File::open(&base).map_err(|source| TwinError::Io {
+        path: base.clone(),
+        source,
+    })?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
+    let xml = fmu_shear::variables::table(&params).to_model_description_xml();
+    let json = serde_json::to_string_pretty(resource)
+        .map_err(|e| TwinError::Message(format!("the structure as JSON: {e}")))?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    {
+        let zip_err = |e: zip::result::ZipError| bad(format!("zip: {e}"));
+        let io_err = |e: std::io::Error| bad(e.to_string());
+        let mut zip = zip::ZipWriter::new(&mut out);
+        let deflated = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated);
+        for i in 0..archive.len() {
+            let mut entry = archive.by_index(i).map_err(zip_err)?;
+            let name = entry.name().to_owned();
+            if name == "modelDescription.xml" || name == RESOURCE {
+                continue;
+            }
+            let mut bytes = Vec::new();
+            entry.read_to_end(&mut bytes).map_err(io_err)?;
+            let options = if name.starts_with("binaries/") {
+                deflated.compression_method(zip::CompressionMethod::Stored)
+            } else {
+                deflated
+            };
+            zip.start_file(name, options).map_err(zip_err)?;
+            zip.write_all(&bytes).map_err(io_err)?;
+        }
+        zip.start_file("modelDescription.xml", deflated)
+            .map_err(zip_err)?;
+        zip.write_all(xml.as_bytes()).map_err(io_err)?;
+        zip.start_file(RESOURCE, deflated).map_err(zip_err)?;
+        zip.write_all(json.as_bytes()).map_err(io_err)?;
+        zip.finish().map_err(zip_err)?;
+    }
+    Ok(out.into_inner())
+}
+
+impl Twin {
+    /// The default twin of `structure`: the paper's rig is [`Twin::default_twin`] itself;
+    /// any other structure gets its own shear FMU (written to a temporary file that lives as
+    /// long as the twin), the excitation's input and the control force connected in, every
+    /// floor's acceleration out.
+    pub fn for_structure(structure: &Structure) -> Result<Twin, TwinError> {
+        let resource = StructureResource {
+            structure: structure.clone(),
+            control_floor: 1,
+        };
+        let params = resource
+            .parameters()
+            .map_err(|e| TwinError::Message(format!("the structure: {e}")))?;
+        if params == ShearParameters::default() {
+            return Twin::default_twin();
+        }
+        let bytes = shear_fmu_bytes(&resource)?;
+        let dir = tempfile::tempdir().map_err(|source| TwinError::Io {
+            path: std::env::temp_dir(),
+            source,
+        })?;
+        let fmu_path = dir.path().join(SHEAR_FMU);
+        std::fs::write(&fmu_path, bytes).map_err(|source| TwinError::Io {
+            path: fmu_path.clone(),
+            source,
+        })?;
+        let inputs = [structure.excitation.input_name(), "control_force"];
+        let mut connections: Vec<Connection> = inputs
+            .iter()
+            .map(|input| Connection {
+                start_element: None,
+                start_connector: (*input).into(),
+                end_element: Some(PHYSICS.into()),
+                end_connector: (*input).into(),
+            })
+            .collect();
+        for floor in 1..=structure.storeys() {
+            let output = format!("acc{floor}");
+            connections.push(Connection {
+                start_element: Some(PHYSICS.into()),
+                start_connector: output.clone(),
+                end_element: None,
+                end_connector: output,
+            });
+        }
+        Ok(Twin {
+            name: "shear-twin".into(),
+            components: vec![Component {
+                name: PHYSICS.into(),
+                fmu_name: SHEAR_FMU.into(),
+                fmu_path,
+                parameters: BTreeMap::new(),
+            }],
+            connections,
+            noise_variance: None,
+            default_experiment: None,
+            parameter_covariance: None,
+            validation_nmse: None,
+            records: Vec::new(),
+            source: None,
+            keep_alive: vec![Arc::new(dir)],
+        })
+    }
+}
