@@ -2,8 +2,9 @@
 //! initialization, one `Controller::step` per `fmi2DoStep`.
 
 use fmi2::{CoSimModel, InstantiateContext, ModelError, ModelInfo};
-use numerics::lqr::{Controller, ControllerMemory, Estimator, ShearMatrices, FLOORS, STATES};
+use numerics::lqr::{Controller, ControllerMemory, Estimator, StateSpace};
 use serde::{Deserialize, Serialize};
+use structure::{Excitation, Structure};
 
 use crate::variables::{self as vars, *};
 
@@ -13,34 +14,64 @@ pub const STEP_TOLERANCE: f64 = 1e-9;
 /// Everything the host sets before initialization.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Parameters {
-    pub gain: [f64; STATES],
+    /// One per state: the floors' displacements, then their velocities.
+    pub gain: Vec<f64>,
     pub state_scale: f64,
-    pub mass: [f64; FLOORS],
-    pub damping: [f64; FLOORS],
-    pub stiffness: [f64; FLOORS],
+    /// The observer's model: the structure (m, c, k; the shaker at floor 1, which `force` is).
+    pub structure: Structure,
+    /// The floor the control force acts on (1-based).
+    pub actuator_floor: usize,
     /// 0 integrate, 1 Kalman.
     pub estimator: i32,
     pub highpass_hz: f64,
     pub process_sd: f64,
-    pub sensor_sd: [f64; FLOORS],
+    /// One per floor.
+    pub sensor_sd: Vec<f64>,
     pub sample_interval: f64,
 }
 
 impl Default for Parameters {
     fn default() -> Self {
         Parameters {
-            gain: [0.0; STATES],
+            gain: vec![0.0; 2 * FLOORS],
             state_scale: 1.0,
-            mass: [DEFAULT_MASS; FLOORS],
-            damping: [DEFAULT_DAMPING; FLOORS],
-            stiffness: [DEFAULT_STIFFNESS; FLOORS],
+            structure: Structure::uniform(
+                FLOORS,
+                DEFAULT_MASS,
+                DEFAULT_DAMPING,
+                DEFAULT_STIFFNESS,
+                Excitation::Force { floor: 1 },
+            ),
+            actuator_floor: DEFAULT_ACTUATOR_FLOOR,
             estimator: 0,
             highpass_hz: DEFAULT_HIGHPASS_HZ,
             process_sd: DEFAULT_PROCESS_SD,
-            sensor_sd: [DEFAULT_SENSOR_SD; FLOORS],
+            sensor_sd: vec![DEFAULT_SENSOR_SD; FLOORS],
             sample_interval: DEFAULT_SAMPLE_INTERVAL,
         }
     }
+}
+
+/// The controller's model of `structure` with the actuator at `actuator_floor`, the state in
+/// units of `state_scale` metres: the one way from a structure to the LQR's plant, for this FMU
+/// and the orchestrator's designs.
+pub fn plant(
+    structure: &Structure,
+    actuator_floor: usize,
+    state_scale: f64,
+) -> Result<StateSpace, String> {
+    let si = structure.state_space().map_err(|e| e.to_string())?;
+    let actuator = structure
+        .force_input(actuator_floor)
+        .map_err(|e| format!("the actuator: {e}"))?;
+    StateSpace::from_si(
+        &si.a,
+        &si.c,
+        (&si.b, &si.d),
+        (&actuator.0, &actuator.1),
+        state_scale,
+    )
+    .map_err(|e| e.to_string())
 }
 
 impl Parameters {
@@ -51,7 +82,7 @@ impl Parameters {
             }),
             1 => Ok(Estimator::Kalman {
                 process_sd: self.process_sd,
-                sensor_sd: self.sensor_sd,
+                sensor_sd: self.sensor_sd.clone(),
             }),
             e => Err(format!("estimator = {e}: 0 (integrate) or 1 (kalman)")),
         }
@@ -59,15 +90,8 @@ impl Parameters {
 
     /// The controller these parameters describe, with no sample seen yet.
     pub fn controller(&self) -> Result<Controller, String> {
-        let structure = ShearMatrices {
-            mass: self.mass,
-            damping: self.damping,
-            stiffness: self.stiffness,
-        };
-        let plant = structure
-            .state_space(self.state_scale)
-            .map_err(|e| e.to_string())?;
-        Controller::new(&plant, self.gain, &self.estimator()?, self.sample_interval)
+        let plant = plant(&self.structure, self.actuator_floor, self.state_scale)?;
+        Controller::new(&plant, &self.gain, &self.estimator()?, self.sample_interval)
             .map_err(|e| e.to_string())
     }
 }
@@ -139,9 +163,9 @@ impl LqrModel {
         Some(match vr {
             GAIN..=6 => &mut p.gain[i(GAIN)],
             STATE_SCALE => &mut p.state_scale,
-            MASS..=12 => &mut p.mass[i(MASS)],
-            DAMPING..=15 => &mut p.damping[i(DAMPING)],
-            STIFFNESS..=18 => &mut p.stiffness[i(STIFFNESS)],
+            MASS..=12 => &mut p.structure.mass[i(MASS)],
+            DAMPING..=15 => &mut p.structure.damping[i(DAMPING)],
+            STIFFNESS..=18 => &mut p.structure.stiffness[i(STIFFNESS)],
             HIGHPASS_HZ => &mut p.highpass_hz,
             PROCESS_SD => &mut p.process_sd,
             SENSOR_SD..=25 => &mut p.sensor_sd[i(SENSOR_SD)],
@@ -232,7 +256,9 @@ impl CoSimModel for LqrModel {
             .controller
             .as_mut()
             .ok_or_else(|| ModelError::Other("the controller was not initialised".into()))?;
-        let u = controller.step(self.acc, self.force);
+        let u = controller
+            .step(&self.acc, self.force)
+            .map_err(|e| ModelError::Other(e.to_string()))?;
         if !u.is_finite() {
             return Err(ModelError::Diverged {
                 time,

@@ -4,6 +4,12 @@ use std::sync::OnceLock;
 
 use fmi2::{DefaultExperiment, ModelInfo, Unit, Variability, Variable};
 
+/// The floors this FMU's variables are laid out for (acc1..3, m1..m3, …; the law underneath,
+/// `numerics::lqr`, takes any number).
+pub const FLOORS: usize = 3;
+/// The floor the control force acts on.
+pub const DEFAULT_ACTUATOR_FLOOR: usize = 1;
+
 /// gain1..gain6 are GAIN..GAIN+5 (the state `[y1, y2, y3, ẏ1, ẏ2, ẏ3]`).
 pub const GAIN: u32 = 1;
 pub const STATE_SCALE: u32 = 7;
@@ -51,7 +57,7 @@ fn units() -> Vec<Unit> {
 
 fn variables() -> Vec<Variable> {
     let mut v = Vec::new();
-    for i in 0..3u32 {
+    for i in 0..FLOORS as u32 {
         let floor = i + 1;
         v.push(
             Variable::real_input(&format!("acc{floor}"), ACC + i, "m/s2", 0.0).describe(&format!(
@@ -84,7 +90,7 @@ fn variables() -> Vec<Variable> {
             .min(0.0)
             .describe("metres per state unit (1e-3: the state in mm and mm/s)"),
     );
-    for i in 0..3u32 {
+    for i in 0..FLOORS as u32 {
         let n = i + 1;
         v.push(
             Variable::real_parameter(&format!("m{n}"), MASS + i, "kg", DEFAULT_MASS)
@@ -92,7 +98,7 @@ fn variables() -> Vec<Variable> {
                 .describe(&format!("mass of floor {n} (the observer's model)")),
         );
     }
-    for i in 0..3u32 {
+    for i in 0..FLOORS as u32 {
         let n = i + 1;
         v.push(
             Variable::real_parameter(&format!("c{n}"), DAMPING + i, "N.s/m", DEFAULT_DAMPING)
@@ -102,7 +108,7 @@ fn variables() -> Vec<Variable> {
                 )),
         );
     }
-    for i in 0..3u32 {
+    for i in 0..FLOORS as u32 {
         let n = i + 1;
         v.push(
             Variable::real_parameter(&format!("k{n}"), STIFFNESS + i, "N/m", DEFAULT_STIFFNESS)
@@ -126,7 +132,7 @@ fn variables() -> Vec<Variable> {
             .min(0.0)
             .describe("Kalman observer: sd of a white force error on floor 1 per sample"),
     );
-    for i in 0..3u32 {
+    for i in 0..FLOORS as u32 {
         let n = i + 1;
         v.push(
             Variable::real_parameter(

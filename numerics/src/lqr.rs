@@ -1,7 +1,11 @@
-//! The shear structure's state-space model and the LQR controller's run-time law (the reference
-//! paper's section 6, eqs 16–22): `f_c = K ŵ`, with the state `ŵ = [y; ẏ]` estimated from the
-//! measured floor accelerations, either by integrating them with drift removal (as the paper
-//! does) or by a steady-state Kalman observer on the twin's model.
+//! The LQR controller's run-time law (the reference paper's section 6, eqs 16–22) for a linear
+//! model of any size: `f_c = K ŵ`, with the state `ŵ` estimated from the measured accelerations,
+//! either by integrating them with drift removal (as the paper does) or by a steady-state Kalman
+//! observer on the model.
+//!
+//! No building lives here: the model's matrices come from the caller (the shear building's from
+//! `structure::Structure::state_space` and `force_input`). The state is `w = [y; ẏ]` of `n`
+//! degrees of freedom, `2n` states; the accelerometers read `n` absolute accelerations.
 //!
 //! The same code runs as a block of the orchestrator's master and inside the controller FMU, so
 //! a controlled system gives the same numbers in any FMI host.
@@ -10,16 +14,8 @@
 //! through `state_scale` (metres per state unit: 1e-3 for the paper's millimetres), and then the
 //! gain is in newtons per state unit.
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-
-/// Floors of the structure.
-pub const FLOORS: usize = 3;
-/// States: displacements then velocities of the floors.
-pub const STATES: usize = 2 * FLOORS;
-
-pub type StateMatrix = SMatrix<f64, STATES, STATES>;
-pub type StateVector = SVector<f64, STATES>;
 
 /// Errors of the controller's set-up.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -27,9 +23,13 @@ pub enum LqrError {
     #[error("{what} must be finite and positive, got {value}")]
     NotPositive { what: String, value: f64 },
     #[error("the gain has a non-finite entry: {0:?}")]
-    NonFiniteGain([f64; STATES]),
-    #[error("the mass matrix is singular")]
-    SingularMass,
+    NonFiniteGain(Vec<f64>),
+    #[error("{what} has {got} entries; the model needs {expected}")]
+    Dimension {
+        what: String,
+        got: usize,
+        expected: usize,
+    },
     #[error("the Kalman observer's covariance did not settle in {0} iterations")]
     KalmanNotConverged(usize),
     #[error("the Kalman observer's innovation covariance is singular")]
@@ -47,134 +47,122 @@ fn positive(what: &str, value: f64) -> Result<f64, LqrError> {
     }
 }
 
-/// Masses (kg), storey dampings (N s/m) and storey stiffnesses (N/m) of the shear model: the
-/// linear part of eq. (16).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ShearMatrices {
-    pub mass: [f64; FLOORS],
-    pub damping: [f64; FLOORS],
-    pub stiffness: [f64; FLOORS],
-}
-
-/// The tridiagonal matrix of storey coefficients `c` (storey i joins floor i−1 and floor i;
-/// storey 1 joins the ground and floor 1).
-fn storey_matrix(c: &[f64; FLOORS]) -> Matrix3<f64> {
-    let mut m = Matrix3::zeros();
-    for i in 0..FLOORS {
-        m[(i, i)] += c[i];
-        if i + 1 < FLOORS {
-            m[(i, i)] += c[i + 1];
-            m[(i, i + 1)] -= c[i + 1];
-            m[(i + 1, i)] -= c[i + 1];
-        }
-    }
-    m
-}
-
-impl ShearMatrices {
-    /// Every value finite, masses and stiffnesses positive, dampings non-negative.
-    pub fn check(&self) -> Result<(), LqrError> {
-        for i in 0..FLOORS {
-            positive(&format!("m{}", i + 1), self.mass[i])?;
-            positive(&format!("k{}", i + 1), self.stiffness[i])?;
-            let c = self.damping[i];
-            if !(c.is_finite() && c >= 0.0) {
-                return Err(LqrError::NotPositive {
-                    what: format!("c{} (may be zero)", i + 1),
-                    value: c,
-                });
-            }
-        }
+fn dimension(what: &str, got: usize, expected: usize) -> Result<(), LqrError> {
+    if got == expected {
         Ok(())
-    }
-
-    pub fn mass_matrix(&self) -> Matrix3<f64> {
-        Matrix3::from_diagonal(&Vector3::from(self.mass))
-    }
-
-    pub fn damping_matrix(&self) -> Matrix3<f64> {
-        storey_matrix(&self.damping)
-    }
-
-    pub fn stiffness_matrix(&self) -> Matrix3<f64> {
-        storey_matrix(&self.stiffness)
-    }
-
-    /// Undamped natural frequencies, Hz, ascending: the resonances the attenuation is read at.
-    pub fn natural_frequencies(&self) -> [f64; FLOORS] {
-        let s = Matrix3::from_diagonal(&Vector3::from(self.mass.map(|m| 1.0 / m.sqrt())));
-        let sym = s * self.stiffness_matrix() * s;
-        let mut w: Vec<f64> = sym
-            .symmetric_eigenvalues()
-            .iter()
-            .map(|&l| l.max(0.0).sqrt() / (2.0 * std::f64::consts::PI))
-            .collect();
-        w.sort_by(f64::total_cmp);
-        [w[0], w[1], w[2]]
-    }
-
-    /// The state-space model of eqs 17–19 with the state in units of `state_scale` metres.
-    pub fn state_space(&self, state_scale: f64) -> Result<StateSpace, LqrError> {
-        self.check()?;
-        positive("state_scale", state_scale)?;
-        let m_inv = self
-            .mass_matrix()
-            .try_inverse()
-            .ok_or(LqrError::SingularMass)?;
-        let mk = -(m_inv * self.stiffness_matrix());
-        let mc = -(m_inv * self.damping_matrix());
-        let mut a = StateMatrix::zeros();
-        let mut c = SMatrix::<f64, FLOORS, STATES>::zeros();
-        for i in 0..FLOORS {
-            a[(i, FLOORS + i)] = 1.0;
-            for j in 0..FLOORS {
-                a[(FLOORS + i, j)] = mk[(i, j)];
-                a[(FLOORS + i, FLOORS + j)] = mc[(i, j)];
-                c[(i, j)] = mk[(i, j)];
-                c[(i, FLOORS + j)] = mc[(i, j)];
-            }
-        }
-        // φ = floor 1: a force of 1 N accelerates floor 1 by 1/m1 m/s², 1/(m1·scale) state
-        // units.
-        let mut b = StateVector::zeros();
-        b[FLOORS] = m_inv[(0, 0)] / state_scale;
-        let d = Vector3::new(m_inv[(0, 0)] / state_scale, 0.0, 0.0);
-        Ok(StateSpace {
-            a,
-            b,
-            c,
-            d,
-            state_scale,
+    } else {
+        Err(LqrError::Dimension {
+            what: what.to_owned(),
+            got,
+            expected,
         })
     }
 }
 
-/// `ẇ = A w + B (f_p − f_c)`, `z = C w + D (f_p − f_c)` with `w` and the accelerations `z` in
-/// state units (eqs 17–19; B_p = B_c = B since both forces act on floor 1).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// `ẇ = A w + B_e u_e − B f_c`, `z = C w + D_e u_e − D f_c`: the state `w` (`n` displacements,
+/// then `n` velocities) and the accelerations `z` in state units, `u_e` the excitation (known to
+/// the Kalman observer: a force in N, or a ground acceleration in m/s²), `f_c` the control force
+/// (N) of the actuator (eqs 17–19; the paper's B_p = B_c, shaker and actuator both on floor 1).
+#[derive(Clone, Debug, PartialEq)]
 pub struct StateSpace {
-    pub a: StateMatrix,
-    pub b: StateVector,
-    pub c: SMatrix<f64, FLOORS, STATES>,
-    pub d: Vector3<f64>,
+    pub a: DMatrix<f64>,
+    /// The actuator's column, state units per N.
+    pub b: DVector<f64>,
+    pub c: DMatrix<f64>,
+    /// The actuator's feedthrough into the accelerations.
+    pub d: DVector<f64>,
+    /// The excitation's column and feedthrough.
+    pub excitation_b: DVector<f64>,
+    pub excitation_d: DVector<f64>,
     /// Metres per state unit.
     pub state_scale: f64,
 }
 
+impl StateSpace {
+    /// The model in state units of `state_scale` metres from one in SI (`ẋ = A x + B_e u_e +
+    /// B f`, accelerations `C x + D_e u_e + D f`, `x` in m and m/s): A and C stay (a state and
+    /// its accelerations scale alike), the input columns are divided by the scale.
+    pub fn from_si(
+        a: &DMatrix<f64>,
+        c: &DMatrix<f64>,
+        (excitation_b, excitation_d): (&DVector<f64>, &DVector<f64>),
+        (actuator_b, actuator_d): (&DVector<f64>, &DVector<f64>),
+        state_scale: f64,
+    ) -> Result<StateSpace, LqrError> {
+        positive("state_scale", state_scale)?;
+        let states = a.nrows();
+        if states == 0 || states % 2 != 0 {
+            return Err(LqrError::Dimension {
+                what: "the state (displacements then velocities)".into(),
+                got: states,
+                expected: 2 * (states / 2).max(1),
+            });
+        }
+        dimension("A's columns", a.ncols(), states)?;
+        dimension("C's columns", c.ncols(), states)?;
+        dimension("the excitation's column", excitation_b.len(), states)?;
+        dimension("the actuator's column", actuator_b.len(), states)?;
+        dimension(
+            "the excitation's feedthrough",
+            excitation_d.len(),
+            c.nrows(),
+        )?;
+        dimension("the actuator's feedthrough", actuator_d.len(), c.nrows())?;
+        let all = a
+            .iter()
+            .chain(c.iter())
+            .chain(excitation_b.iter())
+            .chain(excitation_d.iter())
+            .chain(actuator_b.iter())
+            .chain(actuator_d.iter());
+        if let Some(&bad) = all.into_iter().find(|x| !x.is_finite()) {
+            return Err(LqrError::NotPositive {
+                what: "every entry of the model (finite)".into(),
+                value: bad,
+            });
+        }
+        Ok(StateSpace {
+            a: a.clone(),
+            b: actuator_b / state_scale,
+            c: c.clone(),
+            d: actuator_d / state_scale,
+            excitation_b: excitation_b / state_scale,
+            excitation_d: excitation_d / state_scale,
+            state_scale,
+        })
+    }
+
+    /// States: `2n`.
+    pub fn states(&self) -> usize {
+        self.a.nrows()
+    }
+
+    /// Degrees of freedom (floors): `n`.
+    pub fn floors(&self) -> usize {
+        self.a.nrows() / 2
+    }
+
+    /// Whether the actuator acts where the excitation does (the paper's rig): then the two
+    /// enter the model as their difference.
+    fn actuator_at_excitation(&self) -> bool {
+        self.b == self.excitation_b && self.d == self.excitation_d
+    }
+}
+
 /// How the controller estimates the state from the measured accelerations.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum Estimator {
     /// Integrate the accelerations twice (trapezoidal rule), each integral leaking with the
     /// corner frequency `highpass_hz`: the drift an offset or noise would make is removed, at
     /// the price of a phase lead `atan(f_c / f)` per integration near the first resonance.
     Integrate { highpass_hz: f64 },
-    /// A steady-state Kalman observer on the model: `process_sd` is the sd (N) of a white force
-    /// error on floor 1 per sample (the model's own error), `sensor_sd` the accelerometers'
-    /// noise sd (m/s²).
+    /// A steady-state Kalman observer on the model: `process_sd` is the sd of a white error of
+    /// the excitation per sample (N for a force: the model's own error), `sensor_sd` the
+    /// accelerometers' noise sd (m/s²), one per measured acceleration.
     Kalman {
         process_sd: f64,
-        sensor_sd: [f64; FLOORS],
+        sensor_sd: Vec<f64>,
     },
 }
 
@@ -192,29 +180,51 @@ enum State {
     Integrate {
         /// Leak per sample, `exp(−2π f_c h)`.
         leak: f64,
-        y: [f64; FLOORS],
-        v: [f64; FLOORS],
-        a_prev: [f64; FLOORS],
+        y: Vec<f64>,
+        v: Vec<f64>,
+        a_prev: Vec<f64>,
         started: bool,
     },
     Kalman(Box<Kalman>),
 }
 
-/// The discrete observer: the model's exact step map over the sample interval with the force
-/// linear inside it (first-order hold) and the control force held, then the steady-state gain.
+/// The discrete observer: the model's exact step map over the sample interval with the
+/// excitation linear inside it (first-order hold) and the control force held, then the
+/// steady-state gain.
 #[derive(Clone, Debug)]
 struct Kalman {
-    ad: StateMatrix,
-    /// Response to the input at the start of the interval, held.
-    g0: StateVector,
-    /// Response to the input's slope inside the interval, times the interval.
-    g1: StateVector,
-    c: SMatrix<f64, FLOORS, STATES>,
-    d: Vector3<f64>,
-    l: SMatrix<f64, STATES, FLOORS>,
-    w: StateVector,
-    /// The last sample's force and control force (the prediction needs both ends).
+    ad: DMatrix<f64>,
+    /// Response to the excitation at the start of the interval, held.
+    g0: DVector<f64>,
+    /// Response to the excitation's slope inside the interval, times the interval.
+    g1: DVector<f64>,
+    /// Response to the control force, held; None when the actuator acts where the excitation
+    /// does (then `g0` serves both, on their difference).
+    g0_control: Option<DVector<f64>>,
+    c: DMatrix<f64>,
+    d: DVector<f64>,
+    /// The control force's feedthrough, when the actuator is not at the excitation.
+    d_control: Option<DVector<f64>>,
+    l: DMatrix<f64>,
+    w: DVector<f64>,
+    /// The last sample's excitation and control force (the prediction needs both ends).
     previous: Option<(f64, f64)>,
+}
+
+/// `exp([[A, b, 0], [0, 0, 1], [0, 0, 0]]·h)`: the step map, the held-input response and the
+/// ramp response (per second of slope) of input column `b`, in one go.
+fn step_map(a: &DMatrix<f64>, b: &DVector<f64>, dt: f64) -> DMatrix<f64> {
+    let states = a.nrows();
+    let n = states + 2;
+    let mut m = DMatrix::<f64>::zeros(n, n);
+    for i in 0..states {
+        for j in 0..states {
+            m[(i, j)] = a[(i, j)] * dt;
+        }
+        m[(i, states)] = b[i] * dt;
+    }
+    m[(states, states + 1)] = dt;
+    m.exp()
 }
 
 impl Kalman {
@@ -222,55 +232,50 @@ impl Kalman {
         model: &StateSpace,
         dt: f64,
         process_sd: f64,
-        sensor_sd: [f64; FLOORS],
+        sensor_sd: &[f64],
     ) -> Result<Self, LqrError> {
         positive("the Kalman process sd", process_sd)?;
+        let measured = model.c.nrows();
+        dimension("the Kalman sensor sd", sensor_sd.len(), measured)?;
         for (i, &s) in sensor_sd.iter().enumerate() {
             positive(&format!("the Kalman sensor sd of floor {}", i + 1), s)?;
         }
-        // exp of [[A, B, 0], [0, 0, 1], [0, 0, 0]]·h gives the step map, the held-input
-        // response and the ramp response in one go.
-        let n = STATES + 2;
-        let mut m = nalgebra::DMatrix::<f64>::zeros(n, n);
-        for i in 0..STATES {
-            for j in 0..STATES {
-                m[(i, j)] = model.a[(i, j)] * dt;
-            }
-            m[(i, STATES)] = model.b[i] * dt;
-        }
-        m[(STATES, STATES + 1)] = dt;
-        let e = m.exp();
-        let mut ad = StateMatrix::zeros();
-        let mut g0 = StateVector::zeros();
-        let mut g1 = StateVector::zeros();
-        for i in 0..STATES {
-            for j in 0..STATES {
-                ad[(i, j)] = e[(i, j)];
-            }
-            g0[i] = e[(i, STATES)];
-            // The column multiplies the input's slope (per second); times 1/h it takes the
-            // change over the interval.
-            g1[i] = e[(i, STATES + 1)] / dt;
-        }
-        let qd = g0 * g0.transpose() * (process_sd * process_sd);
-        let v = Matrix3::from_diagonal(&Vector3::from(
-            sensor_sd.map(|s| (s / model.state_scale).powi(2)),
+        let states = model.states();
+        let e = step_map(&model.a, &model.excitation_b, dt);
+        let ad = e.view((0, 0), (states, states)).into_owned();
+        let g0 = e.view((0, states), (states, 1)).column(0).into_owned();
+        // The column multiplies the input's slope (per second); times 1/h it takes the change
+        // over the interval.
+        let g1 = e.view((0, states + 1), (states, 1)).column(0) / dt;
+        let (g0_control, d_control) = if model.actuator_at_excitation() {
+            (None, None)
+        } else {
+            let e = step_map(&model.a, &model.b, dt);
+            (
+                Some(e.view((0, states), (states, 1)).column(0).into_owned()),
+                Some(model.d.clone()),
+            )
+        };
+        let qd = &g0 * g0.transpose() * (process_sd * process_sd);
+        let v = DMatrix::from_diagonal(&DVector::from_iterator(
+            measured,
+            sensor_sd.iter().map(|s| (s / model.state_scale).powi(2)),
         ));
-        let c = model.c;
-        let mut p = qd;
-        let mut l = SMatrix::<f64, STATES, FLOORS>::zeros();
+        let c = model.c.clone();
+        let mut p = qd.clone();
+        let mut l = DMatrix::<f64>::zeros(states, measured);
         const MAX_ITERATIONS: usize = 200_000;
-        let identity = StateMatrix::identity();
+        let identity = DMatrix::<f64>::identity(states, states);
         let mut converged = false;
         for _ in 0..MAX_ITERATIONS {
-            let predicted = ad * p * ad.transpose() + qd;
-            let s = c * predicted * c.transpose() + v;
+            let predicted = &ad * &p * ad.transpose() + &qd;
+            let s = &c * &predicted * c.transpose() + &v;
             let s_inv = s.try_inverse().ok_or(LqrError::SingularInnovation)?;
-            let next = predicted * c.transpose() * s_inv;
-            let ilc = identity - next * c;
-            p = ilc * predicted * ilc.transpose() + next * v * next.transpose();
-            p = (p + p.transpose()) * 0.5;
-            let change = (next - l).norm();
+            let next = &predicted * c.transpose() * s_inv;
+            let ilc = &identity - &next * &c;
+            p = &ilc * &predicted * ilc.transpose() + &next * &v * next.transpose();
+            p = (&p + p.transpose()) * 0.5;
+            let change = (&next - &l).norm();
             l = next;
             if change <= 1e-13 * l.norm() {
                 converged = true;
@@ -284,24 +289,39 @@ impl Kalman {
             ad,
             g0,
             g1,
+            g0_control,
             c,
-            d: model.d,
+            d: model.excitation_d.clone(),
+            d_control,
             l,
-            w: StateVector::zeros(),
+            w: DVector::zeros(states),
             previous: None,
         })
     }
 
-    /// The estimate at this sample from the measured accelerations (state units), the force
-    /// now and the control force that acted until now.
-    fn update(&mut self, z: Vector3<f64>, force: f64, control_until_now: f64) -> StateVector {
+    /// The estimate at this sample from the measured accelerations (state units), the
+    /// excitation now and the control force that acted until now.
+    fn update(&mut self, z: DVector<f64>, force: f64, control_until_now: f64) -> DVector<f64> {
         if let Some((force_prev, control_prev)) = self.previous {
-            let u0 = force_prev - control_prev;
-            self.w = self.ad * self.w + self.g0 * u0 + self.g1 * (force - force_prev);
+            self.w = match &self.g0_control {
+                None => {
+                    let u0 = force_prev - control_prev;
+                    &self.ad * &self.w + &self.g0 * u0 + &self.g1 * (force - force_prev)
+                }
+                Some(g0_control) => {
+                    &self.ad * &self.w + &self.g0 * force_prev - g0_control * control_prev
+                        + &self.g1 * (force - force_prev)
+                }
+            };
         }
-        let innovation = z - self.c * self.w - self.d * (force - control_until_now);
-        self.w += self.l * innovation;
-        self.w
+        let innovation = match &self.d_control {
+            None => z - &self.c * &self.w - &self.d * (force - control_until_now),
+            Some(d_control) => {
+                z - &self.c * &self.w - &self.d * force + d_control * control_until_now
+            }
+        };
+        self.w += &self.l * innovation;
+        self.w.clone()
     }
 }
 
@@ -312,7 +332,7 @@ impl Kalman {
 /// and the synthetic structure's loop are the same system under any master.
 #[derive(Clone, Debug)]
 pub struct Controller {
-    gain: [f64; STATES],
+    gain: Vec<f64>,
     state_scale: f64,
     dt: f64,
     state: State,
@@ -320,63 +340,80 @@ pub struct Controller {
     acting: f64,
     /// The command computed at the last sample, acting from the next one.
     pending: f64,
-    estimate: StateVector,
+    estimate: DVector<f64>,
 }
 
 impl Controller {
-    /// A controller sampling every `dt` seconds with `gain` (N per state unit) on `model`.
+    /// A controller sampling every `dt` seconds with `gain` (N per state unit, one per state)
+    /// on `model`.
     pub fn new(
         model: &StateSpace,
-        gain: [f64; STATES],
+        gain: &[f64],
         estimator: &Estimator,
         dt: f64,
     ) -> Result<Self, LqrError> {
         positive("the controller's sample interval", dt)?;
+        dimension("the gain", gain.len(), model.states())?;
         if gain.iter().any(|g| !g.is_finite()) {
-            return Err(LqrError::NonFiniteGain(gain));
+            return Err(LqrError::NonFiniteGain(gain.to_vec()));
         }
-        let state = match *estimator {
+        let floors = model.floors();
+        let state = match estimator {
             Estimator::Integrate { highpass_hz } => {
-                positive("the integration's high-pass corner", highpass_hz)?;
+                positive("the integration's high-pass corner", *highpass_hz)?;
+                // Integrating needs every floor's acceleration.
+                dimension("the measured accelerations", model.c.nrows(), floors)?;
                 State::Integrate {
                     leak: (-2.0 * std::f64::consts::PI * highpass_hz * dt).exp(),
-                    y: [0.0; FLOORS],
-                    v: [0.0; FLOORS],
-                    a_prev: [0.0; FLOORS],
+                    y: vec![0.0; floors],
+                    v: vec![0.0; floors],
+                    a_prev: vec![0.0; floors],
                     started: false,
                 }
             }
             Estimator::Kalman {
                 process_sd,
                 sensor_sd,
-            } => State::Kalman(Box::new(Kalman::new(model, dt, process_sd, sensor_sd)?)),
+            } => State::Kalman(Box::new(Kalman::new(model, dt, *process_sd, sensor_sd)?)),
         };
         Ok(Controller {
-            gain,
+            gain: gain.to_vec(),
             state_scale: model.state_scale,
             dt,
             state,
             acting: 0.0,
             pending: 0.0,
-            estimate: StateVector::zeros(),
+            estimate: DVector::zeros(model.states()),
         })
     }
 
-    /// Switch gains (gain scheduling); the estimator carries on.
-    pub fn set_gain(&mut self, gain: [f64; STATES]) {
-        self.gain = gain;
+    /// Switch gains (gain scheduling); the estimator carries on. A gain of another length than
+    /// the state is refused.
+    pub fn set_gain(&mut self, gain: &[f64]) -> Result<(), LqrError> {
+        dimension("the gain", gain.len(), self.gain.len())?;
+        self.gain.copy_from_slice(gain);
+        Ok(())
     }
 
-    pub fn gain(&self) -> [f64; STATES] {
-        self.gain
+    pub fn gain(&self) -> &[f64] {
+        &self.gain
+    }
+
+    /// How many accelerations [`Controller::step`] takes.
+    pub fn measurements(&self) -> usize {
+        match &self.state {
+            State::Integrate { y, .. } => y.len(),
+            State::Kalman(k) => k.c.nrows(),
+        }
     }
 
     /// One sample: the accelerations measured now (m/s², before the new control force acts)
-    /// and the excitation force now (N). Returns the new command (N), which acts from the next
-    /// sample on; [`Controller::acting`] is the one that acts from now.
-    pub fn step(&mut self, acc: [f64; FLOORS], force: f64) -> f64 {
-        self.observe(acc, force);
-        self.output()
+    /// and the excitation now (N, or m/s² for ground motion). Returns the new command (N),
+    /// which acts from the next sample on; [`Controller::acting`] is the one that acts from
+    /// now.
+    pub fn step(&mut self, acc: &[f64], force: f64) -> Result<f64, LqrError> {
+        self.observe(acc, force)?;
+        Ok(self.output())
     }
 
     /// The command acting from this sample to the next (the one computed a sample ago), N.
@@ -385,9 +422,10 @@ impl Controller {
     }
 
     /// Update the state estimate with this sample's measurements (see [`Controller::step`]).
-    pub fn observe(&mut self, acc: [f64; FLOORS], force: f64) {
+    pub fn observe(&mut self, acc: &[f64], force: f64) -> Result<(), LqrError> {
+        dimension("the measured accelerations", acc.len(), self.measurements())?;
         let scale = 1.0 / self.state_scale;
-        let z = Vector3::from(acc.map(|a| a * scale));
+        let z = DVector::from_iterator(acc.len(), acc.iter().map(|a| a * scale));
         // Acting until now (the measurement's feedthrough), and from now to the next sample.
         let (until_now, from_now) = (self.acting, self.pending);
         let dt = self.dt;
@@ -400,15 +438,15 @@ impl Controller {
                 started,
             } => {
                 if *started {
-                    for i in 0..FLOORS {
+                    for i in 0..y.len() {
                         let v_next = *leak * v[i] + 0.5 * dt * (a_prev[i] + z[i]);
                         y[i] = *leak * y[i] + 0.5 * dt * (v[i] + v_next);
                         v[i] = v_next;
                     }
                 }
                 *started = true;
-                *a_prev = [z[0], z[1], z[2]];
-                StateVector::from_column_slice(&[y[0], y[1], y[2], v[0], v[1], v[2]])
+                a_prev.copy_from_slice(z.as_slice());
+                DVector::from_iterator(2 * y.len(), y.iter().chain(v.iter()).copied())
             }
             State::Kalman(k) => {
                 let w = k.update(z, force, until_now);
@@ -416,6 +454,7 @@ impl Controller {
                 w
             }
         };
+        Ok(())
     }
 
     /// The new command `K ŵ` from the current estimate and gain (N), acting from the next
@@ -433,12 +472,8 @@ impl Controller {
     }
 
     /// The current state estimate in metres and metres per second.
-    pub fn estimate_si(&self) -> [f64; STATES] {
-        let mut out = [0.0; STATES];
-        for (o, w) in out.iter_mut().zip(self.estimate.iter()) {
-            *o = w * self.state_scale;
-        }
-        out
+    pub fn estimate_si(&self) -> Vec<f64> {
+        self.estimate.iter().map(|w| w * self.state_scale).collect()
     }
 }
 
@@ -447,10 +482,10 @@ impl Controller {
 /// its state with it and rebuilds the rest from its parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ControllerMemory {
-    pub gain: [f64; STATES],
+    pub gain: Vec<f64>,
     pub acting: f64,
     pub pending: f64,
-    pub estimate: [f64; STATES],
+    pub estimate: Vec<f64>,
     pub estimator: EstimatorMemory,
 }
 
@@ -459,13 +494,13 @@ pub struct ControllerMemory {
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum EstimatorMemory {
     Integrate {
-        y: [f64; FLOORS],
-        v: [f64; FLOORS],
-        a_prev: [f64; FLOORS],
+        y: Vec<f64>,
+        v: Vec<f64>,
+        a_prev: Vec<f64>,
         started: bool,
     },
     Kalman {
-        w: [f64; STATES],
+        w: Vec<f64>,
         previous: Option<(f64, f64)>,
     },
 }
@@ -474,8 +509,6 @@ impl Controller {
     /// The memory, to [`Controller::restore`] into a controller built with the same model,
     /// estimator and interval.
     pub fn memory(&self) -> ControllerMemory {
-        let mut estimate = [0.0; STATES];
-        estimate.copy_from_slice(self.estimate.as_slice());
         let estimator = match &self.state {
             State::Integrate {
                 y,
@@ -484,32 +517,32 @@ impl Controller {
                 started,
                 ..
             } => EstimatorMemory::Integrate {
-                y: *y,
-                v: *v,
-                a_prev: *a_prev,
+                y: y.clone(),
+                v: v.clone(),
+                a_prev: a_prev.clone(),
                 started: *started,
             },
-            State::Kalman(k) => {
-                let mut w = [0.0; STATES];
-                w.copy_from_slice(k.w.as_slice());
-                EstimatorMemory::Kalman {
-                    w,
-                    previous: k.previous,
-                }
-            }
+            State::Kalman(k) => EstimatorMemory::Kalman {
+                w: k.w.iter().copied().collect(),
+                previous: k.previous,
+            },
         };
         ControllerMemory {
-            gain: self.gain,
+            gain: self.gain.clone(),
             acting: self.acting,
             pending: self.pending,
-            estimate,
+            estimate: self.estimate.iter().copied().collect(),
             estimator,
         }
     }
 
     /// Put back a memory taken with [`Controller::memory`]; false (and nothing changed) when
-    /// it is of the other estimator.
+    /// it is of the other estimator or of another size.
     pub fn restore(&mut self, memory: &ControllerMemory) -> bool {
+        let states = self.estimate.len();
+        if memory.gain.len() != states || memory.estimate.len() != states {
+            return false;
+        }
         match (&mut self.state, &memory.estimator) {
             (
                 State::Integrate {
@@ -526,21 +559,27 @@ impl Controller {
                     started: ms,
                 },
             ) => {
-                *y = *my;
-                *v = *mv;
-                *a_prev = *ma;
+                if [my, mv, ma].iter().any(|m| m.len() != y.len()) {
+                    return false;
+                }
+                y.copy_from_slice(my);
+                v.copy_from_slice(mv);
+                a_prev.copy_from_slice(ma);
                 *started = *ms;
             }
             (State::Kalman(k), EstimatorMemory::Kalman { w, previous }) => {
-                k.w = StateVector::from_column_slice(w);
+                if w.len() != states {
+                    return false;
+                }
+                k.w = DVector::from_column_slice(w);
                 k.previous = *previous;
             }
             _ => return false,
         }
-        self.gain = memory.gain;
+        self.gain.copy_from_slice(&memory.gain);
         self.acting = memory.acting;
         self.pending = memory.pending;
-        self.estimate = StateVector::from_column_slice(&memory.estimate);
+        self.estimate = DVector::from_column_slice(&memory.estimate);
         true
     }
 }
@@ -561,7 +600,7 @@ pub struct Schedule {
     pub lookahead: f64,
     pub dwell: f64,
     /// Latent variance threshold per floor (None: not used).
-    pub variance_threshold: Option<[f64; FLOORS]>,
+    pub variance_threshold: Option<Vec<f64>>,
 }
 
 /// What made the schedule hold the high gain at a sample.
@@ -583,7 +622,8 @@ pub struct Scheduler {
 }
 
 impl Scheduler {
-    pub fn new(schedule: Schedule) -> Result<Self, LqrError> {
+    /// The schedule of a structure of `floors` floors.
+    pub fn new(schedule: Schedule, floors: usize) -> Result<Self, LqrError> {
         positive("the scheduled gap", schedule.gap)?;
         if !(0.0..1.0).contains(&schedule.margin) {
             return Err(LqrError::NotPositive {
@@ -597,9 +637,9 @@ impl Scheduler {
                 value: schedule.lookahead.min(schedule.dwell),
             });
         }
-        if !(1..=FLOORS).contains(&schedule.storey) {
+        if !(1..=floors).contains(&schedule.storey) {
             return Err(LqrError::NotPositive {
-                what: "the scheduled storey (1..3)".into(),
+                what: format!("the scheduled storey (1..{floors})"),
                 value: schedule.storey as f64,
             });
         }
@@ -620,24 +660,20 @@ impl Scheduler {
         self.last
     }
 
-    /// Decide at time `t` from the state estimate (SI) and, when the twin has a corrector, the
-    /// latent variances. Returns whether the high gain is on.
-    pub fn decide(
-        &mut self,
-        t: f64,
-        estimate: &[f64; STATES],
-        latent_var: Option<[f64; FLOORS]>,
-    ) -> bool {
+    /// Decide at time `t` from the state estimate (SI: displacements, then velocities) and,
+    /// when the twin has a corrector, the latent variances. Returns whether the high gain is on.
+    pub fn decide(&mut self, t: f64, estimate: &[f64], latent_var: Option<&[f64]>) -> bool {
+        let floors = estimate.len() / 2;
         let s = self.schedule.storey - 1;
         let drift = |x: &[f64]| x[s] - if s == 0 { 0.0 } else { x[s - 1] };
-        let d = drift(&estimate[..FLOORS]) + self.schedule.lookahead * drift(&estimate[FLOORS..]);
+        let d = drift(&estimate[..floors]) + self.schedule.lookahead * drift(&estimate[floors..]);
         let near = (1.0 - self.schedule.margin) * self.schedule.gap;
         let closing = match self.schedule.side {
             1 => d > near,
             -1 => d < -near,
             _ => d.abs() > near,
         };
-        let uncertain = match (self.schedule.variance_threshold, latent_var) {
+        let uncertain = match (&self.schedule.variance_threshold, latent_var) {
             (Some(th), Some(v)) => v.iter().zip(th.iter()).any(|(v, th)| v > th),
             _ => false,
         };
@@ -658,41 +694,31 @@ impl Scheduler {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use structure::{Excitation, Structure};
 
-    fn frame() -> ShearMatrices {
-        ShearMatrices {
-            mass: [5.2; 3],
-            damping: [0.5; 3],
-            stiffness: [4021.0; 3],
-        }
+    fn frame() -> Structure {
+        Structure::uniform(3, 5.2, 0.5, 4021.0, Excitation::Force { floor: 1 })
     }
 
-    /// The natural frequencies of three equal storeys: 2√(k/m)·sin((2i−1)π/14) rad/s.
-    #[test]
-    fn natural_frequencies_of_a_uniform_frame() {
-        let f = frame().natural_frequencies();
-        let w0 = (4021.0f64 / 5.2).sqrt();
-        for (i, fi) in f.iter().enumerate() {
-            let expected = 2.0 * w0 * ((2 * i + 1) as f64 * std::f64::consts::PI / 14.0).sin()
-                / (2.0 * std::f64::consts::PI);
-            assert!(
-                (fi - expected).abs() < 1e-9 * expected,
-                "{fi} vs {expected}"
-            );
-        }
+    /// The shear building's model with the actuator at floor 1, where the shaker is.
+    fn plant(s: &Structure, state_scale: f64) -> Result<StateSpace, String> {
+        let ss = s.state_space().map_err(|e| e.to_string())?;
+        let (b, d) = s.force_input(1).map_err(|e| e.to_string())?;
+        StateSpace::from_si(&ss.a, &ss.c, (&ss.b, &ss.d), (&b, &d), state_scale)
+            .map_err(|e| e.to_string())
     }
 
     /// A in millimetres equals A in metres; B scales with 1/state_scale.
     #[test]
     fn state_units_scale_b_not_a() {
-        let m = frame().state_space(1.0).expect("valid");
-        let mm = frame().state_space(1e-3).expect("valid");
+        let m = plant(&frame(), 1.0).expect("valid");
+        let mm = plant(&frame(), 1e-3).expect("valid");
         assert_eq!(m.a, mm.a);
         assert!((mm.b[3] - 1000.0 * m.b[3]).abs() < 1e-12);
         assert!((m.b[3] - 1.0 / 5.2).abs() < 1e-15);
         // The accelerations of a static displacement are −M⁻¹K y.
-        let w = StateVector::from_column_slice(&[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]);
-        let z = m.c * w;
+        let w = DVector::from_column_slice(&[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let z = &m.c * w;
         assert!((z[0] + 2.0 * 4021.0 * 1e-3 / 5.2).abs() < 1e-12);
         assert!((z[1] - 4021.0 * 1e-3 / 5.2).abs() < 1e-12);
     }
@@ -701,32 +727,32 @@ mod tests {
     fn bad_parameters_are_refused() {
         let mut bad = frame();
         bad.mass[1] = 0.0;
-        assert!(bad.state_space(1.0).is_err());
+        assert!(plant(&bad, 1.0).is_err());
         bad = frame();
         bad.stiffness[2] = f64::NAN;
-        assert!(bad.state_space(1.0).is_err());
-        let ok = frame().state_space(1.0).expect("valid");
+        assert!(plant(&bad, 1.0).is_err());
+        let ok = plant(&frame(), 1.0).expect("valid");
         let integrate = Estimator::Integrate { highpass_hz: 0.2 };
-        assert!(Controller::new(&ok, [f64::NAN; 6], &integrate, 1e-3).is_err());
-        assert!(Controller::new(&ok, [0.0; 6], &integrate, 0.0).is_err());
+        assert!(Controller::new(&ok, &[f64::NAN; 6], &integrate, 1e-3).is_err());
+        assert!(Controller::new(&ok, &[0.0; 6], &integrate, 0.0).is_err());
         let kalman = Estimator::Kalman {
             process_sd: 0.1,
-            sensor_sd: [0.01, -1.0, 0.01],
+            sensor_sd: vec![0.01, -1.0, 0.01],
         };
-        assert!(Controller::new(&ok, [0.0; 6], &kalman, 1e-3).is_err());
+        assert!(Controller::new(&ok, &[0.0; 6], &kalman, 1e-3).is_err());
     }
 
     /// The integrating estimator recovers a sine's velocity and displacement well above its
     /// corner frequency, to the leak's own error.
     #[test]
     fn integration_recovers_velocity_and_displacement_of_a_resonance() {
-        let model = frame().state_space(1.0).expect("valid");
+        let model = plant(&frame(), 1.0).expect("valid");
         let dt = 1.0 / 1000.0;
         let f = 5.0;
         let w = 2.0 * std::f64::consts::PI * f;
         let mut c = Controller::new(
             &model,
-            [0.0; 6],
+            &[0.0; 6],
             &Estimator::Integrate { highpass_hz: 0.1 },
             dt,
         )
@@ -737,7 +763,7 @@ mod tests {
         for k in 0..45_000 {
             let t = k as f64 * dt;
             let a = (w * t).sin();
-            c.step([a, 0.0, 0.0], 0.0);
+            c.step(&[a, 0.0, 0.0], 0.0).expect("three accelerations");
             if t > 35.0 {
                 let e = c.estimate_si();
                 let (y, v) = (-(w * t).sin() / (w * w), -(w * t).cos() / w);
@@ -755,14 +781,14 @@ mod tests {
     #[test]
     fn kalman_observer_tracks_the_model() {
         let sm = frame();
-        let model = sm.state_space(1e-3).expect("valid");
+        let model = plant(&sm, 1e-3).expect("valid");
         let dt = 1.0 / 409.6;
         let mut c = Controller::new(
             &model,
-            [0.0; 6],
+            &[0.0; 6],
             &Estimator::Kalman {
                 process_sd: 0.05,
-                sensor_sd: [1e-3; 3],
+                sensor_sd: vec![1e-3; 3],
             },
             dt,
         )
@@ -773,19 +799,19 @@ mod tests {
             for j in 0..6 {
                 m[(i, j)] = model.a[(i, j)] * dt;
             }
-            m[(i, 6)] = model.b[i] * dt;
+            m[(i, 6)] = model.excitation_b[i] * dt;
         }
         let e = m.exp();
-        let mut w = StateVector::zeros();
+        let mut w = DVector::<f64>::zeros(6);
         let mut worst = 0.0f64;
         let mut peak = 0.0f64;
         for k in 0..8000 {
             let t = k as f64 * dt;
             let force = (2.0 * std::f64::consts::PI * 3.0 * t).sin()
                 + 0.5 * (2.0 * std::f64::consts::PI * 7.3 * t).sin();
-            let z = model.c * w + model.d * force;
+            let z = &model.c * &w + &model.excitation_d * force;
             let acc = [z[0] * 1e-3, z[1] * 1e-3, z[2] * 1e-3];
-            c.step(acc, force);
+            c.step(&acc, force).expect("three accelerations");
             if t > 5.0 {
                 let est = c.estimate_si();
                 for i in 0..6 {
@@ -795,7 +821,7 @@ mod tests {
             }
             // Advance the truth with the force held (the observer assumes it linear: the
             // difference is the model error the process noise covers).
-            let mut next = StateVector::zeros();
+            let mut next = DVector::<f64>::zeros(6);
             for i in 0..6 {
                 next[i] = (0..6).map(|j| e[(i, j)] * w[j]).sum::<f64>() + e[(i, 6)] * force;
             }
@@ -806,15 +832,18 @@ mod tests {
 
     #[test]
     fn schedule_switches_up_near_the_gap_and_back_after_the_dwell() {
-        let mut s = Scheduler::new(Schedule {
-            storey: 3,
-            gap: 5e-4,
-            side: -1,
-            margin: 0.3,
-            lookahead: 0.0,
-            dwell: 0.5,
-            variance_threshold: None,
-        })
+        let mut s = Scheduler::new(
+            Schedule {
+                storey: 3,
+                gap: 5e-4,
+                side: -1,
+                margin: 0.3,
+                lookahead: 0.0,
+                dwell: 0.5,
+                variance_threshold: None,
+            },
+            3,
+        )
         .expect("valid");
         let at = |drift: f64| [0.0, 0.0, drift, 0.0, 0.0, 0.0];
         assert!(!s.decide(0.0, &at(-3e-4), None), "far from the gap");
@@ -825,10 +854,13 @@ mod tests {
         assert!(s.decide(0.2, &at(-4e-4), None), "within 30 % of closing");
         assert!(s.decide(0.5, &at(0.0), None), "held during the dwell");
         assert!(!s.decide(0.71, &at(0.0), None), "released after the dwell");
-        assert!(Scheduler::new(Schedule {
-            margin: 1.5,
-            ..s.schedule.clone()
-        })
+        assert!(Scheduler::new(
+            Schedule {
+                margin: 1.5,
+                ..s.schedule.clone()
+            },
+            3
+        )
         .is_err());
     }
 }

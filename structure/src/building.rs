@@ -261,6 +261,24 @@ impl Structure {
         }
     }
 
+    /// A force (N) at `floor` (1-based), whatever excites the building (an actuator): its
+    /// column in `ẋ = A x + …` of [`Structure::state_space`] and its feedthrough into the
+    /// accelerometers' reading, `(M⁻¹ e_floor` below the displacements, `M⁻¹ e_floor)`.
+    pub fn force_input(
+        &self,
+        floor: usize,
+    ) -> Result<(DVector<f64>, DVector<f64>), StructureError> {
+        let n = self.storeys();
+        if floor == 0 || floor > n {
+            return Err(StructureError::ForceFloor { floor, storeys: n });
+        }
+        let mut d = DVector::zeros(n);
+        d[floor - 1] = 1.0 / self.mass[floor - 1];
+        let mut b = DVector::zeros(2 * n);
+        b[n + floor - 1] = d[floor - 1];
+        Ok((b, d))
+    }
+
     /// Undamped natural frequencies, Hz, ascending.
     pub fn natural_frequencies(&self) -> Vec<f64> {
         let s = DMatrix::from_diagonal(&DVector::from_iterator(
@@ -415,6 +433,35 @@ mod tests {
         let want =
             DMatrix::from_row_slice(3, 3, &[3.0, -2.0, 0.0, -2.0, 6.0, -4.0, 0.0, -4.0, 4.0]);
         assert_eq!(k, want);
+    }
+
+    /// The natural frequencies of three equal storeys: 2√(k/m)·sin((2i−1)π/14) rad/s.
+    #[test]
+    fn natural_frequencies_of_a_uniform_frame() {
+        let f = Structure::uniform(3, 5.2, 0.5, 4021.0, Excitation::Base).natural_frequencies();
+        let w0 = (4021.0f64 / 5.2).sqrt();
+        for (i, fi) in f.iter().enumerate() {
+            let expected = 2.0 * w0 * ((2 * i + 1) as f64 * std::f64::consts::PI / 14.0).sin()
+                / (2.0 * std::f64::consts::PI);
+            assert!(
+                (fi - expected).abs() < 1e-9 * expected,
+                "{fi} vs {expected}"
+            );
+        }
+    }
+
+    /// A force at floor K is the shaker's input when the shaker is at K; elsewhere it is refused.
+    #[test]
+    fn a_force_input_at_the_excitations_floor_is_the_excitations() {
+        let s = Structure::uniform(4, 2.0, 0.1, 100.0, Excitation::Force { floor: 3 });
+        let ss = s.state_space().unwrap();
+        let (b, d) = s.force_input(3).unwrap();
+        assert_eq!((b, d), (ss.b, ss.d));
+        let (b, d) = s.force_input(1).unwrap();
+        assert_eq!(b[4], 0.5);
+        assert_eq!(b.iter().filter(|x| **x != 0.0).count(), 1);
+        assert_eq!(d[0], 0.5);
+        assert!(s.force_input(0).is_err() && s.force_input(5).is_err());
     }
 
     #[test]

@@ -1,11 +1,11 @@
 //! The LQR controller as a zero-time block of the master: inputs the floor accelerations (through
-//! sampled connections: what the sensors read as the last step left the structure) and the
-//! excitation force; outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
+//! sampled connections: what the sensors read as the last step left the structure), one per
+//! floor, and the excitation force; outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
 //! held over the next step (the command computed a sample ago: see `numerics::lqr::Controller`),
 //! and which gain is on. The law itself is `numerics::lqr`, shared with
 //! the controller FMU.
 
-use numerics::lqr::{Controller, Scheduler, FLOORS, STATES};
+use numerics::lqr::{Controller, Scheduler};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -15,27 +15,28 @@ use crate::cosim::master::{Block, MasterError};
 /// Gain scheduling inside the block: the scheduler and the gains it switches between.
 pub struct Scheduled {
     pub scheduler: Scheduler,
-    pub low: [f64; STATES],
-    pub high: [f64; STATES],
+    pub low: Vec<f64>,
+    pub high: Vec<f64>,
 }
 
 /// Accelerometer noise added to what the controller reads (the structure's own outputs are
 /// noise-free): per-floor sd (m/s²) and a seed, so runs repeat.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct SensorNoise {
-    pub sd: [f64; FLOORS],
+    pub sd: Vec<f64>,
     pub seed: u64,
 }
 
 pub struct LqrBlock {
     controller: Controller,
-    /// Whether inputs 4..7 are a corrector's latent variances (for the schedule).
+    /// Whether the inputs after the force are a corrector's latent variances (for the
+    /// schedule), one per floor.
     latent: bool,
     scheduled: Option<Scheduled>,
-    noise: Option<(ChaCha8Rng, [f64; FLOORS])>,
+    noise: Option<(ChaCha8Rng, Vec<f64>)>,
     /// A control force beyond this (N) means the loop has gone unstable: the run stops.
     force_limit: f64,
-    last: Option<(f64, [f64; 4])>,
+    last: Option<(f64, Vec<f64>)>,
 }
 
 /// The schedule's triggers at a point as one output: 1 the drift, 2 the latent variance, 3 both.
@@ -44,9 +45,11 @@ pub fn trigger_code(t: numerics::lqr::Triggers) -> f64 {
 }
 
 impl LqrBlock {
-    /// `acc1..3`, `force`; then, with `latent`, `latent_var1..3`.
-    pub const INPUTS: usize = 4;
-    pub const LATENT_INPUTS: usize = FLOORS;
+    /// `acc1..N`, `force`; then, with `latent`, `latent_var1..N`: for a structure of `floors`
+    /// floors, the inputs before the latent variances.
+    pub fn inputs(floors: usize) -> usize {
+        floors + 1
+    }
     /// `control_force`, `high_gain` (1 when the scheduler has the high gain on), the schedule's
     /// triggers ([`trigger_code`]).
     pub const OUTPUTS: usize = 3;
@@ -62,7 +65,9 @@ impl LqrBlock {
         let noise = noise.map(|n| {
             (
                 ChaCha8Rng::seed_from_u64(n.seed),
-                n.sd.map(|sd| if sd.is_finite() { sd.max(0.0) } else { 0.0 }),
+                n.sd.iter()
+                    .map(|&sd| if sd.is_finite() { sd.max(0.0) } else { 0.0 })
+                    .collect(),
             )
         });
         LqrBlock {
@@ -83,11 +88,12 @@ impl Block for LqrBlock {
         inputs: &[f64],
         outputs: &mut [f64],
     ) -> Result<(), MasterError> {
-        let now = [inputs[0], inputs[1], inputs[2], inputs[3]];
-        if let Some((t, seen)) = self.last {
+        let floors = self.controller.measurements();
+        let now = &inputs[..Self::inputs(floors)];
+        if let Some((t, seen)) = &self.last {
             // The law has state: one sample per communication point. Sampled inputs do not
             // move inside a point, so a second call there can only be a wiring mistake.
-            if t == time {
+            if *t == time {
                 if seen == now {
                     return Ok(());
                 }
@@ -98,28 +104,33 @@ impl Block for LqrBlock {
                 ));
             }
         }
-        self.last = Some((time, now));
-        let mut acc = [inputs[0], inputs[1], inputs[2]];
+        self.last = Some((time, now.to_vec()));
+        let force = inputs[floors];
+        let mut acc = inputs[..floors].to_vec();
         if let Some((rng, sd)) = &mut self.noise {
             for (a, s) in acc.iter_mut().zip(sd.iter()) {
                 let z: f64 = StandardNormal.sample(rng);
                 *a += s * z;
             }
         }
-        if acc.iter().chain([&inputs[3]]).any(|v| !v.is_finite()) {
+        if acc.iter().chain([&force]).any(|v| !v.is_finite()) {
             return Err(MasterError::Config(format!(
-                "the controller read a non-finite measurement at t = {time} s: {acc:?}, force {}",
-                inputs[3]
+                "the controller read a non-finite measurement at t = {time} s: {acc:?}, force {force}"
             )));
         }
-        self.controller.observe(acc, inputs[3]);
+        self.controller
+            .observe(&acc, force)
+            .map_err(|e| MasterError::Config(format!("the controller at t = {time} s: {e}")))?;
         let (mut high, mut triggers) = (0.0, 0.0);
         if let Some(s) = &mut self.scheduled {
-            let latent = self.latent.then(|| [inputs[4], inputs[5], inputs[6]]);
+            let at = Self::inputs(floors);
+            let latent = self.latent.then(|| &inputs[at..at + floors]);
             let on = s
                 .scheduler
                 .decide(time, &self.controller.estimate_si(), latent);
-            self.controller.set_gain(if on { s.high } else { s.low });
+            self.controller
+                .set_gain(if on { &s.high } else { &s.low })
+                .map_err(|e| MasterError::Config(format!("the gain schedule: {e}")))?;
             high = f64::from(u8::from(on));
             triggers = trigger_code(s.scheduler.triggers());
         }

@@ -49,7 +49,7 @@ fn draw_mesh<DB: DrawingBackend>(
 struct Run<'a> {
     label: String,
     colour: RGBColor,
-    acc: &'a [Vec<f64>; 3],
+    acc: &'a [Vec<f64>],
     contacts: Vec<f64>,
 }
 

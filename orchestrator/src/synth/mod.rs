@@ -285,7 +285,8 @@ pub type ControllerFactory =
 pub struct InLoopController {
     pub make: ControllerFactory,
     pub interval: f64,
-    pub sensor_sd: [f64; 3],
+    /// Per floor.
+    pub sensor_sd: Vec<f64>,
     pub seed: u64,
 }
 
@@ -300,7 +301,11 @@ impl InLoopController {
     ) -> std::result::Result<Self, crate::workflows::control::ControlError> {
         let interval = 1.0 / spec.control_rate_hz;
         spec.controller(q, interval)?;
-        let sensor_sd = spec.sensor_noise_sd.unwrap_or([0.0; 3]);
+        let floors = spec.structure()?.storeys();
+        let sensor_sd = spec
+            .sensor_noise_sd
+            .clone()
+            .unwrap_or_else(|| vec![0.0; floors]);
         Ok(InLoopController {
             make: Box::new(move |dt| spec.controller(q, dt).map_err(|e| e.to_string())),
             interval,
@@ -439,12 +444,20 @@ pub fn synth_controlled(
                     // The sensors read the structure as it is, under the force held so far.
                     let a =
                         hysteretic.acceleration(&model, fine_force[j] - model.control_force.value);
-                    let mut measured = [0.0; 3];
-                    for f in 0..3 {
-                        let z: f64 = StandardNormal.sample(&mut sensor_rng);
-                        measured[f] = a[f] + sensor_sd[f] * z;
-                    }
-                    controller.step(measured, fine_force[j]);
+                    let measured: Vec<f64> = a
+                        .iter()
+                        .zip(sensor_sd.iter())
+                        .map(|(a, sd)| {
+                            let z: f64 = StandardNormal.sample(&mut sensor_rng);
+                            a + sd * z
+                        })
+                        .collect();
+                    controller.step(&measured, fine_force[j]).map_err(|e| {
+                        SynthError::Record(format!(
+                            "the controller in the loop at t = {:.6} s: {e}",
+                            j as f64 * hf
+                        ))
+                    })?;
                     let u = controller.acting();
                     if !u.is_finite() {
                         return Err(SynthError::Record(format!(

@@ -4,7 +4,7 @@
 //! schedule's switches and the contact initiations (the drift of a storey with a contact crossing
 //! its gap, open → closed), all online.
 
-use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace, FLOORS, STATES};
+use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace};
 use structure::effects::{Kind, Law, Side};
 
 use super::ControlError;
@@ -48,9 +48,11 @@ pub fn twin_gaps(twin: &Twin) -> Vec<Gap> {
     let Some(physics) = twin.component(PHYSICS) else {
         return Vec::new();
     };
+    // A twin whose structure does not read has no gaps here; run_control reports why.
+    let floors = super::design::structure_of(twin).map_or(0, |s| s.storeys());
     let kind = Kind::Contact;
     let mut gaps = Vec::new();
-    for location in 0..kind.sites(FLOORS) {
+    for location in 0..kind.sites(floors) {
         let prefix = kind.prefix(location);
         let on = matches!(
             physics.parameters.get(&format!("{prefix}_enabled")),
@@ -86,16 +88,16 @@ pub fn twin_gaps(twin: &Twin) -> Vec<Gap> {
 /// Which gain the loop uses.
 #[derive(Clone, Debug)]
 pub enum Gains {
-    Fixed([f64; STATES]),
+    Fixed(Vec<f64>),
     Scheduled {
-        low: [f64; STATES],
-        high: [f64; STATES],
+        low: Vec<f64>,
+        high: Vec<f64>,
         schedule: numerics::lqr::Schedule,
     },
 }
 
 /// How the controller knows the state.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub enum StateSource {
     /// From the measured accelerations (with sensor noise when given).
     Estimated(Estimator),
@@ -139,7 +141,8 @@ pub struct ContactEvent {
 pub struct Response {
     /// At the record's rate.
     pub time: Vec<f64>,
-    pub acc: [Vec<f64>; FLOORS],
+    /// Per floor.
+    pub acc: Vec<Vec<f64>>,
     pub control: Vec<f64>,
     pub control_rms: f64,
     pub control_peak: f64,
@@ -156,6 +159,7 @@ pub struct Response {
 /// The law on the structure's exact state: inputs as [`LqrBlock`]'s, then the displacements and
 /// velocities (m, m/s).
 struct ExactStateBlock {
+    floors: usize,
     /// Where the state starts among the inputs.
     state_at: usize,
     latent: bool,
@@ -176,18 +180,18 @@ impl crate::cosim::master::Block for ExactStateBlock {
         inputs: &[f64],
         outputs: &mut [f64],
     ) -> Result<(), crate::cosim::master::MasterError> {
-        let mut w = [0.0; STATES];
-        w.copy_from_slice(&inputs[self.state_at..self.state_at + STATES]);
-        let latent = self.latent.then(|| [inputs[4], inputs[5], inputs[6]]);
+        let w = &inputs[self.state_at..self.state_at + 2 * self.floors];
+        let at = LqrBlock::inputs(self.floors);
+        let latent = self.latent.then(|| &inputs[at..at + self.floors]);
         let mut triggers = 0.0;
         let (gain, high) = match (&self.gains, &mut self.scheduler) {
-            (Gains::Fixed(g), _) => (*g, false),
+            (Gains::Fixed(g), _) => (g, false),
             (Gains::Scheduled { low, high, .. }, Some(s)) => {
-                let on = s.decide(time, &w, latent);
+                let on = s.decide(time, w, latent);
                 triggers = trigger_code(s.triggers());
-                (if on { *high } else { *low }, on)
+                (if on { high } else { low }, on)
             }
-            (Gains::Scheduled { low, .. }, None) => (*low, false),
+            (Gains::Scheduled { low, .. }, None) => (low, false),
         };
         let u: f64 = gain
             .iter()
@@ -212,6 +216,7 @@ impl crate::cosim::master::Block for ExactStateBlock {
 }
 
 struct LoopObserver {
+    floors: usize,
     ports: Vec<Port>,
     substeps: usize,
     gaps: Vec<Gap>,
@@ -228,31 +233,32 @@ struct LoopObserver {
 
 impl Observer for LoopObserver {
     fn record(&mut self, time: f64, values: &[f64]) {
-        // values: acc1..3, control force, high flag, triggers, then one drift per gap.
+        // values: acc1..N, control force, high flag, triggers, then one drift per gap.
+        let n = self.floors;
         let r = &mut self.response;
         if self.k.is_multiple_of(self.substeps) {
             r.time.push(time);
-            for f in 0..FLOORS {
+            for f in 0..n {
                 r.acc[f].push(values[f]);
             }
-            r.control.push(values[3]);
+            r.control.push(values[n]);
         }
         self.k += 1;
-        let u = values[3];
+        let u = values[n];
         self.sum_sq += u * u;
         r.control_peak = r.control_peak.max(u.abs());
         self.points += 1;
-        let high = values[4] != 0.0;
+        let high = values[n + 1] != 0.0;
         if high != self.high {
             r.switches.push((time, high));
             self.high = high;
         }
         self.high_points += usize::from(high);
-        let triggers = values[5] as u8;
+        let triggers = values[n + 2] as u8;
         self.drift_points += usize::from(triggers & 1 != 0);
         self.variance_points += usize::from(triggers & 2 != 0);
         for (i, gap) in self.gaps.iter().enumerate() {
-            let closed = gap.law.force_at(values[6 + i]) != 0.0;
+            let closed = gap.law.force_at(values[n + 3 + i]) != 0.0;
             if closed && !self.closed[i] {
                 r.contacts.push(ContactEvent {
                     time,
@@ -298,6 +304,7 @@ pub fn simulate(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Response, ControlError> {
     let substeps = setup.substeps.max(1);
+    let floors = setup.plant.floors();
     let start = data.time[0];
     let builder = SystemBuilder::open(twin)?;
     if builder.fmu(PHYSICS).is_none() {
@@ -312,7 +319,7 @@ pub fn simulate(
     running.system.recording = Recording::BeforeInputs;
     let mut outputs = Vec::new();
     for prefix in ["acc", "disp", "vel"] {
-        for f in 1..=FLOORS {
+        for f in 1..=floors {
             outputs.push(format!("{prefix}{f}"));
         }
     }
@@ -337,9 +344,9 @@ pub fn simulate(
     // The corrector keeps the record's rate (its lags are the record's samples).
     let latent = match builder.fmu(CORRECTOR) {
         Some(_) if setup.corrector => {
-            let mut inputs: Vec<String> = (1..=FLOORS).map(|f| format!("physics_acc{f}")).collect();
+            let mut inputs: Vec<String> = (1..=floors).map(|f| format!("physics_acc{f}")).collect();
             inputs.push("force".into());
-            let outputs = (1..=FLOORS).map(|f| format!("latent_var{f}")).collect();
+            let outputs = (1..=floors).map(|f| format!("latent_var{f}")).collect();
             let node = builder
                 .add_component(
                     &mut running,
@@ -350,10 +357,10 @@ pub fn simulate(
                     Some(substeps),
                 )
                 .map_err(system_error)?;
-            for f in 0..FLOORS {
+            for f in 0..floors {
                 running.system.connect(Port::Output(plant, f), node, f)?;
             }
-            running.system.connect(force, node, FLOORS)?;
+            running.system.connect(force, node, floors)?;
             Some(node)
         }
         None if setup.corrector => {
@@ -368,28 +375,28 @@ pub fn simulate(
     let controller: Option<NodeId> = match law {
         None => None,
         Some(law) => {
-            let block: Box<dyn crate::cosim::master::Block> = match law.state {
+            let block: Box<dyn crate::cosim::master::Block> = match &law.state {
                 StateSource::Estimated(estimator) => {
                     let (first, scheduled) = match &law.gains {
-                        Gains::Fixed(g) => (*g, None),
+                        Gains::Fixed(g) => (g, None),
                         Gains::Scheduled {
                             low,
                             high,
                             schedule,
                         } => (
-                            *low,
+                            low,
                             Some(Scheduled {
-                                scheduler: Scheduler::new(schedule.clone())?,
-                                low: *low,
-                                high: *high,
+                                scheduler: Scheduler::new(schedule.clone(), floors)?,
+                                low: low.clone(),
+                                high: high.clone(),
                             }),
                         ),
                     };
-                    let controller = Controller::new(&setup.plant, first, &estimator, dt)?;
+                    let controller = Controller::new(&setup.plant, first, estimator, dt)?;
                     Box::new(LqrBlock::new(
                         controller,
                         scheduled,
-                        setup.noise,
+                        setup.noise.clone(),
                         setup.force_limit,
                         latent.is_some(),
                     ))
@@ -397,17 +404,14 @@ pub fn simulate(
                 StateSource::Exact => {
                     let scheduler = match &law.gains {
                         Gains::Scheduled { schedule, .. } => {
-                            Some(Scheduler::new(schedule.clone())?)
+                            Some(Scheduler::new(schedule.clone(), floors)?)
                         }
                         Gains::Fixed(_) => None,
                     };
                     Box::new(ExactStateBlock {
-                        state_at: LqrBlock::INPUTS
-                            + if latent.is_some() {
-                                LqrBlock::LATENT_INPUTS
-                            } else {
-                                0
-                            },
+                        floors,
+                        state_at: LqrBlock::inputs(floors)
+                            + if latent.is_some() { floors } else { 0 },
                         latent: latent.is_some(),
                         gains: law.gains.clone(),
                         scheduler,
@@ -420,35 +424,31 @@ pub fn simulate(
                 }
             };
             let exact = matches!(law.state, StateSource::Exact);
-            let latent_inputs = if latent.is_some() {
-                LqrBlock::LATENT_INPUTS
-            } else {
-                0
-            };
-            let state_at = LqrBlock::INPUTS + latent_inputs;
-            let n_inputs = state_at + if exact { STATES } else { 0 };
+            let latent_inputs = if latent.is_some() { floors } else { 0 };
+            let state_at = LqrBlock::inputs(floors) + latent_inputs;
+            let n_inputs = state_at + if exact { 2 * floors } else { 0 };
             let node = running
                 .system
                 .add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
-            for f in 0..FLOORS {
+            for f in 0..floors {
                 running
                     .system
                     .connect_sampled(Port::Output(plant, f), node, f)?;
             }
-            running.system.connect(force, node, 3)?;
+            running.system.connect(force, node, floors)?;
             if let Some(c) = latent {
-                for f in 0..FLOORS {
+                for f in 0..floors {
                     running.system.connect_sampled(
                         Port::Output(c, f),
                         node,
-                        LqrBlock::INPUTS + f,
+                        LqrBlock::inputs(floors) + f,
                     )?;
                 }
             }
             if exact {
-                for s in 0..STATES {
+                for s in 0..2 * floors {
                     running.system.connect_sampled(
-                        Port::Output(plant, FLOORS + s),
+                        Port::Output(plant, floors + s),
                         node,
                         state_at + s,
                     )?;
@@ -462,7 +462,7 @@ pub fn simulate(
     let zero = running
         .system
         .add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
-    let mut ports: Vec<Port> = (0..FLOORS).map(|f| Port::Output(plant, f)).collect();
+    let mut ports: Vec<Port> = (0..floors).map(|f| Port::Output(plant, f)).collect();
     match controller {
         Some(node) => ports.extend([
             Port::Output(node, 0),
@@ -472,15 +472,19 @@ pub fn simulate(
         None => ports.extend([zero, zero, zero]),
     }
     for (i, _) in setup.gaps.iter().enumerate() {
-        ports.push(Port::Output(plant, 3 * FLOORS + i));
+        ports.push(Port::Output(plant, 3 * floors + i));
     }
     let mut observer = LoopObserver {
+        floors,
         ports,
         substeps,
         gaps: setup.gaps.clone(),
         closed: vec![false; setup.gaps.len()],
         k: 0,
-        response: Response::default(),
+        response: Response {
+            acc: vec![Vec::new(); floors],
+            ..Response::default()
+        },
         sum_sq: 0.0,
         points: 0,
         high_points: 0,

@@ -5,8 +5,9 @@ use std::collections::BTreeMap;
 
 use nalgebra::DMatrix;
 use numerics::control::solve_care;
-use numerics::lqr::{ShearMatrices, StateSpace, FLOORS, STATES};
+use numerics::lqr::StateSpace;
 use serde::Serialize;
+use structure::{Excitation, Structure};
 
 use super::ControlError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -38,9 +39,9 @@ impl StateUnit {
     }
 }
 
-/// The twin's linear structure: its physics component's m1..3, c1..3, k1..3 (the shear FMU's
-/// defaults where the twin sets none).
-pub fn structure_of(twin: &Twin) -> Result<ShearMatrices, ControlError> {
+/// The twin's linear structure: its physics component's m1..mN, c1..cN, k1..kN (the shear FMU's
+/// defaults where the twin sets none), shaken at floor 1.
+pub fn structure_of(twin: &Twin) -> Result<Structure, ControlError> {
     let defaults = fmu_shear::ShearParameters::default();
     let physics = twin.component(PHYSICS).ok_or_else(|| {
         ControlError::Twin(format!(
@@ -48,40 +49,46 @@ pub fn structure_of(twin: &Twin) -> Result<ShearMatrices, ControlError> {
             twin.describe()
         ))
     })?;
-    let value = |name: &str, default: f64| -> Result<f64, ControlError> {
-        match physics.parameters.get(name) {
-            None => Ok(default),
-            Some(ParameterValue::Real(x)) if x.is_finite() => Ok(*x),
-            Some(other) => Err(ControlError::Twin(format!(
-                "{}: parameter '{name}' is {other:?}, not a finite real",
-                twin.describe()
-            ))),
+    let mut s = Structure {
+        mass: defaults.mass.to_vec(),
+        damping: defaults.damping.to_vec(),
+        stiffness: defaults.stiffness.to_vec(),
+        excitation: Excitation::Force { floor: 1 },
+    };
+    for name in s.parameter_names() {
+        match physics.parameters.get(&name) {
+            None => {}
+            Some(ParameterValue::Real(x)) if x.is_finite() => {
+                s.set(&name, *x);
+            }
+            Some(other) => {
+                return Err(ControlError::Twin(format!(
+                    "{}: parameter '{name}' is {other:?}, not a finite real",
+                    twin.describe()
+                )))
+            }
         }
-    };
-    let mut s = ShearMatrices {
-        mass: std::array::from_fn(|i| defaults.mass[i]),
-        damping: std::array::from_fn(|i| defaults.damping[i]),
-        stiffness: std::array::from_fn(|i| defaults.stiffness[i]),
-    };
-    for i in 0..FLOORS {
-        s.mass[i] = value(&format!("m{}", i + 1), defaults.mass[i])?;
-        s.damping[i] = value(&format!("c{}", i + 1), defaults.damping[i])?;
-        s.stiffness[i] = value(&format!("k{}", i + 1), defaults.stiffness[i])?;
     }
-    s.check()
+    s.validate()
         .map_err(|e| ControlError::Twin(format!("{}: {e}", twin.describe())))?;
     Ok(s)
 }
 
-/// m1..k3 by name, for the report.
-pub fn parameter_map(s: &ShearMatrices) -> BTreeMap<String, f64> {
-    let mut map = BTreeMap::new();
-    for i in 0..FLOORS {
-        map.insert(format!("m{}", i + 1), s.mass[i]);
-        map.insert(format!("c{}", i + 1), s.damping[i]);
-        map.insert(format!("k{}", i + 1), s.stiffness[i]);
-    }
-    map
+/// m1..kN by name, for the report.
+pub fn parameter_map(s: &Structure) -> BTreeMap<String, f64> {
+    s.parameter_names()
+        .into_iter()
+        .zip(s.parameters())
+        .collect()
+}
+
+/// The LQR's plant: `structure` with the actuator at `actuator_floor`, the state in units of `state_scale` metres.
+pub fn plant_of(
+    structure: &Structure,
+    actuator_floor: usize,
+    state_scale: f64,
+) -> Result<StateSpace, ControlError> {
+    fmu_lqr::model::plant(structure, actuator_floor, state_scale).map_err(ControlError::Twin)
 }
 
 /// One LQR design.
@@ -90,8 +97,8 @@ pub struct Design {
     pub q: f64,
     #[serde(rename = "Q")]
     pub q_matrix: Vec<Vec<f64>>,
-    /// N per state unit: `f_c = gain · w`.
-    pub gain: [f64; STATES],
+    /// N per state unit: `f_c = gain · w`, one per state.
+    pub gain: Vec<f64>,
     pub riccati_residual: f64,
     /// `[re, im]` of the eigenvalues of A − B·gain, 1/s.
     pub closed_loop_poles: Vec<[f64; 2]>,
@@ -99,9 +106,9 @@ pub struct Design {
     pub hamiltonian_margin: f64,
 }
 
-pub fn rows<const R: usize, const C: usize>(m: &nalgebra::SMatrix<f64, R, C>) -> Vec<Vec<f64>> {
-    (0..R)
-        .map(|i| (0..C).map(|j| m[(i, j)]).collect())
+pub fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter()
+        .map(|row| row.iter().copied().collect())
         .collect()
 }
 
@@ -117,13 +124,14 @@ pub fn design(plant: &StateSpace, q: f64, r: f64) -> Result<Design, ControlError
             "R must be a finite number > 0, got {r}"
         )));
     }
-    let a = DMatrix::from_fn(STATES, STATES, |i, j| plant.a[(i, j)]);
-    let b = DMatrix::from_fn(STATES, 1, |i, _| plant.b[i]);
+    let (states, floors) = (plant.states(), plant.floors());
+    let a = &plant.a;
+    let b = DMatrix::from_column_slice(states, 1, plant.b.as_slice());
     let q_matrix = DMatrix::from_fn(
-        STATES,
-        STATES,
+        states,
+        states,
         |i, j| {
-            if i == j && i >= FLOORS {
+            if i == j && i >= floors {
                 q
             } else {
                 0.0
@@ -131,19 +139,14 @@ pub fn design(plant: &StateSpace, q: f64, r: f64) -> Result<Design, ControlError
         },
     );
     let r_matrix = DMatrix::from_element(1, 1, r);
-    let care = solve_care(&a, &b, &q_matrix, &r_matrix).map_err(|e| ControlError::Design {
+    let care = solve_care(a, &b, &q_matrix, &r_matrix).map_err(|e| ControlError::Design {
         q,
         message: e.to_string(),
     })?;
-    let mut gain = [0.0; STATES];
-    for (j, g) in gain.iter_mut().enumerate() {
-        *g = care.gain[(0, j)];
-    }
+    let gain = care.gain.row(0).iter().copied().collect();
     Ok(Design {
         q,
-        q_matrix: (0..STATES)
-            .map(|i| (0..STATES).map(|j| q_matrix[(i, j)]).collect())
-            .collect(),
+        q_matrix: rows(&q_matrix),
         gain,
         riccati_residual: care.relative_residual,
         closed_loop_poles: care

@@ -11,8 +11,9 @@ pub mod design;
 pub mod options;
 pub mod ssp;
 
-use numerics::lqr::{Estimator, Schedule, ShearMatrices, FLOORS};
+use numerics::lqr::{Estimator, Schedule};
 use serde::Serialize;
+use structure::Structure;
 
 use crate::blocks::lqr::SensorNoise;
 use crate::cosim::master::MasterError;
@@ -21,7 +22,7 @@ use crate::evaluation::stats::rms;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
 use closed_loop::{simulate, ContactEvent, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
-pub use design::{design, structure_of, Design, StateUnit};
+pub use design::{design, plant_of, structure_of, Design, StateUnit};
 pub use options::{sensor_noise, twin_for_control};
 
 /// Errors of `twin control`.
@@ -88,8 +89,9 @@ pub struct ControlOptions {
     pub highpass_hz: f64,
     /// Controller samples per record sample (None: from the fastest closed-loop pole).
     pub substeps: Option<usize>,
-    /// Accelerometer noise sd the controller reads (None: the twin's calibrated noise).
-    pub sensor_noise: Option<[f64; FLOORS]>,
+    /// Accelerometer noise sd the controller reads, per floor, or one for every floor (None:
+    /// the twin's calibrated noise).
+    pub sensor_noise: Option<Vec<f64>>,
     pub seed: u64,
     /// Gaps to watch besides the twin's own contacts.
     pub gaps: Vec<Gap>,
@@ -97,6 +99,8 @@ pub struct ControlOptions {
     pub schedule: Option<ScheduleOptions>,
     /// Compare the estimators' cost on the first design.
     pub estimator_costs: bool,
+    /// The floor the control force acts on (1-based).
+    pub actuator_floor: usize,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -113,7 +117,7 @@ pub enum EstimatorChoice {
 pub struct Attenuation {
     pub mode: usize,
     pub frequency_hz: f64,
-    pub floors_db: [f64; FLOORS],
+    pub floors_db: Vec<f64>,
 }
 
 /// A design run on the structure.
@@ -130,7 +134,7 @@ pub struct DesignRun {
     pub mean_attenuation_db: f64,
     pub control_rms: f64,
     pub control_peak: f64,
-    pub acc_rms: [f64; FLOORS],
+    pub acc_rms: Vec<f64>,
     /// Why the run stopped, when the closed loop went unstable (then no figures).
     pub unstable: Option<String>,
 }
@@ -140,7 +144,7 @@ pub struct Passive {
     pub contacts: usize,
     pub contact_times: Vec<f64>,
     pub contact_events: Vec<ContactEvent>,
-    pub acc_rms: [f64; FLOORS],
+    pub acc_rms: Vec<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -183,7 +187,7 @@ pub struct ScheduleReport {
     pub high_fraction: f64,
     /// The corrector's latent variance above which the high gain comes on, per floor (None:
     /// the twin has no corrector, or the trigger is off).
-    pub variance_threshold: Option<[f64; FLOORS]>,
+    pub variance_threshold: Option<Vec<f64>>,
     /// Fractions of the time the drift and the latent-variance triggers held.
     pub drift_trigger_fraction: f64,
     pub variance_trigger_fraction: f64,
@@ -193,7 +197,7 @@ pub struct ScheduleReport {
     pub mean_attenuation_db: f64,
     pub control_rms: f64,
     pub control_peak: f64,
-    pub acc_rms: [f64; FLOORS],
+    pub acc_rms: Vec<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -235,8 +239,8 @@ pub struct ControlReport {
     pub highpass_hz: f64,
     pub substeps: usize,
     pub control_rate_hz: f64,
-    pub sensor_noise_sd: Option<[f64; FLOORS]>,
-    pub resonances_hz: [f64; FLOORS],
+    pub sensor_noise_sd: Option<Vec<f64>>,
+    pub resonances_hz: Vec<f64>,
     pub gaps: Vec<GapReport>,
     pub passive: Passive,
     pub designs: Vec<DesignRun>,
@@ -256,15 +260,16 @@ pub struct ControlOutcome {
     pub dt: f64,
 }
 
-/// Peak of the FRF (dB) in the band around each resonance, per floor.
+/// Peak of the FRF (dB) in the band around each resonance (rows), per floor (columns).
 fn resonance_peaks(
     force: &[f64],
     response: &Response,
     dt: f64,
-    resonances: &[f64; FLOORS],
-) -> [[f64; FLOORS]; FLOORS] {
-    let mut out = [[f64::NAN; FLOORS]; FLOORS];
-    for floor in 0..FLOORS {
+    resonances: &[f64],
+) -> Vec<Vec<f64>> {
+    let floors = response.acc.len();
+    let mut out = vec![vec![f64::NAN; floors]; resonances.len()];
+    for floor in 0..floors {
         let n = force.len().min(response.acc[floor].len());
         let Some(h) = welch_h1(&force[..n], &response.acc[floor][..n], dt, FRF_SEGMENT) else {
             continue;
@@ -286,16 +291,17 @@ fn resonance_peaks(
 }
 
 fn attenuation(
-    passive: &[[f64; FLOORS]; FLOORS],
-    controlled: &[[f64; FLOORS]; FLOORS],
-    resonances: &[f64; FLOORS],
+    passive: &[Vec<f64>],
+    controlled: &[Vec<f64>],
+    resonances: &[f64],
 ) -> (Vec<Attenuation>, f64) {
     let mut list = Vec::new();
     let mut sum = 0.0;
     let mut count = 0;
-    for mode in 0..FLOORS {
-        let mut floors_db = [f64::NAN; FLOORS];
-        for floor in 0..FLOORS {
+    for mode in 0..resonances.len() {
+        let floors = passive[mode].len();
+        let mut floors_db = vec![f64::NAN; floors];
+        for floor in 0..floors {
             floors_db[floor] = passive[mode][floor] - controlled[mode][floor];
             if floors_db[floor].is_finite() {
                 sum += floors_db[floor];
@@ -318,8 +324,8 @@ fn attenuation(
     )
 }
 
-fn acc_rms(r: &Response) -> [f64; FLOORS] {
-    [rms(&r.acc[0]), rms(&r.acc[1]), rms(&r.acc[2])]
+fn acc_rms(r: &Response) -> Vec<f64> {
+    r.acc.iter().map(|a| rms(a)).collect()
 }
 
 /// Controller samples per record sample: the fastest closed-loop pole moves by at most 0.1 rad
@@ -341,8 +347,8 @@ struct Runner<'a> {
     data: &'a Measurement,
     setup: LoopSetup,
     estimator: Estimator,
-    resonances: [f64; FLOORS],
-    passive_peaks: [[f64; FLOORS]; FLOORS],
+    resonances: Vec<f64>,
+    passive_peaks: Vec<Vec<f64>>,
     progress: &'a mut dyn FnMut(u64, u64),
     runs_done: u64,
     runs_total: u64,
@@ -376,8 +382,8 @@ impl Runner<'_> {
         design: Design,
         role: &str,
     ) -> Result<(DesignRun, Option<Response>), ControlError> {
-        let state = StateSource::Estimated(self.estimator);
-        let outcome = self.run_law(Gains::Fixed(design.gain), state)?;
+        let state = StateSource::Estimated(self.estimator.clone());
+        let outcome = self.run_law(Gains::Fixed(design.gain.clone()), state)?;
         Ok(match outcome {
             Ok(r) => {
                 let peaks = resonance_peaks(&self.data.force(), &r, self.data.dt, &self.resonances);
@@ -410,7 +416,7 @@ impl Runner<'_> {
                     mean_attenuation_db: f64::NAN,
                     control_rms: f64::NAN,
                     control_peak: f64::NAN,
-                    acc_rms: [f64::NAN; FLOORS],
+                    acc_rms: vec![f64::NAN; self.setup.plant.floors()],
                     unstable: Some(message),
                 },
                 None,
@@ -422,8 +428,9 @@ impl Runner<'_> {
 fn estimator_of(
     choice: EstimatorChoice,
     options: &ControlOptions,
-    noise_sd: Option<[f64; FLOORS]>,
+    noise_sd: Option<&[f64]>,
     data: &Measurement,
+    floors: usize,
 ) -> Estimator {
     match choice {
         EstimatorChoice::Integrate => Estimator::Integrate {
@@ -434,11 +441,15 @@ fn estimator_of(
             // sample; the sensors' noise as the twin calibrated it (else 1 % of the measured
             // RMS).
             let force_rms = rms(&data.force()).max(1e-6);
-            let sensor_sd =
-                noise_sd.unwrap_or_else(|| [0, 1, 2].map(|f| (0.01 * rms(&data.acc(f))).max(1e-6)));
+            let sensor_sd: Vec<f64> = match noise_sd {
+                Some(sd) => sd.to_vec(),
+                None => (0..floors)
+                    .map(|f| (0.01 * rms(data.acc(f))).max(1e-6))
+                    .collect(),
+            };
             Estimator::Kalman {
                 process_sd: 0.05 * force_rms,
-                sensor_sd: sensor_sd.map(|s| s.max(1e-9)),
+                sensor_sd: sensor_sd.iter().map(|s| s.max(1e-9)).collect(),
             }
         }
     }
@@ -460,8 +471,9 @@ pub fn run_control(
             options.highpass_hz
         )));
     }
-    let structure: ShearMatrices = structure_of(twin)?;
-    let plant = structure.state_space(options.unit.scale())?;
+    let structure: Structure = structure_of(twin)?;
+    let plant = plant_of(&structure, options.actuator_floor, options.unit.scale())?;
+    let floors = structure.storeys();
     let mut qs = options.qs.clone();
     qs.sort_by(f64::total_cmp);
     qs.dedup();
@@ -487,9 +499,19 @@ pub fn run_control(
         }
         None => substeps_for(&all, data.dt),
     };
-    let noise_sd = options
-        .sensor_noise
-        .or_else(|| twin.noise_variance.map(|v| v.map(|x| x.max(0.0).sqrt())));
+    let noise_sd: Option<Vec<f64>> = match &options.sensor_noise {
+        Some(sd) if sd.len() == 1 => Some(vec![sd[0]; floors]),
+        Some(sd) if sd.len() == floors => Some(sd.clone()),
+        Some(sd) => {
+            return Err(ControlError::Options(format!(
+                "the sensor noise has {} values: give one, or one per floor ({floors})",
+                sd.len()
+            )))
+        }
+        None => twin
+            .noise_variance
+            .map(|v| v.iter().map(|x| x.max(0.0).sqrt()).collect()),
+    };
     let mut gaps = closed_loop::twin_gaps(twin);
     for g in &options.gaps {
         if !gaps.iter().any(|h| h.storey == g.storey) {
@@ -498,9 +520,9 @@ pub fn run_control(
     }
     let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
-        plant,
+        plant: plant.clone(),
         substeps,
-        noise: noise_sd.map(|sd| SensorNoise {
+        noise: noise_sd.clone().map(|sd| SensorNoise {
             sd,
             seed: options.seed,
         }),
@@ -508,7 +530,13 @@ pub fn run_control(
         force_limit: 1e3 * force_peak.max(1e-3),
         corrector: false,
     };
-    let estimator = estimator_of(options.estimator, options, noise_sd, data);
+    let estimator = estimator_of(
+        options.estimator,
+        options,
+        noise_sd.as_deref(),
+        data,
+        floors,
+    );
     let resonances = structure.natural_frequencies();
     let runs_total = 1
         + designs.len()
@@ -519,9 +547,9 @@ pub fn run_control(
         twin,
         data,
         setup,
-        estimator,
-        resonances,
-        passive_peaks: [[f64::NAN; FLOORS]; FLOORS],
+        estimator: estimator.clone(),
+        resonances: resonances.clone(),
+        passive_peaks: Vec::new(),
         progress,
         runs_done: 0,
         runs_total: runs_total as u64,
@@ -642,16 +670,17 @@ pub fn run_control(
                             twin.describe()
                         )));
                     }
-                    Some([v; FLOORS])
+                    Some(vec![v; floors])
                 }
-                VarianceTrigger::Auto if has_corrector => {
-                    Some(twin.noise_variance.unwrap_or_else(|| {
-                        [0, 1, 2].map(|f| {
+                VarianceTrigger::Auto if has_corrector => Some(match twin.noise_variance {
+                    Some(v) => v.to_vec(),
+                    None => (0..floors)
+                        .map(|f| {
                             crate::workflows::learn::PAPER_THRESHOLD
-                                * crate::evaluation::stats::variance(&data.acc(f))
+                                * crate::evaluation::stats::variance(data.acc(f))
                         })
-                    }))
-                }
+                        .collect(),
+                }),
                 VarianceTrigger::Auto => None,
             };
             let schedule = Schedule {
@@ -661,14 +690,14 @@ pub fn run_control(
                 margin: so.margin,
                 lookahead: so.lookahead,
                 dwell: so.dwell,
-                variance_threshold,
+                variance_threshold: variance_threshold.clone(),
             };
             let gains = Gains::Scheduled {
-                low: low.design.gain,
-                high: high.design.gain,
+                low: low.design.gain.clone(),
+                high: high.design.gain.clone(),
                 schedule,
             };
-            let state = StateSource::Estimated(estimator);
+            let state = StateSource::Estimated(estimator.clone());
             runner.setup.corrector = variance_threshold.is_some();
             let r = runner.run_law(gains, state);
             runner.setup.corrector = false;
@@ -718,8 +747,9 @@ pub fn run_control(
                 StateSource::Estimated(estimator_of(
                     EstimatorChoice::Integrate,
                     options,
-                    noise_sd,
+                    noise_sd.as_deref(),
                     data,
+                    floors,
                 )),
             ),
             (
@@ -727,14 +757,15 @@ pub fn run_control(
                 StateSource::Estimated(estimator_of(
                     EstimatorChoice::Kalman,
                     options,
-                    noise_sd,
+                    noise_sd.as_deref(),
                     data,
+                    floors,
                 )),
             ),
         ];
         for (name, state) in choices {
             // The chosen estimator's run is the design's own.
-            let same = matches!(state, StateSource::Estimated(e) if e == estimator);
+            let same = matches!(&state, StateSource::Estimated(e) if *e == estimator);
             let (att, mean, rms_u, contacts) = if same {
                 (
                     first.attenuation_db.clone(),
@@ -743,7 +774,7 @@ pub fn run_control(
                     first.contacts,
                 )
             } else {
-                match runner.run_law(Gains::Fixed(first.design.gain), state)? {
+                match runner.run_law(Gains::Fixed(first.design.gain.clone()), state)? {
                     Ok(r) => {
                         let peaks = resonance_peaks(&data.force(), &r, data.dt, &resonances);
                         let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
@@ -787,7 +818,7 @@ pub fn run_control(
         state_unit: options.unit.name().into(),
         units_note,
         estimator: estimator.name().into(),
-        estimator_settings: estimator,
+        estimator_settings: estimator.clone(),
         highpass_hz: options.highpass_hz,
         substeps,
         control_rate_hz: substeps as f64 / data.dt,
@@ -825,14 +856,14 @@ pub struct ControllerSpec {
     pub state_scale: f64,
     pub estimator_settings: Estimator,
     pub control_rate_hz: f64,
-    pub sensor_noise_sd: Option<[f64; FLOORS]>,
+    pub sensor_noise_sd: Option<Vec<f64>>,
     pub designs: Vec<SpecDesign>,
 }
 
 #[derive(Clone, Debug, serde::Deserialize)]
 pub struct SpecDesign {
     pub q: f64,
-    pub gain: [f64; numerics::lqr::STATES],
+    pub gain: Vec<f64>,
     pub unstable: Option<String>,
 }
 
@@ -873,25 +904,35 @@ impl ControllerSpec {
         }
     }
 
-    /// The structure the design was made on.
-    pub fn structure(&self) -> Result<ShearMatrices, ControlError> {
+    /// The structure the design was made on: as many storeys as the report has masses
+    /// (m1, m2, … without a gap), each with its c and k.
+    pub fn structure(&self) -> Result<Structure, ControlError> {
         let get = |name: String| {
             self.parameters.get(&name).copied().ok_or_else(|| {
                 ControlError::Options(format!("the report's parameters lack '{name}'"))
             })
         };
-        let mut s = ShearMatrices {
-            mass: [0.0; FLOORS],
-            damping: [0.0; FLOORS],
-            stiffness: [0.0; FLOORS],
-        };
-        for i in 0..FLOORS {
-            s.mass[i] = get(format!("m{}", i + 1))?;
-            s.damping[i] = get(format!("c{}", i + 1))?;
-            s.stiffness[i] = get(format!("k{}", i + 1))?;
+        let storeys = (1..)
+            .take_while(|i| self.parameters.contains_key(&format!("m{i}")))
+            .count();
+        if storeys == 0 {
+            return Err(ControlError::Options(
+                "the report's parameters lack 'm1'".into(),
+            ));
         }
-        s.check()?;
+        let mut s = Structure::uniform(storeys, 0.0, 0.0, 0.0, Default::default());
+        for name in s.parameter_names() {
+            let value = get(name.clone())?;
+            s.set(&name, value);
+        }
+        s.validate()
+            .map_err(|e| ControlError::Options(format!("the report's structure: {e}")))?;
         Ok(s)
+    }
+
+    /// The design's plant: the report's structure, the actuator at floor 1.
+    pub fn plant(&self) -> Result<numerics::lqr::StateSpace, ControlError> {
+        plant_of(&self.structure()?, 1, self.state_scale)
     }
 
     /// The controller for design `q`, sampling every `dt` seconds (the report's rate is
@@ -902,7 +943,7 @@ impl ControllerSpec {
         dt: f64,
     ) -> Result<numerics::lqr::Controller, ControlError> {
         let design = self.design(q)?;
-        let plant = self.structure()?.state_space(self.state_scale)?;
+        let plant = self.plant()?;
         if !(self.control_rate_hz.is_finite() && self.control_rate_hz > 0.0) {
             return Err(ControlError::Options(format!(
                 "the report's control rate {} Hz is not positive",
@@ -911,7 +952,7 @@ impl ControllerSpec {
         }
         Ok(numerics::lqr::Controller::new(
             &plant,
-            design.gain,
+            &design.gain,
             &self.estimator_settings,
             dt,
         )?)
@@ -930,7 +971,7 @@ pub fn predict_controlled(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<crate::twin::run::Prediction, ControlError> {
     let design = spec.design(q)?;
-    let plant = spec.structure()?.state_space(spec.state_scale)?;
+    let plant = spec.plant()?;
     let substeps = (spec.control_rate_hz * data.dt).round().max(1.0) as usize;
     let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
@@ -942,13 +983,18 @@ pub fn predict_controlled(
         corrector: false,
     };
     let law = LoopLaw {
-        gains: Gains::Fixed(design.gain),
-        state: StateSource::Estimated(spec.estimator_settings),
+        gains: Gains::Fixed(design.gain.clone()),
+        state: StateSource::Estimated(spec.estimator_settings.clone()),
     };
     let r = simulate(twin, data, &setup, Some(&law), progress)?;
+    let floors = r.acc.len();
     Ok(crate::twin::run::Prediction {
         time: r.time,
-        acc: r.acc,
+        acc: r.acc.try_into().map_err(|_| {
+            ControlError::Twin(format!(
+                "a prediction holds three floors; the controlled structure has {floors}"
+            ))
+        })?,
         latent_var: None,
         sd: None,
     })

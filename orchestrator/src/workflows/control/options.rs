@@ -1,7 +1,6 @@
 //! `twin control`'s options: their defaults, checks and the texts of `--gap`,
 //! `--variance-threshold` and `--sensor-noise`, once for the CLI and the Python package.
 
-use numerics::lqr::FLOORS;
 use structure::effects::{Kind, Law, Side};
 
 use super::closed_loop::Gap;
@@ -12,7 +11,7 @@ use crate::workflows::options::InvalidOption;
 impl Default for ControlOptions {
     /// No design (`qs` empty: give at least one q), R = 0.1, the state in m, the integrating
     /// estimator with a 0.5 Hz drift removal, sub-steps from the fastest pole, the twin's
-    /// calibrated sensor noise, seed 1, no retune, no schedule.
+    /// calibrated sensor noise, seed 1, no retune, no schedule, the actuator at floor 1.
     fn default() -> Self {
         ControlOptions {
             qs: Vec::new(),
@@ -27,6 +26,7 @@ impl Default for ControlOptions {
             retune: None,
             schedule: None,
             estimator_costs: false,
+            actuator_floor: 1,
         }
     }
 }
@@ -69,6 +69,11 @@ impl ControlOptions {
                 self.r
             )));
         }
+        if self.actuator_floor == 0 {
+            return Err(InvalidOption(
+                "the actuator's floor is 1-based: 1 is the first floor".into(),
+            ));
+        }
         if let Some(Retune {
             max_force: Some(m), ..
         }) = &self.retune
@@ -86,9 +91,9 @@ impl ControlOptions {
 
 /// `--sensor-noise SD` (m/s², every floor): the options' `sensor_noise` (None: the twin's
 /// calibrated noise), and whether the twin's own noise goes too (SD = 0: no noise at all).
-pub fn sensor_noise(sd: Option<f64>) -> Result<(Option<[f64; FLOORS]>, bool), InvalidOption> {
+pub fn sensor_noise(sd: Option<f64>) -> Result<(Option<Vec<f64>>, bool), InvalidOption> {
     match sd {
-        Some(s) if s.is_finite() && s >= 0.0 => Ok(((s > 0.0).then_some([s; FLOORS]), s == 0.0)),
+        Some(s) if s.is_finite() && s >= 0.0 => Ok(((s > 0.0).then(|| vec![s]), s == 0.0)),
         Some(s) => Err(InvalidOption(format!(
             "--sensor-noise {s}: must be a number ≥ 0 (m/s²)"
         ))),

@@ -56,22 +56,24 @@ pub fn controller_parameters(
         real(format!("gain{}", i + 1), *g);
     }
     real("state_scale".into(), spec.state_scale);
-    for i in 0..3 {
-        real(format!("m{}", i + 1), structure.mass[i]);
-        real(format!("c{}", i + 1), structure.damping[i]);
-        real(format!("k{}", i + 1), structure.stiffness[i]);
+    for (name, value) in structure
+        .parameter_names()
+        .into_iter()
+        .zip(structure.parameters())
+    {
+        real(name, value);
     }
     real("sample_interval".into(), 1.0 / spec.control_rate_hz);
-    let estimator = match spec.estimator_settings {
+    let estimator = match &spec.estimator_settings {
         Estimator::Integrate { highpass_hz } => {
-            real("highpass_hz".into(), highpass_hz);
+            real("highpass_hz".into(), *highpass_hz);
             0
         }
         Estimator::Kalman {
             process_sd,
             sensor_sd,
         } => {
-            real("process_sd".into(), process_sd);
+            real("process_sd".into(), *process_sd);
             for (i, s) in sensor_sd.iter().enumerate() {
                 real(format!("sensor_sd{}", i + 1), *s);
             }

@@ -271,10 +271,11 @@ pub fn runs(
     }
     let excitation: Vec<f64> = setup.unit.iter().map(|f| f * peak).collect();
     let st = &setup.structure;
-    let modes = numerics::lqr::ShearMatrices {
-        mass: st.mass,
-        damping: st.damping,
-        stiffness: st.stiffness,
+    let modes = structure::Structure {
+        mass: st.mass.to_vec(),
+        damping: st.damping.to_vec(),
+        stiffness: st.stiffness.to_vec(),
+        excitation: structure::Excitation::Force { floor: 1 },
     }
     .natural_frequencies();
     let mut out = Vec::new();

@@ -154,10 +154,21 @@ impl HybridOptions {
     pub fn setup(&self, twin: &Twin) -> Result<(Setup, Header), HybridTestError> {
         let c = self;
         let s = structure_of(twin)?;
+        // The test's substructures are cut from the paper's three storeys.
+        let three = |v: &[f64]| -> Result<[f64; 3], HybridTestError> {
+            v.try_into().map_err(|_| {
+                HybridError::Setup(format!(
+                    "the hybrid test splits a three-storey structure; {} has {}",
+                    twin.describe(),
+                    v.len()
+                ))
+                .into()
+            })
+        };
         let structure = Structure {
-            mass: s.mass,
-            damping: s.damping,
-            stiffness: s.stiffness,
+            mass: three(&s.mass)?,
+            damping: three(&s.damping)?,
+            stiffness: three(&s.stiffness)?,
             gap: c.gap,
             contact_stiffness: c.contact_stiffness,
         };
