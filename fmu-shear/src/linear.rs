@@ -298,7 +298,10 @@ mod tests {
             }
             println!("{excitation:?}: {worst:e} of {peak:e}");
             assert!(peak > 1e-4, "the run moves: peak {peak:e}");
-            assert!(worst <= 1e-12 * peak, "map vs direct RK4: {worst:e} of {peak:e}");
+            assert!(
+                worst <= 1e-12 * peak,
+                "map vs direct RK4: {worst:e} of {peak:e}"
+            );
         }
     }
 }

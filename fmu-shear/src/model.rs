@@ -235,9 +235,7 @@ impl ShearModel {
             out[i] = rhs;
         }
         if self.effects.any_enabled() && n == 3 {
-            let g = self
-                .effects
-                .force(&[y[0], y[1], y[2]], &[v[0], v[1], v[2]]);
+            let g = self.effects.force(&[y[0], y[1], y[2]], &[v[0], v[1], v[2]]);
             for i in 0..3 {
                 out[i] -= g[i];
             }

@@ -134,12 +134,11 @@ fn units() -> Vec<Unit> {
 fn variables(p: &ShearParameters) -> Vec<Variable> {
     let n = p.storeys() as u32;
     let excitation = match p.excitation {
-        Excitation::Force { floor } => {
-            Variable::real_input("force", FORCE, "N", 0.0)
-                .describe(&format!("excitation force on floor {floor} (the shaker)"))
-        }
-        Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0)
-            .describe("ground acceleration at the base (the model is in coordinates relative to the ground)"),
+        Excitation::Force { floor } => Variable::real_input("force", FORCE, "N", 0.0)
+            .describe(&format!("excitation force on floor {floor} (the shaker)")),
+        Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0).describe(
+            "ground acceleration at the base (the model is in coordinates relative to the ground)",
+        ),
     };
     let input_vr = excitation.vr;
     let mut v = vec![
@@ -164,8 +163,9 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
     for i in 0..n {
         let floor = i + 1;
         v.push(
-            Variable::real_output(&format!("disp{floor}"), DISP + i, "m")
-                .describe(&format!("displacement of floor {floor} relative to the ground")),
+            Variable::real_output(&format!("disp{floor}"), DISP + i, "m").describe(&format!(
+                "displacement of floor {floor} relative to the ground"
+            )),
         );
     }
     for i in 0..n {
@@ -287,7 +287,11 @@ fn build(p: &ShearParameters) -> ModelInfo {
         variables(p),
         units(),
         true,
-        Some(DefaultExperiment { start_time: 0.0, stop_time: 20.0, step_size: 1.0 / 51.2 }),
+        Some(DefaultExperiment {
+            start_time: 0.0,
+            stop_time: 20.0,
+            step_size: 1.0 / 51.2,
+        }),
     )
     // Built from a validated structure; the unit tests build it for every storey count.
     .expect("the shear FMU's variable table is consistent")
@@ -344,7 +348,10 @@ mod tests {
             for excitation in [Excitation::Force { floor: storeys }, Excitation::Base] {
                 let p = params(storeys, excitation);
                 let info = table(&p);
-                assert!(guids.insert(info.guid.clone()), "{storeys} {excitation:?}: GUID shared");
+                assert!(
+                    guids.insert(info.guid.clone()),
+                    "{storeys} {excitation:?}: GUID shared"
+                );
                 assert!(std::ptr::eq(info, table(&p)), "built once");
                 for i in 1..=storeys {
                     for name in ["acc", "disp", "vel", "drift", "m", "c", "k"] {
@@ -368,9 +375,13 @@ mod tests {
                     info.by_name(&last).map(|v| v.vr),
                     Some(sensitivity_vr(storeys - 1, 3 * storeys - 1, storeys))
                 );
-                assert_eq!(info.by_name("contact23_enabled").is_some(), p.is_paper_layout());
                 assert_eq!(
-                    info.by_name(&format!("m{storeys}")).map(|v| v.start.clone()),
+                    info.by_name("contact23_enabled").is_some(),
+                    p.is_paper_layout()
+                );
+                assert_eq!(
+                    info.by_name(&format!("m{storeys}"))
+                        .map(|v| v.start.clone()),
                     Some(fmi2::Start::Real(p.mass[storeys - 1]))
                 );
             }
@@ -389,10 +400,16 @@ mod tests {
                     assert_eq!(sensitivity_index(vr, storeys), Some((floor, parameter)));
                 }
             }
-            assert_eq!(sensitivity_index(SENSITIVITY + PER_FLOOR * storeys as u32, storeys), None);
+            assert_eq!(
+                sensitivity_index(SENSITIVITY + PER_FLOOR * storeys as u32, storeys),
+                None
+            );
             if storeys < MAX_STOREYS {
                 // Past the last storey of the m block.
-                assert_eq!(sensitivity_index(SENSITIVITY + storeys as u32, storeys), None);
+                assert_eq!(
+                    sensitivity_index(SENSITIVITY + storeys as u32, storeys),
+                    None
+                );
             }
         }
     }

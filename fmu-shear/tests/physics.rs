@@ -70,7 +70,8 @@ fn energy(model: &ShearModel) -> f64 {
 /// Natural circular frequencies (ascending) and mass-normalised mode shapes (columns, φᵀMφ = I),
 /// from the symmetric eigenproblem of M^-1/2 K M^-1/2.
 fn modes(p: &ShearParameters) -> (Vector3<f64>, Matrix3<f64>) {
-    let m_inv_sqrt = Matrix3::from_diagonal(&Vector3::from_column_slice(&p.mass).map(|m| 1.0 / m.sqrt()));
+    let m_inv_sqrt =
+        Matrix3::from_diagonal(&Vector3::from_column_slice(&p.mass).map(|m| 1.0 / m.sqrt()));
     let eigen = SymmetricEigen::new(m_inv_sqrt * stiffness_matrix(p) * m_inv_sqrt);
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
@@ -355,7 +356,9 @@ fn free_vibration_in_a_mode_shape_stays_in_it_at_the_eigenfrequency() {
         let mut model = ShearModel::new(p.clone(), Effects::default());
         let scale = 1e-3 / shape.amax();
         model.displacement = (0..3).map(|i| scale * shape[i]).collect();
-        let modal = |model: &ShearModel| shapes.transpose() * m * Vector3::from_column_slice(&model.displacement);
+        let modal = |model: &ShearModel| {
+            shapes.transpose() * m * Vector3::from_column_slice(&model.displacement)
+        };
         let q0 = modal(&model)[mode];
         let (mut previous, mut crossings, mut leak) = (q0, Vec::new(), 0.0f64);
         for n in 1..=samples {

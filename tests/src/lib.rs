@@ -124,7 +124,13 @@ pub fn simulate_accelerations(
         model.force = RampInput { value, slope };
         let net_input = model.force.value - model.control_force.value;
         let mut acc = [0.0; 3];
-        model.accelerations_into(&model.displacement, &model.velocity, net_input, 0.0, &mut acc);
+        model.accelerations_into(
+            &model.displacement,
+            &model.velocity,
+            net_input,
+            0.0,
+            &mut acc,
+        );
         accelerations.push(acc);
         if next.is_some() {
             model.advance(step);

@@ -309,34 +309,7 @@ impl Measurement {
                 (comments.start.unwrap_or(0.0), 1.0 / rate)
             }
         };
-        let mut take = |i: usize, unit: Unit| -> Vec<f64> {
-            let mut values = std::mem::take(&mut columns[i]);
-            let factor = unit.to_si();
-            if factor != 1.0 {
-                values.iter_mut().for_each(|v| *v *= factor);
-            }
-            values
-        };
-        let (ex_index, ex_channel, ex_unit) = layout.excitation;
-        let excitation = Signal {
-            channel: ex_channel,
-            unit: ex_unit,
-            values: take(ex_index, ex_unit),
-        };
-        let responses = layout
-            .responses
-            .iter()
-            .map(|&(i, channel, unit)| Signal {
-                channel,
-                unit,
-                values: take(i, unit),
-            })
-            .collect();
-        let extra = layout
-            .extra
-            .iter()
-            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[*i])))
-            .collect();
+        let (excitation, responses, extra) = layout.take_signals(&mut columns);
         Ok(Measurement {
             path: path.to_owned(),
             time: match layout.time {
@@ -392,33 +365,7 @@ impl Measurement {
         // Arrays carry no printed resolution: their times are taken as written to 1 µs.
         let (_, dt) = nominal_grid(&columns[time_index], &vec![1e-6; n])
             .map_err(|e| grid_error(e, |k| err(format!("sample {k}"))))?;
-        let mut take = |i: usize, unit: Unit| -> Vec<f64> {
-            let factor = unit.to_si();
-            std::mem::take(&mut columns[i])
-                .into_iter()
-                .map(|v| v * factor)
-                .collect()
-        };
-        let (ex_index, ex_channel, ex_unit) = layout.excitation;
-        let excitation = Signal {
-            channel: ex_channel,
-            unit: ex_unit,
-            values: take(ex_index, ex_unit),
-        };
-        let responses = layout
-            .responses
-            .iter()
-            .map(|&(i, channel, unit)| Signal {
-                channel,
-                unit,
-                values: take(i, unit),
-            })
-            .collect();
-        let extra = layout
-            .extra
-            .iter()
-            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[*i])))
-            .collect();
+        let (excitation, responses, extra) = layout.take_signals(&mut columns);
         Ok(Measurement {
             path: origin.to_owned(),
             time: std::mem::take(&mut columns[time_index]),
@@ -470,6 +417,42 @@ struct Layout {
 }
 
 impl Layout {
+    /// The excitation, the responses (in SI) and the extra columns, taken out of `columns`.
+    fn take_signals(
+        &self,
+        columns: &mut [Vec<f64>],
+    ) -> (Signal, Vec<Signal>, HashMap<String, Vec<f64>>) {
+        let mut take = |i: usize, unit: Unit| -> Vec<f64> {
+            let mut values = std::mem::take(&mut columns[i]);
+            let factor = unit.to_si();
+            if factor != 1.0 {
+                values.iter_mut().for_each(|v| *v *= factor);
+            }
+            values
+        };
+        let (ex_index, ex_channel, ex_unit) = self.excitation;
+        let excitation = Signal {
+            channel: ex_channel,
+            unit: ex_unit,
+            values: take(ex_index, ex_unit),
+        };
+        let responses = self
+            .responses
+            .iter()
+            .map(|&(i, channel, unit)| Signal {
+                channel,
+                unit,
+                values: take(i, unit),
+            })
+            .collect();
+        let extra = self
+            .extra
+            .iter()
+            .map(|(i, name)| (name.clone(), std::mem::take(&mut columns[*i])))
+            .collect();
+        (excitation, responses, extra)
+    }
+
     fn parse(header: &[String], map: &ColumnMap) -> Result<Layout, String> {
         let mut time = None;
         let mut excitation: Option<(usize, Channel, Unit)> = None;

@@ -161,25 +161,41 @@ pub fn find_fmu(file_name: &str) -> Result<PathBuf, TwinError> {
 impl Twin {
     /// The shear FMU with its default parameters, force in, accelerations out.
     pub fn default_twin() -> Result<Self, TwinError> {
-        let fmu_path = find_fmu(SHEAR_FMU)?;
-        let mut connections = Vec::new();
-        for input in INPUTS {
-            connections.push(Connection {
+        Ok(Twin::of_shear_fmu(
+            find_fmu(SHEAR_FMU)?,
+            &INPUTS,
+            &OUTPUTS,
+            Vec::new(),
+        ))
+    }
+
+    /// The shear FMU at `fmu_path` alone, each of `inputs` fed from the system's input of that
+    /// name and each of `outputs` given out under its name; `keep_alive` holds what the path
+    /// lives in (a temporary directory).
+    pub(crate) fn of_shear_fmu(
+        fmu_path: PathBuf,
+        inputs: &[&str],
+        outputs: &[impl AsRef<str>],
+        keep_alive: Vec<std::sync::Arc<dyn std::any::Any + Send + Sync>>,
+    ) -> Twin {
+        let mut connections: Vec<Connection> = inputs
+            .iter()
+            .map(|input| Connection {
                 start_element: None,
-                start_connector: input.into(),
+                start_connector: (*input).into(),
                 end_element: Some(PHYSICS.into()),
-                end_connector: input.into(),
-            });
-        }
-        for output in OUTPUTS {
+                end_connector: (*input).into(),
+            })
+            .collect();
+        for output in outputs {
             connections.push(Connection {
                 start_element: Some(PHYSICS.into()),
-                start_connector: output.into(),
+                start_connector: output.as_ref().into(),
                 end_element: None,
-                end_connector: output.into(),
+                end_connector: output.as_ref().into(),
             });
         }
-        Ok(Twin {
+        Twin {
             name: "shear-twin".into(),
             components: vec![Component {
                 name: PHYSICS.into(),
@@ -194,8 +210,8 @@ impl Twin {
             validation_nmse: None,
             records: Vec::new(),
             source: None,
-            keep_alive: Vec::new(),
-        })
+            keep_alive,
+        }
     }
 
     /// `path` is an `.ssp` archive, or None for the default twin.

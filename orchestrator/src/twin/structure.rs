@@ -6,7 +6,6 @@
 //! `resources/structure.json`, which the library reads at `fmi2Instantiate`. The archive is the
 //! built-in shear FMU with those two entries replaced or added.
 
-use std::collections::BTreeMap;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -14,7 +13,7 @@ use std::sync::Arc;
 use fmu_shear::{ShearParameters, StructureResource};
 use structure::{Excitation, Structure};
 
-use super::{find_fmu, Component, Connection, Twin, TwinError, PHYSICS, SHEAR_FMU};
+use super::{find_fmu, Twin, TwinError, SHEAR_FMU};
 
 /// The structure file inside the FMU (under `resources/`).
 const RESOURCE: &str = "resources/structure.json";
@@ -92,7 +91,8 @@ impl InitOptions {
                     defaults.stiffness[0],
                     excitation,
                 );
-                s.validate().map_err(|e| TwinError::Message(e.to_string()))?;
+                s.validate()
+                    .map_err(|e| TwinError::Message(e.to_string()))?;
                 s
             }
         };
@@ -179,40 +179,14 @@ impl Twin {
             source,
         })?;
         let inputs = [structure.excitation.input_name(), "control_force"];
-        let mut connections: Vec<Connection> = inputs
-            .iter()
-            .map(|input| Connection {
-                start_element: None,
-                start_connector: (*input).into(),
-                end_element: Some(PHYSICS.into()),
-                end_connector: (*input).into(),
-            })
+        let outputs: Vec<String> = (1..=structure.storeys())
+            .map(|floor| format!("acc{floor}"))
             .collect();
-        for floor in 1..=structure.storeys() {
-            let output = format!("acc{floor}");
-            connections.push(Connection {
-                start_element: Some(PHYSICS.into()),
-                start_connector: output.clone(),
-                end_element: None,
-                end_connector: output,
-            });
-        }
-        Ok(Twin {
-            name: "shear-twin".into(),
-            components: vec![Component {
-                name: PHYSICS.into(),
-                fmu_name: SHEAR_FMU.into(),
-                fmu_path,
-                parameters: BTreeMap::new(),
-            }],
-            connections,
-            noise_variance: None,
-            default_experiment: None,
-            parameter_covariance: None,
-            validation_nmse: None,
-            records: Vec::new(),
-            source: None,
-            keep_alive: vec![Arc::new(dir)],
-        })
+        Ok(Twin::of_shear_fmu(
+            fmu_path,
+            &inputs,
+            &outputs,
+            vec![Arc::new(dir)],
+        ))
     }
 }
