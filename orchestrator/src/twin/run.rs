@@ -3,32 +3,15 @@
 
 use std::time::{Duration, Instant};
 
-use crate::cosim::master::{Clock, MasterError, Recorder};
+use crate::cosim::master::{Clock, Recorder};
 use crate::evaluation::compare::{compare, CompareOptions, Comparison};
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::system::{SystemBuilder, SystemError};
-use crate::twin::{ParameterValue, Twin, TwinError, OUTPUTS, PHYSICS};
+use crate::twin::{ParameterValue, Twin, OUTPUTS, PHYSICS};
 
-#[derive(Debug, thiserror::Error)]
-pub enum RunError {
-    #[error(transparent)]
-    Twin(#[from] TwinError),
-    #[error(transparent)]
-    Master(#[from] MasterError),
-    #[error("twin: {0}")]
-    Wiring(String),
-}
-
-impl From<SystemError> for RunError {
-    fn from(e: SystemError) -> Self {
-        match e {
-            SystemError::Twin(e) => RunError::Twin(e),
-            SystemError::Master(e) => RunError::Master(e),
-            SystemError::Wiring(message) => RunError::Wiring(message),
-        }
-    }
-}
+/// A run's error is the system builder's: the twin, the master or the wiring.
+pub type RunError = SystemError;
 
 /// Predicted accelerations at every sample of the measurement.
 #[derive(Debug, Clone)]
