@@ -11,42 +11,105 @@
 //!   percent with frequent contact at 8 sub-steps); splitting the step at the crossing, located
 //!   by regula falsi on the switch function, restores it.
 
-use numerics::ode;
+use numerics::ode::{self, OdeState};
 
 use crate::effects::Switches;
+use crate::linear::StepInputs;
 use crate::model::{ShearModel, ADAPTIVE_TOLERANCE};
 
+/// The state `[y, ẏ]` of the paper's three storeys as a fixed array (the effect paths of the
+/// paper's rig; any other structure steps a `Vec<f64>` of length 2N).
 pub type State = [f64; 6];
 
-/// `ẋ` for the state `[y, ẏ]` of the paper's three storeys and a net input force on floor 1
-/// (the effect paths).
+/// `ẋ` for the state `x = [y, ẏ]` (any N) under the excitation `excitation` and the control
+/// force `control`.
 #[inline]
-pub fn rhs(model: &ShearModel, x: &State, input: f64) -> State {
-    let mut a = [0.0; 3];
-    model.accelerations_into(&x[..3], &x[3..], input, 0.0, &mut a);
-    [x[3], x[4], x[5], a[0], a[1], a[2]]
+pub fn rhs<S: OdeState>(model: &ShearModel, x: &S, excitation: f64, control: f64) -> S {
+    let xs = x.as_ref();
+    let n = xs.len() / 2;
+    let mut out = x.clone();
+    let o = out.as_mut();
+    o[..n].copy_from_slice(&xs[n..]);
+    model.accelerations_into(&xs[..n], &xs[n..], excitation, control, &mut o[n..]);
+    out
+}
+
+/// `ẋ` at `tau` into the step: the inputs' ramps evaluated there.
+#[inline]
+fn rhs_at<S: OdeState>(model: &ShearModel, x: &S, inputs: &StepInputs, tau: f64) -> S {
+    rhs(
+        model,
+        x,
+        inputs.excitation + inputs.excitation_slope * tau,
+        inputs.control + inputs.control_slope * tau,
+    )
+}
+
+/// The switch values of the effects at the state `x = [y, ẏ]`.
+#[inline]
+fn switches<S: OdeState>(model: &ShearModel, x: &S) -> Switches {
+    let xs = x.as_ref();
+    model.effects.switches(&xs[..xs.len() / 2])
 }
 
 /// The switch values as numerics' stepper reads them.
 impl AsRef<[f64]> for Switches {
     fn as_ref(&self) -> &[f64] {
-        &self.values[..self.len]
+        &self.values
+    }
+}
+
+/// The exact contact flows (`piecewise`), which serve the paper's three storeys: the fixed
+/// array steps them, a vector (any other structure) does not.
+pub trait Exact: Sized {
+    fn exact_contacts(
+        model: &mut ShearModel,
+        x0: &Self,
+        inputs: &StepInputs,
+        h: f64,
+    ) -> Option<Self>;
+}
+
+impl Exact for State {
+    fn exact_contacts(
+        model: &mut ShearModel,
+        x0: &State,
+        inputs: &StepInputs,
+        h: f64,
+    ) -> Option<State> {
+        use crate::piecewise::ContactMaps;
+        if !model.contact_maps.as_ref().is_some_and(|m| m.fits(model, h)) {
+            model.contact_maps = Some(Box::new(ContactMaps::new(model, h)));
+        }
+        let maps = model.contact_maps.as_mut()?;
+        maps.advance(x0, inputs.excitation, inputs.excitation_slope)
+            .ok()
+    }
+}
+
+impl Exact for Vec<f64> {
+    fn exact_contacts(
+        _model: &mut ShearModel,
+        _x0: &Vec<f64>,
+        _inputs: &StepInputs,
+        _h: f64,
+    ) -> Option<Vec<f64>> {
+        None
     }
 }
 
 /// RK4 sub-steps over `[0, h]` from `x`, split at every switch of the effects (contact kinks):
 /// [`numerics::ode::rk4_with_events`] on the model's right-hand side.
-pub fn rk4_with_events(
+pub fn rk4_with_events<S: OdeState>(
     model: &ShearModel,
-    x: &State,
-    u0: f64,
-    slope: f64,
+    x: &S,
+    inputs: &StepInputs,
     h: f64,
     substeps: u32,
-) -> State {
+) -> S {
     ode::rk4_with_events(
-        |tau, x: &State| rhs(model, x, u0 + slope * tau),
-        |x: &State| model.effects.switches(&[x[0], x[1], x[2]]),
+        |tau, x: &S| rhs_at(model, x, inputs, tau),
+        |x: &S| switches(model, x),
         x,
         h,
         substeps,
@@ -56,24 +119,25 @@ pub fn rk4_with_events(
 /// Error-controlled Dormand–Prince 5(4) over `[0, h]` from `x` to [`ADAPTIVE_TOLERANCE`], split
 /// at every switch of the effects: [`numerics::ode::dopri5_with_events`] on the model's
 /// right-hand side. `step` carries the trial step from one call to the next.
-pub fn dopri5_with_events(
+pub fn dopri5_with_events<S: OdeState>(
     model: &ShearModel,
-    x: &State,
-    u0: f64,
-    slope: f64,
+    x: &S,
+    inputs: &StepInputs,
     h: f64,
     step: &mut f64,
-) -> State {
+) -> S {
+    let n = x.as_ref().len() / 2;
     // Displacements and velocities each against the largest of their kind over the step.
-    let error_norm = |error: &State, a: &State, b: &State| -> f64 {
+    let error_norm = |error: &S, a: &S, b: &S| -> f64 {
+        let (error, a, b) = (error.as_ref(), a.as_ref(), b.as_ref());
         let largest = |range: std::ops::Range<usize>| {
             range
                 .map(|i| a[i].abs().max(b[i].abs()))
                 .fold(f64::MIN_POSITIVE, f64::max)
         };
-        let (sy, sv) = (largest(0..3), largest(3..6));
-        let worst_y = error[..3].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sy;
-        let worst_v = error[3..].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sv;
+        let (sy, sv) = (largest(0..n), largest(n..2 * n));
+        let worst_y = error[..n].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sy;
+        let worst_v = error[n..].iter().fold(0.0f64, |m, e| m.max(e.abs())) / sv;
         worst_y.max(worst_v) / ADAPTIVE_TOLERANCE
     };
     let mut control = ode::Adaptive {
@@ -81,8 +145,8 @@ pub fn dopri5_with_events(
         step: *step,
     };
     let x = ode::dopri5_with_events(
-        |tau, x: &State| rhs(model, x, u0 + slope * tau),
-        |x: &State| model.effects.switches(&[x[0], x[1], x[2]]),
+        |tau, x: &S| rhs_at(model, x, inputs, tau),
+        |x: &S| switches(model, x),
         x,
         h,
         &mut control,
@@ -127,7 +191,7 @@ mod tests {
                 },
             );
             b = rk4_substeps(
-                |tau, x: &State| rhs(&model, x, u0 + slope * tau),
+                |tau, x: &State| rhs(&model, x, u0 + slope * tau, 0.0),
                 0.0,
                 &b,
                 h,
@@ -162,7 +226,12 @@ mod tests {
             for k in 0..400 {
                 let u0 = 2.0 * (0.9 * k as f64).sin();
                 let u1 = 2.0 * (0.9 * (k + 1) as f64).sin();
-                x = rk4_with_events(&model, &x, u0, (u1 - u0) / h, h, substeps);
+                let inputs = StepInputs {
+                    excitation: u0,
+                    excitation_slope: (u1 - u0) / h,
+                    ..Default::default()
+                };
+                x = rk4_with_events(&model, &x, &inputs, h, substeps);
             }
             x
         };

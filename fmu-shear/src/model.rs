@@ -95,7 +95,8 @@ impl ShearParameters {
     }
 
     /// The reference paper's layout: three storeys, the force and the control force on floor 1.
-    /// The effect library is written for it (its sites, the exact contact flows).
+    /// The exact contact flows (`piecewise`) are written for it; the rest of the effect library
+    /// serves every layout.
     pub fn is_paper_layout(&self) -> bool {
         self.storeys() == structure::building::PAPER_STOREYS
             && self.excitation == Excitation::Force { floor: 1 }
@@ -168,8 +169,11 @@ pub struct ShearModel {
 }
 
 impl ShearModel {
-    pub fn new(params: ShearParameters, effects: Effects) -> Self {
+    /// A model of the structure `params` with the effects `effects`, the library laid out for
+    /// its storeys (sites the structure lacks dropped, new ones off).
+    pub fn new(params: ShearParameters, mut effects: Effects) -> Self {
         let n = params.storeys();
+        effects.fit(n);
         ShearModel {
             params,
             effects,
@@ -234,10 +238,12 @@ impl ShearModel {
             }
             out[i] = rhs;
         }
-        if self.effects.any_enabled() && n == 3 {
-            let g = self.effects.force(&[y[0], y[1], y[2]], &[v[0], v[1], v[2]]);
-            for i in 0..3 {
-                out[i] -= g[i];
+        if self.effects.any_enabled() {
+            let mut g = [0.0; structure::MAX_STOREYS];
+            let g = &mut g[..n];
+            self.effects.add_forces(&y[..n], &v[..n], g);
+            for (o, g) in out.iter_mut().zip(g.iter()) {
+                *o -= g;
             }
         }
         for i in 0..n {
@@ -294,15 +300,28 @@ impl ShearModel {
         x0.extend_from_slice(&self.displacement);
         x0.extend_from_slice(&self.velocity);
         if self.effects.any_enabled() && self.params.is_paper_layout() {
-            // The effect library is written for the paper's layout: the net input on floor 1.
+            // The paper's layout: the net input on floor 1, the state a fixed array (the exact
+            // contact flows are written for it).
             let (f0, fs) = (
                 self.force.value - self.control_force.value,
                 self.force.slope - self.control_force.slope,
             );
+            let inputs = StepInputs {
+                excitation: f0,
+                excitation_slope: fs,
+                control: 0.0,
+                control_slope: 0.0,
+            };
             let state: integrate::State = std::array::from_fn(|i| x0[i]);
-            let x = self.advance_with_effects(&state, f0, fs, h);
+            let x = self.advance_with_effects(&state, &inputs, h);
             self.displacement.copy_from_slice(&x[..3]);
             self.velocity.copy_from_slice(&x[3..]);
+        } else if self.effects.any_enabled() {
+            // Any other structure: the excitation and the control force each as its ramp.
+            let inputs = self.step_inputs();
+            let x = self.advance_with_effects(&x0, &inputs, h);
+            self.displacement.copy_from_slice(&x[..n]);
+            self.velocity.copy_from_slice(&x[n..]);
         } else {
             if !self
                 .step_map
@@ -332,35 +351,32 @@ impl ShearModel {
         }
     }
 
-    fn advance_with_effects(
+    /// A step with effects from `x0` (`[y, ẏ]`, a fixed array on the paper's rig, a vector
+    /// otherwise). The exact contact flows serve the paper's layout (`piecewise`); elsewhere
+    /// contacts are stepped by the error-controlled path, split at their kinks.
+    fn advance_with_effects<S: numerics::ode::OdeState + integrate::Exact>(
         &mut self,
-        x0: &integrate::State,
-        u0: f64,
-        slope: f64,
+        x0: &S,
+        inputs: &StepInputs,
         h: f64,
-    ) -> integrate::State {
+    ) -> S {
         use crate::piecewise::ContactMaps;
         if self.integrator == Integrator::FixedSubsteps {
-            return integrate::rk4_with_events(self, x0, u0, slope, h, self.params.substeps);
+            return integrate::rk4_with_events(self, x0, inputs, h, self.params.substeps);
         }
         let contacts_alone = ContactMaps::applies(self);
         if !contacts_alone && self.integrator == Integrator::ExactContactsElseFixed {
-            return integrate::rk4_with_events(self, x0, u0, slope, h, self.params.substeps);
+            return integrate::rk4_with_events(self, x0, inputs, h, self.params.substeps);
         }
-        if contacts_alone {
-            if !self.contact_maps.as_ref().is_some_and(|m| m.fits(self, h)) {
-                self.contact_maps = Some(Box::new(ContactMaps::new(self, h)));
-            }
-            if let Some(maps) = self.contact_maps.as_mut() {
-                if let Ok(x) = maps.advance(x0, u0, slope) {
-                    return x;
-                }
+        if contacts_alone && self.params.is_paper_layout() {
+            if let Some(x) = S::exact_contacts(self, x0, inputs, h) {
+                return x;
             }
             // Not finite: the error-controlled path steps it and the host is told of the
             // divergence.
         }
         let mut step = self.adaptive_step;
-        let x = integrate::dopri5_with_events(self, x0, u0, slope, h, &mut step);
+        let x = integrate::dopri5_with_events(self, x0, inputs, h, &mut step);
         self.adaptive_step = step;
         x
     }
@@ -386,11 +402,6 @@ impl ShearModel {
             .filter(|&i| i < self.storeys())
     }
 
-    /// The effect library's variables exist only in the paper's layout.
-    fn effects_apply(&self) -> bool {
-        self.params.is_paper_layout()
-    }
-
     /// An instance for the structure in `resources/structure.json` under the FMU's resources,
     /// or the paper's rig without one.
     pub fn from_resources(resource_dir: Option<&std::path::Path>) -> Result<Self, ModelError> {
@@ -398,7 +409,8 @@ impl ShearModel {
             Some(path) if path.exists() => read_structure_resource(&path)?,
             _ => ShearParameters::default(),
         };
-        let mut model = ShearModel::new(params, Effects::default());
+        let storeys = params.storeys();
+        let mut model = ShearModel::new(params, Effects::new(storeys));
         model.table = Some(crate::variables::table(&model.params));
         model.origin = Some(model.params.clone());
         Ok(model)
@@ -499,13 +511,11 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i]
                 } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i]
-                } else if self.effects_apply() {
+                } else {
                     return self
                         .effects
                         .get_real(vr)
                         .ok_or(ModelError::UnknownVariable { vr, kind: "Real" });
-                } else {
-                    return Err(ModelError::UnknownVariable { vr, kind: "Real" });
                 }
             }
         };
@@ -531,13 +541,11 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i] = positive(&name(), value, false)?;
                 } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i] = positive(&name(), value, false)?;
-                } else if self.effects_apply() {
+                } else {
                     return self
                         .effects
                         .set_real(vr, value)
                         .unwrap_or(Err(ModelError::UnknownVariable { vr, kind: "Real" }));
-                } else {
-                    return Err(ModelError::UnknownVariable { vr, kind: "Real" });
                 }
             }
         }
@@ -642,13 +650,6 @@ impl CoSimModel for ShearModel {
     }
 
     fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
-        if self.effects.any_enabled() && !self.params.is_paper_layout() {
-            return Err(ModelError::Other(format!(
-                "the effect library is written for the paper's layout (3 storeys, force and control on floor 1), not for {} storeys under {}",
-                self.storeys(),
-                self.params.excitation.describe()
-            )));
-        }
         self.advance(step_size);
         // Accelerations overflow a step before the state does; check what the host will read.
         let acc = self.absolute_acceleration();

@@ -254,20 +254,14 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             );
         }
     }
-    if p.is_paper_layout() {
-        v.extend(Effects::all_variables());
-    }
+    v.extend(Effects::variables(n as usize));
     v
 }
 
 /// The model's name, and its description, for a structure.
 fn identity(p: &ShearParameters) -> (String, String) {
     let n = p.storeys();
-    let effects = if p.is_paper_layout() {
-        " and optional gap contact, cubic stiffness, friction and up to six discovered terms coefficient·f(x, v)"
-    } else {
-        ""
-    };
+    let effects = " and optional gap contact, cubic stiffness, friction and up to six discovered terms coefficient·f(x, v)";
     (
         format!("ShearFrame{n}"),
         format!(
@@ -340,7 +334,7 @@ mod tests {
     /// Every storey count up to MAX_STOREYS and both excitations: the table builds (distinct
     /// names and value references, checked by `ModelInfo::new`), has exactly the floors' and
     /// storeys' variables and N × 3N sensitivities, the excitation's input alone, and the effect
-    /// library only in the paper's layout.
+    /// library at every site.
     #[test]
     fn the_table_is_laid_out_for_every_storey_count() {
         let mut guids = std::collections::HashSet::new();
@@ -375,10 +369,17 @@ mod tests {
                     info.by_name(&last).map(|v| v.vr),
                     Some(sensitivity_vr(storeys - 1, 3 * storeys - 1, storeys))
                 );
-                assert_eq!(
-                    info.by_name("contact23_enabled").is_some(),
-                    p.is_paper_layout()
-                );
+                assert_eq!(info.by_name("contact23_enabled").is_some(), storeys >= 3);
+                let top = storeys - 1;
+                for kind in crate::effects::Kind::ALL {
+                    let name = format!("{}_enabled", kind.prefix(top));
+                    let vr = info.by_name(&name).map(|v| v.vr);
+                    let base = [100, 200, 300][kind as usize];
+                    assert_eq!(vr, Some(crate::effects::site_vr(base, top)), "{name}");
+                }
+                assert!(info
+                    .by_name(&format!("{}_enabled", crate::effects::Kind::Cubic.prefix(storeys)))
+                    .is_none());
                 assert_eq!(
                     info.by_name(&format!("m{storeys}"))
                         .map(|v| v.start.clone()),

@@ -99,7 +99,7 @@ fn a_floor_v_term_is_a_damper_to_the_ground() {
         let linear = ShearModel::new(params(), Effects::default());
         let m = params().mass[floor - 1];
         let rhs_damped = |x: &State, u: f64| -> State {
-            let mut dx = rhs(&linear, x, u);
+            let mut dx = rhs(&linear, x, u, 0.0);
             dx[3 + floor - 1] -= c * x[3 + floor - 1] / m;
             dx
         };
@@ -150,7 +150,7 @@ fn the_two_ramps_at_a_storey_are_the_contact_bumper_split_at_the_same_kinks() {
     let mut contact = ShearModel::new(params(), effects);
     contact.integrator = Integrator::FixedSubsteps;
     let switches = ramps.effects.switches(&[1e-3, 2e-3, 2.5e-3]);
-    assert_eq!(switches.len, 2, "one switch per ramp");
+    assert_eq!(switches.values.len(), 2, "one switch per ramp");
     let a = drive(&mut ramps, &f);
     let b = drive(&mut contact, &f);
     let difference = relative_difference(&a, &b);

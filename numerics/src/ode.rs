@@ -1,35 +1,49 @@
 //! Fixed-step integrators for small first-order systems `ẋ = f(t, x)`, with or without
-//! event splitting at the kinks of a piecewise-smooth `f`.
+//! event splitting at the kinks of a piecewise-smooth `f`. The state is any [`OdeState`]: a
+//! fixed array `[f64; N]` (no allocation: the shear FMU's paper rig) or a `Vec<f64>` (any size).
+
+/// A state vector: an array `[f64; N]` or a `Vec<f64>`.
+pub trait OdeState: Clone + AsRef<[f64]> + AsMut<[f64]> {}
+impl<T: Clone + AsRef<[f64]> + AsMut<[f64]>> OdeState for T {}
+
+/// A state shaped like `x` with entry `i` equal to `value(i)`.
+#[inline]
+fn build<S: OdeState>(x: &S, value: impl Fn(usize) -> f64) -> S {
+    let mut out = x.clone();
+    for (i, o) in out.as_mut().iter_mut().enumerate() {
+        *o = value(i);
+    }
+    out
+}
 
 /// One classical 4th-order Runge–Kutta step of size `h` from `(t, x)`.
 #[inline]
-pub fn rk4_step<const N: usize>(
-    f: impl Fn(f64, &[f64; N]) -> [f64; N],
-    t: f64,
-    x: &[f64; N],
-    h: f64,
-) -> [f64; N] {
-    let axpy = |a: &[f64; N], s: f64, b: &[f64; N]| -> [f64; N] {
-        std::array::from_fn(|i| a[i] + s * b[i])
+pub fn rk4_step<S: OdeState>(f: impl Fn(f64, &S) -> S, t: f64, x: &S, h: f64) -> S {
+    let axpy = |a: &S, s: f64, b: &S| -> S {
+        let (ar, br) = (a.as_ref(), b.as_ref());
+        build(a, |i| ar[i] + s * br[i])
     };
     let k1 = f(t, x);
     let k2 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k1));
     let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));
     let k4 = f(t + h, &axpy(x, h, &k3));
-    std::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]))
+    let (xr, k1, k2, k3, k4) = (x.as_ref(), k1.as_ref(), k2.as_ref(), k3.as_ref(), k4.as_ref());
+    build(x, |i| {
+        xr[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    })
 }
 
 /// `n` RK4 sub-steps covering `[t, t + h]`.
-pub fn rk4_substeps<const N: usize>(
-    f: impl Fn(f64, &[f64; N]) -> [f64; N],
+pub fn rk4_substeps<S: OdeState>(
+    f: impl Fn(f64, &S) -> S,
     t: f64,
-    x: &[f64; N],
+    x: &S,
     h: f64,
     n: u32,
-) -> [f64; N] {
+) -> S {
     let n = n.max(1);
     let dt = h / f64::from(n);
-    let mut state = *x;
+    let mut state = x.clone();
     for i in 0..n {
         state = rk4_step(&f, t + f64::from(i) * dt, &state, dt);
     }
@@ -48,16 +62,16 @@ pub const MAX_SPLITS: usize = 16;
 /// a kink loses its order, so the sub-step is cut just past the earliest crossing, located by
 /// regula falsi on the switch along the RK4 step ([`locate`]), and goes on from there: at most
 /// [`MAX_SPLITS`] times, after which the rest of the sub-step is one RK4 step.
-pub fn rk4_with_events<const N: usize, S: AsRef<[f64]>>(
-    f: impl Fn(f64, &[f64; N]) -> [f64; N],
-    switches: impl Fn(&[f64; N]) -> S,
-    x: &[f64; N],
+pub fn rk4_with_events<X: OdeState, S: AsRef<[f64]>>(
+    f: impl Fn(f64, &X) -> X,
+    switches: impl Fn(&X) -> S,
+    x: &X,
     h: f64,
     n: u32,
-) -> [f64; N] {
+) -> X {
     let n = n.max(1);
     let dt = h / f64::from(n);
-    let mut state = *x;
+    let mut state = x.clone();
     for i in 0..n {
         let mut tau = f64::from(i) * dt;
         let end = f64::from(i + 1) * dt;
@@ -134,16 +148,19 @@ mod dp {
 /// One Dormand–Prince 5(4) step of size `h` from `(t, x)` with `k1 = f(t, x)` given: the 5th-order
 /// state, its derivative there (the next step's `k1`) and the local error estimate.
 #[inline]
-pub fn dopri5_step<const N: usize>(
-    f: &impl Fn(f64, &[f64; N]) -> [f64; N],
+pub fn dopri5_step<S: OdeState>(
+    f: &impl Fn(f64, &S) -> S,
     t: f64,
-    x: &[f64; N],
-    k1: &[f64; N],
+    x: &S,
+    k1: &S,
     h: f64,
-) -> ([f64; N], [f64; N], [f64; N]) {
+) -> (S, S, S) {
     use dp::*;
-    let stage = |ks: &[&[f64; N]], a: &[f64]| -> [f64; N] {
-        std::array::from_fn(|i| x[i] + h * ks.iter().zip(a).map(|(k, a)| a * k[i]).sum::<f64>())
+    let xr = x.as_ref();
+    let stage = |ks: &[&S], a: &[f64]| -> S {
+        build(x, |i| {
+            xr[i] + h * ks.iter().zip(a).map(|(k, a)| a * k.as_ref()[i]).sum::<f64>()
+        })
     };
     let k2 = f(t + C[1] * h, &stage(&[k1], &A2));
     let k3 = f(t + C[2] * h, &stage(&[k1, &k2], &A3));
@@ -153,7 +170,9 @@ pub fn dopri5_step<const N: usize>(
     let next = stage(&[k1, &k2, &k3, &k4, &k5, &k6], &B);
     let k7 = f(t + h, &next);
     let ks = [k1, &k2, &k3, &k4, &k5, &k6, &k7];
-    let error = std::array::from_fn(|i| h * ks.iter().zip(&E).map(|(k, e)| e * k[i]).sum::<f64>());
+    let error = build(x, |i| {
+        h * ks.iter().zip(&E).map(|(k, e)| e * k.as_ref()[i]).sum::<f64>()
+    });
     (next, k7, error)
 }
 
@@ -170,13 +189,13 @@ pub struct Adaptive<E> {
 /// the step). Steps are accepted when the scaled local error is ≤ 1 and resized by the usual
 /// `0.9 · err^{-1/5}` rule (bounded to ×0.2..×5). Returns the state at `h`; `control.step` holds
 /// the next step proposed, for the next call.
-pub fn dopri5_with_events<const N: usize, S: AsRef<[f64]>>(
-    f: impl Fn(f64, &[f64; N]) -> [f64; N],
-    switches: impl Fn(&[f64; N]) -> S,
-    x: &[f64; N],
+pub fn dopri5_with_events<X: OdeState, S: AsRef<[f64]>>(
+    f: impl Fn(f64, &X) -> X,
+    switches: impl Fn(&X) -> S,
+    x: &X,
     h: f64,
-    control: &mut Adaptive<impl Fn(&[f64; N], &[f64; N], &[f64; N]) -> f64>,
-) -> [f64; N] {
+    control: &mut Adaptive<impl Fn(&X, &X, &X) -> f64>,
+) -> X {
     let smallest = 1e-12 * h;
     let mut dt = if control.step > 0.0 {
         control.step.min(h)
@@ -184,7 +203,7 @@ pub fn dopri5_with_events<const N: usize, S: AsRef<[f64]>>(
         h
     };
     let mut tau = 0.0f64;
-    let mut state = *x;
+    let mut state = x.clone();
     let mut k1 = f(0.0, &state);
     // Bounded work: past this many trials the rest is taken in one step (the state then
     // diverges or is non-finite, which the caller reports).
@@ -230,7 +249,7 @@ pub fn dopri5_with_events<const N: usize, S: AsRef<[f64]>>(
         } else {
             dt = dt.max(step) * grow.min(1.0);
         }
-        if !state.iter().all(|v| v.is_finite()) {
+        if !state.as_ref().iter().all(|v| v.is_finite()) {
             break;
         }
     }

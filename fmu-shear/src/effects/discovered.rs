@@ -18,7 +18,6 @@ pub use structure::effects::discovered::{
     DEFAULT_SCALE, PLACEMENT_FLOOR, PLACEMENT_STOREY,
 };
 
-use super::{Floors, STOREYS};
 
 /// How many discovered terms the FMU carries.
 pub const MAX_TERMS: usize = 6;
@@ -66,8 +65,9 @@ impl Default for Discovered {
 }
 
 impl Discovered {
-    /// The variables of the six terms, for the variable table.
-    pub fn variables() -> Vec<Variable> {
+    /// The variables of the six terms, for the variable table of a building of `storeys`
+    /// storeys.
+    pub fn variables(storeys: usize) -> Vec<Variable> {
         let codes = Function::ALL
             .iter()
             .map(|f| format!("{} {}", f.code(), f.name()))
@@ -117,8 +117,8 @@ impl Discovered {
                     START_TERM.site.at() as i32,
                 )
                 .min(1.0)
-                .max(STOREYS as f64)
-                .describe(&format!("{what}: the storey or floor, 1..{STOREYS}")),
+                .max(storeys as f64)
+                .describe(&format!("{what}: the storey or floor, 1..{storeys}")),
             );
             let mut coefficient = Variable::real_parameter(
                 &variable_name(i, Slot::Coefficient),
@@ -196,7 +196,13 @@ impl Discovered {
         }
     }
 
-    pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
+    /// Set an integer of a term, the site checked against a building of `storeys` storeys.
+    pub fn set_integer(
+        &mut self,
+        vr: u32,
+        value: i32,
+        storeys: usize,
+    ) -> Option<Result<(), ModelError>> {
         let (i, slot) = Self::locate(vr)?;
         let term = &mut self.terms[i - 1];
         let result = match slot {
@@ -214,7 +220,7 @@ impl Discovered {
                     ),
                 ))),
             },
-            Slot::Placement => match Site::from_codes(value, term.site.at() as i32, STOREYS) {
+            Slot::Placement => match Site::from_codes(value, term.site.at() as i32, storeys) {
                 Some(site) => {
                     term.site = site;
                     Ok(())
@@ -225,7 +231,7 @@ impl Discovered {
                     format!("{value} is neither 0 (storey) nor 1 (floor)"),
                 ))),
             },
-            Slot::At => match Site::from_codes(term.site.placement_code(), value, STOREYS) {
+            Slot::At => match Site::from_codes(term.site.placement_code(), value, storeys) {
                 Some(site) => {
                     term.site = site;
                     Ok(())
@@ -233,7 +239,7 @@ impl Discovered {
                 None => Err(refused(invalid(
                     i,
                     slot,
-                    format!("{value} is outside [1, {STOREYS}]"),
+                    format!("{value} is outside [1, {storeys}]"),
                 ))),
             },
             _ => return None,
@@ -272,7 +278,7 @@ impl Discovered {
 
     /// Replace every term: `terms` (at most [`MAX_TERMS`], each valid) in slots 1.., switched
     /// on; the other slots off and at their start values. Nothing changes on an error.
-    pub fn set_terms(&mut self, terms: &[Term]) -> Result<(), ModelError> {
+    pub fn set_terms(&mut self, terms: &[Term], storeys: usize) -> Result<(), ModelError> {
         if terms.len() > MAX_TERMS {
             return Err(ModelError::InvalidValue {
                 name: "discovered terms".into(),
@@ -280,7 +286,7 @@ impl Discovered {
             });
         }
         for (i, term) in terms.iter().enumerate() {
-            term.validate(i + 1, STOREYS).map_err(refused)?;
+            term.validate(i + 1, storeys).map_err(refused)?;
         }
         *self = Discovered::default();
         for (i, term) in terms.iter().enumerate() {
@@ -291,7 +297,7 @@ impl Discovered {
     }
 
     #[inline]
-    pub fn add_forces(&self, y: &Floors, v: &Floors, g: &mut Floors) {
+    pub fn add_forces(&self, y: &[f64], v: &[f64], g: &mut [f64]) {
         for term in self.enabled_terms() {
             term.add_force(y, v, g);
         }
@@ -318,15 +324,15 @@ mod tests {
         let vr = |term, slot| value_reference(term, slot);
         for code in [0, -1, 14] {
             expect_refused(
-                d.set_integer(vr(2, Slot::Function), code),
+                d.set_integer(vr(2, Slot::Function), code, 3),
                 "discovered2_function",
             );
         }
         for at in [0, 4, -1] {
-            expect_refused(d.set_integer(vr(3, Slot::At), at), "discovered3_at");
+            expect_refused(d.set_integer(vr(3, Slot::At), at, 3), "discovered3_at");
         }
         expect_refused(
-            d.set_integer(vr(1, Slot::Placement), 2),
+            d.set_integer(vr(1, Slot::Placement), 2, 3),
             "discovered1_placement",
         );
         for scale in [0.0, -1e-3, f64::NAN, f64::INFINITY] {
@@ -340,20 +346,23 @@ mod tests {
         }
         assert_eq!(d, Discovered::default());
         let bad = Term::new(Function::X, Site::Floor(4), 1.0);
-        let err = d.set_terms(&[Term::new(Function::X, Site::Floor(1), 1.0), bad]);
+        let err = d.set_terms(&[Term::new(Function::X, Site::Floor(1), 1.0), bad], 3);
         assert!(err
             .expect_err("refused")
             .to_string()
             .contains("discovered2_at"));
-        let err = d.set_terms(&[Term {
-            scale: 0.0,
-            ..Term::new(Function::TanhV, Site::Floor(1), 1.0)
-        }]);
+        let err = d.set_terms(
+            &[Term {
+                scale: 0.0,
+                ..Term::new(Function::TanhV, Site::Floor(1), 1.0)
+            }],
+            3,
+        );
         assert!(err
             .expect_err("refused")
             .to_string()
             .contains("discovered1_scale"));
-        let err = d.set_terms(&[Term::new(Function::X, Site::Floor(1), 1.0); 7]);
+        let err = d.set_terms(&[Term::new(Function::X, Site::Floor(1), 1.0); 7], 3);
         assert!(err.is_err());
         assert_eq!(d, Discovered::default());
     }
@@ -363,10 +372,10 @@ mod tests {
         let mut d = Discovered::default();
         let vr = |slot| value_reference(5, slot);
         assert_eq!(d.set_boolean(vr(Slot::Enabled), true), Some(()));
-        assert!(matches!(d.set_integer(vr(Slot::Function), 7), Some(Ok(()))));
-        assert!(matches!(d.set_integer(vr(Slot::At), 2), Some(Ok(()))));
+        assert!(matches!(d.set_integer(vr(Slot::Function), 7, 3), Some(Ok(()))));
+        assert!(matches!(d.set_integer(vr(Slot::At), 2, 3), Some(Ok(()))));
         assert!(matches!(
-            d.set_integer(vr(Slot::Placement), 1),
+            d.set_integer(vr(Slot::Placement), 1, 3),
             Some(Ok(()))
         ));
         assert!(matches!(
@@ -398,7 +407,7 @@ mod tests {
         assert!(!Discovered::owns(DISCOVERED_BASE_VR + 60));
         assert!(!Discovered::owns(DISCOVERED_BASE_VR - 1));
         // The parameter lists name the variables the table has.
-        let names: Vec<String> = Discovered::variables()
+        let names: Vec<String> = Discovered::variables(3)
             .into_iter()
             .map(|v| v.name)
             .collect();

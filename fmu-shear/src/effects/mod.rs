@@ -12,7 +12,8 @@ pub mod discovered;
 
 use fmi2::{ModelError, Variable};
 use serde::{Deserialize, Serialize};
-use structure::building::PAPER_STOREYS;
+use smallvec::SmallVec;
+use structure::building::{MAX_STOREYS, PAPER_STOREYS};
 
 pub use discovered::{Discovered, MAX_TERMS};
 pub use structure::effects::{
@@ -20,17 +21,55 @@ pub use structure::effects::{
     Function, Kind, Law, Placement, RealParam, Side, Site, Term,
 };
 
-/// The storeys of the FMU's building (its floors 1..N, ground excluded).
-pub const STOREYS: usize = PAPER_STOREYS;
-
-/// Displacements and velocities of floors 1..N (ground excluded).
-pub type Floors = [f64; STOREYS];
-
-/// Value-reference layout of a library: base + 10·location + slot, where slot 0 is the `enabled`
-/// Boolean, 1..=7 the reals and 8..=9 the integers.
-const SLOTS_PER_LOCATION: u32 = 10;
+/// Value-reference layout of a library: each site (0-based location) owns a block of
+/// [`SLOTS_PER_LOCATION`] references, slot 0 the `enabled` Boolean, 1..=7 the reals and 8..=9
+/// the integers. The block of site `l` starts at [`site_vr`]: `base + 10·l` for the paper's
+/// three sites (contact 100, cubic 200, friction 300: the references the paper's twins and
+/// `modelDescription/fmu_shear.xml` carry), and `EXTENDED_BASE_VR + 10·base + 10·l` for every
+/// later site, so that no two kinds' blocks meet for any N ≤ [`MAX_STOREYS`] (the base blocks
+/// hold 10 sites before the next kind's, the extended ones 100).
+pub const SLOTS_PER_LOCATION: u32 = 10;
 const FIRST_REAL_SLOT: u32 = 1;
 const FIRST_INTEGER_SLOT: u32 = 8;
+/// Where the sites past the paper's third start: above every other block (the sensitivities
+/// end below `SENSITIVITY + 3·MAX_STOREYS²`).
+pub const EXTENDED_BASE_VR: u32 = 100_000;
+
+const _: () = assert!(SLOTS_PER_LOCATION * PAPER_STOREYS as u32 <= 100);
+const _: () = assert!(SLOTS_PER_LOCATION * MAX_STOREYS as u32 <= 1000);
+const _: () = assert!(
+    crate::variables::SENSITIVITY + 3 * (MAX_STOREYS * MAX_STOREYS) as u32 <= EXTENDED_BASE_VR
+);
+
+/// The first value reference of site `location` (0-based) of the library whose paper block
+/// starts at `base` (see [`SLOTS_PER_LOCATION`]).
+pub fn site_vr(base: u32, location: usize) -> u32 {
+    if location < PAPER_STOREYS {
+        base + SLOTS_PER_LOCATION * location as u32
+    } else {
+        EXTENDED_BASE_VR + 10 * base + SLOTS_PER_LOCATION * location as u32
+    }
+}
+
+/// The inverse of [`site_vr`]: (location, slot) of `vr` for a library at `base` with `sites`
+/// sites.
+fn site_of(base: u32, vr: u32, sites: usize) -> Option<(usize, u32)> {
+    let paper = vr
+        .checked_sub(base)
+        .filter(|&offset| offset < SLOTS_PER_LOCATION * PAPER_STOREYS as u32);
+    let (location, slot) = match paper {
+        Some(offset) => (offset / SLOTS_PER_LOCATION, offset % SLOTS_PER_LOCATION),
+        None => {
+            let offset = vr.checked_sub(EXTENDED_BASE_VR + 10 * base)?;
+            let location = offset / SLOTS_PER_LOCATION;
+            if location < PAPER_STOREYS as u32 {
+                return None;
+            }
+            (location, offset % SLOTS_PER_LOCATION)
+        }
+    };
+    ((location as usize) < sites).then_some((location as usize, slot))
+}
 
 /// One effect kind at each of its locations, each with its own `enabled` switch.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -41,19 +80,29 @@ pub struct Library<E> {
 }
 
 impl<E: Effect> Library<E> {
-    pub fn new(base_vr: u32) -> Self {
+    /// Every site of a building of `storeys` storeys, each off at its start values.
+    pub fn new(base_vr: u32, storeys: usize) -> Self {
         Library {
             base_vr,
-            enabled: vec![false; E::sites(STOREYS)],
-            effects: (0..E::sites(STOREYS)).map(E::at_start).collect(),
+            enabled: vec![false; E::sites(storeys)],
+            effects: (0..E::sites(storeys)).map(E::at_start).collect(),
         }
     }
 
-    pub fn variables(base_vr: u32) -> Vec<Variable> {
+    /// The sites of a building of `storeys` storeys: the ones it has kept, new ones off.
+    fn fit(&mut self, storeys: usize) {
+        let sites = E::sites(storeys);
+        self.enabled.resize(sites, false);
+        let have = self.effects.len();
+        self.effects.truncate(sites);
+        self.effects.extend((have..sites).map(E::at_start));
+    }
+
+    pub fn variables(base_vr: u32, storeys: usize) -> Vec<Variable> {
         let mut vars = Vec::new();
-        for location in 0..E::sites(STOREYS) {
+        for location in 0..E::sites(storeys) {
             let prefix = E::prefix(location);
-            let vr0 = base_vr + SLOTS_PER_LOCATION * location as u32;
+            let vr0 = site_vr(base_vr, location);
             vars.push(
                 Variable::boolean_parameter(&format!("{prefix}_enabled"), vr0, false)
                     .describe(&format!("{} {}: switched on", E::KIND, E::where_(location))),
@@ -101,13 +150,16 @@ impl<E: Effect> Library<E> {
 
     /// (location, slot) of a value reference of this library, if it is one.
     fn locate(&self, vr: u32) -> Option<(usize, u32)> {
-        let offset = vr.checked_sub(self.base_vr)?;
-        let location = (offset / SLOTS_PER_LOCATION) as usize;
-        (location < E::sites(STOREYS)).then_some((location, offset % SLOTS_PER_LOCATION))
+        site_of(self.base_vr, vr, self.effects.len())
     }
 
     pub fn owns(&self, vr: u32) -> bool {
         self.locate(vr).is_some()
+    }
+
+    /// The value reference of real parameter `index` at `location`.
+    pub fn real_vr(&self, location: usize, index: usize) -> u32 {
+        site_vr(self.base_vr, location) + FIRST_REAL_SLOT + index as u32
     }
 
     pub fn get_real(&self, vr: u32) -> Option<f64> {
@@ -173,13 +225,28 @@ impl<E: Effect> Library<E> {
         self.enabled.iter().any(|&e| e)
     }
 
+    /// Add the enabled effects' forces to `g` (floor displacements `y`, velocities `v`, all of
+    /// the building's length).
     #[inline]
-    pub fn add_forces(&self, y: &Floors, v: &Floors, g: &mut Floors) {
+    pub fn add_forces(&self, y: &[f64], v: &[f64], g: &mut [f64]) {
         for (location, effect) in self.effects.iter().enumerate() {
             if self.enabled[location] {
                 effect.add_force(location, y, v, g);
             }
         }
+    }
+
+    /// How many sites the library has.
+    pub fn sites(&self) -> usize {
+        self.effects.len()
+    }
+
+    /// The enabled sites (0-based).
+    pub fn enabled_sites(&self) -> impl Iterator<Item = usize> + '_ {
+        self.enabled
+            .iter()
+            .enumerate()
+            .filter_map(|(location, &on)| on.then_some(location))
     }
 
     /// Direct access, for tests and the synthetic structure.
@@ -197,16 +264,14 @@ impl<E: Effect> Library<E> {
     }
 }
 
-/// Up to two switch values per contact location and one per discovered ramp term.
-pub const MAX_SWITCHES: usize = 2 * STOREYS + MAX_TERMS;
-
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The switch values of the enabled effects (up to two per contact, one per discovered ramp
+/// term), inline up to eight.
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct Switches {
-    pub values: [f64; MAX_SWITCHES],
-    pub len: usize,
+    pub values: SmallVec<[f64; 8]>,
 }
 
-/// Every effect kind of the library.
+/// Every effect kind of the library, at every site of a building of N storeys.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Effects {
     pub contact: Library<Contact>,
@@ -223,23 +288,48 @@ pub const FRICTION_BASE_VR: u32 = 300;
 pub use discovered::DISCOVERED_BASE_VR;
 
 impl Default for Effects {
+    /// The library of the paper's rig (three storeys).
     fn default() -> Self {
-        Effects {
-            contact: Library::new(CONTACT_BASE_VR),
-            cubic: Library::new(CUBIC_BASE_VR),
-            friction: Library::new(FRICTION_BASE_VR),
-            discovered: Discovered::default(),
-        }
+        Effects::new(PAPER_STOREYS)
     }
 }
 
 impl Effects {
-    pub fn all_variables() -> Vec<Variable> {
-        let mut vars = Library::<Contact>::variables(CONTACT_BASE_VR);
-        vars.extend(Library::<Cubic>::variables(CUBIC_BASE_VR));
-        vars.extend(Library::<Friction>::variables(FRICTION_BASE_VR));
-        vars.extend(Discovered::variables());
+    /// Every site of a building of `storeys` storeys, every effect off.
+    pub fn new(storeys: usize) -> Self {
+        Effects {
+            contact: Library::new(CONTACT_BASE_VR, storeys),
+            cubic: Library::new(CUBIC_BASE_VR, storeys),
+            friction: Library::new(FRICTION_BASE_VR, storeys),
+            discovered: Discovered::default(),
+        }
+    }
+
+    /// The storeys of the building the library is laid out for.
+    pub fn storeys(&self) -> usize {
+        self.cubic.sites()
+    }
+
+    /// Lay the library out for a building of `storeys` storeys: the sites it has keep their
+    /// settings, new ones are off.
+    pub fn fit(&mut self, storeys: usize) {
+        self.contact.fit(storeys);
+        self.cubic.fit(storeys);
+        self.friction.fit(storeys);
+    }
+
+    /// The variables of every site of a building of `storeys` storeys.
+    pub fn variables(storeys: usize) -> Vec<Variable> {
+        let mut vars = Library::<Contact>::variables(CONTACT_BASE_VR, storeys);
+        vars.extend(Library::<Cubic>::variables(CUBIC_BASE_VR, storeys));
+        vars.extend(Library::<Friction>::variables(FRICTION_BASE_VR, storeys));
+        vars.extend(Discovered::variables(storeys));
         vars
+    }
+
+    /// The variables of the paper's rig.
+    pub fn all_variables() -> Vec<Variable> {
+        Effects::variables(PAPER_STOREYS)
     }
 
     /// Switch on the effect `law` at `location` (0-based storey or floor).
@@ -264,7 +354,8 @@ impl Effects {
     /// 1..; the other slots off). A term that is not valid is refused, naming its variable, and
     /// nothing changes.
     pub fn switch_on_terms(&mut self, terms: &[Term]) -> Result<(), ModelError> {
-        self.discovered.set_terms(terms)
+        let storeys = self.storeys();
+        self.discovered.set_terms(terms, storeys)
     }
 
     pub fn any_enabled(&self) -> bool {
@@ -278,34 +369,32 @@ impl Effects {
     /// `g` (a contact gap opening or closing, a discovered ramp's `x ∓ s` crossing zero).
     /// Smooth effects have none.
     #[inline]
-    pub fn switches(&self, y: &Floors) -> Switches {
-        let mut out = Switches {
-            values: [0.0; MAX_SWITCHES],
-            len: 0,
-        };
+    pub fn switches(&self, y: &[f64]) -> Switches {
+        let mut out = Switches::default();
         for (location, contact) in self.contact.effects.iter().enumerate() {
             if self.contact.enabled[location] {
-                for value in contact.switches(drift(y, location)).into_iter().flatten() {
-                    out.values[out.len] = value;
-                    out.len += 1;
-                }
+                out.values
+                    .extend(contact.switches(drift(y, location)).into_iter().flatten());
             }
         }
-        for value in self.discovered.enabled_terms().filter_map(|t| t.switch(y)) {
-            out.values[out.len] = value;
-            out.len += 1;
-        }
+        out.values
+            .extend(self.discovered.enabled_terms().filter_map(|t| t.switch(y)));
         out
     }
 
-    /// `g(y, ẏ)`: the sum of every enabled effect's force on each floor.
+    /// Add `g(y, ẏ)`, the sum of every enabled effect's force on each floor, to `g`.
     #[inline]
-    pub fn force(&self, y: &Floors, v: &Floors) -> Floors {
-        let mut g = [0.0; STOREYS];
-        self.contact.add_forces(y, v, &mut g);
-        self.cubic.add_forces(y, v, &mut g);
-        self.friction.add_forces(y, v, &mut g);
-        self.discovered.add_forces(y, v, &mut g);
+    pub fn add_forces(&self, y: &[f64], v: &[f64], g: &mut [f64]) {
+        self.contact.add_forces(y, v, g);
+        self.cubic.add_forces(y, v, g);
+        self.friction.add_forces(y, v, g);
+        self.discovered.add_forces(y, v, g);
+    }
+
+    /// `g(y, ẏ)`: the sum of every enabled effect's force on each floor.
+    pub fn force(&self, y: &[f64], v: &[f64]) -> Vec<f64> {
+        let mut g = vec![0.0; y.len()];
+        self.add_forces(y, v, &mut g);
         g
     }
 
@@ -331,11 +420,12 @@ impl Effects {
             .or_else(|| self.discovered.get_integer(vr))
     }
     pub fn set_integer(&mut self, vr: u32, value: i32) -> Option<Result<(), ModelError>> {
+        let storeys = self.storeys();
         self.contact
             .set_integer(vr, value)
             .or_else(|| self.cubic.set_integer(vr, value))
             .or_else(|| self.friction.set_integer(vr, value))
-            .or_else(|| self.discovered.set_integer(vr, value))
+            .or_else(|| self.discovered.set_integer(vr, value, storeys))
     }
     pub fn get_boolean(&self, vr: u32) -> Option<bool> {
         self.contact
@@ -357,32 +447,64 @@ impl Effects {
 mod tests {
     use super::*;
 
-    /// The law of each kind is the force the model adds: at a location, along its drift or
-    /// velocity.
+    /// The law of each kind is the force the model adds: at every location of a 3- and a
+    /// 12-storey building, along its drift or velocity.
     #[test]
     fn each_law_is_the_models_force() {
-        let y = [1e-3, -2e-3, 4e-3];
-        let v = [0.02, -0.01, 0.005];
-        for kind in Kind::ALL {
-            for location in 0..kind.sites(STOREYS) {
-                let reals: Vec<f64> = kind.real_params().iter().map(|p| 2.0 * p.start).collect();
-                let law = Law::new(kind, &reals, Side::Negative).expect("enough parameters");
-                assert_eq!(law.reals(), reals);
-                let mut effects = Effects::default();
-                let mut g = [0.0; 3];
-                let expected = match kind.placement() {
-                    Placement::Storey => {
-                        let f = law.force_at(drift(&y, location));
-                        add_storey_force(location, f, &mut g);
-                        g
-                    }
-                    Placement::Floor => {
-                        g[location] = law.force_at(v[location]);
-                        g
-                    }
-                };
-                effects.switch_on(location, law);
-                assert_eq!(effects.force(&y, &v), expected, "{kind:?} at {location}");
+        for storeys in [3, 12] {
+            let y: Vec<f64> = (0..storeys).map(|i| 1e-3 * (i as f64 * 1.7).sin()).collect();
+            let v: Vec<f64> = (0..storeys).map(|i| 0.02 * (i as f64 * 0.9).cos()).collect();
+            for kind in Kind::ALL {
+                for location in 0..kind.sites(storeys) {
+                    let reals: Vec<f64> =
+                        kind.real_params().iter().map(|p| 2.0 * p.start).collect();
+                    let law = Law::new(kind, &reals, Side::Negative).expect("enough parameters");
+                    assert_eq!(law.reals(), reals);
+                    let mut effects = Effects::new(storeys);
+                    let mut g = vec![0.0; storeys];
+                    let expected = match kind.placement() {
+                        Placement::Storey => {
+                            let f = law.force_at(drift(&y, location));
+                            add_storey_force(location, f, &mut g);
+                            g
+                        }
+                        Placement::Floor => {
+                            g[location] = law.force_at(v[location]);
+                            g
+                        }
+                    };
+                    effects.switch_on(location, law);
+                    assert_eq!(effects.force(&y, &v), expected, "{kind:?} at {location}");
+                }
+            }
+        }
+    }
+
+    /// Every site of every kind of a building of up to MAX_STOREYS storeys has its own block of
+    /// references, found back from any of its slots, none shared with another site or kind; the
+    /// paper's first three sites at base + 10·site.
+    #[test]
+    fn site_references_never_meet_and_read_back() {
+        let mut seen = std::collections::HashMap::new();
+        for (k, base) in [CONTACT_BASE_VR, CUBIC_BASE_VR, FRICTION_BASE_VR]
+            .into_iter()
+            .enumerate()
+        {
+            for location in 0..MAX_STOREYS {
+                let vr = site_vr(base, location);
+                if location < PAPER_STOREYS {
+                    assert_eq!(vr, base + 10 * location as u32);
+                }
+                for slot in 0..SLOTS_PER_LOCATION {
+                    assert_eq!(
+                        site_of(base, vr + slot, MAX_STOREYS),
+                        Some((location, slot))
+                    );
+                    assert_eq!(seen.insert(vr + slot, (k, location)), None, "{vr}");
+                    assert!(!Discovered::owns(vr + slot));
+                }
+                // A site the building lacks is not found.
+                assert_eq!(site_of(base, vr, location), None);
             }
         }
     }

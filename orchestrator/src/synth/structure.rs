@@ -2,11 +2,13 @@
 //! the quadratic (velocity-squared) damping, effects the FMU's library lacks.
 
 use ::structure::effects::{add_storey_force, drift};
-use fmu_shear::effects::Floors;
 use fmu_shear::ShearModel;
 use numerics::ode::rk4_with_events;
 
 use super::scenario::{DampingSite, EffectSpec};
+
+/// Displacements or velocities of the paper rig's three floors.
+type Floors = [f64; 3];
 
 // ---------------------------------------------------------------------------------------------
 // Quadratic damping: not in the FMU's library, integrated here beside the model
@@ -229,8 +231,8 @@ impl Hysteretic {
     fn switches(&self, model: &ShearModel, x: &HState) -> ([f64; 6 + MAX_LAWS], usize) {
         let contact = model.effects.switches(&[x[0], x[1], x[2]]);
         let mut out = [0.0; 6 + MAX_LAWS];
-        out[..contact.len].copy_from_slice(&contact.values[..contact.len]);
-        let mut len = contact.len;
+        let mut len = contact.values.len();
+        out[..len].copy_from_slice(&contact.values);
         for (i, law) in self.laws.iter().enumerate() {
             out[len] = drift(&[x[3], x[4], x[5]], law.storey) * x[Z0 + i];
             len += 1;

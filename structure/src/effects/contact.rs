@@ -71,8 +71,16 @@ const PARAMS: &[RealParam] = &[
 impl Effect for Contact {
     const KIND: &'static str = "contact";
 
+    /// `contact{L}{U}` while both floors are single digits (`contact01`, `contact23`: the
+    /// paper's names), `contact{L}to{U}` from floor 10 up (`contact9to10`, `contact10to11`), so
+    /// that no name reads as two pairs of floors (`contact1011` could be 10–11 or 1–011) and no
+    /// site's `prefix_` starts another's (`contact12_13_gap` would start with `contact12_`).
     fn prefix(location: usize) -> String {
-        format!("contact{}{}", location, location + 1)
+        if location + 1 < 10 {
+            format!("contact{}{}", location, location + 1)
+        } else {
+            format!("contact{}to{}", location, location + 1)
+        }
     }
     fn where_(location: usize) -> String {
         if location == 0 {

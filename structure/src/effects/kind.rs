@@ -260,6 +260,23 @@ mod tests {
             assert_eq!(Side::from_code(side.code()), Some(side));
         }
         assert_eq!(Kind::Contact.prefix(2), "contact23");
+        assert_eq!(Kind::Contact.prefix(8), "contact89");
+        assert_eq!(Kind::Contact.prefix(9), "contact9to10");
+        assert_eq!(Kind::Contact.prefix(10), "contact10to11");
+        assert_eq!(Kind::Cubic.prefix(11), "cubic12");
+        assert_eq!(Kind::Friction.prefix(19), "friction20");
+        // Every site's prefix of a building of MAX_STOREYS storeys is its own, and no prefix
+        // followed by `_` starts another (`cubic1_` is not the start of `cubic12_`).
+        let n = crate::MAX_STOREYS;
+        let prefixes: Vec<String> = Kind::ALL
+            .into_iter()
+            .flat_map(|kind| (0..kind.sites(n)).map(move |s| kind.prefix(s) + "_"))
+            .collect();
+        for (i, a) in prefixes.iter().enumerate() {
+            for (j, b) in prefixes.iter().enumerate() {
+                assert!(i == j || !b.starts_with(a.as_str()), "{a} starts {b}");
+            }
+        }
         assert!(Law::new(Kind::Friction, &[0.1], Side::Both).is_none());
     }
 
@@ -267,7 +284,7 @@ mod tests {
     /// kind cannot sit at is refused saying where it can.
     #[test]
     fn sites_read_back_from_their_text_and_the_rest_is_refused() {
-        for storeys in [1, 3, 12] {
+        for storeys in [1, 3, 12, crate::MAX_STOREYS] {
             for kind in Kind::ALL {
                 assert_eq!(kind.sites(storeys), storeys);
                 for site in 0..kind.sites(storeys) {
