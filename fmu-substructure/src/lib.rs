@@ -13,7 +13,7 @@
 //!   direct feedthrough). `fmi2DoStep(t, h)` takes `substeps` RK4 steps of `h / substeps`.
 //!   Facing role 1 the load is the measured force `F_m`. Facing role 2, whose specimen holds
 //!   floor 2, floor 2 here is the twin's model of it kept as a predictor, and the master loads
-//!   it with `F_m` less its own inertia (`numerics::substructure::floor2_load`): the numerical
+//!   it with `F_m` less its own inertia (`numerics::substructure::interface_load`): the numerical
 //!   substructure is then floor 1 and storey 2's interface equation, the paper's eqs (13)–(14).
 //! * `role = 1`, **physical, specimen floor 3**: storey 3 with the one-sided bumper between
 //!   floors 2 and 3, and floor 3 (`m3 c3 k3 gap contact_stiffness`), moved at floor 2 by the

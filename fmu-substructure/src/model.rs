@@ -24,9 +24,10 @@ impl Default for Parameters {
         Parameters {
             role: ROLE_NUMERICAL,
             frame: Frame {
-                mass: [DEFAULT_MASS; 3],
-                damping: [DEFAULT_DAMPING; 3],
-                stiffness: [DEFAULT_STIFFNESS; 3],
+                mass: vec![DEFAULT_MASS; STOREYS],
+                damping: vec![DEFAULT_DAMPING; STOREYS],
+                stiffness: vec![DEFAULT_STIFFNESS; STOREYS],
+                floor: SPLIT_FLOOR,
                 gap: DEFAULT_GAP,
                 contact_stiffness: DEFAULT_CONTACT_STIFFNESS,
             },
@@ -57,8 +58,7 @@ impl Parameters {
             return Err(invalid("role", role_reason(self.role)));
         }
         let f = &self.frame;
-        for i in 0..3 {
-            let m = f.mass[i];
+        for (i, &m) in f.mass.iter().enumerate() {
             if !(m.is_finite() && m > 0.0) {
                 return Err(invalid(
                     &format!("m{}", i + 1),
@@ -66,7 +66,7 @@ impl Parameters {
                 ));
             }
         }
-        for (prefix, values) in [("c", f.damping), ("k", f.stiffness)] {
+        for (prefix, values) in [("c", &f.damping), ("k", &f.stiffness)] {
             for (i, x) in values.iter().enumerate() {
                 if !(x.is_finite() && *x >= 0.0) {
                     return Err(invalid(
@@ -147,9 +147,9 @@ impl SubstructureModel {
     /// What the physical role's specimen holds.
     fn split(&self) -> Split {
         if self.params.role == ROLE_PHYSICAL_FLOORS_2_3 {
-            Split::SpecimenFloors23
+            Split::FloorPhysical
         } else {
-            Split::SpecimenFloor3
+            Split::FloorNumerical
         }
     }
 
@@ -166,15 +166,15 @@ impl SubstructureModel {
 
     /// The specimen at the end of the imposed motion.
     fn end_of_motion(&mut self) -> Physical {
-        if let Some(p) = self.preview {
-            return p;
+        if let Some(p) = &self.preview {
+            return p.clone();
         }
-        let mut p = self.physical;
+        let mut p = self.physical.clone();
         let h = self.params.control_step;
         if h.is_finite() && h > 0.0 {
             p.follow(&self.params.frame, &self.imposed(), self.params.substeps());
         }
-        self.preview = Some(p);
+        self.preview = Some(p.clone());
         p
     }
 
@@ -198,12 +198,13 @@ impl SubstructureModel {
 
     fn output(&mut self, vr: u32) -> Option<f64> {
         let numerical = !self.physical_role();
-        let n = self.numerical;
+        let n = &self.numerical;
+        let j = self.params.frame.floor - 1;
         Some(match vr {
             Y1 => n.y[0],
             V1 => n.v[0],
-            Y2 => n.y[1],
-            V2 => n.v[1],
+            Y2 => n.y[j],
+            V2 => n.v[j],
             MEASURED_FORCE | Y3 | V3 | RELATIVE | A2 if numerical => 0.0,
             MEASURED_FORCE => {
                 let p = self.end_of_motion();
@@ -217,9 +218,9 @@ impl SubstructureModel {
                 )
             }
             A2 => self.imposed().acceleration_at_end(),
-            Y3 => self.end_of_motion().y3,
-            V3 => self.end_of_motion().v3,
-            RELATIVE => self.motion[2] - self.end_of_motion().y3,
+            Y3 => self.end_of_motion().y[0],
+            V3 => self.end_of_motion().v[0],
+            RELATIVE => self.motion[2] - self.end_of_motion().y[0],
             _ => return None,
         })
     }
@@ -231,14 +232,15 @@ impl CoSimModel for SubstructureModel {
     }
 
     fn instantiate(_context: &InstantiateContext) -> Result<Self, ModelError> {
+        let params = Parameters::default();
         Ok(SubstructureModel {
-            params: Parameters::default(),
+            numerical: Numerical::at_rest(&params.frame),
+            physical: Physical::at_rest(&params.frame),
+            params,
             force: RampInput::default(),
             interface_force: 0.0,
             interface_force_rate: 0.0,
             motion: [0.0; 4],
-            numerical: Numerical::default(),
-            physical: Physical::default(),
             preview: None,
         })
     }
@@ -313,7 +315,7 @@ impl CoSimModel for SubstructureModel {
     }
 
     fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
-        let f = self.params.frame;
+        let f = self.params.frame.clone();
         let n = self.params.substeps();
         if self.physical_role() {
             let dt = self.params.control_step;
@@ -327,10 +329,16 @@ impl CoSimModel for SubstructureModel {
                 });
             }
             let end = self.end_of_motion();
-            if !(end.y3.is_finite() && end.v3.is_finite()) {
+            if !end.y.iter().chain(&end.v).all(|x| x.is_finite()) {
                 return Err(ModelError::Diverged {
                     time: time + step_size,
-                    what: format!("floor 3's state is ({}, {})", end.y3, end.v3),
+                    what: format!(
+                        "floors {}-{}'s state is {:?}, {:?}",
+                        f.floor + 1,
+                        f.storeys(),
+                        end.y,
+                        end.v
+                    ),
                 });
             }
             self.physical = end;
@@ -338,7 +346,7 @@ impl CoSimModel for SubstructureModel {
             let hs = step_size / f64::from(n);
             let (u, du) = (self.force.value, self.force.slope);
             let (fm, rate) = (self.interface_force, self.interface_force_rate);
-            let mut next = self.numerical;
+            let mut next = self.numerical.clone();
             for j in 0..n {
                 let tau0 = f64::from(j) * hs;
                 next.step(&f, hs, (u + du * tau0, du), (fm + rate * tau0, rate));
@@ -347,7 +355,8 @@ impl CoSimModel for SubstructureModel {
                 return Err(ModelError::Diverged {
                     time: time + step_size,
                     what: format!(
-                        "floors 1-2's displacements {:?} and velocities {:?}",
+                        "floors 1-{}'s displacements {:?} and velocities {:?}",
+                        f.floor,
                         next.y, next.v
                     ),
                 });

@@ -46,6 +46,11 @@ pub const ROLE_PHYSICAL: i32 = 1;
 /// carries floor 2's inertia.
 pub const ROLE_PHYSICAL_FLOORS_2_3: i32 = 2;
 
+/// The one structure this FMU's variable table serves, the paper's rig: three storeys cut at
+/// floor 2 (the orchestrator runs other cuts on its Rust loop, the same `numerics::substructure`).
+pub const STOREYS: usize = 3;
+pub const SPLIT_FLOOR: usize = 2;
+
 /// The shear FMU's defaults for the structure; the bumper of the hybrid test's setup.
 pub const DEFAULT_MASS: f64 = 5.2;
 pub const DEFAULT_DAMPING: f64 = 0.010_001_702_004_705_479; // exp(−4.605)
@@ -75,7 +80,7 @@ fn variables() -> Vec<Variable> {
         .min(0.0)
         .max(2.0)
         .describe("0: numerical substructure (floor 1 with storeys 1-2, and floor 2: the specimen's floor 2 under role 2, the twin's model of it as a predictor whose inertia the master takes out of interface_force); 1: physical substructure, specimen floor 3 (storey 3 with the bumper and floor 3, moved at floor 2); 2: physical substructure, specimen floors 2-3 (the reference paper's eqs 13-14: role 1 with floor 2's mass m2, whose inertia is in the measured force). A role ignores the other's inputs; the other's outputs read 0")];
-    for i in 0..3u32 {
+    for i in 0..STOREYS as u32 {
         let n = i + 1;
         let side = match n {
             1 => "numerical",
@@ -88,7 +93,7 @@ fn variables() -> Vec<Variable> {
                 .describe(&format!("mass of floor {n} ({side} role)")),
         );
     }
-    for i in 0..3u32 {
+    for i in 0..STOREYS as u32 {
         let n = i + 1;
         let side = if n == 3 { "physical" } else { "numerical" };
         v.push(
@@ -97,7 +102,7 @@ fn variables() -> Vec<Variable> {
                 .describe(&format!("viscous damping of storey {n} ({side} role)")),
         );
     }
-    for i in 0..3u32 {
+    for i in 0..STOREYS as u32 {
         let n = i + 1;
         let side = if n == 3 { "physical" } else { "numerical" };
         v.push(

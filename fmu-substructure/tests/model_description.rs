@@ -83,9 +83,10 @@ fn the_table_has_both_roles_interfaces() {
 
 fn frame() -> Frame {
     Frame {
-        mass: [4.6, 5.3, 4.9],
-        damping: [8.0, 3.5, 2.6],
-        stiffness: [3850.0, 4100.0, 4650.0],
+        mass: vec![4.6, 5.3, 4.9],
+        damping: vec![8.0, 3.5, 2.6],
+        stiffness: vec![3850.0, 4100.0, 4650.0],
+        floor: 2,
         gap: 5e-4,
         contact_stiffness: 9000.0,
     }
@@ -114,7 +115,7 @@ fn model(role: i32, f: &Frame, h: f64) -> SubstructureModel {
 fn the_numerical_role_is_the_shared_model() {
     let (f, h) = (frame(), 1e-3);
     let mut m = model(ROLE_NUMERICAL, &f, h);
-    let mut reference = Numerical::default();
+    let mut reference = Numerical::at_rest(&f);
     for k in 0..50 {
         let (u, du, fm, rate) = ((k as f64 * 0.3).sin(), 2.0, 0.1 * k as f64, -3.0 + k as f64);
         m.set_real(FORCE, u).expect("force");
@@ -134,8 +135,8 @@ fn the_numerical_role_is_the_shared_model() {
 #[test]
 fn the_physical_roles_are_the_shared_model() {
     for (role, split) in [
-        (ROLE_PHYSICAL, Split::SpecimenFloor3),
-        (ROLE_PHYSICAL_FLOORS_2_3, Split::SpecimenFloors23),
+        (ROLE_PHYSICAL, Split::FloorNumerical),
+        (ROLE_PHYSICAL_FLOORS_2_3, Split::FloorPhysical),
     ] {
         physical_role_is_the_shared_model(role, split);
     }
@@ -144,7 +145,7 @@ fn the_physical_roles_are_the_shared_model() {
 fn physical_role_is_the_shared_model(role: i32, split: Split) {
     let (f, h) = (frame(), 1e-3);
     let mut m = model(role, &f, h);
-    let mut reference = Physical::default();
+    let mut reference = Physical::at_rest(&f);
     let (mut y0, mut v0) = (0.0, 0.0);
     for k in 0..200 {
         let t = (k + 1) as f64 * h;
@@ -158,12 +159,12 @@ fn physical_role_is_the_shared_model(role: i32, split: Split) {
         let expected = f.interface_force(split, y1, v1, a2, &reference);
         assert_eq!(m.get_real(MEASURED_FORCE).expect("fm"), expected);
         assert_eq!(m.get_real(A2).expect("a2"), a2);
-        let storey3 = f.storey3_force(y1, v1, &reference);
+        let storey3 = f.storey_above_force(y1, v1, &reference);
         match split {
-            Split::SpecimenFloor3 => assert_eq!(expected, storey3),
-            Split::SpecimenFloors23 => assert_eq!(expected, f.mass[1] * a2 + storey3),
+            Split::FloorNumerical => assert_eq!(expected, storey3),
+            Split::FloorPhysical => assert_eq!(expected, f.mass[1] * a2 + storey3),
         }
-        assert_eq!(m.get_real(RELATIVE).expect("yr"), y1 - reference.y3);
+        assert_eq!(m.get_real(RELATIVE).expect("yr"), y1 - reference.y[0]);
         m.do_step(k as f64 * h, h).expect("step");
         // The kept state; the outputs now preview the same motion again, until the next is set.
         assert_eq!(m.physical, reference);

@@ -12,7 +12,7 @@ use crate::report::hybrid_plot;
 use crate::twin::Twin;
 use crate::workflows::hybrid::experiment::{Coupling, InterfaceNoise};
 use crate::workflows::hybrid::options::{check_a_err, HybridOptions, RUN_PEAK};
-use crate::workflows::hybrid::Split;
+use crate::workflows::hybrid::Cut;
 
 #[derive(clap::Args)]
 pub struct HybridArgs {
@@ -74,7 +74,7 @@ pub struct Common {
     /// in the measured force) or specimen-floor-3 (storey 3 moved at floor 2; floor 2's mass
     /// numerical).
     #[arg(long, default_value_t = HybridOptions::default().split)]
-    pub split: Split,
+    pub split: Cut,
     /// How the substructures are coupled: auto (one ODE for an actuator without dynamics, as
     /// the paper's simplified simulation; the stepped loop otherwise), monolithic or stepped.
     #[arg(long, value_enum, default_value_t = HybridOptions::default().coupling)]
@@ -152,7 +152,7 @@ fn threshold_command(a: &ThresholdArgs) -> Result<()> {
     let twin = Twin::load(a.common.twin.as_deref())?;
     let (report, curve, setup) =
         crate::workflows::hybrid::options::threshold(&twin, &a.common.options(), a_errs)?;
-    println!("split: {}", setup.split.describe());
+    println!("split: {}", setup.describe_split());
     let plot = match &a.common.plot {
         Some(path) => Some((
             path,
@@ -206,7 +206,7 @@ fn run_command(a: &RunArgs) -> Result<()> {
     if let Some((path, svg)) = plot {
         write_text_atomically(path, &svg)?;
     }
-    println!("split: {}", setup.split.describe());
+    println!("split: {}", setup.describe_split());
     for r in &report.runs {
         if let Some(why) = &r.stopped {
             println!("a_err {:+.3}: {why}", r.a_err);

@@ -150,7 +150,7 @@ pub fn runs_svg(outcomes: &[RunOutcome], dt: f64) -> Result<String, String> {
                 o.summary.a_err, o.summary.contacts
             );
             let t_end = run.time.last().copied().unwrap_or(1.0).max(dt);
-            let y = range(run.y2p.iter().map(|v| 1e3 * v));
+            let y = range(run.yjp.iter().map(|v| 1e3 * v));
             let mut chart = ChartBuilder::on(&rows[2 * i])
                 .margin(10)
                 .caption(format!("{title}: floor 2 (physical side)"), (FONT, 15))
@@ -161,7 +161,7 @@ pub fn runs_svg(outcomes: &[RunOutcome], dt: f64) -> Result<String, String> {
             mesh(&mut chart, "time (s)", "y2 (mm)")?;
             chart
                 .draw_series(LineSeries::new(
-                    run.time.iter().zip(&run.y2p).map(|(t, v)| (*t, 1e3 * v)),
+                    run.time.iter().zip(&run.yjp).map(|(t, v)| (*t, 1e3 * v)),
                     colour.stroke_width(1),
                 ))
                 .map_err(text)?;

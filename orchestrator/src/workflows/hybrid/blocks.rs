@@ -6,7 +6,7 @@
 //!   achieved position and rate to the new ones, the new rate from the last three positions:
 //!   only displacements cross the interface);
 //! * [`InterfaceBlock`]: the measured force → floor 2's load on the numerical side
-//!   (`numerics::substructure::floor2_load`: the force, less the numerical floor 2's inertia
+//!   (`numerics::substructure::interface_load`: the force, less the numerical floor 2's inertia
 //!   when the specimen holds floor 2) as its `interface_force`, and its linear extrapolation
 //!   slope, with the test's bookkeeping: the energy monitor, the bumper's
 //!   contact times and the interface log (a [`HybridRun`] filled as the run goes).
@@ -19,7 +19,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use numerics::actuator::EnergyMonitor;
-use numerics::substructure::{floor2_load, Frame, SampledMotion, Split};
+use numerics::substructure::{interface_load, Frame, SampledMotion, Split};
 
 use super::{HybridError, HybridRun};
 use crate::cosim::master::{Block, MasterError};
@@ -107,7 +107,7 @@ pub struct InterfaceLog {
     pub stopped: Option<HybridError>,
 }
 
-/// Inputs: `y1`, `y2` (numerical side), `y2p` (the achieved displacement, the actuator
+/// Inputs: `y1`, `y2` (numerical side), `yjp` (the achieved displacement, the actuator
 /// block's `y2_end`), the measured force, `y3`, `relative`, `a2` (physical side).
 /// Outputs: `interface_force` and `interface_force_rate` for the numerical side (floor 2's
 /// load, extrapolated linearly from the last two).
@@ -156,6 +156,7 @@ impl InterfaceBlock {
             l.run.split = split;
             l.run.interface.step = dt / f64::from(substeps);
         }
+        let gap = frame.gap;
         Ok(InterfaceBlock {
             log,
             split,
@@ -164,7 +165,7 @@ impl InterfaceBlock {
             dt,
             substeps,
             h: dt / f64::from(substeps),
-            gap: frame.gap,
+            gap,
             monitor,
             numerical_motion: SampledMotion::default(),
             load: 0.0,
@@ -193,7 +194,7 @@ impl Block for InterfaceBlock {
         if same_point(&self.last, time, inputs, outputs, "interface")? {
             return Ok(());
         }
-        let [y1, y2n, y2p, fm, y3, yr, a2p] = std::array::from_fn(|i| inputs[i]);
+        let [y1, yjn, yjp, fm, y3, yr, ajp] = std::array::from_fn(|i| inputs[i]);
         let k = self.points;
         self.points += 1;
         let h = self.h;
@@ -208,15 +209,15 @@ impl Block for InterfaceBlock {
             let fe = (self.excitation[ks] + slope * tau0, slope);
             // The excitation's work on floor 1 over the step (force at mid-step).
             let input_work = (fe.0 + 0.5 * fe.1 * h) * (y1 - self.y1_before);
-            self.monitor.observe(fm, y2n, input_work);
+            self.monitor.observe(fm, yjn, input_work);
             {
                 let mut log = self.log.borrow_mut();
                 let run = &mut log.run;
-                run.interface.y2n.push(y2n);
-                run.interface.y2p.push(y2p);
-                run.interface.y3.push(y3);
+                run.interface.yjn.push(yjn);
+                run.interface.yjp.push(yjp);
+                run.interface.y_above.push(y3);
                 run.interface.force.push(fm);
-                run.interface.a2p.push(a2p);
+                run.interface.ajp.push(ajp);
                 run.max_relative = run.max_relative.max(yr);
                 let now = yr > self.gap;
                 if now && !self.closed {
@@ -224,7 +225,7 @@ impl Block for InterfaceBlock {
                 }
                 self.closed = now;
             }
-            if !(fm.is_finite() && y2n.is_finite()) {
+            if !(fm.is_finite() && yjn.is_finite()) {
                 return Err(self.stop(HybridError::Setup(format!(
                     "non-finite state at t = {:.4} s",
                     t + tau0 + h
@@ -244,18 +245,18 @@ impl Block for InterfaceBlock {
             let run = &mut log.run;
             run.time.push((k / substeps) as f64 * self.dt);
             run.y1.push(y1);
-            run.y2n.push(y2n);
-            run.y2p.push(y2p);
-            run.y3.push(y3);
+            run.yjn.push(yjn);
+            run.yjp.push(yjp);
+            run.y_above.push(y3);
             run.force.push(fm);
         }
         // The numerical floor 2's acceleration, estimated as the achieved motion's is.
-        let a2n = if k > 0 {
-            self.numerical_motion.advance(y2n, h).acceleration_at_end()
+        let ajn = if k > 0 {
+            self.numerical_motion.advance(yjn, h).acceleration_at_end()
         } else {
             0.0
         };
-        let load = floor2_load(self.split, &self.frame, fm, a2n);
+        let load = interface_load(self.split, &self.frame, fm, ajn);
         let out = [load, (load - self.load) / h];
         self.load = load;
         self.y1_before = y1;

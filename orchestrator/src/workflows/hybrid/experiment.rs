@@ -15,12 +15,12 @@ use serde::Serialize;
 
 use super::identify::{identify, ContactLaw};
 use super::spectrum::{harmonics, welch, Harmonics, Spectrum};
-use super::{monolithic, run, threshold, HybridError, HybridRun, Result, Split, Structure};
+use super::{monolithic, run, threshold, Cut, Frame, HybridError, HybridRun, Result, Split};
 
 /// Everything a hybrid experiment is set up with.
 #[derive(Clone, Debug)]
 pub struct Setup {
-    pub structure: Structure,
+    pub structure: Frame,
     /// Where the structure is cut (default: the paper's, the specimen floors 2 and 3).
     pub split: Split,
     /// The excitation scaled to a peak of 1 N, at `dt`.
@@ -47,6 +47,16 @@ pub enum Coupling {
 }
 
 impl Setup {
+    /// What the specimen holds, in words.
+    pub fn describe_split(&self) -> String {
+        Cut {
+            floor: self.structure.floor,
+            split: self.split,
+            storeys: None,
+        }
+        .describe(self.structure.storeys())
+    }
+
     fn control_step(&self) -> f64 {
         self.dt / f64::from(self.substeps)
     }
@@ -60,17 +70,26 @@ impl Setup {
         };
         let actuator = Actuator::new(spec, self.control_step())
             .map_err(|e| HybridError::Setup(e.to_string()))?;
-        if self.split.floor2_physical() && spec.delay > 0.0 {
+        if self.split.floor_physical() && spec.delay > 0.0 {
             // Measured: one control step of delay (0.49 ms) diverges within 5.1 s, five within
             // 0.7 s even with third-order compensation; the other split runs both.
+            let (n, j) = (self.structure.storeys(), self.structure.floor);
+            let name = |split| {
+                Cut {
+                    floor: j,
+                    split,
+                    storeys: None,
+                }
+                .name(n)
+            };
             return Err(HybridError::Setup(format!(
-                "a pure delay ({} s) with the specimen holding floor 2 (--split {}, the paper's) \
-                 feeds floor 2's inertia of the delayed motion back into the massless interface \
+                "a pure delay ({} s) with the specimen holding floor {j} (--split {}, the paper's) \
+                 feeds floor {j}'s inertia of the delayed motion back into the massless interface \
                  equation (14): a neutral delay loop that no stepped test holds; give --split {} \
-                 (floor 2 numerical) or no delay (a lag is accepted)",
+                 (floor {j} numerical) or no delay (a lag is accepted)",
                 spec.delay,
-                Split::SpecimenFloors23,
-                Split::SpecimenFloor3
+                name(Split::FloorPhysical),
+                name(Split::FloorNumerical)
             )));
         }
         Ok(actuator)
@@ -128,10 +147,12 @@ impl Setup {
 impl Setup {
     /// [`Setup::simulate`] with the stepped coupling on the master: the substructures as two
     /// `fmu_substructure` instances ([`super::fmus::run_on_master`], the same computation as
-    /// [`super::run`], tested equal to it). The one-ODE coupling has no substructures to run.
+    /// [`super::run`], tested equal to it) when the FMU's variables fit the cut (the paper's
+    /// rig, [`super::fmus::serves`]); other cuts, and the one-ODE coupling, which has no
+    /// substructures to run, as [`Setup::simulate`].
     pub fn simulate_on_master(&self, excitation: &[f64], a_err: f64) -> Result<HybridRun> {
         match self.resolved()? {
-            Coupling::Stepped => {
+            Coupling::Stepped if super::fmus::serves(&self.structure) => {
                 let mut act = self.actuator(a_err)?;
                 super::fmus::run_on_master(
                     &self.structure,
@@ -179,9 +200,9 @@ pub fn threshold_curve(setup: &Setup, a_errs: &[f64]) -> Result<ThresholdCurve> 
         setup.actuator(a)?;
         let found = threshold(&setup.unit, |f| setup.simulate(f, a));
         let open = Setup {
-            structure: Structure {
+            structure: Frame {
                 gap: f64::MAX / 4.0,
-                ..setup.structure
+                ..setup.structure.clone()
             },
             ..setup.clone()
         };
@@ -302,7 +323,7 @@ pub fn runs(
             }
             Err(e) => return Err(e),
         };
-        let spectrum = welch(&run.y2p, setup.dt, segment(setup.dt));
+        let spectrum = welch(&run.yjp, setup.dt, segment(setup.dt));
         // The measurements, with noise (seeded per run).
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(noise.seed.wrapping_add(i as u64));
         let mut noisy = |x: &[f64], sd: f64| -> Vec<f64> {
@@ -312,22 +333,22 @@ pub fn runs(
             }
         };
         let face = &run.interface;
-        let y2p = noisy(&face.y2p, noise.displacement);
-        let y2n = noisy(&face.y2n, noise.displacement);
-        let y3 = noisy(&face.y3, noise.displacement);
+        let yjp = noisy(&face.yjp, noise.displacement);
+        let yjn = noisy(&face.yjn, noise.displacement);
+        let y3 = noisy(&face.y_above, noise.displacement);
         let force = noisy(&face.force, noise.force);
-        let a2p = setup
+        let ajp = setup
             .split
-            .floor2_physical()
-            .then(|| noisy(&face.a2p, noise.acceleration));
+            .floor_physical()
+            .then(|| noisy(&face.ajp, noise.acceleration));
         out.push(RunOutcome {
             summary: RunSummary {
                 a_err: a,
                 contacts: run.contact_times.len(),
                 max_relative: run.max_relative,
                 spectrum: harmonics(&spectrum, 40.0, &modes),
-                identified: identify(&y2p, &y3, a2p.as_deref(), &force, face.step),
-                identified_from_command: identify(&y2n, &y3, a2p.as_deref(), &force, face.step),
+                identified: identify(&yjp, &y3, ajp.as_deref(), &force, face.step),
+                identified_from_command: identify(&yjn, &y3, ajp.as_deref(), &force, face.step),
                 stopped: None,
             },
             run: Some(run),

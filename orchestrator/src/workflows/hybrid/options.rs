@@ -12,7 +12,7 @@ use super::experiment::{
     read_excitation, runs, threshold_curve, Coupling, InterfaceNoise, RunOutcome, RunSummary,
     Setup, ThresholdCurve, ThresholdPoint,
 };
-use super::{unit_peak, HybridError, Split, Structure};
+use super::{unit_peak, Cut, HybridError, Split};
 use crate::twin::{Twin, TwinError};
 use crate::workflows::control::design::structure_of;
 use crate::workflows::control::ControlError;
@@ -57,8 +57,9 @@ pub struct HybridOptions {
     pub compensate: Option<usize>,
     /// Stop a run when the interface has put more than this × the excitation's energy in.
     pub energy_factor: f64,
-    /// Where the structure is cut, by what the specimen holds (the paper's: floors 2 and 3).
-    pub split: Split,
+    /// Where the structure is cut: the floor the actuator drives and what the specimen holds
+    /// (the paper's: floors 2 and 3).
+    pub split: Cut,
     pub coupling: Coupling,
 }
 
@@ -79,7 +80,11 @@ impl Default for HybridOptions {
             lag: 0.0,
             compensate: None,
             energy_factor: 10.0,
-            split: Split::SpecimenFloors23,
+            split: Cut {
+                floor: 2,
+                split: Split::FloorPhysical,
+                storeys: Some(3),
+            },
             coupling: Coupling::Auto,
         }
     }
@@ -143,8 +148,9 @@ pub struct Header {
     pub control_step: f64,
     pub excitation: String,
     pub actuator: ActuatorSpec,
-    /// What the specimen held: specimen-floors-2-3 (the paper's) or specimen-floor-3.
-    pub split: Split,
+    /// What the specimen held, by name (`numerics::substructure::Cut`): specimen-floors-2-3
+    /// (the paper's) or specimen-floor-3 on the paper's rig.
+    pub split: String,
     pub coupling: Coupling,
 }
 
@@ -154,25 +160,26 @@ impl HybridOptions {
     pub fn setup(&self, twin: &Twin) -> Result<(Setup, Header), HybridTestError> {
         let c = self;
         let s = structure_of(twin)?;
-        // The test's substructures are cut from the paper's three storeys.
-        let three = |v: &[f64]| -> Result<[f64; 3], HybridTestError> {
-            v.try_into().map_err(|_| {
-                HybridError::Setup(format!(
-                    "the hybrid test splits a three-storey structure; {} has {}",
-                    twin.describe(),
-                    v.len()
-                ))
-                .into()
-            })
-        };
-        let structure = Structure {
-            mass: three(&s.mass)?,
-            damping: three(&s.damping)?,
-            stiffness: three(&s.stiffness)?,
-            gap: c.gap,
-            contact_stiffness: c.contact_stiffness,
-        };
-        structure.check()?;
+        let n = s.storeys();
+        let cut = c.split;
+        if let Some(stated) = cut.storeys.filter(|&stated| stated != n) {
+            return Err(InvalidOption(format!(
+                "--split {cut}: names a {stated}-storey structure; {} has {n} storeys",
+                twin.describe()
+            ))
+            .into());
+        }
+        if !(1..n).contains(&cut.floor) {
+            return Err(InvalidOption(format!(
+                "--split {cut}: the actuator's floor must be 1 to {} of {}'s {n} storeys (the \
+                 specimen holds the storey above it, with the bumper)",
+                n.saturating_sub(1).max(1),
+                twin.describe()
+            ))
+            .into());
+        }
+        let structure = super::cut(&s, cut.floor, c.gap, c.contact_stiffness);
+        structure.check().map_err(HybridError::Setup)?;
         if c.substeps == 0 {
             return Err(InvalidOption("--substeps must be at least 1".into()).into());
         }
@@ -215,9 +222,10 @@ impl HybridOptions {
             parameters.insert(format!("c{}", i + 1), s.damping[i]);
             parameters.insert(format!("k{}", i + 1), s.stiffness[i]);
         }
+        let split_name = Cut { storeys: None, ..cut }.name(n);
         let setup = Setup {
             structure,
-            split: c.split,
+            split: cut.split,
             unit: unit_peak(&signal)?,
             dt,
             substeps: c.substeps,
@@ -232,7 +240,7 @@ impl HybridOptions {
             control_step: dt / f64::from(c.substeps),
             excitation: source,
             actuator,
-            split: c.split,
+            split: split_name,
             coupling: setup.resolved()?,
         };
         Ok((setup, header))
