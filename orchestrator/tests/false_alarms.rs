@@ -41,7 +41,7 @@ fn record(gain: f64, noise: NoiseLevel, between: BetweenSamples) -> Measurement 
     synth_record(&s).expect("synth").0.measurement
 }
 
-fn worst(x: &[f64; 3]) -> f64 {
+fn worst(x: &[f64]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 

@@ -165,7 +165,7 @@ fn structural_changes_are_never_sensor_faults() {
     // Only the sensor check matters here: it runs before the alternatives, so the effect
     // library is left out and the recalibration is short.
     let quick = DiagnoseOptions {
-        candidates: Vec::new(),
+        candidates: Some(Vec::new()),
         recalibration_starts: 1,
         ..DiagnoseOptions::default()
     };
@@ -225,7 +225,7 @@ fn structural_changes_are_never_sensor_faults() {
         // What separates them: a structural change moves several floors (measured: the
         // second-worst floor ≥ 6.3 % NMSE, against a tolerance of 0.5 %), and no channel fit
         // cuts its floor's held-out NMSE by the 4× gate (measured at most 2.6×).
-        let mut nmse = d.nmse_before;
+        let mut nmse = d.nmse_before.clone();
         nmse.sort_by(f64::total_cmp);
         assert!(nmse[1] >= 2.0 * d.tolerance, "{label}: {:?}", d.nmse_before);
         for s in &d.sensor_candidates {

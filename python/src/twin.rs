@@ -324,7 +324,7 @@ impl Twin {
         let data = record.paper()?;
         o.validate_for(data).map_err(|e| to_py(kind, e))?;
         if let Some(effects) = effects {
-            o.candidates = parse_candidates(&effects).map_err(|e| to_py(kind, e))?;
+            o.candidates = Some(parse_candidates(&effects).map_err(|e| to_py(kind, e))?);
         }
         let d = detached(py, || {
             let d = diagnose(&self.twin, data, &o).map_err(|e| to_py(kind, e))?;

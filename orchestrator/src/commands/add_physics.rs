@@ -100,7 +100,10 @@ fn fitted_records(paths: &[PathBuf]) -> Result<Vec<RecordRef>> {
 
 fn print_records(text: &mut String, records: &[RecordNmse]) {
     use std::fmt::Write;
-    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    let pct = |x: &[f64]| {
+        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
+        format!("{} %", values.join(" / "))
+    };
     let _ = writeln!(text, "NMSE per record and floor, before → after:");
     for r in records {
         let _ = writeln!(
@@ -198,7 +201,10 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
-    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    let pct = |x: &[f64]| {
+        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
+        format!("{} %", values.join(" / "))
+    };
     for effect in &report.effects {
         let _ = writeln!(text, "effect        {}", effect.name.label);
         for t in &effect.terms {

@@ -79,7 +79,7 @@ impl DiagnoseArgs {
         }
         o.validate()?;
         if !self.effects.is_empty() {
-            o.candidates = parse_candidates(&self.effects)?;
+            o.candidates = Some(parse_candidates(&self.effects)?);
         }
         Ok(o)
     }
@@ -115,9 +115,13 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 
 /// What `twin diagnose` prints.
 pub fn summary(d: &Diagnosis) -> String {
-    let pct = |x: &[f64; 3]| format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2]);
+    let pct = |x: &[f64]| {
+        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
+        format!("{} %", values.join(" / "))
+    };
     let mut s = String::new();
     s += &format!("record        {}\n", d.record);
+    s += &format!("channels      {}\n", d.channels.join(" / "));
     s += &format!("NMSE before   {}\n", pct(&d.nmse_before));
     s += &format!("noise level   {}\n", pct(&d.noise_nmse));
     s += &format!(

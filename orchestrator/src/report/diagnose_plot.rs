@@ -1,4 +1,4 @@
-//! The diagnosis plot: per floor, the residual before and after the chosen action with the
+//! The diagnosis plot: per measured channel, the residual before and after the chosen action with the
 //! failing windows shaded; then the evidence: the storey shear the twin misses against the
 //! storey's drift, with the fitted effect's force (for a contact, the kink at the gap).
 
@@ -49,8 +49,8 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                 .as_ref()
                 .map(|e| format!(" ({})", e.name.label))
                 .or_else(|| d.sensor.as_ref().map(|x| format!(
-                    " (floor {}: gain {:.3}, offset {:.3e}, drift {:.3e})",
-                    x.floor, x.gain, x.offset, x.drift
+                    " ({} on floor {}: gain {:.3}, offset {:.3e}, drift {:.3e})",
+                    x.channel, x.floor, x.gain, x.offset, x.drift
                 )))
                 .unwrap_or_default()
         );
@@ -58,7 +58,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             .titled(&title, ("sans-serif", 22))
             .map_err(|e| err(&e))?;
         let (top, bottom) = root.split_vertically(SIZE.1 * 62 / 100);
-        let rows = top.split_evenly((3, 1));
+        let rows = top.split_evenly((s.measured.len().max(1), 1));
         let t = &s.time[s.first..];
         let after_label = match d.action {
             Action::AddPhysics => "residual after adding the effect",
@@ -66,7 +66,9 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             Action::SensorFault => "residual with the sensor fault modelled",
             _ => "residual (unchanged)",
         };
-        for (f, area) in rows.iter().enumerate() {
+        for (f, area) in rows.iter().enumerate().take(s.measured.len()) {
+            let floor = s.floors.get(f).copied().unwrap_or(f + 1);
+            let channel = d.channels.get(f).map(String::as_str).unwrap_or("?");
             let before: Vec<f64> = (s.first..s.time.len())
                 .map(|k| s.measured[f][k] - s.before[f][k])
                 .collect();
@@ -80,8 +82,8 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                 .y_label_area_size(70)
                 .caption(
                     format!(
-                        "floor {}: NMSE {:.3} % → {:.3} %",
-                        f + 1,
+                        "{channel} (floor {}): NMSE {:.3} % → {:.3} %",
+                        floor,
                         d.nmse_before[f],
                         d.nmse_after[f]
                     ),
@@ -99,7 +101,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
             for w in d
                 .failing_windows
                 .iter()
-                .filter(|w| w.floors.contains(&(f + 1)))
+                .filter(|w| w.floors.contains(&floor))
             {
                 chart
                     .draw_series(std::iter::once(Rectangle::new(
@@ -136,9 +138,10 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
 
         // The evidence panel: the winning effect's storey (or floor), else the storey the
         // localisation points at.
+        let storeys = s.drift.len().max(1);
         let (storey, what) = match &d.effect {
             Some(e) => (
-                e.name.location.last().copied().unwrap_or(1).clamp(1, 3),
+                e.name.location.last().copied().unwrap_or(1).clamp(1, storeys),
                 e.name.kind,
             ),
             None => {
@@ -149,7 +152,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                     .next()
                     .and_then(|x| x.parse().ok())
                     .unwrap_or(1usize)
-                    .clamp(1, 3);
+                    .clamp(1, storeys);
                 (n, EffectKind::Contact)
             }
         };

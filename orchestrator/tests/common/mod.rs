@@ -80,6 +80,6 @@ pub fn hidden_change_twin() -> &'static orchestrator::twin::Twin {
 pub const HIDDEN_CHANGE_NOISE_SD: f64 = 0.003;
 
 /// The worst floor's value.
-pub fn worst(x: &[f64; 3]) -> f64 {
+pub fn worst(x: &[f64]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }

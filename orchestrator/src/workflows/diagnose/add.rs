@@ -15,7 +15,6 @@ use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 use crate::workflows::calibrate::{
     calibrate_records, fixed_log_evidence, Calibration, CalibrationSetup, Prior, RecordInput,
-    DEFAULT_PARAMETERS,
 };
 use crate::workflows::train::physics_only;
 
@@ -40,6 +39,25 @@ pub fn add_physics(
         return Err(DiagnoseError::Setup("no effect to add".into()));
     }
     let physics = physics_only(twin);
+    let storeys = super::storeys_of(twin)?;
+    for c in candidates {
+        let inside = match c {
+            Addition::Library(c) => super::check_sites([c], storeys),
+            Addition::Discovered(terms) => match terms
+                .iter()
+                .find(|t| !structure::effects::Site::all(storeys).contains(&t.site))
+            {
+                Some(t) => Err(format!(
+                    "effect '{}': {} is not a site of the twin's building of {storeys} storeys",
+                    c.label(),
+                    t.site
+                )),
+                None => Ok(()),
+            },
+        };
+        inside.map_err(DiagnoseError::Setup)?;
+    }
+    super::Channels::of(data, storeys)?;
     let n = data.len();
     let first = first_after_transient(&data.time, options.transient);
     if n - first < 20 {
@@ -127,11 +145,11 @@ pub fn add_physics(
                 sd: p.sd,
             })
             .collect(),
-        nmse_before: own.nmse_before,
-        nmse_after: own.nmse_after,
+        nmse_before: own.nmse_before.clone(),
+        nmse_after: own.nmse_after.clone(),
         nmse_effects_alone: stage1.nmse_after,
         evidence: stage1.evidence,
-        noise_variance: own.noise_variance,
+        noise_variance: own.noise_variance.clone(),
         records: refit.records,
         validation_nmse: refit.twin.validation_nmse,
         seconds: started.elapsed().as_secs_f64(),
@@ -146,7 +164,7 @@ pub fn with_record<'a>(
     records: &'a [Measurement],
 ) -> (Vec<&'a Measurement>, usize) {
     let same = |a: &Measurement, b: &Measurement| {
-        a.time == b.time && a.force() == b.force() && a.accs() == b.accs()
+        a.time == b.time && a.excitation == b.excitation && a.responses == b.responses
     };
     let mut all: Vec<&Measurement> = Vec::new();
     for r in records {
@@ -196,7 +214,7 @@ pub fn refit_over_records(
     }
     let reals = PhysicsReals::of(switched)?;
     let mut names = effect_names;
-    names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
+    names.extend(structure::building::parameter_names(reals.storeys));
     let mut initial = BTreeMap::new();
     for name in &names {
         initial.insert(name.clone(), reals.get(name)?);
@@ -243,9 +261,9 @@ pub fn refit_over_records(
         validated.push((fitted.record.clone(), nmse_after));
         out.push(RecordNmse {
             record: fitted.record.clone(),
-            nmse_before: crate::twin::run::nmse_on(original, data, options.transient)?,
-            nmse_after,
-            noise_variance: fitted.noise_variance,
+            nmse_before: crate::twin::run::nmse_on(original, data, options.transient)?.to_vec(),
+            nmse_after: nmse_after.to_vec(),
+            noise_variance: fitted.noise_variance.to_vec(),
         });
     }
     chosen.validation_nmse = crate::report::json::validation_nmse(&validated);
@@ -379,7 +397,7 @@ pub fn effects_from_report(path: &PathBuf) -> Result<(Vec<Addition>, bool)> {
 
 /// One effect of a report: a library label, or a discovered effect with its terms.
 fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, String> {
-    use structure::building::PAPER_STOREYS;
+    use structure::building::MAX_STOREYS;
     use structure::effects::{Function, Label, Site, Term};
     let label = e
         .get("label")
@@ -387,13 +405,11 @@ fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, St
         .ok_or("an effect without a label")?;
     let site = match Label::parse(label) {
         Ok(parsed) if parsed.kind == super::candidate::DISCOVERED => {
-            Site::at_location(parsed.location, PAPER_STOREYS).ok_or_else(|| {
-                format!(
-                    "effect '{label}': the site must be storey1..{PAPER_STOREYS} or floor1..{PAPER_STOREYS}"
-                )
+            Site::at_location(parsed.location, MAX_STOREYS).ok_or_else(|| {
+                format!("effect '{label}': the site must be storeyN or floorN")
             })?
         }
-        _ => return Candidate::parse(label, PAPER_STOREYS).map(Addition::Library),
+        _ => return Candidate::parse(label, MAX_STOREYS).map(Addition::Library),
     };
     let terms = e
         .get("terms")

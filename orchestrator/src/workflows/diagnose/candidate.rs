@@ -17,7 +17,7 @@ use crate::workflows::calibrate::Prior;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Candidate {
     pub kind: Kind,
-    /// Storey (contact, cubic) or floor (friction), 1..=3.
+    /// Storey (contact, cubic) or floor (friction), from 1.
     pub at: usize,
     /// Contact only.
     pub side: Side,
@@ -25,11 +25,13 @@ pub struct Candidate {
 
 /// What the candidates' priors are scaled by: the calibrated twin's storey stiffness, and the
 /// RMS of its storey drifts, floor velocities and of the force on the record.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct Scales {
-    pub stiffness: [f64; 3],
-    pub drift_rms: [f64; 3],
-    pub velocity_rms: [f64; 3],
+    /// Per storey, storey 1 first.
+    pub stiffness: Vec<f64>,
+    pub drift_rms: Vec<f64>,
+    /// Per floor, floor 1 first.
+    pub velocity_rms: Vec<f64>,
     pub force_rms: f64,
 }
 

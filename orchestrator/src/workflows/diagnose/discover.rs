@@ -34,11 +34,10 @@
 
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use structure::building::PAPER_STOREYS;
-use structure::effects::{Function, Site, Term};
+use structure::effects::{Function, Kind, Placement, Site, Term};
 
 use super::{
     effect_report, estimates, select, worst, Addition, Candidate, DiagnoseError, DiscoveryReport,
@@ -56,36 +55,162 @@ pub const MAX_TERMS_FOUND: usize = 3;
 /// residual before of the path's best: a term that explains less than 1 % is not worth it.
 pub const PARSIMONY: f64 = 0.01;
 
-/// The linear part of the base model.
-#[derive(Clone, Copy, Debug)]
+/// The linear part of the base model: per floor (mass) and storey (damping, stiffness), 1
+/// first.
+#[derive(Clone, Debug)]
 pub struct LinearPart {
-    pub mass: [f64; 3],
-    pub damping: [f64; 3],
-    pub stiffness: [f64; 3],
+    pub mass: Vec<f64>,
+    pub damping: Vec<f64>,
+    pub stiffness: Vec<f64>,
 }
 
-/// The base model's states along the record.
+impl LinearPart {
+    pub fn storeys(&self) -> usize {
+        self.mass.len()
+    }
+}
+
+/// The base model's states along the record, every storey and floor, 1 first.
 pub struct States<'a> {
     /// Storey drifts (storey 1 = floor 1's displacement).
-    pub drift: &'a [Vec<f64>; 3],
+    pub drift: &'a [Vec<f64>],
     /// Floor velocities.
-    pub velocity: &'a [Vec<f64>; 3],
+    pub velocity: &'a [Vec<f64>],
     /// Floor accelerations.
-    pub acceleration: &'a [Vec<f64>; 3],
+    pub acceleration: &'a [Vec<f64>],
 }
 
 /// What the regression sees.
 pub struct Problem<'a> {
     pub linear: LinearPart,
     pub states: States<'a>,
-    /// Measured minus base-model accelerations, per floor.
-    pub residual: [Vec<f64>; 3],
-    /// Variance of each floor's measured acceleration (the NMSE's denominator).
-    pub variance: [f64; 3],
+    /// The measured channels' floors (from 0), in the record's order.
+    pub floors: &'a [usize],
+    /// Measured minus base-model accelerations, per channel.
+    pub residual: Vec<Vec<f64>>,
+    /// Variance of each channel's measured acceleration (the NMSE's denominator).
+    pub variance: Vec<f64>,
     pub dt: f64,
     pub fitted: &'a [usize],
     pub held_out: &'a [usize],
     pub first: usize,
+}
+
+impl Problem<'_> {
+    /// A sensitivity (every floor) at the measured channels' floors.
+    fn measured(&self, every_floor: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
+        self.floors.iter().map(|&f| every_floor[f].clone()).collect()
+    }
+
+    /// The nuisance columns, in every model: the sensitivities to the physics parameters (each
+    /// storey's `x` and `v`, each floor's mass as the force `δm·ÿ`), so a parameter that is
+    /// also off takes its own share and the sparse terms only what no parameter can.
+    fn nuisance(&self) -> Vec<Vec<Vec<f64>>> {
+        let mut nuisance: Vec<Vec<Vec<f64>>> = Vec::new();
+        for storey in 1..=self.linear.storeys() {
+            let site = Site::Storey(storey);
+            let (x, v) = site_states(&self.states, site);
+            nuisance.push(self.measured(sensitivity(&self.linear, site, &x, self.dt)));
+            nuisance.push(self.measured(sensitivity(&self.linear, site, &v, self.dt)));
+        }
+        for floor in 1..=self.linear.storeys() {
+            nuisance.push(self.measured(sensitivity(
+                &self.linear,
+                Site::Floor(floor),
+                &self.states.acceleration[floor - 1],
+                self.dt,
+            )));
+        }
+        nuisance
+    }
+
+    fn weights(&self) -> Vec<f64> {
+        self.variance
+            .iter()
+            .map(|&v| if v > 0.0 { 1.0 / v } else { 0.0 })
+            .collect()
+    }
+}
+
+/// Screen the library's candidates before any is fitted through the FMU: for each, the share
+/// of the held-out residual (the physics parameters' sensitivities always in the model) that
+/// its force, linearised through the structure as in [`regress`], leaves — the lowest over a
+/// few shapes of its law: contact at a storey as a one-sided ramp of the drift beyond a gap
+/// (the 80th, 90th and 95th percentiles of `|x|`) above, below or both (every side of a storey
+/// gets the storey's score, so a sign convention cannot drop the right side); cubic as `x^3`;
+/// friction on a floor as `sign(v)` or `tanh(v/s)` (`s` 5 % and 20 % of its velocity RMS).
+/// 1 means the candidate explains nothing the parameters do not; the lowest are worth fitting.
+pub fn screen(problem: &Problem, candidates: &[Candidate]) -> Vec<f64> {
+    let w = problem.weights();
+    let nuisance = problem.nuisance();
+    let q = nuisance.len();
+    let base: Vec<usize> = (0..q).collect();
+    let mut by_site: Vec<((Kind, usize), f64)> = Vec::new();
+    candidates
+        .iter()
+        .map(|c| {
+            let key = (c.kind, c.at);
+            if let Some((_, score)) = by_site.iter().find(|(k, _)| *k == key) {
+                return *score;
+            }
+            let site = match c.placement() {
+                Placement::Storey => Site::Storey(c.at),
+                Placement::Floor => Site::Floor(c.at),
+            };
+            let (x, v) = site_states(&problem.states, site);
+            let after_x = &x[problem.first..];
+            let after_v = &v[problem.first..];
+            let v_rms =
+                (after_v.iter().map(|a| a * a).sum::<f64>() / after_v.len().max(1) as f64).sqrt();
+            let shapes: Vec<Vec<(Function, f64)>> = match c.kind {
+                Kind::Cubic => vec![vec![(Function::X3, 1.0)]],
+                Kind::Friction => vec![
+                    vec![(Function::SignV, 1.0)],
+                    vec![(Function::TanhV, 0.05 * v_rms)],
+                    vec![(Function::TanhV, 0.2 * v_rms)],
+                ],
+                Kind::Contact => [0.8, 0.9, 0.95]
+                    .iter()
+                    .flat_map(|&p| {
+                        let gap = quantile(after_x, p);
+                        [
+                            vec![(Function::RampUp, gap)],
+                            vec![(Function::RampDown, gap)],
+                            vec![(Function::RampUp, gap), (Function::RampDown, gap)],
+                        ]
+                    })
+                    .collect(),
+            };
+            let mut columns = nuisance.clone();
+            let mut sets = Vec::new();
+            for shape in &shapes {
+                let mut set = base.clone();
+                for &(function, scale) in shape {
+                    let phi: Vec<f64> = x
+                        .iter()
+                        .zip(&v)
+                        .map(|(&a, &b)| function.eval(a, b, scale))
+                        .collect();
+                    set.push(columns.len());
+                    columns.push(problem.measured(sensitivity(&problem.linear, site, &phi, problem.dt)));
+                }
+                sets.push(set);
+            }
+            let fit = normal(&columns, &problem.residual, &w, problem.fitted);
+            let held = normal(&columns, &problem.residual, &w, problem.held_out);
+            let reference = solve(&fit, &base)
+                .map(|theta| left(&held, &base, &theta))
+                .unwrap_or(held.energy);
+            let score = sets
+                .iter()
+                .filter_map(|set| solve(&fit, set).map(|theta| left(&held, set, &theta)))
+                .map(|e| e / reference)
+                .filter(|x| x.is_finite())
+                .fold(1.0, f64::min);
+            by_site.push((key, score));
+            score
+        })
+        .collect()
 }
 
 /// One site's sparse model.
@@ -128,15 +253,19 @@ impl Column {
 /// The site's `(x, v)` along the run.
 fn site_states(states: &States, site: Site) -> (Vec<f64>, Vec<f64>) {
     let n = states.drift[0].len();
+    let storeys = states.drift.len();
+    let mut y = vec![0.0; storeys];
+    let mut v = vec![0.0; storeys];
     (0..n)
         .map(|k| {
-            let mut y = [0.0; 3];
             let mut acc = 0.0;
             for (f, yf) in y.iter_mut().enumerate() {
                 acc += states.drift[f][k];
                 *yf = acc;
             }
-            let v = [0, 1, 2].map(|f| states.velocity[f][k]);
+            for (f, vf) in v.iter_mut().enumerate() {
+                *vf = states.velocity[f][k];
+            }
             site.state(&y, &v)
         })
         .unzip()
@@ -173,15 +302,22 @@ fn columns(site: Site, x: &[f64], v: &[f64]) -> Vec<Column> {
     out
 }
 
-/// The accelerations of the base model's linear part driven by the force `−P φ(t)` of a unit
-/// coefficient at `site` (`φ` linear between samples), from rest.
-fn sensitivity(linear: &LinearPart, site: Site, phi: &[f64], dt: f64) -> [Vec<f64>; 3] {
-    let m_inv = Vector3::from(linear.mass.map(|m| 1.0 / m));
-    let storey = |c: &[f64; 3]| {
-        let mut m = Matrix3::zeros();
-        for i in 0..3 {
+/// The accelerations of every floor of the base model's linear part driven by the force
+/// `−P φ(t)` of a unit coefficient at `site` (`φ` linear between samples), from rest.
+///
+/// Integrated by RK4 with [`SUBSTEPS`] fixed sub-steps per sample. With the force linear between
+/// samples that sample step is itself linear in the state and the two end values of `φ`, so it
+/// is formed once as a matrix (the RK4 step applied to each unit state and unit input) and each
+/// sample costs one product with it: `2N` by `2N` for `N` storeys, instead of `4·SUBSTEPS`
+/// evaluations of the structure's dynamics.
+fn sensitivity(linear: &LinearPart, site: Site, phi: &[f64], dt: f64) -> Vec<Vec<f64>> {
+    let storeys = linear.storeys();
+    let m_inv = DVector::from_iterator(storeys, linear.mass.iter().map(|m| 1.0 / m));
+    let storey = |c: &[f64]| {
+        let mut m = DMatrix::zeros(storeys, storeys);
+        for i in 0..storeys {
             m[(i, i)] += c[i];
-            if i + 1 < 3 {
+            if i + 1 < storeys {
                 m[(i, i)] += c[i + 1];
                 m[(i, i + 1)] -= c[i + 1];
                 m[(i + 1, i)] -= c[i + 1];
@@ -191,39 +327,70 @@ fn sensitivity(linear: &LinearPart, site: Site, phi: &[f64], dt: f64) -> [Vec<f6
     };
     let c = storey(&linear.damping);
     let k = storey(&linear.stiffness);
-    let mut pattern = [0.0; 3];
+    let mut pattern = vec![0.0; storeys];
     site.add_force(1.0, &mut pattern);
-    let p = -Vector3::from(pattern);
-    let accel = |y: &Vector3<f64>, v: &Vector3<f64>, u: f64| -> Vector3<f64> {
-        (p * u - c * v - k * y).component_mul(&m_inv)
+    let p = -DVector::from_vec(pattern);
+    let accel = |y: &DVector<f64>, v: &DVector<f64>, u: f64| -> DVector<f64> {
+        (&p * u - &c * v - &k * y).component_mul(&m_inv)
     };
-    let n = phi.len();
-    let mut out = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-    let (mut y, mut v) = (Vector3::zeros(), Vector3::zeros());
     let h = dt / f64::from(SUBSTEPS);
-    for j in 0..n {
-        let a = accel(&y, &v, phi[j]);
-        for f in 0..3 {
-            out[f][j] = a[f];
-        }
-        if j + 1 == n {
-            break;
-        }
-        let (u0, u1) = (phi[j], phi[j + 1]);
+    // One sample of RK4 sub-steps from (y, v) with the force from u0 to u1.
+    let sample = |mut y: DVector<f64>, mut v: DVector<f64>, u0: f64, u1: f64| {
         for i in 0..SUBSTEPS {
             let s = f64::from(i) / f64::from(SUBSTEPS);
             let u = |tau: f64| u0 + (u1 - u0) * (s + tau / dt);
             let k1v = accel(&y, &v, u(0.0));
-            let k1y = v;
-            let k2v = accel(&(y + k1y * (h / 2.0)), &(v + k1v * (h / 2.0)), u(h / 2.0));
-            let k2y = v + k1v * (h / 2.0);
-            let k3v = accel(&(y + k2y * (h / 2.0)), &(v + k2v * (h / 2.0)), u(h / 2.0));
-            let k3y = v + k2v * (h / 2.0);
-            let k4v = accel(&(y + k3y * h), &(v + k3v * h), u(h));
-            let k4y = v + k3v * h;
+            let k1y = v.clone();
+            let k2v = accel(&(&y + &k1y * (h / 2.0)), &(&v + &k1v * (h / 2.0)), u(h / 2.0));
+            let k2y = &v + &k1v * (h / 2.0);
+            let k3v = accel(&(&y + &k2y * (h / 2.0)), &(&v + &k2v * (h / 2.0)), u(h / 2.0));
+            let k3y = &v + &k2v * (h / 2.0);
+            let k4v = accel(&(&y + &k3y * h), &(&v + &k3v * h), u(h));
+            let k4y = &v + &k3v * h;
             y += (k1y + k2y * 2.0 + k3y * 2.0 + k4y) * (h / 6.0);
             v += (k1v + k2v * 2.0 + k3v * 2.0 + k4v) * (h / 6.0);
         }
+        let mut x = DVector::zeros(2 * storeys);
+        x.rows_mut(0, storeys).copy_from(&y);
+        x.rows_mut(storeys, storeys).copy_from(&v);
+        x
+    };
+    let zero = || DVector::zeros(storeys);
+    let unit = |i: usize| {
+        let mut e = DVector::zeros(storeys);
+        e[i] = 1.0;
+        e
+    };
+    // x' = A x + B0 u0 + B1 u1, and the accelerations a = Cx x + D u.
+    let mut a = DMatrix::zeros(2 * storeys, 2 * storeys);
+    let mut cx = DMatrix::zeros(storeys, 2 * storeys);
+    for i in 0..storeys {
+        a.set_column(i, &sample(unit(i), zero(), 0.0, 0.0));
+        a.set_column(storeys + i, &sample(zero(), unit(i), 0.0, 0.0));
+        cx.set_column(i, &accel(&unit(i), &zero(), 0.0));
+        cx.set_column(storeys + i, &accel(&zero(), &unit(i), 0.0));
+    }
+    let b0 = sample(zero(), zero(), 1.0, 0.0);
+    let b1 = sample(zero(), zero(), 0.0, 1.0);
+    let d = accel(&zero(), &zero(), 1.0);
+    let n = phi.len();
+    let mut out = vec![vec![0.0; n]; storeys];
+    let mut x = DVector::zeros(2 * storeys);
+    let mut next = DVector::zeros(2 * storeys);
+    let mut acc = DVector::zeros(storeys);
+    for j in 0..n {
+        acc.gemv(1.0, &cx, &x, 0.0);
+        acc.axpy(phi[j], &d, 1.0);
+        for (f, out) in out.iter_mut().enumerate() {
+            out[j] = acc[f];
+        }
+        if j + 1 == n {
+            break;
+        }
+        next.gemv(1.0, &a, &x, 0.0);
+        next.axpy(phi[j], &b0, 1.0);
+        next.axpy(phi[j + 1], &b1, 1.0);
+        std::mem::swap(&mut x, &mut next);
     }
     out
 }
@@ -235,17 +402,13 @@ struct Normal {
     energy: f64,
 }
 
-fn normal(
-    columns: &[[Vec<f64>; 3]],
-    residual: &[Vec<f64>; 3],
-    w: &[f64; 3],
-    rows: &[usize],
-) -> Normal {
+/// `columns` and `residual` per channel.
+fn normal(columns: &[Vec<Vec<f64>>], residual: &[Vec<f64>], w: &[f64], rows: &[usize]) -> Normal {
     let p = columns.len();
     let mut gram = DMatrix::zeros(p, p);
     let mut rhs = DVector::zeros(p);
     let mut energy = 0.0;
-    for f in 0..3 {
+    for f in 0..residual.len() {
         for &k in rows {
             let r = residual[f][k];
             energy += w[f] * r * r;
@@ -313,10 +476,10 @@ fn left(n: &Normal, active: &[usize], theta: &DVector<f64>) -> f64 {
     e
 }
 
-/// The accelerations the base model's linear part gives to `term`'s force along `states`: its
-/// linearised share of the response (a pass after a refit adds it back to the residual to
-/// linearise again around the better trajectory).
-pub fn term_response(linear: &LinearPart, states: &States, term: &Term, dt: f64) -> [Vec<f64>; 3] {
+/// The accelerations (every floor) the base model's linear part gives to `term`'s force along
+/// `states`: its linearised share of the response (a pass after a refit adds it back to the
+/// residual to linearise again around the better trajectory).
+pub fn term_response(linear: &LinearPart, states: &States, term: &Term, dt: f64) -> Vec<Vec<f64>> {
     let (x, v) = site_states(states, term.site);
     let phi: Vec<f64> = x
         .iter()
@@ -362,33 +525,16 @@ fn swap(fit: &Normal, active: &mut [usize], q: usize, p: usize) -> DVector<f64> 
 /// Find the sparse model of the missing force (see the module documentation); `None` when no
 /// site's model cuts the held-out residual the physics parameters alone leave by `min_cut`.
 pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
-    let w = problem
-        .variance
-        .map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
+    let w = problem.weights();
     let dt = problem.dt;
-    // The nuisance columns, in every model: the sensitivities to the nine physics parameters
-    // (each storey's `x` and `v`, each floor's mass as the force `δm·ÿ`), so a parameter that
-    // is also off takes its own share and the sparse terms only what no parameter can.
-    let mut nuisance: Vec<[Vec<f64>; 3]> = Vec::new();
-    for storey in 1..=3 {
-        let site = Site::Storey(storey);
-        let (x, v) = site_states(&problem.states, site);
-        nuisance.push(sensitivity(&problem.linear, site, &x, dt));
-        nuisance.push(sensitivity(&problem.linear, site, &v, dt));
-    }
-    for floor in 1..=3 {
-        nuisance.push(sensitivity(
-            &problem.linear,
-            Site::Floor(floor),
-            &problem.states.acceleration[floor - 1],
-            dt,
-        ));
-    }
+    let storeys = problem.linear.storeys();
+    let measured = |every_floor: Vec<Vec<f64>>| problem.measured(every_floor);
+    let nuisance = problem.nuisance();
     let q = nuisance.len();
     let base: Vec<usize> = (0..q).collect();
     let mut best: Option<(f64, Vec<Term>, String)> = None;
     let mut sites = Vec::new();
-    for site in Site::all(PAPER_STOREYS) {
+    for site in Site::all(storeys) {
         let (x, v) = site_states(&problem.states, site);
         let after = |s: &[f64]| s[problem.first..].to_vec();
         let cols = columns(site, &after(&x), &after(&v));
@@ -399,7 +545,7 @@ pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
                 .zip(&v)
                 .map(|(&a, &b)| c.function.eval(a, b, c.scale))
                 .collect();
-            sensitivity(&problem.linear, site, &phi, dt)
+            measured(sensitivity(&problem.linear, site, &phi, dt))
         }));
         let fit = normal(&responses, &problem.residual, &w, problem.fitted);
         let held = normal(&responses, &problem.residual, &w, problem.held_out);
@@ -514,38 +660,49 @@ pub(super) fn missing(
                 None => ctx.reals.get(name),
             }
         };
-        let triple = |p: char| -> Result<[f64; 3]> {
-            Ok([
-                value(&format!("{p}1"))?,
-                value(&format!("{p}2"))?,
-                value(&format!("{p}3"))?,
-            ])
+        let per_storey = |p: char| -> Result<Vec<f64>> {
+            (1..=ctx.reals.storeys)
+                .map(|i| value(&format!("{p}{i}")))
+                .collect()
         };
         let linear = LinearPart {
-            mass: triple('m')?,
-            damping: triple('c')?,
-            stiffness: triple('k')?,
+            mass: per_storey('m')?,
+            damping: per_storey('c')?,
+            stiffness: per_storey('k')?,
         };
         let states = States {
             drift: &run.drift,
             velocity: &run.velocity,
             acceleration: &run.acc,
         };
-        let mut residual: [Vec<f64>; 3] =
-            [0, 1, 2].map(|f| (0..n).map(|k| data.acc(f)[k] - run.acc[f][k]).collect());
+        let channels = ctx.channels;
+        let mut residual: Vec<Vec<f64>> = (0..channels.len())
+            .map(|c| {
+                let f = channels.floors[c];
+                (0..n)
+                    .map(|k| channels.measured[c][k] - run.acc[f][k])
+                    .collect()
+            })
+            .collect();
         for t in terms {
             let share = term_response(&linear, &states, t, data.dt);
-            for f in 0..3 {
+            for (c, residual) in residual.iter_mut().enumerate() {
+                let f = channels.floors[c];
                 for k in 0..n {
-                    residual[f][k] += share[f][k];
+                    residual[k] += share[f][k];
                 }
             }
         }
         let problem = Problem {
             linear,
             states,
+            floors: &channels.floors,
             residual,
-            variance: [0, 1, 2].map(|f| variance(&data.acc(f)[ctx.first..])),
+            variance: channels
+                .measured
+                .iter()
+                .map(|m| variance(&m[ctx.first..]))
+                .collect(),
             dt: data.dt,
             fitted: &fitted_idx,
             held_out: ctx.held_out,
@@ -618,8 +775,8 @@ pub(super) fn missing(
     report.passes =
         w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst;
     report.terms = effect_report(&addition, &estimates(&fitted.calibration), ctx.scales).terms;
-    report.nmse_held_out = Some(fitted.nmse_held_out);
-    report.nmse_after = Some(fitted.nmse_after);
+    report.nmse_held_out = Some(fitted.nmse_held_out.clone());
+    report.nmse_after = Some(fitted.nmse_after.clone());
     report.seconds = started.elapsed().as_secs_f64();
     let pass = report.passes.then_some((terms, fitted));
     Ok((report, pass))
@@ -707,11 +864,13 @@ pub(super) fn describe_terms(e: &EffectReport) -> String {
 mod tests {
     use super::*;
 
-    const LINEAR: LinearPart = LinearPart {
-        mass: [5.0, 5.0, 5.0],
-        damping: [3.0, 3.0, 3.0],
-        stiffness: [4000.0, 4000.0, 4000.0],
-    };
+    fn linear() -> LinearPart {
+        LinearPart {
+            mass: vec![5.0, 5.0, 5.0],
+            damping: vec![3.0, 3.0, 3.0],
+            stiffness: vec![4000.0, 4000.0, 4000.0],
+        }
+    }
 
     /// A storey-1 force pattern is a floor-1 force (the ground takes the other half); the
     /// response is linear in the input; and a constant unit force at floor 1 settles at the
@@ -723,11 +882,11 @@ mod tests {
         let force: Vec<f64> = (0..n)
             .map(|k| (0.7 * k as f64).sin() + 0.5 * (0.23 * k as f64).cos())
             .collect();
-        let storey1 = sensitivity(&LINEAR, Site::Storey(1), &force, dt);
-        let floor1 = sensitivity(&LINEAR, Site::Floor(1), &force, dt);
+        let storey1 = sensitivity(&linear(), Site::Storey(1), &force, dt);
+        let floor1 = sensitivity(&linear(), Site::Floor(1), &force, dt);
         assert_eq!(storey1, floor1);
         let double: Vec<f64> = force.iter().map(|f| 2.0 * f).collect();
-        let twice = sensitivity(&LINEAR, Site::Floor(1), &double, dt);
+        let twice = sensitivity(&linear(), Site::Floor(1), &double, dt);
         for f in 0..3 {
             for k in 0..n {
                 let expected = 2.0 * floor1[f][k];
@@ -736,11 +895,11 @@ mod tests {
         }
         // The first sample: from rest, only the force accelerates floor 1, against it (g adds
         // to the left-hand side): −φ/m₁.
-        assert!((floor1[0][0] + force[0] / LINEAR.mass[0]).abs() < 1e-15);
+        assert!((floor1[0][0] + force[0] / linear().mass[0]).abs() < 1e-15);
         assert_eq!((floor1[1][0], floor1[2][0]), (0.0, 0.0));
         // A storey-3 pattern pushes floor 3 and pulls floor 2.
         let step = vec![1.0; 2];
-        let s3 = sensitivity(&LINEAR, Site::Storey(3), &step, dt);
+        let s3 = sensitivity(&linear(), Site::Storey(3), &step, dt);
         assert!(s3[2][0] < 0.0 && s3[1][0] > 0.0 && s3[0][0] == 0.0);
     }
 
@@ -751,21 +910,21 @@ mod tests {
         let dt = 1.0 / 51.2;
         let n = 1024;
         // States: two incommensurate sines per floor.
-        let drift: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+        let drift: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
             (0..n)
                 .map(|k| 1e-3 * ((0.31 + 0.07 * f as f64) * k as f64).sin())
                 .collect()
-        });
-        let velocity: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+        }).to_vec();
+        let velocity: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
             (0..n)
                 .map(|k| 0.02 * ((0.19 + 0.05 * f as f64) * k as f64 + 0.4).cos())
                 .collect()
-        });
-        let acceleration: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
+        }).to_vec();
+        let acceleration: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
             (0..n)
                 .map(|k| 0.3 * ((0.43 + 0.03 * f as f64) * k as f64 + 1.1).sin())
                 .collect()
-        });
+        }).to_vec();
         let states = States {
             drift: &drift,
             velocity: &velocity,
@@ -774,14 +933,14 @@ mod tests {
         let site = Site::Storey(2);
         let (x, v) = site_states(&states, site);
         let truth = [(Function::X3, 2e9), (Function::VAbsV, 300.0)];
-        let mut residual = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        let mut residual = vec![vec![0.0; n]; 3];
         for (function, c) in truth {
             let phi: Vec<f64> = x
                 .iter()
                 .zip(&v)
                 .map(|(&a, &b)| c * function.eval(a, b, 1e-3))
                 .collect();
-            let s = sensitivity(&LINEAR, site, &phi, dt);
+            let s = sensitivity(&linear(), site, &phi, dt);
             for f in 0..3 {
                 for k in 0..n {
                     residual[f][k] += s[f][k];
@@ -791,13 +950,14 @@ mod tests {
         let first = 100;
         let fitted: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 0).collect();
         let held_out: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 1).collect();
-        let variance =
-            [0, 1, 2].map(|f| residual[f].iter().map(|r| r * r).sum::<f64>() / n as f64 + 1e-12);
+        let variance: Vec<f64> = (0..3)
+            .map(|f| residual[f].iter().map(|r| r * r).sum::<f64>() / n as f64 + 1e-12)
+            .collect();
         // The same with storey 1's stiffness 5 % (200 N/m) off too: the nuisance columns take
         // it, the sparse terms stay.
         let (x1, _) = site_states(&states, Site::Storey(1));
         let stiffer: Vec<f64> = x1.iter().map(|x| 200.0 * x).collect();
-        let off = sensitivity(&LINEAR, Site::Storey(1), &stiffer, dt);
+        let off = sensitivity(&linear(), Site::Storey(1), &stiffer, dt);
         let mut with_off = residual.clone();
         for f in 0..3 {
             for k in 0..n {
@@ -807,14 +967,15 @@ mod tests {
         for residual in [residual, with_off] {
             let found = regress(
                 &Problem {
-                    linear: LINEAR,
+                    linear: linear(),
                     states: States {
                         drift: &drift,
                         velocity: &velocity,
                         acceleration: &acceleration,
                     },
+                    floors: &[0, 1, 2],
                     residual,
-                    variance,
+                    variance: variance.clone(),
                     dt,
                     fitted: &fitted,
                     held_out: &held_out,

@@ -86,7 +86,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use serde::Serialize;
-use structure::building::PAPER_STOREYS;
+use structure::building::parameter_names;
 use structure::effects::{Law, Placement};
 
 use crate::cosim::import::ImportError;
@@ -99,7 +99,7 @@ use crate::twin::{ParameterValue, Twin, PHYSICS};
 use crate::workflows::calibrate::simulator::Simulator;
 use crate::workflows::calibrate::CalibrateError;
 use crate::workflows::calibrate::{
-    calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior, DEFAULT_PARAMETERS,
+    calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior,
 };
 use crate::workflows::train::physics_only;
 
@@ -146,7 +146,7 @@ pub use add::{
 };
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
 pub use discover::Found;
-pub use options::{parse_additions, parse_candidates};
+pub use options::{check_sites, parse_additions, parse_candidates};
 pub use report::*;
 pub use sensor::{SensorFit, SensorSd};
 
@@ -183,6 +183,13 @@ impl Default for Gates {
     }
 }
 
+/// Candidates fitted through the FMU at most when the library is the default: the paper rig's
+/// whole library (15: contact at three storeys on three sides, cubic per storey, friction per
+/// floor), so a three-storey diagnosis fits every candidate as it always did, and a taller
+/// building's first round costs what the rig's does — its library (5 per storey) is screened
+/// first by [`discover::screen`] and the lowest-scoring candidates are fitted.
+pub const SCREEN_KEEP: usize = 15;
+
 /// Sub-steps while fitting candidates. The fits run the shear FMU with `integrator` = 2: contacts
 /// alone step exactly (their cost does not depend on sub-steps), every other effect (cubic,
 /// friction, discovered terms) with this many fixed RK4 sub-steps, and a fit's cost is
@@ -200,8 +207,9 @@ pub struct DiagnoseOptions {
     /// Length (s) of the alternating fitted and held-out blocks.
     pub block: f64,
     pub gates: Gates,
-    /// The candidates tried (default: the whole library).
-    pub candidates: Vec<Candidate>,
+    /// The candidates tried (None: the whole library at every site of the twin's building,
+    /// [`Candidate::library`]).
+    pub candidates: Option<Vec<Candidate>>,
     /// Optimiser starts per candidate, and for the recalibration.
     pub starts: usize,
     pub recalibration_starts: usize,
@@ -244,7 +252,7 @@ impl Default for DiagnoseOptions {
             transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             block: 1.0,
             gates: Gates::default(),
-            candidates: Candidate::library(PAPER_STOREYS),
+            candidates: None,
             starts: 3,
             recalibration_starts: 8,
             simulations_per_start: 250,
@@ -283,17 +291,110 @@ impl Action {
     }
 }
 
-/// One physics run: accelerations, storey drifts and floor velocities.
+/// One physics run: every floor's acceleration and velocity and every storey's drift, floor
+/// (storey) 1 first.
 #[derive(Clone)]
 struct PhysicsRun {
-    acc: [Vec<f64>; 3],
-    drift: [Vec<f64>; 3],
-    velocity: [Vec<f64>; 3],
+    acc: Vec<Vec<f64>>,
+    drift: Vec<Vec<f64>>,
+    velocity: Vec<Vec<f64>>,
 }
 
-const RECORDED: [&str; 9] = [
-    "acc1", "acc2", "acc3", "drift1", "drift2", "drift3", "vel1", "vel2", "vel3",
-];
+/// The storeys of the building `twin`'s physics models: the one place a diagnosis learns them,
+/// from the shear FMU's variables (a stiffness `k1..kN` per storey, as `twin init` writes them
+/// for its structure).
+pub(crate) fn storeys_of(twin: &Twin) -> Result<usize> {
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    storeys_in(&Fmu::open(&component.fmu_path)?.model_description, &component.fmu_name)
+}
+
+/// The storeys of a shear FMU: how many of `k1, k2, …` it has.
+fn storeys_in(md: &ModelDescription, fmu: &str) -> Result<usize> {
+    match (1..)
+        .take_while(|i| md.variable(&format!("k{i}")).is_some())
+        .count()
+    {
+        0 => Err(DiagnoseError::Setup(format!(
+            "{fmu}: no storey stiffness 'k1': a diagnosis needs the shear FMU's physics"
+        ))),
+        n => Ok(n),
+    }
+}
+
+/// The measured channels a diagnosis reads, in the record's order: each one's name, floor and
+/// values. A diagnosis works on accelerations (the residual times the floor mass is the force
+/// the model misses); another response, or a floor the structure lacks, is refused by name.
+#[derive(Clone, Debug)]
+pub(crate) struct Channels {
+    pub names: Vec<String>,
+    /// Each channel's floor, from 0.
+    pub floors: Vec<usize>,
+    pub measured: Vec<Vec<f64>>,
+}
+
+impl Channels {
+    pub fn of(data: &Measurement, storeys: usize) -> Result<Channels> {
+        let mut out = Channels {
+            names: Vec::new(),
+            floors: Vec::new(),
+            measured: Vec::new(),
+        };
+        for signal in &data.responses {
+            let name = signal.channel.name();
+            let floor = match signal.channel {
+                structure::channel::Channel::Response {
+                    quantity: structure::channel::Quantity::Acceleration,
+                    floor,
+                } => floor,
+                _ => {
+                    return Err(DiagnoseError::Setup(format!(
+                        "{}: column '{name}': a diagnosis reads accelerometers (acc<i>); the \
+                         record has {}",
+                        data.path.display(),
+                        data.channel_names().join(", ")
+                    )))
+                }
+            };
+            if !(1..=storeys).contains(&floor) {
+                return Err(DiagnoseError::Setup(format!(
+                    "{}: column '{name}': the twin's building has floors 1 to {storeys}",
+                    data.path.display()
+                )));
+            }
+            out.names.push(name);
+            out.floors.push(floor - 1);
+            out.measured.push(signal.values.clone());
+        }
+        if out.names.is_empty() {
+            return Err(DiagnoseError::Setup(format!(
+                "{}: no accelerometer to diagnose",
+                data.path.display()
+            )));
+        }
+        Ok(out)
+    }
+
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    /// The index of the channel named `name` (one of this record's).
+    pub fn index(&self, name: &str) -> usize {
+        self.names.iter().position(|n| n == name).unwrap_or(0)
+    }
+
+    /// Per channel, from per-floor series (a physics run, a prediction): each channel's floor.
+    pub fn pick<T: Clone>(&self, per_floor: &[T]) -> Vec<T> {
+        self.floors.iter().map(|&f| per_floor[f].clone()).collect()
+    }
+
+    /// NMSE per channel of `predicted` (per channel) over the samples `idx`.
+    pub fn nmse_on(&self, predicted: &[Vec<f64>], idx: &[usize]) -> Vec<f64> {
+        nmse_on(&self.measured, predicted, idx)
+    }
+}
 
 /// Run the physics component of `twin` with `extra` parameters (and `values` for `names`).
 fn run_physics(
@@ -307,6 +408,7 @@ fn run_physics(
         .component(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path)?;
+    let storeys = storeys_in(&fmu.model_description, &component.fmu_name)?;
     let mut base = component.parameters.clone();
     base.extend(extra.clone());
     for n in names {
@@ -316,25 +418,31 @@ fn run_physics(
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
-    let outputs = RECORDED
+    let recorded: Vec<String> = ["acc", "drift", "vel"]
+        .iter()
+        .flat_map(|q| (1..=storeys).map(move |i| format!("{q}{i}")))
+        .collect();
+    let outputs = recorded
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
     let mut sim = Simulator::new(&fmu, base, &data.force(), data.time[0], data.dt, "diagnose")?;
-    let mut out: Vec<Vec<f64>> = vec![Vec::new(); RECORDED.len()];
+    let mut out: Vec<Vec<f64>> = vec![Vec::new(); recorded.len()];
     sim.record(&vrs, values, &outputs, &mut out)?;
-    let mut it = out.into_iter();
-    let mut three = || -> [Vec<f64>; 3] { [(); 3].map(|_| it.next().unwrap_or_default()) };
+    let velocity = out.split_off(2 * storeys);
+    let drift = out.split_off(storeys);
     Ok(PhysicsRun {
-        acc: three(),
-        drift: three(),
-        velocity: three(),
+        acc: out,
+        drift,
+        velocity,
     })
 }
 
 /// The physics component's real parameters: the twin's value, else the FMU's start value, read
 /// from its modelDescription, which is opened once.
 struct PhysicsReals {
+    /// The building's storeys.
+    storeys: usize,
     given: BTreeMap<String, ParameterValue>,
     model_description: ModelDescription,
     fmu_name: String,
@@ -345,9 +453,11 @@ impl PhysicsReals {
         let component = twin.component(PHYSICS).ok_or_else(|| {
             DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
         })?;
+        let model_description = Fmu::open(&component.fmu_path)?.model_description;
         Ok(PhysicsReals {
+            storeys: storeys_in(&model_description, &component.fmu_name)?,
             given: component.parameters.clone(),
-            model_description: Fmu::open(&component.fmu_path)?.model_description,
+            model_description,
             fmu_name: component.fmu_name.clone(),
         })
     }
@@ -386,16 +496,20 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
-/// NMSE per floor over the samples `idx`.
-fn nmse_on(measured: &[Vec<f64>; 3], predicted: &[Vec<f64>; 3], idx: &[usize]) -> [f64; 3] {
-    [0, 1, 2].map(|f| {
-        let y: Vec<f64> = idx.iter().map(|&k| measured[f][k]).collect();
-        let p: Vec<f64> = idx.iter().map(|&k| predicted[f][k]).collect();
-        nmse(&y, &p)
-    })
+/// NMSE per channel over the samples `idx`.
+fn nmse_on(measured: &[Vec<f64>], predicted: &[Vec<f64>], idx: &[usize]) -> Vec<f64> {
+    measured
+        .iter()
+        .zip(predicted)
+        .map(|(measured, predicted)| {
+            let y: Vec<f64> = idx.iter().map(|&k| measured[k]).collect();
+            let p: Vec<f64> = idx.iter().map(|&k| predicted[k]).collect();
+            nmse(&y, &p)
+        })
+        .collect()
 }
 
-fn worst(x: &[f64; 3]) -> f64 {
+fn worst(x: &[f64]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 
@@ -407,14 +521,13 @@ fn prior_scales(
     force: &[f64],
     first: usize,
 ) -> Result<Scales> {
-    let mut stiffness = [0.0; 3];
-    for (f, k) in stiffness.iter_mut().enumerate() {
-        *k = reals.get(&format!("k{}", f + 1))?;
-    }
+    let stiffness = (1..=run.drift.len())
+        .map(|s| reals.get(&format!("k{s}")))
+        .collect::<Result<Vec<f64>>>()?;
     Ok(Scales {
         stiffness,
-        drift_rms: [0, 1, 2].map(|s| rms(&run.drift[s][first..])),
-        velocity_rms: [0, 1, 2].map(|f| rms(&run.velocity[f][first..])),
+        drift_rms: run.drift.iter().map(|d| rms(&d[first..])).collect(),
+        velocity_rms: run.velocity.iter().map(|v| rms(&v[first..])).collect(),
         force_rms: rms(&force[first..]),
     })
 }
@@ -424,8 +537,9 @@ fn prior_scales(
 struct Fitted {
     calibration: Calibration,
     evidence: f64,
-    nmse_after: [f64; 3],
-    nmse_held_out: [f64; 3],
+    /// Per channel.
+    nmse_after: Vec<f64>,
+    nmse_held_out: Vec<f64>,
     run: PhysicsRun,
 }
 
@@ -503,10 +617,12 @@ fn fit(
     let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
     let run = run_physics(twin, data, &BTreeMap::new(), &parameters, &values)?;
     let after: Vec<usize> = (first..data.len()).collect();
+    let channels = Channels::of(data, run.acc.len())?;
+    let predicted = channels.pick(&run.acc);
     Ok(Fitted {
         evidence: calibration.log_evidence - baseline_evidence,
-        nmse_after: nmse_on(&data.accs().map(<[f64]>::to_vec), &run.acc, &after),
-        nmse_held_out: nmse_on(&data.accs().map(<[f64]>::to_vec), &run.acc, held_out),
+        nmse_after: channels.nmse_on(&predicted, &after),
+        nmse_held_out: channels.nmse_on(&predicted, held_out),
         run,
         calibration,
     })
@@ -596,6 +712,16 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     }
     let (mask, held_out) = blocks(&data.time, first, options.block);
     let after: Vec<usize> = (first..n).collect();
+    let storeys = storeys_of(twin)?;
+    let channels = Channels::of(data, storeys)?;
+    let nc = channels.len();
+    let candidates = match &options.candidates {
+        Some(given) => {
+            check_sites(given, storeys).map_err(DiagnoseError::Setup)?;
+            given.clone()
+        }
+        None => Candidate::library(storeys),
+    };
 
     // 1. The twin as given, and its physics alone with drifts and velocities.
     // The twin's noise variances are known here, so the comparison's band is theirs.
@@ -613,64 +739,67 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     )?;
     let physics = physics_only(twin);
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
-    let nmse_before = comparison.nmse;
-    let nmse_before_held_out = nmse_on(
-        &data.accs().map(<[f64]>::to_vec),
-        &prediction.acc,
-        &held_out,
-    );
-    let noise_nmse_on = |idx: &[usize]| {
-        [0, 1, 2].map(|f| {
-            let y: Vec<f64> = idx.iter().map(|&k| data.acc(f)[k]).collect();
-            100.0 * noise_variance[f] / variance(&y)
-        })
+    // The twin's per-floor results, per channel.
+    let predicted = channels.pick(&prediction.acc);
+    let nmse_before = channels.pick(&comparison.nmse);
+    let band_nmse = channels.pick(&band_nmse);
+    let noise_variance = channels.pick(&noise_variance);
+    let nmse_before_held_out = channels.nmse_on(&predicted, &held_out);
+    let noise_nmse_on = |idx: &[usize]| -> Vec<f64> {
+        (0..nc)
+            .map(|c| {
+                let y: Vec<f64> = idx.iter().map(|&k| channels.measured[c][k]).collect();
+                100.0 * noise_variance[c] / variance(&y)
+            })
+            .collect()
     };
     let noise_nmse = noise_nmse_on(&after);
     let noise_nmse_held_out = noise_nmse_on(&held_out);
-    let explained_nmse = [0, 1, 2].map(|f| noise_nmse[f] + band_nmse[f]);
-    let latent_variance = prediction.latent_var.as_ref().map(|v| LatentVariance {
-        max: [0, 1, 2].map(|f| v[f][first..].iter().copied().fold(0.0, f64::max)),
-        mean: [0, 1, 2].map(|f| v[f][first..].iter().sum::<f64>() / (n - first) as f64),
+    let explained_nmse: Vec<f64> = (0..nc).map(|c| noise_nmse[c] + band_nmse[c]).collect();
+    let latent_variance = prediction.latent_var.as_ref().map(|v| {
+        let v = channels.pick(v);
+        LatentVariance {
+            max: v
+                .iter()
+                .map(|v| v[first..].iter().copied().fold(0.0, f64::max))
+                .collect(),
+            mean: v
+                .iter()
+                .map(|v| v[first..].iter().sum::<f64>() / (n - first) as f64)
+                .collect(),
+        }
     });
 
     // Scales of the candidates' priors.
     let reals = PhysicsReals::of(&physics)?;
-    let mass = [0, 1, 2]
-        .map(|f| reals.get(&format!("m{}", f + 1)))
-        .into_iter()
+    let mass = (1..=storeys)
+        .map(|f| reals.get(&format!("m{f}")))
         .collect::<Result<Vec<f64>>>()?;
     let scales = prior_scales(&reals, &base_run, &data.force(), first)?;
 
     // Localisation from the residual of the twin as given.
-    let floor_force: [Vec<f64>; 3] = [0, 1, 2].map(|f| {
-        (0..n)
-            .map(|k| mass[f] * (data.acc(f)[k] - prediction.acc[f][k]))
-            .collect()
-    });
-    let missing_shear: [Vec<f64>; 3] = [0, 1, 2].map(|s| {
-        (0..n)
-            .map(|k| (s..3).map(|j| floor_force[j][k]).sum())
-            .collect()
-    });
+    let floor_force = missing_floor_force(&channels, &mass, &predicted, storeys, n);
+    let missing_shear = missing_shear(&floor_force);
     let localisation = localise(&missing_shear, &floor_force, &base_run, first);
 
     let mut diagnosis = Diagnosis {
         record: data.path.display().to_string(),
+        channels: channels.names.clone(),
         twin: twin
             .source
             .as_ref()
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "(default twin)".into()),
-        nmse_before,
-        noise_nmse,
-        band_nmse,
-        explained_nmse,
+        nmse_before: nmse_before.clone(),
+        noise_nmse: noise_nmse.clone(),
+        band_nmse: band_nmse.clone(),
+        explained_nmse: explained_nmse.clone(),
         tolerance: tolerance.value,
         tolerance_source: tolerance.source.clone(),
         statistically_significant: false,
         practically_significant: false,
-        nmse_before_held_out,
-        noise_nmse_held_out,
+        nmse_before_held_out: nmse_before_held_out.clone(),
+        noise_nmse_held_out: noise_nmse_held_out.clone(),
         failing_windows: comparison.failing_windows.clone(),
         latent_variance,
         action: Action::None,
@@ -682,10 +811,11 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         discovery: None,
         sensor: None,
         sensor_candidates: Vec::new(),
-        nmse_after: nmse_before,
+        nmse_after: nmse_before.clone(),
         recalibration: None,
         candidates: Vec::new(),
         failed_candidates: Vec::new(),
+        screened_out: Vec::new(),
         localisation,
         gates: options.gates,
         block_seconds: options.block,
@@ -693,9 +823,10 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         series: Series {
             time: data.time.clone(),
             first,
-            measured: data.accs().map(<[f64]>::to_vec),
-            before: prediction.acc.clone(),
-            after: prediction.acc.clone(),
+            floors: channels.floors.iter().map(|f| f + 1).collect(),
+            measured: channels.measured.clone(),
+            before: predicted.clone(),
+            after: predicted.clone(),
             drift: base_run.drift.clone(),
             missing_shear,
             effect_force: None,
@@ -705,7 +836,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
 
     // 2. Significant, statistically and practically?
     let gates = options.gates;
-    let statistically = (0..3).any(|f| nmse_before[f] > gates.none_factor * explained_nmse[f]);
+    let statistically = (0..nc).any(|c| nmse_before[c] > gates.none_factor * explained_nmse[c]);
     let practically = worst(&nmse_before) > tolerance.value;
     diagnosis.statistically_significant = statistically;
     diagnosis.practically_significant = practically;
@@ -728,12 +859,13 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     // 3a. Faulty sensors: per floor, the channel as gain·ŷ + offset + drift·t of the twin's
     // prediction, least squares on the fitted blocks, scored on the held-out ones.
     let fitted_idx: Vec<usize> = (0..n).filter(|&k| mask[k]).collect();
-    diagnosis.sensor_candidates = (0..3)
-        .filter_map(|f| {
+    diagnosis.sensor_candidates = (0..nc)
+        .filter_map(|c| {
             sensor::fit_channel(
-                f,
-                &data.acc(f),
-                &prediction.acc[f],
+                &channels.names[c],
+                channels.floors[c] + 1,
+                &channels.measured[c],
+                &predicted[c],
                 &data.time,
                 &fitted_idx,
                 &held_out,
@@ -742,6 +874,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         })
         .collect();
     let sensor_fault = sensor_decision(
+        &channels.names,
         &diagnosis.sensor_candidates,
         &nmse_before_held_out,
         &noise_nmse_held_out,
@@ -751,12 +884,12 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     );
     if let Some((fault, reason)) = &sensor_fault {
         if !no_alarm {
-            let f = fault.floor - 1;
+            let c = channels.index(&fault.channel);
             diagnosis.action = Action::SensorFault;
             diagnosis.reason = reason.clone();
             diagnosis.sensor = Some(fault.clone());
-            diagnosis.series.after[f] = fault.apply(&prediction.acc[f], &data.time);
-            diagnosis.nmse_after[f] = fault.nmse_after;
+            diagnosis.series.after[c] = fault.apply(&predicted[c], &data.time);
+            diagnosis.nmse_after[c] = fault.nmse_after;
             if !options.always_fit {
                 diagnosis.seconds = started.elapsed().as_secs_f64();
                 return Ok(diagnosis);
@@ -771,8 +904,54 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         ..CalibrationSetup::default()
     };
     let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
+    // A building with more candidates than the paper's rig fits only those whose force,
+    // linearised through the structure, explains most of the residual (see `discover::screen`).
+    let candidates = if options.candidates.is_none() && candidates.len() > SCREEN_KEEP {
+        options.tell(&format!("screening {} candidates", candidates.len()));
+        let values = |p: char| -> Result<Vec<f64>> {
+            (1..=storeys).map(|i| reals.get(&format!("{p}{i}"))).collect()
+        };
+        let problem = discover::Problem {
+            linear: discover::LinearPart {
+                mass: values('m')?,
+                damping: values('c')?,
+                stiffness: values('k')?,
+            },
+            states: discover::States {
+                drift: &base_run.drift,
+                velocity: &base_run.velocity,
+                acceleration: &base_run.acc,
+            },
+            floors: &channels.floors,
+            residual: (0..nc)
+                .map(|c| {
+                    let f = channels.floors[c];
+                    (0..n)
+                        .map(|k| channels.measured[c][k] - base_run.acc[f][k])
+                        .collect()
+                })
+                .collect(),
+            variance: channels
+                .measured
+                .iter()
+                .map(|m| variance(&m[first..]))
+                .collect(),
+            dt: data.dt,
+            fitted: &fitted_idx,
+            held_out: &held_out,
+            first,
+        };
+        let scores = discover::screen(&problem, &candidates);
+        let mut ranked: Vec<(Candidate, f64)> = candidates.into_iter().zip(scores).collect();
+        ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let dropped = ranked.split_off(SCREEN_KEEP);
+        diagnosis.screened_out = dropped.iter().map(|(c, s)| (c.label(), *s)).collect();
+        ranked.into_iter().map(|(c, _)| c).collect()
+    } else {
+        candidates
+    };
     let mut jobs = vec![Job::Recalibrate];
-    jobs.extend(options.candidates.iter().map(|c| Job::Effect(*c)));
+    jobs.extend(candidates.iter().map(|c| Job::Effect(*c)));
     let done = AtomicUsize::new(0);
     let total = jobs.len();
     options.tell(&format!(
@@ -791,7 +970,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             Job::Recalibrate => fit(
                 &physics,
                 data,
-                DEFAULT_PARAMETERS.iter().map(|s| s.to_string()).collect(),
+                parameter_names(storeys),
                 BTreeMap::new(),
                 &mask,
                 &held_out,
@@ -854,16 +1033,16 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     moved.sort_by(|a, b| b.change_in_sd.abs().total_cmp(&a.change_in_sd.abs()));
     diagnosis.recalibration = Some(RecalibrationReport {
         evidence: recal.evidence,
-        nmse_after: recal.nmse_after,
-        nmse_held_out: recal.nmse_held_out,
+        nmse_after: recal.nmse_after.clone(),
+        nmse_held_out: recal.nmse_held_out.clone(),
         parameters: moved,
-        noise_variance: recal.calibration.noise_variance,
+        noise_variance: channels.pick(&recal.calibration.noise_variance),
         simulations: recal.calibration.simulations,
         seconds: recal_seconds,
     });
 
     let mut fitted_candidates = Vec::new();
-    for (c, r) in options.candidates.iter().zip(results) {
+    for (c, r) in candidates.iter().zip(results) {
         let (fitted, seconds) = match r {
             Ok(x) => x,
             Err(e) => {
@@ -880,8 +1059,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         diagnosis.candidates.push(CandidateReport {
             name: EffectName::of(c),
             evidence: fitted.evidence,
-            nmse_after: fitted.nmse_after,
-            nmse_held_out: fitted.nmse_held_out,
+            nmse_after: fitted.nmse_after.clone(),
+            nmse_held_out: fitted.nmse_held_out.clone(),
             parameters: fitted
                 .calibration
                 .parameters
@@ -909,8 +1088,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     // 5. Forward selection: the best effect, refitted jointly with the physics, then the next
     // while the error falls by the step gate (see `select`).
     let recal_explains = recal_worst * gates.required_cut <= before_worst
-        && (0..3).all(|f| {
-            recal.nmse_held_out[f] <= gates.recalibration_noise_factor * noise_nmse_held_out[f]
+        && (0..nc).all(|c| {
+            recal.nmse_held_out[c] <= gates.recalibration_noise_factor * noise_nmse_held_out[c]
         });
     let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
     let ctx = select::Context {
@@ -923,7 +1102,11 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         held_out: &held_out,
         first,
         baseline_evidence,
-        explained_held_out: [0, 1, 2].map(|f| noise_nmse_held_out[f] + band_nmse[f]),
+        explained_held_out: (0..nc)
+            .map(|c| noise_nmse_held_out[c] + band_nmse[c])
+            .collect(),
+        channels: &channels,
+        candidates: &candidates,
         tolerance: tolerance.value,
     };
     let selection = if no_alarm || sensor_fault.is_some() {
@@ -1013,7 +1196,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             .map(|c| effect_report(&Addition::Library(*c), &selection.values, &scales))
             .collect();
         diagnosis.effect = diagnosis.effects.first().cloned();
-        diagnosis.physics_moved = moved_physics(&reals, &selection.values);
+        diagnosis.physics_moved = moved_physics(&reals, &selection.values, storeys);
         let moved: Vec<String> = diagnosis
             .physics_moved
             .iter()
@@ -1037,21 +1220,25 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 format!("; refitted jointly, the physics moved: {}", moved.join(", "))
             }
         );
-        diagnosis.nmse_after = fitted.nmse_after;
-        diagnosis.series.after = fitted.run.acc.clone();
+        diagnosis.nmse_after = fitted.nmse_after.clone();
+        diagnosis.series.after = channels.pick(&fitted.run.acc);
         // The evidence: along the fitted model's drift (which follows the structure), the
         // storey shear the linear part misses = the effect's force plus what is still missed.
         let c = &selection.chosen[0];
         if let Some(force) = effect_force(c, &selection.values, &scales, &fitted.run) {
             let s = c.at - 1;
             diagnosis.series.drift = fitted.run.drift.clone();
-            diagnosis.series.missing_shear[s] = (0..n)
-                .map(|k| {
-                    let still: f64 = (s..3)
-                        .map(|j| mass[j] * (data.acc(j)[k] - fitted.run.acc[j][k]))
-                        .sum();
-                    still - force[k]
-                })
+            let still = missing_floor_force(
+                &channels,
+                &mass,
+                &channels.pick(&fitted.run.acc),
+                storeys,
+                n,
+            );
+            diagnosis.series.missing_shear[s] = storey_shear(&still, s)
+                .iter()
+                .zip(&force)
+                .map(|(still, force)| still - force)
                 .collect();
             diagnosis.series.effect_force = Some(force);
         }
@@ -1081,8 +1268,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             gates.beat_recalibration,
             top.join(", ")
         );
-        diagnosis.nmse_after = recal.nmse_after;
-        diagnosis.series.after = recal.run.acc.clone();
+        diagnosis.nmse_after = recal.nmse_after.clone();
+        diagnosis.series.after = channels.pick(&recal.run.acc);
     } else if let (Some(s), Some((terms, fitted))) = (&selection, discovered_passes) {
         diagnosis.action = Action::AddPhysics;
         // On top of the selection's effects, unless discovery replaced them.
@@ -1099,7 +1286,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             .map(|a| effect_report(a, &values, &scales))
             .collect();
         diagnosis.effect = diagnosis.effects.first().cloned();
-        diagnosis.physics_moved = moved_physics(&reals, &values);
+        diagnosis.physics_moved = moved_physics(&reals, &values, storeys);
         let w = worst(&fitted.nmse_held_out);
         let found = diagnosis
             .effects
@@ -1127,21 +1314,25 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             before_worst / w,
             recal_worst / w
         );
-        diagnosis.nmse_after = fitted.nmse_after;
-        diagnosis.series.after = fitted.run.acc.clone();
+        diagnosis.nmse_after = fitted.nmse_after.clone();
+        diagnosis.series.after = channels.pick(&fitted.run.acc);
         // The evidence panel: at a storey, the discovered terms' storey force along the fitted
         // model's drift or drift rate, beside the shear the linear part still misses.
         if let Some((force, axis)) = discover::storey_force(terms, &fitted.run) {
             diagnosis.series.evidence_axis = Some(axis);
             let s = terms[0].site.at() - 1;
             diagnosis.series.drift = fitted.run.drift.clone();
-            diagnosis.series.missing_shear[s] = (0..n)
-                .map(|k| {
-                    let still: f64 = (s..3)
-                        .map(|j| mass[j] * (data.acc(j)[k] - fitted.run.acc[j][k]))
-                        .sum();
-                    still - force[k]
-                })
+            let still = missing_floor_force(
+                &channels,
+                &mass,
+                &channels.pick(&fitted.run.acc),
+                storeys,
+                n,
+            );
+            diagnosis.series.missing_shear[s] = storey_shear(&still, s)
+                .iter()
+                .zip(&force)
+                .map(|(still, force)| still - force)
                 .collect();
             diagnosis.series.effect_force = Some(force);
         }
@@ -1162,7 +1353,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                     .collect::<Vec<_>>()
                     .join(" + "),
                 d.nmse_held_out
-                    .map(|x| format!("{:.3} %", worst(&x)))
+                    .as_ref()
+                    .map(|x| format!("{:.3} %", worst(x)))
                     .unwrap_or_else(|| "?".into())
             ),
             None => String::new(),
@@ -1191,33 +1383,35 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
 /// [`Gates::none_factor`] × its explained level, or the tolerance. A structural change moves
 /// several floors' residuals coherently; a faulty sensor only its own.
 fn sensor_decision(
+    names: &[String],
     fits: &[SensorFit],
-    before_held_out: &[f64; 3],
-    noise_held_out: &[f64; 3],
-    band: &[f64; 3],
+    before_held_out: &[f64],
+    noise_held_out: &[f64],
+    band: &[f64],
     tolerance: f64,
     gates: &Gates,
 ) -> Option<(SensorFit, String)> {
-    let explained = |f: usize| noise_held_out[f] + band[f];
-    let fine = |f: usize, x: f64, factor: f64| x <= (factor * explained(f)).max(tolerance);
+    let explained = |c: usize| noise_held_out[c] + band[c];
+    let fine = |c: usize, x: f64, factor: f64| x <= (factor * explained(c)).max(tolerance);
+    let index = |s: &SensorFit| names.iter().position(|n| *n == s.channel);
     let explains: Vec<&SensorFit> = fits
         .iter()
         .filter(|s| {
-            let f = s.floor - 1;
-            s.nmse_held_out * gates.required_cut <= before_held_out[f]
-                && fine(f, s.nmse_held_out, gates.recalibration_noise_factor)
-                && (0..3)
-                    .filter(|&g| g != f)
+            let Some(c) = index(s) else { return false };
+            s.nmse_held_out * gates.required_cut <= before_held_out[c]
+                && fine(c, s.nmse_held_out, gates.recalibration_noise_factor)
+                && (0..names.len())
+                    .filter(|&g| g != c)
                     .all(|g| fine(g, before_held_out[g], gates.none_factor))
         })
         .collect();
     let [s] = explains.as_slice() else {
         return None;
     };
-    let f = s.floor - 1;
-    let others: Vec<String> = (0..3)
-        .filter(|&g| g != f)
-        .map(|g| format!("floor {} {:.3} %", g + 1, before_held_out[g]))
+    let c = index(s)?;
+    let others: Vec<String> = (0..names.len())
+        .filter(|&g| g != c)
+        .map(|g| format!("{} {:.3} %", floor_of(&names[g]), before_held_out[g]))
         .collect();
     Some((
         (*s).clone(),
@@ -1244,24 +1438,24 @@ fn sensor_decision(
 
 /// Why `none`: within the explained level, or below the tolerance, or both.
 fn none_reason(
-    nmse: &[f64; 3],
-    noise: &[f64; 3],
-    band: &[f64; 3],
+    nmse: &[f64],
+    noise: &[f64],
+    band: &[f64],
     factor: f64,
     statistically: bool,
     tolerance: &Tolerance,
 ) -> String {
-    let explained = [0, 1, 2].map(|f| noise[f] + band[f]);
+    let explained: Vec<f64> = noise.iter().zip(band).map(|(n, b)| n + b).collect();
     let stat =
         format!(
         "{} NMSE ({}) is within {}× of what the twin's band explains on this record ({}: noise \
          {} + parameter uncertainty {})",
         if statistically { "not every floor's" } else { "every floor's" },
-        triple(nmse),
+        per_channel(nmse),
         factor,
-        triple(&explained),
-        triple(noise),
-        triple(band)
+        per_channel(&explained),
+        per_channel(noise),
+        per_channel(band)
     );
     let worst_floor = worst(nmse);
     let practical = format!(
@@ -1282,20 +1476,33 @@ fn none_reason(
     }
 }
 
-fn triple(x: &[f64; 3]) -> String {
-    format!("{:.3} / {:.3} / {:.3} %", x[0], x[1], x[2])
+/// `0.123 / 0.456 / 0.789 %`: one value per channel, in the record's order (the report's
+/// `channels`).
+fn per_channel(x: &[f64]) -> String {
+    let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
+    format!("{} %", values.join(" / "))
+}
+
+/// `floor 2` for `acc2`: how the reasons name a channel's floor.
+fn floor_of(name: &str) -> String {
+    let digits = name.trim_start_matches(|c: char| !c.is_ascii_digit());
+    if digits.is_empty() {
+        name.to_string()
+    } else {
+        format!("floor {digits}")
+    }
 }
 
 /// The physics parameters in `values` that moved from the twin's by more than 3 posterior sd
 /// and 1 %, largest move (in sd) first.
-fn moved_physics(reals: &PhysicsReals, values: &Estimates) -> Vec<MovedParameter> {
-    let mut moved: Vec<MovedParameter> = DEFAULT_PARAMETERS
-        .iter()
-        .filter_map(|&name| {
-            let &(after, sd) = values.get(name)?;
-            let before = reals.get(name).ok()?;
+fn moved_physics(reals: &PhysicsReals, values: &Estimates, storeys: usize) -> Vec<MovedParameter> {
+    let mut moved: Vec<MovedParameter> = parameter_names(storeys)
+        .into_iter()
+        .filter_map(|name| {
+            let &(after, sd) = values.get(&name)?;
+            let before = reals.get(&name).ok()?;
             Some(MovedParameter {
-                name: name.to_string(),
+                name,
                 before,
                 after,
                 sd,
@@ -1377,47 +1584,90 @@ fn effect_force(
     Some(along.iter().map(|&x| law.force_at(x)).collect())
 }
 
+/// The force per floor the twin misses: each measured floor's mass times its residual
+/// acceleration; 0 on a floor without an accelerometer (what it misses there is not seen).
+fn missing_floor_force(
+    channels: &Channels,
+    mass: &[f64],
+    predicted: &[Vec<f64>],
+    storeys: usize,
+    n: usize,
+) -> Vec<Vec<f64>> {
+    let mut force = vec![vec![0.0; n]; storeys];
+    for c in 0..channels.len() {
+        let f = channels.floors[c];
+        force[f] = (0..n)
+            .map(|k| mass[f] * (channels.measured[c][k] - predicted[c][k]))
+            .collect();
+    }
+    force
+}
+
+/// The storey shear the twin misses at storey `s` (from 0): the missing floor forces summed
+/// from the top down to floor `s + 1`.
+fn storey_shear(floor_force: &[Vec<f64>], s: usize) -> Vec<f64> {
+    let n = floor_force.first().map_or(0, Vec::len);
+    (0..n)
+        .map(|k| (s..floor_force.len()).map(|j| floor_force[j][k]).sum())
+        .collect()
+}
+
+/// Every storey's missing shear, storey 1 first.
+fn missing_shear(floor_force: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    (0..floor_force.len())
+        .map(|s| storey_shear(floor_force, s))
+        .collect()
+}
+
 fn localise(
-    missing_shear: &[Vec<f64>; 3],
-    floor_force: &[Vec<f64>; 3],
+    missing_shear: &[Vec<f64>],
+    floor_force: &[Vec<f64>],
     run: &PhysicsRun,
     first: usize,
 ) -> Localisation {
+    let storeys = run.drift.len();
     let cut = |x: &[f64]| x[first..].to_vec();
-    let shear_vs_drift =
-        [0, 1, 2].map(|s| correlation(&cut(&missing_shear[s]), &cut(&run.drift[s])));
-    let shear_vs_drift_cubed = [0, 1, 2].map(|s| {
-        let d3: Vec<f64> = run.drift[s][first..].iter().map(|d| d * d * d).collect();
-        correlation(&cut(&missing_shear[s]), &d3)
-    });
-    let shear_vs_drift_beyond = [0, 1, 2].map(|s| {
-        let d = &run.drift[s][first..];
-        let mut abs: Vec<f64> = d.iter().map(|x| x.abs()).collect();
-        abs.sort_by(f64::total_cmp);
-        let g = abs[(abs.len() * 8) / 10];
-        let beyond: Vec<f64> = d
-            .iter()
-            .map(|&x| {
-                if x > g {
-                    x - g
-                } else if x < -g {
-                    x + g
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        correlation(&cut(&missing_shear[s]), &beyond)
-    });
-    let force_vs_velocity_sign = [0, 1, 2].map(|f| {
-        let sign: Vec<f64> = run.velocity[f][first..]
-            .iter()
-            .map(|v| v.signum())
-            .collect();
-        correlation(&cut(&floor_force[f]), &sign)
-    });
+    let shear_vs_drift: Vec<f64> = (0..storeys)
+        .map(|s| correlation(&cut(&missing_shear[s]), &cut(&run.drift[s])))
+        .collect();
+    let shear_vs_drift_cubed: Vec<f64> = (0..storeys)
+        .map(|s| {
+            let d3: Vec<f64> = run.drift[s][first..].iter().map(|d| d * d * d).collect();
+            correlation(&cut(&missing_shear[s]), &d3)
+        })
+        .collect();
+    let shear_vs_drift_beyond: Vec<f64> = (0..storeys)
+        .map(|s| {
+            let d = &run.drift[s][first..];
+            let mut abs: Vec<f64> = d.iter().map(|x| x.abs()).collect();
+            abs.sort_by(f64::total_cmp);
+            let g = abs[(abs.len() * 8) / 10];
+            let beyond: Vec<f64> = d
+                .iter()
+                .map(|&x| {
+                    if x > g {
+                        x - g
+                    } else if x < -g {
+                        x + g
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            correlation(&cut(&missing_shear[s]), &beyond)
+        })
+        .collect();
+    let force_vs_velocity_sign: Vec<f64> = (0..storeys)
+        .map(|f| {
+            let sign: Vec<f64> = run.velocity[f][first..]
+                .iter()
+                .map(|v| v.signum())
+                .collect();
+            correlation(&cut(&floor_force[f]), &sign)
+        })
+        .collect();
     let mut strongest = (0.0, String::new());
-    for s in 0..3 {
+    for s in 0..storeys {
         for c in [
             shear_vs_drift[s],
             shear_vs_drift_cubed[s],

@@ -118,10 +118,10 @@ pub struct CandidateReport {
     pub name: EffectName,
     /// Log Bayes factor (Laplace) against the twin as it is, on the fitted blocks.
     pub evidence: f64,
-    /// NMSE per floor over the whole record after the transient.
-    pub nmse_after: [f64; 3],
-    /// NMSE per floor on the held-out blocks.
-    pub nmse_held_out: [f64; 3],
+    /// NMSE per channel over the whole record after the transient.
+    pub nmse_after: Vec<f64>,
+    /// NMSE per channel on the held-out blocks.
+    pub nmse_held_out: Vec<f64>,
     pub parameters: Vec<Estimate>,
     /// Cut the error by the required factor and beat recalibration.
     pub passes: bool,
@@ -143,11 +143,11 @@ pub struct MovedParameter {
 #[derive(Clone, Debug, Serialize)]
 pub struct RecalibrationReport {
     pub evidence: f64,
-    pub nmse_after: [f64; 3],
-    pub nmse_held_out: [f64; 3],
+    pub nmse_after: Vec<f64>,
+    pub nmse_held_out: Vec<f64>,
     /// Every parameter, largest move (in posterior sd) first.
     pub parameters: Vec<MovedParameter>,
-    pub noise_variance: [f64; 3],
+    pub noise_variance: Vec<f64>,
     pub simulations: usize,
     pub seconds: f64,
 }
@@ -156,37 +156,40 @@ pub struct RecalibrationReport {
 /// with the sign of the floor's velocity.
 #[derive(Clone, Debug, Serialize)]
 pub struct Localisation {
-    /// Per storey 1..3: corr(missing shear, drift).
-    pub shear_vs_drift: [f64; 3],
+    /// Per storey, 1 first: corr(missing shear, drift).
+    pub shear_vs_drift: Vec<f64>,
     /// Per storey: corr(missing shear, drift³).
-    pub shear_vs_drift_cubed: [f64; 3],
+    pub shear_vs_drift_cubed: Vec<f64>,
     /// Per storey: corr(missing shear, the part of the drift beyond its 80th percentile of |drift|,
     /// the shape of a contact force).
-    pub shear_vs_drift_beyond: [f64; 3],
-    /// Per floor 1..3: corr(missing floor force, sign of the floor's velocity).
-    pub force_vs_velocity_sign: [f64; 3],
+    pub shear_vs_drift_beyond: Vec<f64>,
+    /// Per floor, 1 first: corr(missing floor force, sign of the floor's velocity).
+    pub force_vs_velocity_sign: Vec<f64>,
     /// The storey or floor with the largest |correlation| of any kind, e.g. "storey 3".
     pub strongest: String,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct LatentVariance {
-    pub max: [f64; 3],
-    pub mean: [f64; 3],
+    pub max: Vec<f64>,
+    pub mean: Vec<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Diagnosis {
     pub record: String,
+    /// The measured channels, in the record's order: every per-channel list (`nmse_before`,
+    /// `nmse_after`, …) is in this order.
+    pub channels: Vec<String>,
     pub twin: String,
-    pub nmse_before: [f64; 3],
-    /// NMSE per floor that the twin's noise variances alone explain on this record.
-    pub noise_nmse: [f64; 3],
-    /// NMSE per floor that the twin's parameter uncertainty explains (its band's `J Σ Jᵀ`; 0
+    pub nmse_before: Vec<f64>,
+    /// NMSE per channel that the twin's noise variances alone explain on this record.
+    pub noise_nmse: Vec<f64>,
+    /// NMSE per channel that the twin's parameter uncertainty explains (its band's `J Σ Jᵀ`; 0
     /// for a twin without a posterior covariance).
-    pub band_nmse: [f64; 3],
+    pub band_nmse: Vec<f64>,
     /// `noise_nmse + band_nmse`: what the twin's ±3σ band explains.
-    pub explained_nmse: [f64; 3],
+    pub explained_nmse: Vec<f64>,
     /// Practical significance (NMSE %) and where it comes from.
     pub tolerance: f64,
     pub tolerance_source: String,
@@ -194,8 +197,8 @@ pub struct Diagnosis {
     pub statistically_significant: bool,
     /// The worst floor's NMSE exceeds the tolerance.
     pub practically_significant: bool,
-    pub nmse_before_held_out: [f64; 3],
-    pub noise_nmse_held_out: [f64; 3],
+    pub nmse_before_held_out: Vec<f64>,
+    pub noise_nmse_held_out: Vec<f64>,
     pub failing_windows: Vec<FailingWindow>,
     /// The corrector's latent variance V(f) on the record, when the twin has one.
     pub latent_variance: Option<LatentVariance>,
@@ -219,13 +222,17 @@ pub struct Diagnosis {
     /// Every floor's sensor candidate (gain, offset, drift of the twin's prediction), floor 1
     /// first; empty when nothing was fitted.
     pub sensor_candidates: Vec<SensorFit>,
-    pub nmse_after: [f64; 3],
+    pub nmse_after: Vec<f64>,
     pub recalibration: Option<RecalibrationReport>,
     /// Best evidence first.
     pub candidates: Vec<CandidateReport>,
     /// Candidates whose fit failed (no start converged, the FMU refused every value): label
     /// and error. They take no part in the decision.
     pub failed_candidates: Vec<(String, String)>,
+    /// Candidates of a taller building's library not fitted (beyond [`super::SCREEN_KEEP`]):
+    /// label and the share of the held-out residual their linearised force leaves
+    /// ([`super::discover::screen`]); empty when every candidate was fitted.
+    pub screened_out: Vec<(String, f64)>,
     pub localisation: Localisation,
     pub gates: Gates,
     pub block_seconds: f64,
@@ -240,13 +247,15 @@ pub struct Diagnosis {
 pub struct Series {
     pub time: Vec<f64>,
     pub first: usize,
-    pub measured: [Vec<f64>; 3],
-    pub before: [Vec<f64>; 3],
-    pub after: [Vec<f64>; 3],
-    pub drift: [Vec<f64>; 3],
+    /// Each channel's floor (from 1); `measured`, `before` and `after` are per channel.
+    pub floors: Vec<usize>,
+    pub measured: Vec<Vec<f64>>,
+    pub before: Vec<Vec<f64>>,
+    pub after: Vec<Vec<f64>>,
+    pub drift: Vec<Vec<f64>>,
     /// Missing storey shear per storey (N): from the residual of the twin as given; for the
     /// winning effect's storey, the shear the linear part misses along the fitted model.
-    pub missing_shear: [Vec<f64>; 3],
+    pub missing_shear: Vec<Vec<f64>>,
     /// The winning effect's storey force (N) for its storey, when one won.
     pub effect_force: Option<Vec<f64>>,
     /// The evidence panel's horizontal axis when it is not the storey's drift (a discovered
@@ -274,9 +283,9 @@ pub struct DiscoveryReport {
     pub relinearised: Option<Found>,
     /// The terms kept, with the FMI refit's coefficients and sd.
     pub terms: Vec<TermReport>,
-    /// After the refit through the FMU (with the physics): per floor.
-    pub nmse_held_out: Option<[f64; 3]>,
-    pub nmse_after: Option<[f64; 3]>,
+    /// After the refit through the FMU (with the physics): per channel.
+    pub nmse_held_out: Option<Vec<f64>>,
+    pub nmse_after: Option<Vec<f64>>,
     /// Cut the error by the required factor and beat recalibration.
     pub passes: bool,
     pub seconds: f64,
@@ -292,15 +301,15 @@ pub struct AddPhysicsReport {
     pub effects: Vec<EffectReport>,
     /// The structure's parameters after the joint refit over every record.
     pub refined_physics: Vec<Estimate>,
-    /// NMSE per floor on `record` before and after the joint refit.
-    pub nmse_before: [f64; 3],
-    pub nmse_after: [f64; 3],
+    /// NMSE per channel on `record` before and after the joint refit.
+    pub nmse_before: Vec<f64>,
+    pub nmse_after: Vec<f64>,
     /// On `record` after the first stage (the effects alone, the physics held).
-    pub nmse_effects_alone: [f64; 3],
+    pub nmse_effects_alone: Vec<f64>,
     /// Log Bayes factor of the first stage against the twin as it was, on `record`.
     pub evidence: f64,
     /// `record`'s noise variances in the joint fit.
-    pub noise_variance: [f64; 3],
+    pub noise_variance: Vec<f64>,
     /// Every record of the joint refit, `record` first.
     pub records: Vec<RecordNmse>,
     /// The new twin's validation NMSE (worst floor of its worst record under the cap): twice
@@ -309,11 +318,11 @@ pub struct AddPhysicsReport {
     pub seconds: f64,
 }
 
-/// One record of a joint refit: NMSE per floor before and after, and its noise variances.
+/// One record of a joint refit: NMSE per channel before and after, and its noise variances.
 #[derive(Clone, Debug, Serialize)]
 pub struct RecordNmse {
     pub record: String,
-    pub nmse_before: [f64; 3],
-    pub nmse_after: [f64; 3],
-    pub noise_variance: [f64; 3],
+    pub nmse_before: Vec<f64>,
+    pub nmse_after: Vec<f64>,
+    pub noise_variance: Vec<f64>,
 }

@@ -39,12 +39,12 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::{
-    estimates, fit, parallel, with_switches, worst, Addition, Candidate, DiagnoseError,
+    estimates, fit, Channels, parallel, with_switches, worst, Addition, Candidate, DiagnoseError,
     DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
 };
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
-use crate::workflows::calibrate::DEFAULT_PARAMETERS;
+use structure::building::parameter_names;
 
 /// Candidates a round after the first tries, at most.
 pub const SCREENED: usize = 6;
@@ -62,9 +62,9 @@ pub struct SelectionStep {
     /// Worst-floor held-out NMSE of the model before the round.
     pub worst_before: f64,
     /// Held-out NMSE per floor with the effect added, everything else held.
-    pub nmse_held_out_effect: [f64; 3],
+    pub nmse_held_out_effect: Vec<f64>,
     /// Held-out NMSE per floor after the joint refit of every chosen effect and the physics.
-    pub nmse_held_out_joint: [f64; 3],
+    pub nmse_held_out_joint: Vec<f64>,
     /// Whether the joint refit was kept (it lowered the held-out error).
     pub joint_kept: bool,
     /// Every candidate the round tried: label and worst-floor held-out NMSE.
@@ -83,8 +83,11 @@ pub(super) struct Context<'a> {
     pub held_out: &'a [usize],
     pub first: usize,
     pub baseline_evidence: f64,
-    /// Per floor, the held-out NMSE the twin's band explains.
-    pub explained_held_out: [f64; 3],
+    /// Per channel, the held-out NMSE the twin's band explains.
+    pub explained_held_out: Vec<f64>,
+    pub channels: &'a Channels,
+    /// The candidates a full round tries.
+    pub candidates: &'a [Candidate],
     pub tolerance: f64,
 }
 
@@ -102,10 +105,16 @@ pub(super) struct Selection {
 }
 
 impl Context<'_> {
-    pub fn good_enough(&self, nmse_held_out: &[f64; 3]) -> bool {
+    pub fn good_enough(&self, nmse_held_out: &[f64]) -> bool {
         let factor = self.options.gates.none_factor;
         worst(nmse_held_out) <= self.tolerance
-            || (0..3).all(|f| nmse_held_out[f] <= factor * self.explained_held_out[f])
+            || (0..self.channels.len())
+                .all(|c| nmse_held_out[c] <= factor * self.explained_held_out[c])
+    }
+
+    /// The names of the structure's physics parameters (m1..mN, c1..cN, k1..kN).
+    fn physics_names(&self) -> Vec<String> {
+        parameter_names(self.reals.storeys)
     }
 
     /// The physics twin with `chosen` switched on and `values` set.
@@ -172,13 +181,14 @@ impl Context<'_> {
                 initial.insert(p.0.clone(), t.coefficient);
             }
         }
-        for name in DEFAULT_PARAMETERS {
-            if !initial.contains_key(name) {
-                initial.insert(name.to_string(), self.reals.get(name)?);
+        for name in self.physics_names() {
+            if !initial.contains_key(&name) {
+                let value = self.reals.get(&name)?;
+                initial.insert(name, value);
             }
         }
         let mut names: Vec<String> = params.iter().map(|p| p.0.clone()).collect();
-        names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
+        names.extend(self.physics_names());
         fit(
             &twin,
             self.data,
@@ -211,10 +221,11 @@ impl Context<'_> {
         let mut initial: BTreeMap<String, f64> =
             start.iter().map(|(k, v)| (k.clone(), v.0)).collect();
         if physics {
-            names.extend(DEFAULT_PARAMETERS.iter().map(|s| s.to_string()));
-            for name in DEFAULT_PARAMETERS {
-                if !initial.contains_key(name) {
-                    initial.insert(name.to_string(), self.reals.get(name)?);
+            names.extend(self.physics_names());
+            for name in self.physics_names() {
+                if !initial.contains_key(&name) {
+                    let value = self.reals.get(&name)?;
+                    initial.insert(name, value);
                 }
             }
         }
@@ -323,8 +334,8 @@ pub(super) fn forward(
                 round,
                 added: "recalibration".into(),
                 worst_before: current,
-                nmse_held_out_effect: recalibrated.nmse_held_out,
-                nmse_held_out_joint: recalibrated.nmse_held_out,
+                nmse_held_out_effect: recalibrated.nmse_held_out.clone(),
+                nmse_held_out_joint: recalibrated.nmse_held_out.clone(),
                 joint_kept: true,
                 tried: std::mem::take(&mut tried),
                 seconds: started.elapsed().as_secs_f64(),
@@ -346,7 +357,7 @@ pub(super) fn forward(
             let mut values = selection.values.clone();
             values.extend(estimates(&alone.calibration));
             let mut kept = alone.clone();
-            let mut refit_held_out = alone.nmse_held_out;
+            let mut refit_held_out = alone.nmse_held_out.clone();
             let mut refit_kept = false;
             // On recalibrated physics (fitted while the effect was missing) the physics is
             // refitted with the effects; else the effects alone, when there are several.
@@ -357,7 +368,7 @@ pub(super) fn forward(
                 ));
                 match ctx.joint(&selection.chosen, &values, physics_moved) {
                     Ok(joint) => {
-                        refit_held_out = joint.nmse_held_out;
+                        refit_held_out = joint.nmse_held_out.clone();
                         if worst(&joint.nmse_held_out) < worst(&alone.nmse_held_out) {
                             values.extend(estimates(&joint.calibration));
                             kept = joint;
@@ -371,7 +382,7 @@ pub(super) fn forward(
                 round,
                 added: c.label(),
                 worst_before: current,
-                nmse_held_out_effect: alone.nmse_held_out,
+                nmse_held_out_effect: alone.nmse_held_out.clone(),
                 nmse_held_out_joint: refit_held_out,
                 joint_kept: refit_kept,
                 tried: std::mem::take(&mut tried),
@@ -390,7 +401,7 @@ pub(super) fn forward(
         let taken: Vec<String> = selection.chosen.iter().map(|c| c.prefix()).collect();
         let full = std::mem::take(&mut full_round_next);
         let next: Vec<Candidate> = if full {
-            ctx.options.candidates.clone()
+            ctx.candidates.to_vec()
         } else {
             screened.clone()
         }
@@ -440,7 +451,7 @@ pub(super) fn forward(
             if better {
                 selection.values.extend(estimates(&joint.calibration));
                 if let Some(last) = selection.steps.last_mut() {
-                    last.nmse_held_out_joint = joint.nmse_held_out;
+                    last.nmse_held_out_joint = joint.nmse_held_out.clone();
                     last.joint_kept = true;
                 }
                 selection.fitted = Some(joint);

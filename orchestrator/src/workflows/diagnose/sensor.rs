@@ -1,7 +1,8 @@
 //! Faulty sensors: one accelerometer's channel modelled as `gain·ŷ_f + offset + drift·t` of the
 //! twin's own prediction `ŷ_f` (the physics unchanged). Linear in the three parameters, so each
 //! floor's candidate is an ordinary least-squares fit on the fitted blocks, its sd from the
-//! residual, and it is scored on the held-out blocks like the other alternatives.
+//! residual, and it is scored on the held-out blocks like the other alternatives. One
+//! candidate per measured channel.
 
 use serde::Serialize;
 
@@ -11,7 +12,9 @@ use crate::evaluation::stats::nmse;
 /// record's first sample time.
 #[derive(Clone, Debug, Serialize)]
 pub struct SensorFit {
-    /// 1..=3.
+    /// The channel's name, e.g. `acc2`.
+    pub channel: String,
+    /// Its floor, from 1.
     pub floor: usize,
     pub gain: f64,
     /// m/s².
@@ -46,9 +49,11 @@ impl SensorFit {
     }
 }
 
-/// Fit floor `floor` (0-based)'s channel on the `fitted` samples, score on `held_out` and
-/// `after`. `None` when the normal equations are singular (a constant prediction).
+/// Fit the channel `channel` (on floor `floor`, from 1) on the `fitted` samples, score on
+/// `held_out` and `after`. `None` when the normal equations are singular (a constant
+/// prediction).
 pub fn fit_channel(
+    channel: &str,
     floor: usize,
     measured: &[f64],
     predicted: &[f64],
@@ -96,7 +101,8 @@ pub fn fit_channel(
         nmse(&y, &p)
     };
     Some(SensorFit {
-        floor: floor + 1,
+        channel: channel.to_string(),
+        floor,
         gain: beta[0],
         offset: beta[1],
         drift: beta[2],
@@ -147,7 +153,7 @@ mod tests {
             .map(|(p, t)| 0.8 * p + 0.05 + 0.01 * t)
             .collect();
         let idx: Vec<usize> = (0..n).collect();
-        let f = fit_channel(1, &y, &p, &time, &idx, &idx, &idx).expect("fit");
+        let f = fit_channel("acc2", 2, &y, &p, &time, &idx, &idx, &idx).expect("fit");
         assert!((f.gain - 0.8).abs() < 1e-9 && (f.offset - 0.05).abs() < 1e-9);
         assert!((f.drift - 0.01).abs() < 1e-9 && f.floor == 2);
         assert!(f.nmse_held_out < 1e-12);

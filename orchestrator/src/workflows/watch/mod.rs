@@ -524,8 +524,9 @@ impl Alerts {
 }
 
 /// NaN as JSON null.
-fn floats(x: [f64; 3]) -> Value {
-    json!(x.map(|v| if v.is_finite() { Some(v) } else { None }))
+fn floats(x: impl AsRef<[f64]>) -> Value {
+    let x: Vec<Option<f64>> = x.as_ref().iter().map(|v| v.is_finite().then_some(*v)).collect();
+    json!(x)
 }
 
 struct Watcher<'a> {
