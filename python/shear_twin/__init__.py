@@ -292,7 +292,9 @@ class Twin:
         0.02). ``common``: the options both hybrid commands take — ``excitation`` (a
         ``time,force`` CSV), ``seed``, ``duration``, ``sample_rate``, ``substeps``, ``gap``,
         ``contact_stiffness``, ``delay``, ``lag``, ``compensate``, ``energy_factor``, ``split``
-        ("specimen-floors-2-3", the paper's, or "specimen-floor-3"), ``coupling`` ("auto",
+        (the floor J the actuator drives as a string, e.g. "3", or a name: "specimen-floors-J-N",
+        "specimen-storeys-A-N", "specimen-floor-N"; the paper's "specimen-floors-2-3" by
+        default on three storeys, or "specimen-floor-3"), ``coupling`` ("auto",
         "monolithic", "stepped"), ``plot`` — None for the CLI's defaults. Returns the report."""
         return Report(self._native.hybrid_threshold(a_err=None if a_err is None else list(a_err),
                                                     **_hybrid(common)))

@@ -781,9 +781,10 @@ impl Twin {
     }
 
     /// `twin hybrid threshold`: the simulated real-time hybrid test on this twin's structure —
-    /// the peak excitation force at which the bumper between floors 2 and 3 first closes, for
-    /// each amplitude error `a_err` (default −0.1 to 0.1 by 0.02), the structure cut as `split`
-    /// says (default the paper's, "specimen-floors-2-3"). Returns the CLI's report.
+    /// the peak excitation force at which the bumper above the driven floor first closes, for
+    /// each amplitude error `a_err` (default −0.1 to 0.1 by 0.02), the structure (the twin's,
+    /// any storey count) cut as `split` says (`--split`: "J" or a name; default the paper's cut
+    /// at floor 2, "specimen-floors-2-3" on three storeys). Returns the CLI's report.
     #[pyo3(signature = (*, a_err = None, excitation = None, seed = None, duration = None,
                         sample_rate = None, substeps = None, gap = None,
                         contact_stiffness = None, delay = None, lag = None, compensate = None,
@@ -952,10 +953,12 @@ fn hybrid_options(
         lag: lag.unwrap_or(d.lag),
         compensate: compensate.or(d.compensate),
         energy_factor: energy_factor.unwrap_or(d.energy_factor),
+        storeys: None,
         split: match split {
-            Some(text) => text
-                .parse()
-                .map_err(|m: String| invalid(Kind::Hybrid, format!("--split: {m}")))?,
+            Some(text) => Some(
+                text.parse()
+                    .map_err(|m: String| invalid(Kind::Hybrid, format!("--split: {m}")))?,
+            ),
             None => d.split,
         },
         coupling: match coupling {

@@ -69,12 +69,17 @@ pub struct Common {
     /// the numerical substructure.
     #[arg(long, default_value_t = HybridOptions::default().energy_factor, allow_negative_numbers = true)]
     pub energy_factor: f64,
-    /// Where the structure is cut, by what the specimen (the physical substructure) holds:
-    /// specimen-floors-2-3 (the paper's eqs 13–14: the actuator drives floor 2, whose mass is
-    /// in the measured force) or specimen-floor-3 (storey 3 moved at floor 2; floor 2's mass
-    /// numerical).
-    #[arg(long, default_value_t = HybridOptions::default().split)]
-    pub split: Cut,
+    /// The storey count of the building tested without --twin (the paper's floor and storey N
+    /// times); with --twin it must be the twin's.
+    #[arg(long)]
+    pub storeys: Option<usize>,
+    /// Where the structure is cut: J, the floor the actuator drives (1 ≤ J < N; the specimen
+    /// floors J..N with floor J's mass and the bumper in storey J+1, the paper's eqs 13–14;
+    /// default 2), or a name: specimen-floors-J-N (the same), specimen-storeys-A-N (storeys
+    /// A..N moved at floor A−1, that floor's mass numerical), specimen-floor-N (A = N). The
+    /// paper's rig: specimen-floors-2-3 (the default) or specimen-floor-3.
+    #[arg(long)]
+    pub split: Option<Cut>,
     /// How the substructures are coupled: auto (one ODE for an actuator without dynamics, as
     /// the paper's simplified simulation; the stepped loop otherwise), monolithic or stepped.
     #[arg(long, value_enum, default_value_t = HybridOptions::default().coupling)]
@@ -133,6 +138,7 @@ impl Common {
             lag: self.lag,
             compensate: self.compensate,
             energy_factor: self.energy_factor,
+            storeys: self.storeys,
             split: self.split,
             coupling: self.coupling,
         }
@@ -213,10 +219,12 @@ fn run_command(a: &RunArgs) -> Result<()> {
             continue;
         }
         let h = r.spectrum.as_ref();
+        let j = setup.structure.floor;
         println!(
-            "a_err {:+.3}: {} contacts, largest y2 − y3 {:.3e} m, fundamental {:.2} Hz, harmonics {}",
+            "a_err {:+.3}: {} contacts, largest y{j} − y{} {:.3e} m, fundamental {:.2} Hz, harmonics {}",
             r.a_err,
             r.contacts,
+            j + 1,
             r.max_relative,
             h.map(|h| h.fundamental_hz).unwrap_or(f64::NAN),
             h.map(|h| {
@@ -230,8 +238,8 @@ fn run_command(a: &RunArgs) -> Result<()> {
             .unwrap_or_else(|| "none".into())
         );
         for (what, law) in [
-            ("measured y2p", &r.identified),
-            ("commanded y2n", &r.identified_from_command),
+            (format!("measured y{j}p"), &r.identified),
+            (format!("commanded y{j}n"), &r.identified_from_command),
         ] {
             match law {
                 Some(l) => println!(
@@ -241,7 +249,7 @@ fn run_command(a: &RunArgs) -> Result<()> {
                     l.contact_stiffness,
                     l.contact_stiffness_sd,
                     l.specimen_mass
-                        .map(|m| format!(", floor 2's mass {m:.4} kg"))
+                        .map(|m| format!(", floor {j}'s mass {m:.4} kg"))
                         .unwrap_or_default()
                 ),
                 None => println!("  contact law from the {what}: not identifiable (too few contacts)"),

@@ -429,7 +429,9 @@ pub(crate) mod tests {
 
     /// The same for five storeys cut at floor 3 and four cut at floor 1, either way: with perfect
     /// control and the bumper open the stepped loop is the whole structure to the staggered
-    /// coupling's O(h²) (MEASURED_OTHERS).
+    /// coupling's O(h²) (measured, either cut alike: 4.27e-3, 1.08e-3, 2.70e-4 of floor 3's peak
+    /// for five storeys, 2.58e-3, 6.47e-4, 1.62e-4 of floor 1's for four, at 16, 32, 64 control
+    /// steps a sample; the limit leaves 1.5× on the larger, the ratios 3.95–4.0 per halving).
     #[test]
     fn perfect_control_reproduces_the_whole_structure_of_other_buildings() {
         let force = excitation(512);
@@ -453,7 +455,7 @@ pub(crate) mod tests {
                     s.storeys(),
                     s.floor
                 );
-                assert!(e64 < 3e-4, "{split:?}: {e64}");
+                assert!(e64 < 4e-4, "{split:?}: {e64}");
                 assert!(
                     e16 / e32 > 3.5 && e32 / e64 > 3.5,
                     "{split:?}: {e16} {e32} {e64}"

@@ -2,7 +2,8 @@
 //! reports, once for the CLI and the Python package.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::io::Read;
+use std::path::{Path, PathBuf};
 
 use numerics::actuator::{ActuatorSpec, Compensation};
 use numerics::excitation::ExcitationSpec;
@@ -13,7 +14,7 @@ use super::experiment::{
     Setup, ThresholdCurve, ThresholdPoint,
 };
 use super::{unit_peak, Cut, HybridError, Split};
-use crate::twin::{Twin, TwinError};
+use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 use crate::workflows::control::design::structure_of;
 use crate::workflows::control::ControlError;
 use crate::workflows::options::InvalidOption;
@@ -57,9 +58,12 @@ pub struct HybridOptions {
     pub compensate: Option<usize>,
     /// Stop a run when the interface has put more than this × the excitation's energy in.
     pub energy_factor: f64,
+    /// The storey count of the building tested without a twin (the paper's floor and storey N
+    /// times); with a twin it must be the twin's. None: the twin's.
+    pub storeys: Option<usize>,
     /// Where the structure is cut: the floor the actuator drives and what the specimen holds
-    /// (the paper's: floors 2 and 3).
-    pub split: Cut,
+    /// (None: the paper's cut at floor 2, floor 1 for two storeys).
+    pub split: Option<Cut>,
     pub coupling: Coupling,
 }
 
@@ -80,11 +84,8 @@ impl Default for HybridOptions {
             lag: 0.0,
             compensate: None,
             energy_factor: 10.0,
-            split: Cut {
-                floor: 2,
-                split: Split::FloorPhysical,
-                storeys: Some(3),
-            },
+            storeys: None,
+            split: None,
             coupling: Coupling::Auto,
         }
     }
@@ -159,9 +160,21 @@ impl HybridOptions {
     /// header.
     pub fn setup(&self, twin: &Twin) -> Result<(Setup, Header), HybridTestError> {
         let c = self;
-        let s = structure_of(twin)?;
+        let s = self.structure(twin)?;
         let n = s.storeys();
-        let cut = c.split;
+        if n < 2 {
+            return Err(InvalidOption(format!(
+                "{}: a {n}-storey structure cannot be split (the actuator drives a floor with a \
+                 storey above it)",
+                if c.storeys.is_some() { "--storeys".to_string() } else { twin.describe() }
+            ))
+            .into());
+        }
+        let cut = c.split.unwrap_or(Cut {
+            floor: n.min(3) - 1,
+            split: Split::FloorPhysical,
+            storeys: None,
+        });
         if let Some(stated) = cut.storeys.filter(|&stated| stated != n) {
             return Err(InvalidOption(format!(
                 "--split {cut}: names a {stated}-storey structure; {} has {n} storeys",
@@ -173,7 +186,7 @@ impl HybridOptions {
             return Err(InvalidOption(format!(
                 "--split {cut}: the actuator's floor must be 1 to {} of {}'s {n} storeys (the \
                  specimen holds the storey above it, with the bumper)",
-                n.saturating_sub(1).max(1),
+                n - 1,
                 twin.describe()
             ))
             .into());
@@ -245,6 +258,95 @@ impl HybridOptions {
         };
         Ok((setup, header))
     }
+}
+
+impl HybridOptions {
+    /// The building tested: `--storeys N` of the paper's floor and storey on the default twin,
+    /// else the twin's structure (which `--storeys` must match).
+    pub fn structure(&self, twin: &Twin) -> Result<structure::Structure, HybridTestError> {
+        match self.storeys {
+            Some(n) if twin.source.is_none() => {
+                let paper = structure::Structure::default();
+                let s = structure::Structure::uniform(
+                    n,
+                    paper.mass[0],
+                    paper.damping[0],
+                    paper.stiffness[0],
+                    paper.excitation,
+                );
+                s.validate()
+                    .map_err(|e| InvalidOption(format!("--storeys {n}: {e}")))?;
+                Ok(s)
+            }
+            Some(n) => {
+                let s = twin_structure(twin)?;
+                if s.storeys() != n {
+                    return Err(InvalidOption(format!(
+                        "--storeys {n}: {} has {} storeys",
+                        twin.describe(),
+                        s.storeys()
+                    ))
+                    .into());
+                }
+                Ok(s)
+            }
+            None => twin_structure(twin),
+        }
+    }
+}
+
+/// The structure file in a shear FMU built for its building (`twin init --storeys N`).
+const STRUCTURE_RESOURCE: &str = "resources/structure.json";
+
+/// The twin's structure: its shear FMU's `resources/structure.json` (what `twin init --storeys
+/// N` writes; without it the paper's rig, [`structure_of`]) with the twin's m, c, k set over it.
+fn twin_structure(twin: &Twin) -> Result<structure::Structure, HybridTestError> {
+    let physics = twin.component(PHYSICS).ok_or_else(|| {
+        HybridError::Setup(format!(
+            "{} has no '{PHYSICS}' component to split",
+            twin.describe()
+        ))
+    })?;
+    let Some(mut s) = structure_resource(&physics.fmu_path)? else {
+        return Ok(structure_of(twin)?);
+    };
+    for name in s.parameter_names() {
+        match physics.parameters.get(&name) {
+            None => {}
+            Some(ParameterValue::Real(x)) if x.is_finite() => {
+                s.set(&name, *x);
+            }
+            Some(other) => {
+                return Err(HybridError::Setup(format!(
+                    "{}: parameter '{name}' is {other:?}, not a finite real",
+                    twin.describe()
+                ))
+                .into())
+            }
+        }
+    }
+    s.validate()
+        .map_err(|e| HybridError::Setup(format!("{}: {e}", twin.describe())))?;
+    Ok(s)
+}
+
+/// The structure in the shear FMU archive at `fmu`, if it carries one.
+fn structure_resource(fmu: &Path) -> Result<Option<structure::Structure>, HybridTestError> {
+    let bad = |e: String| HybridError::Setup(format!("{}: {e}", fmu.display()));
+    let file = std::fs::File::open(fmu).map_err(|e| bad(e.to_string()))?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
+    let mut entry = match archive.by_name(STRUCTURE_RESOURCE) {
+        Ok(entry) => entry,
+        Err(zip::result::ZipError::FileNotFound) => return Ok(None),
+        Err(e) => return Err(bad(e.to_string()).into()),
+    };
+    let mut text = String::new();
+    entry
+        .read_to_string(&mut text)
+        .map_err(|e| bad(format!("{STRUCTURE_RESOURCE}: {e}")))?;
+    let resource: fmu_shear::StructureResource = serde_json::from_str(&text)
+        .map_err(|e| bad(format!("{STRUCTURE_RESOURCE}: {e}")))?;
+    Ok(Some(resource.structure))
 }
 
 /// `twin hybrid threshold --report`.
