@@ -34,6 +34,16 @@
 //! measured force: with a pure delay in the loop the paper's split is a neutral delay
 //! equation whose high frequencies a stepped test cannot hold, this one only loses damping.
 //!
+//! # Any building
+//!
+//! The paper's rig is three storeys cut at floor 2; a building of N storeys is cut at any floor
+//! j with 1 ≤ j < N ([`Frame`]'s `floor`, `--split J`): the numerical substructure is floors
+//! 1..j under the excitation at floor 1, the specimen floors j+1..N with storeys j+1..N and
+//! the bumper in storey j+1, and floor j's mass in the specimen in the paper's cut — what is
+//! said above of floors 2 and 3 is said of floors j and j+1. The substructure FMU's variables
+//! are the paper rig's, so the master runs the FMUs for that cut ([`fmus::serves`]) and the
+//! stepped test of another cut runs on the Rust loop, the same `numerics::substructure`.
+//!
 //! # Stepping
 //!
 //! Both substructures step at the control rate `h` (the record's step over `substeps`), as a
