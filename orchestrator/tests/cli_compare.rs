@@ -191,18 +191,22 @@ fn compare_writes_the_report_the_predictions_the_plot_and_a_summary() {
         );
     }
 
-    // The summary table on stdout: a header, then floors 1..3 with the report's NMSE to 3 decimals.
+    // The summary table on stdout: a header, then acc1..acc3 with the report's NMSE to 3 decimals.
+    assert_eq!(
+        json["channels"],
+        serde_json::json!(["acc1", "acc2", "acc3"])
+    );
     let stdout = text(&output.stdout);
     assert!(
         stdout
             .lines()
-            .any(|l| l.starts_with("floor") && l.contains("NMSE")),
+            .any(|l| l.starts_with("channel") && l.contains("NMSE")),
         "no table header:\n{stdout}"
     );
     for floor in 1..=3 {
         let row = stdout
             .lines()
-            .find(|l| l.split_whitespace().next() == Some(&floor.to_string()))
+            .find(|l| l.split_whitespace().next() == Some(&format!("acc{floor}")))
             .unwrap_or_else(|| panic!("no row for floor {floor}:\n{stdout}"));
         let shown: f64 = row
             .split_whitespace()
@@ -555,11 +559,12 @@ fn bad_measurement_files_are_refused_with_one_line_and_no_output() {
     let rows = |n: usize| (0..n).map(row).collect::<String>();
     // (name, content, the line named in the message, a word of the problem)
     let cases: Vec<(&str, String, Option<usize>, &str)> = vec![
+        // compare serves any subset of the floors; a floor the twin lacks is refused by name.
         (
-            "missing_column.csv",
-            format!("time,force,acc1,acc2\n{}", "0,1,2,3\n0.5,1,2,3\n"),
+            "unknown_floor.csv",
+            format!("time,force,acc1,acc4\n{}", "0,1,2,3\n0.5,1,2,3\n"),
             Some(1),
-            "missing column 'acc3'",
+            "column 'acc4' is for floor 4; the structure has floors 1 to 3",
         ),
         (
             "nan.csv",

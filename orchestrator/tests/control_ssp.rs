@@ -220,7 +220,7 @@ fn the_controlled_system_as_ssp_is_the_masters_closed_loop() {
             |c: &[f64]| -> Vec<f64> { c.iter().step_by(SUBSTEPS).copied().collect() };
         for f in 0..3 {
             let name = format!("physics.acc{}", f + 1);
-            let e = relative_error(&block.acc[f], &at_record_rate(column(&jacobi, &name)));
+            let e = relative_error(block.acc(f), &at_record_rate(column(&jacobi, &name)));
             assert!(
                 e <= 1e-9,
                 "{estimator}: {name}: Jacobi run vs the block: {e:.2e}"
@@ -236,7 +236,7 @@ fn the_controlled_system_as_ssp_is_the_masters_closed_loop() {
         for f in 0..3 {
             let name = format!("physics.acc{}", f + 1);
             gs_error = gs_error.max(relative_error(
-                &block.acc[f],
+                block.acc(f),
                 &at_record_rate(column(&gauss_seidel, &name)),
             ));
         }

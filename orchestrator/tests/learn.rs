@@ -32,7 +32,7 @@ fn records_nmse(prediction: &orchestrator::run::Prediction, record: &Path) -> [f
         .position(|t| t - data.time[0] >= orchestrator::compare::DEFAULT_TRANSIENT)
         .expect("samples after the transient");
     [0, 1, 2]
-        .map(|f| orchestrator::compare::nmse(&data.acc(f)[first..], &prediction.acc[f][first..]))
+        .map(|f| orchestrator::compare::nmse(&data.acc(f)[first..], &prediction.acc(f)[first..]))
 }
 
 /// The twin calibrated on dataset1, made once per test binary.
@@ -390,7 +390,10 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
         |_, _| {},
     )
     .expect("the learned twin runs");
-    assert!(prediction.latent_var.is_some(), "no corrector in the twin");
+    assert!(
+        prediction.paper_latent_var().is_some(),
+        "no corrector in the twin"
+    );
     let reported = &report["modes"][0]["final_gps_nmse"][1];
     let streams = records_nmse(&prediction, &data.join("dataset2.csv"));
     for f in 0..3 {

@@ -1066,9 +1066,9 @@ fn the_shear_fmu_held_is_fmpys_to_the_bit_and_with_slopes_is_twin_compares() {
         orchestrator::run::run_twin(&default_twin, &measurement, |_, _| {}).expect("run_twin");
     for (f, name) in ["acc1", "acc2", "acc3"].iter().enumerate() {
         let ours = sloped.column(name);
-        assert_eq!(ours.len(), predicted.acc[f].len(), "{name}: points");
-        let peak = predicted.acc[f].iter().fold(0.0f64, |m, a| m.max(a.abs()));
-        for (k, (a, b)) in ours.iter().zip(&predicted.acc[f]).enumerate() {
+        assert_eq!(ours.len(), predicted.acc(f).len(), "{name}: points");
+        let peak = predicted.acc(f).iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        for (k, (a, b)) in ours.iter().zip(predicted.acc(f)).enumerate() {
             assert!(
                 (a - b).abs() <= 1e-13 * peak,
                 "{name} at point {k}: {a} against {b}"

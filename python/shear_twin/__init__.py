@@ -89,9 +89,11 @@ class Report:
 
 
 class Comparison(Report):
-    """``twin compare``'s report, with the predictions: ``predictions`` is a dict of numpy
-    arrays (``time``, ``acc1``..``acc3``, and the corrector's ``latent_var*``, ``sd*``), ready
-    for ``pandas.DataFrame(c.predictions)``."""
+    """``twin compare``'s report, with the predictions: ``channels`` names the record's
+    measured channels (``acc1``, ``vel2``, ...) and every per-channel list of the report
+    (``nmse``, ``noise_variance``, a failing window's ``nmse``) follows that order;
+    ``predictions`` is a dict of numpy arrays (``time``, each measured channel by name, in SI,
+    and the corrector's ``latent_var*``, ``sd*``), ready for ``pandas.DataFrame(c.predictions)``."""
 
     def __init__(self, report: dict[str, Any], predictions: dict[str, Any]):
         super().__init__(report)
@@ -142,8 +144,10 @@ class Twin:
                 tolerance: float | None = None, controller: str | os.PathLike | Report | dict | None = None,
                 controller_q: float | None = None, plot: str | os.PathLike | None = None,
                 frf: bool = False, latent_threshold: float | None = None) -> Comparison:
-        """``twin compare``: run the twin on the record's force and compare its accelerations
-        with the measured ones. ``controller``: a ``twin control`` report (a path, or the report
+        """``twin compare``: run the twin on the record's excitation (``force`` or
+        ``ground_acc``) and compare every measured channel, each in its own quantity; a record
+        the twin cannot serve (another excitation, a floor it lacks) raises ``DataError``
+        naming the column. ``controller``: a ``twin control`` report (a path, or the report
         ``Twin.control`` returned) whose design ``controller_q`` (default the first stable one)
         closes the loop. None means the CLI's default (``transient`` 2 s; ``tolerance`` 2 × the
         twin's worst validation NMSE, else 0.5 %). ``plot``: the CLI's ``--plot`` (.svg; with

@@ -26,9 +26,33 @@ fn column(values: &[f64], py: Python<'_>) -> Py<PyAny> {
 }
 
 impl Record {
-    /// The record for a workflow written for the paper's rig (a force, acc1..acc3); a record
-    /// without them raises `DataError` naming the missing column.
-    pub(crate) fn paper(&self) -> PyResult<&Measurement> {
+    /// The record checked against `twin` by the library's one guard (`twin::guard`) before any
+    /// work: for `command` Some(name), a command still written for the paper's rig
+    /// (`check_paper_rig`); for None, any building (`check_record`). `DataError` names the
+    /// column, or says the command serves the paper's rig only.
+    pub(crate) fn for_twin(
+        &self,
+        twin: &orchestrator::twin::Twin,
+        command: Option<&str>,
+    ) -> PyResult<&Measurement> {
+        use orchestrator::twin::guard;
+        match command {
+            Some(command) => guard::check_paper_rig(twin, &self.measurement, command)
+                .map_err(|e| to_py(Kind::Data, e))?,
+            None => {
+                guard::check_record(twin, &self.measurement).map_err(|e| to_py(Kind::Data, e))?;
+            }
+        }
+        Ok(&self.measurement)
+    }
+
+    /// The record checked against `twin` by the guard (`check_record`) and holding the force
+    /// and acc1..acc3 that diagnose and add-physics still read, as the CLI's `read_record`.
+    pub(crate) fn for_twin_with_paper_columns(
+        &self,
+        twin: &orchestrator::twin::Twin,
+    ) -> PyResult<&Measurement> {
+        self.for_twin(twin, None)?;
         self.measurement
             .require_paper_rig()
             .map_err(|e| to_py(Kind::Data, e))?;

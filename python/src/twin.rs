@@ -140,10 +140,10 @@ impl Twin {
         format!("Twin({})", self.twin.describe())
     }
 
-    /// `twin compare`: run the twin on the record's force (in a closed loop with a `twin
-    /// control` report's controller when `controller` is given), compare with its
-    /// accelerations. Returns `{"report": <the CLI's JSON report>, "predictions": {"time",
-    /// "acc1".. [, "latent_var1".., "sd1"..]: arrays}}`.
+    /// `twin compare`: run the twin on the record's excitation (in a closed loop with a `twin
+    /// control` report's controller when `controller` is given), compare with every measured
+    /// channel. Returns `{"report": <the CLI's JSON report>, "predictions": {"time", each
+    /// measured channel by name [, "latent_var1".., "sd1"..]: arrays}}`.
     #[pyo3(signature = (record, *, transient = None, tolerance = None, controller = None,
                         controller_q = None, plot = None, frf = false, latent_threshold = None))]
     #[allow(clippy::too_many_arguments)]
@@ -171,7 +171,7 @@ impl Twin {
             latent_threshold,
         };
         options.validate().map_err(|e| to_py(kind, e))?;
-        let data = record.paper()?;
+        let data = record.for_twin(&self.twin, None)?;
         options.validate_for(data).map_err(|e| to_py(kind, e))?;
         let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
         let compared = detached(py, || {
@@ -191,16 +191,15 @@ impl Twin {
         let prediction = compared.prediction;
         let predictions = PyDict::new(py);
         predictions.set_item("time", floats(py, &prediction.time))?;
-        for (f, acc) in prediction.acc.iter().enumerate() {
-            predictions.set_item(format!("acc{}", f + 1), floats(py, acc))?;
+        for c in &prediction.channels {
+            predictions.set_item(c.channel.name(), floats(py, &c.values))?;
         }
-        for (prefix, triple) in [
-            ("latent_var", &prediction.latent_var),
-            ("sd", &prediction.sd),
-        ] {
-            if let Some(values) = triple {
-                for (f, column) in values.iter().enumerate() {
-                    predictions.set_item(format!("{prefix}{}", f + 1), floats(py, column))?;
+        for prefix in ["latent_var", "sd"] {
+            for c in &prediction.channels {
+                let band = if prefix == "sd" { &c.sd } else { &c.latent_var };
+                let name = c.channel.name();
+                if let (Some(values), Some(floor)) = (band, name.strip_prefix("acc")) {
+                    predictions.set_item(format!("{prefix}{floor}"), floats(py, values))?;
                 }
             }
         }
@@ -248,11 +247,11 @@ impl Twin {
         setup.seed = seed.unwrap_or(setup.seed);
         setup.transient = transient.unwrap_or(setup.transient);
         setup.threads = threads.unwrap_or(setup.threads);
-        let data = record.paper()?;
+        let data = record.for_twin(&self.twin, Some("calibrate"))?;
         setup.validate(data).map_err(|e| to_py(kind, e))?;
         let validation: Vec<&Measurement> = validate
             .iter()
-            .map(|r| r.paper())
+            .map(|r| r.for_twin(&self.twin, Some("calibrate")))
             .collect::<PyResult<_>>()?;
         let (new_twin, report) = detached(py, || {
             let v = calibrate_validated(&self.twin, data, &validation, &setup)
@@ -321,7 +320,7 @@ impl Twin {
         o.transient = transient.unwrap_or(o.transient);
         o.threads = threads.unwrap_or(o.threads);
         o.block = block.unwrap_or(o.block);
-        let data = record.paper()?;
+        let data = record.for_twin_with_paper_columns(&self.twin)?;
         o.validate_for(data).map_err(|e| to_py(kind, e))?;
         if let Some(effects) = effects {
             o.candidates = Some(parse_candidates(&effects).map_err(|e| to_py(kind, e))?);
@@ -367,7 +366,7 @@ impl Twin {
         let others: Vec<orchestrator::twin::data::Measurement> = match records {
             Some(given) => given
                 .iter()
-                .map(|r| r.paper().cloned())
+                .map(|r| r.for_twin_with_paper_columns(&self.twin).cloned())
                 .collect::<PyResult<_>>()?,
             None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
         };
@@ -400,7 +399,7 @@ impl Twin {
             }
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
-        let data = record.paper()?;
+        let data = record.for_twin_with_paper_columns(&self.twin)?;
         let (new_twin, report) = detached(py, || {
             let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;
@@ -500,7 +499,7 @@ impl Twin {
             dwell: dwell.unwrap_or(sd.dwell),
             variance,
         });
-        let data = record.paper()?;
+        let data = record.for_twin(&self.twin, Some("control"))?;
         let outcome = detached(py, || {
             let twin = twin_for_control(&self.twin, sensor_noise);
             let outcome =
@@ -595,6 +594,8 @@ impl Twin {
         refit_every: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let kind = Kind::Watch;
+        orchestrator::twin::guard::check_paper_twin(&self.twin, "watch")
+            .map_err(|e| to_py(Kind::Data, e))?;
         let err = |e: WatchError| to_py(kind, e);
         let source = source.extract::<PathBuf>()?.display().to_string();
         orchestrator::workflows::options::check_tolerance(tolerance).map_err(|e| to_py(kind, e))?;
@@ -680,7 +681,7 @@ impl Twin {
         if let Some(s) = &selection {
             s.validate().map_err(|e| to_py(kind, e))?;
         }
-        let data = record.paper()?;
+        let data = record.for_twin(&self.twin, Some("train"))?;
         let (twin, report) = detached(py, || {
             let trained = train_selected(&self.twin, data, &options, selection.as_ref())
                 .map_err(|e| to_py(kind, e))?;
@@ -753,7 +754,7 @@ impl Twin {
         }
         let data: Vec<Measurement> = records
             .iter()
-            .map(|r| r.paper().cloned())
+            .map(|r| r.for_twin(&self.twin, Some("learn")).cloned())
             .collect::<PyResult<_>>()?;
         let (report, learned) = detached(py, || {
             let started = std::time::Instant::now();

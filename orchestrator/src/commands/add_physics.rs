@@ -147,6 +147,9 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
         .as_deref()
         .map(|p| args.columns.read_record(p))
         .transpose()?;
+    for record in others.iter().chain(&data) {
+        crate::twin::guard::check_record(&twin, record)?;
+    }
     // In the refit's order: the twin's records, then the new one.
     let mut paths: Vec<PathBuf> = others.iter().map(|m| m.path.clone()).collect();
     paths.extend(data.iter().map(|d| d.path.clone()));

@@ -66,6 +66,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         .map(|p| args.columns.read_record(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
+    for record in std::iter::once(&data).chain(&validation) {
+        crate::twin::guard::check_paper_rig(&twin, record, "calibrate")?;
+    }
     let mut setup = CalibrationSetup {
         transient: args.transient,
         starts: args.starts,

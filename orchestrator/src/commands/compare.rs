@@ -9,7 +9,7 @@ use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
 use crate::twin::data::Measurement;
 use crate::twin::run::Prediction;
-use crate::twin::Twin;
+use crate::twin::{guard, Twin};
 use crate::workflows::compare::{compare, CompareOptions};
 use crate::workflows::control::ControllerSpec;
 use crate::workflows::options::check_svg;
@@ -21,13 +21,14 @@ pub struct CompareArgs {
     /// The twin (.ssp); the default twin when absent.
     #[arg(long)]
     pub twin: Option<PathBuf>,
-    /// Measurement CSV: time,force,acc1,acc2,acc3.
+    /// Measurement CSV: time, the excitation (force or ground_acc) and any of the twin's
+    /// response channels (acc<i>, vel<i>, disp<i>), units in the header.
     #[arg(long)]
     pub data: PathBuf,
     /// JSON report.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Predicted accelerations as CSV (time,acc1,acc2,acc3).
+    /// The twin's predictions as CSV: time and each measured channel by name, SI.
     #[arg(long)]
     pub predictions: Option<PathBuf>,
     /// Plot (.svg): measured, predicted, ±3σ band, residual, failing windows.
@@ -78,9 +79,10 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     let options = args.options();
     options.validate()?;
-    let data = args.columns.read_record(&args.data)?;
-    options.validate_for(&data)?;
+    let data = args.columns.read_any(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
+    guard::check_record(&twin, &data)?;
+    options.validate_for(&data)?;
     let spec = args
         .controller
         .as_deref()
@@ -97,7 +99,6 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         tolerance,
         ..
     } = &compared;
-    let (noise_nmse, band_nmse) = (*noise_nmse, *band_nmse);
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
@@ -111,15 +112,18 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     print_summary(&twin, &data, comparison);
     if parameter_variance.is_some() {
+        let join = |values: Vec<f64>| {
+            values
+                .iter()
+                .map(|v| format!("{v:.3}"))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        let explained = noise_nmse.iter().zip(band_nmse).map(|(n, b)| n + b);
         println!(
-            "band: noise + parameter uncertainty, explains NMSE {:.3} / {:.3} / {:.3} % \
-             (noise {:.3} / {:.3} / {:.3} %)",
-            noise_nmse[0] + band_nmse[0],
-            noise_nmse[1] + band_nmse[1],
-            noise_nmse[2] + band_nmse[2],
-            noise_nmse[0],
-            noise_nmse[1],
-            noise_nmse[2]
+            "band: noise + parameter uncertainty, explains NMSE {} % (noise {} %)",
+            join(explained.collect()),
+            join(noise_nmse.clone())
         );
     }
     println!(
@@ -134,19 +138,22 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     Ok(())
 }
 
-/// `time,acc1,acc2,acc3`, then the corrector's `latent_var1..3,sd1..3` when the twin has one.
+/// `time` and every predicted channel by name (`acc1,acc2,acc3` on the paper's rig), in SI;
+/// then the corrector's `latent_var<i>` and `sd<i>` of the channels it corrects.
 fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(f);
-    let mut header: Vec<String> = ["time", "acc1", "acc2", "acc3"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    let mut columns: Vec<&Vec<f64>> = p.acc.iter().collect();
-    for (prefix, triple) in [("latent_var", &p.latent_var), ("sd", &p.sd)] {
-        if let Some(values) = triple {
-            for (f, column) in values.iter().enumerate() {
-                header.push(format!("{prefix}{}", f + 1));
-                columns.push(column);
+    let mut header: Vec<String> = vec!["time".to_owned()];
+    let mut columns: Vec<&Vec<f64>> = Vec::new();
+    for c in &p.channels {
+        header.push(c.channel.name());
+        columns.push(&c.values);
+    }
+    for prefix in ["latent_var", "sd"] {
+        for c in &p.channels {
+            let band = if prefix == "sd" { &c.sd } else { &c.latent_var };
+            if let (Some(values), Some(floor)) = (band, c.channel.name().strip_prefix("acc")) {
+                header.push(format!("{prefix}{floor}"));
+                columns.push(values);
             }
         }
     }
@@ -168,24 +175,22 @@ fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
         data.len(),
         1.0 / data.dt
     );
-    println!("{:<8} {:>10} {:>12}", "floor", "NMSE %", "noise sd");
-    for f in 0..3 {
-        println!("{:<8} {:>10.3} {:>12.4e}", f + 1, c.nmse[f], c.noise_sd[f]);
+    println!("{:<8} {:>10} {:>12}", "channel", "NMSE %", "noise sd");
+    for (i, name) in c.names().iter().enumerate() {
+        println!("{:<8} {:>10.3} {:>12.4e}", name, c.nmse[i], c.noise_sd[i]);
     }
     if c.failing_windows.is_empty() {
         println!("failing windows: none (the residual stays inside ±3σ)");
     } else {
         println!("failing windows ({}):", c.failing_windows.len());
         for w in &c.failing_windows {
-            let floors: Vec<String> = w.floors.iter().map(|f| f.to_string()).collect();
+            let nmse: Vec<String> = w.nmse.iter().map(|v| format!("{v:.1}")).collect();
             println!(
-                "  {:>7.2}–{:<7.2} s  floors {:<6} NMSE {:.1} / {:.1} / {:.1} %",
+                "  {:>7.2}–{:<7.2} s  {:<14} NMSE {} %",
                 w.start,
                 w.end,
-                floors.join(","),
-                w.nmse[0],
-                w.nmse[1],
-                w.nmse[2]
+                w.channels.join(","),
+                nmse.join(" / ")
             );
         }
     }

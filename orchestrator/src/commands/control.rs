@@ -147,6 +147,7 @@ pub fn run(args: &ControlArgs) -> Result<()> {
     let options = args.options()?;
     let data = args.columns.read_record(&args.data)?;
     let twin = twin_for_control(&Twin::load(args.twin.as_deref())?, args.sensor_noise);
+    crate::twin::guard::check_paper_rig(&twin, &data, "control")?;
     let mut progress = progress_bar();
     let outcome = run_control(&twin, &data, &options, &mut progress)?;
     let svg = match &args.plot {

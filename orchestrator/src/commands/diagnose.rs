@@ -89,6 +89,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = args.options()?;
     let data = args.columns.read_record(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
+    crate::twin::guard::check_record(&twin, &data)?;
     // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).
     let spinner = indicatif::ProgressBar::new_spinner();
     spinner.enable_steady_tick(std::time::Duration::from_millis(120));

@@ -143,6 +143,9 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         .map(|p| args.columns.read_record(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
+    for record in &records {
+        crate::twin::guard::check_paper_rig(&twin, record, "learn")?;
+    }
     let started = std::time::Instant::now();
     let streams = prepare(&twin, &records, &options)?;
     let results = run_modes(&streams, &modes, &options)?;

@@ -162,12 +162,18 @@ impl ColumnsArg {
     /// Read a record for a command written for the paper's rig: the column map applied, a
     /// record without a force or without acc1..acc3 refused at once, naming the column.
     pub fn read_record(&self, path: &Path) -> Result<Measurement> {
+        let record = self.read_any(path)?;
+        record.require_paper_rig()?;
+        Ok(record)
+    }
+
+    /// Read a record with the column map applied, whatever it measures; check it against the
+    /// twin with `twin::guard` before any work.
+    pub fn read_any(&self, path: &Path) -> Result<Measurement> {
         let columns = match &self.columns {
             Some(map) => ColumnMap::read(map)?,
             None => ColumnMap::default(),
         };
-        let record = Measurement::read_with(path, &ReadOptions { columns })?;
-        record.require_paper_rig()?;
-        Ok(record)
+        Ok(Measurement::read_with(path, &ReadOptions { columns })?)
     }
 }

@@ -73,6 +73,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let data = args.columns.read_record(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
+    crate::twin::guard::check_paper_rig(&twin, &data, "train")?;
     let (options, selection) = args.options();
     options.validate()?;
     if let Some(s) = &selection {

@@ -123,6 +123,7 @@ impl WatchArgs {
 pub fn run(args: &WatchArgs) -> Result<()> {
     let options = args.options()?;
     let twin = Twin::load(args.twin.as_deref())?;
+    crate::twin::guard::check_paper_twin(&twin, "watch")?;
     let spinner = std::io::stderr().is_terminal().then(|| {
         let s = indicatif::ProgressBar::new_spinner();
         s.enable_steady_tick(Duration::from_millis(120));

@@ -1,7 +1,8 @@
-//! Model against measurement: NMSE per floor, residuals, the ±3σ band from the twin's noise
-//! variances, and the failing windows where the residual leaves the band.
+//! Model against measurement, per measured channel: NMSE, residuals, the ±3σ band from the
+//! twin's noise variances, and the failing windows where a residual leaves the band.
 
 use serde::Serialize;
+use structure::channel::Channel;
 
 /// Seconds at the start of a record left out of every error measure: the model starts at rest
 /// and the structure does not, and with ~1 % damping that difference takes seconds to die out.
@@ -27,10 +28,12 @@ pub use crate::evaluation::stats::nmse;
 pub struct FailingWindow {
     pub start: f64,
     pub end: f64,
-    /// Floors (1-based) whose residual left the band inside the window.
+    /// The channels (by name) whose residual left the band inside the window.
+    pub channels: Vec<String>,
+    /// Their floors (1-based, each once).
     pub floors: Vec<usize>,
-    /// NMSE per floor inside the window.
-    pub nmse: [f64; 3],
+    /// NMSE per channel inside the window, in the comparison's channel order.
+    pub nmse: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -40,8 +43,8 @@ pub struct CompareOptions {
     pub min_outliers: usize,
     pub severity: f64,
     pub severity_window: f64,
-    /// Practical significance, NMSE %: a window whose NMSE is below it on every floor that left
-    /// the band is not a failing window, whatever the band says (0: every window counts).
+    /// Practical significance, NMSE %: a window whose NMSE is below it on every channel that
+    /// left the band is not a failing window, whatever the band says (0: every window counts).
     pub tolerance: f64,
 }
 
@@ -58,85 +61,119 @@ impl Default for CompareOptions {
     }
 }
 
+/// Measured against predicted, channel by channel (index `c` below is a position in
+/// `channels`), each in its own quantity and SI unit.
 #[derive(Debug, Clone)]
 pub struct Comparison {
     pub time: Vec<f64>,
-    pub measured: [Vec<f64>; 3],
-    pub predicted: [Vec<f64>; 3],
-    /// Noise standard deviation per floor: the band is predicted ± 3σ …
-    pub noise_sd: [f64; 3],
-    /// … unless the twin gives a predictive sd per sample (its GP corrector): then that.
-    pub band_sd: Option<[Vec<f64>; 3]>,
+    pub channels: Vec<Channel>,
+    pub measured: Vec<Vec<f64>>,
+    pub predicted: Vec<Vec<f64>>,
+    /// Noise standard deviation per channel: the band is predicted ± 3σ …
+    pub noise_sd: Vec<f64>,
+    /// … unless the twin gives an sd per sample (its corrector, its parameter uncertainty):
+    /// then that.
+    pub band_sd: Option<Vec<Vec<f64>>>,
     /// Index of the first sample after the transient cut-off.
     pub first: usize,
-    pub nmse: [f64; 3],
+    pub nmse: Vec<f64>,
     pub failing_windows: Vec<FailingWindow>,
-    /// Windows out of the band but below the tolerance on every floor that left it.
+    /// Windows out of the band but below the tolerance on every channel that left it.
     pub windows_below_tolerance: usize,
     pub tolerance: f64,
 }
 
 impl Comparison {
-    /// The σ of the ±3σ band on `floor` at sample `k`.
-    pub fn sd_at(&self, floor: usize, k: usize) -> f64 {
+    /// The σ of the ±3σ band of channel `c` at sample `k`.
+    pub fn sd_at(&self, c: usize, k: usize) -> f64 {
         match &self.band_sd {
-            Some(sd) => sd[floor][k],
-            None => self.noise_sd[floor],
+            Some(sd) => sd[c][k],
+            None => self.noise_sd[c],
         }
     }
 
-    pub fn residual(&self, floor: usize) -> Vec<f64> {
-        self.measured[floor]
+    pub fn residual(&self, c: usize) -> Vec<f64> {
+        self.measured[c]
             .iter()
-            .zip(&self.predicted[floor])
+            .zip(&self.predicted[c])
             .map(|(y, p)| y - p)
             .collect()
     }
+
+    /// The channels' names, in order.
+    pub fn names(&self) -> Vec<String> {
+        self.channels.iter().map(Channel::name).collect()
+    }
+
+    /// The position of `channel` among the compared ones.
+    pub fn index_of(&self, channel: Channel) -> Option<usize> {
+        self.channels.iter().position(|c| *c == channel)
+    }
+
+    /// The NMSE (%) of `channel`, if it was compared.
+    pub fn nmse_of(&self, channel: Channel) -> Option<f64> {
+        self.index_of(channel).map(|c| self.nmse[c])
+    }
 }
 
+/// The floor a response channel is on (0 for the time and the excitation).
+fn floor_of(channel: &Channel) -> usize {
+    match channel {
+        Channel::Response { floor, .. } => *floor,
+        _ => 0,
+    }
+}
+
+/// Compare `measured[c]` with `predicted[c]` for each of `channels` (all of `time`'s length):
+/// NMSE per channel after the transient, and the failing windows where a residual leaves the
+/// ±3σ band (`band_sd`, else the noise sd) severely.
 pub fn compare(
     time: &[f64],
-    measured: &[Vec<f64>; 3],
-    predicted: &[Vec<f64>; 3],
-    noise_variance: [f64; 3],
-    band_sd: Option<&[Vec<f64>; 3]>,
+    channels: &[Channel],
+    measured: &[Vec<f64>],
+    predicted: &[Vec<f64>],
+    noise_variance: &[f64],
+    band_sd: Option<&[Vec<f64>]>,
     options: CompareOptions,
 ) -> Comparison {
     let n = time.len();
+    let m = channels.len();
     let first = crate::evaluation::stats::first_after_transient(time, options.transient);
-    let nmse_floor = |f: usize, range: std::ops::Range<usize>| {
-        nmse(&measured[f][range.clone()], &predicted[f][range])
+    let nmse_channel = |c: usize, range: std::ops::Range<usize>| {
+        nmse(&measured[c][range.clone()], &predicted[c][range])
     };
-    let overall = [0, 1, 2].map(|f| nmse_floor(f, first..n));
-    let noise_sd = noise_variance.map(f64::sqrt);
+    let overall: Vec<f64> = (0..m).map(|c| nmse_channel(c, first..n)).collect();
+    let noise_sd: Vec<f64> = noise_variance.iter().map(|v| v.sqrt()).collect();
 
-    // Out-of-band samples per floor, after the transient, where the error is severe.
-    let sd = |f: usize, k: usize| band_sd.map_or(noise_sd[f], |b| b[f][k]);
+    // Out-of-band samples per channel, after the transient, where the error is severe.
+    let sd = |c: usize, k: usize| band_sd.map_or(noise_sd[c], |b| b[c][k]);
     let dt = if n > 1 {
         (time[n - 1] - time[0]) / (n - 1) as f64
     } else {
         1.0
     };
     let half = ((options.severity_window / dt / 2.0).round() as usize).max(0);
-    let severe: [Vec<bool>; 3] = [0, 1, 2].map(|f| {
-        // Moving RMS of the residual in band sds, by prefix sums.
-        let mut prefix = vec![0.0; n + 1];
-        for k in 0..n {
-            let u = (measured[f][k] - predicted[f][k]) / sd(f, k);
-            prefix[k + 1] = prefix[k] + if u.is_finite() { u * u } else { f64::MAX / 4.0 };
-        }
-        (0..n)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
-                ((prefix[b] - prefix[a]) / (b - a) as f64).sqrt() >= options.severity
-            })
-            .collect()
-    });
-    let outside = |f: usize, k: usize| {
-        (measured[f][k] - predicted[f][k]).abs() > 3.0 * sd(f, k) && severe[f][k]
+    let severe: Vec<Vec<bool>> = (0..m)
+        .map(|c| {
+            // Moving RMS of the residual in band sds, by prefix sums.
+            let mut prefix = vec![0.0; n + 1];
+            for k in 0..n {
+                let u = (measured[c][k] - predicted[c][k]) / sd(c, k);
+                prefix[k + 1] = prefix[k] + if u.is_finite() { u * u } else { f64::MAX / 4.0 };
+            }
+            (0..n)
+                .map(|k| {
+                    let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
+                    ((prefix[b] - prefix[a]) / (b - a) as f64).sqrt() >= options.severity
+                })
+                .collect()
+        })
+        .collect();
+    let outside = |c: usize, k: usize| {
+        (measured[c][k] - predicted[c][k]).abs() > 3.0 * sd(c, k) && severe[c][k]
     };
     let out_samples: Vec<usize> = (first..n)
-        .filter(|&k| (0..3).any(|f| outside(f, k)))
+        .filter(|&k| (0..m).any(|c| outside(c, k)))
         .collect();
 
     // Group out-of-band samples into windows, merging stretches closer than merge_gap.
@@ -147,39 +184,42 @@ pub fn compare(
             _ => groups.push(vec![k]),
         }
     }
-    let windows: Vec<FailingWindow> = groups
+    // Per window, the positions of the channels that left the band.
+    let windows: Vec<(Vec<usize>, FailingWindow)> = groups
         .into_iter()
         .filter(|g| g.len() >= options.min_outliers)
         .map(|g| {
             let (a, b) = (g[0], g[g.len() - 1]);
-            let floors = (0..3)
-                .filter(|&f| g.iter().any(|&k| outside(f, k)))
-                .map(|f| f + 1)
+            let out: Vec<usize> = (0..m)
+                .filter(|&c| g.iter().any(|&k| outside(c, k)))
                 .collect();
-            FailingWindow {
+            let mut floors: Vec<usize> = out.iter().map(|&c| floor_of(&channels[c])).collect();
+            floors.sort_unstable();
+            floors.dedup();
+            let window = FailingWindow {
                 start: time[a],
                 end: time[b],
+                channels: out.iter().map(|&c| channels[c].name()).collect(),
                 floors,
-                nmse: [0, 1, 2].map(|f| nmse_floor(f, a..b + 1)),
-            }
+                nmse: (0..m).map(|c| nmse_channel(c, a..b + 1)).collect(),
+            };
+            (out, window)
         })
         .collect();
-    let (failing_windows, below): (Vec<FailingWindow>, Vec<FailingWindow>) =
-        windows.into_iter().partition(|w| {
-            w.floors
-                .iter()
-                .any(|&f| !(w.nmse[f - 1] < options.tolerance))
-        });
+    let (failing, below): (Vec<_>, Vec<_>) = windows
+        .into_iter()
+        .partition(|(out, w)| out.iter().any(|&c| !(w.nmse[c] < options.tolerance)));
 
     Comparison {
         time: time.to_vec(),
-        measured: measured.clone(),
-        predicted: predicted.clone(),
+        channels: channels.to_vec(),
+        measured: measured.to_vec(),
+        predicted: predicted.to_vec(),
         noise_sd,
-        band_sd: band_sd.cloned(),
+        band_sd: band_sd.map(<[Vec<f64>]>::to_vec),
         first,
         nmse: overall,
-        failing_windows,
+        failing_windows: failing.into_iter().map(|(_, w)| w).collect(),
         windows_below_tolerance: below.len(),
         tolerance: options.tolerance,
     }
@@ -188,6 +228,13 @@ pub fn compare(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The paper rig's channels, acc1..acc3.
+    fn accs() -> Vec<Channel> {
+        (1..=3)
+            .map(|f| Channel::parse(&format!("acc{f}")).expect("a channel"))
+            .collect()
+    }
 
     #[test]
     fn nmse_is_zero_for_a_perfect_model_and_100_for_the_mean() {
@@ -202,7 +249,7 @@ mod tests {
         let n = 1000;
         let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let base: Vec<f64> = time.iter().map(|t| (7.0 * t).sin()).collect();
-        let predicted = [base.clone(), base.clone(), base.clone()];
+        let predicted = vec![base.clone(), base.clone(), base.clone()];
         let mut measured = predicted.clone();
         // Floor 3 fails in 5.00–5.10 s and 5.30–5.40 s (merged: gap 0.2 s < 0.5 s), floor 1 at 8.0–8.05 s.
         // Offsets of 2 (20 band sds): severe enough over the 0.5 s severity window.
@@ -219,9 +266,10 @@ mod tests {
         measured[1][300] += 2.0;
         let c = compare(
             &time,
+            &accs(),
             &measured,
             &predicted,
-            [0.01; 3],
+            &[0.01; 3],
             None,
             CompareOptions::default(),
         );
@@ -232,6 +280,7 @@ mod tests {
             "{w:?}"
         );
         assert_eq!(w.floors, vec![3]);
+        assert_eq!(w.channels, vec!["acc3".to_owned()]);
         assert_eq!(w.nmse[0], 0.0);
         assert!(w.nmse[2] > 100.0);
         assert_eq!(c.failing_windows[1].floors, vec![1]);
@@ -243,7 +292,7 @@ mod tests {
         let time: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
         let y: Vec<f64> = time.iter().map(|t| (3.0 * t).sin()).collect();
         // ±3.5σ alternating: every sample leaves the ±3σ band, the local RMS is 3.5σ < 5σ …
-        let mut measured = [y.clone(), y.clone(), y.clone()];
+        let mut measured = vec![y.clone(), y.clone(), y.clone()];
         for (k, m) in measured[1].iter_mut().enumerate() {
             *m += if k % 2 == 0 { 0.35 } else { -0.35 };
         }
@@ -253,9 +302,10 @@ mod tests {
         }
         let c = compare(
             &time,
+            &accs(),
             &measured,
-            &[y.clone(), y.clone(), y],
-            [0.01; 3],
+            &[y.clone(), y.clone(), y][..],
+            &[0.01; 3],
             None,
             CompareOptions::default(),
         );
@@ -269,18 +319,19 @@ mod tests {
     fn windows_below_the_tolerance_are_not_failing() {
         let time: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
         let y: Vec<f64> = time.iter().map(|t| (3.0 * t).sin()).collect();
-        let mut measured = [y.clone(), y.clone(), y.clone()];
+        let mut measured = vec![y.clone(), y.clone(), y.clone()];
         // A burst at 10σ (σ = 0.01) in 6.0–6.5 s: window NMSE 5.8 %.
         for k in 600..650 {
             measured[1][k] = y[k] + if k % 2 == 0 { 0.1 } else { -0.1 };
         }
-        let predicted = [y.clone(), y.clone(), y];
+        let predicted = vec![y.clone(), y.clone(), y];
         let run = |tolerance: f64| {
             compare(
                 &time,
+                &accs(),
                 &measured,
                 &predicted,
-                [1e-4; 3],
+                &[1e-4; 3],
                 None,
                 CompareOptions {
                     tolerance,
@@ -302,13 +353,14 @@ mod tests {
     fn the_transient_is_left_out() {
         let time: Vec<f64> = (0..300).map(|k| k as f64 * 0.01).collect();
         let y: Vec<f64> = time.iter().map(|t| t.sin()).collect();
-        let mut measured = [y.clone(), y.clone(), y.clone()];
+        let mut measured = vec![y.clone(), y.clone(), y.clone()];
         measured[0][10] += 5.0; // inside the first 2 s
         let c = compare(
             &time,
+            &accs(),
             &measured,
-            &[y.clone(), y.clone(), y],
-            [1e-4; 3],
+            &[y.clone(), y.clone(), y][..],
+            &[1e-4; 3],
             None,
             CompareOptions::default(),
         );

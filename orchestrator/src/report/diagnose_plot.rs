@@ -83,9 +83,7 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
                 .caption(
                     format!(
                         "{channel} (floor {}): NMSE {:.3} % → {:.3} %",
-                        floor,
-                        d.nmse_before[f],
-                        d.nmse_after[f]
+                        floor, d.nmse_before[f], d.nmse_after[f]
                     ),
                     ("sans-serif", 16),
                 )
@@ -141,7 +139,12 @@ pub fn draw_diagnosis(d: &Diagnosis) -> Result<String> {
         let storeys = s.drift.len().max(1);
         let (storey, what) = match &d.effect {
             Some(e) => (
-                e.name.location.last().copied().unwrap_or(1).clamp(1, storeys),
+                e.name
+                    .location
+                    .last()
+                    .copied()
+                    .unwrap_or(1)
+                    .clamp(1, storeys),
                 e.name.kind,
             ),
             None => {

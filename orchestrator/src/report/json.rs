@@ -11,11 +11,20 @@ use crate::twin::Twin;
 use crate::workflows::calibrate::Calibration;
 
 /// `twin compare --report`: `compared` is `twin` run on `data` after `transient` seconds.
+/// Every per-channel array (`nmse`, `noise_variance`, the band's, a failing window's `nmse`) is
+/// in the order of `channels`, the record's measured channels by name (on the paper's rig,
+/// `acc1`, `acc2`, `acc3`); each value in the channel's own quantity, SI.
 pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: f64) -> Value {
-    let explained = [0, 1, 2].map(|f| compared.noise_nmse[f] + compared.band_nmse[f]);
+    let explained: Vec<f64> = compared
+        .noise_nmse
+        .iter()
+        .zip(&compared.band_nmse)
+        .map(|(noise, band)| noise + band)
+        .collect();
     json!({
         "twin": twin.describe(),
         "data": data.path.display().to_string(),
+        "channels": compared.comparison.names(),
         "nmse": compared.comparison.nmse,
         "failing_windows": compared.comparison.failing_windows,
         "noise_variance": compared.noise_variance,

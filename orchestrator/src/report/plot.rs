@@ -12,6 +12,8 @@ use super::{palette, ReportError};
 use crate::evaluation::compare::Comparison;
 use crate::evaluation::frf::{welch_h1, FrequencyResponse};
 use crate::fsutil::write_text_atomically;
+use crate::record::Signal;
+use ::structure::channel::{Channel, Quantity};
 
 pub use crate::evaluation::frf::FRF_SEGMENT;
 
@@ -21,6 +23,36 @@ const FRF_DEPTH_DB: f64 = 80.0;
 
 const TIME_VIEW_SIZE: (u32, u32) = (1400, 900);
 const FRF_VIEW_SIZE: (u32, u32) = (1400, 520);
+/// Views with more than three channels grow by this much per panel past the third.
+const TIME_PANEL_HEIGHT: u32 = 220;
+const FRF_PANEL_HEIGHT: u32 = 150;
+
+/// A view's size for `panels` channels: the three-panel size, taller past three panels.
+fn view_size((width, height): (u32, u32), panels: usize, per_panel: u32) -> (u32, u32) {
+    (width, height + per_panel * panels.saturating_sub(3) as u32)
+}
+
+/// The axis label of a channel's quantity in SI.
+fn quantity_label(channel: &Channel) -> &'static str {
+    match channel.quantity() {
+        Quantity::Acceleration => "acceleration (m/s²)",
+        Quantity::Velocity => "velocity (m/s)",
+        Quantity::Displacement => "displacement (m)",
+        Quantity::Force => "force (N)",
+        Quantity::Time => "time (s)",
+    }
+}
+
+/// The SI unit of a channel's quantity, as the frequency view's axis writes it.
+fn unit_label(channel: &Channel) -> &'static str {
+    match channel.quantity() {
+        Quantity::Acceleration => "m/s²",
+        Quantity::Velocity => "m/s",
+        Quantity::Displacement => "m",
+        Quantity::Force => "N",
+        Quantity::Time => "s",
+    }
+}
 const FONT: &str = "sans-serif";
 
 // Okabe–Ito colours: measured, predicted and band stay apart for colour-blind readers too.
@@ -38,22 +70,24 @@ const FAILING_ELSEWHERE_OPACITY: f64 = 0.07;
 const TRANSIENT_OPACITY: f64 = 0.18;
 
 /// Writes the comparison `c` as an SVG at `path` (nothing else is accepted): one panel per
-/// floor, stacked on a shared time axis, each with the measured and predicted acceleration, the
-/// prediction ± 3σ band, the residual (measured − predicted) on the same axis, the transient
-/// (left out of every error measure) greyed and the failing windows shaded red — strongly on
-/// the floors that left the band in the window, faintly on the others. The caption gives the
-/// floor's NMSE after the transient.
+/// measured channel, captioned by its name, stacked on a shared time axis, each with the
+/// measured and predicted value in the channel's quantity, the prediction ± 3σ band, the
+/// residual (measured − predicted) on the same axis, the transient (left out of every error
+/// measure) greyed and the failing windows shaded red — strongly on the channels that left the
+/// band in the window, faintly on the others. The caption gives the channel's NMSE after the
+/// transient.
 ///
 /// With `frequency_view`, a second SVG is written beside the first, `<stem>-frf.svg`: per
-/// floor, the H1 estimate (see [`welch_h1`], segments of [`FRF_SEGMENT`]) of the response
-/// from `force` to the measured and to the predicted acceleration, in dB up to Nyquist, over
-/// the samples after the transient. `force` is only read for this view.
+/// channel, the H1 estimate (see [`welch_h1`], segments of [`FRF_SEGMENT`]) of the response
+/// from the `excitation` (force or ground acceleration) to the measured and to the predicted
+/// value, in dB up to Nyquist, over the samples after the transient. `excitation` is only read
+/// for this view.
 ///
 /// Each file is written to a temporary file in its directory and renamed into place, and
 /// everything is drawn before anything is written: an error leaves no partial file.
 pub fn plot_comparison(
     c: &Comparison,
-    force: &[f64],
+    excitation: &Signal,
     title: &str,
     path: &Path,
     frequency_view: bool,
@@ -71,9 +105,10 @@ pub fn plot_comparison(
         path: path.to_owned(),
         message,
     };
-    check_lengths(c, force, frequency_view).map_err(bad_input)?;
+    let force = &excitation.values;
+    check_lengths(c, excitation, frequency_view).map_err(bad_input)?;
     let responses = if frequency_view {
-        Some(floor_responses(c, force).map_err(bad_input)?)
+        Some(channel_responses(c, force).map_err(bad_input)?)
     } else {
         None
     };
@@ -86,9 +121,11 @@ pub fn plot_comparison(
     if let Some(responses) = responses {
         let frf_path = frf_path(path);
         let svg =
-            draw_frequency_view(c, &responses, title).map_err(|message| ReportError::Draw {
-                path: frf_path.clone(),
-                message,
+            draw_frequency_view(c, &responses, &excitation.channel, title).map_err(|message| {
+                ReportError::Draw {
+                    path: frf_path.clone(),
+                    message,
+                }
             })?;
         files.push((frf_path, svg));
     }
@@ -98,14 +135,14 @@ pub fn plot_comparison(
     Ok(())
 }
 
-/// The corrector's latent variance `V(f)` per floor on a log axis, with the threshold above
-/// which active learning would query a point (the reference paper's Figures 7–8, lower panels),
+/// The corrector's latent variance `V(f)` of each channel it corrects (`latent`: the channel's
+/// position in `c`, its variances, its threshold) on a log axis, with the threshold above which
+/// active learning would query a point (the reference paper's Figures 7–8, lower panels),
 /// written to `<dir>/<stem>-latent.svg` beside `path`. Samples above the threshold after the
 /// transient are marked.
 pub fn plot_latent_variance(
     c: &Comparison,
-    latent: &[Vec<f64>; 3],
-    threshold: [f64; 3],
+    latent: &[(usize, &[f64], f64)],
     title: &str,
     path: &Path,
 ) -> Result<PathBuf, ReportError> {
@@ -118,37 +155,44 @@ pub fn plot_latent_variance(
     if n < 2 {
         return Err(bad_input(format!("{n} samples; a plot needs at least 2")));
     }
-    if latent.iter().any(|v| v.len() != n) {
-        return Err(bad_input(format!(
-            "{} / {} / {} latent variances for {n} samples",
-            latent[0].len(),
-            latent[1].len(),
-            latent[2].len()
-        )));
+    if latent.is_empty() {
+        return Err(bad_input("no channel has a latent variance".into()));
     }
-    if threshold.iter().any(|t| !(*t > 0.0 && t.is_finite())) {
-        return Err(bad_input(format!(
-            "thresholds {threshold:?}: must be positive"
-        )));
+    for (channel, values, threshold) in latent {
+        let name = c
+            .channels
+            .get(*channel)
+            .map(Channel::name)
+            .ok_or_else(|| bad_input(format!("channel {channel} is not compared")))?;
+        if values.len() != n {
+            return Err(bad_input(format!(
+                "{name}: {} latent variances for {n} samples",
+                values.len()
+            )));
+        }
+        if !(*threshold > 0.0 && threshold.is_finite()) {
+            return Err(bad_input(format!(
+                "{name}: threshold {threshold}: must be positive"
+            )));
+        }
     }
-    let svg =
-        draw_latent_view(c, latent, threshold, title).map_err(|message| ReportError::Draw {
-            path: out.clone(),
-            message,
-        })?;
+    let svg = draw_latent_view(c, latent, title).map_err(|message| ReportError::Draw {
+        path: out.clone(),
+        message,
+    })?;
     write_text_atomically(&out, &svg)?;
     Ok(out)
 }
 
 fn draw_latent_view(
     c: &Comparison,
-    latent: &[Vec<f64>; 3],
-    threshold: [f64; 3],
+    latent: &[(usize, &[f64], f64)],
     title: &str,
 ) -> Result<String, String> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, FRF_VIEW_SIZE).into_drawing_area();
+        let size = view_size(FRF_VIEW_SIZE, latent.len(), FRF_PANEL_HEIGHT);
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(text)?;
         let root = root
             .titled(&format!("{title}: latent variance V(f)"), (FONT, 22))
@@ -165,21 +209,23 @@ fn draw_latent_view(
         )?;
         let n = c.time.len();
         let (t0, t1) = (c.time[0], c.time[n - 1]);
-        for (floor, area) in panels.split_evenly((1, 3)).iter().enumerate() {
-            let v = &latent[floor];
+        for (&(channel, v, threshold), area) in latent
+            .iter()
+            .zip(panels.split_evenly((1, latent.len())).iter())
+        {
             let positive = v.iter().copied().filter(|x| *x > 0.0 && x.is_finite());
             let (lo, hi) = positive
-                .chain(std::iter::once(threshold[floor]))
+                .chain(std::iter::once(threshold))
                 .fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
             let (lo, hi) = (lo / 2.0, hi * 2.0);
-            let above = (c.first..n).filter(|&k| v[k] > threshold[floor]).count();
+            let above = (c.first..n).filter(|&k| v[k] > threshold).count();
+            let unit = unit_label(&c.channels[channel]);
             let mut chart = ChartBuilder::on(area)
                 .caption(
                     format!(
-                        "floor {}: {above} of {} samples above {:.2e}",
-                        floor + 1,
+                        "{}: {above} of {} samples above {threshold:.2e}",
+                        c.channels[channel].name(),
                         n - c.first,
-                        threshold[floor]
                     ),
                     (FONT, 15),
                 )
@@ -191,7 +237,7 @@ fn draw_latent_view(
             chart
                 .configure_mesh()
                 .x_desc("time (s)")
-                .y_desc("V(f) ((m/s²)²)")
+                .y_desc(format!("V(f) (({unit})²)"))
                 .y_label_formatter(&|y| format!("{y:.0e}"))
                 .x_labels(6)
                 .y_labels(5)
@@ -201,7 +247,7 @@ fn draw_latent_view(
                 .draw()
                 .map_err(text)?;
             chart
-                .draw_series((c.first..n).filter(|&k| v[k] > threshold[floor]).map(|k| {
+                .draw_series((c.first..n).filter(|&k| v[k] > threshold).map(|k| {
                     Rectangle::new(
                         [(c.time[k], lo), (c.time[k] + sampling_interval(c), hi)],
                         PREDICTED.mix(0.5).filled(),
@@ -218,7 +264,7 @@ fn draw_latent_view(
                 .map_err(text)?;
             chart
                 .draw_series(LineSeries::new(
-                    [(t0, threshold[floor]), (t1, threshold[floor])],
+                    [(t0, threshold), (t1, threshold)],
                     FAILING.stroke_width(2),
                 ))
                 .map_err(text)?;
@@ -246,19 +292,23 @@ fn frf_path(path: &Path) -> PathBuf {
     path.with_file_name(format!("{stem}-frf.svg"))
 }
 
-fn check_lengths(c: &Comparison, force: &[f64], frequency_view: bool) -> Result<(), String> {
+fn check_lengths(c: &Comparison, excitation: &Signal, frequency_view: bool) -> Result<(), String> {
+    let force = &excitation.values;
     let n = c.time.len();
     if n < 2 {
         return Err(format!(
             "the record has {n} samples; a plot needs at least 2"
         ));
     }
-    for floor in 0..3 {
-        let (m, p) = (c.measured[floor].len(), c.predicted[floor].len());
+    if c.channels.is_empty() {
+        return Err("no channel to plot".into());
+    }
+    for (i, channel) in c.channels.iter().enumerate() {
+        let (m, p) = (c.measured[i].len(), c.predicted[i].len());
         if m != n || p != n {
             return Err(format!(
-                "floor {}: {m} measured and {p} predicted samples for {n} time samples",
-                floor + 1
+                "{}: {m} measured and {p} predicted samples for {n} time samples",
+                channel.name()
             ));
         }
     }
@@ -267,8 +317,9 @@ fn check_lengths(c: &Comparison, force: &[f64], frequency_view: bool) -> Result<
     }
     if frequency_view && force.len() != n {
         return Err(format!(
-            "{} force samples for {n} time samples",
-            force.len()
+            "{} {} samples for {n} time samples",
+            force.len(),
+            excitation.channel.name()
         ));
     }
     Ok(())
@@ -279,8 +330,8 @@ fn sampling_interval(c: &Comparison) -> f64 {
     (c.time[n - 1] - c.time[0]) / (n - 1) as f64
 }
 
-/// Per floor, the H1 estimate from the force to the measured and to the predicted acceleration.
-fn floor_responses(c: &Comparison, force: &[f64]) -> Result<[[FrequencyResponse; 2]; 3], String> {
+/// Per channel, the H1 estimate from the excitation to the measured and to the predicted value.
+fn channel_responses(c: &Comparison, force: &[f64]) -> Result<Vec<[FrequencyResponse; 2]>, String> {
     let after = c.first..c.time.len();
     let dt = sampling_interval(c);
     let estimate = |acc: &[f64]| {
@@ -292,13 +343,9 @@ fn floor_responses(c: &Comparison, force: &[f64]) -> Result<[[FrequencyResponse;
             )
         })
     };
-    let [first, second, third] = [0, 1, 2].map(|floor| -> Result<_, String> {
-        Ok([
-            estimate(&c.measured[floor])?,
-            estimate(&c.predicted[floor])?,
-        ])
-    });
-    Ok([first?, second?, third?])
+    (0..c.channels.len())
+        .map(|i| Ok([estimate(&c.measured[i])?, estimate(&c.predicted[i])?]))
+        .collect()
 }
 
 fn text(e: impl Display) -> String {
@@ -411,8 +458,10 @@ fn draw_key(
 
 fn draw_time_view(c: &Comparison, title: &str) -> Result<String, String> {
     let mut svg = String::new();
+    let channels = c.channels.len();
     {
-        let root = SVGBackend::with_string(&mut svg, TIME_VIEW_SIZE).into_drawing_area();
+        let size = view_size(TIME_VIEW_SIZE, channels, TIME_PANEL_HEIGHT);
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(text)?;
         let root = root.titled(title, (FONT, 24)).map_err(text)?;
         let (key, panels) = root.split_vertically(30);
@@ -434,11 +483,17 @@ fn draw_time_view(c: &Comparison, title: &str) -> Result<String, String> {
         // Only the bottom panel carries the time axis; it gets that room on top of the same
         // plotting height as the others.
         let (_, height) = panels.dim_in_pixel();
-        let panel_height = (height - TIME_AXIS_HEIGHT) / 3;
-        let (top, rest) = panels.split_vertically(panel_height);
-        let (middle, bottom) = rest.split_vertically(panel_height);
-        for (floor, area) in [top, middle, bottom].iter().enumerate() {
-            draw_floor(c, floor, area, floor == 2)?;
+        let panel_height = (height - TIME_AXIS_HEIGHT) / channels as u32;
+        let mut rest = panels;
+        for channel in 0..channels {
+            let last = channel + 1 == channels;
+            if last {
+                draw_channel(c, channel, &rest, true)?;
+            } else {
+                let (area, below) = rest.split_vertically(panel_height);
+                draw_channel(c, channel, &area, false)?;
+                rest = below;
+            }
         }
         root.present().map_err(text)?;
     }
@@ -453,21 +508,22 @@ fn transient_duration(c: &Comparison) -> f64 {
     c.time[c.first.min(last)] - c.time[0]
 }
 
-fn draw_floor(
+fn draw_channel(
     c: &Comparison,
-    floor: usize,
+    channel: usize,
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     with_time_axis: bool,
 ) -> Result<(), String> {
     let n = c.time.len();
     let (t0, t1) = (c.time[0], c.time[n - 1]);
     let half_sample = 0.5 * sampling_interval(c);
-    let measured = &c.measured[floor];
-    let predicted = &c.predicted[floor];
-    let residual = c.residual(floor);
+    let measured = &c.measured[channel];
+    let predicted = &c.predicted[channel];
+    let residual = c.residual(channel);
+    let name = c.channels[channel].name();
     // ±3σ at each sample: the noise σ, or the corrector's predictive σ where the twin has one.
     let band: Vec<f64> = (0..n)
-        .map(|k| 3.0 * c.sd_at(floor, k))
+        .map(|k| 3.0 * c.sd_at(channel, k))
         .map(|b| if b.is_finite() { b } else { 0.0 })
         .collect();
     let (lo, hi) = padded_range(
@@ -483,9 +539,9 @@ fn draw_floor(
     let windows_here = c
         .failing_windows
         .iter()
-        .filter(|w| w.floors.contains(&(floor + 1)))
+        .filter(|w| w.channels.contains(&name))
         .count();
-    let mut caption = format!("floor {} — NMSE {}", floor + 1, percent(c.nmse[floor]));
+    let mut caption = format!("{name} — NMSE {}", percent(c.nmse[channel]));
     if windows_here > 0 {
         caption += &format!(
             " — out of band in {windows_here} window{}",
@@ -503,10 +559,10 @@ fn draw_floor(
         .build_cartesian_2d(t0..t1, lo..hi)
         .map_err(text)?;
     let time_label = |t: &f64| tick_label(*t, t1 - t0);
-    let acceleration_label = |a: &f64| tick_label(*a, hi - lo);
+    let value_label = |a: &f64| tick_label(*a, hi - lo);
     let mut mesh = chart.configure_mesh();
     mesh.x_label_formatter(&time_label)
-        .y_label_formatter(&acceleration_label)
+        .y_label_formatter(&value_label)
         .x_labels(21)
         .y_labels(5)
         .max_light_lines(1)
@@ -514,7 +570,7 @@ fn draw_floor(
         .light_line_style(BLACK.mix(0.04))
         .label_style((FONT, 13))
         .axis_desc_style((FONT, 14))
-        .y_desc("acceleration (m/s²)");
+        .y_desc(quantity_label(&c.channels[channel]));
     if with_time_axis {
         mesh.x_desc("time (s)");
     }
@@ -530,7 +586,7 @@ fn draw_floor(
             .map_err(text)?;
     }
     for window in &c.failing_windows {
-        let opacity = if window.floors.contains(&(floor + 1)) {
+        let opacity = if window.channels.contains(&name) {
             FAILING_OPACITY
         } else {
             FAILING_ELSEWHERE_OPACITY
@@ -581,7 +637,8 @@ fn draw_floor(
 
 fn draw_frequency_view(
     c: &Comparison,
-    responses: &[[FrequencyResponse; 2]; 3],
+    responses: &[[FrequencyResponse; 2]],
+    excitation: &Channel,
     title: &str,
 ) -> Result<String, String> {
     let dt = sampling_interval(c);
@@ -601,11 +658,27 @@ fn draw_frequency_view(
 
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, FRF_VIEW_SIZE).into_drawing_area();
+        let size = view_size(FRF_VIEW_SIZE, responses.len(), FRF_PANEL_HEIGHT);
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(text)?;
+        let what = match excitation {
+            Channel::Excitation(::structure::channel::ExcitationKind::GroundAcc) => {
+                "ground acceleration"
+            }
+            _ => "force",
+        };
+        let responses_are = if c
+            .channels
+            .iter()
+            .all(|ch| ch.quantity() == Quantity::Acceleration)
+        {
+            "floor acceleration"
+        } else {
+            "measured channel"
+        };
         let root = root
             .titled(
-                &format!("{title} — frequency response, force → floor acceleration"),
+                &format!("{title} — frequency response, {what} → {responses_are}"),
                 (FONT, 24),
             )
             .map_err(text)?;
@@ -623,9 +696,11 @@ fn draw_frequency_view(
             ],
             PANEL_LEFT as i32 + 10,
         )?;
-        for (floor, area) in panels.split_evenly((1, 3)).iter().enumerate() {
+        let input_unit = unit_label(excitation);
+        for (i, area) in panels.split_evenly((1, responses.len())).iter().enumerate() {
+            let channel = &c.channels[i];
             let mut chart = ChartBuilder::on(area)
-                .caption(format!("floor {}", floor + 1), (FONT, 17))
+                .caption(channel.name(), (FONT, 17))
                 .margin_left(10)
                 .margin_right(20)
                 .margin_bottom(4)
@@ -645,10 +720,13 @@ fn draw_frequency_view(
                 .label_style((FONT, 13))
                 .axis_desc_style((FONT, 14))
                 .x_desc("frequency (Hz)")
-                .y_desc("|H| (dB re 1 (m/s²)/N)")
+                .y_desc(format!(
+                    "|H| (dB re 1 ({})/{input_unit})",
+                    unit_label(channel)
+                ))
                 .draw()
                 .map_err(text)?;
-            for (response, colour) in responses[floor].iter().zip([MEASURED, PREDICTED]) {
+            for (response, colour) in responses[i].iter().zip([MEASURED, PREDICTED]) {
                 let clamped = response.magnitude_db.iter().map(|db| db.max(lo));
                 let line = points(&response.frequency, clamped);
                 chart
@@ -684,16 +762,34 @@ mod tests {
             .collect()
     }
 
+    /// The paper rig's channels, acc1..acc3.
+    fn accs() -> Vec<Channel> {
+        (1..=3)
+            .map(|f| Channel::parse(&format!("acc{f}")).expect("a channel"))
+            .collect()
+    }
+
+    /// `values` as the force column.
+    fn force_signal(values: Vec<f64>) -> Signal {
+        Signal {
+            channel: Channel::Excitation(::structure::channel::ExcitationKind::Force),
+            unit: ::structure::channel::Unit::Newton,
+            values,
+        }
+    }
+
     /// 1024 samples, two failing windows: floor 3 alone, then floors 1 and 2.
-    fn synthetic() -> (Comparison, Vec<f64>) {
+    fn synthetic() -> (Comparison, Signal) {
         let n = 1024;
         let time: Vec<f64> = (0..n).map(|k| k as f64 * DT).collect();
-        let force = noise(7, n);
-        let predicted = [1.0, 1.6, 2.0].map(|gain| {
-            time.iter()
-                .map(|t| gain * (2.0 * PI * 3.0 * t).sin())
-                .collect::<Vec<_>>()
-        });
+        let force = force_signal(noise(7, n));
+        let predicted: Vec<Vec<f64>> = [1.0, 1.6, 2.0]
+            .map(|gain| {
+                time.iter()
+                    .map(|t| gain * (2.0 * PI * 3.0 * t).sin())
+                    .collect::<Vec<_>>()
+            })
+            .to_vec();
         let mut measured = predicted.clone();
         for (floor, values) in measured.iter_mut().enumerate() {
             for (v, e) in values.iter_mut().zip(noise(11 + floor as u64, n)) {
@@ -704,24 +800,27 @@ mod tests {
             FailingWindow {
                 start: 5.0,
                 end: 5.4,
+                channels: vec!["acc3".into()],
                 floors: vec![3],
-                nmse: [0.1, 0.1, 150.0],
+                nmse: vec![0.1, 0.1, 150.0],
             },
             FailingWindow {
                 start: 12.0,
                 end: 12.6,
+                channels: vec!["acc1".into(), "acc2".into()],
                 floors: vec![1, 2],
-                nmse: [90.0, 60.0, 0.1],
+                nmse: vec![90.0, 60.0, 0.1],
             },
         ];
         let c = Comparison {
             time,
+            channels: accs(),
             measured,
             predicted,
-            noise_sd: [0.03; 3],
+            noise_sd: vec![0.03; 3],
             band_sd: None,
             first: 103,
-            nmse: [0.26, 2.44, 2.94],
+            nmse: vec![0.26, 2.44, 2.94],
             failing_windows,
             windows_below_tolerance: 0,
             tolerance: 0.0,
@@ -792,10 +891,10 @@ mod tests {
             "{}",
             svg.texts
         );
-        assert!(svg.texts.contains("floor 1 — NMSE 0.26 %"), "{}", svg.texts);
+        assert!(svg.texts.contains("acc1 — NMSE 0.26 %"), "{}", svg.texts);
         assert!(
             svg.texts
-                .contains("floor 3 — NMSE 2.94 % — out of band in 1 window"),
+                .contains("acc3 — NMSE 2.94 % — out of band in 1 window"),
             "{}",
             svg.texts
         );
@@ -839,13 +938,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("temp dir");
         plot_comparison(&c, &force, "dataset 2", &dir.path().join("d2.svg"), true).expect("plots");
         let svg = parse_svg(&dir.path().join("d2-frf.svg"));
-        for expected in [
-            "dataset 2",
-            "floor 1",
-            "floor 3",
-            "frequency (Hz)",
-            "H1 estimate",
-        ] {
+        for expected in ["dataset 2", "acc1", "acc3", "frequency (Hz)", "H1 estimate"] {
             assert!(
                 svg.texts.contains(expected),
                 "{expected} missing from {}",
@@ -876,7 +969,8 @@ mod tests {
         let (c, force) = synthetic();
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("comparison.svg");
-        let err = plot_comparison(&c, &force[..100], "t", &path, true).expect_err("refused");
+        let short = force_signal(force.values[..100].to_vec());
+        let err = plot_comparison(&c, &short, "t", &path, true).expect_err("refused");
         assert!(matches!(err, ReportError::BadInput { .. }), "{err}");
         assert!(
             err.to_string()
@@ -952,7 +1046,7 @@ mod tests {
         // Stand-in prediction, only for the picture: the measurement through a centred
         // [1/4, 1/2, 1/4] smoother, with floor 3 in anti-phase between 12 and 13 s (a residual
         // of twice the response there, ~13 band sds: severe enough for a failing window).
-        let predicted = m.accs().map(<[f64]>::to_vec).map(|acc| {
+        let predicted = m.accs().map(<[f64]>::to_vec).map(|acc: Vec<f64>| {
             let n = acc.len();
             (0..n)
                 .map(|k| {
@@ -977,9 +1071,10 @@ mod tests {
         }
         let c = compare(
             &m.time,
+            &accs(),
             &m.accs().map(<[f64]>::to_vec),
             &predicted,
-            noise_variance,
+            &noise_variance,
             None,
             CompareOptions::default(),
         );
@@ -996,14 +1091,14 @@ mod tests {
         let path = dir.path().join("dataset1.svg");
         plot_comparison(
             &c,
-            &m.force(),
+            &m.excitation,
             "dataset 1 — smoothed stand-in prediction",
             &path,
             true,
         )
         .expect("plots");
         let svg = parse_svg(&path);
-        assert!(svg.texts.contains("floor 2"));
+        assert!(svg.texts.contains("acc2"));
         parse_svg(&dir.path().join("dataset1-frf.svg"));
     }
 }

@@ -16,6 +16,7 @@
 /// Measurement records live in [`crate::record`]; this path is kept for code written before.
 pub use crate::record as data;
 pub mod embedded;
+pub mod guard;
 pub mod run;
 pub mod structure;
 pub mod system;
@@ -39,8 +40,12 @@ const NS_SSV: &str = "http://ssp-standard.org/SSP1/SystemStructureParameterValue
 pub const PHYSICS: &str = "physics";
 /// The shear FMU's archive name.
 pub const SHEAR_FMU: &str = "fmu_shear.fmu";
-/// System inputs and outputs of a twin.
+/// System inputs of the paper rig's twin (a twin of another structure takes `ground_acc` for
+/// ground motion, see [`Twin::for_structure`]).
 pub const INPUTS: [&str; 2] = ["force", "control_force"];
+/// The paper rig's accelerations, for the workflows still written for it; a twin's outputs are
+/// its structure's (`Twin::for_structure`), and `run::run_twin` predicts whatever channels a
+/// record measures.
 pub const OUTPUTS: [&str; 3] = ["acc1", "acc2", "acc3"];
 
 #[derive(Debug, thiserror::Error)]
@@ -159,12 +164,16 @@ pub fn find_fmu(file_name: &str) -> Result<PathBuf, TwinError> {
 }
 
 impl Twin {
-    /// The shear FMU with its default parameters, force in, accelerations out.
+    /// The shear FMU with its default parameters (the paper's rig), force in, every floor's
+    /// acceleration out.
     pub fn default_twin() -> Result<Self, TwinError> {
+        let outputs: Vec<String> = (1..=::structure::Structure::default().storeys())
+            .map(|floor| format!("acc{floor}"))
+            .collect();
         Ok(Twin::of_shear_fmu(
             find_fmu(SHEAR_FMU)?,
             &INPUTS,
-            &OUTPUTS,
+            &outputs,
             Vec::new(),
         ))
     }
@@ -270,6 +279,21 @@ impl Twin {
             }
         }
         names
+    }
+
+    /// The measurement noise variance the twin holds for `channel` (in its SI unit, squared):
+    /// the calibrated variances of floors 1 to 3's accelerations (`noise_variance1..3`); None
+    /// for any other channel or an uncalibrated twin.
+    pub fn noise_variance_of(&self, channel: ::structure::channel::Channel) -> Option<f64> {
+        match channel {
+            ::structure::channel::Channel::Response {
+                quantity: ::structure::channel::Quantity::Acceleration,
+                floor,
+            } => self
+                .noise_variance
+                .and_then(|v| v.get(floor.checked_sub(1)?).copied()),
+            _ => None,
+        }
     }
 
     pub fn component(&self, name: &str) -> Option<&Component> {

@@ -1,27 +1,100 @@
-//! Running a twin on a measurement: the system of the twin's FMUs, the measured force replayed
-//! as its input, the accelerations recorded.
+//! Running a twin on a measurement: the system of the twin's FMUs, the measured excitation
+//! (`force` or `ground_acc`) replayed as its input, the twin's value of every response channel
+//! the record measures recorded.
 
 use std::time::{Duration, Instant};
+
+use ::structure::channel::{Channel, Quantity};
 
 use crate::cosim::master::{Clock, Recorder};
 use crate::evaluation::compare::{compare, CompareOptions, Comparison};
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::system::{SystemBuilder, SystemError};
-use crate::twin::{ParameterValue, Twin, OUTPUTS, PHYSICS};
+use crate::twin::{Connection, ParameterValue, Twin, PHYSICS};
 
 /// A run's error is the system builder's: the twin, the master or the wiring.
 pub type RunError = SystemError;
 
-/// Predicted accelerations at every sample of the measurement.
+/// The twin's prediction of one measured channel at every sample of the record.
+#[derive(Debug, Clone)]
+pub struct PredictedChannel {
+    pub channel: Channel,
+    /// In SI: m/s², m/s or m.
+    pub values: Vec<f64>,
+    /// The corrector's latent variance V(f) of this channel, when the twin corrects it.
+    pub latent_var: Option<Vec<f64>>,
+    /// The corrector's predictive standard deviation of this channel, likewise.
+    pub sd: Option<Vec<f64>>,
+}
+
+/// The twin's prediction of a record: one [`PredictedChannel`] per response channel, in the
+/// record's order.
 #[derive(Debug, Clone)]
 pub struct Prediction {
     pub time: Vec<f64>,
-    pub acc: [Vec<f64>; 3],
-    /// The corrector's latent variance V(f) per floor, when the twin has a corrector.
-    pub latent_var: Option<[Vec<f64>; 3]>,
-    /// The corrector's predictive standard deviation per floor, likewise.
-    pub sd: Option<[Vec<f64>; 3]>,
+    pub channels: Vec<PredictedChannel>,
+}
+
+/// Acceleration of floor `floor` (1-based).
+fn acc_channel(floor: usize) -> Channel {
+    Channel::Response {
+        quantity: Quantity::Acceleration,
+        floor,
+    }
+}
+
+impl Prediction {
+    /// Accelerations of floors 1, 2, … (a closed loop's prediction), without corrector.
+    pub fn of_accelerations(time: Vec<f64>, acc: Vec<Vec<f64>>) -> Prediction {
+        let channels = acc
+            .into_iter()
+            .enumerate()
+            .map(|(f, values)| PredictedChannel {
+                channel: acc_channel(f + 1),
+                values,
+                latent_var: None,
+                sd: None,
+            })
+            .collect();
+        Prediction { time, channels }
+    }
+
+    /// The prediction of `channel`, if the twin made one.
+    pub fn get(&self, channel: Channel) -> Option<&PredictedChannel> {
+        self.channels.iter().find(|c| c.channel == channel)
+    }
+
+    /// The predicted channels' names, in order.
+    pub fn names(&self) -> Vec<String> {
+        self.channels.iter().map(|c| c.channel.name()).collect()
+    }
+
+    /// Whether the twin gives a predictive sd (its corrector) for some channel.
+    pub fn has_sd(&self) -> bool {
+        self.channels.iter().any(|c| c.sd.is_some())
+    }
+
+    /// Floor `f`'s acceleration (`f` from 0), for the workflows written for the paper's rig
+    /// (their records have acc1..acc3, [`Measurement::require_paper_rig`]). Panics when it
+    /// was not predicted.
+    pub fn acc(&self, f: usize) -> &[f64] {
+        &self
+            .get(acc_channel(f + 1))
+            .unwrap_or_else(|| panic!("the prediction has no acc{}", f + 1))
+            .values
+    }
+
+    /// The paper rig's three accelerations (see [`Prediction::acc`]).
+    pub fn accs(&self) -> [&[f64]; 3] {
+        std::array::from_fn(|f| self.acc(f))
+    }
+
+    /// The paper rig's three latent variances, when the twin's corrector gives them.
+    pub fn paper_latent_var(&self) -> Option<[Vec<f64>; 3]> {
+        let one = |f: usize| self.get(acc_channel(f + 1))?.latent_var.clone();
+        Some([one(0)?, one(1)?, one(2)?])
+    }
 }
 
 /// Calls `on_progress(done, total)`, but only once a run has lasted more than a second, so short
@@ -45,36 +118,77 @@ impl<F: FnMut(u64, u64)> Progress<F> {
     }
 }
 
-/// Run `twin` on `data`'s force (the control force, if the data has a `control` column and the
-/// twin takes it, is replayed too).
+/// Run `twin` on `data`'s excitation (`force` or `ground_acc`; the control force, if the data
+/// has a `control` column and the twin takes it, is replayed too) and record its value of every
+/// response channel the record measures: the system output of that name when the twin has one
+/// (a corrector's corrected acceleration), else the physics component's variable (`acc<i>`,
+/// `vel<i>`, `disp<i>`: the shear FMU has them for every floor); and for an `acc<i>`, the
+/// corrector's `latent_var<i>` and `sd<i>` when the twin gives them.
 pub fn run_twin(
     twin: &Twin,
     data: &Measurement,
     mut progress: impl FnMut(u64, u64),
 ) -> Result<Prediction, RunError> {
     let start = data.time[0];
-    let mut inputs = vec![("force", data.force().to_vec())];
+    let excitation = data.excitation.channel.name();
+    let driven = |name: &str| {
+        twin.connections
+            .iter()
+            .any(|c| c.start_element.is_none() && c.start_connector == name)
+    };
+    if !driven(&excitation) {
+        return Err(RunError::Wiring(format!(
+            "{}: the record is excited by '{excitation}', which {} does not take",
+            data.path.display(),
+            twin.describe(),
+        )));
+    }
+    let mut inputs = vec![(excitation.as_str(), data.excitation.values.clone())];
     if let Some(control) = data.extra.get("control") {
         inputs.push(("control_force", control.clone()));
     }
+    // Channels the twin gives out under their name, and those read from its physics.
+    let system_outputs = twin.system_outputs();
+    let names: Vec<String> = data.responses.iter().map(|s| s.channel.name()).collect();
+    let from_physics: Vec<&String> = names
+        .iter()
+        .filter(|n| !system_outputs.contains(n))
+        .collect();
+    let wired;
+    let twin = if from_physics.is_empty() {
+        twin
+    } else {
+        let mut copy = twin.duplicate();
+        for name in from_physics {
+            copy.connections.push(Connection {
+                start_element: Some(PHYSICS.into()),
+                start_connector: name.clone(),
+                end_element: None,
+                end_connector: name.clone(),
+            });
+        }
+        wired = copy;
+        &wired
+    };
     let builder = SystemBuilder::open(twin)?;
     let mut running = builder.build(start, inputs)?;
     let system_outputs = twin.system_outputs();
-    let optional = [
-        "latent_var1",
-        "latent_var2",
-        "latent_var3",
-        "sd1",
-        "sd2",
-        "sd3",
-    ];
+    let band_of = |name: &str, prefix: &str| -> Option<String> {
+        let floor = name.strip_prefix("acc")?;
+        let band = format!("{prefix}{floor}");
+        system_outputs.contains(&band).then_some(band)
+    };
     let mut watched = Vec::new();
-    for output in OUTPUTS.iter().chain(
-        optional
-            .iter()
-            .filter(|o| system_outputs.iter().any(|s| s == *o)),
-    ) {
-        watched.push(((*output).to_owned(), running.system_output(twin, output)?));
+    for name in &names {
+        watched.push((name.clone(), running.system_output(twin, name)?));
+        for prefix in ["latent_var", "sd"] {
+            if let Some(band) = band_of(name, prefix) {
+                if !watched.iter().any(|(w, _)| *w == band) {
+                    let port = running.system_output(twin, &band)?;
+                    watched.push((band, port));
+                }
+            }
+        }
     }
     let mut recorder = Recorder::new(watched);
     let clock = Clock::new(start, data.dt, (data.len() - 1) as u64);
@@ -83,20 +197,24 @@ pub fn run_twin(
         .run(clock, &mut [&mut recorder], &mut progress)?;
     drop(running);
     let column = |name: &str| recorder.column(name).map(<[f64]>::to_vec);
-    let triple = |prefix: &str| -> Option<[Vec<f64>; 3]> {
-        Some([
-            column(&format!("{prefix}1"))?,
-            column(&format!("{prefix}2"))?,
-            column(&format!("{prefix}3"))?,
-        ])
-    };
-    let acc = triple("acc")
-        .ok_or_else(|| RunError::Wiring("the accelerations were not recorded".into()))?;
+    let channels = data
+        .responses
+        .iter()
+        .zip(&names)
+        .map(|(signal, name)| {
+            let values = column(name)
+                .ok_or_else(|| RunError::Wiring(format!("the twin's '{name}' was not recorded")))?;
+            Ok(PredictedChannel {
+                channel: signal.channel,
+                values,
+                latent_var: band_of(name, "latent_var").and_then(|b| column(&b)),
+                sd: band_of(name, "sd").and_then(|b| column(&b)),
+            })
+        })
+        .collect::<Result<Vec<_>, RunError>>()?;
     Ok(Prediction {
         time: recorder.time.clone(),
-        acc,
-        latent_var: triple("latent_var"),
-        sd: triple("sd"),
+        channels,
     })
 }
 
@@ -146,24 +264,53 @@ impl Tolerance {
     }
 }
 
-/// A twin run on a record and compared with it.
+/// A twin run on a record and compared with it, channel by channel in the record's order.
 pub struct Compared {
     pub prediction: Prediction,
     pub comparison: Comparison,
-    /// The ±3σ band's noise variances: the twin's, else [`PRIOR_NOISE_FRACTION`] of the record's.
-    pub noise_variance: [f64; 3],
-    pub noise_source: &'static str,
-    /// Per floor and sample, the prediction's variance from the twin's parameter uncertainty
+    /// The ±3σ band's noise variance per channel: the twin's, else [`PRIOR_NOISE_FRACTION`] of
+    /// the record's, in the channel's own unit squared (SI).
+    pub noise_variance: Vec<f64>,
+    pub noise_source: String,
+    /// Per channel and sample, the prediction's variance from the twin's parameter uncertainty
     /// (`J Σ Jᵀ`), when the twin has a posterior covariance and no corrector band.
-    pub parameter_variance: Option<[Vec<f64>; 3]>,
-    /// NMSE per floor (%) the band explains on this record after the transient: noise alone,
-    /// and the parameter uncertainty's share (`100 · mean(J Σ Jᵀ) / var ÿ`).
-    pub noise_nmse: [f64; 3],
-    pub band_nmse: [f64; 3],
+    pub parameter_variance: Option<Vec<Vec<f64>>>,
+    /// NMSE per channel (%) the band explains on this record after the transient: noise alone,
+    /// and the parameter uncertainty's share (`100 · mean(J Σ Jᵀ) / var y`).
+    pub noise_nmse: Vec<f64>,
+    pub band_nmse: Vec<f64>,
     pub tolerance: Tolerance,
 }
 
-/// Run `twin` on `data` and compare the accelerations after `transient`: the one sequence
+impl Compared {
+    /// NMSE (%) of floor `f`'s acceleration (`f` from 0), for the workflows written for the
+    /// paper's rig. Panics when the record has no such channel.
+    pub fn acc_nmse(&self, f: usize) -> f64 {
+        self.comparison
+            .nmse_of(acc_channel(f + 1))
+            .unwrap_or_else(|| panic!("the comparison has no acc{}", f + 1))
+    }
+
+    /// The paper rig's NMSE per floor (see [`Compared::acc_nmse`]).
+    pub fn paper_nmse(&self) -> [f64; 3] {
+        std::array::from_fn(|f| self.acc_nmse(f))
+    }
+
+    /// A per-channel array of this comparison (e.g. `band_nmse`) at floors 1 to 3's
+    /// accelerations, for the workflows written for the paper's rig. Panics when the record
+    /// lacks one of them.
+    pub fn paper(&self, per_channel: &[f64]) -> [f64; 3] {
+        std::array::from_fn(|f| {
+            let c = self
+                .comparison
+                .index_of(acc_channel(f + 1))
+                .unwrap_or_else(|| panic!("the comparison has no acc{}", f + 1));
+            per_channel[c]
+        })
+    }
+}
+
+/// Run `twin` on `data` and compare every measured channel after `transient`: the one sequence
 /// behind `twin compare`, the calibrated twin's plot and the NMSE after calibrating or training.
 /// The band includes the parameter uncertainty; the tolerance is the twin's default.
 pub fn run_and_compare(
@@ -184,18 +331,19 @@ pub fn run_and_compare_with(
     progress: impl FnMut(u64, u64),
 ) -> Result<Compared, RunError> {
     let prediction = run_twin(twin, data, progress)?;
-    let parameter_variance = match prediction.sd {
-        Some(_) => None,
-        None => parameter_variance(twin, data, &prediction.acc)?,
+    let parameter_variance = if prediction.has_sd() {
+        None
+    } else {
+        parameter_variance(twin, data, &prediction)?
     };
-    Ok(compare_with(
+    compare_with(
         twin,
         data,
         transient,
         tolerance,
         prediction,
         parameter_variance,
-    ))
+    )
 }
 
 /// Compare a prediction the twin made some other way (e.g. in a closed loop) with `data`, as
@@ -206,62 +354,124 @@ pub fn compare_prediction(
     data: &Measurement,
     transient: f64,
     prediction: Prediction,
-) -> Compared {
+) -> Result<Compared, RunError> {
     compare_with(twin, data, transient, None, prediction, None)
 }
 
-/// Compare `prediction` with `data`: the band's variance per sample is the noise variance plus
-/// `parameter_variance` (or the corrector's predictive sd when the twin has one).
+/// The noise variance of each of `data`'s response channels: the twin's where it has one
+/// ([`Twin::noise_variance_of`]), else [`PRIOR_NOISE_FRACTION`] of the channel's measured
+/// variance; and where they came from, in words.
+pub fn noise_variances(twin: &Twin, data: &Measurement) -> (Vec<f64>, String) {
+    let mut from_twin = Vec::new();
+    let mut from_prior = Vec::new();
+    let variances = data
+        .responses
+        .iter()
+        .map(|s| match twin.noise_variance_of(s.channel) {
+            Some(v) => {
+                from_twin.push(s.channel.name());
+                v
+            }
+            None => {
+                from_prior.push(s.channel.name());
+                PRIOR_NOISE_FRACTION * variance(&s.values)
+            }
+        })
+        .collect();
+    let prior = "prior: 2 % of the measured variance";
+    let calibrated = "twin (calibrated)";
+    let source = match (from_twin.is_empty(), from_prior.is_empty()) {
+        (false, true) => calibrated.to_owned(),
+        (true, _) => prior.to_owned(),
+        (false, false) => format!(
+            "{calibrated} for {}; {prior} for {}",
+            from_twin.join(", "),
+            from_prior.join(", ")
+        ),
+    };
+    (variances, source)
+}
+
+/// Compare `prediction` with `data`, channel by channel in the record's order: the band's
+/// variance per sample is the noise variance plus `parameter_variance` (or the corrector's
+/// predictive sd where the twin gives one). Err when the prediction lacks a measured channel.
 pub fn compare_with(
     twin: &Twin,
     data: &Measurement,
     transient: f64,
     tolerance: Option<f64>,
     prediction: Prediction,
-    parameter_variance: Option<[Vec<f64>; 3]>,
-) -> Compared {
-    let (noise_variance, noise_source) = match twin.noise_variance {
-        Some(v) => (v, "twin (calibrated)"),
-        None => (
-            [0, 1, 2].map(|f| PRIOR_NOISE_FRACTION * variance(&data.acc(f))),
-            "prior: 2 % of the measured variance",
-        ),
-    };
+    parameter_variance: Option<Vec<Vec<f64>>>,
+) -> Result<Compared, RunError> {
+    let (noise_variance, noise_source) = noise_variances(twin, data);
     let tolerance = Tolerance::resolve(twin, tolerance);
     let options = CompareOptions {
         transient,
         tolerance: tolerance.value,
         ..CompareOptions::default()
     };
-    let band_sd: Option<[Vec<f64>; 3]> = match (&prediction.sd, &parameter_variance) {
-        (Some(sd), _) => Some(sd.clone()),
-        (None, Some(pv)) => Some([0, 1, 2].map(|f| {
-            pv[f]
-                .iter()
-                .map(|v| (noise_variance[f] + v.max(0.0)).sqrt())
-                .collect()
-        })),
-        (None, None) => None,
-    };
+    let predicted: Vec<&PredictedChannel> = data
+        .responses
+        .iter()
+        .map(|s| {
+            prediction.get(s.channel).ok_or_else(|| {
+                RunError::Wiring(format!(
+                    "the twin's prediction has no '{}', which {} measures",
+                    s.channel.name(),
+                    data.path.display()
+                ))
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let n = data.len();
+    // A band per sample when some channel has one: the corrector's sd, or noise and parameter
+    // uncertainty; the other channels keep their noise sd.
+    let band_sd: Option<Vec<Vec<f64>>> =
+        if predicted.iter().any(|p| p.sd.is_some()) || parameter_variance.is_some() {
+            Some(
+                predicted
+                    .iter()
+                    .enumerate()
+                    .map(|(c, p)| match (&p.sd, &parameter_variance) {
+                        (Some(sd), _) => sd.clone(),
+                        (None, Some(pv)) => pv[c]
+                            .iter()
+                            .map(|v| (noise_variance[c] + v.max(0.0)).sqrt())
+                            .collect(),
+                        (None, None) => vec![noise_variance[c].sqrt(); n],
+                    })
+                    .collect(),
+            )
+        } else {
+            None
+        };
+    let channels: Vec<Channel> = data.responses.iter().map(|s| s.channel).collect();
+    let measured: Vec<Vec<f64>> = data.responses.iter().map(|s| s.values.clone()).collect();
+    let predicted_values: Vec<Vec<f64>> = predicted.iter().map(|p| p.values.clone()).collect();
     let comparison = compare(
         &data.time,
-        &data.accs().map(<[f64]>::to_vec),
-        &prediction.acc,
-        noise_variance,
-        band_sd.as_ref(),
+        &channels,
+        &measured,
+        &predicted_values,
+        &noise_variance,
+        band_sd.as_deref(),
         options,
     );
     let first = comparison.first;
-    let record_var = [0, 1, 2].map(|f| variance(&data.acc(f)[first..]));
-    let noise_nmse = [0, 1, 2].map(|f| 100.0 * noise_variance[f] / record_var[f]);
-    let band_nmse = [0, 1, 2].map(|f| match &parameter_variance {
-        Some(pv) if pv[f].len() > first => {
-            let tail = &pv[f][first..];
-            100.0 * tail.iter().sum::<f64>() / tail.len() as f64 / record_var[f]
-        }
-        _ => 0.0,
-    });
-    Compared {
+    let record_var: Vec<f64> = measured.iter().map(|m| variance(&m[first..])).collect();
+    let noise_nmse = (0..channels.len())
+        .map(|c| 100.0 * noise_variance[c] / record_var[c])
+        .collect();
+    let band_nmse = (0..channels.len())
+        .map(|c| match &parameter_variance {
+            Some(pv) if pv[c].len() > first => {
+                let tail = &pv[c][first..];
+                100.0 * tail.iter().sum::<f64>() / tail.len() as f64 / record_var[c]
+            }
+            _ => 0.0,
+        })
+        .collect();
+    Ok(Compared {
         prediction,
         comparison,
         noise_variance,
@@ -270,18 +480,19 @@ pub fn compare_with(
         noise_nmse,
         band_nmse,
         tolerance,
-    }
+    })
 }
 
-/// The prediction's variance per floor and sample from the twin's parameter uncertainty,
-/// `J Σ Jᵀ`: `J` by forward differences through FMI (the twin run once more per calibrated
-/// parameter, the runs spread over the cores), `Σ` the twin's posterior covariance. None when the
-/// twin has no covariance, or its physics does not hold a value for every parameter of it.
+/// The prediction's variance per measured channel (the record's order) and sample from the
+/// twin's parameter uncertainty, `J Σ Jᵀ`: `J` by forward differences through FMI (the twin run
+/// once more per calibrated parameter, the runs spread over the cores), `Σ` the twin's
+/// posterior covariance. None when the twin has no covariance, or its physics does not hold a
+/// value for every parameter of it.
 pub fn parameter_variance(
     twin: &Twin,
     data: &Measurement,
-    acc: &[Vec<f64>; 3],
-) -> Result<Option<[Vec<f64>; 3]>, RunError> {
+    prediction: &Prediction,
+) -> Result<Option<Vec<Vec<f64>>>, RunError> {
     let Some(cov) = &twin.parameter_covariance else {
         return Ok(None);
     };
@@ -299,10 +510,22 @@ pub fn parameter_variance(
     if p == 0 {
         return Ok(None);
     }
+    let base: Vec<&[f64]> = data
+        .responses
+        .iter()
+        .map(|s| {
+            prediction
+                .get(s.channel)
+                .map(|c| c.values.as_slice())
+                .ok_or_else(|| {
+                    RunError::Wiring(format!("the prediction has no '{}'", s.channel.name()))
+                })
+        })
+        .collect::<Result<_, _>>()?;
     // The step: 1e-5 of the value, far inside the posterior's width for any usable calibration
     // and far above rounding, so `J` is the derivative and the band exactly linear in `Σ`.
     let steps: Vec<f64> = values.iter().map(|v| (1e-5 * v.abs()).max(1e-12)).collect();
-    let sensitivity = |j: usize| -> Result<[Vec<f64>; 3], RunError> {
+    let sensitivity = |j: usize| -> Result<Vec<Vec<f64>>, RunError> {
         let mut shifted = twin.duplicate();
         if let Some(c) = shifted.component_mut(PHYSICS) {
             c.parameters.insert(
@@ -311,19 +534,24 @@ pub fn parameter_variance(
             );
         }
         let run = run_twin(&shifted, data, |_, _| {})?;
-        Ok([0, 1, 2].map(|f| {
-            run.acc[f]
-                .iter()
-                .zip(&acc[f])
-                .map(|(a, b)| (a - b) / steps[j])
-                .collect()
-        }))
+        Ok(run
+            .channels
+            .iter()
+            .zip(&base)
+            .map(|(c, b)| {
+                c.values
+                    .iter()
+                    .zip(b.iter())
+                    .map(|(a, b)| (a - b) / steps[j])
+                    .collect()
+            })
+            .collect())
     };
     let threads = std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1)
         .clamp(1, p);
-    let results: Vec<Vec<(usize, Result<[Vec<f64>; 3], RunError>)>> = std::thread::scope(|scope| {
+    let results: Vec<Vec<(usize, Result<Vec<Vec<f64>>, RunError>)>> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
                 let sensitivity = &sensitivity;
@@ -340,32 +568,35 @@ pub fn parameter_variance(
             .map(|h| h.join().expect("a sensitivity thread panicked"))
             .collect()
     });
-    let mut jac: Vec<Option<[Vec<f64>; 3]>> = (0..p).map(|_| None).collect();
+    let mut jac: Vec<Option<Vec<Vec<f64>>>> = (0..p).map(|_| None).collect();
     for (j, r) in results.into_iter().flatten() {
         jac[j] = Some(r?);
     }
-    let jac: Vec<[Vec<f64>; 3]> = jac.into_iter().map(|j| j.expect("every run")).collect();
-    let n = acc[0].len();
-    Ok(Some([0, 1, 2].map(|f| {
-        (0..n)
-            .map(|k| {
-                let mut v = 0.0;
-                for a in 0..p {
-                    let ja = jac[a][f][k];
-                    for b in 0..p {
-                        v += ja * cov.matrix[a][b] * jac[b][f][k];
-                    }
-                }
-                v.max(0.0)
+    let jac: Vec<Vec<Vec<f64>>> = jac.into_iter().map(|j| j.expect("every run")).collect();
+    let n = data.len();
+    Ok(Some(
+        (0..base.len())
+            .map(|c| {
+                (0..n)
+                    .map(|k| {
+                        let mut v = 0.0;
+                        for a in 0..p {
+                            let ja = jac[a][c][k];
+                            for b in 0..p {
+                                v += ja * cov.matrix[a][b] * jac[b][c][k];
+                            }
+                        }
+                        v.max(0.0)
+                    })
+                    .collect()
             })
-            .collect()
-    })))
+            .collect(),
+    ))
 }
 
-/// NMSE per floor of `twin` on `data` after the transient.
+/// NMSE per floor of `twin` on `data` after the transient, for the workflows written for the
+/// paper's rig (acc1..acc3).
 pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3], RunError> {
     let prediction = run_twin(twin, data, |_, _| {})?;
-    Ok(compare_prediction(twin, data, transient, prediction)
-        .comparison
-        .nmse)
+    Ok(compare_prediction(twin, data, transient, prediction)?.paper_nmse())
 }

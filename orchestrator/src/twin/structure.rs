@@ -13,7 +13,7 @@ use std::sync::Arc;
 use fmu_shear::{ShearParameters, StructureResource};
 use structure::{Excitation, Structure};
 
-use super::{find_fmu, Twin, TwinError, SHEAR_FMU};
+use super::{find_fmu, ParameterValue, Twin, TwinError, PHYSICS, SHEAR_FMU};
 
 /// The structure file inside the FMU (under `resources/`).
 const RESOURCE: &str = "resources/structure.json";
@@ -152,7 +152,64 @@ pub fn shear_fmu_bytes(resource: &StructureResource) -> Result<Vec<u8>, TwinErro
     Ok(out.into_inner())
 }
 
+/// The structure a shear FMU archive models: its `resources/structure.json`, None when it has
+/// none (the paper's rig).
+pub fn structure_of_fmu(fmu: &Path) -> Result<Option<StructureResource>, TwinError> {
+    let bad = |message: String| TwinError::Invalid {
+        path: fmu.to_owned(),
+        message,
+    };
+    let file = std::fs::File::open(fmu).map_err(|source| TwinError::Io {
+        path: fmu.to_owned(),
+        source,
+    })?;
+    let mut archive =
+        zip::ZipArchive::new(file).map_err(|e| bad(format!("not a zip archive ({e})")))?;
+    let mut entry = match archive.by_name(RESOURCE) {
+        Ok(entry) => entry,
+        Err(zip::result::ZipError::FileNotFound) => return Ok(None),
+        Err(e) => return Err(bad(format!("{RESOURCE}: {e}"))),
+    };
+    let mut text = String::new();
+    entry
+        .read_to_string(&mut text)
+        .map_err(|e| bad(format!("{RESOURCE}: {e}")))?;
+    let resource: StructureResource =
+        serde_json::from_str(&text).map_err(|e| bad(format!("{RESOURCE}: {e}")))?;
+    resource
+        .parameters()
+        .map_err(|e| bad(format!("{RESOURCE}: {e}")))?;
+    Ok(Some(resource))
+}
+
 impl Twin {
+    /// The structure the twin models: its physics component's shear FMU's
+    /// `resources/structure.json` (written by `twin init`; without it, the paper's rig), with
+    /// the twin's own values of the parameters `m<i>`, `c<i>`, `k<i>` put in.
+    pub fn structure(&self) -> Result<Structure, TwinError> {
+        let physics = self.component(PHYSICS).ok_or_else(|| {
+            TwinError::Message(format!(
+                "{} has no '{PHYSICS}' component, so no structure",
+                self.describe()
+            ))
+        })?;
+        let mut structure = structure_of_fmu(&physics.fmu_path)
+            .map_err(|e| TwinError::Component {
+                twin: self.describe(),
+                component: physics.name.clone(),
+                fmu: format!("resources/{}", physics.fmu_name),
+                inner: Box::new(super::strip_temporary_path(e, &physics.fmu_path)),
+            })?
+            .map(|r| r.structure)
+            .unwrap_or_default();
+        for (name, value) in &physics.parameters {
+            if let ParameterValue::Real(x) = value {
+                structure.set(name, *x);
+            }
+        }
+        Ok(structure)
+    }
+
     /// The default twin of `structure`: the paper's rig is [`Twin::default_twin`] itself;
     /// any other structure gets its own shear FMU (written to a temporary file that lives as
     /// long as the twin), the excitation's input and the control force connected in, every

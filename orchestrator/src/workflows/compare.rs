@@ -1,5 +1,6 @@
-//! `twin compare`'s options and work: the twin on a record's force (open loop, or in a closed
-//! loop with a `twin control` report's controller), compared with the measured accelerations.
+//! `twin compare`'s options and work: the twin on a record's excitation (open loop, or in a
+//! closed loop with a `twin control` report's controller), compared with every measured
+//! channel.
 
 use crate::evaluation::compare::DEFAULT_TRANSIENT;
 use crate::twin::data::Measurement;
@@ -83,15 +84,16 @@ pub fn compare(
                 options.tolerance,
                 prediction,
                 None,
-            )
+            )?
         }
     })
 }
 
 /// `twin compare --plot PATH [--frf]`: measured, predicted, ±3σ band, residual and failing
-/// windows (and the frequency-response view); with a corrector, the latent-variance view
-/// beside it (`PATH-latent.svg`) against `options.latent_threshold` (default: each floor's
-/// calibrated noise variance, else 1e-3 × its measured variance on this record).
+/// windows per measured channel (and the frequency-response view); with a corrector, the
+/// latent-variance view of the channels it corrects beside it (`PATH-latent.svg`) against
+/// `options.latent_threshold` (default: each channel's calibrated noise variance, else 1e-3 ×
+/// its measured variance on this record).
 pub fn plot(
     twin: &Twin,
     data: &Measurement,
@@ -102,17 +104,28 @@ pub fn plot(
 ) -> Result<(), crate::report::ReportError> {
     let title = format!("{} on {}", twin.describe(), data.path.display());
     let comparison = &compared.comparison;
-    crate::report::plot_comparison(comparison, &data.force(), &title, path, frf)?;
-    if let Some(latent) = &compared.prediction.latent_var {
-        let threshold = match (options.latent_threshold, twin.noise_variance) {
-            (Some(t), _) => [t; 3],
-            (None, Some(v)) => v,
-            (None, None) => [0, 1, 2].map(|f| {
-                crate::workflows::learn::PAPER_THRESHOLD
-                    * crate::evaluation::stats::variance(&data.acc(f)[comparison.first..])
-            }),
-        };
-        crate::report::plot_latent_variance(comparison, latent, threshold, &title, path)?;
+    crate::report::plot_comparison(comparison, &data.excitation, &title, path, frf)?;
+    let latent: Vec<(usize, &[f64], f64)> = comparison
+        .channels
+        .iter()
+        .enumerate()
+        .filter_map(|(c, channel)| {
+            let values = compared.prediction.get(*channel)?.latent_var.as_deref()?;
+            let threshold = match (options.latent_threshold, twin.noise_variance_of(*channel)) {
+                (Some(t), _) => t,
+                (None, Some(v)) => v,
+                (None, None) => {
+                    crate::workflows::learn::PAPER_THRESHOLD
+                        * crate::evaluation::stats::variance(
+                            &comparison.measured[c][comparison.first..],
+                        )
+                }
+            };
+            Some((c, values, threshold))
+        })
+        .collect();
+    if !latent.is_empty() {
+        crate::report::plot_latent_variance(comparison, &latent, &title, path)?;
     }
     Ok(())
 }

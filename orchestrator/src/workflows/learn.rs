@@ -282,9 +282,9 @@ pub fn prepare(
             let samples: Vec<Sample> = (0..data.len())
                 .map(|k| {
                     [
-                        prediction.acc[0][k],
-                        prediction.acc[1][k],
-                        prediction.acc[2][k],
+                        prediction.acc(0)[k],
+                        prediction.acc(1)[k],
+                        prediction.acc(2)[k],
                         data.force()[k],
                     ]
                 })
@@ -306,10 +306,10 @@ pub fn prepare(
                 targets: (0..data.len())
                     .map(|k| {
                         [0, 1, 2]
-                            .map(|f| options.target.target(data.acc(f)[k], prediction.acc[f][k]))
+                            .map(|f| options.target.target(data.acc(f)[k], prediction.acc(f)[k]))
                     })
                     .collect(),
-                physics: prediction.acc.clone(),
+                physics: prediction.accs().map(<[f64]>::to_vec),
                 measured: data.accs().map(<[f64]>::to_vec),
                 first,
             })

@@ -147,8 +147,10 @@ pub fn select_lags(
         return Err(TrainError::Setup("no lag count to choose from".into()));
     }
     let physics = physics_only(twin);
-    let prediction = run_twin(&physics, data, |_, _| {})?;
-    let samples = physics_samples(data, &prediction.acc);
+    let acc = run_twin(&physics, data, |_, _| {})?
+        .accs()
+        .map(<[f64]>::to_vec);
+    let samples = physics_samples(data, &acc);
     // The same samples for every q: the transient cut at the largest q.
     let largest = candidates.iter().copied().max().unwrap_or(1);
     let mut scores = Vec::new();
@@ -156,7 +158,7 @@ pub fn select_lags(
         let floors = fit_floors(
             data,
             &samples,
-            &prediction.acc,
+            &acc,
             &TrainOptions {
                 lags: q,
                 transient: options.transient.max(largest as f64 * data.dt),
@@ -191,9 +193,11 @@ pub fn train(
 ) -> Result<(Twin, TrainSummary), TrainError> {
     let started = std::time::Instant::now();
     let physics = physics_only(twin);
-    let prediction = run_twin(&physics, data, |_, _| {})?;
-    let samples = physics_samples(data, &prediction.acc);
-    let floors = fit_floors(data, &samples, &prediction.acc, options)?;
+    let acc = run_twin(&physics, data, |_, _| {})?
+        .accs()
+        .map(<[f64]>::to_vec);
+    let samples = physics_samples(data, &acc);
+    let floors = fit_floors(data, &samples, &acc, options)?;
     let trained = floors.to_training_file(options.lags, options.target);
 
     let summary = TrainSummary {

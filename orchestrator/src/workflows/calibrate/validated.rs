@@ -72,6 +72,6 @@ pub fn plot(
     let comparison =
         crate::twin::run::run_and_compare(calibrated, data, transient, |_, _| {})?.comparison;
     let title = format!("calibrated on {}", data.path.display());
-    crate::report::plot_comparison(&comparison, &data.force(), &title, path, false)?;
+    crate::report::plot_comparison(&comparison, &data.excitation, &title, path, false)?;
     Ok(())
 }

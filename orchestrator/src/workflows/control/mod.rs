@@ -987,15 +987,7 @@ pub fn predict_controlled(
         state: StateSource::Estimated(spec.estimator_settings.clone()),
     };
     let r = simulate(twin, data, &setup, Some(&law), progress)?;
-    let floors = r.acc.len();
-    Ok(crate::twin::run::Prediction {
-        time: r.time,
-        acc: r.acc.try_into().map_err(|_| {
-            ControlError::Twin(format!(
-                "a prediction holds three floors; the controlled structure has {floors}"
-            ))
-        })?,
-        latent_var: None,
-        sd: None,
-    })
+    Ok(crate::twin::run::Prediction::of_accelerations(
+        r.time, r.acc,
+    ))
 }

@@ -405,9 +405,8 @@ fn addition_from_json(e: &serde_json::Value) -> std::result::Result<Addition, St
         .ok_or("an effect without a label")?;
     let site = match Label::parse(label) {
         Ok(parsed) if parsed.kind == super::candidate::DISCOVERED => {
-            Site::at_location(parsed.location, MAX_STOREYS).ok_or_else(|| {
-                format!("effect '{label}': the site must be storeyN or floorN")
-            })?
+            Site::at_location(parsed.location, MAX_STOREYS)
+                .ok_or_else(|| format!("effect '{label}': the site must be storeyN or floorN"))?
         }
         _ => return Candidate::parse(label, MAX_STOREYS).map(Addition::Library),
     };

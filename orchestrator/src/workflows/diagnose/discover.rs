@@ -99,7 +99,10 @@ pub struct Problem<'a> {
 impl Problem<'_> {
     /// A sensitivity (every floor) at the measured channels' floors.
     fn measured(&self, every_floor: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
-        self.floors.iter().map(|&f| every_floor[f].clone()).collect()
+        self.floors
+            .iter()
+            .map(|&f| every_floor[f].clone())
+            .collect()
     }
 
     /// The nuisance columns, in every model: the sensitivities to the physics parameters (each
@@ -192,7 +195,12 @@ pub fn screen(problem: &Problem, candidates: &[Candidate]) -> Vec<f64> {
                         .map(|(&a, &b)| function.eval(a, b, scale))
                         .collect();
                     set.push(columns.len());
-                    columns.push(problem.measured(sensitivity(&problem.linear, site, &phi, problem.dt)));
+                    columns.push(problem.measured(sensitivity(
+                        &problem.linear,
+                        site,
+                        &phi,
+                        problem.dt,
+                    )));
                 }
                 sets.push(set);
             }
@@ -341,9 +349,17 @@ fn sensitivity(linear: &LinearPart, site: Site, phi: &[f64], dt: f64) -> Vec<Vec
             let u = |tau: f64| u0 + (u1 - u0) * (s + tau / dt);
             let k1v = accel(&y, &v, u(0.0));
             let k1y = v.clone();
-            let k2v = accel(&(&y + &k1y * (h / 2.0)), &(&v + &k1v * (h / 2.0)), u(h / 2.0));
+            let k2v = accel(
+                &(&y + &k1y * (h / 2.0)),
+                &(&v + &k1v * (h / 2.0)),
+                u(h / 2.0),
+            );
             let k2y = &v + &k1v * (h / 2.0);
-            let k3v = accel(&(&y + &k2y * (h / 2.0)), &(&v + &k2v * (h / 2.0)), u(h / 2.0));
+            let k3v = accel(
+                &(&y + &k2y * (h / 2.0)),
+                &(&v + &k2v * (h / 2.0)),
+                u(h / 2.0),
+            );
             let k3y = &v + &k2v * (h / 2.0);
             let k4v = accel(&(&y + &k3y * h), &(&v + &k3v * h), u(h));
             let k4y = &v + &k3v * h;
@@ -910,21 +926,27 @@ mod tests {
         let dt = 1.0 / 51.2;
         let n = 1024;
         // States: two incommensurate sines per floor.
-        let drift: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
-            (0..n)
-                .map(|k| 1e-3 * ((0.31 + 0.07 * f as f64) * k as f64).sin())
-                .collect()
-        }).to_vec();
-        let velocity: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
-            (0..n)
-                .map(|k| 0.02 * ((0.19 + 0.05 * f as f64) * k as f64 + 0.4).cos())
-                .collect()
-        }).to_vec();
-        let acceleration: Vec<Vec<f64>> = [0, 1, 2].map(|f| {
-            (0..n)
-                .map(|k| 0.3 * ((0.43 + 0.03 * f as f64) * k as f64 + 1.1).sin())
-                .collect()
-        }).to_vec();
+        let drift: Vec<Vec<f64>> = [0, 1, 2]
+            .map(|f| {
+                (0..n)
+                    .map(|k| 1e-3 * ((0.31 + 0.07 * f as f64) * k as f64).sin())
+                    .collect()
+            })
+            .to_vec();
+        let velocity: Vec<Vec<f64>> = [0, 1, 2]
+            .map(|f| {
+                (0..n)
+                    .map(|k| 0.02 * ((0.19 + 0.05 * f as f64) * k as f64 + 0.4).cos())
+                    .collect()
+            })
+            .to_vec();
+        let acceleration: Vec<Vec<f64>> = [0, 1, 2]
+            .map(|f| {
+                (0..n)
+                    .map(|k| 0.3 * ((0.43 + 0.03 * f as f64) * k as f64 + 1.1).sin())
+                    .collect()
+            })
+            .to_vec();
         let states = States {
             drift: &drift,
             velocity: &velocity,

@@ -307,7 +307,10 @@ pub(crate) fn storeys_of(twin: &Twin) -> Result<usize> {
     let component = twin
         .component(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    storeys_in(&Fmu::open(&component.fmu_path)?.model_description, &component.fmu_name)
+    storeys_in(
+        &Fmu::open(&component.fmu_path)?.model_description,
+        &component.fmu_name,
+    )
 }
 
 /// The storeys of a shear FMU: how many of `k1, k2, …` it has.
@@ -725,24 +728,30 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
 
     // 1. The twin as given, and its physics alone with drifts and velocities.
     // The twin's noise variances are known here, so the comparison's band is theirs.
+    let compared =
+        run_and_compare_with(twin, data, options.transient, options.tolerance, |_, _| {}).map_err(
+            |e| DiagnoseError::In {
+                context: format!("running the twin on {}", data.path.display()),
+                source: Box::new(e.into()),
+            },
+        )?;
     let Compared {
         prediction,
         comparison,
         band_nmse,
         tolerance,
         ..
-    } = run_and_compare_with(twin, data, options.transient, options.tolerance, |_, _| {}).map_err(
-        |e| DiagnoseError::In {
-            context: format!("running the twin on {}", data.path.display()),
-            source: Box::new(e.into()),
-        },
-    )?;
+    } = compared;
     let physics = physics_only(twin);
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
-    // The twin's per-floor results, per channel.
-    let predicted = channels.pick(&prediction.acc);
-    let nmse_before = channels.pick(&comparison.nmse);
-    let band_nmse = channels.pick(&band_nmse);
+    // The twin's results per channel: the comparison's are in the record's order, as
+    // `channels` (Channels::of reads the record's responses in order).
+    let predicted: Vec<Vec<f64>> = prediction
+        .channels
+        .iter()
+        .map(|c| c.values.clone())
+        .collect();
+    let nmse_before = comparison.nmse.clone();
     let noise_variance = channels.pick(&noise_variance);
     let nmse_before_held_out = channels.nmse_on(&predicted, &held_out);
     let noise_nmse_on = |idx: &[usize]| -> Vec<f64> {
@@ -756,9 +765,12 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let noise_nmse = noise_nmse_on(&after);
     let noise_nmse_held_out = noise_nmse_on(&held_out);
     let explained_nmse: Vec<f64> = (0..nc).map(|c| noise_nmse[c] + band_nmse[c]).collect();
-    let latent_variance = prediction.latent_var.as_ref().map(|v| {
-        let v = channels.pick(v);
-        LatentVariance {
+    let latent_variance = prediction
+        .channels
+        .iter()
+        .map(|c| c.latent_var.as_ref())
+        .collect::<Option<Vec<&Vec<f64>>>>()
+        .map(|v| LatentVariance {
             max: v
                 .iter()
                 .map(|v| v[first..].iter().copied().fold(0.0, f64::max))
@@ -767,8 +779,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 .iter()
                 .map(|v| v[first..].iter().sum::<f64>() / (n - first) as f64)
                 .collect(),
-        }
-    });
+        });
 
     // Scales of the candidates' priors.
     let reals = PhysicsReals::of(&physics)?;
@@ -909,7 +920,9 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let candidates = if options.candidates.is_none() && candidates.len() > SCREEN_KEEP {
         options.tell(&format!("screening {} candidates", candidates.len()));
         let values = |p: char| -> Result<Vec<f64>> {
-            (1..=storeys).map(|i| reals.get(&format!("{p}{i}"))).collect()
+            (1..=storeys)
+                .map(|i| reals.get(&format!("{p}{i}")))
+                .collect()
         };
         let problem = discover::Problem {
             linear: discover::LinearPart {

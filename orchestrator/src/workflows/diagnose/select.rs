@@ -39,7 +39,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::{
-    estimates, fit, Channels, parallel, with_switches, worst, Addition, Candidate, DiagnoseError,
+    estimates, fit, parallel, with_switches, worst, Addition, Candidate, Channels, DiagnoseError,
     DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
 };
 use crate::twin::data::Measurement;

@@ -18,7 +18,7 @@ use std::path::Path;
 use std::rc::Rc;
 
 use super::blocks::{ActuatorBlock, InterfaceBlock, InterfaceLog};
-use super::{HybridError, HybridRun, Result, Split, Frame};
+use super::{Frame, HybridError, HybridRun, Result, Split};
 use crate::cosim::import::{Fmu, Instance};
 use crate::cosim::master::{Clock, MasterError, Port, System};
 

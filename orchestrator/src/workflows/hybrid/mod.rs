@@ -59,8 +59,8 @@
 //! two instances of that FMU on the master algorithm.
 
 use numerics::actuator::EnergyMonitor;
-pub use numerics::substructure::{Cut, Frame, Split};
 use numerics::substructure::{interface_load, Numerical, Physical, SampledMotion};
+pub use numerics::substructure::{Cut, Frame, Split};
 use serde::Serialize;
 
 pub mod blocks;
@@ -92,7 +92,12 @@ pub type Result<T, E = HybridError> = std::result::Result<T, E>;
 
 /// `building` cut at `floor` with the bumper's `gap` and `contact_stiffness` (not checked:
 /// [`Frame::check`]).
-pub fn cut(building: &structure::Structure, floor: usize, gap: f64, contact_stiffness: f64) -> Frame {
+pub fn cut(
+    building: &structure::Structure,
+    floor: usize,
+    gap: f64,
+    contact_stiffness: f64,
+) -> Frame {
     Frame {
         mass: building.mass.clone(),
         damping: building.damping.clone(),
@@ -144,12 +149,7 @@ pub struct Interface {
 
 /// Check a test's inputs — the structure, a positive step, at least one control step a
 /// sample, a finite excitation — and give the control step `dt / substeps`.
-pub(crate) fn check_inputs(
-    s: &Frame,
-    excitation: &[f64],
-    dt: f64,
-    substeps: u32,
-) -> Result<f64> {
+pub(crate) fn check_inputs(s: &Frame, excitation: &[f64], dt: f64, substeps: u32) -> Result<f64> {
     s.check().map_err(HybridError::Setup)?;
     if !(dt.is_finite() && dt > 0.0) || substeps == 0 {
         return Err(HybridError::Setup(format!(
@@ -342,7 +342,11 @@ pub(crate) mod tests {
         let acc = |y: &[f64], v: &[f64], f: f64| -> Vec<f64> {
             // Storey i's force on floor i − 1 (0-based storey i joins floors i − 1 and i).
             let storey = |i: usize| {
-                let (yb, vb) = if i == 0 { (0.0, 0.0) } else { (y[i - 1], v[i - 1]) };
+                let (yb, vb) = if i == 0 {
+                    (0.0, 0.0)
+                } else {
+                    (y[i - 1], v[i - 1])
+                };
                 s.damping[i] * (v[i] - vb) + s.stiffness[i] * (y[i] - yb)
             };
             (0..n)

@@ -17,15 +17,7 @@ use super::{Frame, HybridError, HybridRun, Result, Split};
 
 /// Accelerations of all floors (1..j numerical, j+1..N physical; floor j's the numerical
 /// side's y_jn) into `a`, and the measured force, at states `y`, `v`.
-fn rates(
-    s: &Frame,
-    split: Split,
-    a_err: f64,
-    y: &[f64],
-    v: &[f64],
-    fe: f64,
-    a: &mut [f64],
-) -> f64 {
+fn rates(s: &Frame, split: Split, a_err: f64, y: &[f64], v: &[f64], fe: f64, a: &mut [f64]) -> f64 {
     let n = y.len();
     let jf = s.floor - 1;
     let gain = 1.0 + a_err;

@@ -235,7 +235,11 @@ impl HybridOptions {
             parameters.insert(format!("c{}", i + 1), s.damping[i]);
             parameters.insert(format!("k{}", i + 1), s.stiffness[i]);
         }
-        let split_name = Cut { storeys: None, ..cut }.name(n);
+        let split_name = Cut {
+            storeys: None,
+            ..cut
+        }
+        .name(n);
         let setup = Setup {
             structure,
             split: cut.split,

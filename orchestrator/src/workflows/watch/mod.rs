@@ -525,7 +525,11 @@ impl Alerts {
 
 /// NaN as JSON null.
 fn floats(x: impl AsRef<[f64]>) -> Value {
-    let x: Vec<Option<f64>> = x.as_ref().iter().map(|v| v.is_finite().then_some(*v)).collect();
+    let x: Vec<Option<f64>> = x
+        .as_ref()
+        .iter()
+        .map(|v| v.is_finite().then_some(*v))
+        .collect();
     json!(x)
 }
 
@@ -634,7 +638,7 @@ impl Watcher<'_> {
                             Some(time),
                             "failing",
                             json!({"start": window.start, "floors": window.floors,
-                                   "nmse": floats(window.nmse)}),
+                                   "nmse": floats(&window.nmse)}),
                         )?;
                     }
                     if failing || was_opened {
@@ -642,7 +646,7 @@ impl Watcher<'_> {
                             Some(time),
                             "recovered",
                             json!({"start": window.start, "end": window.end,
-                                   "floors": window.floors, "nmse": floats(window.nmse),
+                                   "floors": window.floors, "nmse": floats(&window.nmse),
                                    "withdrawn": !failing}),
                         )?;
                     }

@@ -327,8 +327,9 @@ impl Detector {
             window: FailingWindow {
                 start: group.start,
                 end: group.last,
+                channels: group.floors().iter().map(|f| format!("acc{f}")).collect(),
                 floors: group.floors(),
-                nmse,
+                nmse: nmse.to_vec(),
             },
             failing,
             was_opened: group.alerted,
@@ -376,7 +377,12 @@ mod tests {
                 tolerance,
                 ..CompareOptions::default()
             };
-            let batch = compare(&time, &measured, &predicted, [0.01; 3], None, options);
+            let accs: Vec<::structure::channel::Channel> = (1..=3)
+                .map(|f| ::structure::channel::Channel::parse(&format!("acc{f}")).expect("acc"))
+                .collect();
+            let batch = compare(
+                &time, &accs, &measured, &predicted, &[0.01; 3], None, options,
+            );
             let mut d = Detector::new(Options::new(options, 2.0), [0.01; 3], dt);
             let mut events = Vec::new();
             for k in 0..time.len() {
