@@ -80,7 +80,7 @@ def test_records_with_units_column_maps_and_other_channels(tmp_path):
     compared = st.Twin.default().compare(velocities)
     assert compared.channels == ["vel2"] and len(compared.nmse) == 1
     with pytest.raises(st.DataError, match="missing column 'acc1'"):
-        st.Twin.default().calibrate(velocities)
+        st.Twin.default().train(velocities)
     high = st.Record.from_arrays({"time": d["time"], "force": d["force"], "acc4": d["acc2"]})
     with pytest.raises(st.DataError, match="column 'acc4' is for floor 4; the structure has floors 1 to 3"):
         st.Twin.default().compare(high)

@@ -201,14 +201,13 @@ def test_the_guard_refuses_a_force_record_and_a_floor_the_twin_lacks(twin_binary
 
 def test_commands_written_for_the_paper_rig_say_so_at_once(twin_binary, tmp_path):
     """A five-storey twin shaken at floor 1 and the paper's record (force, acc1..acc3): compare
-    serves it; calibrate and train, still written for the rig, refuse it before any work."""
+    serves it; train, still written for the rig, refuses it before any work."""
     values = {key: [v[0]] * 5 for key, v in FIVE.items()}
     twin_path = init(twin_binary, tmp_path, "five-force", "force:1", values)
     dataset1 = ROOT / "data" / "dataset1.csv"
     report, _ = compare(twin_binary, twin_path, dataset1, tmp_path)
     assert report["channels"] == ["acc1", "acc2", "acc3"]
-    for command in (["calibrate", "--out", str(tmp_path / "c.ssp")],
-                    ["train", "--out", str(tmp_path / "t.ssp")]):
+    for command in (["train", "--out", str(tmp_path / "t.ssp")],):
         done = twin(twin_binary, *command, "--twin", str(twin_path), "--data", str(dataset1))
         assert done.returncode != 0, command
         assert f"twin {command[0]} serves the paper's rig only" in done.stderr, done.stderr
