@@ -59,7 +59,7 @@ impl Sensitivities {
         if !self
             .maps
             .as_ref()
-            .is_some_and(|m| m.step == h && m.params == *params)
+            .is_some_and(|m| crate::linear::same_step(m.step, h) && m.params == *params)
         {
             self.maps = Some(Box::new(SensitivityMaps::new(params, h)));
         }
