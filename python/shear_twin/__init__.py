@@ -158,15 +158,19 @@ class Twin:
                                    plot=_path(plot), frf=frf, latent_threshold=latent_threshold)
         return Comparison(out["report"], out["predictions"])
 
-    def calibrate(self, record: Record, *, parameters: list[str] | None = None,
+    def calibrate(self, record: Record | Sequence[Record], *, parameters: list[str] | None = None,
                   priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
                   seed: int | None = None, transient: float | None = None,
                   validate: Sequence[Record] = (), threads: int | None = None,
                   plot: str | os.PathLike | None = None) -> tuple["Twin", Report]:
-        """``twin calibrate``: MAP calibration of ``parameters`` (default m1..3, c1..3, k1..3)
-        and the noise variances; ``priors`` as the CLI's ``--priors`` file's JSON; the
-        ``validate`` records' worst NMSE sets the new twin's tolerance. Defaults (None): 12
-        starts, seed 1, transient 2 s, all cores. Returns the calibrated twin and the report."""
+        """``twin calibrate``: MAP calibration of ``parameters`` (default every floor's mass and
+        storey's damping and stiffness of the twin's structure) and a noise variance per measured
+        channel, on one record or on several runs (one MAP over all, each run its own channels);
+        ``priors`` as the CLI's ``--priors`` file's JSON; the ``validate`` records' worst NMSE
+        sets the new twin's tolerance. Defaults (None): 12 starts, seed 1, transient 2 s, all
+        cores. Returns the calibrated twin and the report (``runs``: NMSE by channel per run)."""
+        if not isinstance(record, Record):
+            record = list(record)
         twin, report = self._native.calibrate(record, parameters=parameters, priors=priors, starts=starts,
                                               seed=seed, transient=transient, validate=list(validate),
                                               threads=threads, plot=_path(plot))

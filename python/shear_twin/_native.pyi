@@ -67,7 +67,7 @@ class Twin:
                 controller: str | dict[str, Any] | None = None,
                 controller_q: float | None = None, plot: str | None = None, frf: bool = False,
                 latent_threshold: float | None = None) -> dict[str, Any]: ...
-    def calibrate(self, record: Record, *, parameters: list[str] | None = None,
+    def calibrate(self, record: Record | list[Record], *, parameters: list[str] | None = None,
                   priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
                   seed: int | None = None, transient: float | None = None, validate: list[Record] = ...,
                   threads: int | None = None, plot: str | None = None) -> tuple[Twin, dict[str, Any]]: ...

@@ -8,7 +8,10 @@ use orchestrator::cosim::import::Fmu;
 use orchestrator::report::control_plot::plot_control;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, RecordRef, RecordRole, Twin as CoreTwin};
-use orchestrator::workflows::calibrate::{calibrate_validated, priors_from_json, CalibrationSetup};
+use orchestrator::workflows::calibrate::validated::check_plot;
+use orchestrator::workflows::calibrate::{
+    calibrate_validated, default_parameters, priors_from_json, CalibrationSetup,
+};
 use orchestrator::workflows::compare::{compare, CompareOptions};
 use orchestrator::workflows::control::closed_loop::{Gap, Response};
 use orchestrator::workflows::control::{
@@ -209,17 +212,20 @@ impl Twin {
         Ok(out)
     }
 
-    /// `twin calibrate`: MAP calibration of `parameters` (default m1..3, c1..3, k1..3) and the
-    /// noise variances on the record; `priors` overrides default priors (`{"k1": {"space":
-    /// "linear", "mean": 4021, "variance": 10000}}`); `validate` records set the twin's
-    /// tolerance. Returns the calibrated twin and the CLI's report (this twin is kept as it is).
+    /// `twin calibrate`: MAP calibration of `parameters` (default every floor's mass and storey's
+    /// damping and stiffness, m1..mN, c1..cN, k1..kN) and the noise variances on the record, or
+    /// on a list of records (runs: one MAP over all, each run its own channels and noise
+    /// variances); `priors` overrides the twin's and the default priors, in `twin calibrate
+    /// --priors`' format (`{"k": {"relative_sd": 0.3}, "k1": {"space": "linear", "mean": 4021,
+    /// "variance": 10000}}`); `validate` records set the twin's tolerance. Returns the
+    /// calibrated twin and the CLI's report (this twin is kept as it is).
     #[pyo3(signature = (record, *, parameters = None, priors = None, starts = None, seed = None,
                         transient = None, validate = Vec::new(), threads = None, plot = None))]
     #[allow(clippy::too_many_arguments)]
     fn calibrate<'py>(
         &self,
         py: Python<'py>,
-        record: &Record,
+        record: &Bound<'py, PyAny>,
         parameters: Option<Vec<String>>,
         priors: Option<&Bound<'py, PyAny>>,
         starts: Option<usize>,
@@ -233,28 +239,44 @@ impl Twin {
         if let Some(path) = &plot {
             check_svg(path).map_err(|e| to_py(kind, e))?;
         }
-        let mut setup = CalibrationSetup::default();
+        let mut setup = CalibrationSetup {
+            parameters: default_parameters(&self.twin).map_err(|e| to_py(kind, e))?,
+            ..CalibrationSetup::default()
+        };
         if let Some(p) = parameters {
             setup.parameters = p;
         }
         if let Some(priors) = priors {
             let value: serde_json::Value =
                 pythonize::depythonize(priors).map_err(|e| invalid(kind, e.to_string()))?;
-            setup.priors =
-                priors_from_json(&value.to_string(), "priors").map_err(|m| invalid(kind, m))?;
+            setup.prior_spec = Some(
+                priors_from_json(&value.to_string(), "priors").map_err(|m| invalid(kind, m))?,
+            );
+        }
+        let runs: Vec<PyRef<'py, Record>> = match record.extract::<PyRef<'py, Record>>() {
+            Ok(one) => vec![one],
+            Err(_) => record.extract().map_err(|_| {
+                invalid(kind, "record: a Record or a list of Records".to_owned())
+            })?,
+        };
+        if runs.is_empty() {
+            return Err(invalid(kind, "record: an empty list".to_owned()));
         }
         setup.starts = starts.unwrap_or(setup.starts);
         setup.seed = seed.unwrap_or(setup.seed);
         setup.transient = transient.unwrap_or(setup.transient);
         setup.threads = threads.unwrap_or(setup.threads);
-        let data = record.for_twin(&self.twin, Some("calibrate"))?;
-        setup.validate(data).map_err(|e| to_py(kind, e))?;
-        let validation: Vec<&Measurement> = validate
-            .iter()
-            .map(|r| r.for_twin(&self.twin, Some("calibrate")))
-            .collect::<PyResult<_>>()?;
+        let data_runs: Vec<&Measurement> = runs.iter().map(|r| &r.measurement).collect();
+        let data = data_runs[0];
+        for d in &data_runs {
+            setup.validate(d).map_err(|e| to_py(kind, e))?;
+        }
+        if plot.is_some() {
+            check_plot(&self.twin, &data_runs).map_err(|e| to_py(kind, e))?;
+        }
+        let validation: Vec<&Measurement> = validate.iter().map(|r| &r.measurement).collect();
         let (new_twin, report) = detached(py, || {
-            let v = calibrate_validated(&self.twin, data, &validation, &setup)
+            let v = calibrate_validated(&self.twin, &data_runs, &validation, &setup)
                 .map_err(|e| to_py(kind, e))?;
             if let Some(path) = &plot {
                 orchestrator::workflows::calibrate::validated::plot(
@@ -278,7 +300,9 @@ impl Twin {
             // The records read from files, for `add_physics` to refit over, as `twin
             // calibrate` stores them (records made from arrays have no file to name).
             let mut calibrated = v.twin;
-            let roles = std::iter::once((data, RecordRole::Calibration))
+            let roles = data_runs
+                .iter()
+                .map(|m| (*m, RecordRole::Calibration))
                 .chain(validation.iter().map(|m| (*m, RecordRole::Validation)));
             let mut stored = Vec::new();
             for (m, role) in roles {

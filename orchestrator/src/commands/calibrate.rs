@@ -8,27 +8,37 @@ use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::run::Tolerance;
 use crate::twin::{RecordRef, RecordRole, Twin};
-use crate::workflows::calibrate::{calibrate_validated, read_priors, CalibrationSetup, Validated};
+use crate::workflows::calibrate::validated::check_plot;
+use crate::workflows::calibrate::{
+    calibrate_validated, default_parameters, read_priors, CalibrationSetup, Validated,
+};
 use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
     #[command(flatten)]
     pub columns: super::ColumnsArg,
-    /// Measurement CSV to calibrate on.
-    #[arg(long)]
-    pub data: PathBuf,
+    /// Measurement CSV(s) to calibrate on. Several are runs of one test (one MAP over all: the
+    /// structure's parameters shared, each run its own excitation, measured channels and noise
+    /// variances), e.g. a roving accelerometer moved floor to floor.
+    #[arg(long, num_args = 1.., required = true)]
+    pub data: Vec<PathBuf>,
     /// The twin to start from (.ssp); the default twin when absent. It is not modified.
     #[arg(long)]
     pub twin: Option<PathBuf>,
     /// The calibrated twin (.ssp) to write.
     #[arg(long)]
     pub out: PathBuf,
-    /// A real parameter of the physics FMU to calibrate (repeat); default m1..3, c1..3, k1..3.
+    /// A real parameter of the physics FMU to calibrate (repeat); default every floor's mass
+    /// and storey's damping and stiffness, m1..mN, c1..cN, k1..kN.
     #[arg(long = "param")]
     pub params: Vec<String>,
-    /// JSON file of priors overriding the defaults: {"k1": {"space": "linear", "mean": 4021, "variance": 10000}}.
-    #[arg(long)]
+    /// JSON file of priors over the twin's (`twin init --priors`) and the defaults (the paper's
+    /// rig: Table 1; a structure from `twin init --nominal`: centred on the nominal, mass sd
+    /// 10 %, stiffness log-sd 0.25, damping log-sd 1). Keys a family (m, c, k) or a parameter;
+    /// fields space (linear|log), value or mean, and one of sd, variance, relative_sd:
+    /// {"k": {"relative_sd": 0.3}, "k1": {"space": "linear", "mean": 4021, "variance": 10000}}.
+    #[arg(long, value_name = "P.json")]
     pub priors: Option<PathBuf>,
     /// Seconds at the start of the record left out of the likelihood.
     #[arg(long, default_value_t = CalibrationSetup::default().transient, value_parser = super::transient_seconds)]
@@ -59,42 +69,52 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         check_svg(plot)?;
     }
-    let data = args.columns.read_record(&args.data)?;
+    let runs = args
+        .data
+        .iter()
+        .map(|p| args.columns.read_any(p))
+        .collect::<Result<Vec<_>, _>>()?;
     let validation = args
         .validate
         .iter()
-        .map(|p| args.columns.read_record(p))
+        .map(|p| args.columns.read_any(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
-    for record in std::iter::once(&data).chain(&validation) {
-        crate::twin::guard::check_paper_rig(&twin, record, "calibrate")?;
+    let runs: Vec<&Measurement> = runs.iter().collect();
+    if args.plot.is_some() {
+        check_plot(&twin, &runs)?;
     }
     let mut setup = CalibrationSetup {
         transient: args.transient,
         starts: args.starts,
         seed: args.seed,
+        parameters: default_parameters(&twin)?,
         ..CalibrationSetup::default()
     };
     if !args.params.is_empty() {
         setup.parameters = args.params.clone();
     }
     if let Some(path) = &args.priors {
-        setup.priors = read_priors(path).map_err(anyhow::Error::msg)?;
+        setup.prior_spec = Some(read_priors(path).map_err(anyhow::Error::msg)?);
     }
     let validation: Vec<&Measurement> = validation.iter().collect();
     let Validated {
         twin: mut new_twin,
         calibration,
         validated,
-    } = calibrate_validated(&twin, &data, &validation, &setup)?;
+    } = calibrate_validated(&twin, &runs, &validation, &setup)?;
     // The records, for `twin add-physics` to refit over.
-    new_twin.records = std::iter::once(RecordRef::of(&args.data, RecordRole::Calibration))
+    new_twin.records = args
+        .data
+        .iter()
+        .map(|p| RecordRef::of(p, RecordRole::Calibration))
         .chain(
             args.validate
                 .iter()
                 .map(|p| RecordRef::of(p, RecordRole::Validation)),
         )
         .collect::<Result<_, _>>()?;
+    let data = runs[0];
 
     // All computed: now write, each file atomically.
     new_twin.write(&args.out)?;
@@ -103,7 +123,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             &twin,
             &new_twin,
             Some(&args.out),
-            &data,
+            data,
             args.transient,
             &calibration,
             &validated,
@@ -111,12 +131,13 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        crate::workflows::calibrate::validated::plot(&new_twin, &data, args.transient, path)?;
+        crate::workflows::calibrate::validated::plot(&new_twin, data, args.transient, path)?;
     }
 
+    let names: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
     println!(
         "calibrated on {} ({} starts, {} simulations, {:.2} s)",
-        data.path.display(),
+        names.join(", "),
         calibration.starts.len(),
         calibration.simulations,
         calibration.seconds
@@ -134,23 +155,39 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             p.prior.value(p.prior.mean)
         );
     }
-    for f in 0..3 {
-        println!(
-            "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
-            f + 1,
-            calibration.noise_variance[f],
-            calibration.noise_log_sd[f]
-        );
+    let paper = calibration.records.len() == 1
+        && calibration.records[0]
+            .paper_floors(&calibration.nmse)
+            .is_some();
+    if paper {
+        // The paper's rig, as it has always been printed.
+        for f in 0..3 {
+            println!(
+                "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
+                f + 1,
+                calibration.noise_variance[f],
+                calibration.noise_log_sd[f]
+            );
+        }
+    } else {
+        for r in &calibration.records {
+            for (c, name) in r.channels.iter().enumerate() {
+                println!(
+                    "noise {:<6} {:>12.4e} (σ² in SI²; sd of log σ² {:.3}) on {}",
+                    name, r.noise_variance[c], r.noise_log_sd[c], r.record
+                );
+            }
+        }
     }
-    let names: Vec<&str> = calibration
+    let pnames: Vec<&str> = calibration
         .parameters
         .iter()
         .map(|p| p.name.as_str())
         .collect();
     let mut strongest = Vec::new();
-    for a in 0..names.len() {
-        for b in a + 1..names.len() {
-            strongest.push((calibration.correlation[a][b], names[a], names[b]));
+    for a in 0..pnames.len() {
+        for b in a + 1..pnames.len() {
+            strongest.push((calibration.correlation[a][b], pnames[a], pnames[b]));
         }
     }
     strongest.sort_by(|x, y| y.0.abs().total_cmp(&x.0.abs()));
@@ -160,20 +197,41 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
         .collect();
     println!("strongest correlations: {}", shown.join(", "));
-    println!(
-        "NMSE % on {}: {:.3} / {:.3} / {:.3}",
-        data.path.display(),
-        calibration.nmse[0],
-        calibration.nmse[1],
-        calibration.nmse[2]
-    );
-    for (p, n) in &validated {
+    let per_channel = |channels: &[String], nmse: &[f64]| -> String {
+        channels
+            .iter()
+            .zip(nmse)
+            .map(|(c, n)| format!("{c} {n:.3}"))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
+    if paper {
         println!(
-            "NMSE % on {p}: {:.3} / {:.3} / {:.3}{}",
-            n[0],
-            n[1],
-            n[2],
-            if crate::report::json::accepted_for_validation(n) {
+            "NMSE % on {}: {:.3} / {:.3} / {:.3}",
+            data.path.display(),
+            calibration.nmse[0],
+            calibration.nmse[1],
+            calibration.nmse[2]
+        );
+    } else {
+        for r in &calibration.records {
+            println!(
+                "NMSE % on {}: {}",
+                r.record,
+                per_channel(&r.channels, &r.nmse)
+            );
+        }
+    }
+    for v in &validated {
+        let shown = if v.channels == ["acc1", "acc2", "acc3"] {
+            format!("{:.3} / {:.3} / {:.3}", v.nmse[0], v.nmse[1], v.nmse[2])
+        } else {
+            per_channel(&v.channels, &v.nmse)
+        };
+        println!(
+            "NMSE % on {}: {shown}{}",
+            v.data,
+            if crate::report::json::accepted_for_validation(&v.nmse) {
                 ""
             } else {
                 " (above the cap: not taken as the twin's validation level)"

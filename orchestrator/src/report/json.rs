@@ -8,6 +8,7 @@ use serde_json::{json, Value};
 use crate::twin::data::Measurement;
 use crate::twin::run::{Compared, Tolerance, VALIDATION_CAP};
 use crate::twin::Twin;
+use crate::workflows::calibrate::validated::ChannelNmse;
 use crate::workflows::calibrate::Calibration;
 
 /// `twin compare --report`: `compared` is `twin` run on `data` after `transient` seconds.
@@ -44,28 +45,29 @@ pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: 
     })
 }
 
-/// Whether a validation record's NMSE (per floor, %) counts as the twin's validation level.
-pub fn accepted_for_validation(nmse: &[f64; 3]) -> bool {
+/// Whether a validation record's NMSE (per floor or channel, %) counts as the twin's validation level.
+pub fn accepted_for_validation(nmse: &[f64]) -> bool {
     worst_floor(nmse) <= VALIDATION_CAP
 }
 
 /// The twin's validation NMSE from its validation records (name, NMSE per floor): the worst
 /// floor of the worst record under [`VALIDATION_CAP`]; records above it show something the
 /// twin does not know and are no measure of its fidelity.
-pub fn validation_nmse(validated: &[(String, [f64; 3])]) -> Option<f64> {
+pub fn validation_nmse<N: AsRef<[f64]>>(validated: &[(String, N)]) -> Option<f64> {
     validated
         .iter()
-        .filter(|(_, n)| accepted_for_validation(n))
-        .map(|(_, n)| worst_floor(n))
+        .filter(|(_, n)| accepted_for_validation(n.as_ref()))
+        .map(|(_, n)| worst_floor(n.as_ref()))
         .reduce(f64::max)
 }
 
-fn worst_floor(n: &[f64; 3]) -> f64 {
+fn worst_floor(n: &[f64]) -> f64 {
     n.iter().copied().fold(0.0, f64::max)
 }
 
-/// `twin calibrate --report`: `twin` calibrated on `data` into `calibrated` (written to `out`,
-/// when it is), checked on the `validated` records.
+/// `twin calibrate --report`: `twin` calibrated on `data` (the first of its runs) into
+/// `calibrated` (written to `out`, when it is), checked on the `validated` records. `runs` has
+/// every run's noise variances and NMSE by channel name.
 pub fn calibrate(
     twin: &Twin,
     calibrated: &Twin,
@@ -73,8 +75,15 @@ pub fn calibrate(
     data: &Measurement,
     transient: f64,
     calibration: &Calibration,
-    validated: &[(String, [f64; 3])],
+    validated: &[ChannelNmse],
 ) -> Value {
+    let by_name = |names: &[String], values: &[f64]| -> serde_json::Map<String, Value> {
+        names
+            .iter()
+            .zip(values)
+            .map(|(n, v)| (n.clone(), json!(v)))
+            .collect()
+    };
     let mut report = json!({
         "twin": twin.describe(),
         "data": data.path.display().to_string(),
@@ -85,9 +94,26 @@ pub fn calibrate(
         "noise_log_sd": calibration.noise_log_sd,
         "neg_log_posterior": calibration.neg_log_posterior,
         "nmse": calibration.nmse,
+        "channels": calibration.channels,
+        "runs": calibration
+            .records
+            .iter()
+            .map(|r| json!({
+                "data": r.record,
+                "samples_used": r.samples_used,
+                "nmse": by_name(&r.channels, &r.nmse),
+                "noise_variance": by_name(&r.channels, &r.noise_variance),
+                "noise_log_sd": by_name(&r.channels, &r.noise_log_sd),
+            }))
+            .collect::<Vec<_>>(),
         "validation": validated
             .iter()
-            .map(|(p, n)| json!({"data": p, "nmse": n, "accepted": accepted_for_validation(n)}))
+            .map(|v| json!({
+                "data": v.data,
+                "nmse": v.nmse,
+                "nmse_by_channel": by_name(&v.channels, &v.nmse),
+                "accepted": accepted_for_validation(&v.nmse),
+            }))
             .collect::<Vec<_>>(),
         "validation_nmse": calibrated.validation_nmse,
         "tolerance": Tolerance::resolve(calibrated, None),

@@ -96,6 +96,9 @@ pub struct ParameterCovariance {
     pub matrix: Vec<Vec<f64>>,
 }
 
+/// Where a twin keeps its calibration priors (`twin init --priors`).
+const PRIORS_RESOURCE: &str = "resources/priors.json";
+
 /// The prefix of the covariance's entries in `resources/twin.ssv`.
 const COVARIANCE_PREFIX: &str = "covariance.";
 
@@ -125,6 +128,9 @@ pub struct Twin {
     pub validation_nmse: Option<f64>,
     /// The records it was calibrated and validated on (stored with the noise variances).
     pub records: Vec<RecordRef>,
+    /// The calibration's priors given at `twin init --priors P.json` (the file's JSON text,
+    /// stored as `resources/priors.json`; see `workflows::calibrate::PriorSpec`).
+    pub priors: Option<String>,
     /// Where it was read from; None for the default twin.
     pub source: Option<PathBuf>,
     /// Keeps what `fmu_path`s point into (the unpacked archive, a trained FMU's scratch
@@ -218,6 +224,7 @@ impl Twin {
             parameter_covariance: None,
             validation_nmse: None,
             records: Vec::new(),
+            priors: None,
             source: None,
             keep_alive,
         }
@@ -242,6 +249,7 @@ impl Twin {
             parameter_covariance: self.parameter_covariance.clone(),
             validation_nmse: self.validation_nmse,
             records: self.records.clone(),
+            priors: self.priors.clone(),
             source: self.source.clone(),
             keep_alive: self.keep_alive.clone(),
         }
@@ -412,6 +420,15 @@ impl Twin {
                 }
             };
         }
+        let priors_path = unpacked.path().join(PRIORS_RESOURCE);
+        let priors = if priors_path.is_file() {
+            Some(
+                std::fs::read_to_string(&priors_path)
+                    .map_err(|e| invalid(format!("{PRIORS_RESOURCE}: {e}")))?,
+            )
+        } else {
+            None
+        };
         Ok(Twin {
             name: parsed.name,
             components,
@@ -421,6 +438,7 @@ impl Twin {
             parameter_covariance,
             validation_nmse,
             records,
+            priors,
             source: Some(path.to_owned()),
             keep_alive: vec![std::sync::Arc::new(unpacked)],
         })
@@ -462,6 +480,10 @@ impl Twin {
                 zip.start_file(format!("resources/{}.ssv", c.name), options)
                     .map_err(zip_err)?;
                 zip.write_all(ssv_xml(&c.name, &c.parameters).as_bytes())?;
+            }
+            if let Some(priors) = &self.priors {
+                zip.start_file(PRIORS_RESOURCE, options).map_err(zip_err)?;
+                zip.write_all(priors.as_bytes())?;
             }
             if self.noise_variance.is_some() {
                 let values = self.system_values();

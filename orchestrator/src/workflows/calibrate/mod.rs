@@ -34,10 +34,15 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use serde::Serialize;
 
-use crate::cosim::import::{Fmu, ScalarType};
+use ::structure::channel::Channel;
+use ::structure::Structure;
+
+use crate::cosim::import::{Causality, Fmu, ScalarType};
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
-pub use prior::{default_prior, priors_from_json, read_priors, Prior, Space};
+pub use prior::{
+    default_prior, priors_from_json, read_priors, structure_prior, Prior, PriorSpec, Space,
+};
 use simulator::Simulator;
 pub use validated::{calibrate_validated, CalibrateRunError, Validated};
 
@@ -57,8 +62,11 @@ pub enum CalibrateError {
 #[derive(Debug, Clone)]
 pub struct CalibrationSetup {
     pub parameters: Vec<String>,
-    /// Overrides of the default priors, by parameter name.
+    /// Overrides of the default priors, by parameter name (first).
     pub priors: BTreeMap<String, Prior>,
+    /// A priors file (`--priors P.json`), over the twin's own (`twin init --priors`), over the
+    /// structure's defaults ([`structure_prior`]).
+    pub prior_spec: Option<PriorSpec>,
     /// Seconds at the start of the record left out of the likelihood.
     pub transient: f64,
     pub starts: usize,
@@ -86,6 +94,7 @@ impl Default for CalibrationSetup {
         CalibrationSetup {
             parameters: DEFAULT_PARAMETERS.iter().map(|s| s.to_string()).collect(),
             priors: BTreeMap::new(),
+            prior_spec: None,
             transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             starts: 12,
             seed: 1,
@@ -125,9 +134,13 @@ pub struct Calibration {
     pub parameters: Vec<ParameterEstimate>,
     /// Correlation matrix of the calibrated parameters (in their prior coordinates).
     pub correlation: Vec<Vec<f64>>,
-    pub noise_variance: [f64; 3],
-    /// Posterior sd of log σ²_f.
-    pub noise_log_sd: [f64; 3],
+    /// The first record's noise variance per measured channel, in [`Calibration::channels`]'
+    /// order (on the paper's rig floors 1 to 3), in the channel's SI unit squared.
+    pub noise_variance: Vec<f64>,
+    /// Posterior sd of log σ² per channel.
+    pub noise_log_sd: Vec<f64>,
+    /// The first record's measured channels (`acc1`, `vel2`, …).
+    pub channels: Vec<String>,
     pub neg_log_posterior: f64,
     /// Laplace approximation of the log evidence `log p(D)` of the model with these calibrated
     /// parameters, up to a constant that depends only on the record and the noise prior (so
@@ -137,17 +150,47 @@ pub struct Calibration {
     pub log_evidence: f64,
     /// Samples the likelihood used.
     pub samples_used: usize,
-    /// NMSE per floor on the calibration record, after the transient.
-    pub nmse: [f64; 3],
-    /// Every record's noise variances and NMSE, in the order given (one for a single-record
-    /// calibration, the same as the fields above).
+    /// NMSE (%) per channel on the first record, after the transient.
+    pub nmse: Vec<f64>,
+    /// Every record's noise variances and NMSE per channel, in the order given (one for a
+    /// single-record calibration, the same as the fields above).
     pub records: Vec<RecordCalibration>,
     pub starts: Vec<StartOutcome>,
     pub simulations: usize,
     pub seconds: f64,
+    /// The storeys of the calibrated twin's structure.
+    #[serde(skip)]
+    pub storeys: usize,
 }
 
 impl Calibration {
+    /// The noise variances a twin of three storeys keeps, per floor (`acc1..acc3`): the first
+    /// record's when it measured all three (the paper's rig); on runs that each measured some
+    /// floors (a roving sensor), each floor's from the first run that measured it. None when a
+    /// floor was never measured, a run measured something else, or the structure is not of
+    /// three storeys (its records' noise variances are in the report).
+    pub fn floor_noise_variances(&self) -> Option<[f64; 3]> {
+        if self.storeys != 3 {
+            return None;
+        }
+        if let Some(own) = self.records[0].paper_floors(&self.records[0].noise_variance) {
+            return Some(own);
+        }
+        let mut out = [None; 3];
+        for r in &self.records {
+            for (name, v) in r.channels.iter().zip(&r.noise_variance) {
+                let f = match name.as_str() {
+                    "acc1" => 0,
+                    "acc2" => 1,
+                    "acc3" => 2,
+                    _ => return None,
+                };
+                out[f].get_or_insert(*v);
+            }
+        }
+        Some([out[0]?, out[1]?, out[2]?])
+    }
+
     /// The Laplace posterior covariance of the calibrated parameters in their own units (for
     /// log-space priors by the delta method, as `sd`): `corr[a][b] · sd[a] · sd[b]`.
     pub fn covariance(&self) -> crate::twin::ParameterCovariance {
@@ -179,18 +222,39 @@ impl Calibration {
     }
 }
 
-/// One record of a calibration: its samples the likelihood uses and its own noise prior.
+/// One measured response of one record: its values, the FMU output predicting it and its own
+/// noise prior.
+struct ChannelTarget<'a> {
+    name: String,
+    values: &'a [f64],
+    /// The FMU's output of the same name (`acc2`, `vel1`, `disp3`).
+    output: u32,
+    /// `d_{name}_d_{p}` for the calibrated parameters, when the FMU has them all.
+    sensitivities: Option<Vec<u32>>,
+    /// Prior mean of log σ² for this channel of this record: from its own measured variance.
+    noise_mean: f64,
+}
+
+/// One record of a calibration: its excitation, its measured channels, the samples the
+/// likelihood uses.
 struct RecordTarget<'a> {
     data: &'a Measurement,
+    /// The FMU input the excitation drives (`force` or `ground_acc`).
+    input: String,
     /// Sample indices the likelihood uses.
     used: Vec<usize>,
-    /// Prior mean of log σ²_f for this record: from its own measured variance.
-    noise_mean: [f64; 3],
+    channels: Vec<ChannelTarget<'a>>,
+}
+
+impl RecordTarget<'_> {
+    fn outputs(&self) -> Vec<u32> {
+        self.channels.iter().map(|c| c.output).collect()
+    }
 }
 
 /// What one calibration works on, shared by the threads: one or more records, one parameter
-/// vector. The residuals are the records' in turn, each floor-major (record r, floor f is
-/// block `3 r + f`, with its own noise variance).
+/// vector. The residuals are the records' in turn, each channel-major (record r, channel c is
+/// one block with its own noise variance).
 struct Target<'a> {
     fmu: &'a Fmu,
     base: BTreeMap<String, ParameterValue>,
@@ -199,41 +263,46 @@ struct Target<'a> {
     priors: Vec<Prior>,
     noise_var: f64,
     budget: usize,
-    /// The FMU's forward sensitivities of the accelerations to the calibrated parameters, when
-    /// it offers them for all of them.
+    /// The FMU's forward sensitivities of the measured outputs to the calibrated parameters,
+    /// when it offers them for all of them.
     sensitivity: Option<Sensitivity>,
 }
 
-/// Where an FMU gives `∂acc_f/∂p` along a run: the Boolean parameter that switches them on and
-/// the outputs `d_acc{f}_d_{p}`, floor-major in the calibrated parameters' order. The shear FMU
-/// carries them for its linear model (`fmu_shear::sensitivity`); with an effect on they are
-/// NaN, and the calibration falls back to finite differences.
+/// Where an FMU gives `∂y/∂p` along a run: the Boolean parameter that switches them on (the
+/// outputs `d_{channel}_d_{p}` are each channel's). The shear FMU carries them for its linear
+/// model (`fmu_shear::sensitivity`); with an effect on they are NaN, and the calibration falls
+/// back to finite differences.
 struct Sensitivity {
     switch: u32,
-    outputs: Vec<u32>,
     /// Set once a sensitivity run gave non-finite values: finite differences from then on.
     failed: AtomicBool,
 }
 
 impl Sensitivity {
-    fn find(fmu: &Fmu, parameters: &[String]) -> Option<Self> {
+    fn find(fmu: &Fmu) -> Option<Self> {
         let md = &fmu.model_description;
         let switch = md.variable("sensitivities").filter(|v| {
             v.scalar_type == ScalarType::Boolean
                 && v.causality == crate::cosim::import::Causality::Parameter
         })?;
-        let mut outputs = Vec::with_capacity(3 * parameters.len());
-        for f in 1..=3 {
-            for p in parameters {
-                outputs.push(md.variable(&format!("d_acc{f}_d_{p}"))?.value_reference);
-            }
-        }
         Some(Sensitivity {
             switch: switch.value_reference,
-            outputs,
             failed: AtomicBool::new(false),
         })
     }
+}
+
+/// The value references of `d_{channel}_d_{p}` for every calibrated parameter, if the FMU has
+/// them all.
+fn channel_sensitivities(fmu: &Fmu, channel: &str, parameters: &[String]) -> Option<Vec<u32>> {
+    parameters
+        .iter()
+        .map(|p| {
+            fmu.model_description
+                .variable(&format!("d_{channel}_d_{p}"))
+                .map(|v| v.value_reference)
+        })
+        .collect()
 }
 
 impl Target<'_> {
@@ -243,12 +312,12 @@ impl Target<'_> {
             .map(|(z, p)| p.value(p.mean + p.sd() * z))
             .collect()
     }
-    /// The residual blocks (record, floor) as (first row, rows).
+    /// The residual blocks (record, channel) as (first row, rows).
     fn blocks(&self) -> Vec<(usize, usize)> {
         let mut at = 0;
-        let mut out = Vec::with_capacity(3 * self.records.len());
+        let mut out = Vec::new();
         for r in &self.records {
-            for _ in 0..3 {
+            for _ in &r.channels {
                 out.push((at, r.used.len()));
                 at += r.used.len();
             }
@@ -256,24 +325,37 @@ impl Target<'_> {
         out
     }
     fn rows(&self) -> usize {
-        3 * self.records.iter().map(|r| r.used.len()).sum::<usize>()
+        self.records
+            .iter()
+            .map(|r| r.channels.len() * r.used.len())
+            .sum()
     }
     /// Every block's prior mean of log σ², in block order.
     fn noise_means(&self) -> Vec<f64> {
-        self.records.iter().flat_map(|r| r.noise_mean).collect()
+        self.records
+            .iter()
+            .flat_map(|r| r.channels.iter().map(|c| c.noise_mean))
+            .collect()
+    }
+    /// Whether every channel of every record has its sensitivities.
+    fn sensitive(&self) -> bool {
+        self.records
+            .iter()
+            .all(|r| r.channels.iter().all(|c| c.sensitivities.is_some()))
     }
 }
 
-/// One simulator per record (its force), for one thread.
+/// One simulator per record (its excitation), for one thread.
 fn simulators<'a>(target: &Target<'a>, name: &str) -> Result<Vec<Simulator<'a>>, TwinError> {
     target
         .records
         .iter()
         .map(|r| {
-            Simulator::new(
+            Simulator::driven(
                 target.fmu,
                 target.base.clone(),
-                &r.data.force(),
+                &r.input,
+                &r.data.excitation.values,
                 r.data.time[0],
                 r.data.dt,
                 name,
@@ -288,7 +370,7 @@ fn raw_residuals(
     sims: &mut [Simulator],
     target: &Target,
     z: &[f64],
-    buf: &mut [Vec<f64>; 3],
+    buf: &mut Vec<Vec<f64>>,
 ) -> Option<Vec<f64>> {
     let values = target.values(z);
     if values.iter().any(|v| !v.is_finite()) {
@@ -296,10 +378,11 @@ fn raw_residuals(
     }
     let mut r = Vec::with_capacity(target.rows());
     for (sim, record) in sims.iter_mut().zip(&target.records) {
-        sim.simulate(&target.vrs, &values, buf).ok()?;
-        for f in 0..3 {
+        buf.resize(record.channels.len(), Vec::new());
+        sim.record(&target.vrs, &values, &record.outputs(), buf).ok()?;
+        for (c, predicted) in record.channels.iter().zip(buf.iter()) {
             for &k in &record.used {
-                r.push(record.data.acc(f)[k] - buf[f][k]);
+                r.push(c.values[k] - predicted[k]);
             }
         }
     }
@@ -339,28 +422,26 @@ fn sensitivity_jacobian(
         .collect();
     let mut row0 = 0;
     for (sim, record) in sims.iter_mut().zip(&target.records) {
-        let mut outputs = sim.acc_vrs().to_vec();
-        outputs.extend(&sensitivity.outputs);
+        let q = record.channels.len();
+        let mut outputs = record.outputs();
+        for c in &record.channels {
+            outputs.extend(c.sensitivities.as_ref()?);
+        }
         let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
         sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
             .ok()?;
         let per = record.used.len();
-        for f in 0..3 {
-            r.extend(
-                record
-                    .used
-                    .iter()
-                    .map(|&k| record.data.acc(f)[k] - out[f][k]),
-            );
+        for (f, c) in record.channels.iter().enumerate() {
+            r.extend(record.used.iter().map(|&k| c.values[k] - out[f][k]));
             for (j, scale) in scale.iter().enumerate() {
-                let d = &out[3 + f * p + j];
+                let d = &out[q + f * p + j];
                 let mut column = jac.column_mut(j);
                 for (i, &k) in record.used.iter().enumerate() {
                     column[row0 + f * per + i] = -d[k] * scale;
                 }
             }
         }
-        row0 += 3 * per;
+        row0 += q * per;
     }
     if jac.iter().any(|d| !d.is_finite()) {
         sensitivity.failed.store(true, Ordering::Relaxed);
@@ -383,7 +464,7 @@ struct Problem<'s, 'a> {
     target: &'s Target<'a>,
     /// Each residual's weight `e^{−s/2}`, by the noise variance of its block.
     weights: Vec<f64>,
-    buf: RefCell<[Vec<f64>; 3]>,
+    buf: RefCell<Vec<Vec<f64>>>,
     /// Simulations used, a Jacobian from sensitivities counted as the p runs it replaces: what
     /// the budget bounds.
     evaluations: RefCell<usize>,
@@ -522,7 +603,7 @@ fn run_start<'a>(
     let mut z = z0;
     let mut evaluations = 0;
     let mut runs = 0;
-    let mut buf: [Vec<f64>; 3] = Default::default();
+    let mut buf: Vec<Vec<f64>> = Vec::new();
     for _outer in 0..5 {
         let mut weights = Vec::with_capacity(target.rows());
         for (&(_, n), sb) in blocks.iter().zip(&s) {
@@ -574,7 +655,7 @@ fn central_differences(
     target: &Target,
     z: &[f64],
 ) -> Option<(Vec<f64>, DMatrix<f64>)> {
-    let mut buf: [Vec<f64>; 3] = Default::default();
+    let mut buf: Vec<Vec<f64>> = Vec::new();
     let r0 = raw_residuals(sims, target, z, &mut buf)?;
     let mut jac = DMatrix::zeros(r0.len(), z.len());
     for j in 0..z.len() {
@@ -672,16 +753,36 @@ pub struct RecordInput<'a> {
 }
 
 /// What a calibration found on one of its records: that record's own noise variances (which
-/// also hold what the model still misses there) and the fit's NMSE on it.
+/// also hold what the model still misses there) and the fit's NMSE on it, per measured channel.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordCalibration {
     pub record: String,
-    pub noise_variance: [f64; 3],
-    /// Posterior sd of log σ²_f.
-    pub noise_log_sd: [f64; 3],
+    /// Its measured channels, in the record's order (`acc1`, `vel2`, …).
+    pub channels: Vec<String>,
+    /// Per channel, in its SI unit squared.
+    pub noise_variance: Vec<f64>,
+    /// Posterior sd of log σ² per channel.
+    pub noise_log_sd: Vec<f64>,
     pub samples_used: usize,
-    /// NMSE per floor on the record, after the transient.
-    pub nmse: [f64; 3],
+    /// NMSE (%) per channel on the record, after the transient.
+    pub nmse: Vec<f64>,
+}
+
+impl RecordCalibration {
+    /// The three floors' values of `per_channel` (one per channel, in this record's order) when
+    /// the record measured `acc1`, `acc2` and `acc3` alone (the paper's rig, whose twin stores
+    /// noise variances per floor).
+    pub fn paper_floors(&self, per_channel: &[f64]) -> Option<[f64; 3]> {
+        if self.channels.len() != 3 {
+            return None;
+        }
+        let at = |f: usize| {
+            let name = format!("acc{f}");
+            self.channels.iter().position(|c| *c == name)
+        };
+        let [a, b, c] = [at(1)?, at(2)?, at(3)?];
+        Some([per_channel[a], per_channel[b], per_channel[c]])
+    }
 }
 
 /// Calibrate the physics component of `twin` on `data` (the one record of
@@ -719,23 +820,52 @@ pub fn calibrate_records(
     if inputs.is_empty() {
         return Err(CalibrateError::Setup("no record to calibrate on".into()));
     }
+    let structure = physics_structure(&component.fmu_path)?;
+    let twin_priors = match &twin.priors {
+        Some(text) => Some(
+            priors_from_json(text, &format!("{} (its priors)", twin.describe()))
+                .map_err(CalibrateError::Setup)?,
+        ),
+        None => None,
+    };
+    if let Some(spec) = &setup.prior_spec {
+        spec.check(&structure, false).map_err(CalibrateError::Setup)?;
+    }
+    if setup.parameters.is_empty() {
+        return Err(CalibrateError::Setup("no parameter to calibrate".into()));
+    }
+    // Every record's channels checked against the structure before any work.
+    for input in inputs {
+        check_record(input.data, &structure, &fmu)?;
+    }
     let mut records = Vec::with_capacity(inputs.len());
     let mut firsts = Vec::with_capacity(inputs.len());
     for input in inputs {
         let (first, used) = used_samples(input.data, input.mask, setup.transient)?;
-        let noise_mean = [0, 1, 2].map(|f| {
-            let y: Vec<f64> = used.iter().map(|&k| input.data.acc(f)[k]).collect();
-            (setup.noise_fraction * crate::evaluation::stats::variance(&y)).ln()
-        });
+        let channels = input
+            .data
+            .responses
+            .iter()
+            .map(|signal| {
+                let name = signal.channel.name();
+                let y: Vec<f64> = used.iter().map(|&k| signal.values[k]).collect();
+                Ok(ChannelTarget {
+                    output: fmu.value_reference(&name).map_err(TwinError::from)?,
+                    sensitivities: channel_sensitivities(&fmu, &name, &setup.parameters),
+                    noise_mean: (setup.noise_fraction * crate::evaluation::stats::variance(&y))
+                        .ln(),
+                    values: &signal.values,
+                    name,
+                })
+            })
+            .collect::<Result<Vec<_>, CalibrateError>>()?;
         firsts.push(first);
         records.push(RecordTarget {
             data: input.data,
+            input: input.data.excitation.channel.name(),
             used,
-            noise_mean,
+            channels,
         });
-    }
-    if setup.parameters.is_empty() {
-        return Err(CalibrateError::Setup("no parameter to calibrate".into()));
     }
     let mut vrs = Vec::new();
     let mut priors = Vec::new();
@@ -758,11 +888,21 @@ pub fn calibrate_records(
                 .and_then(|s| s.parse().ok())
                 .unwrap_or(0.0),
         };
+        let fallback = structure_prior(&structure, name)
+            .unwrap_or_else(|| default_prior(name, current));
+        let from_files = setup
+            .prior_spec
+            .iter()
+            .chain(&twin_priors)
+            .find_map(|spec| spec.prior_for(name, fallback))
+            .transpose()
+            .map_err(CalibrateError::Setup)?;
         let prior = setup
             .priors
             .get(name)
             .copied()
-            .unwrap_or_else(|| default_prior(name, current));
+            .or(from_files)
+            .unwrap_or(fallback);
         vrs.push(var.value_reference);
         priors.push(prior);
     }
@@ -770,7 +910,7 @@ pub fn calibrate_records(
     for name in &setup.parameters {
         base.remove(name);
     }
-    let target = Target {
+    let mut target = Target {
         fmu: &fmu,
         base,
         records,
@@ -778,8 +918,11 @@ pub fn calibrate_records(
         priors,
         noise_var: setup.noise_log_variance,
         budget: setup.simulations_per_start.max(1),
-        sensitivity: Sensitivity::find(&fmu, &setup.parameters),
+        sensitivity: Sensitivity::find(&fmu),
     };
+    if !target.sensitive() {
+        target.sensitivity = None;
+    }
 
     // Starts: the prior mean, then draws from the prior widened ×3.
     let mut rng = StdRng::seed_from_u64(setup.seed);
@@ -908,23 +1051,31 @@ pub fn calibrate_records(
         }
         None => f64::NEG_INFINITY,
     };
-    let mut buf: [Vec<f64>; 3] = Default::default();
+    let mut buf: Vec<Vec<f64>> = Vec::new();
     let mut fitted = Vec::with_capacity(target.records.len());
-    for (r, ((sim, record), &first)) in sims
-        .iter_mut()
-        .zip(&target.records)
-        .zip(&firsts)
-        .enumerate()
-    {
-        sim.simulate(&target.vrs, &values, &mut buf)?;
-        let data = record.data;
+    let mut block = 0;
+    for ((sim, record), &first) in sims.iter_mut().zip(&target.records).zip(&firsts) {
+        buf.resize(record.channels.len(), Vec::new());
+        sim.record(&target.vrs, &values, &record.outputs(), &mut buf)?;
+        let q = record.channels.len();
+        let blocks = block..block + q;
+        block += q;
         fitted.push(RecordCalibration {
-            record: data.path.display().to_string(),
-            noise_variance: [0, 1, 2].map(|f| best.s[3 * r + f].exp()),
-            noise_log_sd: [0, 1, 2].map(|f| cov[(p + 3 * r + f, p + 3 * r + f)].max(0.0).sqrt()),
+            record: record.data.path.display().to_string(),
+            channels: record.channels.iter().map(|c| c.name.clone()).collect(),
+            noise_variance: blocks.clone().map(|b| best.s[b].exp()).collect(),
+            noise_log_sd: blocks
+                .map(|b| cov[(p + b, p + b)].max(0.0).sqrt())
+                .collect(),
             samples_used: record.used.len(),
-            nmse: [0, 1, 2]
-                .map(|f| crate::evaluation::compare::nmse(&data.acc(f)[first..], &buf[f][first..])),
+            nmse: record
+                .channels
+                .iter()
+                .zip(&buf)
+                .map(|(c, predicted)| {
+                    crate::evaluation::compare::nmse(&c.values[first..], &predicted[first..])
+                })
+                .collect(),
         });
     }
     let own = fitted[0].clone();
@@ -933,6 +1084,7 @@ pub fn calibrate_records(
         correlation,
         noise_variance: own.noise_variance,
         noise_log_sd: own.noise_log_sd,
+        channels: own.channels,
         neg_log_posterior: best.objective,
         log_evidence,
         samples_used: own.samples_used,
@@ -941,7 +1093,73 @@ pub fn calibrate_records(
         starts: outcomes,
         simulations: simulations + laplace_runs + target.records.len(),
         seconds: started.elapsed().as_secs_f64(),
+        storeys: structure.storeys(),
     })
+}
+
+/// The structure the twin's physics FMU was made for: its `resources/structure.json`
+/// (`twin init --storeys/--excitation/--nominal`), or the paper's rig when it has none.
+pub fn physics_structure(fmu_path: &std::path::Path) -> Result<Structure, CalibrateError> {
+    let bad = |message: String| {
+        CalibrateError::Twin(TwinError::Invalid {
+            path: fmu_path.to_owned(),
+            message,
+        })
+    };
+    let file = std::fs::File::open(fmu_path).map_err(|e| bad(e.to_string()))?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
+    let mut entry = match archive.by_name("resources/structure.json") {
+        Ok(entry) => entry,
+        Err(zip::result::ZipError::FileNotFound) => return Ok(Structure::default()),
+        Err(e) => return Err(bad(e.to_string())),
+    };
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut entry, &mut text).map_err(|e| bad(e.to_string()))?;
+    let resource: fmu_shear::StructureResource = serde_json::from_str(&text)
+        .map_err(|e| bad(format!("resources/structure.json: {e}")))?;
+    Ok(resource.structure)
+}
+
+/// Whether calibration can use `data` on a twin of `structure`: its excitation is the one the
+/// structure has, every response is of a floor it has and an output of the FMU. Err names the
+/// record and the column.
+fn check_record(data: &Measurement, structure: &Structure, fmu: &Fmu) -> Result<(), CalibrateError> {
+    let bad = |message: String| {
+        CalibrateError::Setup(format!("{}: {message}", data.path.display()))
+    };
+    for signal in data.channels() {
+        let name = signal.channel.name();
+        signal
+            .channel
+            .check(&name, structure)
+            .map_err(|e| bad(e.to_string()))?;
+        let output = fmu.model_description.variable(&name);
+        let ok = match signal.channel {
+            Channel::Excitation(_) => output.is_some_and(|v| v.causality == Causality::Input),
+            _ => output.is_some_and(|v| v.causality == Causality::Output),
+        };
+        if !ok {
+            return Err(bad(format!(
+                "column '{name}': the twin's physics FMU has no such {}",
+                if matches!(signal.channel, Channel::Excitation(_)) {
+                    "input"
+                } else {
+                    "output"
+                }
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The parameters calibrated by default: every floor's mass and every storey's damping and
+/// stiffness of the twin's structure (`m1..mN, c1..cN, k1..kN`; on the paper's rig
+/// [`DEFAULT_PARAMETERS`]).
+pub fn default_parameters(twin: &Twin) -> Result<Vec<String>, CalibrateError> {
+    let component = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    Ok(physics_structure(&component.fmu_path)?.parameter_names())
 }
 
 /// A copy of `twin` with the calibrated values, noise variances and posterior covariance (a
@@ -956,7 +1174,7 @@ pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, C
             .parameters
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
-    out.noise_variance = Some(calibration.noise_variance);
+    out.noise_variance = calibration.floor_noise_variances();
     out.parameter_covariance = Some(calibration.covariance());
     out.validation_nmse = None;
     // The records the input twin was fitted on are not this one's (the caller adds them).

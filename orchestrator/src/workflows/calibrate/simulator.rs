@@ -1,6 +1,7 @@
 //! One FMU instance run again and again on one record, with different parameter values: the
 //! inner loop of calibration. The runs are the master algorithm's (`master::System`: the record's
-//! force replayed into the instance), so its predictions are `twin compare`'s by construction.
+//! excitation, `force` or `ground_acc`, replayed into the instance), so its predictions are
+//! `twin compare`'s by construction.
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -11,22 +12,26 @@ use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
 use crate::twin::system::initialise;
 use crate::twin::{ParameterValue, TwinError, OUTPUTS};
 
-/// One FMU instance run on the master, the record's force replayed into its `force` input.
-/// Between runs the simulator resets the instance and sets its parameters.
+/// One FMU instance run on the master, the record's excitation replayed into the input of its
+/// name (`force` or `ground_acc`). Between runs the simulator resets the instance and sets its
+/// parameters.
 pub struct Simulator<'a> {
     fmu: &'a Fmu,
     instance: Rc<RefCell<Instance>>,
     name: String,
     /// The twin's own parameter values for this component, applied before the calibrated ones.
     base: BTreeMap<String, ParameterValue>,
+    /// The excitation's input and its values.
     force_vr: u32,
-    acc_vrs: [u32; 3],
     force: &'a [f64],
+    /// `acc1..acc3` (the paper's rig, [`Simulator::new`]).
+    acc_vrs: [u32; 3],
     start: f64,
     dt: f64,
 }
 
 impl<'a> Simulator<'a> {
+    /// The paper's rig: the record's force into `force`, `acc1..acc3` for [`Simulator::simulate`].
     pub fn new(
         fmu: &'a Fmu,
         base: BTreeMap<String, ParameterValue>,
@@ -35,13 +40,30 @@ impl<'a> Simulator<'a> {
         dt: f64,
         name: &str,
     ) -> Result<Self, TwinError> {
-        let instance = Rc::new(RefCell::new(fmu.instantiate(name)?));
-        let force_vr = fmu.value_reference("force")?;
-        let acc_vrs = [
+        let mut sim = Self::driven(fmu, base, "force", force, start, dt, name)?;
+        sim.acc_vrs = [
             fmu.value_reference(OUTPUTS[0])?,
             fmu.value_reference(OUTPUTS[1])?,
             fmu.value_reference(OUTPUTS[2])?,
         ];
+        Ok(sim)
+    }
+
+    /// Any structure: `excitation` replayed into the FMU's input `input` (`force` or
+    /// `ground_acc`); the outputs are the caller's ([`Simulator::record`]).
+    pub fn driven(
+        fmu: &'a Fmu,
+        base: BTreeMap<String, ParameterValue>,
+        input: &str,
+        excitation: &'a [f64],
+        start: f64,
+        dt: f64,
+        name: &str,
+    ) -> Result<Self, TwinError> {
+        let instance = Rc::new(RefCell::new(fmu.instantiate(name)?));
+        let force_vr = fmu.value_reference(input)?;
+        let force = excitation;
+        let acc_vrs = [0; 3];
         Ok(Simulator {
             fmu,
             instance,

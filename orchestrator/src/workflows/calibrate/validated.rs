@@ -1,11 +1,16 @@
 //! `twin calibrate` as a whole, for the CLI and the Python package: the options checked, the
-//! calibration, the calibrated twin and its NMSE on the validation records (the worst of which
-//! sets its default tolerance).
+//! calibration over one or more records (runs), the calibrated twin and its NMSE on the
+//! validation records (the worst of which sets its default tolerance).
 
-use super::{calibrate, calibrated_twin, CalibrateError, Calibration, CalibrationSetup};
+use serde::Serialize;
+
+use super::{
+    calibrate_records, calibrated_twin, physics_structure, simulator::Simulator, CalibrateError,
+    Calibration, CalibrationSetup, RecordInput,
+};
 use crate::twin::data::Measurement;
 use crate::twin::run::{nmse_on, RunError};
-use crate::twin::Twin;
+use crate::twin::{Twin, TwinError, PHYSICS};
 use crate::workflows::options::{check_threads, check_transient_leaves, InvalidOption};
 
 #[derive(Debug, thiserror::Error)]
@@ -28,38 +33,140 @@ impl CalibrationSetup {
     }
 }
 
+/// A record's NMSE (%) per measured channel.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelNmse {
+    pub data: String,
+    pub channels: Vec<String>,
+    pub nmse: Vec<f64>,
+}
+
 /// What `twin calibrate` computes.
 pub struct Validated {
     pub twin: Twin,
     pub calibration: Calibration,
-    /// Each validation record's name and the calibrated twin's NMSE % per floor on it.
-    pub validated: Vec<(String, [f64; 3])>,
+    /// Each validation record's NMSE % per channel under the calibrated twin.
+    pub validated: Vec<ChannelNmse>,
 }
 
-/// Calibrate `twin` on `data`, and report the calibrated twin's NMSE on `validation`.
-pub fn calibrate_validated(
+/// Whether `twin` and `data` are the paper's rig as the three-floor workflows know it (its
+/// comparison, band and plot): the twin's physics is the paper's structure and the record
+/// has a force and `acc1..acc3`.
+fn paper_rig(twin: &Twin, data: &Measurement) -> Result<bool, CalibrateError> {
+    let physics = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    Ok(physics_structure(&physics.fmu_path)? == ::structure::Structure::default()
+        && data.require_paper_rig().is_ok())
+}
+
+/// The calibrated twin's NMSE % per channel of `data` after the transient: on the paper's rig
+/// the whole twin's (as `twin compare`), on any other structure its physics component run on
+/// the record's excitation, each measured channel against its output.
+pub fn channel_nmse(
     twin: &Twin,
     data: &Measurement,
+    transient: f64,
+) -> Result<ChannelNmse, CalibrateRunError> {
+    let name = data.path.display().to_string();
+    if paper_rig(twin, data)? {
+        return Ok(ChannelNmse {
+            data: name,
+            channels: (1..=3).map(|f| format!("acc{f}")).collect(),
+            nmse: nmse_on(twin, data, transient)?.to_vec(),
+        });
+    }
+    let physics = twin
+        .component(PHYSICS)
+        .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    let fmu = crate::cosim::import::Fmu::open(&physics.fmu_path)
+        .map_err(|e| CalibrateError::from(TwinError::from(e)))?;
+    let mut sim = Simulator::driven(
+        &fmu,
+        physics.parameters.clone(),
+        &data.excitation.channel.name(),
+        &data.excitation.values,
+        data.time[0],
+        data.dt,
+        "validation",
+    )
+    .map_err(CalibrateError::from)?;
+    let outputs = data
+        .responses
+        .iter()
+        .map(|s| fmu.value_reference(&s.channel.name()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CalibrateError::from(TwinError::from(e)))?;
+    let mut out = vec![Vec::new(); outputs.len()];
+    sim.record(&[], &[], &outputs, &mut out)
+        .map_err(CalibrateError::from)?;
+    let first = crate::evaluation::stats::first_after_transient(&data.time, transient);
+    Ok(ChannelNmse {
+        data: name,
+        channels: data.responses.iter().map(|s| s.channel.name()).collect(),
+        nmse: data
+            .responses
+            .iter()
+            .zip(&out)
+            .map(|(s, p)| crate::evaluation::compare::nmse(&s.values[first..], &p[first..]))
+            .collect(),
+    })
+}
+
+/// Calibrate `twin` on the runs `data` (one MAP over all of them: the structure's parameters
+/// shared, each run its own excitation, channels and noise variances), and report the
+/// calibrated twin's NMSE on `validation`.
+pub fn calibrate_validated(
+    twin: &Twin,
+    data: &[&Measurement],
     validation: &[&Measurement],
     setup: &CalibrationSetup,
 ) -> Result<Validated, CalibrateRunError> {
-    setup.validate(data)?;
-    let calibration = calibrate(twin, data, setup)?;
+    for d in data {
+        setup.validate(d)?;
+    }
+    // A single record takes the setup's sample mask, as `calibrate` does.
+    let mask = if data.len() == 1 {
+        setup.mask.as_deref()
+    } else {
+        None
+    };
+    let inputs: Vec<RecordInput> = data.iter().map(|d| RecordInput { data: d, mask }).collect();
+    let calibration = calibrate_records(twin, &inputs, setup)?;
     let mut new_twin = calibrated_twin(twin, &calibration)?;
     let mut validated = Vec::new();
     for v in validation {
-        validated.push((
-            v.path.display().to_string(),
-            nmse_on(&new_twin, v, setup.transient)?,
-        ));
+        validated.push(channel_nmse(&new_twin, v, setup.transient)?);
     }
     // The worst validation NMSE sets the default tolerance of compare and diagnose.
-    new_twin.validation_nmse = crate::report::json::validation_nmse(&validated);
+    new_twin.validation_nmse = crate::report::json::validation_nmse(
+        &validated
+            .iter()
+            .map(|v| (v.data.clone(), v.nmse.clone()))
+            .collect::<Vec<_>>(),
+    );
     Ok(Validated {
         twin: new_twin,
         calibration,
         validated,
     })
+}
+
+/// Refuse `--plot` at once where it cannot be drawn: the plot is the paper rig's three floors.
+pub fn check_plot(twin: &Twin, data: &[&Measurement]) -> Result<(), CalibrateRunError> {
+    match data {
+        [one] if paper_rig(twin, one)? => Ok(()),
+        [_] => Err(CalibrateError::Setup(
+            "--plot draws the paper rig's three floors (a force and acc1..acc3 on the paper's \
+             structure); leave it out for this structure or record"
+                .into(),
+        )
+        .into()),
+        _ => Err(CalibrateError::Setup(
+            "--plot draws one calibration record; leave it out when calibrating on several".into(),
+        )
+        .into()),
+    }
 }
 
 /// `twin calibrate --plot PATH`: the calibrated twin on the calibration record.
