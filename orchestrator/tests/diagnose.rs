@@ -33,7 +33,7 @@ fn base_scenario(seed: u64) -> Scenario {
         seed,
         ..Scenario::default()
     };
-    s.noise.level = NoiseLevel::Sd([NOISE_SD; 3]);
+    s.noise.level = NoiseLevel::Sd(vec![NOISE_SD; 3]);
     s
 }
 

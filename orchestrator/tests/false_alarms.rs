@@ -90,7 +90,7 @@ fn unchanged(label: &str, data: &Measurement) -> Diagnosis {
 #[test]
 fn absolute_sensor_noise_at_three_excitation_levels() {
     for gain in [0.3, 1.0, 3.0] {
-        let data = record(gain, NoiseLevel::Sd([NOISE_SD; 3]), BetweenSamples::Linear);
+        let data = record(gain, NoiseLevel::Sd(vec![NOISE_SD; 3]), BetweenSamples::Linear);
         unchanged(&format!("sd {gain}×"), &data);
     }
 }
@@ -100,7 +100,7 @@ fn response_proportional_noise_at_three_excitation_levels() {
     for gain in [0.3, 1.0, 3.0] {
         let data = record(
             gain,
-            NoiseLevel::Fraction([NOISE_FRACTION; 3]),
+            NoiseLevel::Fraction(vec![NOISE_FRACTION; 3]),
             BetweenSamples::Linear,
         );
         let d = unchanged(&format!("fraction {gain}×"), &data);
@@ -120,7 +120,7 @@ fn the_band_is_j_sigma_j_and_grows_with_the_covariance() {
     // large (to 1 %), and that band, once it explains the error, makes the statistics quiet.
     let data = record(
         3.0,
-        NoiseLevel::Fraction([NOISE_FRACTION; 3]),
+        NoiseLevel::Fraction(vec![NOISE_FRACTION; 3]),
         BetweenSamples::Linear,
     );
     let base = run_and_compare(twin(), &data, 2.0, |_, _| {}).expect("compare");
@@ -171,7 +171,7 @@ fn the_covariance_and_validation_level_survive_the_archive() {
     }
     assert_eq!(back.validation_nmse, Some(0.123));
     // The default tolerance follows the validation level.
-    let data = record(1.0, NoiseLevel::Sd([NOISE_SD; 3]), BetweenSamples::Linear);
+    let data = record(1.0, NoiseLevel::Sd(vec![NOISE_SD; 3]), BetweenSamples::Linear);
     let d = diagnose(&back, &data, &DiagnoseOptions::default()).expect("diagnosis");
     assert!((d.tolerance - 0.246).abs() < 1e-12, "{}", d.tolerance);
     assert!(d.tolerance_source.contains("validation"));

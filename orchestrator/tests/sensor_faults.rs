@@ -38,7 +38,7 @@ fn record(change: impl FnOnce(&mut Scenario)) -> Measurement {
         duration: 12.0,
         ..Scenario::default()
     };
-    s.noise.level = NoiseLevel::Sd([NOISE_SD; 3]);
+    s.noise.level = NoiseLevel::Sd(vec![NOISE_SD; 3]);
     change(&mut s);
     synth_record(&s).expect("synth").0.measurement
 }

@@ -895,7 +895,7 @@ fn bad_scenarios_and_flags_are_refused_naming_the_file_and_field() {
 #[test]
 fn a_diverging_structure_is_an_error_not_a_panic() {
     let s = Scenario {
-        stiffness: [1e12; 3],
+        stiffness: vec![1e12; 3],
         oversample: 1,
         ..quiet(1)
     };
@@ -1300,8 +1300,8 @@ fn quadratic_reference(
     force: &[f64],
     h: f64,
 ) -> ([Vec<f64>; 3], f64, [f64; 3]) {
-    let (m, c, k) = (s.mass, s.damping, s.stiffness);
-    let matrix = |s: [f64; 3]| {
+    let (m, c, k) = (&s.mass, &s.damping, &s.stiffness);
+    let matrix = |s: &[f64]| {
         [
             [s[0] + s[1], -s[1], 0.0],
             [-s[1], s[1] + s[2], -s[2]],

@@ -7,9 +7,11 @@ use anyhow::{anyhow, bail, Result};
 
 use super::{write_json, write_text_atomically};
 use crate::synth::{
-    csv_text, parse_change_flag, parse_effect_flag, synth_controlled, BetweenSamples, ForceWindow,
-    InLoopController, NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
+    csv_text, parse_change_flag, parse_effect_flag_for, synth_controlled, BetweenSamples,
+    ForceWindow, GroundMotion, InLoopController, NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
 };
+use structure::channel::{parse_header_field, Channel, Quantity, Unit};
+use structure::Excitation;
 use crate::workflows::control::ControllerSpec;
 
 const AFTER_HELP: &str = "\
@@ -26,7 +28,15 @@ Scenario JSON (every field optional; see the orchestrator::synth documentation):
                 \"beta\": 0.5, \"gamma\": 0.5, \"exponent\": 2},
                {\"kind\": \"quadratic_damping\", \"location\": [2], \"coefficient\": 400},
                {\"kind\": \"quadratic_damping\", \"floor\": 1, \"coefficient\": 400}],
-   \"changes\": [{\"at\": 8.0, \"parameter\": \"k2\", \"factor\": 0.85}]}
+   \"changes\": [{\"at\": 8.0, \"parameter\": \"k2\", \"factor\": 0.85}],
+   \"storeys\": 5, \"excitation\": \"force:K\" | \"base\",
+   \"ground_motion\": {\"soil_hz\": 2.5, \"soil_damping\": 0.6, \"rise_end\": 2, \"strong_end\": 10, \"decay\": 0.4},
+   \"channels\": [\"acc1 (g)\", \"acc3 (g)\", \"vel5 (mm/s)\"]}
+Any building: --storeys N (equal floors 5.2 kg, storeys 3 N s/m and 4021 N/m unless
+--nominal NOMINAL.json {\"m\": [...], \"c\": [...], \"k\": [...]} or --mass/--damping/--stiffness
+give them), --excitation force:K or base (ground motion: Kanai-Tajimi filtered white noise
+under a Jennings envelope, --force-rms its stationary RMS in m/s2), --channels acc1,acc3,vel2
+and --units acc=g,vel=mm/s. Effects at any site of it: cubic@4, contact@9-10, friction@floor12.
 Locations: contact [lower, upper] floors (0 = ground); cubic, hysteresis and quadratic_damping
 [storey] (1 = ground-floor 1); friction [floor]; quadratic_damping \"floor\": N instead damps
 floor N's velocity to the ground. Hysteresis (Bouc-Wen) and quadratic_damping (force
@@ -39,7 +49,8 @@ pub struct SynthArgs {
     /// Scenario JSON; flags override and extend it.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Measurement CSV to write: time,force,acc1,acc2,acc3.
+    /// Measurement CSV to write: time, the excitation (force or ground_acc), the response
+    /// channels (default acc1..accN in m/s2).
     #[arg(long)]
     pub out: PathBuf,
     /// Truth JSON to write: everything about how the record was made.
@@ -57,15 +68,31 @@ pub struct SynthArgs {
     /// Fine RK4 steps per sample interval.
     #[arg(long)]
     pub oversample: Option<u32>,
-    /// Floor masses, kg.
-    #[arg(long, value_name = "M1,M2,M3")]
+    /// Storeys of the building (default 3, the paper's rig).
+    #[arg(long)]
+    pub storeys: Option<usize>,
+    /// What shakes it: force:K (a force at floor K) or base (ground motion).
+    #[arg(long, value_name = "force:K|base")]
+    pub excitation: Option<String>,
+    /// The structure's m, c, k as `twin init --nominal` takes them: {"m": [...], "c": [...],
+    /// "k": [...]} (kg, N s/m, N/m).
+    #[arg(long, value_name = "NOMINAL.json")]
+    pub nominal: Option<PathBuf>,
+    /// Floor masses, kg (one per floor).
+    #[arg(long, value_name = "M1,M2,...")]
     pub mass: Option<String>,
-    /// Storey damping, N s/m.
-    #[arg(long, value_name = "C1,C2,C3")]
+    /// Storey damping, N s/m (one per storey).
+    #[arg(long, value_name = "C1,C2,...")]
     pub damping: Option<String>,
-    /// Storey stiffness, N/m.
-    #[arg(long, value_name = "K1,K2,K3")]
+    /// Storey stiffness, N/m (one per storey).
+    #[arg(long, value_name = "K1,K2,...")]
     pub stiffness: Option<String>,
+    /// The response channels written (default acc1..accN): e.g. acc1,acc3,acc5 or vel1,vel2.
+    #[arg(long, value_name = "CHANNEL,...")]
+    pub channels: Option<String>,
+    /// Units of the written channels by quantity: acc=g|m/s2|mm/s2, vel=m/s|mm/s, disp=m|mm.
+    #[arg(long, value_name = "QUANTITY=UNIT,...")]
+    pub units: Option<String>,
     /// Force RMS at envelope 1, N.
     #[arg(long)]
     pub force_rms: Option<f64>,
@@ -125,21 +152,17 @@ impl SynthArgs {
                 )),
             }
         };
-        let three = |flag: &str, text: &str| -> Result<[f64; 3]> {
-            let parts: Vec<&str> = text.split(',').collect();
-            if parts.len() != 3 {
-                bail!("--{flag} {text:?}: expected three comma-separated numbers");
-            }
-            Ok([
-                number(flag, parts[0])?,
-                number(flag, parts[1])?,
-                number(flag, parts[2])?,
-            ])
+        let list = |flag: &str, text: &str| -> Result<Vec<f64>> {
+            text.split(',').map(|part| number(flag, part)).collect()
         };
         if let Some(x) = self.seed {
             s.seed = x;
         }
         if let Some(x) = self.duration {
+            // The ground motion's envelope follows the record unless the scenario set it.
+            if s.ground == GroundMotion::for_duration(s.duration) {
+                s.ground = GroundMotion::for_duration(x);
+            }
             s.duration = x;
         }
         if let Some(x) = self.sample_rate {
@@ -148,14 +171,87 @@ impl SynthArgs {
         if let Some(x) = self.oversample {
             s.oversample = x;
         }
+        if let Some(n) = self.storeys {
+            if !(1..=structure::MAX_STOREYS).contains(&n) {
+                bail!(
+                    "--storeys {n}: a structure has 1 to {} storeys",
+                    structure::MAX_STOREYS
+                );
+            }
+            if n != s.storeys() {
+                s.set_storeys(n);
+            }
+        }
+        if let Some(path) = &self.nominal {
+            let nominal = crate::twin::structure::Nominal::read(path)?;
+            if let Some(n) = self.storeys {
+                if nominal.m.len() != n {
+                    bail!(
+                        "{}: \"m\" has {} values but --storeys is {n}",
+                        path.display(),
+                        nominal.m.len()
+                    );
+                }
+            }
+            s.mass = nominal.m;
+            s.damping = nominal.c;
+            s.stiffness = nominal.k;
+        }
         if let Some(t) = &self.mass {
-            s.mass = three("mass", t)?;
+            s.mass = list("mass", t)?;
         }
         if let Some(t) = &self.damping {
-            s.damping = three("damping", t)?;
+            s.damping = list("damping", t)?;
         }
         if let Some(t) = &self.stiffness {
-            s.stiffness = three("stiffness", t)?;
+            s.stiffness = list("stiffness", t)?;
+        }
+        if let Some(t) = &self.excitation {
+            s.excitation = Excitation::parse(t)
+                .map_err(|e| anyhow!("--excitation {t:?}: {e}; expected force:K or base"))?;
+        }
+        if let Some(t) = &self.channels {
+            s.channels = Some(
+                t.split(',')
+                    .map(|field| {
+                        parse_header_field(field).map_err(|e| anyhow!("--channels {t:?}: {e}"))
+                    })
+                    .collect::<Result<Vec<_>>>()?,
+            );
+        }
+        if let Some(t) = &self.units {
+            let mut channels = s.response_channels();
+            for part in t.split(',') {
+                let (key, unit) = part.split_once('=').ok_or_else(|| {
+                    anyhow!("--units {t:?}: {part:?} is not QUANTITY=UNIT (acc=g, vel=mm/s, disp=mm)")
+                })?;
+                let quantity = match key.trim() {
+                    "acc" => Quantity::Acceleration,
+                    "vel" => Quantity::Velocity,
+                    "disp" => Quantity::Displacement,
+                    other => bail!("--units {t:?}: {other:?} is not acc, vel or disp"),
+                };
+                let unit = Unit::parse(unit)
+                    .filter(|u| u.quantity() == quantity)
+                    .ok_or_else(|| {
+                        anyhow!(
+                            "--units {t:?}: {:?} is not a unit of {key} ({})",
+                            unit.trim(),
+                            Unit::ALL
+                                .iter()
+                                .filter(|u| u.quantity() == quantity)
+                                .map(|u| u.symbol())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
+                    })?;
+                for (channel, u) in channels.iter_mut() {
+                    if matches!(channel, Channel::Response { quantity: q, .. } if *q == quantity) {
+                        *u = unit;
+                    }
+                }
+            }
+            s.channels = Some(channels);
         }
         if let Some(x) = self.force_rms {
             s.force.rms = x;
@@ -189,15 +285,15 @@ impl SynthArgs {
         }
         match (self.noise_fraction, self.noise_sd) {
             (Some(_), Some(_)) => bail!("give either --noise-fraction or --noise-sd, not both"),
-            (Some(f), None) => s.noise.level = NoiseLevel::Fraction([f; 3]),
-            (None, Some(sd)) => s.noise.level = NoiseLevel::Sd([sd; 3]),
+            (Some(f), None) => s.noise.level = NoiseLevel::Fraction(vec![f]),
+            (None, Some(sd)) => s.noise.level = NoiseLevel::Sd(vec![sd]),
             (None, None) => {}
         }
         if let Some(x) = self.force_noise_fraction {
             s.noise.force_fraction = x;
         }
         for e in &self.effects {
-            s.effects.push(parse_effect_flag(e)?);
+            s.effects.push(parse_effect_flag_for(e, s.storeys())?);
         }
         for c in &self.changes {
             s.changes.push(parse_change_flag(c)?);

@@ -37,16 +37,29 @@ pub fn format_g9(x: f64) -> String {
     }
 }
 
-/// The record as CSV text, in SI: `time`, the excitation, the responses (the paper's
-/// `time,force,acc1,acc2,acc3`), then `control` when the record has a control force.
+/// The record as CSV text: `time`, the excitation, the responses (the paper's
+/// `time,force,acc1,acc2,acc3`), then `control` when the record has a control force. Each
+/// channel in its own unit: SI ones as the bare name, others as `name (unit)` (`acc3 (g)`,
+/// `vel1 (mm/s)`) with the values in that unit.
 pub fn csv_text(m: &Measurement) -> String {
     let control = m.extra.get("control").filter(|c| c.len() == m.len());
-    let channels: Vec<&[f64]> = m.channels().map(|s| s.values.as_slice()).collect();
+    let channels: Vec<(&[f64], f64)> = m
+        .channels()
+        .map(|s| (s.values.as_slice(), s.unit.to_si()))
+        .collect();
     let mut text = String::with_capacity(16 * (channels.len() + 2) * (m.len() + 1));
     text.push_str("time");
-    for name in m.channel_names() {
+    for signal in m.channels() {
         text.push(',');
-        text.push_str(&name);
+        if signal.unit == signal.channel.quantity().si() {
+            text.push_str(&signal.channel.name());
+        } else {
+            text.push_str(&format!(
+                "{} ({})",
+                signal.channel.name(),
+                signal.unit.symbol()
+            ));
+        }
     }
     text.push_str(if control.is_some() {
         ",control\n"
@@ -55,9 +68,13 @@ pub fn csv_text(m: &Measurement) -> String {
     });
     for k in 0..m.len() {
         text.push_str(&format!("{:.6}", m.time[k]));
-        for column in &channels {
+        for (column, scale) in &channels {
             text.push(',');
-            text.push_str(&format_g9(column[k]));
+            if *scale == 1.0 {
+                text.push_str(&format_g9(column[k]));
+            } else {
+                text.push_str(&format_g9(column[k] / scale));
+            }
         }
         if let Some(c) = control {
             text.push(',');

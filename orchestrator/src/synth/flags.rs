@@ -15,6 +15,11 @@ use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamNam
 /// written `quadratic_damping`, as in the JSON). Read into the scenario file's form and checked
 /// as the file's effects are.
 pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
+    parse_effect_flag_for(text, PAPER_STOREYS)
+}
+
+/// [`parse_effect_flag`] in a building of `storeys` storeys (the site checked against it).
+pub fn parse_effect_flag_for(text: &str, storeys: usize) -> Result<EffectSpec> {
     let bad = |why: String| SynthError::Scenario(format!("--effect {text:?}: {why}"));
     let label = Label::parse(text).map_err(|e| bad(e.to_string()))?;
     let kind = match label.kind.as_str() {
@@ -26,7 +31,7 @@ pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
     // A library kind's site as the catalogue reads it, written in the file's form.
     let location = match Kind::parse(kind) {
         Some(kind) => kind.location(
-            kind.site(label.location, PAPER_STOREYS)
+            kind.site(label.location, storeys)
                 .map_err(|e| bad(e.to_string()))?,
         ),
         None => label.location,
@@ -56,6 +61,7 @@ pub fn parse_effect_flag(text: &str) -> Result<EffectSpec> {
             path: String::new(),
         },
         &Value::Object(o),
+        storeys,
     )
 }
 
@@ -67,7 +73,7 @@ pub fn parse_change_flag(text: &str) -> Result<Change> {
         .ok_or_else(|| bad("expected PARAM@TIME:FACTOR or PARAM@TIME=VALUE".into()))?;
     let parameter = ParamName::parse(name.trim()).ok_or_else(|| {
         bad(format!(
-            "unknown parameter {name:?}; expected m1..m3, c1..c3 or k1..k3"
+            "unknown parameter {name:?}; expected m, c or k and a floor or storey number (m1, k2, ...)"
         ))
     })?;
     let (time, how) = if let Some((t, f)) = rest.split_once(':') {

@@ -76,6 +76,68 @@ pub fn band_limited_force(s: &Scenario) -> Result<(Vec<f64>, usize)> {
     Ok((fine, keep.len()))
 }
 
+/// The ground acceleration on the fine grid under `excitation` = base (see
+/// [`super::scenario::GroundMotion`]): white Gaussian noise on the generator grid (stream 1, as
+/// the force), its spectrum kept inside the band and shaped by the Kanai–Tajimi gain, the same
+/// trigonometric polynomial evaluated on the fine grid, scaled so that its RMS over the record
+/// is `force.rms`, then multiplied by the Jennings–Housner–Tsai envelope (and any amplitude
+/// windows) at each fine time. Also returns the number of frequency bins used.
+pub fn ground_motion(s: &Scenario) -> Result<(Vec<f64>, usize)> {
+    s.validate("scenario")?;
+    let n = s.samples();
+    let period = n as f64 / s.sample_rate;
+    let ng = n * GENERATOR_OVERSAMPLE;
+    let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
+    rng.set_stream(FORCE_STREAM);
+    let mut spectrum: Vec<Complex<f64>> = (0..ng)
+        .map(|_| {
+            let w: f64 = StandardNormal.sample(&mut rng);
+            Complex::new(w, 0.0)
+        })
+        .collect();
+    let mut planner = FftPlanner::<f64>::new();
+    planner.plan_fft_forward(ng).process(&mut spectrum);
+    let (low, band) = (s.force.low_hz, s.band_hz());
+    let keep: Vec<usize> = (1..=ng / 2)
+        .filter(|&k| in_band(k as f64 / period, low, band))
+        .collect();
+    let nf = n * s.oversample as usize;
+    let mut fine = vec![Complex::new(0.0, 0.0); nf];
+    for &k in &keep {
+        let gain = s.ground.gain(k as f64 / period);
+        fine[k] = spectrum[k] * gain;
+        fine[nf - k] = spectrum[ng - k] * gain;
+    }
+    planner.plan_fft_inverse(nf).process(&mut fine);
+    let stationary: Vec<f64> = fine.iter().map(|c| c.re).collect();
+    let power = stationary.iter().map(|x| x * x).sum::<f64>() / nf as f64;
+    if !(power > 0.0) {
+        return Err(SynthError::Record(
+            "the ground motion has no power: check force.band_hz and force.low_hz".into(),
+        ));
+    }
+    let scale = s.force.rms / power.sqrt();
+    let hf = period / nf as f64;
+    let mut fine: Vec<f64> = stationary
+        .iter()
+        .enumerate()
+        .map(|(j, x)| {
+            let t = j as f64 * hf;
+            x * scale * s.ground.envelope(t) * envelope(&s.force.windows, t)
+        })
+        .collect();
+    if s.force.between_samples == BetweenSamples::Linear {
+        let os = s.oversample as usize;
+        for k in 0..n {
+            let (a, b) = (fine[k * os], fine[((k + 1) % n) * os]);
+            for i in 1..os {
+                fine[k * os + i] = a + (b - a) * (i as f64 / os as f64);
+            }
+        }
+    }
+    Ok((fine, keep.len()))
+}
+
 /// The amplitude envelope at time `t`.
 pub fn envelope(windows: &[ForceWindow], t: f64) -> f64 {
     windows

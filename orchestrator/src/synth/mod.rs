@@ -126,6 +126,22 @@
 //!   value in force at that time) or `value`; `at` in s, inside the record. Changes apply in time
 //!   order.
 //!
+//! * Any building (written in the JSON only when it is not the paper's rig, whose scenarios read
+//!   as they always have): `"storeys": N` (the parameters' lists then have N values; without
+//!   them equal floors of [`DEFAULT_FLOOR_MASS`] kg and storeys of [`DEFAULT_STOREY_DAMPING`]
+//!   N s/m and [`DEFAULT_STOREY_STIFFNESS`] N/m), `"excitation": "force:K" | "base"`, and
+//!   `"channels": ["acc1 (g)", "acc3 (g)", "vel5 (mm/s)"]` (a record's header fields: the
+//!   responses written, each in its unit; default an accelerometer per floor in m/s²; the noise
+//!   `fraction`/`sd` one value or one per channel, `sd` in SI). Effects at any site of the
+//!   building (`contact` `[L, L+1]` for L = 0..N−1, `cubic` storeys 1..N, `friction` floors
+//!   1..N); hysteresis, quadratic damping and a controller in the loop are written for the
+//!   paper's layout and refused elsewhere, naming the field. Under `"base"` the excitation column
+//!   is `ground_acc` (m/s²), accelerometers read the absolute acceleration, and the signal is
+//!   [`ground_motion`]: Gaussian white noise shaped by the Kanai–Tajimi filter
+//!   (`"ground_motion": {"soil_hz": 2.5, "soil_damping": 0.6, ...}`: firm soil) in the force's
+//!   band, scaled to `force.rms` m/s² when stationary, under the Jennings–Housner–Tsai envelope
+//!   (`rise_end` 10 % of the record, `strong_end` 50 %, `decay` 4 / (duration − strong_end)).
+//!
 //! The truth JSON's `scenario` member is the scenario with every default filled in; given back as
 //! `--scenario`, it makes the same record.
 //!
@@ -155,11 +171,13 @@ mod structure;
 mod truth;
 
 pub use crate::record::{csv_text, format_g9};
-pub use flags::{parse_change_flag, parse_effect_flag};
-pub use force::{band_limited_force, envelope};
+pub use flags::{parse_change_flag, parse_effect_flag, parse_effect_flag_for};
+pub use force::{band_limited_force, envelope, ground_motion};
 pub use scenario::{
-    BetweenSamples, Change, ChangeHow, DampingSite, EffectSpec, ForceSpec, ForceWindow, NoiseLevel,
-    NoiseSpec, ParamKind, ParamName, Scenario,
+    header_field, BetweenSamples, Change, ChangeHow, DampingSite, EffectSpec, ForceSpec,
+    ForceWindow, GroundMotion, NoiseLevel, NoiseSpec, ParamKind, ParamName, Scenario,
+    DEFAULT_FLOOR_MASS, DEFAULT_SOIL_DAMPING, DEFAULT_SOIL_HZ, DEFAULT_STOREY_DAMPING,
+    DEFAULT_STOREY_STIFFNESS,
 };
 pub use truth::{
     ChangeTruth, EffectTruth, ForceTruth, NoiseTruth, RecordTruth, ResponseTruth, StructureTruth,
@@ -169,7 +187,9 @@ pub use truth::{
 use std::collections::HashMap;
 use std::path::PathBuf;
 
+use ::structure::channel::{Channel, ExcitationKind, Quantity, Unit};
 use ::structure::effects::drift;
+use ::structure::Excitation;
 use fmu_shear::effects::Effects;
 use fmu_shear::{ShearModel, ShearParameters};
 use rand::SeedableRng;
@@ -178,7 +198,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use self::structure::Hysteretic;
 use crate::record::write::{round9, round_time};
-use crate::record::Measurement;
+use crate::record::{Measurement, Signal};
 use truth::Stats;
 
 /// What can go wrong making a synthetic record. The messages say where (the scenario file and
@@ -242,9 +262,11 @@ pub struct SynthRecord {
     /// Exactly what the CSV holds and [`Measurement::read`] gives back (`path` = `<synthetic>`
     /// until written).
     pub measurement: Measurement,
-    /// The accelerations before noise and rounding, at the sample times.
-    pub clean_acc: [Vec<f64>; 3],
-    /// The force before noise and rounding, at the sample times.
+    /// The response channels before noise and rounding, at the sample times, in the record's
+    /// order and in SI (the default channels: the floor accelerations).
+    pub clean_acc: Vec<Vec<f64>>,
+    /// The excitation (the force, or the ground acceleration) before noise and rounding, at
+    /// the sample times.
     pub clean_force: Vec<f64>,
     /// The force on the fine grid: `fine_force[j]` at `t = j · fine_step`, `samples · oversample`
     /// points (one period of the force). The structure sees it linearly interpolated.
@@ -267,6 +289,37 @@ pub struct HysteresisTrace {
     pub drift: Vec<f64>,
     /// `∫₀ᵗ k_h z dδ`, J, integrated with the structure on the fine grid.
     pub work: Vec<f64>,
+}
+
+/// The floor accelerations an accelerometer reads at the model's state under the excitation
+/// `excitation` (and the model's control force): the paper's layout through the hysteretic
+/// structure (as records were always made), any other structure from the model itself, plus the
+/// ground acceleration under ground motion.
+fn floor_accelerations(
+    s: &Scenario,
+    hysteretic: &Hysteretic,
+    model: &ShearModel,
+    excitation: f64,
+) -> Vec<f64> {
+    if s.is_paper_layout() {
+        return hysteretic
+            .acceleration(model, excitation - model.control_force.value)
+            .to_vec();
+    }
+    let mut a = vec![0.0; model.storeys()];
+    model.accelerations_into(
+        &model.displacement,
+        &model.velocity,
+        excitation,
+        model.control_force.value,
+        &mut a,
+    );
+    if s.excitation == Excitation::Base {
+        for x in &mut a {
+            *x += excitation;
+        }
+    }
+    a
 }
 
 /// Make a record: see the module documentation.
@@ -323,14 +376,28 @@ pub fn synth_controlled(
     control: Option<InLoopController>,
 ) -> Result<(SynthRecord, Truth)> {
     s.validate("scenario")?;
+    if control.is_some() && !s.is_paper_layout() {
+        return Err(SynthError::Scenario(format!(
+            "a controller in the loop is written for the paper's layout (3 storeys, a force at floor 1), not {} storeys under {}",
+            s.storeys(),
+            s.excitation.describe()
+        )));
+    }
     let n = s.samples();
     let os = s.oversample as usize;
     let dt = s.dt();
     let hf = dt / os as f64;
-    let (fine_force, bins) = band_limited_force(s)?;
+    let storeys = s.storeys();
+    let base = s.excitation == Excitation::Base;
+    let (fine_force, bins) = if base {
+        ground_motion(s)?
+    } else {
+        band_limited_force(s)?
+    };
+    let channels = s.response_channels();
 
     // The structure.
-    let mut effects = Effects::default();
+    let mut effects = Effects::new(storeys);
     for e in &s.effects {
         // Hysteresis and quadratic damping are not in the library: integrated here, beside the
         // model (see `Hysteretic`).
@@ -340,11 +407,8 @@ pub fn synth_controlled(
     }
     let hysteretic = Hysteretic::new(&s.effects);
     let params = ShearParameters {
-        mass: s.mass.to_vec(),
-        damping: s.damping.to_vec(),
-        stiffness: s.stiffness.to_vec(),
         substeps: 1,
-        ..ShearParameters::default()
+        ..ShearParameters::from_structure(&s.structure())
     };
     let mut model = ShearModel::new(params, effects);
 
@@ -372,8 +436,8 @@ pub fn synth_controlled(
         });
     };
 
-    let mut stats = Stats::new(&s.effects);
-    let mut clean_acc = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    let mut stats = Stats::new(&s.effects, storeys);
+    let mut clean_acc = vec![vec![0.0; n]; channels.len()];
     let mut clean_force = vec![0.0; n];
     let mut hysteretic = hysteretic;
     let mut traces: Vec<HysteresisTrace> = hysteretic
@@ -416,10 +480,18 @@ pub fn synth_controlled(
             apply(&mut model, changes[next_change]);
             next_change += 1;
         }
-        let a = hysteretic.acceleration(&model, fine_force[j0] - model.control_force.value);
-        for f in 0..3 {
-            clean_acc[f][k] = a[f];
-            stats.max_acc[f] = stats.max_acc[f].max(a[f].abs());
+        let a = floor_accelerations(s, &hysteretic, &model, fine_force[j0]);
+        for (f, a) in a.iter().enumerate() {
+            stats.max_acc[f] = stats.max_acc[f].max(a.abs());
+        }
+        for (c, (channel, _)) in channels.iter().enumerate() {
+            if let Channel::Response { quantity, floor } = *channel {
+                clean_acc[c][k] = match quantity {
+                    Quantity::Velocity => model.velocity[floor - 1],
+                    Quantity::Displacement => model.displacement[floor - 1],
+                    _ => a[floor - 1],
+                };
+            }
         }
         for (i, trace) in traces.iter_mut().enumerate() {
             trace.z.push(hysteretic.z[i]);
@@ -508,26 +580,36 @@ pub fn synth_controlled(
 
     // Noise.
     let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    let response_rms = [rms(&clean_acc[0]), rms(&clean_acc[1]), rms(&clean_acc[2])];
-    let acc_sd = match &s.noise.level {
-        NoiseLevel::Fraction(f) => [
-            f[0] * response_rms[0],
-            f[1] * response_rms[1],
-            f[2] * response_rms[2],
-        ],
-        NoiseLevel::Sd(sd) => *sd,
-    };
+    let response_rms: Vec<f64> = clean_acc.iter().map(|c| rms(c)).collect();
+    let acc_sd: Vec<f64> = (0..channels.len())
+        .map(|c| match &s.noise.level {
+            NoiseLevel::Fraction(_) => s.noise.level.at(c) * response_rms[c],
+            NoiseLevel::Sd(_) => s.noise.level.at(c),
+        })
+        .collect();
     let force_rms = rms(&clean_force);
     let force_sd = s.noise.force_fraction * force_rms;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(NOISE_STREAM);
     let mut gauss = || -> f64 { StandardNormal.sample(&mut rng) };
-    let mut acc: [Vec<f64>; 3] = Default::default();
-    for f in 0..3 {
-        acc[f] = clean_acc[f]
-            .iter()
-            .map(|a| round9(a + acc_sd[f] * gauss()))
-            .collect();
+    // Each value rounded as the CSV writes it, in the channel's unit, then back in SI: exactly
+    // what reading the file gives.
+    let written = |x: f64, unit: Unit| {
+        let scale = unit.to_si();
+        if scale == 1.0 {
+            round9(x)
+        } else {
+            round9(x / scale) * scale
+        }
+    };
+    let mut acc: Vec<Vec<f64>> = Vec::with_capacity(channels.len());
+    for (c, (_, unit)) in channels.iter().enumerate() {
+        acc.push(
+            clean_acc[c]
+                .iter()
+                .map(|a| written(a + acc_sd[c] * gauss(), *unit))
+                .collect(),
+        );
     }
     let force: Vec<f64> = clean_force
         .iter()
@@ -542,8 +624,35 @@ pub fn synth_controlled(
         }
         extra.insert("control".to_owned(), cs.into_iter().map(round9).collect());
     }
-    let measurement =
-        Measurement::paper_rig(PathBuf::from("<synthetic>"), time, force, acc, dt, extra);
+    let measurement = Measurement {
+        path: PathBuf::from("<synthetic>"),
+        time,
+        dt,
+        excitation: Signal {
+            channel: Channel::Excitation(if base {
+                ExcitationKind::GroundAcc
+            } else {
+                ExcitationKind::Force
+            }),
+            unit: if base {
+                Unit::MetrePerSecond2
+            } else {
+                Unit::Newton
+            },
+            values: force,
+        },
+        responses: channels
+            .iter()
+            .zip(acc)
+            .map(|(&(channel, unit), values)| Signal {
+                channel,
+                unit,
+                values,
+            })
+            .collect(),
+        extra,
+        header_line: None,
+    };
 
     // The truth.
     let period = n as f64 / s.sample_rate;
@@ -597,7 +706,10 @@ pub fn synth_controlled(
         generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
         scenario: s.to_json(),
         record: RecordTruth {
-            columns: crate::record::REQUIRED_COLUMNS.iter().map(|c| c.to_string()).collect(),
+            columns: std::iter::once("time".to_owned())
+                .chain(std::iter::once(s.excitation.input_name().to_owned()))
+                .chain(channels.iter().map(|&(c, u)| header_field(c, u)))
+                .collect(),
             samples: n,
             sample_rate: s.sample_rate,
             sample_interval: dt,
@@ -610,18 +722,33 @@ pub fn synth_controlled(
             sampling: "point samples of the force and of ÿ at each sample time (no anti-aliasing filter); 6-decimal times, 9 significant digits".into(),
         },
         structure: StructureTruth {
-            model: "3-DOF shear frame of eq. (1): m = floor masses (kg), c = storey damping (N s/m), k = storey stiffness (N/m)".into(),
-            m: s.mass,
-            c: s.damping,
-            k: s.stiffness,
-            final_m: std::array::from_fn(|i| model.params.mass[i]),
-            final_c: std::array::from_fn(|i| model.params.damping[i]),
-            final_k: std::array::from_fn(|i| model.params.stiffness[i]),
+            model: format!(
+                "{storeys}-DOF shear frame of eq. (1){}: m = floor masses (kg), c = storey damping (N s/m), k = storey stiffness (N/m)",
+                if base {
+                    " under ground acceleration, in coordinates relative to the ground (accelerometers read the absolute acceleration)"
+                } else {
+                    ""
+                }
+            ),
+            excitation: (s.excitation != Excitation::default()).then(|| s.excitation.name()),
+            m: s.mass.clone(),
+            c: s.damping.clone(),
+            k: s.stiffness.clone(),
+            final_m: model.params.mass.clone(),
+            final_c: model.params.damping.clone(),
+            final_k: model.params.stiffness.clone(),
         },
         effects,
         changes: change_truth,
         force: ForceTruth {
-            kind: "white Gaussian noise × amplitude envelope, FFT band mask, periodic over the record".into(),
+            kind: if base {
+                format!(
+                    "ground acceleration (m/s²): white Gaussian noise, FFT band mask × Kanai–Tajimi gain (f_g {} Hz, ζ_g {}), scaled to rms_requested when stationary, × Jennings–Housner–Tsai envelope (rise to {} s, strong to {} s, decay {} /s)",
+                    s.ground.soil_hz, s.ground.soil_damping, s.ground.rise_end, s.ground.strong_end, s.ground.decay
+                )
+            } else {
+                "white Gaussian noise × amplitude envelope, FFT band mask, periodic over the record".into()
+            },
             rms_requested: s.force.rms,
             rms_record: force_rms,
             band_hz: [s.force.low_hz, s.band_hz()],

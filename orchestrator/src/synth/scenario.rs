@@ -4,7 +4,9 @@ use std::path::Path;
 
 use super::{Result, SynthError};
 use ::structure::building::PAPER_STOREYS;
+use ::structure::channel::{parse_header_field, Channel, Quantity, Unit};
 use ::structure::effects::{Contact, Cubic, Friction, Kind, Law, Location, Side};
+use ::structure::{Excitation, Structure, MAX_STOREYS};
 use fmu_shear::ShearParameters;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -36,10 +38,19 @@ pub struct Scenario {
     pub duration: f64,
     pub sample_rate: f64,
     pub oversample: u32,
-    pub mass: [f64; 3],
-    pub damping: [f64; 3],
-    pub stiffness: [f64; 3],
+    /// Floor masses (kg), storey damping (N s/m) and stiffness (N/m): N values each.
+    pub mass: Vec<f64>,
+    pub damping: Vec<f64>,
+    pub stiffness: Vec<f64>,
+    /// A force at a floor (the paper's shaker on floor 1 by default) or ground motion.
+    pub excitation: Excitation,
+    /// The excitation's signal: the force, or under ground motion the ground acceleration's
+    /// level (`rms`, m/s²), band and windows.
     pub force: ForceSpec,
+    /// The ground motion's spectrum and envelope (used under `excitation` = base).
+    pub ground: GroundMotion,
+    /// The response channels written, each in its unit (None: `acc1..accN` in m/s²).
+    pub channels: Option<Vec<(Channel, Unit)>>,
     pub noise: NoiseSpec,
     pub effects: Vec<EffectSpec>,
     pub changes: Vec<Change>,
@@ -97,13 +108,88 @@ pub struct ForceWindow {
     pub ramp: f64,
 }
 
+/// The sensor noise, per response channel (one value for all, or one per channel).
 #[derive(Clone, Debug, PartialEq)]
 pub enum NoiseLevel {
-    /// Of each floor's noise-free response RMS.
-    Fraction([f64; 3]),
-    /// Absolute, m/s².
-    Sd([f64; 3]),
+    /// Of each channel's noise-free RMS.
+    Fraction(Vec<f64>),
+    /// Absolute, in SI (m/s², m/s or m, as the channel measures).
+    Sd(Vec<f64>),
 }
+
+impl NoiseLevel {
+    /// The level of response channel `i` (a single value serves every channel).
+    pub fn at(&self, i: usize) -> f64 {
+        let v = match self {
+            NoiseLevel::Fraction(v) | NoiseLevel::Sd(v) => v,
+        };
+        if v.len() == 1 {
+            v[0]
+        } else {
+            v.get(i).copied().unwrap_or(0.0)
+        }
+    }
+}
+
+/// Ground motion (under `excitation` = base): Gaussian white noise shaped by the Kanai–Tajimi
+/// filter of a soil layer, `|H(f)|² = (1 + 4ζ²(f/f_g)²) / ((1 − (f/f_g)²)² + 4ζ²(f/f_g)²)`,
+/// inside the band (`force.low_hz`, `force.band_hz`), then modulated by the Jennings–Housner–
+/// Tsai envelope: `(t/t₁)²` rising to 1 at `t₁`, 1 until `t₂`, then `exp(−decay·(t − t₂))`.
+/// Scaled so that the stationary signal (envelope 1) has RMS `force.rms`, m/s².
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GroundMotion {
+    /// f_g, Hz (default 2.5: firm soil).
+    pub soil_hz: f64,
+    /// ζ_g (default 0.6).
+    pub soil_damping: f64,
+    /// t₁, s: end of the rise (default 10 % of the record).
+    pub rise_end: f64,
+    /// t₂, s: end of the strong phase (default 50 % of the record).
+    pub strong_end: f64,
+    /// 1/s: the decay rate after t₂ (default 4 / (duration − t₂)).
+    pub decay: f64,
+}
+
+impl GroundMotion {
+    /// The defaults for a record of `duration` s.
+    pub fn for_duration(duration: f64) -> GroundMotion {
+        GroundMotion {
+            soil_hz: DEFAULT_SOIL_HZ,
+            soil_damping: DEFAULT_SOIL_DAMPING,
+            rise_end: 0.1 * duration,
+            strong_end: 0.5 * duration,
+            decay: 4.0 / (0.5 * duration),
+        }
+    }
+
+    /// `|H(f)|` of the Kanai–Tajimi filter.
+    pub fn gain(&self, f: f64) -> f64 {
+        let r = f / self.soil_hz;
+        let z = 4.0 * self.soil_damping * self.soil_damping * r * r;
+        ((1.0 + z) / ((1.0 - r * r).powi(2) + z)).sqrt()
+    }
+
+    /// The envelope at time `t`.
+    pub fn envelope(&self, t: f64) -> f64 {
+        if t < self.rise_end {
+            (t / self.rise_end).powi(2)
+        } else if t <= self.strong_end {
+            1.0
+        } else {
+            (-self.decay * (t - self.strong_end)).exp()
+        }
+    }
+}
+
+/// The Kanai–Tajimi defaults (firm soil).
+pub const DEFAULT_SOIL_HZ: f64 = 2.5;
+pub const DEFAULT_SOIL_DAMPING: f64 = 0.6;
+/// A storey of a building other than the default 3 when the scenario gives no parameters:
+/// the paper's prior means for mass and stiffness, and a damping of about 1 % of critical in
+/// the first mode of a 5-storey frame.
+pub const DEFAULT_FLOOR_MASS: f64 = 5.2;
+pub const DEFAULT_STOREY_DAMPING: f64 = 3.0;
+pub const DEFAULT_STOREY_STIFFNESS: f64 = 4021.0;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoiseSpec {
@@ -195,10 +281,13 @@ impl Default for Scenario {
             duration: DEFAULT_DURATION,
             sample_rate: DEFAULT_SAMPLE_RATE,
             oversample: DEFAULT_OVERSAMPLE,
-            mass: DEFAULT_MASS,
-            damping: DEFAULT_DAMPING,
-            stiffness: DEFAULT_STIFFNESS,
+            mass: DEFAULT_MASS.to_vec(),
+            damping: DEFAULT_DAMPING.to_vec(),
+            stiffness: DEFAULT_STIFFNESS.to_vec(),
+            excitation: Excitation::default(),
             force: ForceSpec::default(),
+            ground: GroundMotion::for_duration(DEFAULT_DURATION),
+            channels: None,
             noise: NoiseSpec::default(),
             effects: Vec::new(),
             changes: Vec::new(),
@@ -221,7 +310,7 @@ impl Default for ForceSpec {
 impl Default for NoiseSpec {
     fn default() -> Self {
         NoiseSpec {
-            level: NoiseLevel::Fraction([DEFAULT_NOISE_FRACTION; 3]),
+            level: NoiseLevel::Fraction(vec![DEFAULT_NOISE_FRACTION]),
             force_fraction: 0.0,
         }
     }
@@ -231,7 +320,7 @@ impl NoiseSpec {
     /// No noise at all.
     pub fn none() -> Self {
         NoiseSpec {
-            level: NoiseLevel::Fraction([0.0; 3]),
+            level: NoiseLevel::Fraction(vec![0.0]),
             force_fraction: 0.0,
         }
     }
@@ -246,13 +335,17 @@ impl ParamName {
             'k' => ParamKind::Stiffness,
             _ => return None,
         };
-        let index = match chars.as_str() {
-            "1" => 0,
-            "2" => 1,
-            "3" => 2,
-            _ => return None,
-        };
-        Some(ParamName { kind, index })
+        let digits = chars.as_str();
+        if digits.starts_with('0') || !digits.chars().all(|c| c.is_ascii_digit()) {
+            return None;
+        }
+        let number: usize = digits.parse().ok()?;
+        (1..=MAX_STOREYS)
+            .contains(&number)
+            .then_some(ParamName {
+                kind,
+                index: number - 1,
+            })
     }
     pub fn name(&self) -> String {
         let letter = match self.kind {
@@ -529,10 +622,51 @@ impl Scenario {
         s.duration = file.duration.unwrap_or(s.duration);
         s.sample_rate = file.sample_rate.unwrap_or(s.sample_rate);
         s.oversample = file.oversample.unwrap_or(s.oversample);
+        // The storey count: `storeys`, else the masses' length, else the default 3 (damping
+        // and stiffness lists must then match it).
+        let given = file
+            .parameters
+            .as_ref()
+            .and_then(|p| p.m.as_ref())
+            .map(Vec::len);
+        if let Some(n) = file.storeys.or(given) {
+            if !(1..=MAX_STOREYS).contains(&n) {
+                return Err(at.field("storeys").error(format!(
+                    "{n} storeys; a structure has 1 to {MAX_STOREYS}"
+                )));
+            }
+            s.set_storeys(n);
+        }
         if let Some(p) = file.parameters {
             s.mass = p.m.unwrap_or(s.mass);
             s.damping = p.c.unwrap_or(s.damping);
             s.stiffness = p.k.unwrap_or(s.stiffness);
+        }
+        if let Some(text) = &file.excitation {
+            s.excitation = Excitation::parse(text).map_err(|e| {
+                at.field("excitation")
+                    .error(format!("{e}; expected \"force:K\" or \"base\""))
+            })?;
+        }
+        s.ground = GroundMotion::for_duration(s.duration);
+        if let Some(g) = file.ground_motion {
+            s.ground.soil_hz = g.soil_hz.unwrap_or(s.ground.soil_hz);
+            s.ground.soil_damping = g.soil_damping.unwrap_or(s.ground.soil_damping);
+            s.ground.rise_end = g.rise_end.unwrap_or(s.ground.rise_end);
+            s.ground.strong_end = g.strong_end.unwrap_or(s.ground.strong_end);
+            s.ground.decay = g.decay.unwrap_or(s.ground.decay);
+        }
+        if let Some(channels) = &file.channels {
+            let list = at.field("channels");
+            s.channels = Some(
+                channels
+                    .iter()
+                    .enumerate()
+                    .map(|(i, text)| {
+                        parse_header_field(text).map_err(|e| list.index(i).error(e.to_string()))
+                    })
+                    .collect::<Result<Vec<_>>>()?,
+            );
         }
         if let Some(f) = file.force {
             s.force.rms = f.rms.unwrap_or(s.force.rms);
@@ -558,23 +692,25 @@ impl Scenario {
                         .field("noise")
                         .error("give either `fraction` or `sd`, not both".into()))
                 }
-                (Some(x), None) => s.noise.level = NoiseLevel::Fraction(x.three()),
-                (None, Some(x)) => s.noise.level = NoiseLevel::Sd(x.three()),
+                (Some(x), None) => s.noise.level = NoiseLevel::Fraction(x.values()),
+                (None, Some(x)) => s.noise.level = NoiseLevel::Sd(x.values()),
                 (None, None) => {}
             }
             s.noise.force_fraction = n.force_fraction.unwrap_or(s.noise.force_fraction);
         }
         let effects = at.field("effects");
         for (i, e) in file.effects.unwrap_or_default().iter().enumerate() {
-            s.effects.push(parse_effect(&effects.index(i), e)?);
+            s.effects
+                .push(parse_effect(&effects.index(i), e, s.storeys())?);
         }
         let changes = at.field("changes");
         for (i, c) in file.changes.unwrap_or_default().into_iter().enumerate() {
             let at = changes.index(i);
             let parameter = ParamName::parse(&c.parameter).ok_or_else(|| {
                 at.field("parameter").error(format!(
-                    "unknown parameter {:?}; expected m1..m3, c1..c3 or k1..k3",
-                    c.parameter
+                    "unknown parameter {:?}; expected m1..m{n}, c1..c{n} or k1..k{n}",
+                    c.parameter,
+                    n = s.storeys()
                 ))
             })?;
             let how = match (c.factor, c.value) {
@@ -593,13 +729,18 @@ impl Scenario {
 
     /// The scenario as JSON, every default filled in: [`Scenario::from_json`] reads it back equal.
     pub fn to_json(&self) -> Value {
+        let levels: Vec<f64> = (0..self.response_channels().len())
+            .map(|i| self.noise.level.at(i))
+            .collect();
         let noise = match &self.noise.level {
-            NoiseLevel::Fraction(f) => {
-                json!({"fraction": f, "force_fraction": self.noise.force_fraction})
+            NoiseLevel::Fraction(_) => {
+                json!({"fraction": levels, "force_fraction": self.noise.force_fraction})
             }
-            NoiseLevel::Sd(sd) => json!({"sd": sd, "force_fraction": self.noise.force_fraction}),
+            NoiseLevel::Sd(_) => {
+                json!({"sd": levels, "force_fraction": self.noise.force_fraction})
+            }
         };
-        json!({
+        let mut v = json!({
             "seed": self.seed,
             "duration": self.duration,
             "sample_rate": self.sample_rate,
@@ -615,7 +756,80 @@ impl Scenario {
             "noise": noise,
             "effects": self.effects.iter().map(EffectSpec::to_json).collect::<Vec<_>>(),
             "changes": self.changes.iter().map(Change::to_json).collect::<Vec<_>>(),
-        })
+        });
+        // The building, its excitation and sensors when they are not the paper rig's (whose
+        // scenarios read as they always have).
+        if self.storeys() != PAPER_STOREYS {
+            v["storeys"] = json!(self.storeys());
+        }
+        if self.excitation != Excitation::default() {
+            v["excitation"] = json!(self.excitation.name());
+        }
+        if self.excitation == Excitation::Base {
+            v["ground_motion"] = json!(self.ground);
+        }
+        if let Some(channels) = &self.channels {
+            v["channels"] = json!(channels
+                .iter()
+                .map(|(c, u)| header_field(*c, *u))
+                .collect::<Vec<_>>());
+        }
+        v
+    }
+
+    /// The number of storeys (floors 1..N).
+    pub fn storeys(&self) -> usize {
+        self.mass.len()
+    }
+
+    /// A building of `n` storeys: the default 3 keeps the default parameters, any other count
+    /// has equal floors and storeys ([`DEFAULT_FLOOR_MASS`], [`DEFAULT_STOREY_DAMPING`],
+    /// [`DEFAULT_STOREY_STIFFNESS`]).
+    pub fn set_storeys(&mut self, n: usize) {
+        if n == PAPER_STOREYS {
+            self.mass = DEFAULT_MASS.to_vec();
+            self.damping = DEFAULT_DAMPING.to_vec();
+            self.stiffness = DEFAULT_STIFFNESS.to_vec();
+        } else {
+            self.mass = vec![DEFAULT_FLOOR_MASS; n];
+            self.damping = vec![DEFAULT_STOREY_DAMPING; n];
+            self.stiffness = vec![DEFAULT_STOREY_STIFFNESS; n];
+        }
+    }
+
+    /// The structure the record is made of (at the start of the record).
+    pub fn structure(&self) -> Structure {
+        Structure {
+            mass: self.mass.clone(),
+            damping: self.damping.clone(),
+            stiffness: self.stiffness.clone(),
+            excitation: self.excitation,
+        }
+    }
+
+    /// The response channels written, in order, each with its unit: the scenario's, or an
+    /// accelerometer on every floor in m/s².
+    pub fn response_channels(&self) -> Vec<(Channel, Unit)> {
+        match &self.channels {
+            Some(c) => c.clone(),
+            None => (1..=self.storeys())
+                .map(|floor| {
+                    (
+                        Channel::Response {
+                            quantity: Quantity::Acceleration,
+                            floor,
+                        },
+                        Unit::MetrePerSecond2,
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// Whether this is the paper's layout (3 storeys, a force at floor 1), which the hysteresis,
+    /// the quadratic damping and a controller in the loop are written for.
+    pub fn is_paper_layout(&self) -> bool {
+        self.storeys() == PAPER_STOREYS && self.excitation == Excitation::default()
     }
 
     /// Check the ranges; `origin` names the source (a file, or "scenario") in the errors.
@@ -665,10 +879,90 @@ impl Scenario {
             )));
         }
         let p = at.field("parameters");
-        for i in 0..3 {
+        let n_storeys = self.storeys();
+        if !(1..=MAX_STOREYS).contains(&n_storeys) {
+            return Err(p.field("m").error(format!(
+                "{n_storeys} floors; a structure has 1 to {MAX_STOREYS}"
+            )));
+        }
+        for (name, values) in [("c", &self.damping), ("k", &self.stiffness)] {
+            if values.len() != n_storeys {
+                return Err(p.field(name).error(format!(
+                    "{} values for {n_storeys} storeys (m has {n_storeys})",
+                    values.len()
+                )));
+            }
+        }
+        for i in 0..n_storeys {
             positive(p.field("m").index(i), self.mass[i], true)?;
             positive(p.field("c").index(i), self.damping[i], false)?;
             positive(p.field("k").index(i), self.stiffness[i], false)?;
+        }
+        if let Excitation::Force { floor } = self.excitation {
+            if !(1..=n_storeys).contains(&floor) {
+                return Err(at.field("excitation").error(format!(
+                    "force:{floor}: the structure has floors 1 to {n_storeys}"
+                )));
+            }
+        }
+        if self.excitation == Excitation::Base {
+            let g = at.field("ground_motion");
+            positive(g.field("soil_hz"), self.ground.soil_hz, true)?;
+            positive(g.field("soil_damping"), self.ground.soil_damping, true)?;
+            positive(g.field("rise_end"), self.ground.rise_end, true)?;
+            positive(g.field("decay"), self.ground.decay, false)?;
+            if !(self.ground.strong_end.is_finite() && self.ground.strong_end >= self.ground.rise_end)
+            {
+                return Err(g.field("strong_end").error(format!(
+                    "{} s must be a finite time ≥ rise_end {} s",
+                    self.ground.strong_end, self.ground.rise_end
+                )));
+            }
+        }
+        let channels = self.response_channels();
+        if channels.is_empty() {
+            return Err(at
+                .field("channels")
+                .error("is empty; give at least one response channel".into()));
+        }
+        for (i, (channel, unit)) in channels.iter().enumerate() {
+            let at = at.field("channels").index(i);
+            match channel {
+                Channel::Response { floor, quantity } => {
+                    if !(1..=n_storeys).contains(floor) {
+                        return Err(at.error(format!(
+                            "'{}': the structure has floors 1 to {n_storeys}",
+                            channel.name()
+                        )));
+                    }
+                    if unit.quantity() != *quantity {
+                        return Err(at.error(format!(
+                            "'{}' cannot be in {}",
+                            channel.name(),
+                            unit.symbol()
+                        )));
+                    }
+                }
+                _ => {
+                    return Err(at.error(format!(
+                        "'{}' is not a response (acc<i>, vel<i> or disp<i>); the excitation is always written",
+                        channel.name()
+                    )))
+                }
+            }
+            if channels[..i].iter().any(|(c, _)| c == channel) {
+                return Err(at.error(format!("'{}' is given twice", channel.name())));
+            }
+        }
+        if !self.is_paper_layout() {
+            if let Some(i) = self.effects.iter().position(|e| !e.in_library()) {
+                return Err(at.field("effects").index(i).error(format!(
+                    "{} is written for the paper's layout (3 storeys, a force at floor 1), not {} storeys under {}",
+                    self.effects[i].kind(),
+                    n_storeys,
+                    self.excitation.describe()
+                )));
+            }
         }
         let f = at.field("force");
         positive(f.field("rms"), self.force.rms, false)?;
@@ -725,6 +1019,13 @@ impl Scenario {
             NoiseLevel::Fraction(x) => ("fraction", x),
             NoiseLevel::Sd(x) => ("sd", x),
         };
+        if levels.len() != 1 && levels.len() != channels.len() {
+            return Err(noise.field(name).error(format!(
+                "{} values for {} response channels; give one value or one per channel",
+                levels.len(),
+                channels.len()
+            )));
+        }
         for (i, &x) in levels.iter().enumerate() {
             positive(noise.field(name).index(i), x, false)?;
         }
@@ -737,9 +1038,9 @@ impl Scenario {
             let at = at.field("effects").index(i);
             match *e {
                 EffectSpec::Contact { lower, side, .. } => {
-                    if lower > 2 {
+                    if lower >= n_storeys {
                         return Err(at.field("location").error(format!(
-                            "[{lower}, {}] is not a storey; expected [0, 1], [1, 2] or [2, 3]",
+                            "[{lower}, {}] is not a storey of the {n_storeys}-storey structure",
                             lower + 1
                         )));
                     }
@@ -748,17 +1049,17 @@ impl Scenario {
                     }
                 }
                 EffectSpec::Cubic { storey, .. } => {
-                    if !(1..=3).contains(&storey) {
-                        return Err(at
-                            .field("location")
-                            .error(format!("storey {storey} is not 1, 2 or 3")));
+                    if !(1..=n_storeys).contains(&storey) {
+                        return Err(at.field("location").error(format!(
+                            "storey {storey} is not one of 1..{n_storeys}"
+                        )));
                     }
                 }
                 EffectSpec::Friction { floor, .. } => {
-                    if !(1..=3).contains(&floor) {
-                        return Err(at
-                            .field("location")
-                            .error(format!("floor {floor} is not 1, 2 or 3")));
+                    if !(1..=n_storeys).contains(&floor) {
+                        return Err(at.field("location").error(format!(
+                            "floor {floor} is not one of 1..{n_storeys}"
+                        )));
                     }
                 }
                 EffectSpec::Hysteresis {
@@ -839,6 +1140,12 @@ impl Scenario {
         let last = (n - 1) as f64 / self.sample_rate;
         for (i, c) in self.changes.iter().enumerate() {
             let at = at.field("changes").index(i);
+            if c.parameter.index >= n_storeys {
+                return Err(at.field("parameter").error(format!(
+                    "{} is not a parameter of the {n_storeys}-storey structure",
+                    c.parameter.name()
+                )));
+            }
             if !(c.at.is_finite() && c.at >= 0.0 && c.at <= last) {
                 return Err(at
                     .field("at")
@@ -856,7 +1163,7 @@ impl Scenario {
 
 /// One effect of the scenario's `effects` list (also what `--effect` becomes). The library's
 /// kinds take their parameter names, defaults and side from its description.
-pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
+pub(super) fn parse_effect(at: &Loc, value: &Value, storeys: usize) -> Result<EffectSpec> {
     let head: EffectHead = read(at, value)?;
     let loc = at.field("location");
     let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
@@ -866,7 +1173,7 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
     };
     let storey_or_adjacent = |location: &[u64]| {
         place(location)
-            .and_then(|l| l.storey(PAPER_STOREYS))
+            .and_then(|l| l.storey(storeys))
             .ok_or_else(|| {
                 loc.error(format!(
             "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
@@ -935,7 +1242,7 @@ pub(super) fn parse_effect(at: &Loc, value: &Value) -> Result<EffectSpec> {
     // 0-based, as the library counts; where each kind may sit is the catalogue's.
     let location = match place(&location) {
         Some(at) => kind
-            .site(at, PAPER_STOREYS)
+            .site(at, storeys)
             .map_err(|e| loc.error(format!("{location:?}: {e}")))?,
         None => {
             return Err(loc.error(format!(
@@ -975,7 +1282,12 @@ struct ScenarioFile {
     duration: Option<f64>,
     sample_rate: Option<f64>,
     oversample: Option<u32>,
+    storeys: Option<usize>,
+    excitation: Option<String>,
     parameters: Option<ParametersFile>,
+    ground_motion: Option<GroundMotionFile>,
+    /// Response channels as a record's header writes them: `acc1`, `acc3 (g)`, `vel2 (mm/s)`.
+    channels: Option<Vec<String>>,
     force: Option<ForceFile>,
     noise: Option<NoiseFile>,
     /// Read one by one by [`parse_effect`], whose fields depend on the kind.
@@ -986,9 +1298,19 @@ struct ScenarioFile {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields, expecting = "an object")]
 struct ParametersFile {
-    m: Option<[f64; 3]>,
-    c: Option<[f64; 3]>,
-    k: Option<[f64; 3]>,
+    m: Option<Vec<f64>>,
+    c: Option<Vec<f64>>,
+    k: Option<Vec<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields, expecting = "an object")]
+struct GroundMotionFile {
+    soil_hz: Option<f64>,
+    soil_damping: Option<f64>,
+    rise_end: Option<f64>,
+    strong_end: Option<f64>,
+    decay: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -1013,28 +1335,37 @@ struct WindowFile {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields, expecting = "an object")]
 struct NoiseFile {
-    fraction: Option<OneOrThree>,
-    sd: Option<OneOrThree>,
+    fraction: Option<OneOrMany>,
+    sd: Option<OneOrMany>,
     force_fraction: Option<f64>,
 }
 
-/// A number for all three floors, or one per floor.
+/// A number for every response channel, or one per channel.
 #[derive(Deserialize)]
 #[serde(
     untagged,
-    expecting = "expected a number or a list of 3 numbers (floors 1..3)"
+    expecting = "expected a number or a list of numbers (one per response channel)"
 )]
-enum OneOrThree {
+enum OneOrMany {
     One(f64),
-    Three([f64; 3]),
+    Many(Vec<f64>),
 }
 
-impl OneOrThree {
-    fn three(self) -> [f64; 3] {
+impl OneOrMany {
+    fn values(self) -> Vec<f64> {
         match self {
-            OneOrThree::One(x) => [x; 3],
-            OneOrThree::Three(x) => x,
+            OneOrMany::One(x) => vec![x],
+            OneOrMany::Many(x) => x,
         }
+    }
+}
+
+/// A channel as a record's header writes it: `acc1` in SI, `acc1 (g)` otherwise.
+pub fn header_field(channel: Channel, unit: Unit) -> String {
+    if unit == channel.quantity().si() {
+        channel.name()
+    } else {
+        format!("{} ({})", channel.name(), unit.symbol())
     }
 }
 

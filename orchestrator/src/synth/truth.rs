@@ -42,14 +42,17 @@ pub struct RecordTruth {
 #[derive(Debug, Clone, Serialize)]
 pub struct StructureTruth {
     pub model: String,
-    /// Parameters at the start of the record.
-    pub m: [f64; 3],
-    pub c: [f64; 3],
-    pub k: [f64; 3],
+    /// The excitation (`force:K` or `base`), when it is not the paper's force at floor 1.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub excitation: Option<String>,
+    /// Parameters at the start of the record: N floors' masses, N storeys' damping, stiffness.
+    pub m: Vec<f64>,
+    pub c: Vec<f64>,
+    pub k: Vec<f64>,
     /// Parameters at the end of the record (after every change).
-    pub final_m: [f64; 3],
-    pub final_c: [f64; 3],
-    pub final_k: [f64; 3],
+    pub final_m: Vec<f64>,
+    pub final_c: Vec<f64>,
+    pub final_k: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -127,19 +130,22 @@ pub struct ForceTruth {
 #[derive(Debug, Clone, Serialize)]
 pub struct NoiseTruth {
     pub kind: String,
-    /// The sd added to acc1..acc3, m/s².
-    pub acc_sd: [f64; 3],
+    /// The sd added to each response channel (in the record's order), SI (m/s², m/s or m).
+    pub acc_sd: Vec<f64>,
     pub force_sd: f64,
-    /// The noise-free accelerations' RMS, m/s².
-    pub response_rms: [f64; 3],
+    /// Each response channel's noise-free RMS, SI.
+    pub response_rms: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
 pub struct ResponseTruth {
     /// Largest |inter-storey drift| of storeys 1..3 on the fine grid, m.
-    pub max_abs_drift: [f64; 3],
-    pub max_abs_displacement: [f64; 3],
-    pub max_abs_acceleration: [f64; 3],
+    /// Largest |inter-storey drift| of storeys 1..N on the fine grid, m.
+    pub max_abs_drift: Vec<f64>,
+    pub max_abs_displacement: Vec<f64>,
+    /// Largest |acceleration| of floors 1..N at the sample times (absolute under ground
+    /// motion), m/s².
+    pub max_abs_acceleration: Vec<f64>,
 }
 
 impl Truth {
@@ -150,10 +156,10 @@ impl Truth {
 
 /// What the fine grid saw: drifts, contacts.
 pub(super) struct Stats {
-    pub(super) max_drift: [f64; 3],
-    pub(super) max_disp: [f64; 3],
-    pub(super) max_vel: [f64; 3],
-    pub(super) max_acc: [f64; 3],
+    pub(super) max_drift: Vec<f64>,
+    pub(super) max_disp: Vec<f64>,
+    pub(super) max_vel: Vec<f64>,
+    pub(super) max_acc: Vec<f64>,
     contacts: Vec<ContactStats>,
 }
 
@@ -172,7 +178,7 @@ struct ContactStats {
 }
 
 impl Stats {
-    pub(super) fn new(effects: &[EffectSpec]) -> Self {
+    pub(super) fn new(effects: &[EffectSpec], storeys: usize) -> Self {
         let contacts = effects
             .iter()
             .enumerate()
@@ -190,17 +196,17 @@ impl Stats {
             })
             .collect();
         Stats {
-            max_drift: [0.0; 3],
-            max_disp: [0.0; 3],
-            max_vel: [0.0; 3],
-            max_acc: [0.0; 3],
+            max_drift: vec![0.0; storeys],
+            max_disp: vec![0.0; storeys],
+            max_vel: vec![0.0; storeys],
+            max_acc: vec![0.0; storeys],
             contacts,
         }
     }
 
     pub(super) fn observe(&mut self, model: &ShearModel, t: f64, h: f64) {
-        let y: &[f64; 3] = &std::array::from_fn(|i| model.displacement[i]);
-        for i in 0..3 {
+        let y = &model.displacement;
+        for i in 0..y.len() {
             self.max_drift[i] = self.max_drift[i].max(drift(y, i).abs());
             self.max_disp[i] = self.max_disp[i].max(y[i].abs());
             self.max_vel[i] = self.max_vel[i].max(model.velocity[i].abs());

@@ -38,7 +38,7 @@ pub fn twin_calibrated_on_default_structure(noise_sd: f64) -> orchestrator::twin
         seed: 1,
         ..Scenario::default()
     };
-    s.noise.level = NoiseLevel::Sd([noise_sd; 3]);
+    s.noise.level = NoiseLevel::Sd(vec![noise_sd; 3]);
     let (record, _) = synth_record(&s).expect("synth");
     let twin = orchestrator::twin::Twin::default_twin().expect("default twin");
     let cal =
@@ -58,7 +58,7 @@ pub fn hidden_change_record(
         seed: 2,
         ..Scenario::default()
     };
-    s.noise.level = NoiseLevel::Sd([noise_sd; 3]);
+    s.noise.level = NoiseLevel::Sd(vec![noise_sd; 3]);
     s.force.windows.push(ForceWindow {
         start: 12.0,
         end: 17.0,
