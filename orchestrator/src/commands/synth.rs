@@ -328,12 +328,18 @@ pub fn run(args: &SynthArgs) -> Result<()> {
         write_json(path, &truth)?;
     }
     println!(
-        "wrote {} ({} samples at {} Hz, seed {}, force RMS {:.4} N, made in {:.0} ms)",
+        "wrote {} ({} samples at {} Hz, seed {}, {} RMS {:.4} {}, made in {:.0} ms)",
         args.out.display(),
         truth.record.samples,
         scenario.sample_rate,
         scenario.seed,
+        scenario.excitation.input_name(),
         truth.force.rms_record,
+        if scenario.excitation == Excitation::Base {
+            "m/s2"
+        } else {
+            "N"
+        },
         elapsed.as_secs_f64() * 1e3
     );
     for e in &truth.effects {
