@@ -34,6 +34,10 @@ pub enum LqrError {
     KalmanNotConverged(usize),
     #[error("the Kalman observer's innovation covariance is singular")]
     SingularInnovation,
+    /// Eigenvalues of A (1/s, `[re, im]`) that no measurement sees: the state cannot be
+    /// estimated from these measurements.
+    #[error("the state is not observable from the measurements: no measurement sees the motion at eigenvalue(s) {}", .0.iter().map(|e| format!("{:.4}{:+.4}i", e[0], e[1])).collect::<Vec<_>>().join(", "))]
+    Unobservable(Vec<[f64; 2]>),
 }
 
 fn positive(what: &str, value: f64) -> Result<f64, LqrError> {
@@ -76,7 +80,15 @@ pub struct StateSpace {
     pub excitation_d: DVector<f64>,
     /// Metres per state unit.
     pub state_scale: f64,
+    /// What each measurement reads beyond the state's own motion per unit of excitation, where
+    /// the state is relative to a moving ground: 1 for an accelerometer under ground motion (it
+    /// reads `ÿ + a_g`), else 0. The integrating estimator removes it before integrating.
+    pub ground_in_reading: DVector<f64>,
 }
+
+/// Relative tolerance of [`StateSpace::unobservable`]: the smallest singular value of
+/// `[A − λI; C]` (C's rows scaled to unit norm) against the norm of A.
+pub const OBSERVABILITY_TOLERANCE: f64 = 1e-9;
 
 impl StateSpace {
     /// The model in state units of `state_scale` metres from one in SI (`ẋ = A x + B_e u_e +
@@ -129,7 +141,64 @@ impl StateSpace {
             excitation_b: excitation_b / state_scale,
             excitation_d: excitation_d / state_scale,
             state_scale,
+            ground_in_reading: DVector::zeros(c.nrows()),
         })
+    }
+
+    /// The same model with `ground` as [`StateSpace::ground_in_reading`] (one per measurement).
+    pub fn with_ground_in_reading(mut self, ground: DVector<f64>) -> Result<Self, LqrError> {
+        dimension("the ground's part of the readings", ground.len(), self.c.nrows())?;
+        self.ground_in_reading = ground;
+        Ok(self)
+    }
+
+    /// The eigenvalues of A whose motion no measurement sees (the Popov–Belevitch–Hautus
+    /// test: `[A − λI; C]` loses rank at λ), `[re, im]` in 1/s; empty when the state is
+    /// observable from the measurements. C's rows are scaled to unit norm first (the
+    /// measurements may be of different quantities), and rank is judged against
+    /// [`OBSERVABILITY_TOLERANCE`] times the norm of A.
+    pub fn unobservable(&self) -> Vec<[f64; 2]> {
+        use nalgebra::Complex;
+        let states = self.states();
+        let rows = self.c.nrows();
+        if rows == 0 {
+            let mut all: Vec<[f64; 2]> = self
+                .a
+                .complex_eigenvalues()
+                .iter()
+                .map(|l| [l.re, l.im])
+                .collect();
+            all.sort_by(|x, y| x[1].total_cmp(&y[1]));
+            return all;
+        }
+        let scale = self.a.norm().max(f64::MIN_POSITIVE);
+        let mut c = self.c.clone();
+        for mut row in c.row_iter_mut() {
+            let norm = row.norm();
+            if norm > 0.0 {
+                row /= norm;
+            }
+        }
+        let mut out = Vec::new();
+        for lambda in self.a.complex_eigenvalues().iter() {
+            let m = DMatrix::<Complex<f64>>::from_fn(states + rows, states, |i, j| {
+                if i < states {
+                    let diagonal = if i == j { *lambda } else { Complex::new(0.0, 0.0) };
+                    Complex::new(self.a[(i, j)], 0.0) - diagonal
+                } else {
+                    Complex::new(c[(i - states, j)] * scale, 0.0)
+                }
+            });
+            let smallest = m
+                .singular_values()
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min);
+            if smallest <= OBSERVABILITY_TOLERANCE * scale {
+                out.push([lambda.re, lambda.im]);
+            }
+        }
+        out
     }
 
     /// States: `2n`.
@@ -180,6 +249,8 @@ enum State {
     Integrate {
         /// Leak per sample, `exp(−2π f_c h)`.
         leak: f64,
+        /// The ground's part of each reading per unit of excitation (removed before integrating).
+        ground: Vec<f64>,
         y: Vec<f64>,
         v: Vec<f64>,
         a_prev: Vec<f64>,
@@ -235,10 +306,14 @@ impl Kalman {
         sensor_sd: &[f64],
     ) -> Result<Self, LqrError> {
         positive("the Kalman process sd", process_sd)?;
+        let unobservable = model.unobservable();
+        if !unobservable.is_empty() {
+            return Err(LqrError::Unobservable(unobservable));
+        }
         let measured = model.c.nrows();
         dimension("the Kalman sensor sd", sensor_sd.len(), measured)?;
         for (i, &s) in sensor_sd.iter().enumerate() {
-            positive(&format!("the Kalman sensor sd of floor {}", i + 1), s)?;
+            positive(&format!("the Kalman sensor sd of measurement {}", i + 1), s)?;
         }
         let states = model.states();
         let e = step_map(&model.a, &model.excitation_b, dt);
@@ -365,6 +440,7 @@ impl Controller {
                 dimension("the measured accelerations", model.c.nrows(), floors)?;
                 State::Integrate {
                     leak: (-2.0 * std::f64::consts::PI * highpass_hz * dt).exp(),
+                    ground: model.ground_in_reading.iter().copied().collect(),
                     y: vec![0.0; floors],
                     v: vec![0.0; floors],
                     a_prev: vec![0.0; floors],
@@ -432,11 +508,16 @@ impl Controller {
         self.estimate = match &mut self.state {
             State::Integrate {
                 leak,
+                ground,
                 y,
                 v,
                 a_prev,
                 started,
             } => {
+                let z = DVector::from_iterator(
+                    z.len(),
+                    z.iter().zip(ground.iter()).map(|(z, g)| z - g * force * scale),
+                );
                 if *started {
                     for i in 0..y.len() {
                         let v_next = *leak * v[i] + 0.5 * dt * (a_prev[i] + z[i]);
@@ -828,6 +909,79 @@ mod tests {
             w = next;
         }
         assert!(worst < 0.05 * peak, "worst {worst} of peak {peak}");
+    }
+
+    /// The model measuring the accelerations of `floors` (1-based) alone.
+    fn measuring(s: &Structure, floors: &[usize]) -> StateSpace {
+        let full = plant(s, 1.0).expect("valid");
+        let pick = |m: &DMatrix<f64>| {
+            DMatrix::from_fn(floors.len(), m.ncols(), |i, j| m[(floors[i] - 1, j)])
+        };
+        let pick_v = |v: &DVector<f64>| {
+            DVector::from_iterator(floors.len(), floors.iter().map(|&f| v[f - 1]))
+        };
+        StateSpace {
+            c: pick(&full.c),
+            d: pick_v(&full.d),
+            excitation_d: pick_v(&full.excitation_d),
+            ground_in_reading: DVector::zeros(floors.len()),
+            ..full
+        }
+    }
+
+    /// A uniform chain of four storeys has mode shapes sin((2j − 1)π i / 9): the second mode
+    /// stands still at floor 3, so an accelerometer there alone cannot see it (both its
+    /// eigenvalues are named), and the Kalman observer refuses it; floor 2 or floors 1 and 3
+    /// see every mode.
+    #[test]
+    fn a_mode_with_a_node_at_every_sensor_is_unobservable() {
+        let s = Structure::uniform(4, 5.2, 0.5, 4021.0, Excitation::Force { floor: 1 });
+        let blind = measuring(&s, &[3]);
+        let missed = blind.unobservable();
+        assert_eq!(missed.len(), 2, "{missed:?}");
+        // The second mode of the undamped chain: ω² = 4 (k/m) sin²(3π/18).
+        let w2 = (4.0 * 4021.0 / 5.2 * (3.0 * std::f64::consts::PI / 18.0).sin().powi(2)).sqrt();
+        for e in &missed {
+            assert!((e[0].hypot(e[1]) - w2).abs() < 1e-6 * w2, "{e:?} against {w2}");
+        }
+        let kalman = Estimator::Kalman {
+            process_sd: 0.1,
+            sensor_sd: vec![0.01],
+        };
+        assert!(matches!(
+            Controller::new(&blind, &[0.0; 8], &kalman, 1e-3),
+            Err(LqrError::Unobservable(_))
+        ));
+        assert!(measuring(&s, &[2]).unobservable().is_empty());
+        assert!(measuring(&s, &[1, 3]).unobservable().is_empty());
+        assert!(plant(&s, 1.0).expect("valid").unobservable().is_empty());
+    }
+
+    /// Under ground motion the accelerometers read `ÿ + a_g`: the integrating estimator takes
+    /// the ground's part out, so a ground acceleration that moves nothing relative to it
+    /// integrates to no relative motion.
+    #[test]
+    fn integration_removes_the_grounds_part_of_the_reading() {
+        let s = Structure::uniform(2, 5.2, 0.5, 4021.0, Excitation::Base);
+        let ss = s.state_space().expect("valid");
+        let (b, d) = s.force_input(1).expect("floor 1");
+        let model = StateSpace::from_si(&ss.a, &ss.c, (&ss.b, &ss.d), (&b, &d), 1.0)
+            .expect("valid")
+            .with_ground_in_reading(DVector::from_element(2, 1.0))
+            .expect("two readings");
+        let mut c = Controller::new(
+            &model,
+            &[0.0; 4],
+            &Estimator::Integrate { highpass_hz: 0.1 },
+            1e-3,
+        )
+        .expect("valid");
+        for k in 0..2000 {
+            let a_g = (k as f64 * 0.01).sin();
+            // A rigid structure moving with the ground: the readings are the ground's.
+            c.step(&[a_g, a_g], a_g).expect("two readings");
+        }
+        assert!(c.estimate_si().iter().all(|x| x.abs() < 1e-15));
     }
 
     #[test]

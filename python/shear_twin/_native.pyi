@@ -83,7 +83,7 @@ class Twin:
                 retune: bool = False, target_contacts: int | None = None, max_force: float | None = None,
                 schedule: bool = False, margin: float | None = None, lookahead: float | None = None,
                 dwell: float | None = None, variance_threshold: str | None = None,
-                estimator_costs: bool = False, ssp: str | None = None,
+                estimator_costs: bool = False, actuator_floor: int | None = None, ssp: str | None = None,
                 ssp_q: float | None = None, plot: str | None = None) -> dict[str, Any]: ...
     def watch(self, source: str, alerts: str, *, on_alert: Callable[[dict[str, Any]], Any] | None = None,
               client_id: str | None = None, follow: bool = False, idle: float | None = None,

@@ -446,7 +446,7 @@ impl Twin {
                         gaps = Vec::new(), retune = false, target_contacts = None,
                         max_force = None, schedule = false, margin = None, lookahead = None,
                         dwell = None, variance_threshold = None, estimator_costs = false,
-                        ssp = None, ssp_q = None, plot = None))]
+                        actuator_floor = None, ssp = None, ssp_q = None, plot = None))]
     #[allow(clippy::too_many_arguments)]
     fn control<'py>(
         &self,
@@ -470,6 +470,7 @@ impl Twin {
         dwell: Option<f64>,
         variance_threshold: Option<&str>,
         estimator_costs: bool,
+        actuator_floor: Option<usize>,
         ssp: Option<PathBuf>,
         ssp_q: Option<f64>,
         plot: Option<PathBuf>,
@@ -501,6 +502,7 @@ impl Twin {
                 max_force,
             }),
             estimator_costs,
+            actuator_floor: actuator_floor.unwrap_or(d.actuator_floor),
             ..ControlOptions::default()
         };
         options.validate().map_err(err)?;
@@ -523,7 +525,7 @@ impl Twin {
             dwell: dwell.unwrap_or(sd.dwell),
             variance,
         });
-        let data = record.for_twin(&self.twin, Some("control"))?;
+        let data = record.for_twin(&self.twin, None)?;
         let outcome = detached(py, || {
             let twin = twin_for_control(&self.twin, sensor_noise);
             let outcome =

@@ -1,6 +1,6 @@
-//! The LQR controller as a zero-time block of the master: inputs the floor accelerations (through
-//! sampled connections: what the sensors read as the last step left the structure), one per
-//! floor, and the excitation force; outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
+//! The LQR controller as a zero-time block of the master: inputs the measured channels (through
+//! sampled connections: what the sensors read as the last step left the structure), in the
+//! order of the controller's model, and the excitation (a force, or a ground acceleration); outputs the control force `f_c = K ŵ` for the shear FMU's `control_force`,
 //! held over the next step (the command computed a sample ago: see `numerics::lqr::Controller`),
 //! and which gain is on. The law itself is `numerics::lqr`, shared with
 //! the controller FMU.
@@ -19,8 +19,8 @@ pub struct Scheduled {
     pub high: Vec<f64>,
 }
 
-/// Accelerometer noise added to what the controller reads (the structure's own outputs are
-/// noise-free): per-floor sd (m/s²) and a seed, so runs repeat.
+/// Sensor noise added to what the controller reads (the structure's own outputs are
+/// noise-free): an sd per measured channel (in its SI unit) and a seed, so runs repeat.
 #[derive(Clone, Debug)]
 pub struct SensorNoise {
     pub sd: Vec<f64>,
@@ -29,9 +29,9 @@ pub struct SensorNoise {
 
 pub struct LqrBlock {
     controller: Controller,
-    /// Whether the inputs after the force are a corrector's latent variances (for the
-    /// schedule), one per floor.
-    latent: bool,
+    /// How many of a corrector's latent variances (for the schedule, one per floor) follow
+    /// the excitation among the inputs; None: none.
+    latent: Option<usize>,
     scheduled: Option<Scheduled>,
     noise: Option<(ChaCha8Rng, Vec<f64>)>,
     /// A control force beyond this (N) means the loop has gone unstable: the run stops.
@@ -45,10 +45,10 @@ pub fn trigger_code(t: numerics::lqr::Triggers) -> f64 {
 }
 
 impl LqrBlock {
-    /// `acc1..N`, `force`; then, with `latent`, `latent_var1..N`: for a structure of `floors`
-    /// floors, the inputs before the latent variances.
-    pub fn inputs(floors: usize) -> usize {
-        floors + 1
+    /// The measured channels, then the excitation; then, with `latent`, `latent_var1..N`:
+    /// for a controller reading `measured` channels, the inputs before the latent variances.
+    pub fn inputs(measured: usize) -> usize {
+        measured + 1
     }
     /// `control_force`, `high_gain` (1 when the scheduler has the high gain on), the schedule's
     /// triggers ([`trigger_code`]).
@@ -59,7 +59,7 @@ impl LqrBlock {
         scheduled: Option<Scheduled>,
         noise: Option<SensorNoise>,
         force_limit: f64,
-        latent: bool,
+        latent: Option<usize>,
     ) -> Self {
         // A negative or non-finite sd reads as no noise on that floor.
         let noise = noise.map(|n| {
@@ -88,8 +88,8 @@ impl Block for LqrBlock {
         inputs: &[f64],
         outputs: &mut [f64],
     ) -> Result<(), MasterError> {
-        let floors = self.controller.measurements();
-        let now = &inputs[..Self::inputs(floors)];
+        let measured = self.controller.measurements();
+        let now = &inputs[..Self::inputs(measured)];
         if let Some((t, seen)) = &self.last {
             // The law has state: one sample per communication point. Sampled inputs do not
             // move inside a point, so a second call there can only be a wiring mistake.
@@ -105,8 +105,8 @@ impl Block for LqrBlock {
             }
         }
         self.last = Some((time, now.to_vec()));
-        let force = inputs[floors];
-        let mut acc = inputs[..floors].to_vec();
+        let force = inputs[measured];
+        let mut acc = inputs[..measured].to_vec();
         if let Some((rng, sd)) = &mut self.noise {
             for (a, s) in acc.iter_mut().zip(sd.iter()) {
                 let z: f64 = StandardNormal.sample(rng);
@@ -123,8 +123,8 @@ impl Block for LqrBlock {
             .map_err(|e| MasterError::Config(format!("the controller at t = {time} s: {e}")))?;
         let (mut high, mut triggers) = (0.0, 0.0);
         if let Some(s) = &mut self.scheduled {
-            let at = Self::inputs(floors);
-            let latent = self.latent.then(|| &inputs[at..at + floors]);
+            let at = Self::inputs(measured);
+            let latent = self.latent.map(|n| &inputs[at..at + n]);
             let on = s
                 .scheduler
                 .decide(time, &self.controller.estimate_si(), latent);

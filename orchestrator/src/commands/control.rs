@@ -87,6 +87,9 @@ pub struct ControlArgs {
     /// the estimation costs in attenuation.
     #[arg(long)]
     pub estimator_costs: bool,
+    /// The floor the control force acts on (1-based; a floor the twin's structure has).
+    #[arg(long, default_value_t = ControlOptions::default().actuator_floor)]
+    pub actuator_floor: usize,
     /// JSON report.
     #[arg(long)]
     pub report: PathBuf,
@@ -119,6 +122,7 @@ impl ControlArgs {
                 max_force: self.max_force,
             }),
             estimator_costs: self.estimator_costs,
+            actuator_floor: self.actuator_floor,
             ..ControlOptions::default()
         };
         options.validate()?;
@@ -145,9 +149,8 @@ pub fn run(args: &ControlArgs) -> Result<()> {
         check_svg(plot)?;
     }
     let options = args.options()?;
-    let data = args.columns.read_record(&args.data)?;
+    let data = args.columns.read_any(&args.data)?;
     let twin = twin_for_control(&Twin::load(args.twin.as_deref())?, args.sensor_noise);
-    crate::twin::guard::check_paper_rig(&twin, &data, "control")?;
     let mut progress = progress_bar();
     let outcome = run_control(&twin, &data, &options, &mut progress)?;
     let svg = match &args.plot {

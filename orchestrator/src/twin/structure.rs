@@ -106,7 +106,17 @@ pub fn shear_fmu_bytes(resource: &StructureResource) -> Result<Vec<u8>, TwinErro
     let params = resource
         .parameters()
         .map_err(|e| TwinError::Message(format!("the structure: {e}")))?;
-    let base = find_fmu(SHEAR_FMU)?;
+    let xml = fmu_shear::variables::table(&params).to_model_description_xml();
+    let json = serde_json::to_string_pretty(resource)
+        .map_err(|e| TwinError::Message(format!("the structure as JSON: {e}")))?;
+    fmu_for_structure(SHEAR_FMU, &xml, &json)
+}
+
+/// The built-in FMU `fmu_name` as archive bytes with `xml` as its modelDescription and `json`
+/// as its `resources/structure.json` (the library reads it at `fmi2Instantiate` and serves the
+/// table `xml` was written from).
+pub fn fmu_for_structure(fmu_name: &str, xml: &str, json: &str) -> Result<Vec<u8>, TwinError> {
+    let base = find_fmu(fmu_name)?;
     let bad = |message: String| TwinError::Invalid {
         path: base.clone(),
         message,
@@ -116,9 +126,6 @@ pub fn shear_fmu_bytes(resource: &StructureResource) -> Result<Vec<u8>, TwinErro
         source,
     })?;
     let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
-    let xml = fmu_shear::variables::table(&params).to_model_description_xml();
-    let json = serde_json::to_string_pretty(resource)
-        .map_err(|e| TwinError::Message(format!("the structure as JSON: {e}")))?;
     let mut out = std::io::Cursor::new(Vec::new());
     {
         let zip_err = |e: zip::result::ZipError| bad(format!("zip: {e}"));

@@ -5,6 +5,7 @@
 //! its gap, open → closed), all online.
 
 use numerics::lqr::{Controller, Estimator, Scheduler, StateSpace};
+use structure::channel::{Channel, Quantity};
 use structure::effects::{Kind, Law, Side};
 
 use super::ControlError;
@@ -117,6 +118,8 @@ pub struct LoopLaw {
 #[derive(Clone, Debug)]
 pub struct LoopSetup {
     pub plant: StateSpace,
+    /// The channels the controller reads (the plant's measurements, in its order).
+    pub measured: Vec<Channel>,
     /// Controller samples per record sample.
     pub substeps: usize,
     pub noise: Option<SensorNoise>,
@@ -160,6 +163,8 @@ pub struct Response {
 /// velocities (m, m/s).
 struct ExactStateBlock {
     floors: usize,
+    /// Where the latent variances start among the inputs.
+    latent_at: usize,
     /// Where the state starts among the inputs.
     state_at: usize,
     latent: bool,
@@ -181,7 +186,7 @@ impl crate::cosim::master::Block for ExactStateBlock {
         outputs: &mut [f64],
     ) -> Result<(), crate::cosim::master::MasterError> {
         let w = &inputs[self.state_at..self.state_at + 2 * self.floors];
-        let at = LqrBlock::inputs(self.floors);
+        let at = self.latent_at;
         let latent = self.latent.then(|| &inputs[at..at + self.floors]);
         let mut triggers = 0.0;
         let (gain, high) = match (&self.gains, &mut self.scheduler) {
@@ -295,7 +300,32 @@ fn upsample(force: &[f64], substeps: usize) -> Vec<f64> {
     out
 }
 
-/// Run the twin's physics on `data`'s force, passive (`law` None) or under `law`.
+/// The physics FMU's output (its index among `acc1..N, disp1..N, vel1..N`) a measured channel
+/// reads.
+fn output_of(channel: &Channel, floors: usize) -> Result<usize, ControlError> {
+    match channel {
+        Channel::Response { quantity, floor } if (1..=floors).contains(floor) => {
+            let block = match quantity {
+                Quantity::Acceleration => 0,
+                Quantity::Displacement => 1,
+                Quantity::Velocity => 2,
+                _ => {
+                    return Err(ControlError::Options(format!(
+                        "the controller cannot read '{}'",
+                        channel.name()
+                    )))
+                }
+            };
+            Ok(block * floors + floor - 1)
+        }
+        _ => Err(ControlError::Options(format!(
+            "the controller cannot read '{}': the structure has floors 1 to {floors}",
+            channel.name()
+        ))),
+    }
+}
+
+/// Run the twin's physics on `data`'s excitation, passive (`law` None) or under `law`.
 pub fn simulate(
     twin: &Twin,
     data: &Measurement,
@@ -305,6 +335,14 @@ pub fn simulate(
 ) -> Result<Response, ControlError> {
     let substeps = setup.substeps.max(1);
     let floors = setup.plant.floors();
+    let measured = setup.measured.len();
+    if measured != setup.plant.c.nrows() {
+        return Err(ControlError::Options(format!(
+            "the controller reads {} channels but its model measures {}",
+            measured,
+            setup.plant.c.nrows()
+        )));
+    }
     let start = data.time[0];
     let builder = SystemBuilder::open(twin)?;
     if builder.fmu(PHYSICS).is_none() {
@@ -326,19 +364,20 @@ pub fn simulate(
     for gap in &setup.gaps {
         outputs.push(format!("drift{}", gap.storey));
     }
+    let excitation = data.excitation.channel.name();
     let plant = builder
         .add_component(
             &mut running,
             PHYSICS,
             start,
-            vec!["force".into(), "control_force".into()],
+            vec![excitation.clone(), "control_force".into()],
             outputs,
             None,
         )
         .map_err(system_error)?;
     let force = running
         .system
-        .add_signal("force", upsample(&data.force(), substeps));
+        .add_signal(&excitation, upsample(&data.excitation.values, substeps));
     running.system.connect(force, plant, 0)?;
     let dt = data.dt / substeps as f64;
     // The corrector keeps the record's rate (its lags are the record's samples).
@@ -398,7 +437,7 @@ pub fn simulate(
                         scheduled,
                         setup.noise.clone(),
                         setup.force_limit,
-                        latent.is_some(),
+                        latent.map(|_| floors),
                     ))
                 }
                 StateSource::Exact => {
@@ -410,7 +449,8 @@ pub fn simulate(
                     };
                     Box::new(ExactStateBlock {
                         floors,
-                        state_at: LqrBlock::inputs(floors)
+                        latent_at: LqrBlock::inputs(measured),
+                        state_at: LqrBlock::inputs(measured)
                             + if latent.is_some() { floors } else { 0 },
                         latent: latent.is_some(),
                         gains: law.gains.clone(),
@@ -425,23 +465,25 @@ pub fn simulate(
             };
             let exact = matches!(law.state, StateSource::Exact);
             let latent_inputs = if latent.is_some() { floors } else { 0 };
-            let state_at = LqrBlock::inputs(floors) + latent_inputs;
+            let state_at = LqrBlock::inputs(measured) + latent_inputs;
             let n_inputs = state_at + if exact { 2 * floors } else { 0 };
             let node = running
                 .system
                 .add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
-            for f in 0..floors {
-                running
-                    .system
-                    .connect_sampled(Port::Output(plant, f), node, f)?;
+            for (i, channel) in setup.measured.iter().enumerate() {
+                running.system.connect_sampled(
+                    Port::Output(plant, output_of(channel, floors)?),
+                    node,
+                    i,
+                )?;
             }
-            running.system.connect(force, node, floors)?;
+            running.system.connect(force, node, measured)?;
             if let Some(c) = latent {
                 for f in 0..floors {
                     running.system.connect_sampled(
                         Port::Output(c, f),
                         node,
-                        LqrBlock::inputs(floors) + f,
+                        LqrBlock::inputs(measured) + f,
                     )?;
                 }
             }

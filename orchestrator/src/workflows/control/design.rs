@@ -7,7 +7,9 @@ use nalgebra::DMatrix;
 use numerics::control::solve_care;
 use numerics::lqr::StateSpace;
 use serde::Serialize;
-use structure::{Excitation, Structure};
+use structure::channel::Channel;
+use fmu_shear::StructureResource;
+use structure::Structure;
 
 use super::ControlError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -39,22 +41,58 @@ impl StateUnit {
     }
 }
 
-/// The twin's linear structure: its physics component's m1..mN, c1..cN, k1..kN (the shear FMU's
-/// defaults where the twin sets none), shaken at floor 1.
-pub fn structure_of(twin: &Twin) -> Result<Structure, ControlError> {
-    let defaults = fmu_shear::ShearParameters::default();
+/// What the twin's physics FMU says about the structure it models: its
+/// `resources/structure.json` (the structure `twin init` wrote and the control force's floor),
+/// the paper's rig when it has none.
+// Until the twin reads its structure itself (Twin::structure), the control workflow reads the
+// resource here, in this one function.
+pub fn physics_resource(twin: &Twin) -> Result<StructureResource, ControlError> {
     let physics = twin.component(PHYSICS).ok_or_else(|| {
         ControlError::Twin(format!(
             "{} has no '{PHYSICS}' component to control",
             twin.describe()
         ))
     })?;
-    let mut s = Structure {
-        mass: defaults.mass.to_vec(),
-        damping: defaults.damping.to_vec(),
-        stiffness: defaults.stiffness.to_vec(),
-        excitation: Excitation::Force { floor: 1 },
+    let path = &physics.fmu_path;
+    let bad = |why: String| ControlError::Twin(format!("{}: {why}", path.display()));
+    let file = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
+    let text = match archive.by_name(STRUCTURE_ENTRY) {
+        Ok(mut entry) => {
+            let mut text = String::new();
+            std::io::Read::read_to_string(&mut entry, &mut text)
+                .map_err(|e| bad(format!("{STRUCTURE_ENTRY}: {e}")))?;
+            text
+        }
+        Err(zip::result::ZipError::FileNotFound) => {
+            return Ok(StructureResource {
+                structure: Structure::default(),
+                control_floor: 1,
+            })
+        }
+        Err(e) => return Err(bad(e.to_string())),
     };
+    let resource: StructureResource =
+        serde_json::from_str(&text).map_err(|e| bad(format!("{STRUCTURE_ENTRY}: {e}")))?;
+    resource
+        .parameters()
+        .map_err(|e| bad(format!("{STRUCTURE_ENTRY}: {e}")))?;
+    Ok(resource)
+}
+
+/// The FMU entry that names the structure.
+const STRUCTURE_ENTRY: &str = "resources/structure.json";
+
+/// The twin's linear structure: its physics FMU's structure (storeys, excitation, nominal
+/// m/c/k; the paper's rig when the FMU names none) with the twin's m1..mN, c1..cN, k1..kN.
+pub fn structure_of(twin: &Twin) -> Result<Structure, ControlError> {
+    let mut s = physics_resource(twin)?.structure;
+    let physics = twin.component(PHYSICS).ok_or_else(|| {
+        ControlError::Twin(format!(
+            "{} has no '{PHYSICS}' component to control",
+            twin.describe()
+        ))
+    })?;
     for name in s.parameter_names() {
         match physics.parameters.get(&name) {
             None => {}
@@ -74,6 +112,67 @@ pub fn structure_of(twin: &Twin) -> Result<Structure, ControlError> {
     Ok(s)
 }
 
+/// `--actuator-floor K` checked against the structure: a floor it has.
+pub fn check_actuator_floor(floor: usize, structure: &Structure) -> Result<(), ControlError> {
+    let n = structure.storeys();
+    if (1..=n).contains(&floor) {
+        Ok(())
+    } else {
+        Err(ControlError::Options(format!(
+            "--actuator-floor {floor}: the structure has floors 1 to {n}"
+        )))
+    }
+}
+
+/// The twin with its control force acting on `floor`: itself when its physics FMU's control
+/// force is there already, else a copy whose physics is the built-in shear FMU written for the
+/// same structure with the control force on `floor` (a temporary FMU that lives as long as the
+/// copy). Refused, naming the option, when the twin sets a parameter that FMU does not have.
+pub fn with_actuator_at(twin: &Twin, floor: usize) -> Result<Twin, ControlError> {
+    let resource = physics_resource(twin)?;
+    check_actuator_floor(floor, &resource.structure)?;
+    if resource.control_floor == floor {
+        return Ok(twin.duplicate());
+    }
+    let moved = StructureResource {
+        structure: resource.structure,
+        control_floor: floor,
+    };
+    let params = moved
+        .parameters()
+        .map_err(|e| ControlError::Options(format!("--actuator-floor {floor}: {e}")))?;
+    let table = fmu_shear::variables::table(&params);
+    let mut copy = twin.duplicate();
+    let physics = copy.component_mut(PHYSICS).ok_or_else(|| {
+        ControlError::Twin(format!(
+            "{} has no '{PHYSICS}' component to control",
+            twin.describe()
+        ))
+    })?;
+    if let Some(name) = physics
+        .parameters
+        .keys()
+        .find(|name| table.by_name(name).is_none())
+    {
+        return Err(ControlError::Options(format!(
+            "--actuator-floor {floor}: {} sets '{name}', which the shear FMU has only with the \
+             control force on floor {} (its effect library is laid out for the paper's rig)",
+            twin.describe(),
+            resource.control_floor
+        )));
+    }
+    let bytes = crate::twin::structure::shear_fmu_bytes(&moved)?;
+    let dir = tempfile::tempdir().map_err(|e| {
+        ControlError::Twin(format!("a temporary directory for the physics FMU: {e}"))
+    })?;
+    let path = dir.path().join(crate::twin::SHEAR_FMU);
+    std::fs::write(&path, bytes)
+        .map_err(|e| ControlError::Twin(format!("{}: {e}", path.display())))?;
+    physics.fmu_path = path;
+    copy.keep_alive(std::sync::Arc::new(dir));
+    Ok(copy)
+}
+
 /// m1..kN by name, for the report.
 pub fn parameter_map(s: &Structure) -> BTreeMap<String, f64> {
     s.parameter_names()
@@ -82,13 +181,25 @@ pub fn parameter_map(s: &Structure) -> BTreeMap<String, f64> {
         .collect()
 }
 
-/// The LQR's plant: `structure` with the actuator at `actuator_floor`, the state in units of `state_scale` metres.
+/// The LQR's plant: `structure` with the actuator at `actuator_floor`, reading every floor's
+/// acceleration, the state in units of `state_scale` metres.
 pub fn plant_of(
     structure: &Structure,
     actuator_floor: usize,
     state_scale: f64,
 ) -> Result<StateSpace, ControlError> {
     fmu_lqr::model::plant(structure, actuator_floor, state_scale).map_err(ControlError::Twin)
+}
+
+/// The LQR's plant reading the channels `measured`.
+pub fn plant_measuring(
+    structure: &Structure,
+    actuator_floor: usize,
+    measured: &[Channel],
+    state_scale: f64,
+) -> Result<StateSpace, ControlError> {
+    fmu_lqr::model::plant_measuring(structure, actuator_floor, measured, state_scale)
+        .map_err(ControlError::Twin)
 }
 
 /// One LQR design.

@@ -13,6 +13,7 @@ pub mod ssp;
 
 use numerics::lqr::{Estimator, Schedule};
 use serde::Serialize;
+use structure::channel::{Channel, Quantity};
 use structure::Structure;
 
 use crate::blocks::lqr::SensorNoise;
@@ -22,7 +23,10 @@ use crate::evaluation::stats::rms;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
 use closed_loop::{simulate, ContactEvent, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
-pub use design::{design, plant_of, structure_of, Design, StateUnit};
+pub use design::{
+    design, physics_resource, plant_measuring, plant_of, structure_of, with_actuator_at, Design,
+    StateUnit,
+};
 pub use options::{sensor_noise, twin_for_control};
 
 /// Errors of `twin control`.
@@ -223,6 +227,13 @@ pub struct ControlReport {
     pub twin: String,
     pub data: String,
     pub parameters: std::collections::BTreeMap<String, f64>,
+    /// What excites the structure: `force:K` or `base`.
+    pub excitation: String,
+    /// The floor the control force acts on (1-based).
+    pub actuator_floor: usize,
+    /// The channels the controller reads (the record's responses), in the order of
+    /// `sensor_noise_sd` and of a Kalman estimator's `sensor_sd`.
+    pub measured: Vec<String>,
     #[serde(rename = "A")]
     pub a: Vec<Vec<f64>>,
     #[serde(rename = "B")]
@@ -386,7 +397,12 @@ impl Runner<'_> {
         let outcome = self.run_law(Gains::Fixed(design.gain.clone()), state)?;
         Ok(match outcome {
             Ok(r) => {
-                let peaks = resonance_peaks(&self.data.force(), &r, self.data.dt, &self.resonances);
+                let peaks = resonance_peaks(
+                    &self.data.excitation.values,
+                    &r,
+                    self.data.dt,
+                    &self.resonances,
+                );
                 let (att, mean) = attenuation(&self.passive_peaks, &peaks, &self.resonances);
                 (
                     DesignRun {
@@ -430,27 +446,105 @@ fn estimator_of(
     options: &ControlOptions,
     noise_sd: Option<&[f64]>,
     data: &Measurement,
-    floors: usize,
+    measured: &[Channel],
 ) -> Estimator {
     match choice {
         EstimatorChoice::Integrate => Estimator::Integrate {
             highpass_hz: options.highpass_hz,
         },
         EstimatorChoice::Kalman => {
-            // The model's error as a force on floor 1: 5 % of the record's force RMS per
-            // sample; the sensors' noise as the twin calibrated it (else 1 % of the measured
-            // RMS).
-            let force_rms = rms(&data.force()).max(1e-6);
+            // The model's error as the excitation's: 5 % of the record's excitation RMS per
+            // sample; the sensors' noise as the twin calibrated it (else 1 % of each measured
+            // channel's RMS, in its own quantity).
+            let excitation_rms = rms(&data.excitation.values).max(1e-6);
             let sensor_sd: Vec<f64> = match noise_sd {
                 Some(sd) => sd.to_vec(),
-                None => (0..floors)
-                    .map(|f| (0.01 * rms(data.acc(f))).max(1e-6))
+                None => measured
+                    .iter()
+                    .map(|c| (0.01 * rms(data.channel(*c).unwrap_or(&[]))).max(1e-6))
                     .collect(),
             };
             Estimator::Kalman {
-                process_sd: 0.05 * force_rms,
+                process_sd: 0.05 * excitation_rms,
                 sensor_sd: sensor_sd.iter().map(|s| s.max(1e-9)).collect(),
             }
+        }
+    }
+}
+
+/// The record's response channels in the order the controller reads them: accelerations, then
+/// velocities, then displacements, each by floor.
+pub fn measured_channels(data: &Measurement) -> Vec<Channel> {
+    let rank = |q: Quantity| match q {
+        Quantity::Acceleration => 0,
+        Quantity::Velocity => 1,
+        _ => 2,
+    };
+    let mut channels: Vec<Channel> = data
+        .responses
+        .iter()
+        .map(|s| s.channel)
+        .filter(|c| matches!(c, Channel::Response { .. }))
+        .collect();
+    channels.sort_by_key(|c| match c {
+        Channel::Response { quantity, floor } => (rank(*quantity), *floor),
+        _ => (3, 0),
+    });
+    channels.dedup();
+    channels
+}
+
+fn names(channels: &[Channel]) -> String {
+    channels
+        .iter()
+        .map(Channel::name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Whether the estimator can run on what the record measures, said before any work: the
+/// integrating estimator needs every floor's acceleration; the Kalman observer needs a set of
+/// channels from which the state is observable (a mode standing still at every sensor is not).
+pub fn check_estimator(
+    choice: EstimatorChoice,
+    structure: &Structure,
+    plant: &numerics::lqr::StateSpace,
+    measured: &[Channel],
+) -> Result<(), ControlError> {
+    match choice {
+        EstimatorChoice::Integrate => {
+            let every = fmu_lqr::model::every_acceleration(structure.storeys());
+            if measured != every.as_slice() {
+                return Err(ControlError::Options(format!(
+                    "--estimator integrate integrates an accelerometer on every floor ({}); the \
+                     record measures {}: use --estimator kalman, which estimates the state from \
+                     the channels there are",
+                    names(&every),
+                    names(measured)
+                )));
+            }
+            Ok(())
+        }
+        EstimatorChoice::Kalman => {
+            let missed = plant.unobservable();
+            if missed.is_empty() {
+                return Ok(());
+            }
+            let mut freqs: Vec<f64> = missed
+                .iter()
+                .map(|e| e[0].hypot(e[1]) / (2.0 * std::f64::consts::PI))
+                .collect();
+            freqs.sort_by(f64::total_cmp);
+            freqs.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs().max(1.0));
+            let listed: Vec<String> = freqs.iter().map(|f| format!("{f:.3} Hz")).collect();
+            Err(ControlError::Options(format!(
+                "the state is not observable from the record's channels {}: the motion at {} \
+                 moves none of them (a mode standing still at every sensor); the Kalman \
+                 estimator cannot see it, so the controller cannot be designed on it — measure \
+                 another floor as well",
+                names(measured),
+                listed.join(", ")
+            )))
         }
     }
 }
@@ -472,8 +566,20 @@ pub fn run_control(
         )));
     }
     let structure: Structure = structure_of(twin)?;
-    let plant = plant_of(&structure, options.actuator_floor, options.unit.scale())?;
+    design::check_actuator_floor(options.actuator_floor, &structure)?;
+    check_record(data, &structure)?;
+    let measured = measured_channels(data);
+    let plant = plant_measuring(
+        &structure,
+        options.actuator_floor,
+        &measured,
+        options.unit.scale(),
+    )?;
+    check_estimator(options.estimator, &structure, &plant, &measured)?;
+    let controlled = with_actuator_at(twin, options.actuator_floor)?;
+    let twin = &controlled;
     let floors = structure.storeys();
+    let channels = measured.len();
     let mut qs = options.qs.clone();
     qs.sort_by(f64::total_cmp);
     qs.dedup();
@@ -500,17 +606,29 @@ pub fn run_control(
         None => substeps_for(&all, data.dt),
     };
     let noise_sd: Option<Vec<f64>> = match &options.sensor_noise {
-        Some(sd) if sd.len() == 1 => Some(vec![sd[0]; floors]),
-        Some(sd) if sd.len() == floors => Some(sd.clone()),
+        Some(sd) if sd.len() == 1 => Some(vec![sd[0]; channels]),
+        Some(sd) if sd.len() == channels => Some(sd.clone()),
         Some(sd) => {
             return Err(ControlError::Options(format!(
-                "the sensor noise has {} values: give one, or one per floor ({floors})",
-                sd.len()
+                "the sensor noise has {} values: give one, or one per measured channel \
+                 ({channels}: {})",
+                sd.len(),
+                names(&measured)
             )))
         }
-        None => twin
-            .noise_variance
-            .map(|v| v.iter().map(|x| x.max(0.0).sqrt()).collect()),
+        // The twin's calibrated noise, when it has one for every channel read.
+        None => twin.noise_variance.and_then(|v| {
+            measured
+                .iter()
+                .map(|c| match c {
+                    Channel::Response {
+                        quantity: Quantity::Acceleration,
+                        floor,
+                    } => v.get(floor - 1).map(|x| x.max(0.0).sqrt()),
+                    _ => None,
+                })
+                .collect()
+        }),
     };
     let mut gaps = closed_loop::twin_gaps(twin);
     for g in &options.gaps {
@@ -518,16 +636,16 @@ pub fn run_control(
             gaps.push(g.clone());
         }
     }
-    let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
         plant: plant.clone(),
+        measured: measured.clone(),
         substeps,
         noise: noise_sd.clone().map(|sd| SensorNoise {
             sd,
             seed: options.seed,
         }),
         gaps: gaps.clone(),
-        force_limit: 1e3 * force_peak.max(1e-3),
+        force_limit: force_limit(&structure, data),
         corrector: false,
     };
     let estimator = estimator_of(
@@ -535,7 +653,7 @@ pub fn run_control(
         options,
         noise_sd.as_deref(),
         data,
-        floors,
+        &measured,
     );
     let resonances = structure.natural_frequencies();
     let runs_total = 1
@@ -555,7 +673,8 @@ pub fn run_control(
         runs_total: runs_total as u64,
     };
     let passive = runner.run(None)?;
-    runner.passive_peaks = resonance_peaks(&data.force(), &passive, data.dt, &resonances);
+    runner.passive_peaks =
+        resonance_peaks(&data.excitation.values, &passive, data.dt, &resonances);
 
     let mut design_runs = Vec::new();
     let mut responses = Vec::new();
@@ -677,7 +796,13 @@ pub fn run_control(
                     None => (0..floors)
                         .map(|f| {
                             crate::workflows::learn::PAPER_THRESHOLD
-                                * crate::evaluation::stats::variance(data.acc(f))
+                                * crate::evaluation::stats::variance(
+                                    data.channel(Channel::Response {
+                                        quantity: Quantity::Acceleration,
+                                        floor: f + 1,
+                                    })
+                                    .unwrap_or(&[]),
+                                )
                         })
                         .collect(),
                 }),
@@ -702,7 +827,7 @@ pub fn run_control(
             let r = runner.run_law(gains, state);
             runner.setup.corrector = false;
             let r = r?.map_err(ControlError::Unstable)?;
-            let peaks = resonance_peaks(&data.force(), &r, data.dt, &resonances);
+            let peaks = resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
             let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
             let report = ScheduleReport {
                 q_low: low.design.q,
@@ -740,29 +865,32 @@ pub fn run_control(
     let mut estimator_costs = Vec::new();
     if options.estimator_costs {
         let first = design_runs[0].clone();
-        let choices = [
-            ("exact", StateSource::Exact),
-            (
+        let mut choices = vec![("exact", StateSource::Exact)];
+        // The integrating estimator needs every floor's acceleration.
+        if check_estimator(EstimatorChoice::Integrate, &structure, &plant, &measured).is_ok() {
+            choices.push((
                 "integrate",
                 StateSource::Estimated(estimator_of(
                     EstimatorChoice::Integrate,
                     options,
                     noise_sd.as_deref(),
                     data,
-                    floors,
+                    &measured,
                 )),
-            ),
-            (
+            ));
+        }
+        if check_estimator(EstimatorChoice::Kalman, &structure, &plant, &measured).is_ok() {
+            choices.push((
                 "kalman",
                 StateSource::Estimated(estimator_of(
                     EstimatorChoice::Kalman,
                     options,
                     noise_sd.as_deref(),
                     data,
-                    floors,
+                    &measured,
                 )),
-            ),
-        ];
+            ));
+        }
         for (name, state) in choices {
             // The chosen estimator's run is the design's own.
             let same = matches!(&state, StateSource::Estimated(e) if *e == estimator);
@@ -776,7 +904,7 @@ pub fn run_control(
             } else {
                 match runner.run_law(Gains::Fixed(first.design.gain.clone()), state)? {
                     Ok(r) => {
-                        let peaks = resonance_peaks(&data.force(), &r, data.dt, &resonances);
+                        let peaks = resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
                         let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
                         (att, mean, r.control_rms, r.contacts.len())
                     }
@@ -811,6 +939,9 @@ pub fn run_control(
         twin: twin.describe(),
         data: data.path.display().to_string(),
         parameters: design::parameter_map(&structure),
+        excitation: structure.excitation.name(),
+        actuator_floor: options.actuator_floor,
+        measured: measured.iter().map(Channel::name).collect(),
         a: design::rows(&plant.a),
         b: plant.b.iter().copied().collect(),
         r: options.r,
@@ -843,9 +974,38 @@ pub fn run_control(
         passive,
         designs: responses,
         scheduled: scheduled_response,
-        force: data.force().to_vec(),
+        force: data.excitation.values.clone(),
         dt: data.dt,
     })
+}
+
+/// The record can drive the structure: its excitation is the structure's (a force, or a ground
+/// acceleration), and every response it measures is of a floor the structure has; refused
+/// naming the column.
+pub fn check_record(data: &Measurement, structure: &Structure) -> Result<(), ControlError> {
+    for signal in data.channels() {
+        let name = signal.channel.name();
+        signal
+            .channel
+            .check(&name, structure)
+            .map_err(|e| ControlError::Options(format!("{}: {e}", data.path.display())))?;
+    }
+    Ok(())
+}
+
+/// A control force beyond this stops a run as unstable: a thousand times the record's peak
+/// excitation as a force (a ground acceleration times the structure's mass).
+fn force_limit(structure: &Structure, data: &Measurement) -> f64 {
+    let peak = data
+        .excitation
+        .values
+        .iter()
+        .fold(0.0f64, |m, f| m.max(f.abs()));
+    let per_unit = match structure.excitation {
+        structure::Excitation::Force { .. } => 1.0,
+        structure::Excitation::Base => structure.mass.iter().sum(),
+    };
+    1e3 * (peak * per_unit).max(1e-3)
 }
 
 /// A controller read back from a `twin control` report: what `twin synth --controller` puts in
@@ -858,6 +1018,15 @@ pub struct ControllerSpec {
     pub control_rate_hz: f64,
     pub sensor_noise_sd: Option<Vec<f64>>,
     pub designs: Vec<SpecDesign>,
+    /// `force:K` or `base` (a report from before excitations were named: a force at floor 1).
+    #[serde(default)]
+    pub excitation: Option<String>,
+    /// The actuator's floor (absent: 1).
+    #[serde(default)]
+    pub actuator_floor: Option<usize>,
+    /// The channels the controller reads (absent: every floor's acceleration).
+    #[serde(default)]
+    pub measured: Option<Vec<String>>,
 }
 
 #[derive(Clone, Debug, serde::Deserialize)]
@@ -920,7 +1089,12 @@ impl ControllerSpec {
                 "the report's parameters lack 'm1'".into(),
             ));
         }
-        let mut s = Structure::uniform(storeys, 0.0, 0.0, 0.0, Default::default());
+        let excitation = match &self.excitation {
+            None => structure::Excitation::default(),
+            Some(text) => structure::Excitation::parse(text)
+                .map_err(|e| ControlError::Options(format!("the report's excitation: {e}")))?,
+        };
+        let mut s = Structure::uniform(storeys, 0.0, 0.0, 0.0, excitation);
         for name in s.parameter_names() {
             let value = get(name.clone())?;
             s.set(&name, value);
@@ -930,9 +1104,38 @@ impl ControllerSpec {
         Ok(s)
     }
 
-    /// The design's plant: the report's structure, the actuator at floor 1.
+    /// The actuator's floor (1 for a report that names none).
+    pub fn actuator_floor(&self) -> usize {
+        self.actuator_floor.unwrap_or(1)
+    }
+
+    /// The channels the controller reads, in its order (every floor's acceleration for a
+    /// report that names none).
+    pub fn measured(&self) -> Result<Vec<Channel>, ControlError> {
+        let storeys = self.structure()?.storeys();
+        match &self.measured {
+            None => Ok(fmu_lqr::model::every_acceleration(storeys)),
+            Some(names) => names
+                .iter()
+                .map(|n| {
+                    Channel::parse(n).ok_or_else(|| {
+                        ControlError::Options(format!(
+                            "the report's measured channel '{n}' is not acc<i>, vel<i> or disp<i>"
+                        ))
+                    })
+                })
+                .collect(),
+        }
+    }
+
+    /// The design's plant: the report's structure, actuator and measured channels.
     pub fn plant(&self) -> Result<numerics::lqr::StateSpace, ControlError> {
-        plant_of(&self.structure()?, 1, self.state_scale)
+        plant_measuring(
+            &self.structure()?,
+            self.actuator_floor(),
+            &self.measured()?,
+            self.state_scale,
+        )
     }
 
     /// The controller for design `q`, sampling every `dt` seconds (the report's rate is
@@ -972,21 +1175,24 @@ pub fn predict_controlled(
 ) -> Result<crate::twin::run::Prediction, ControlError> {
     let design = spec.design(q)?;
     let plant = spec.plant()?;
+    let structure = spec.structure()?;
+    check_record(data, &structure)?;
+    let controlled = with_actuator_at(twin, spec.actuator_floor())?;
     let substeps = (spec.control_rate_hz * data.dt).round().max(1.0) as usize;
-    let force_peak = data.force().iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let setup = LoopSetup {
         plant,
+        measured: spec.measured()?,
         substeps,
         noise: None,
         gaps: Vec::new(),
-        force_limit: 1e3 * force_peak.max(1e-3),
+        force_limit: force_limit(&structure, data),
         corrector: false,
     };
     let law = LoopLaw {
         gains: Gains::Fixed(design.gain.clone()),
         state: StateSource::Estimated(spec.estimator_settings.clone()),
     };
-    let r = simulate(twin, data, &setup, Some(&law), progress)?;
+    let r = simulate(&controlled, data, &setup, Some(&law), progress)?;
     Ok(crate::twin::run::Prediction::of_accelerations(
         r.time, r.acc,
     ))

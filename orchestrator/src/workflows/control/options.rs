@@ -71,7 +71,8 @@ impl ControlOptions {
         }
         if self.actuator_floor == 0 {
             return Err(InvalidOption(
-                "the actuator's floor is 1-based: 1 is the first floor".into(),
+                "--actuator-floor 0: floors are counted from 1 (the first floor above the ground)"
+                    .into(),
             ));
         }
         if let Some(Retune {

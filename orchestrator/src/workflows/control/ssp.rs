@@ -3,10 +3,15 @@
 //! `numerics::lqr` law as the master's `LqrBlock`) with a design's gain and the report's
 //! estimator, sampling at the report's control rate.
 //!
-//! Connections: system `force` → `physics.force` and `lqr.force`; `physics.acc1..3` →
-//! `lqr.acc1..3`; `lqr.control_force` → `physics.control_force`; system outputs `acc1..3` (the
-//! physics') and `control_force` (the controller's). The noise-free loop: the sensor noise of a
-//! `twin control` run is not part of it.
+//! Connections: the system's excitation (`force` or `ground_acc`) → the physics' and the
+//! controller's; the measured channels (`physics.acc1`, `physics.vel3`, …: the report's
+//! `measured`) → the controller's inputs of those names; `lqr.control_force` →
+//! `physics.control_force` (the physics FMU's control force on the report's actuator floor);
+//! system outputs every floor's `acc<i>` (the physics') and `control_force` (the
+//! controller's). The controller FMU is the built-in library with the modelDescription of the
+//! report's layout (structure, actuator, channels) and that layout in
+//! `resources/structure.json`; for the paper's rig, the built-in FMU as it is. The noise-free
+//! loop: the sensor noise of a `twin control` run is not part of it.
 //!
 //! What the masters make of it (the controller's output has no feedthrough, the shear's `acc1`
 //! has: it jumps with `force − control_force`). In every case the structure steps over
@@ -93,9 +98,41 @@ fn link(from: Option<&str>, out: &str, to: Option<&str>, input: &str) -> Connect
     }
 }
 
-/// The controlled system: `twin`'s physics component and the controller of design `q`, with
-/// `experiment` (start, stop) as its DefaultExperiment. `lqr_fmu`: the controller FMU (None:
-/// `find_fmu`).
+/// The controller FMU's layout for `spec`: its structure, actuator floor and measured channels.
+pub fn controller_layout(spec: &ControllerSpec) -> Result<fmu_lqr::model::Layout, ControlError> {
+    fmu_lqr::model::Layout {
+        structure: spec.structure()?,
+        actuator_floor: spec.actuator_floor(),
+        measured: spec.measured()?,
+    }
+    .checked()
+    .map_err(|e| ControlError::Options(format!("the report's controller: {e}")))
+}
+
+/// The controller FMU for `layout`: the built-in one for the paper's rig, else the built-in
+/// library with the modelDescription of that layout's table and `resources/structure.json`,
+/// written into `dir`.
+fn controller_fmu(
+    layout: &fmu_lqr::model::Layout,
+    dir: &Path,
+) -> Result<PathBuf, ControlError> {
+    if layout.is_paper() {
+        return Ok(find_fmu(LQR_FMU)?);
+    }
+    let xml = fmu_lqr::variables::table(layout).to_model_description_xml();
+    let json = serde_json::to_string_pretty(layout)
+        .map_err(|e| ControlError::Options(format!("the controller's layout as JSON: {e}")))?;
+    let bytes = crate::twin::structure::fmu_for_structure(LQR_FMU, &xml, &json)?;
+    let path = dir.join(LQR_FMU);
+    std::fs::write(&path, bytes)
+        .map_err(|e| ControlError::Twin(format!("{}: {e}", path.display())))?;
+    Ok(path)
+}
+
+/// The controlled system: `twin`'s physics component (with its control force on the
+/// actuator's floor) and the controller of design `q`, with `experiment` (start, stop) as its
+/// DefaultExperiment. `lqr_fmu`: the controller FMU (None: the built-in one, written for the
+/// report's layout).
 pub fn controlled_system(
     twin: &Twin,
     spec: &ControllerSpec,
@@ -103,29 +140,35 @@ pub fn controlled_system(
     experiment: Option<(f64, f64)>,
     lqr_fmu: Option<PathBuf>,
 ) -> Result<Twin, ControlError> {
-    let physics = twin
+    let layout = controller_layout(spec)?;
+    let mut system = super::with_actuator_at(twin, layout.actuator_floor)?;
+    let physics = system
         .component(PHYSICS)
         .ok_or_else(|| {
             ControlError::Twin(format!("{} has no '{PHYSICS}' component", twin.describe()))
         })?
         .clone();
+    let dir = tempfile::tempdir()
+        .map_err(|e| ControlError::Twin(format!("a temporary directory: {e}")))?;
     let fmu_path = match lqr_fmu {
         Some(p) => p,
-        None => find_fmu(LQR_FMU)?,
+        None => controller_fmu(&layout, dir.path())?,
     };
+    system.keep_alive(std::sync::Arc::new(dir));
     let controller = Component {
         name: CONTROLLER.into(),
         fmu_name: LQR_FMU.into(),
         fmu_path,
         parameters: controller_parameters(spec, q)?,
     };
+    let input = layout.structure.excitation.input_name();
     let mut connections = vec![
-        link(None, "force", Some(PHYSICS), "force"),
-        link(None, "force", Some(CONTROLLER), "force"),
+        link(None, input, Some(PHYSICS), input),
+        link(None, input, Some(CONTROLLER), input),
     ];
-    for f in 1..=3 {
-        let acc = format!("acc{f}");
-        connections.push(link(Some(PHYSICS), &acc, Some(CONTROLLER), &acc));
+    for channel in &layout.measured {
+        let name = channel.name();
+        connections.push(link(Some(PHYSICS), &name, Some(CONTROLLER), &name));
     }
     connections.push(link(
         Some(CONTROLLER),
@@ -133,7 +176,7 @@ pub fn controlled_system(
         Some(PHYSICS),
         "control_force",
     ));
-    for f in 1..=3 {
+    for f in 1..=layout.storeys() {
         let acc = format!("acc{f}");
         connections.push(link(Some(PHYSICS), &acc, None, &acc));
     }
@@ -143,7 +186,6 @@ pub fn controlled_system(
         None,
         "control_force",
     ));
-    let mut system = twin.duplicate();
     system.name = "shear-twin-controlled".into();
     system.components = vec![physics, controller];
     system.connections = connections;
