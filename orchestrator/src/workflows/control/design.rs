@@ -155,10 +155,9 @@ pub fn with_actuator_at(twin: &Twin, floor: usize) -> Result<Twin, ControlError>
         .find(|name| table.by_name(name).is_none())
     {
         return Err(ControlError::Options(format!(
-            "--actuator-floor {floor}: {} sets '{name}', which the shear FMU has only with the \
-             control force on floor {} (its effect library is laid out for the paper's rig)",
-            twin.describe(),
-            resource.control_floor
+            "--actuator-floor {floor}: {} sets '{name}', which the shear FMU with its control \
+             force on floor {floor} does not have",
+            twin.describe()
         )));
     }
     let bytes = crate::twin::structure::shear_fmu_bytes(&moved)?;
