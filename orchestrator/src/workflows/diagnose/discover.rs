@@ -1027,4 +1027,79 @@ mod tests {
             );
         }
     }
+
+    /// On a 10-storey building with accelerometers on floors 2, 5 and 9 only, a residual made
+    /// of a cubic force at storey 7 (linearised) screens cubic@7 first: it leaves nothing
+    /// (measured −2.8e-16 of the held-out residual, limit 1e-9), and every candidate at another
+    /// site leaves more than half (measured 0.998 at least).
+    #[test]
+    fn the_screen_finds_a_cubic_storey_of_a_ten_storey_building_from_three_floors() {
+        let storeys = 10;
+        let linear = LinearPart {
+            mass: vec![5.0; storeys],
+            damping: vec![3.0; storeys],
+            stiffness: vec![4000.0; storeys],
+        };
+        let dt = 1.0 / 51.2;
+        let n = 1024;
+        let wave = |a: f64, w: f64, f: usize, phase: f64| -> Vec<Vec<f64>> {
+            (0..f)
+                .map(|f| {
+                    (0..n)
+                        .map(|k| a * ((w + 0.013 * f as f64) * k as f64 + phase).sin())
+                        .collect()
+                })
+                .collect()
+        };
+        let drift = wave(1e-3, 0.31, storeys, 0.0);
+        let velocity = wave(0.02, 0.19, storeys, 0.4);
+        let acceleration = wave(0.3, 0.43, storeys, 1.1);
+        let states = States {
+            drift: &drift,
+            velocity: &velocity,
+            acceleration: &acceleration,
+        };
+        let site = Site::Storey(7);
+        let (x, v) = site_states(&states, site);
+        let phi: Vec<f64> = x
+            .iter()
+            .zip(&v)
+            .map(|(&a, &b)| 2e9 * Function::X3.eval(a, b, 1.0))
+            .collect();
+        let floors = [1, 4, 8];
+        let every = sensitivity(&linear, site, &phi, dt);
+        let residual: Vec<Vec<f64>> = floors.iter().map(|&f| every[f].clone()).collect();
+        let variance: Vec<f64> = residual
+            .iter()
+            .map(|r| r.iter().map(|x| x * x).sum::<f64>() / n as f64 + 1e-12)
+            .collect();
+        let first = 100;
+        let fitted: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 0).collect();
+        let held_out: Vec<usize> = (first..n).filter(|k| (k / 51) % 2 == 1).collect();
+        let library = Candidate::library(storeys);
+        let scores = screen(
+            &Problem {
+                linear,
+                states,
+                floors: &floors,
+                residual,
+                variance,
+                dt,
+                fitted: &fitted,
+                held_out: &held_out,
+                first,
+            },
+            &library,
+        );
+        let best = (0..library.len())
+            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+            .expect("candidates");
+        assert_eq!(library[best].label(), "cubic@7", "{scores:?}");
+        assert!(scores[best] < 1e-9, "{}", scores[best]);
+        for (c, s) in library.iter().zip(&scores) {
+            if c.at != 7 {
+                assert!(*s > 0.5, "{}: {s}", c.label());
+            }
+        }
+    }
 }
