@@ -7,9 +7,8 @@ use serde::{Deserialize, Serialize};
 use structure::channel::{Channel, Quantity};
 use structure::{Excitation, Structure};
 
-
-use crate::variables::{self as vars, *};
 pub use crate::variables::Layout;
+use crate::variables::{self as vars, *};
 
 /// Relative tolerance on the communication step against `sample_interval`.
 pub const STEP_TOLERANCE: f64 = 1e-9;
@@ -39,7 +38,6 @@ mod layout_code {
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
     use structure::channel::Channel;
     use structure::{Excitation, Structure};
-
 
     use crate::variables::Layout;
 
@@ -218,7 +216,12 @@ impl Parameters {
     /// The controller these parameters describe, with no sample seen yet.
     pub fn controller(&self) -> Result<Controller, String> {
         let l = &self.layout;
-        let plant = plant_measuring(&l.structure, l.actuator_floor, &l.measured, self.state_scale)?;
+        let plant = plant_measuring(
+            &l.structure,
+            l.actuator_floor,
+            &l.measured,
+            self.state_scale,
+        )?;
         Controller::new(&plant, &self.gain, &self.estimator()?, self.sample_interval)
             .map_err(|e| e.to_string())
     }

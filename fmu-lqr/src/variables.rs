@@ -79,10 +79,7 @@ mod channel_names {
     use structure::channel::Channel;
 
     pub fn serialize<S: Serializer>(c: &[Channel], s: S) -> Result<S::Ok, S::Error> {
-        c.iter()
-            .map(Channel::name)
-            .collect::<Vec<_>>()
-            .serialize(s)
+        c.iter().map(Channel::name).collect::<Vec<_>>().serialize(s)
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Channel>, D::Error> {
@@ -229,7 +226,9 @@ fn describe_channel(c: &Channel, excitation: &Excitation) -> String {
     };
     match quantity {
         Quantity::Acceleration => match excitation {
-            Excitation::Base => format!("measured absolute acceleration of floor {floor} (relative plus ground_acc)"),
+            Excitation::Base => format!(
+                "measured absolute acceleration of floor {floor} (relative plus ground_acc)"
+            ),
             Excitation::Force { .. } => format!("measured absolute acceleration of floor {floor}"),
         },
         Quantity::Velocity => format!("measured velocity of floor {floor} relative to the ground"),
@@ -257,9 +256,8 @@ fn variables(layout: &Layout) -> Vec<Variable> {
         Excitation::Force { floor } => Variable::real_input("force", FORCE, "N", 0.0).describe(
             &format!("excitation force on floor {floor} now (the Kalman observer's known input)"),
         ),
-        Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0).describe(
-            "ground acceleration at the base now (the Kalman observer's known input)",
-        ),
+        Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0)
+            .describe("ground acceleration at the base now (the Kalman observer's known input)"),
     });
     let mut out = Variable::real_output("control_force", CONTROL_FORCE, "N").describe(&format!(
         "the command on floor {} computed at the last fmi2DoStep from the sample at its start; it acts on the structure over the next step",

@@ -78,7 +78,11 @@ impl Exact for State {
         h: f64,
     ) -> Option<State> {
         use crate::piecewise::ContactMaps;
-        if !model.contact_maps.as_ref().is_some_and(|m| m.fits(model, h)) {
+        if !model
+            .contact_maps
+            .as_ref()
+            .is_some_and(|m| m.fits(model, h))
+        {
             model.contact_maps = Some(Box::new(ContactMaps::new(model, h)));
         }
         let maps = model.contact_maps.as_mut()?;

@@ -378,7 +378,10 @@ mod tests {
                     assert_eq!(vr, Some(crate::effects::site_vr(base, top)), "{name}");
                 }
                 assert!(info
-                    .by_name(&format!("{}_enabled", crate::effects::Kind::Cubic.prefix(storeys)))
+                    .by_name(&format!(
+                        "{}_enabled",
+                        crate::effects::Kind::Cubic.prefix(storeys)
+                    ))
                     .is_none());
                 assert_eq!(
                     info.by_name(&format!("m{storeys}"))

@@ -356,8 +356,7 @@ impl CoSimModel for SubstructureModel {
                     time: time + step_size,
                     what: format!(
                         "floors 1-{}'s displacements {:?} and velocities {:?}",
-                        f.floor,
-                        next.y, next.v
+                        f.floor, next.y, next.v
                     ),
                 });
             }

@@ -147,7 +147,11 @@ impl StateSpace {
 
     /// The same model with `ground` as [`StateSpace::ground_in_reading`] (one per measurement).
     pub fn with_ground_in_reading(mut self, ground: DVector<f64>) -> Result<Self, LqrError> {
-        dimension("the ground's part of the readings", ground.len(), self.c.nrows())?;
+        dimension(
+            "the ground's part of the readings",
+            ground.len(),
+            self.c.nrows(),
+        )?;
         self.ground_in_reading = ground;
         Ok(self)
     }
@@ -183,7 +187,11 @@ impl StateSpace {
         for lambda in self.a.complex_eigenvalues().iter() {
             let m = DMatrix::<Complex<f64>>::from_fn(states + rows, states, |i, j| {
                 if i < states {
-                    let diagonal = if i == j { *lambda } else { Complex::new(0.0, 0.0) };
+                    let diagonal = if i == j {
+                        *lambda
+                    } else {
+                        Complex::new(0.0, 0.0)
+                    };
                     Complex::new(self.a[(i, j)], 0.0) - diagonal
                 } else {
                     Complex::new(c[(i - states, j)] * scale, 0.0)
@@ -516,7 +524,9 @@ impl Controller {
             } => {
                 let z = DVector::from_iterator(
                     z.len(),
-                    z.iter().zip(ground.iter()).map(|(z, g)| z - g * force * scale),
+                    z.iter()
+                        .zip(ground.iter())
+                        .map(|(z, g)| z - g * force * scale),
                 );
                 if *started {
                     for i in 0..y.len() {
@@ -942,7 +952,10 @@ mod tests {
         // The second mode of the undamped chain: ω² = 4 (k/m) sin²(3π/18).
         let w2 = (4.0 * 4021.0 / 5.2 * (3.0 * std::f64::consts::PI / 18.0).sin().powi(2)).sqrt();
         for e in &missed {
-            assert!((e[0].hypot(e[1]) - w2).abs() < 1e-6 * w2, "{e:?} against {w2}");
+            assert!(
+                (e[0].hypot(e[1]) - w2).abs() < 1e-6 * w2,
+                "{e:?} against {w2}"
+            );
         }
         let kalman = Estimator::Kalman {
             process_sd: 0.1,

@@ -27,20 +27,20 @@ pub fn rk4_step<S: OdeState>(f: impl Fn(f64, &S) -> S, t: f64, x: &S, h: f64) ->
     let k2 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k1));
     let k3 = f(t + 0.5 * h, &axpy(x, 0.5 * h, &k2));
     let k4 = f(t + h, &axpy(x, h, &k3));
-    let (xr, k1, k2, k3, k4) = (x.as_ref(), k1.as_ref(), k2.as_ref(), k3.as_ref(), k4.as_ref());
+    let (xr, k1, k2, k3, k4) = (
+        x.as_ref(),
+        k1.as_ref(),
+        k2.as_ref(),
+        k3.as_ref(),
+        k4.as_ref(),
+    );
     build(x, |i| {
         xr[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
     })
 }
 
 /// `n` RK4 sub-steps covering `[t, t + h]`.
-pub fn rk4_substeps<S: OdeState>(
-    f: impl Fn(f64, &S) -> S,
-    t: f64,
-    x: &S,
-    h: f64,
-    n: u32,
-) -> S {
+pub fn rk4_substeps<S: OdeState>(f: impl Fn(f64, &S) -> S, t: f64, x: &S, h: f64, n: u32) -> S {
     let n = n.max(1);
     let dt = h / f64::from(n);
     let mut state = x.clone();
@@ -159,7 +159,12 @@ pub fn dopri5_step<S: OdeState>(
     let xr = x.as_ref();
     let stage = |ks: &[&S], a: &[f64]| -> S {
         build(x, |i| {
-            xr[i] + h * ks.iter().zip(a).map(|(k, a)| a * k.as_ref()[i]).sum::<f64>()
+            xr[i]
+                + h * ks
+                    .iter()
+                    .zip(a)
+                    .map(|(k, a)| a * k.as_ref()[i])
+                    .sum::<f64>()
         })
     };
     let k2 = f(t + C[1] * h, &stage(&[k1], &A2));
@@ -171,7 +176,11 @@ pub fn dopri5_step<S: OdeState>(
     let k7 = f(t + h, &next);
     let ks = [k1, &k2, &k3, &k4, &k5, &k6, &k7];
     let error = build(x, |i| {
-        h * ks.iter().zip(&E).map(|(k, e)| e * k.as_ref()[i]).sum::<f64>()
+        h * ks
+            .iter()
+            .zip(&E)
+            .map(|(k, e)| e * k.as_ref()[i])
+            .sum::<f64>()
     });
     (next, k7, error)
 }

@@ -610,12 +610,19 @@ mod tests {
         assert_eq!((other.floor, other.split), (2, Split::FloorNumerical));
         assert_eq!(other.name(3), "specimen-floor-3");
         let three: Cut = "3".parse().expect("floor");
-        assert_eq!((three.floor, three.split, three.storeys), (3, Split::FloorPhysical, None));
+        assert_eq!(
+            (three.floor, three.split, three.storeys),
+            (3, Split::FloorPhysical, None)
+        );
         assert_eq!(three.name(5), "specimen-floors-3-5");
         let storeys: Cut = "specimen-storeys-4-5".parse().expect("storeys");
         assert_eq!((storeys.floor, storeys.split), (3, Split::FloorNumerical));
         assert_eq!(storeys.name(5), "specimen-storeys-4-5");
-        for name in ["specimen-floors-1-4", "specimen-storeys-2-4", "specimen-floor-4"] {
+        for name in [
+            "specimen-floors-1-4",
+            "specimen-storeys-2-4",
+            "specimen-floor-4",
+        ] {
             let cut: Cut = name.parse().expect(name);
             assert_eq!(cut.name(4), name);
         }

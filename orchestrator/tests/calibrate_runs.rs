@@ -76,7 +76,11 @@ fn keep_columns(from: &str, to: &str, keep: &[&str]) {
 }
 
 /// Relative error of the MAP against the truth, per parameter, for `names`.
-fn errors(map: &std::collections::BTreeMap<String, f64>, truth: &Value, names: &[&str]) -> Vec<f64> {
+fn errors(
+    map: &std::collections::BTreeMap<String, f64>,
+    truth: &Value,
+    names: &[&str],
+) -> Vec<f64> {
     names
         .iter()
         .map(|name| {
@@ -118,7 +122,11 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
         if seed <= 3 {
             let acc = format!("acc{seed}");
             let run = p(d, &format!("run{seed}.csv"));
-            keep_columns(&p(d, &format!("full{seed}.csv")), &run, &["time", "force", &acc]);
+            keep_columns(
+                &p(d, &format!("full{seed}.csv")),
+                &run,
+                &["time", "force", &acc],
+            );
             runs.push(run);
         }
     }
@@ -159,7 +167,14 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
 
     let (out1, report1) = (p(d, "floor1.ssp"), p(d, "floor1.json"));
     ok(&twin(&[
-        "calibrate", "--data", &runs[0], "--out", &out1, "--report", &report1, "--validate",
+        "calibrate",
+        "--data",
+        &runs[0],
+        "--out",
+        &out1,
+        "--report",
+        &report1,
+        "--validate",
         &full4,
     ]));
     let single = json(&report1);
@@ -169,7 +184,11 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
         .iter()
         .map(|x| x.as_f64().expect("number"))
         .collect();
-    let single_mk = errors(&map_values(&single), &truth, &["m1", "m2", "m3", "k1", "k2", "k3"]);
+    let single_mk = errors(
+        &map_values(&single),
+        &truth,
+        &["m1", "m2", "m3", "k1", "k2", "k3"],
+    );
     println!("floor 1 alone on seed 4: NMSE % {single_on_4:?}; m, k errors {single_mk:.4?}");
     // One run alone sees the three modes in floor 1's response too (the force is there), so
     // it also predicts the other floors; what it lacks is data: its posterior is wider.
@@ -178,7 +197,12 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
             .as_array()
             .expect("parameters")
             .iter()
-            .map(|p| (p["name"].as_str().expect("name").to_owned(), p["sd"].as_f64().expect("sd")))
+            .map(|p| {
+                (
+                    p["name"].as_str().expect("name").to_owned(),
+                    p["sd"].as_f64().expect("sd"),
+                )
+            })
             .collect()
     };
     let (sd3, sd1) = (sds(&roving), sds(&single));
@@ -186,7 +210,10 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
     println!("posterior sd, one run over three: {ratios:.2?}");
     const SD_RATIO: f64 = 1.3;
     for (name, ratio) in &ratios {
-        assert!(*ratio > SD_RATIO, "{name}: one run's sd only {ratio:.2}× three runs'");
+        assert!(
+            *ratio > SD_RATIO,
+            "{name}: one run's sd only {ratio:.2}× three runs'"
+        );
     }
 }
 
@@ -194,7 +221,14 @@ fn roving_accelerometer_runs_calibrate_every_floor() {
 /// twin: `M ÿ + C ẏ + K y = −M 1 a_g` in relative coordinates, classic RK4 at `fine` steps per
 /// sample with the ground acceleration interpolated linearly; the absolute accelerations
 /// `ÿ + a_g` of every floor at the samples.
-fn base_excited(m: &[f64], c: &[f64], k: &[f64], ag: &[f64], dt: f64, fine: usize) -> Vec<Vec<f64>> {
+fn base_excited(
+    m: &[f64],
+    c: &[f64],
+    k: &[f64],
+    ag: &[f64],
+    dt: f64,
+    fine: usize,
+) -> Vec<Vec<f64>> {
     let n = m.len();
     // Storey i joins floor i-1 (the ground for i = 0) and floor i.
     let accel = |y: &[f64], v: &[f64], a_g: f64| -> Vec<f64> {
@@ -316,13 +350,29 @@ fn five_storeys_under_ground_motion_with_three_sensors_in_g() {
 
     let t = p(d, "five.ssp");
     ok(&twin(&[
-        "init", "--storeys", "5", "--excitation", "base", "--nominal", &p(d, "nominal.json"),
-        "--out", &t,
+        "init",
+        "--storeys",
+        "5",
+        "--excitation",
+        "base",
+        "--nominal",
+        &p(d, "nominal.json"),
+        "--out",
+        &t,
     ]));
     let (out, report) = (p(d, "five-cal.ssp"), p(d, "five-cal.json"));
     let o = twin(&[
-        "calibrate", "--twin", &t, "--data", &record, "--out", &out, "--report", &report,
-        "--starts", "4",
+        "calibrate",
+        "--twin",
+        &t,
+        "--data",
+        &record,
+        "--out",
+        &out,
+        "--report",
+        &report,
+        "--starts",
+        "4",
     ]);
     ok(&o);
     println!("{}", String::from_utf8_lossy(&o.stdout));
@@ -333,8 +383,14 @@ fn five_storeys_under_ground_motion_with_three_sensors_in_g() {
         let name = format!("k{}", i + 1);
         let error = (map[&name] - k[i]).abs() / k[i];
         let nominal_error = (nominal_k[i] - k[i]).abs() / k[i];
-        println!("{name}: MAP {:.1} truth {} nominal {:.1} (error {error:.4})", map[&name], k[i], nominal_k[i]);
-        assert!(error < 0.03 && error < nominal_error / 4.0, "{name}: {error}");
+        println!(
+            "{name}: MAP {:.1} truth {} nominal {:.1} (error {error:.4})",
+            map[&name], k[i], nominal_k[i]
+        );
+        assert!(
+            error < 0.03 && error < nominal_error / 4.0,
+            "{name}: {error}"
+        );
     }
     let nmse = r["runs"][0]["nmse"].as_object().expect("nmse by channel");
     assert_eq!(
@@ -355,15 +411,33 @@ fn malformed_priors_are_refused_naming_the_key() {
     let cases = [
         (r#"{"k": {"relative_sdd": 0.2}}"#, "key 'k'", "relative_sdd"),
         (r#"{"m2": {"sd": -1}}"#, "key 'm2'", "positive"),
-        (r#"{"k7": {"relative_sd": 0.2}}"#, "key 'k7'", "storeys 1 to 5"),
-        (r#"{"c": {"sd": 1, "variance": 1}}"#, "key 'c'", "more than one width"),
-        (r#"{"k": {"value": 4000, "sd": 1}}"#, "key 'k'", "per parameter"),
+        (
+            r#"{"k7": {"relative_sd": 0.2}}"#,
+            "key 'k7'",
+            "storeys 1 to 5",
+        ),
+        (
+            r#"{"c": {"sd": 1, "variance": 1}}"#,
+            "key 'c'",
+            "more than one width",
+        ),
+        (
+            r#"{"k": {"value": 4000, "sd": 1}}"#,
+            "key 'k'",
+            "per parameter",
+        ),
     ];
     for (i, (text, key, why)) in cases.iter().enumerate() {
         let file = p(d, &format!("bad{i}.json"));
         std::fs::write(&file, text).expect("write");
         let o = twin(&[
-            "init", "--storeys", "5", "--priors", &file, "--out", &p(d, "t.ssp"),
+            "init",
+            "--storeys",
+            "5",
+            "--priors",
+            &file,
+            "--out",
+            &p(d, "t.ssp"),
         ]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{text} accepted");
@@ -378,7 +452,12 @@ fn malformed_priors_are_refused_naming_the_key() {
     std::fs::write(&file, r#"{"k2": {"space": "cubic", "sd": 1}}"#).expect("write");
     let data = common::workspace().join("data/dataset1.csv");
     let o = twin(&[
-        "calibrate", "--data", &data.display().to_string(), "--priors", &file, "--out",
+        "calibrate",
+        "--data",
+        &data.display().to_string(),
+        "--priors",
+        &file,
+        "--out",
         &p(d, "c.ssp"),
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -402,17 +481,48 @@ fn stored_priors_are_used_and_an_unusable_record_is_refused() {
     ok(&twin(&["init", "--priors", &priors, "--out", &t]));
     let report = p(d, "pinned.json");
     ok(&twin(&[
-        "calibrate", "--twin", &t, "--data", &data, "--out", &p(d, "o.ssp"), "--report",
-        &report, "--starts", "2",
+        "calibrate",
+        "--twin",
+        &t,
+        "--data",
+        &data,
+        "--out",
+        &p(d, "o.ssp"),
+        "--report",
+        &report,
+        "--starts",
+        "2",
     ]));
     let k2 = map_values(&json(&report))["k2"];
-    assert!((k2 - 3000.0).abs() < 10.0, "k2 {k2}: the stored prior was not used");
+    assert!(
+        (k2 - 3000.0).abs() < 10.0,
+        "k2 {k2}: the stored prior was not used"
+    );
 
     // A five-storey twin under ground motion cannot be driven by dataset1's force.
     let five = p(d, "five.ssp");
-    ok(&twin(&["init", "--storeys", "5", "--excitation", "base", "--out", &five]));
-    let o = twin(&["calibrate", "--twin", &five, "--data", &data, "--out", &p(d, "x.ssp")]);
+    ok(&twin(&[
+        "init",
+        "--storeys",
+        "5",
+        "--excitation",
+        "base",
+        "--out",
+        &five,
+    ]));
+    let o = twin(&[
+        "calibrate",
+        "--twin",
+        &five,
+        "--data",
+        &data,
+        "--out",
+        &p(d, "x.ssp"),
+    ]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
-    assert!(err.contains("'force'") && err.contains("ground acceleration"), "{err}");
+    assert!(
+        err.contains("'force'") && err.contains("ground acceleration"),
+        "{err}"
+    );
 }

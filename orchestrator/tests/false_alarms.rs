@@ -90,7 +90,11 @@ fn unchanged(label: &str, data: &Measurement) -> Diagnosis {
 #[test]
 fn absolute_sensor_noise_at_three_excitation_levels() {
     for gain in [0.3, 1.0, 3.0] {
-        let data = record(gain, NoiseLevel::Sd(vec![NOISE_SD; 3]), BetweenSamples::Linear);
+        let data = record(
+            gain,
+            NoiseLevel::Sd(vec![NOISE_SD; 3]),
+            BetweenSamples::Linear,
+        );
         unchanged(&format!("sd {gain}×"), &data);
     }
 }
@@ -171,7 +175,11 @@ fn the_covariance_and_validation_level_survive_the_archive() {
     }
     assert_eq!(back.validation_nmse, Some(0.123));
     // The default tolerance follows the validation level.
-    let data = record(1.0, NoiseLevel::Sd(vec![NOISE_SD; 3]), BetweenSamples::Linear);
+    let data = record(
+        1.0,
+        NoiseLevel::Sd(vec![NOISE_SD; 3]),
+        BetweenSamples::Linear,
+    );
     let d = diagnose(&back, &data, &DiagnoseOptions::default()).expect("diagnosis");
     assert!((d.tolerance - 0.246).abs() < 1e-12, "{}", d.tolerance);
     assert!(d.tolerance_source.contains("validation"));

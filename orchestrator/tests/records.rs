@@ -192,8 +192,15 @@ fn a_command_refuses_a_record_without_its_columns_naming_them() {
     let calibrated = dir.path().join("c.ssp");
     let report = dir.path().join("c.json");
     let out = twin(&[
-        "calibrate", "--data", s(&data), "--out", s(&calibrated), "--report", s(&report),
-        "--starts", "2",
+        "calibrate",
+        "--data",
+        s(&data),
+        "--out",
+        s(&calibrated),
+        "--report",
+        s(&report),
+        "--starts",
+        "2",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let r: serde_json::Value =

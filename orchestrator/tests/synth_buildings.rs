@@ -54,19 +54,13 @@ fn five_storeys_under_ground_motion_three_accelerometers_in_g_and_a_hidden_cubic
     s.channels = Some(channels("acc1 (g),acc3 (g),acc5 (g)"));
     s.effects
         .push(parse_effect_flag_for("cubic@3:stiffness=2e9", 5).expect("cubic@3"));
-    assert!(matches!(
-        s.effects[0],
-        EffectSpec::Cubic { storey: 3, .. }
-    ));
+    assert!(matches!(s.effects[0], EffectSpec::Cubic { storey: 3, .. }));
     let (text, made, read) = round_trip(&s, dir.path());
     assert_eq!(
         text.lines().next(),
         Some("time,ground_acc,acc1 (g),acc3 (g),acc5 (g)")
     );
-    assert_eq!(
-        read.channel_names(),
-        ["ground_acc", "acc1", "acc3", "acc5"]
-    );
+    assert_eq!(read.channel_names(), ["ground_acc", "acc1", "acc3", "acc5"]);
     assert!(read.responses.iter().all(|r| r.unit == Unit::G));
     assert_same_values(&made, &read);
     // Under ground motion an accelerometer reads the absolute acceleration: of the order of
@@ -97,11 +91,12 @@ fn two_storeys_shaken_at_floor_two_velocities_in_mm_per_s_at_1_khz() {
     assert_eq!(read.channel_names(), ["force", "vel1", "vel2"]);
     assert!((read.dt - 1e-3).abs() < 1e-12, "{}", read.dt);
     assert_eq!(read.len(), 2000);
-    assert!(read
-        .responses
-        .iter()
-        .all(|r| r.unit == Unit::MilliMetrePerSecond
-            && r.channel.quantity() == Quantity::Velocity));
+    assert!(
+        read.responses
+            .iter()
+            .all(|r| r.unit == Unit::MilliMetrePerSecond
+                && r.channel.quantity() == Quantity::Velocity)
+    );
     assert_same_values(&made, &read);
 }
 
@@ -134,7 +129,10 @@ fn the_paper_scenario_keeps_its_columns_and_its_json() {
     for key in ["storeys", "excitation", "channels", "ground_motion"] {
         assert!(json.get(key).is_none(), "{key}");
     }
-    assert_eq!(json["noise"]["fraction"], serde_json::json!([0.03, 0.03, 0.03]));
+    assert_eq!(
+        json["noise"]["fraction"],
+        serde_json::json!([0.03, 0.03, 0.03])
+    );
     let mut short = s.clone();
     short.duration = 1.0;
     let (record, truth) = synth_record(&short).expect("record");
@@ -142,6 +140,9 @@ fn the_paper_scenario_keeps_its_columns_and_its_json() {
         csv_text(&record.measurement).lines().next(),
         Some("time,force,acc1,acc2,acc3")
     );
-    assert_eq!(truth.record.columns, ["time", "force", "acc1", "acc2", "acc3"]);
+    assert_eq!(
+        truth.record.columns,
+        ["time", "force", "acc1", "acc2", "acc3"]
+    );
     assert!(truth.structure.excitation.is_none());
 }

@@ -249,15 +249,14 @@ impl Twin {
         if let Some(priors) = priors {
             let value: serde_json::Value =
                 pythonize::depythonize(priors).map_err(|e| invalid(kind, e.to_string()))?;
-            setup.prior_spec = Some(
-                priors_from_json(&value.to_string(), "priors").map_err(|m| invalid(kind, m))?,
-            );
+            setup.prior_spec =
+                Some(priors_from_json(&value.to_string(), "priors").map_err(|m| invalid(kind, m))?);
         }
         let runs: Vec<PyRef<'py, Record>> = match record.extract::<PyRef<'py, Record>>() {
             Ok(one) => vec![one],
-            Err(_) => record.extract().map_err(|_| {
-                invalid(kind, "record: a Record or a list of Records".to_owned())
-            })?,
+            Err(_) => record
+                .extract()
+                .map_err(|_| invalid(kind, "record: a Record or a list of Records".to_owned()))?,
         };
         if runs.is_empty() {
             return Err(invalid(kind, "record: an empty list".to_owned()));

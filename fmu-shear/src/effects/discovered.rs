@@ -18,7 +18,6 @@ pub use structure::effects::discovered::{
     DEFAULT_SCALE, PLACEMENT_FLOOR, PLACEMENT_STOREY,
 };
 
-
 /// How many discovered terms the FMU carries.
 pub const MAX_TERMS: usize = 6;
 
@@ -372,7 +371,10 @@ mod tests {
         let mut d = Discovered::default();
         let vr = |slot| value_reference(5, slot);
         assert_eq!(d.set_boolean(vr(Slot::Enabled), true), Some(()));
-        assert!(matches!(d.set_integer(vr(Slot::Function), 7, 3), Some(Ok(()))));
+        assert!(matches!(
+            d.set_integer(vr(Slot::Function), 7, 3),
+            Some(Ok(()))
+        ));
         assert!(matches!(d.set_integer(vr(Slot::At), 2, 3), Some(Ok(()))));
         assert!(matches!(
             d.set_integer(vr(Slot::Placement), 1, 3),

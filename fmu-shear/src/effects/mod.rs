@@ -452,8 +452,12 @@ mod tests {
     #[test]
     fn each_law_is_the_models_force() {
         for storeys in [3, 12] {
-            let y: Vec<f64> = (0..storeys).map(|i| 1e-3 * (i as f64 * 1.7).sin()).collect();
-            let v: Vec<f64> = (0..storeys).map(|i| 0.02 * (i as f64 * 0.9).cos()).collect();
+            let y: Vec<f64> = (0..storeys)
+                .map(|i| 1e-3 * (i as f64 * 1.7).sin())
+                .collect();
+            let v: Vec<f64> = (0..storeys)
+                .map(|i| 0.02 * (i as f64 * 0.9).cos())
+                .collect();
             for kind in Kind::ALL {
                 for location in 0..kind.sites(storeys) {
                     let reals: Vec<f64> =

@@ -60,8 +60,8 @@ pub fn run(args: &InitArgs) -> Result<()> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            let spec = priors_from_json(&text, &path.display().to_string())
-                .map_err(anyhow::Error::msg)?;
+            let spec =
+                priors_from_json(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
             let s = structure.clone().unwrap_or_default();
             spec.check(&s, true).map_err(anyhow::Error::msg)?;
             for name in s.parameter_names() {

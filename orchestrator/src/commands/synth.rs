@@ -10,9 +10,9 @@ use crate::synth::{
     csv_text, parse_change_flag, parse_effect_flag_for, synth_controlled, BetweenSamples,
     ForceWindow, GroundMotion, InLoopController, NoiseLevel, Scenario, DEFAULT_WINDOW_RAMP,
 };
+use crate::workflows::control::ControllerSpec;
 use structure::channel::{parse_header_field, Channel, Quantity, Unit};
 use structure::Excitation;
-use crate::workflows::control::ControllerSpec;
 
 const AFTER_HELP: &str = "\
 Scenario JSON (every field optional; see the orchestrator::synth documentation):
@@ -223,7 +223,9 @@ impl SynthArgs {
             let mut channels = s.response_channels();
             for part in t.split(',') {
                 let (key, unit) = part.split_once('=').ok_or_else(|| {
-                    anyhow!("--units {t:?}: {part:?} is not QUANTITY=UNIT (acc=g, vel=mm/s, disp=mm)")
+                    anyhow!(
+                        "--units {t:?}: {part:?} is not QUANTITY=UNIT (acc=g, vel=mm/s, disp=mm)"
+                    )
                 })?;
                 let quantity = match key.trim() {
                     "acc" => Quantity::Acceleration,

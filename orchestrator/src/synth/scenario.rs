@@ -340,12 +340,10 @@ impl ParamName {
             return None;
         }
         let number: usize = digits.parse().ok()?;
-        (1..=MAX_STOREYS)
-            .contains(&number)
-            .then_some(ParamName {
-                kind,
-                index: number - 1,
-            })
+        (1..=MAX_STOREYS).contains(&number).then_some(ParamName {
+            kind,
+            index: number - 1,
+        })
     }
     pub fn name(&self) -> String {
         let letter = match self.kind {
@@ -631,9 +629,9 @@ impl Scenario {
             .map(Vec::len);
         if let Some(n) = file.storeys.or(given) {
             if !(1..=MAX_STOREYS).contains(&n) {
-                return Err(at.field("storeys").error(format!(
-                    "{n} storeys; a structure has 1 to {MAX_STOREYS}"
-                )));
+                return Err(at
+                    .field("storeys")
+                    .error(format!("{n} storeys; a structure has 1 to {MAX_STOREYS}")));
             }
             s.set_storeys(n);
         }
@@ -911,7 +909,8 @@ impl Scenario {
             positive(g.field("soil_damping"), self.ground.soil_damping, true)?;
             positive(g.field("rise_end"), self.ground.rise_end, true)?;
             positive(g.field("decay"), self.ground.decay, false)?;
-            if !(self.ground.strong_end.is_finite() && self.ground.strong_end >= self.ground.rise_end)
+            if !(self.ground.strong_end.is_finite()
+                && self.ground.strong_end >= self.ground.rise_end)
             {
                 return Err(g.field("strong_end").error(format!(
                     "{} s must be a finite time ≥ rise_end {} s",
@@ -1050,16 +1049,16 @@ impl Scenario {
                 }
                 EffectSpec::Cubic { storey, .. } => {
                     if !(1..=n_storeys).contains(&storey) {
-                        return Err(at.field("location").error(format!(
-                            "storey {storey} is not one of 1..{n_storeys}"
-                        )));
+                        return Err(at
+                            .field("location")
+                            .error(format!("storey {storey} is not one of 1..{n_storeys}")));
                     }
                 }
                 EffectSpec::Friction { floor, .. } => {
                     if !(1..=n_storeys).contains(&floor) {
-                        return Err(at.field("location").error(format!(
-                            "floor {floor} is not one of 1..{n_storeys}"
-                        )));
+                        return Err(at
+                            .field("location")
+                            .error(format!("floor {floor} is not one of 1..{n_storeys}")));
                     }
                 }
                 EffectSpec::Hysteresis {

@@ -379,7 +379,8 @@ fn raw_residuals(
     let mut r = Vec::with_capacity(target.rows());
     for (sim, record) in sims.iter_mut().zip(&target.records) {
         buf.resize(record.channels.len(), Vec::new());
-        sim.record(&target.vrs, &values, &record.outputs(), buf).ok()?;
+        sim.record(&target.vrs, &values, &record.outputs(), buf)
+            .ok()?;
         for (c, predicted) in record.channels.iter().zip(buf.iter()) {
             for &k in &record.used {
                 r.push(c.values[k] - predicted[k]);
@@ -829,7 +830,8 @@ pub fn calibrate_records(
         None => None,
     };
     if let Some(spec) = &setup.prior_spec {
-        spec.check(&structure, false).map_err(CalibrateError::Setup)?;
+        spec.check(&structure, false)
+            .map_err(CalibrateError::Setup)?;
     }
     if setup.parameters.is_empty() {
         return Err(CalibrateError::Setup("no parameter to calibrate".into()));
@@ -888,8 +890,8 @@ pub fn calibrate_records(
                 .and_then(|s| s.parse().ok())
                 .unwrap_or(0.0),
         };
-        let fallback = structure_prior(&structure, name)
-            .unwrap_or_else(|| default_prior(name, current));
+        let fallback =
+            structure_prior(&structure, name).unwrap_or_else(|| default_prior(name, current));
         let from_files = setup
             .prior_spec
             .iter()
@@ -1115,18 +1117,21 @@ pub fn physics_structure(fmu_path: &std::path::Path) -> Result<Structure, Calibr
     };
     let mut text = String::new();
     std::io::Read::read_to_string(&mut entry, &mut text).map_err(|e| bad(e.to_string()))?;
-    let resource: fmu_shear::StructureResource = serde_json::from_str(&text)
-        .map_err(|e| bad(format!("resources/structure.json: {e}")))?;
+    let resource: fmu_shear::StructureResource =
+        serde_json::from_str(&text).map_err(|e| bad(format!("resources/structure.json: {e}")))?;
     Ok(resource.structure)
 }
 
 /// Whether calibration can use `data` on a twin of `structure`: its excitation is the one the
 /// structure has, every response is of a floor it has and an output of the FMU. Err names the
 /// record and the column.
-fn check_record(data: &Measurement, structure: &Structure, fmu: &Fmu) -> Result<(), CalibrateError> {
-    let bad = |message: String| {
-        CalibrateError::Setup(format!("{}: {message}", data.path.display()))
-    };
+fn check_record(
+    data: &Measurement,
+    structure: &Structure,
+    fmu: &Fmu,
+) -> Result<(), CalibrateError> {
+    let bad =
+        |message: String| CalibrateError::Setup(format!("{}: {message}", data.path.display()));
     for signal in data.channels() {
         let name = signal.channel.name();
         signal

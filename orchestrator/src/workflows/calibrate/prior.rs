@@ -3,8 +3,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
 use ::structure::Structure;
+use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -193,7 +193,9 @@ pub fn priors_from_json(text: &str, origin: &str) -> Result<PriorSpec, String> {
         }
         if let Some(v) = entry.value {
             if entry.space == Some(Space::Log) && v <= 0.0 {
-                return Err(bad(format!("value {v}: a log-space prior needs a positive value")));
+                return Err(bad(format!(
+                    "value {v}: a log-space prior needs a positive value"
+                )));
             }
         }
         let is_family = matches!(key.as_str(), "m" | "c" | "k");
@@ -241,16 +243,25 @@ impl PriorSpec {
     /// family's, completed from `default` (the structure's default prior, or the one around the
     /// current value) for what the entry leaves out.
     pub fn prior_for(&self, name: &str, default: Prior) -> Option<Result<Prior, String>> {
-        let (key, entry) = self
-            .entries
-            .get_key_value(name)
-            .or_else(|| family(name).and_then(|f| self.entries.get_key_value(f.to_string().as_str())))?;
+        let (key, entry) = self.entries.get_key_value(name).or_else(|| {
+            family(name).and_then(|f| self.entries.get_key_value(f.to_string().as_str()))
+        })?;
         let space = entry.space.unwrap_or(default.space);
         let centre_value = default.value(default.mean);
         let mean = match (entry.mean, entry.value) {
             (Some(m), _) => m,
-            (None, Some(v)) => Prior { space, mean: 0.0, variance: 1.0 }.coordinate(v),
-            (None, None) => Prior { space, mean: 0.0, variance: 1.0 }.coordinate(centre_value),
+            (None, Some(v)) => Prior {
+                space,
+                mean: 0.0,
+                variance: 1.0,
+            }
+            .coordinate(v),
+            (None, None) => Prior {
+                space,
+                mean: 0.0,
+                variance: 1.0,
+            }
+            .coordinate(centre_value),
         };
         if !mean.is_finite() {
             return Some(Err(format!(
@@ -259,7 +270,12 @@ impl PriorSpec {
                 self.origin
             )));
         }
-        let centre = Prior { space, mean, variance: 1.0 }.value(mean);
+        let centre = Prior {
+            space,
+            mean,
+            variance: 1.0,
+        }
+        .value(mean);
         let variance = match (entry.sd, entry.variance, entry.relative_sd) {
             (Some(sd), _, _) => sd * sd,
             (_, Some(v), _) => v,
@@ -325,7 +341,9 @@ mod tests {
         assert_eq!(m3.space, Space::Linear);
         assert!((m3.mean - 6.0).abs() < 1e-12 && (m3.sd() - 0.3).abs() < 1e-12);
         assert_eq!(prior("c1"), Prior::log(-1.0, 4.0));
-        assert!(spec.prior_for("c2", structure_prior(&s, "c2").unwrap()).is_none());
+        assert!(spec
+            .prior_for("c2", structure_prior(&s, "c2").unwrap())
+            .is_none());
         // Without a file: centred on the nominal with the documented widths.
         assert_eq!(
             structure_prior(&s, "k1").unwrap(),
@@ -333,9 +351,15 @@ mod tests {
         );
         // The paper's rig keeps Table 1.
         let paper = Structure::default();
-        assert_eq!(structure_prior(&paper, "k2").unwrap(), Prior::linear(4021.0, 10_000.0));
+        assert_eq!(
+            structure_prior(&paper, "k2").unwrap(),
+            Prior::linear(4021.0, 10_000.0)
+        );
         let seven = priors_from_json(r#"{"k7": {"sd": 1}}"#, "P.json").unwrap();
         let e = seven.check(&s, false).unwrap_err();
-        assert!(e.contains("P.json: key 'k7'") && e.contains("1 to 5"), "{e}");
+        assert!(
+            e.contains("P.json: key 'k7'") && e.contains("1 to 5"),
+            "{e}"
+        );
     }
 }

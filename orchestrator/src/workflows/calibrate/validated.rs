@@ -56,8 +56,10 @@ fn paper_rig(twin: &Twin, data: &Measurement) -> Result<bool, CalibrateError> {
     let physics = twin
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    Ok(physics_structure(&physics.fmu_path)? == ::structure::Structure::default()
-        && data.require_paper_rig().is_ok())
+    Ok(
+        physics_structure(&physics.fmu_path)? == ::structure::Structure::default()
+            && data.require_paper_rig().is_ok(),
+    )
 }
 
 /// The calibrated twin's NMSE % per channel of `data` after the transient: on the paper's rig

@@ -3,12 +3,12 @@
 
 use std::collections::BTreeMap;
 
+use fmu_shear::StructureResource;
 use nalgebra::DMatrix;
 use numerics::control::solve_care;
 use numerics::lqr::StateSpace;
 use serde::Serialize;
 use structure::channel::Channel;
-use fmu_shear::StructureResource;
 use structure::Structure;
 
 use super::ControlError;

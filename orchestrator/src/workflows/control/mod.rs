@@ -673,8 +673,7 @@ pub fn run_control(
         runs_total: runs_total as u64,
     };
     let passive = runner.run(None)?;
-    runner.passive_peaks =
-        resonance_peaks(&data.excitation.values, &passive, data.dt, &resonances);
+    runner.passive_peaks = resonance_peaks(&data.excitation.values, &passive, data.dt, &resonances);
 
     let mut design_runs = Vec::new();
     let mut responses = Vec::new();
@@ -904,7 +903,8 @@ pub fn run_control(
             } else {
                 match runner.run_law(Gains::Fixed(first.design.gain.clone()), state)? {
                     Ok(r) => {
-                        let peaks = resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
+                        let peaks =
+                            resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
                         let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
                         (att, mean, r.control_rms, r.contacts.len())
                     }

@@ -112,10 +112,7 @@ pub fn controller_layout(spec: &ControllerSpec) -> Result<fmu_lqr::model::Layout
 /// The controller FMU for `layout`: the built-in one for the paper's rig, else the built-in
 /// library with the modelDescription of that layout's table and `resources/structure.json`,
 /// written into `dir`.
-fn controller_fmu(
-    layout: &fmu_lqr::model::Layout,
-    dir: &Path,
-) -> Result<PathBuf, ControlError> {
+fn controller_fmu(layout: &fmu_lqr::model::Layout, dir: &Path) -> Result<PathBuf, ControlError> {
     if layout.is_paper() {
         return Ok(find_fmu(LQR_FMU)?);
     }

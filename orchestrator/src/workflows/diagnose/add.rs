@@ -250,7 +250,8 @@ pub fn refit_over_records(
             .parameters
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
-    chosen.noise_variance = calibration.records[0].paper_floors(&calibration.records[0].noise_variance);
+    chosen.noise_variance =
+        calibration.records[0].paper_floors(&calibration.records[0].noise_variance);
     chosen.parameter_covariance = Some(calibration.covariance());
     chosen.records = Vec::new();
     options.tell("the twin before and after on every record");

@@ -166,7 +166,11 @@ impl HybridOptions {
             return Err(InvalidOption(format!(
                 "{}: a {n}-storey structure cannot be split (the actuator drives a floor with a \
                  storey above it)",
-                if c.storeys.is_some() { "--storeys".to_string() } else { twin.describe() }
+                if c.storeys.is_some() {
+                    "--storeys".to_string()
+                } else {
+                    twin.describe()
+                }
             ))
             .into());
         }
@@ -348,8 +352,8 @@ fn structure_resource(fmu: &Path) -> Result<Option<structure::Structure>, Hybrid
     entry
         .read_to_string(&mut text)
         .map_err(|e| bad(format!("{STRUCTURE_RESOURCE}: {e}")))?;
-    let resource: fmu_shear::StructureResource = serde_json::from_str(&text)
-        .map_err(|e| bad(format!("{STRUCTURE_RESOURCE}: {e}")))?;
+    let resource: fmu_shear::StructureResource =
+        serde_json::from_str(&text).map_err(|e| bad(format!("{STRUCTURE_RESOURCE}: {e}")))?;
     Ok(Some(resource.structure))
 }
 
