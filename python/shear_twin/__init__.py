@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from . import _native
@@ -235,7 +235,8 @@ class Twin:
         return Control(out)
 
     def watch(self, source: str | os.PathLike, alerts: str | os.PathLike, *,
-              on_alert: Callable[[dict[str, Any]], Any] | None = None, client_id: str | None = None,
+              on_alert: Callable[[dict[str, Any]], Any] | None = None,
+              columns: Mapping[str, str] | str | os.PathLike | None = None, client_id: str | None = None,
               follow: bool = False, idle: float | None = None, checkpoint: str | os.PathLike | None = None,
               checkpoint_every: int | None = None, window: float | None = None,
               tolerance: float | None = None, transient: float | None = None, rate: float | None = None,
@@ -245,13 +246,15 @@ class Twin:
         """``twin watch``: the operational twin on a stream. ``source``: ``"-"`` (standard
         input, read to its end), ``"mqtt://HOST[:PORT]/TOPIC"`` (QoS 1, a persistent session
         with ``client_id``; alerts also published to TOPIC/alerts) or a CSV file (``follow``:
-        as it grows, until ``idle`` s (10) pass without a line). Alerts go to ``alerts`` as JSON
+        as it grows, until ``idle`` s (10) pass without a line); its header names the columns
+        as a record's does (time, force or ground_acc, any acc/vel/disp<i>, units such as
+        ``acc1 (g)``; ``columns`` maps other names, as ``Record.read``'s). Alerts go to ``alerts`` as JSON
         lines; ``on_alert(alert)`` is called with each alert (a dict) as it is written — an
         exception it raises stops the watch and is raised here. ``diagnosis=False`` is
         ``--no-diagnosis``, ``learning=False`` ``--no-learning``. Returns the ``end`` alert's
         summary."""
         summary = self._native.watch(
-            str(source), str(alerts), on_alert=on_alert, client_id=client_id, follow=follow, idle=idle,
+            str(source), str(alerts), on_alert=on_alert, columns=columns, client_id=client_id, follow=follow, idle=idle,
             checkpoint=_path(checkpoint), checkpoint_every=checkpoint_every, window=window,
             tolerance=tolerance, transient=transient, rate=rate, diagnosis=diagnosis,
             diagnosis_record=diagnosis_record, diagnosis_after=diagnosis_after,

@@ -61,7 +61,7 @@ impl Record {
 }
 
 /// A column map from a dict (`{"dotx1 (m/s)": "vel1"}`) or the path of a MAP.json.
-fn column_map(columns: Option<&Bound<'_, PyAny>>) -> PyResult<ColumnMap> {
+pub(crate) fn column_map(columns: Option<&Bound<'_, PyAny>>) -> PyResult<ColumnMap> {
     let Some(columns) = columns else {
         return Ok(ColumnMap::default());
     };

@@ -586,9 +586,10 @@ impl Twin {
     /// file (read to its end; `follow`: as it grows until `idle` s pass without a line) or
     /// `mqtt://HOST[:PORT]/TOPIC`. Alerts go to `alerts` as JSON lines (and to TOPIC/alerts
     /// from MQTT); `on_alert(alert: dict)` is called for each one as it is written, with the
-    /// GIL (an exception it raises stops the watch and is raised here). Returns the `end`
-    /// alert's summary.
-    #[pyo3(signature = (source, alerts, *, on_alert = None, client_id = None, follow = false,
+    /// GIL (an exception it raises stops the watch and is raised here). The stream's header
+    /// names its columns as a record's does (`columns`: a column map, a dict or a MAP.json
+    /// path, as `twin watch --columns`). Returns the `end` alert's summary.
+    #[pyo3(signature = (source, alerts, *, on_alert = None, columns = None, client_id = None, follow = false,
                         idle = None, checkpoint = None, checkpoint_every = None, window = None,
                         tolerance = None, transient = None, rate = None, diagnosis = true,
                         diagnosis_record = None, diagnosis_after = None,
@@ -601,6 +602,7 @@ impl Twin {
         source: &Bound<'py, PyAny>,
         alerts: PathBuf,
         on_alert: Option<Py<PyAny>>,
+        columns: Option<&Bound<'py, PyAny>>,
         client_id: Option<String>,
         follow: bool,
         idle: Option<f64>,
@@ -619,13 +621,12 @@ impl Twin {
         refit_every: Option<u32>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let kind = Kind::Watch;
-        orchestrator::twin::guard::check_paper_twin(&self.twin, "watch")
-            .map_err(|e| to_py(Kind::Data, e))?;
         let err = |e: WatchError| to_py(kind, e);
         let source = source.extract::<PathBuf>()?.display().to_string();
         orchestrator::workflows::options::check_tolerance(tolerance).map_err(|e| to_py(kind, e))?;
         let stream = StreamSource::parse(&source, follow, idle, client_id).map_err(err)?;
         let mut options = WatchOptions::new(stream, alerts);
+        options.columns = crate::record::column_map(columns)?;
         let d = DiagnosisOptions::default();
         options.checkpoint = checkpoint;
         options.checkpoint_every = checkpoint_every.unwrap_or(options.checkpoint_every);

@@ -21,12 +21,18 @@ pub struct WatchArgs {
     /// The twin (.ssp), calibrated (its noise variances make the ±3σ band).
     #[arg(long)]
     pub twin: Option<PathBuf>,
-    /// `-`: CSV lines on standard input (header `time,force,acc1,acc2,acc3` first), read to the
-    /// end; `mqtt://HOST[:PORT]/TOPIC`: messages of one or more CSV lines (those columns, or a
-    /// header line first) subscribed with QoS 1 on a persistent session, alerts published to
-    /// TOPIC/alerts; else a CSV file (see --follow).
+    /// `-`: CSV lines on standard input (a header first, naming the columns as a record's does:
+    /// `time`, `force` or `ground_acc`, any of `acc<i>`, `vel<i>`, `disp<i>`, a unit in
+    /// brackets, `acc1 (g)`), read to the end; `mqtt://HOST[:PORT]/TOPIC`: messages of one or
+    /// more CSV lines (a header line in the first, else `time`, the excitation and `acc1..accN`)
+    /// subscribed with QoS 1 on a persistent session, alerts published to TOPIC/alerts; else a
+    /// CSV file (see --follow).
     #[arg(long)]
     pub source: String,
+    /// Header names the stream uses for the twin's, a JSON object (`{"fp (N)": "force"}`), as
+    /// other commands take it.
+    #[arg(long)]
+    pub columns: Option<PathBuf>,
     /// The MQTT client id (default `twin-watch-` and the topic): a restarted watcher with the
     /// same id gets what the broker kept for it.
     #[arg(long)]
@@ -113,6 +119,10 @@ impl WatchArgs {
             tolerance: self.tolerance,
             transient: self.transient,
             rate: self.rate,
+            columns: match &self.columns {
+                Some(path) => crate::record::ColumnMap::read(path)?,
+                None => Default::default(),
+            },
             ..WatchOptions::new(source, self.alerts.clone())
         };
         options.validate()?;
@@ -123,7 +133,6 @@ impl WatchArgs {
 pub fn run(args: &WatchArgs) -> Result<()> {
     let options = args.options()?;
     let twin = Twin::load(args.twin.as_deref())?;
-    crate::twin::guard::check_paper_twin(&twin, "watch")?;
     let spinner = std::io::stderr().is_terminal().then(|| {
         let s = indicatif::ProgressBar::new_spinner();
         s.enable_steady_tick(Duration::from_millis(120));
@@ -131,19 +140,24 @@ pub fn run(args: &WatchArgs) -> Result<()> {
     });
     let summary = watch(&twin, &options, |status: &Status| {
         if let Some(s) = &spinner {
-            let nmse = status.rolling_nmse.map(|v| {
-                if v.is_finite() {
-                    format!("{v:.2}")
-                } else {
-                    "-".into()
-                }
-            });
+            let nmse: Vec<String> = status
+                .channels
+                .iter()
+                .zip(&status.rolling_nmse)
+                .map(|(name, v)| {
+                    if v.is_finite() {
+                        format!("{name} {v:.2}")
+                    } else {
+                        format!("{name} -")
+                    }
+                })
+                .collect();
             s.set_message(format!(
                 "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
                 status.samples,
                 status.time,
                 status.samples_per_second,
-                nmse.join(" / "),
+                nmse.join(", "),
                 if status.open_window { ", FAILING" } else { "" },
                 if status.diagnosing {
                     ", diagnosing in the background"
@@ -156,13 +170,18 @@ pub fn run(args: &WatchArgs) -> Result<()> {
     if let Some(s) = spinner {
         s.finish_and_clear();
     }
-    let nmse = summary.nmse.map(|v| {
-        if v.is_finite() {
-            format!("{v:.3}")
-        } else {
-            "-".into()
-        }
-    });
+    let nmse: Vec<String> = summary
+        .channels
+        .iter()
+        .zip(&summary.nmse)
+        .map(|(name, v)| {
+            if v.is_finite() {
+                format!("{name} {v:.3}")
+            } else {
+                format!("{name} -")
+            }
+        })
+        .collect();
     println!(
         "watched {} samples ({} this run): {} bad lines, {} gaps ({} samples missing), {} failing windows",
         summary.samples,
@@ -173,9 +192,10 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         summary.failing_windows
     );
     println!(
-        "NMSE % over the stream (after the transient): {}; tolerance {:.3} %",
-        nmse.join(" / "),
-        summary.tolerance
+        "NMSE % over the stream (after the transient): {}; tolerance {:.3} %; band: {}",
+        nmse.join(", "),
+        summary.tolerance,
+        summary.noise_source
     );
     println!(
         "{:.0} samples/s ({:.0}× real time); per-sample latency median {:.1} µs, p99 {:.1} µs",

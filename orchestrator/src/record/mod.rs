@@ -21,7 +21,7 @@ use std::path::Path;
 use ::structure::channel::{split_unit, Channel};
 
 pub use read::{DataError, Measurement, ReadOptions, Signal, EXTRA_COLUMNS};
-pub use stream::{nominal_step, LineLayout, DEFAULT_HEADER};
+pub use stream::{default_header, nominal_step, LineLayout, DEFAULT_HEADER};
 pub use write::{csv_text, format_g9};
 
 /// The columns of the paper's records.

@@ -408,12 +408,12 @@ fn grid_error(e: GridError, at: impl Fn(usize) -> DataError) -> DataError {
     error
 }
 
-/// Where each column goes.
-struct Layout {
-    time: Option<usize>,
-    excitation: (usize, Channel, Unit),
-    responses: Vec<(usize, Channel, Unit)>,
-    extra: Vec<(usize, String)>,
+/// Where each column goes (a file's header, or a stream's: [`super::stream::LineLayout`]).
+pub(super) struct Layout {
+    pub(super) time: Option<usize>,
+    pub(super) excitation: (usize, Channel, Unit),
+    pub(super) responses: Vec<(usize, Channel, Unit)>,
+    pub(super) extra: Vec<(usize, String)>,
 }
 
 impl Layout {
@@ -453,7 +453,7 @@ impl Layout {
         (excitation, responses, extra)
     }
 
-    fn parse(header: &[String], map: &ColumnMap) -> Result<Layout, String> {
+    pub(super) fn parse(header: &[String], map: &ColumnMap) -> Result<Layout, String> {
         let mut time = None;
         let mut excitation: Option<(usize, Channel, Unit)> = None;
         let mut responses: Vec<(usize, Channel, Unit)> = Vec::new();

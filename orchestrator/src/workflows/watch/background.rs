@@ -1,7 +1,7 @@
 //! The diagnosis of a failing window, run on a thread of its own while the stream goes on.
 //!
-//! The watcher keeps the last `record` seconds of the current segment (force and
-//! accelerations). When a failing window opens, a diagnosis is due: it starts when the window
+//! The watcher keeps the last `record` seconds of the current segment (the excitation and the
+//! measured channels, whatever the stream measures). When a failing window opens, a diagnosis is due: it starts when the window
 //! closes, or `after` seconds after it opened, whichever comes first (more of the changed
 //! behaviour is more evidence), on the samples kept then, with `twin diagnose`'s decision.
 //! One runs at a time; a window that opens meanwhile waits for it. Its result is a
@@ -18,7 +18,9 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::twin::data::Measurement;
+use ::structure::channel::Channel;
+
+use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
 use crate::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
 
@@ -40,8 +42,20 @@ impl Default for DiagnosisOptions {
     }
 }
 
-/// A sample as kept: time, force, the three accelerations.
-pub type Kept = [f64; 5];
+/// The stream's columns as kept: the excitation and the measured channels; each sample kept
+/// flat as its time, the excitation and the channels' values (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Columns {
+    pub excitation: Channel,
+    pub channels: Vec<Channel>,
+}
+
+impl Columns {
+    /// Values a sample takes.
+    pub fn width(&self) -> usize {
+        2 + self.channels.len()
+    }
+}
 
 /// A diagnosis started and not yet reported.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -50,13 +64,28 @@ pub struct Job {
     pub window_start: f64,
     /// The stream's sampling interval.
     pub dt: f64,
-    pub samples: Vec<Kept>,
+    pub columns: Columns,
+    /// The samples, flat ([`Columns`]).
+    pub samples: Vec<f64>,
+}
+
+impl Job {
+    /// The first and the last sample's times (NaN without samples).
+    pub fn span(&self) -> (f64, f64) {
+        let width = self.columns.width();
+        let n = self.samples.len() / width;
+        if n == 0 {
+            return (f64::NAN, f64::NAN);
+        }
+        (self.samples[0], self.samples[(n - 1) * width])
+    }
 }
 
 /// The part a checkpoint carries.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Saved {
-    pub kept: VecDeque<Kept>,
+    /// The kept samples, flat ([`Columns`]).
+    pub kept: VecDeque<f64>,
     /// A window whose diagnosis is due: (its start, when it opened).
     pub due: Option<(f64, f64)>,
     pub running: Option<Job>,
@@ -77,6 +106,7 @@ pub struct Finished {
 
 pub struct Background {
     pub saved: Saved,
+    columns: Columns,
     options: DiagnosisOptions,
     twin: Twin,
     diagnose: DiagnoseOptions,
@@ -91,9 +121,11 @@ impl Background {
         options: DiagnosisOptions,
         diagnose: DiagnoseOptions,
         saved: Saved,
+        columns: Columns,
     ) -> Self {
         let mut b = Background {
             saved,
+            columns,
             options,
             twin: twin.duplicate(),
             diagnose,
@@ -107,16 +139,18 @@ impl Background {
         b
     }
 
-    /// Keep one sample of the segment.
-    pub fn push(&mut self, sample: Kept) {
-        self.saved.kept.push_back(sample);
-        while self
-            .saved
-            .kept
+    /// Keep one sample of the segment: its time, excitation and measured values.
+    pub fn push(&mut self, time: f64, excitation: f64, measured: &[f64]) {
+        let width = self.columns.width();
+        let kept = &mut self.saved.kept;
+        kept.push_back(time);
+        kept.push_back(excitation);
+        kept.extend(&measured[..width - 2]);
+        while kept
             .front()
-            .is_some_and(|s| sample[0] - s[0] > self.options.record)
+            .is_some_and(|&t| time - t > self.options.record)
         {
-            self.saved.kept.pop_front();
+            kept.drain(..width);
         }
     }
 
@@ -190,6 +224,7 @@ impl Background {
         let job = Job {
             window_start,
             dt: self.dt,
+            columns: self.columns.clone(),
             samples: self.saved.kept.iter().copied().collect(),
         };
         self.saved.running = Some(job.clone());
@@ -202,8 +237,8 @@ impl Background {
         let twin = self.twin.duplicate();
         let options = self.diagnose.clone();
         std::thread::spawn(move || {
-            let result = record(&job.samples, job.dt)
-                .and_then(|m| diagnose(&twin, &m, &options).map_err(|e| e.to_string()));
+            let result =
+                record(&job).and_then(|m| diagnose(&twin, &m, &options).map_err(|e| e.to_string()));
             // The watcher may have stopped waiting; nothing to do then.
             let _ = send.send(result);
         });
@@ -235,23 +270,35 @@ impl Background {
     }
 }
 
-/// The kept samples as a record for `diagnose`.
-fn record(samples: &[Kept], dt: f64) -> Result<Measurement, String> {
-    if samples.len() < 2 {
-        return Err(format!(
-            "{} samples kept; a diagnosis needs more",
-            samples.len()
-        ));
+/// A job's samples as a record of the stream's channels (SI) for `diagnose`.
+fn record(job: &Job) -> Result<Measurement, String> {
+    let width = job.columns.width();
+    let n = job.samples.len() / width;
+    if n < 2 {
+        return Err(format!("{n} samples kept; a diagnosis needs more"));
     }
-    let (from, to) = (samples[0][0], samples[samples.len() - 1][0]);
-    Ok(Measurement::paper_rig(
-        PathBuf::from(format!("the stream from {from:.3} s to {to:.3} s")),
-        samples.iter().map(|s| s[0]).collect(),
-        samples.iter().map(|s| s[1]).collect(),
-        [2, 3, 4].map(|i| samples.iter().map(|s| s[i]).collect()),
-        dt,
-        Default::default(),
-    ))
+    let column = |i: usize| -> Vec<f64> { (0..n).map(|k| job.samples[k * width + i]).collect() };
+    let signal = |channel: Channel, i: usize| Signal {
+        channel,
+        unit: channel.quantity().si(),
+        values: column(i),
+    };
+    let (from, to) = job.span();
+    Ok(Measurement {
+        path: PathBuf::from(format!("the stream from {from:.3} s to {to:.3} s")),
+        time: column(0),
+        dt: job.dt,
+        excitation: signal(job.columns.excitation, 1),
+        responses: job
+            .columns
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(c, &channel)| signal(channel, 2 + c))
+            .collect(),
+        extra: Default::default(),
+        header_line: None,
+    })
 }
 
 /// Where the `k`-th diagnosis's report goes: beside the alerts, `ALERTS.diagnosis-k.json`.

@@ -1,8 +1,13 @@
 //! `twin watch`: the operational twin on a live stream. Samples arrive as CSV lines (standard
-//! input, or a file that grows); per sample the twin's FMUs step once (their state carried from
-//! sample to sample), the prediction is compared with the measured accelerations (a rolling
-//! NMSE per floor, the ±3σ band of the twin's noise variances, failing windows found online by
-//! `twin compare`'s rule), and alerts go out as JSON lines, each flushed. A checkpoint (stream
+//! input, a file that grows, an MQTT topic) whose header names the columns as a record's does
+//! (`time`, `force` or `ground_acc`, any of `acc<i>`, `vel<i>`, `disp<i>`, units converted to
+//! SI, `--columns` maps), checked against the twin's structure before any work; per sample the
+//! twin's FMUs step once (their state carried from sample to sample), the prediction is
+//! compared with each measured channel (a rolling NMSE per channel, the ±3σ band of the twin's
+//! noise variances — or, for a channel the twin holds none for, [`PRIOR_NOISE_FRACTION`] of its
+//! measured variance over the [`NOISE_REFERENCE`] seconds after the transient — failing
+//! windows found online by `twin compare`'s rule), and alerts go out as JSON lines, each
+//! flushed. A checkpoint (stream
 //! position, comparison state, counters, the FMUs' serialised states) lets a restarted watcher
 //! resume exactly where the last one saved.
 
@@ -18,19 +23,20 @@ use std::io::{BufRead, BufReader, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use ::structure::channel::Channel;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use crate::cosim::import::ImportError;
 use crate::evaluation::compare::CompareOptions;
 use crate::fsutil::{write_text_atomically, WriteError};
-use crate::record::LineLayout;
+use crate::record::{default_header, ColumnMap, LineLayout};
 pub use crate::record::{nominal_step, DEFAULT_HEADER};
-use crate::twin::run::Tolerance;
+use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
 use crate::twin::{Twin, TwinError};
-use background::{Background, DiagnosisOptions, Finished};
+use background::{Background, Columns, DiagnosisOptions, Finished};
 use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
-use online::{Detector, Event, Options};
+use online::{names_and_floors, Detector, Event, Options};
 use stepper::{NodeState, Stepper};
 use supervise::{Decision, LearnOptions, Supervisor};
 
@@ -115,6 +121,8 @@ pub struct WatchOptions {
     pub diagnosis: Option<DiagnosisOptions>,
     /// The active-learning supervisor of a twin with a GP corrector.
     pub learning: LearnOptions,
+    /// Header names the stream uses for the twin's (`--columns MAP.json`).
+    pub columns: ColumnMap,
 }
 
 /// `--checkpoint-every`'s default, samples.
@@ -123,6 +131,10 @@ pub const CHECKPOINT_EVERY: u64 = 512;
 pub const WINDOW: f64 = 2.0;
 /// `--idle`'s default for a followed file, s (an MQTT source waits for ever by default).
 pub const FILE_IDLE: f64 = 10.0;
+/// Seconds after the transient whose measured variance gives the band of a channel the twin
+/// holds no noise variance for ([`PRIOR_NOISE_FRACTION`] of it, as `twin compare`'s prior);
+/// the comparison of the stream's first samples waits for it.
+pub const NOISE_REFERENCE: f64 = 10.0;
 
 impl WatchOptions {
     /// The defaults for `source`, alerts to `alerts`: checkpoints every 512 samples (none
@@ -140,6 +152,7 @@ impl WatchOptions {
             rate: None,
             diagnosis: Some(DiagnosisOptions::default()),
             learning: LearnOptions::default(),
+            columns: ColumnMap::default(),
         }
     }
 
@@ -227,7 +240,9 @@ pub struct Status {
     pub samples: u64,
     pub time: f64,
     pub samples_per_second: f64,
-    pub rolling_nmse: [f64; 3],
+    /// The measured channels, and the rolling NMSE of each.
+    pub channels: Vec<String>,
+    pub rolling_nmse: Vec<f64>,
     /// Whether a failing window is open.
     pub open_window: bool,
     /// Whether a diagnosis runs in the background.
@@ -253,7 +268,11 @@ pub struct Summary {
     /// The corrector's supervisor (a twin with a GP corrector only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub learning: Option<LearningSummary>,
-    pub nmse: [f64; 3],
+    /// The measured channels, in the order of `nmse` (and of every alert's per-channel list).
+    pub channels: Vec<String>,
+    pub nmse: Vec<f64>,
+    /// Where the band's noise variances came from: the twin's, or the stream's prior.
+    pub noise_source: String,
     pub samples_per_second: f64,
     pub real_time_factor: f64,
     pub latency_median_us: f64,
@@ -270,14 +289,14 @@ pub struct LearningSummary {
     pub training_points: Option<i32>,
     /// None: the corrector's FMU takes no budget (its own limit, 2048, holds).
     pub budget: Option<u32>,
-    /// Per floor, m²/s⁴ (None while the reference samples come).
-    pub threshold: Option<[f64; 3]>,
+    /// Per measured channel (None while the reference samples come).
+    pub threshold: Option<Vec<f64>>,
     /// The largest V(f) / threshold over the stream.
     pub largest_ratio: f64,
 }
 
-/// A checkpoint's format version.
-const CHECKPOINT_VERSION: u32 = 1;
+/// A checkpoint's format version (2: any channels).
+const CHECKPOINT_VERSION: u32 = 2;
 /// A time step above this × the nominal one is a gap.
 pub const GAP_FACTOR: f64 = 1.5;
 const POLL: Duration = Duration::from_millis(100);
@@ -296,8 +315,21 @@ struct State {
     /// The current segment's first time and its samples so far (its FMU clock).
     segment_start: Option<f64>,
     segment_count: u64,
-    /// The stream's first sample, held until the second gives the sampling interval.
-    first: Option<(f64, [f64; 3], [f64; 3])>,
+    /// The stream's excitation and measured channels (its first header's).
+    excitation: Channel,
+    channels: Vec<Channel>,
+    /// The last header line of an MQTT stream (a resumed watcher reads the broker's lines with
+    /// it).
+    header: Option<String>,
+    /// The band's noise variance per channel, once known.
+    noise_variance: Option<Vec<f64>>,
+    /// The sums over the reference stretch for the channels the twin holds no noise variance
+    /// for.
+    reference: Welford,
+    /// Samples (time, measured, predicted) held until the detector can judge them: the
+    /// stream's first until the second gives the sampling interval, and those before the
+    /// noise variances are known.
+    held: Vec<(f64, Vec<f64>, Vec<f64>)>,
     detector: Option<Detector>,
     bad_lines: u64,
     #[serde(default)]
@@ -394,18 +426,70 @@ impl LineReader {
     }
 }
 
-/// The stream's column positions, as the record module reads a header line.
+/// Running mean and variance per channel (Welford), for the band's prior.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+struct Welford {
+    n: u64,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+}
+
+impl Welford {
+    fn add(&mut self, values: &[f64]) {
+        if self.mean.len() != values.len() {
+            self.mean = vec![0.0; values.len()];
+            self.m2 = vec![0.0; values.len()];
+        }
+        self.n += 1;
+        for (c, &y) in values.iter().enumerate() {
+            let d = y - self.mean[c];
+            self.mean[c] += d / self.n as f64;
+            self.m2[c] += d * (y - self.mean[c]);
+        }
+    }
+
+    /// Channel `c`'s variance (population, as `compare`'s prior takes it).
+    fn variance(&self, c: usize) -> f64 {
+        self.m2[c] / self.n as f64
+    }
+}
+
+/// The stream's columns, as the record module reads a header line, checked against the twin:
+/// its excitation the one the structure takes, every response a channel of a floor it has.
 struct Header(LineLayout);
 
 impl Header {
-    fn parse(line: &str) -> Result<Self, WatchError> {
-        LineLayout::parse(line)
-            .map(Header)
-            .map_err(WatchError::Header)
+    fn parse(
+        line: &str,
+        columns: &ColumnMap,
+        structure: &::structure::Structure,
+        twin: &str,
+    ) -> Result<Self, String> {
+        let layout = LineLayout::parse_with(line, columns)?;
+        for channel in
+            std::iter::once(layout.excitation()).chain(layout.responses().iter().copied())
+        {
+            channel.check(&channel.name(), structure).map_err(|e| {
+                format!(
+                    "{e} (the twin: {twin}, {} storey(s) under {})",
+                    structure.storeys(),
+                    structure.excitation.describe()
+                )
+            })?;
+        }
+        Ok(Header(layout))
     }
 
-    fn sample(&self, line: &str) -> Result<(f64, f64, [f64; 3]), String> {
-        self.0.sample(line)
+    /// The stream's columns: the same excitation, the channels in `channels`' order.
+    fn for_stream(self, excitation: Channel, channels: &[Channel]) -> Result<Self, String> {
+        if self.0.excitation() != excitation {
+            return Err(format!(
+                "the header's excitation '{}' is not the stream's '{}'",
+                self.0.excitation().name(),
+                excitation.name()
+            ));
+        }
+        self.0.in_order(channels).map(Header)
     }
 }
 
@@ -540,9 +624,15 @@ struct Watcher<'a> {
     stepper: Stepper<'a>,
     alerts: Alerts,
     reader: LineReader,
+    /// A line read before the watch began (an MQTT stream's first), given out first.
+    pushed_back: Option<String>,
     background: Option<Background>,
-    noise_variance: [f64; 3],
+    /// The twin's noise variance per measured channel, where it holds one.
+    twin_noise: Vec<Option<f64>>,
     options: &'a WatchOptions,
+    /// The sample's measured values and the twin's predictions (per channel; reused).
+    measured: Vec<f64>,
+    predicted: Vec<f64>,
 }
 
 impl Watcher<'_> {
@@ -575,6 +665,14 @@ impl Watcher<'_> {
             return Ok(());
         };
         let events = m.take_events();
+        self.report_connection(events)
+    }
+
+    /// Connection changes as `connection` alerts.
+    fn report_connection(&mut self, events: Vec<ConnectionEvent>) -> Result<(), WatchError> {
+        let Some(m) = self.reader.mqtt() else {
+            return Ok(());
+        };
         let broker = format!("{}:{}", m.url().host, m.url().port);
         for event in events {
             let body = match event {
@@ -597,6 +695,9 @@ impl Watcher<'_> {
 
     /// The next line of the stream, the connection's changes reported.
     fn next_line(&mut self) -> Result<Option<String>, WatchError> {
+        if let Some(line) = self.pushed_back.take() {
+            return Ok(Some(line));
+        }
         let line = self.reader.next();
         self.connection_alerts()?;
         line
@@ -607,7 +708,7 @@ impl Watcher<'_> {
             match event {
                 Event::Opened {
                     start,
-                    floors,
+                    channels,
                     nmse,
                 } => {
                     if let Some(b) = &mut self.background {
@@ -617,12 +718,13 @@ impl Watcher<'_> {
                         .state
                         .detector
                         .as_ref()
-                        .map_or([f64::NAN; 3], Detector::rolling_nmse);
+                        .map_or_else(|| self.nan(), Detector::rolling_nmse);
+                    let (channels, floors) = names_and_floors(&self.state.channels, &channels);
                     self.alert(
                         Some(time),
                         "failing",
-                        json!({"start": start, "floors": floors, "nmse": floats(nmse),
-                               "rolling_nmse": floats(rolling)}),
+                        json!({"start": start, "floors": floors, "channels": channels,
+                               "nmse": floats(nmse), "rolling_nmse": floats(rolling)}),
                     )?;
                 }
                 Event::Closed {
@@ -638,7 +740,7 @@ impl Watcher<'_> {
                             Some(time),
                             "failing",
                             json!({"start": window.start, "floors": window.floors,
-                                   "nmse": floats(&window.nmse)}),
+                                   "channels": window.channels, "nmse": floats(&window.nmse)}),
                         )?;
                     }
                     if failing || was_opened {
@@ -646,8 +748,8 @@ impl Watcher<'_> {
                             Some(time),
                             "recovered",
                             json!({"start": window.start, "end": window.end,
-                                   "floors": window.floors, "nmse": floats(&window.nmse),
-                                   "withdrawn": !failing}),
+                                   "floors": window.floors, "channels": window.channels,
+                                   "nmse": floats(&window.nmse), "withdrawn": !failing}),
                         )?;
                     }
                 }
@@ -673,8 +775,70 @@ impl Watcher<'_> {
         Ok(())
     }
 
-    /// One good sample.
-    fn sample(&mut self, time: f64, force: f64, measured: [f64; 3]) -> Result<(), WatchError> {
+    /// NaN for every measured channel.
+    fn nan(&self) -> Vec<f64> {
+        vec![f64::NAN; self.state.channels.len()]
+    }
+
+    /// The band's noise variances once known: the twin's for every channel it holds one for;
+    /// for the others, [`PRIOR_NOISE_FRACTION`] of the measured variance over the
+    /// [`NOISE_REFERENCE`] seconds after the segment's transient (summed as they come;
+    /// `since`: the sample's time after the segment's start). Whether they are known (in
+    /// `self.state.noise_variance`).
+    fn noise_known(&mut self, since: f64) -> bool {
+        if self.state.noise_variance.is_some() {
+            return true;
+        }
+        if self.twin_noise.iter().all(Option::is_some) {
+            self.state.noise_variance = Some(self.twin_noise.iter().flatten().copied().collect());
+            return true;
+        }
+        let transient = self.options.transient;
+        if since >= transient && since < transient + NOISE_REFERENCE {
+            self.state.reference.add(&self.measured);
+            return false;
+        }
+        if since < transient + NOISE_REFERENCE || self.state.reference.n < 2 {
+            return false;
+        }
+        let reference = &self.state.reference;
+        let v: Vec<f64> = self
+            .twin_noise
+            .iter()
+            .enumerate()
+            .map(|(c, own)| own.unwrap_or_else(|| PRIOR_NOISE_FRACTION * reference.variance(c)))
+            .collect();
+        self.state.noise_variance = Some(v);
+        true
+    }
+
+    /// Where the band's noise variances come from, in words.
+    fn noise_source(&self) -> String {
+        let (own, prior): (Vec<usize>, Vec<usize>) =
+            (0..self.twin_noise.len()).partition(|&c| self.twin_noise[c].is_some());
+        let names = |c: &[usize]| {
+            c.iter()
+                .map(|&c| self.state.channels[c].name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let prior_words = format!(
+            "prior: {} % of the measured variance over the {NOISE_REFERENCE} s after the transient",
+            100.0 * PRIOR_NOISE_FRACTION
+        );
+        match (own.is_empty(), prior.is_empty()) {
+            (false, true) => "twin (calibrated)".to_owned(),
+            (true, _) => prior_words,
+            (false, false) => format!(
+                "twin (calibrated) for {}; {prior_words} for {}",
+                names(&own),
+                names(&prior)
+            ),
+        }
+    }
+
+    /// One good sample: its time and excitation; its measured values in `self.measured`.
+    fn sample(&mut self, time: f64, excitation: f64) -> Result<(), WatchError> {
         if let (None, Some(last)) = (self.state.dt, self.state.last_time) {
             // The second sample gives the interval (unless --rate did).
             let dt = self
@@ -702,7 +866,8 @@ impl Watcher<'_> {
                     json!({"after": last, "missing": missing,
                            "step": step, "nominal_step": dt}),
                 )?;
-                // Re-synchronise: the twin at rest from here, the comparison's transient anew.
+                // Re-synchronise: the twin at rest from here, the comparison's transient anew
+                // (and the band's reference, if it was not complete).
                 if let Some(b) = &mut self.background {
                     b.gap();
                 }
@@ -710,7 +875,10 @@ impl Watcher<'_> {
                     s.gap();
                 }
                 self.state.segment_start = None;
-                self.state.first = None;
+                self.state.held.clear();
+                if self.state.noise_variance.is_none() {
+                    self.state.reference = Welford::default();
+                }
             }
         }
         if self.state.segment_start.is_none() {
@@ -723,33 +891,38 @@ impl Watcher<'_> {
             Some(dt) => start + self.state.segment_count as f64 * dt,
             None => time,
         };
-        let predicted = self.stepper.advance(grid, force)?;
+        self.stepper
+            .advance(grid, excitation, &mut self.predicted)?;
         self.state.segment_count += 1;
         if let Some(b) = &mut self.background {
-            b.push([time, force, measured[0], measured[1], measured[2]]);
+            b.push(time, excitation, &self.measured);
         }
-        if self.state.dt.is_none() {
-            // The stream's first sample waits for the second to give the interval.
-            self.state.first = Some((time, measured, predicted));
-            self.state.samples += 1;
-            self.state.last_time = Some(time);
+        self.state.samples += 1;
+        self.state.last_time = Some(time);
+        let known = self.noise_known(time - start);
+        let (Some(dt), true) = (self.state.dt, known) else {
+            // The stream's first sample waits for the second to give the interval, and the
+            // first samples for the band's reference.
+            self.state
+                .held
+                .push((time, self.measured.clone(), self.predicted.clone()));
             return Ok(());
-        }
-        let dt = self.state.dt.unwrap_or(1.0);
+        };
         let mut events = Vec::new();
+        let channels = &self.state.channels;
+        let options = self.state.options;
+        let noise = self.state.noise_variance.as_deref().unwrap_or_default();
         let detector = self
             .state
             .detector
-            .get_or_insert_with(|| Detector::new(self.state.options, self.noise_variance, dt));
-        if let Some((t0, y0, p0)) = self.state.first.take() {
-            events.extend(detector.push(t0, y0, p0));
+            .get_or_insert_with(|| Detector::new(options, channels.clone(), noise, dt));
+        for (t, y, p) in self.state.held.drain(..) {
+            events.extend(detector.push(t, &y, &p));
         }
-        events.extend(detector.push(time, measured, predicted));
-        self.state.samples += 1;
-        self.state.last_time = Some(time);
+        events.extend(detector.push(time, &self.measured, &self.predicted));
         self.events(time, events)?;
         if self.state.supervisor.is_some() && time - start >= self.options.transient {
-            self.supervise(time, measured)?;
+            self.supervise(time)?;
         }
         if let Some(finished) = self.background.as_mut().and_then(|b| b.poll(time)) {
             self.diagnosed(finished)?;
@@ -759,28 +932,30 @@ impl Watcher<'_> {
 
     /// The corrector's latent variances against the thresholds: a query learns the sample,
     /// an excursion is an `uncertain` alert, its end a `certain` one.
-    fn supervise(&mut self, time: f64, measured: [f64; 3]) -> Result<(), WatchError> {
+    fn supervise(&mut self, time: f64) -> Result<(), WatchError> {
         let Some(v) = self.stepper.latent_variance()? else {
             return Ok(());
         };
         let Some(supervisor) = &mut self.state.supervisor else {
             return Ok(());
         };
-        let decision = supervisor.decide(time, v, self.options.window);
-        let threshold = supervisor.threshold;
+        let decision = supervisor.decide(time, &v, self.options.window);
+        let threshold = supervisor.threshold.clone();
         let queries = supervisor.queries;
         match decision {
             Decision::Quiet => {}
             Decision::Query { floors, alarm } => {
                 if self.options.learning.learn {
-                    self.stepper.learn_current(measured)?;
+                    self.stepper.learn_current(&self.measured)?;
                 }
                 if alarm {
+                    let positions: Vec<usize> = floors.iter().map(|f| f - 1).collect();
+                    let (channels, floors) = names_and_floors(&self.state.channels, &positions);
                     self.alert(
                         Some(time),
                         "uncertain",
-                        json!({"floors": floors, "latent_variance": floats(v),
-                               "threshold": threshold.map(floats)}),
+                        json!({"floors": floors, "channels": channels,
+                               "latent_variance": floats(v), "threshold": threshold.map(floats)}),
                     )?;
                 }
             }
@@ -808,10 +983,7 @@ impl Watcher<'_> {
             // Reported before a restart.
             return Ok(());
         }
-        let (from, to) = (
-            job.samples.first().map_or(f64::NAN, |s| s[0]),
-            job.samples.last().map_or(f64::NAN, |s| s[0]),
-        );
+        let (from, to) = job.span();
         let mut body = json!({
             "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
             "from": from, "to": to, "seconds": seconds,
@@ -827,8 +999,9 @@ impl Watcher<'_> {
                     m.insert("action".into(), json!(d.action));
                     m.insert("reason".into(), json!(d.reason));
                     m.insert("effects".into(), json!(d.effects));
-                    m.insert("nmse_before".into(), floats(d.nmse_before));
-                    m.insert("nmse_after".into(), floats(d.nmse_after));
+                    m.insert("channels".into(), json!(d.channels));
+                    m.insert("nmse_before".into(), floats(&d.nmse_before));
+                    m.insert("nmse_after".into(), floats(&d.nmse_after));
                     m.insert("report".into(), json!(path.display().to_string()));
                 }
             }
@@ -861,9 +1034,7 @@ pub fn watch_with_alerts(
     mut progress: impl FnMut(&Status),
     on_alert: &mut dyn FnMut(&Value) -> Result<(), String>,
 ) -> Result<Summary, WatchError> {
-    let noise_variance = twin
-        .noise_variance
-        .ok_or_else(|| WatchError::NoNoise(twin.describe()))?;
+    let structure = twin.structure()?;
     if !(options.window > 0.0 && options.window.is_finite()) {
         return Err(WatchError::Options(format!(
             "--window must be a positive number of seconds, was {}",
@@ -891,7 +1062,91 @@ pub fn watch_with_alerts(
         },
         options.window,
     );
-    let mut stepper = Stepper::new(twin)?;
+    let saved: Option<State> = match &options.checkpoint {
+        Some(path) if path.exists() => {
+            let bad = |message: String| WatchError::BadCheckpoint {
+                path: path.clone(),
+                message,
+            };
+            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+            let version = serde_json::from_str::<Value>(&text)
+                .ok()
+                .and_then(|v| v.get("version").and_then(Value::as_u64));
+            if version != Some(u64::from(CHECKPOINT_VERSION)) {
+                return Err(bad(format!(
+                    "format version {}, this twin writes {CHECKPOINT_VERSION}",
+                    version.map_or("unknown".into(), |v| v.to_string())
+                )));
+            }
+            let state: State = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+            if state.options != detector_options {
+                return Err(bad(format!(
+                    "made with other comparison options ({:?}) than these ({:?})",
+                    state.options, detector_options
+                )));
+            }
+            Some(state)
+        }
+        _ => None,
+    };
+    let mut reader = LineReader::open(&options.source)?;
+    let from_broker = matches!(reader, LineReader::Mqtt(_));
+    // The header: a file or standard input starts with its own; an MQTT stream's is the one
+    // its last run saw, else its first line if that is a header, else time, the excitation
+    // and an accelerometer on every floor (the paper rig's `time,force,acc1,acc2,acc3`).
+    let mut early_events = Vec::new();
+    let mut pushed_back = None;
+    let header_line = if from_broker {
+        match saved.as_ref().and_then(|s| s.header.clone()) {
+            Some(h) => h,
+            None => loop {
+                match reader.next()? {
+                    None => {
+                        break default_header(structure_excitation(&structure), structure.storeys())
+                    }
+                    Some(line) if line.trim().is_empty() => {
+                        if let Some(m) = reader.mqtt() {
+                            early_events.extend(m.take_events());
+                        }
+                    }
+                    Some(line) => {
+                        let header = is_header(&line).then(|| line.clone());
+                        pushed_back = Some(line);
+                        break header.unwrap_or_else(|| {
+                            default_header(structure_excitation(&structure), structure.storeys())
+                        });
+                    }
+                }
+            },
+        }
+    } else {
+        loop {
+            match reader.next()? {
+                None => return Err(WatchError::Header("the stream is empty".into())),
+                Some(line) if line.trim().is_empty() => continue,
+                Some(line) => break line,
+            }
+        }
+    };
+    let describe = twin.describe();
+    let header = Header::parse(&header_line, &options.columns, &structure, &describe)
+        .map_err(WatchError::Header)?;
+    // The stream's channels: its first header's, or those of the run a checkpoint saved.
+    let (excitation, channels) = match &saved {
+        Some(state) => (state.excitation, state.channels.clone()),
+        None => (header.0.excitation(), header.0.responses().to_vec()),
+    };
+    let mut header = header
+        .for_stream(excitation, &channels)
+        .map_err(|message| match &options.checkpoint {
+            Some(path) => WatchError::BadCheckpoint {
+                path: path.clone(),
+                message: format!("made on another stream: {message}"),
+            },
+            None => WatchError::Header(message),
+        })?;
+    let wired = stepper::wired(twin, &channels);
+    let mut stepper = Stepper::new(wired.as_ref().unwrap_or(twin), excitation, &channels)?;
     // The corrector's training-set budget, when its FMU takes one.
     let mut budget = Some(options.learning.budget);
     if stepper.has_learner() {
@@ -907,30 +1162,6 @@ pub fn watch_with_alerts(
         }
         stepper.set_learner_parameter("refit_every", l.refit_every as i32);
     }
-    let saved: Option<State> = match &options.checkpoint {
-        Some(path) if path.exists() => {
-            let bad = |message: String| WatchError::BadCheckpoint {
-                path: path.clone(),
-                message,
-            };
-            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-            let state: State = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
-            if state.version != CHECKPOINT_VERSION {
-                return Err(bad(format!(
-                    "format version {}, this twin writes {CHECKPOINT_VERSION}",
-                    state.version
-                )));
-            }
-            if state.options != detector_options {
-                return Err(bad(format!(
-                    "made with other comparison options ({:?}) than these ({:?})",
-                    state.options, detector_options
-                )));
-            }
-            Some(state)
-        }
-        _ => None,
-    };
     let resuming = saved.is_some();
     let mut state = match saved {
         Some(state) => {
@@ -949,7 +1180,12 @@ pub fn watch_with_alerts(
             last_time: None,
             segment_start: None,
             segment_count: 0,
-            first: None,
+            excitation,
+            channels: channels.clone(),
+            header: None,
+            noise_variance: None,
+            reference: Welford::default(),
+            held: Vec::new(),
             detector: None,
             bad_lines: 0,
             duplicates: 0,
@@ -963,47 +1199,47 @@ pub fn watch_with_alerts(
             supervisor: None,
         },
     };
+    if from_broker {
+        state.header = Some(header_line.clone());
+    }
     if stepper.has_learner() && state.supervisor.is_none() {
-        state.supervisor = Some(Supervisor::new(options.learning.threshold));
+        state.supervisor = Some(Supervisor::new(options.learning.threshold, channels.len()));
     }
     let alerts = Alerts::open(&options.alerts, resuming)?;
-    let reader = LineReader::open(&options.source)?;
-    let from_broker = matches!(reader, LineReader::Mqtt(_));
     let background = options.diagnosis.map(|o| {
         let diagnose = crate::workflows::diagnose::DiagnoseOptions {
             transient: options.transient,
             tolerance: options.tolerance,
             ..Default::default()
         };
-        let mut b = Background::new(twin, o, diagnose, state.background.clone());
+        let columns = Columns {
+            excitation,
+            channels: channels.clone(),
+        };
+        let mut b = Background::new(twin, o, diagnose, state.background.clone(), columns);
         if let Some(dt) = state.dt {
             b.set_dt(dt);
         }
         b
     });
+    let twin_noise = channels
+        .iter()
+        .map(|&c| twin.noise_variance_of(c))
+        .collect();
     let mut w = Watcher {
         on_alert,
         state,
         stepper,
         alerts,
         reader,
+        pushed_back,
         background,
-        noise_variance,
+        twin_noise,
         options,
+        measured: vec![0.0; channels.len()],
+        predicted: vec![0.0; channels.len()],
     };
-    // A file or standard input starts with its header; MQTT messages carry the usual columns
-    // unless a header line in one of them says otherwise.
-    let mut header = if from_broker {
-        Header::parse(DEFAULT_HEADER)?
-    } else {
-        loop {
-            match w.next_line()? {
-                None => return Err(WatchError::Header("the stream is empty".into())),
-                Some(line) if line.trim().is_empty() => continue,
-                Some(line) => break Header::parse(&line)?,
-            }
-        }
-    };
+    w.report_connection(early_events)?;
     // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:
     // there only the samples' times tell what was seen).
     let skip_lines = if from_broker { 0 } else { w.state.lines };
@@ -1034,14 +1270,13 @@ pub fn watch_with_alerts(
             continue;
         }
         line_number += 1;
-        if from_broker
-            && line
-                .trim_start()
-                .starts_with(|c: char| c.is_ascii_alphabetic())
-        {
-            match Header::parse(&line) {
+        if from_broker && is_header(&line) {
+            match Header::parse(&line, &options.columns, &structure, &describe)
+                .and_then(|h| h.for_stream(excitation, &channels))
+            {
                 Ok(h) => {
                     header = h;
+                    w.state.header = Some(line);
                     continue;
                 }
                 Err(e) => {
@@ -1057,7 +1292,7 @@ pub fn watch_with_alerts(
             }
         }
         let began = Instant::now();
-        let sample = header.sample(&line);
+        let sample = header.0.sample_into(&line, &mut w.measured);
         if line_number <= skip_lines {
             continue;
         }
@@ -1093,8 +1328,8 @@ pub fn watch_with_alerts(
                 };
                 w.alert(time, "bad_sample", json!({"line": line, "reason": reason}))?;
             }
-            Ok((time, force, measured)) => {
-                w.sample(time, force, measured)?;
+            Ok((time, excitation)) => {
+                w.sample(time, excitation)?;
                 this_run += 1;
                 latency.add(began.elapsed().as_secs_f64());
                 since_save += 1;
@@ -1145,16 +1380,18 @@ pub fn watch_with_alerts(
                     None
                 },
                 budget,
-                threshold: s.threshold,
+                threshold: s.threshold.clone(),
                 largest_ratio: s.largest_ratio,
             }),
             None => None,
         },
+        channels: channels.iter().map(Channel::name).collect(),
         nmse: w
             .state
             .detector
             .as_ref()
-            .map_or([f64::NAN; 3], |d| d.overall.nmse()),
+            .map_or_else(|| w.nan(), |d| d.overall.nmse()),
+        noise_source: w.noise_source(),
         samples_per_second: rate,
         real_time_factor: real_time,
         latency_median_us: 1e6 * latency.quantile(0.5),
@@ -1164,7 +1401,7 @@ pub fn watch_with_alerts(
     let mut body =
         serde_json::to_value(&summary).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
     if let Value::Object(map) = &mut body {
-        map.insert("nmse".into(), floats(summary.nmse));
+        map.insert("nmse".into(), floats(&summary.nmse));
         map.insert("tolerance_source".into(), json!(tolerance.source));
     }
     w.alert(last, "end", body)?;
@@ -1174,16 +1411,31 @@ pub fn watch_with_alerts(
     Ok(summary)
 }
 
+/// Whether a line of an MQTT stream is a header (it starts with a letter, as a column name
+/// does and a time does not).
+fn is_header(line: &str) -> bool {
+    line.trim_start()
+        .starts_with(|c: char| c.is_ascii_alphabetic())
+}
+
+/// The excitation column of `structure`: `force` or `ground_acc`.
+fn structure_excitation(structure: &::structure::Structure) -> Channel {
+    Channel::Excitation(::structure::channel::ExcitationKind::of(
+        &structure.excitation,
+    ))
+}
+
 fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
     Status {
         samples: w.state.samples,
         time: w.state.last_time.unwrap_or(0.0),
         samples_per_second: this_run as f64 / started.elapsed().as_secs_f64().max(1e-9),
+        channels: w.state.channels.iter().map(Channel::name).collect(),
         rolling_nmse: w
             .state
             .detector
             .as_ref()
-            .map_or([f64::NAN; 3], Detector::rolling_nmse),
+            .map_or_else(|| w.nan(), Detector::rolling_nmse),
         open_window: w.state.detector.as_ref().is_some_and(Detector::window_open),
         diagnosing: w.background.as_ref().is_some_and(Background::busy),
     }

@@ -7,22 +7,11 @@
 
 use std::collections::VecDeque;
 
+use ::structure::channel::Channel;
 use serde::{Deserialize, Serialize};
 
 use crate::evaluation::compare::{CompareOptions, FailingWindow};
 use crate::evaluation::stats::nmse;
-
-/// One sample waiting for its severity window to fill.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct Entry {
-    time: f64,
-    measured: [f64; 3],
-    predicted: [f64; 3],
-    /// The severity's prefix sums of squared band-normalised residuals before this sample …
-    before: [f64; 3],
-    /// … and after it.
-    after: [f64; 3],
-}
 
 /// An out-of-band stretch being grown: what `compare` calls a group.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -30,10 +19,11 @@ struct Group {
     start: f64,
     last: f64,
     outliers: usize,
-    floors: [bool; 3],
-    /// Every sample from the first out-of-band one on, per floor.
-    measured: [Vec<f64>; 3],
-    predicted: [Vec<f64>; 3],
+    /// Per measured channel, whether it left the band.
+    channels: Vec<bool>,
+    /// Every sample from the first out-of-band one on, per channel.
+    measured: Vec<Vec<f64>>,
+    predicted: Vec<Vec<f64>>,
     /// How many of them run to the last out-of-band sample.
     through_last: usize,
     /// Whether a `failing` alert was raised for it.
@@ -41,23 +31,45 @@ struct Group {
 }
 
 impl Group {
-    fn nmse(&self, len: usize) -> [f64; 3] {
-        [0, 1, 2].map(|f| nmse(&self.measured[f][..len], &self.predicted[f][..len]))
+    fn nmse(&self, len: usize) -> Vec<f64> {
+        (0..self.channels.len())
+            .map(|c| nmse(&self.measured[c][..len], &self.predicted[c][..len]))
+            .collect()
     }
 
-    fn floors(&self) -> Vec<usize> {
-        (0..3).filter(|&f| self.floors[f]).map(|f| f + 1).collect()
+    /// The positions of the channels that left the band.
+    fn out(&self) -> Vec<usize> {
+        (0..self.channels.len())
+            .filter(|&c| self.channels[c])
+            .collect()
     }
+}
+
+/// The names of the channels at `positions`, and their floors (each once, ascending), as
+/// `compare`'s failing windows give them.
+pub fn names_and_floors(channels: &[Channel], positions: &[usize]) -> (Vec<String>, Vec<usize>) {
+    let names = positions.iter().map(|&c| channels[c].name()).collect();
+    let mut floors: Vec<usize> = positions
+        .iter()
+        .map(|&c| match channels[c] {
+            Channel::Response { floor, .. } => floor,
+            _ => 0,
+        })
+        .collect();
+    floors.sort_unstable();
+    floors.dedup();
+    (names, floors)
 }
 
 /// What the detector tells the stream.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
     /// A window has enough out-of-band samples and is above the tolerance so far.
+    /// `channels`: the positions of those that left the band.
     Opened {
         start: f64,
-        floors: Vec<usize>,
-        nmse: [f64; 3],
+        channels: Vec<usize>,
+        nmse: Vec<f64>,
     },
     /// A window closed (no out-of-band sample within the merge gap after its last one).
     /// `failing`: whether it is a failing window by `compare`'s rule on its whole extent.
@@ -68,18 +80,28 @@ pub enum Event {
     },
 }
 
-/// Running sums for an NMSE over everything after the transient (Welford's mean and variance).
+/// Running sums for an NMSE over everything after the transient (Welford's mean and variance),
+/// per measured channel.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct RunningNmse {
-    n: [u64; 3],
-    mean: [f64; 3],
-    m2: [f64; 3],
-    sse: [f64; 3],
+    n: Vec<u64>,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+    sse: Vec<f64>,
 }
 
 impl RunningNmse {
-    fn add(&mut self, measured: [f64; 3], predicted: [f64; 3]) {
-        for f in 0..3 {
+    pub fn new(channels: usize) -> Self {
+        RunningNmse {
+            n: vec![0; channels],
+            mean: vec![0.0; channels],
+            m2: vec![0.0; channels],
+            sse: vec![0.0; channels],
+        }
+    }
+
+    fn add(&mut self, measured: &[f64], predicted: &[f64]) {
+        for f in 0..self.n.len() {
             let y = measured[f];
             self.n[f] += 1;
             let d = y - self.mean[f];
@@ -89,38 +111,54 @@ impl RunningNmse {
         }
     }
 
-    /// NMSE per floor (%); NaN before any sample.
-    pub fn nmse(&self) -> [f64; 3] {
-        [0, 1, 2].map(|f| {
-            if self.n[f] == 0 {
-                f64::NAN
-            } else {
-                100.0 * self.sse[f] / self.m2[f]
-            }
-        })
+    /// NMSE per channel (%); NaN before any sample.
+    pub fn nmse(&self) -> Vec<f64> {
+        (0..self.n.len())
+            .map(|f| {
+                if self.n[f] == 0 {
+                    f64::NAN
+                } else {
+                    100.0 * self.sse[f] / self.m2[f]
+                }
+            })
+            .collect()
     }
 }
 
 /// The state of one segment (from the stream's start or a gap to the next gap or the end).
+///
+/// The samples waiting for their severity window and the rolling window's samples are kept
+/// flat, one record of fixed width per sample, so that a sample costs no allocation whatever
+/// the number of channels.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Detector {
     options: Options,
-    noise_sd: [f64; 3],
+    /// The measured channels, in the order of every per-channel vector here.
+    channels: Vec<Channel>,
+    noise_sd: Vec<f64>,
     /// Half the severity window, in samples.
     half: usize,
     start_time: Option<f64>,
     /// Samples in the segment so far, and the index of the first one not yet judged.
     count: usize,
     judged: usize,
-    prefix: [f64; 3],
-    pending: VecDeque<Entry>,
+    prefix: Vec<f64>,
+    /// Per waiting sample: time, measured, predicted, and the severity's prefix sums of
+    /// squared band-normalised residuals before and after it (1 + 4m values).
+    pending: VecDeque<f64>,
     group: Option<Group>,
-    /// The last `--window` seconds after the transient, for the rolling NMSE.
-    rolling: VecDeque<(f64, [f64; 3], [f64; 3])>,
+    /// The last `--window` seconds after the transient, for the rolling NMSE: time,
+    /// measured, predicted (1 + 2m values a sample).
+    rolling: VecDeque<f64>,
     /// NMSE over the stream after each segment's transient.
     pub overall: RunningNmse,
     /// Failing windows closed so far.
     pub failing_windows: u64,
+    /// The sample being judged (scratch, not state).
+    #[serde(skip)]
+    scratch: Vec<f64>,
+    #[serde(skip)]
+    outside: Vec<bool>,
 }
 
 /// The comparison's rule (as `compare` takes it) and the rolling window's length.
@@ -150,46 +188,65 @@ impl Options {
 }
 
 impl Detector {
-    /// `dt`: the nominal sampling interval (s); `noise_variance`: the band's, per floor.
-    pub fn new(options: Options, noise_variance: [f64; 3], dt: f64) -> Self {
+    /// `channels`: the measured channels; `noise_variance`: the band's, per channel; `dt`: the
+    /// nominal sampling interval (s).
+    pub fn new(options: Options, channels: Vec<Channel>, noise_variance: &[f64], dt: f64) -> Self {
+        let m = channels.len();
         Detector {
             options,
-            noise_sd: noise_variance.map(f64::sqrt),
+            noise_sd: noise_variance.iter().map(|v| v.sqrt()).collect(),
             half: (options.severity_window / dt / 2.0).round() as usize,
             start_time: None,
             count: 0,
             judged: 0,
-            prefix: [0.0; 3],
+            prefix: vec![0.0; m],
             pending: VecDeque::new(),
             group: None,
             rolling: VecDeque::new(),
-            overall: RunningNmse::default(),
+            overall: RunningNmse::new(m),
             failing_windows: 0,
+            scratch: Vec::new(),
+            outside: Vec::new(),
+            channels,
         }
     }
 
+    /// The measured channels, in the order of the NMSE vectors.
+    pub fn channels(&self) -> &[Channel] {
+        &self.channels
+    }
+
+    fn pending_width(&self) -> usize {
+        1 + 4 * self.channels.len()
+    }
+
+    fn rolling_width(&self) -> usize {
+        1 + 2 * self.channels.len()
+    }
+
     /// Take one sample of the segment; events for the samples it lets the detector judge.
-    pub fn push(&mut self, time: f64, measured: [f64; 3], predicted: [f64; 3]) -> Vec<Event> {
+    pub fn push(&mut self, time: f64, measured: &[f64], predicted: &[f64]) -> Vec<Event> {
+        let m = self.channels.len();
         let start = *self.start_time.get_or_insert(time);
-        let before = self.prefix;
-        for f in 0..3 {
+        self.pending.push_back(time);
+        self.pending.extend(&measured[..m]);
+        self.pending.extend(&predicted[..m]);
+        self.pending.extend(&self.prefix);
+        for f in 0..m {
             let u = (measured[f] - predicted[f]) / self.noise_sd[f];
             self.prefix[f] += if u.is_finite() { u * u } else { f64::MAX / 4.0 };
         }
-        self.pending.push_back(Entry {
-            time,
-            measured,
-            predicted,
-            before,
-            after: self.prefix,
-        });
+        self.pending.extend(&self.prefix);
         self.count += 1;
         if time - start >= self.options.transient {
             self.overall.add(measured, predicted);
-            self.rolling.push_back((time, measured, predicted));
-            while let Some(&(t, ..)) = self.rolling.front() {
+            self.rolling.push_back(time);
+            self.rolling.extend(&measured[..m]);
+            self.rolling.extend(&predicted[..m]);
+            let width = self.rolling_width();
+            while let Some(&t) = self.rolling.front() {
                 if time - t >= self.options.window {
-                    self.rolling.pop_front();
+                    self.rolling.drain(..width);
                 } else {
                     break;
                 }
@@ -215,7 +272,7 @@ impl Detector {
         self.start_time = None;
         self.count = 0;
         self.judged = 0;
-        self.prefix = [0.0; 3];
+        self.prefix.iter_mut().for_each(|p| *p = 0.0);
         self.pending.clear();
         self.rolling.clear();
         events
@@ -226,68 +283,93 @@ impl Detector {
         self.group.as_ref().is_some_and(|g| g.alerted)
     }
 
-    /// NMSE per floor over the last `--window` seconds after the transient (NaN: no samples).
-    pub fn rolling_nmse(&self) -> [f64; 3] {
-        [0, 1, 2].map(|f| {
-            let y: Vec<f64> = self.rolling.iter().map(|(_, m, _)| m[f]).collect();
-            let p: Vec<f64> = self.rolling.iter().map(|(_, _, p)| p[f]).collect();
-            nmse(&y, &p)
-        })
+    /// NMSE per channel over the last `--window` seconds after the transient (NaN: no
+    /// samples).
+    pub fn rolling_nmse(&self) -> Vec<f64> {
+        let m = self.channels.len();
+        let width = self.rolling_width();
+        let samples = self.rolling.len() / width;
+        (0..m)
+            .map(|f| {
+                let y: Vec<f64> = (0..samples)
+                    .map(|k| self.rolling[k * width + 1 + f])
+                    .collect();
+                let p: Vec<f64> = (0..samples)
+                    .map(|k| self.rolling[k * width + 1 + m + f])
+                    .collect();
+                nmse(&y, &p)
+            })
+            .collect()
     }
 
     /// Judge sample `self.judged` (the oldest pending), as `compare` does.
     fn judge(&mut self, events: &mut Vec<Event>) {
+        let m = self.channels.len();
+        let width = self.pending_width();
         let k = self.judged;
-        let first_pending = self.count - self.pending.len();
-        let at = |i: usize| &self.pending[i - first_pending];
+        let first_pending = self.count - self.pending.len() / width;
+        let at = |i: usize| (i - first_pending) * width;
         let a = k.saturating_sub(self.half);
         let b = (k + self.half + 1).min(self.count);
-        let entry = at(k).clone();
-        let (from, to) = (at(a).before, at(b - 1).after);
-        let outside = [0, 1, 2].map(|f| {
-            let severe = ((to[f] - from[f]) / (b - a) as f64).sqrt() >= self.options.severity;
-            (entry.measured[f] - entry.predicted[f]).abs() > 3.0 * self.noise_sd[f] && severe
-        });
+        let (entry, from, to) = (at(k), at(a), at(b - 1));
+        let time = self.pending[entry];
+        // The sample's measured and predicted values, and which channels left the band.
+        self.scratch.clear();
+        self.outside.clear();
+        for f in 0..2 * m {
+            self.scratch.push(self.pending[entry + 1 + f]);
+        }
+        for f in 0..m {
+            let before = self.pending[from + 1 + 2 * m + f];
+            let after = self.pending[to + 1 + 3 * m + f];
+            let severe = ((after - before) / (b - a) as f64).sqrt() >= self.options.severity;
+            let residual = (self.scratch[f] - self.scratch[m + f]).abs();
+            self.outside
+                .push(residual > 3.0 * self.noise_sd[f] && severe);
+        }
         self.judged += 1;
         // Keep what later samples' severity windows still reach back to.
         let keep_from = self.judged.saturating_sub(self.half);
-        while first_pending_of(self) < keep_from {
-            self.pending.pop_front();
+        let first_pending = self.count - self.pending.len() / width;
+        if first_pending < keep_from {
+            let done = (keep_from - first_pending).min(self.pending.len() / width);
+            self.pending.drain(..done * width);
         }
-        let start = self.start_time.unwrap_or(entry.time);
-        if entry.time - start < self.options.transient {
+        let start = self.start_time.unwrap_or(time);
+        if time - start < self.options.transient {
             return;
         }
-        let out = outside.iter().any(|&o| o);
+        let out = self.outside.iter().any(|&o| o);
         if let Some(group) = &self.group {
-            if entry.time - group.last > self.options.merge_gap {
+            if time - group.last > self.options.merge_gap {
                 let group = self.group.take().expect("an open group");
                 events.push(self.close(group));
             }
         }
+        let (measured, predicted) = self.scratch.split_at(m);
         match (&mut self.group, out) {
             (Some(group), _) => {
-                for f in 0..3 {
-                    group.measured[f].push(entry.measured[f]);
-                    group.predicted[f].push(entry.predicted[f]);
+                for f in 0..m {
+                    group.measured[f].push(measured[f]);
+                    group.predicted[f].push(predicted[f]);
                 }
                 if out {
-                    group.last = entry.time;
+                    group.last = time;
                     group.outliers += 1;
                     group.through_last = group.measured[0].len();
-                    for f in 0..3 {
-                        group.floors[f] |= outside[f];
+                    for f in 0..m {
+                        group.channels[f] |= self.outside[f];
                     }
                 }
             }
             (None, true) => {
                 self.group = Some(Group {
-                    start: entry.time,
-                    last: entry.time,
+                    start: time,
+                    last: time,
                     outliers: 1,
-                    floors: outside,
-                    measured: entry.measured.map(|v| vec![v]),
-                    predicted: entry.predicted.map(|v| vec![v]),
+                    channels: self.outside.clone(),
+                    measured: measured.iter().map(|&v| vec![v]).collect(),
+                    predicted: predicted.iter().map(|&v| vec![v]).collect(),
                     through_last: 1,
                     alerted: false,
                 });
@@ -308,7 +390,7 @@ impl Detector {
                     group.alerted = true;
                     events.push(Event::Opened {
                         start: group.start,
-                        floors: group.floors(),
+                        channels: group.out(),
                         nmse,
                     });
                 }
@@ -323,13 +405,14 @@ impl Detector {
         if failing {
             self.failing_windows += 1;
         }
+        let (channels, floors) = names_and_floors(&self.channels, &group.out());
         Event::Closed {
             window: FailingWindow {
                 start: group.start,
                 end: group.last,
-                channels: group.floors().iter().map(|f| format!("acc{f}")).collect(),
-                floors: group.floors(),
-                nmse: nmse.to_vec(),
+                channels,
+                floors,
+                nmse,
             },
             failing,
             was_opened: group.alerted,
@@ -337,13 +420,9 @@ impl Detector {
     }
 }
 
-fn first_pending_of(d: &Detector) -> usize {
-    d.count - d.pending.len()
-}
-
-/// `compare`'s tolerance: some floor that left the band has an NMSE not below it.
-fn passes(group: &Group, nmse: &[f64; 3], tolerance: f64) -> bool {
-    (0..3).any(|f| group.floors[f] && !(nmse[f] < tolerance))
+/// `compare`'s tolerance: some channel that left the band has an NMSE not below it.
+fn passes(group: &Group, nmse: &[f64], tolerance: f64) -> bool {
+    (0..group.channels.len()).any(|f| group.channels[f] && !(nmse[f] < tolerance))
 }
 
 #[cfg(test)]
@@ -383,13 +462,13 @@ mod tests {
             let batch = compare(
                 &time, &accs, &measured, &predicted, &[0.01; 3], None, options,
             );
-            let mut d = Detector::new(Options::new(options, 2.0), [0.01; 3], dt);
+            let mut d = Detector::new(Options::new(options, 2.0), accs.clone(), &[0.01; 3], dt);
             let mut events = Vec::new();
             for k in 0..time.len() {
                 events.extend(d.push(
                     time[k],
-                    [0, 1, 2].map(|f| measured[f][k]),
-                    [0, 1, 2].map(|f| predicted[f][k]),
+                    &[0, 1, 2].map(|f| measured[f][k]),
+                    &[0, 1, 2].map(|f| predicted[f][k]),
                 ));
             }
             events.extend(d.finish_segment());

@@ -1,20 +1,59 @@
 //! The twin's system stepped one sample at a time: built by `twin::system` as `run_twin` builds
-//! it, the measured force its one driven input, and driven through the master's step-at-a-time
-//! calls (the force for the next point → `System::step` → the accelerations), so a stream gets
-//! the batch run's prediction from the same stepping code.
+//! it, the measured excitation (`force` or `ground_acc`) its one driven input, and driven
+//! through the master's step-at-a-time calls (the excitation for the next point →
+//! `System::step` → the measured channels' predictions), so a stream gets the batch run's
+//! prediction from the same stepping code. A channel the twin does not give out under its name
+//! is read from its physics component, as `run_twin` reads it ([`wired`]).
+
+use ::structure::channel::{Channel, Quantity};
 
 use crate::cosim::import::StepEnd;
 use crate::cosim::master::{MasterError, NodeId, Port, SavedNode, SavedState};
 use crate::twin::system::{SystemBuilder, SystemError, TwinSystem};
-use crate::twin::{ParameterValue, Twin, TwinError, OUTPUTS};
+use crate::twin::{Connection, ParameterValue, Twin, TwinError, PHYSICS};
 
 use super::WatchError;
 
-/// The system input the stream drives.
-const FORCE: &str = "force";
+/// A copy of `twin` that gives out every one of `channels` (those it does not give out under
+/// their name wired from its physics component, whose shear FMU has `acc<i>`, `vel<i>` and
+/// `disp<i>` for every floor); None when it gives them all already.
+pub fn wired(twin: &Twin, channels: &[Channel]) -> Option<Twin> {
+    let outputs = twin.system_outputs();
+    let missing: Vec<String> = channels
+        .iter()
+        .map(Channel::name)
+        .filter(|n| !outputs.contains(n))
+        .collect();
+    if missing.is_empty() {
+        return None;
+    }
+    let mut copy = twin.duplicate();
+    for name in missing {
+        copy.connections.push(Connection {
+            start_element: Some(PHYSICS.into()),
+            start_connector: name.clone(),
+            end_element: None,
+            end_connector: name,
+        });
+    }
+    Some(copy)
+}
 
-/// The GP corrector's learning interface: the measured accelerations and the learn flag it
-/// takes, the latent variances and training-set size it gives.
+/// The name of the corrector's latent variance of `channel`: `latent_var<i>` for `acc<i>` (the
+/// paper rig's names), `latent_var_<name>` for another channel.
+fn latent_name(channel: &Channel) -> String {
+    match channel {
+        Channel::Response {
+            quantity: Quantity::Acceleration,
+            floor,
+        } => format!("latent_var{floor}"),
+        other => format!("latent_var_{}", other.name()),
+    }
+}
+
+/// The GP corrector's learning interface: the measured values and the learn flag it takes,
+/// the latent variances and training-set size it gives; per measured channel, in the stream's
+/// order.
 struct Learner {
     component: String,
     measured: Vec<u32>,
@@ -28,9 +67,9 @@ struct Learner {
 /// The running system and where its ports are.
 struct Running {
     system: TwinSystem,
-    force: Port,
-    /// The system's accelerations, per floor.
-    acc: Vec<Port>,
+    excitation: Port,
+    /// The system's predictions, per measured channel.
+    outputs: Vec<Port>,
     learner: Option<NodeId>,
 }
 
@@ -38,33 +77,80 @@ pub struct Stepper<'t> {
     builder: SystemBuilder<'t>,
     running: Option<Running>,
     learner: Option<Learner>,
+    /// The driven input (`force` or `ground_acc`) and the predicted channels.
+    excitation: String,
+    channels: Vec<String>,
 }
 
 impl<'t> Stepper<'t> {
-    /// Open the twin's FMUs; the system comes with [`Stepper::start`].
-    pub fn new(twin: &'t Twin) -> Result<Self, WatchError> {
+    /// Open the twin's FMUs (`twin` gives out every one of `channels`: see [`wired`]); the
+    /// system comes with [`Stepper::start`]. `excitation`: the stream's, driving the twin.
+    /// A GP corrector that learns must take every measured channel (`measured_<name>`) and give
+    /// its latent variance, and learn from no channel the stream lacks: refused otherwise.
+    pub fn new(
+        twin: &'t Twin,
+        excitation: Channel,
+        channels: &[Channel],
+    ) -> Result<Self, WatchError> {
         let builder = SystemBuilder::open(twin)?;
-        let learner = twin.components.iter().find_map(|c| {
-            let fmu = builder.fmu(&c.name)?;
-            let vr = |name: &str| fmu.value_reference(name).ok();
-            let floors = |stem: &str| -> Option<Vec<u32>> {
-                (1..=OUTPUTS.len())
-                    .map(|f| vr(&format!("{stem}{f}")))
-                    .collect()
+        let mut learner = None;
+        for c in &twin.components {
+            let Some(fmu) = builder.fmu(&c.name) else {
+                continue;
             };
-            Some(Learner {
+            let vr = |name: &str| fmu.value_reference(name).ok();
+            let (Some(learn), Some(points)) = (vr("learn"), vr("training_points")) else {
+                continue;
+            };
+            let refuse = |what: String| {
+                WatchError::Options(format!(
+                    "{}: its GP corrector (component '{}') {what}; watch a stream of the \
+                     channels it corrects, or the twin without its corrector",
+                    twin.describe(),
+                    c.name
+                ))
+            };
+            let mut measured = Vec::new();
+            let mut latent = Vec::new();
+            for channel in channels {
+                let name = channel.name();
+                measured.push(vr(&format!("measured_{name}")).ok_or_else(|| {
+                    refuse(format!(
+                        "takes no 'measured_{name}' to learn the stream's '{name}'"
+                    ))
+                })?);
+                let band = latent_name(channel);
+                latent.push(vr(&band).ok_or_else(|| {
+                    refuse(format!("gives no '{band}' for the stream's '{name}'"))
+                })?);
+            }
+            let names: Vec<String> = channels.iter().map(Channel::name).collect();
+            if let Some(lacking) = fmu
+                .model_description
+                .inputs()
+                .filter_map(|v| v.name.strip_prefix("measured_"))
+                .find(|n| !names.iter().any(|m| m == n))
+            {
+                return Err(refuse(format!(
+                    "learns from '{lacking}', which the stream does not measure"
+                )));
+            }
+            learner = Some(Learner {
                 component: c.name.clone(),
-                measured: floors("measured_acc")?,
-                learn: vr("learn")?,
-                latent: floors("latent_var")?,
-                points: vr("training_points")?,
+                measured,
+                learn,
+                latent,
+                points,
                 pending: false,
-            })
-        });
+            });
+            break;
+        }
         Ok(Stepper {
             builder,
             running: None,
             learner,
+            excitation: excitation.name(),
+            channels: channels.iter().map(Channel::name).collect(),
         })
     }
 
@@ -102,12 +188,12 @@ impl<'t> Stepper<'t> {
         Ok(Some((l, slave)))
     }
 
-    /// The corrector's latent variances V(f) per floor at the current point.
-    pub fn latent_variance(&mut self) -> Result<Option<[f64; 3]>, WatchError> {
+    /// The corrector's latent variances V(f) per measured channel at the current point.
+    pub fn latent_variance(&mut self) -> Result<Option<Vec<f64>>, WatchError> {
         let Some((l, slave)) = self.learner_slave()? else {
             return Ok(None);
         };
-        let mut v = [0.0; 3];
+        let mut v = vec![0.0; l.latent.len()];
         slave.get_real(&l.latent, &mut v).map_err(master)?;
         Ok(Some(v))
     }
@@ -122,13 +208,13 @@ impl<'t> Stepper<'t> {
         Ok(Some(n[0]))
     }
 
-    /// The current point joins the corrector's training sets, with these measured
-    /// accelerations, at the next step.
-    pub fn learn_current(&mut self, measured: [f64; 3]) -> Result<(), WatchError> {
+    /// The current point joins the corrector's training sets, with these measured values
+    /// (per measured channel), at the next step.
+    pub fn learn_current(&mut self, measured: &[f64]) -> Result<(), WatchError> {
         let Some((l, slave)) = self.learner_slave()? else {
             return Ok(());
         };
-        slave.set_real(&l.measured, &measured).map_err(master)?;
+        slave.set_real(&l.measured, measured).map_err(master)?;
         slave.set_boolean(&[l.learn], &[true]).map_err(master)?;
         l.pending = true;
         Ok(())
@@ -141,15 +227,17 @@ impl<'t> Stepper<'t> {
         let twin = self.builder.twin();
         let system = self
             .builder
-            .build(start, vec![(FORCE, Vec::new())])
+            .build(start, vec![(self.excitation.as_str(), Vec::new())])
             .map_err(system_error)?;
-        let force = system.signal(FORCE).ok_or_else(|| {
+        let excitation = system.signal(&self.excitation).ok_or_else(|| {
             WatchError::Twin(TwinError::Message(format!(
-                "{} takes no '{FORCE}' input",
-                twin.describe()
+                "{} takes no '{}' input",
+                twin.describe(),
+                self.excitation
             )))
         })?;
-        let acc = OUTPUTS
+        let outputs = self
+            .channels
             .iter()
             .map(|output| system.system_output(twin, output))
             .collect::<Result<Vec<_>, _>>()
@@ -160,8 +248,8 @@ impl<'t> Stepper<'t> {
             .and_then(|l| system.node(&l.component));
         self.running = Some(Running {
             system,
-            force,
-            acc,
+            excitation,
+            outputs,
             learner,
         });
         if let Some(l) = &mut self.learner {
@@ -170,13 +258,20 @@ impl<'t> Stepper<'t> {
         Ok(())
     }
 
-    /// Go to the point `time` with force `force` (the step from the last point, with the
-    /// force's ramp; the first point of a segment is evaluated where it is) and return the
-    /// predicted accelerations there.
-    pub fn advance(&mut self, time: f64, force: f64) -> Result<[f64; 3], WatchError> {
+    /// Go to the point `time` with excitation `excitation` (the step from the last point,
+    /// with the excitation's ramp; the first point of a segment is evaluated where it is) and
+    /// write the measured channels' predictions there into `predicted`.
+    pub fn advance(
+        &mut self,
+        time: f64,
+        excitation: f64,
+        predicted: &mut [f64],
+    ) -> Result<(), WatchError> {
         let running = self.running.as_mut().ok_or(WatchError::NotStarted)?;
         let system = &mut running.system.system;
-        system.set_input(running.force, force).map_err(master)?;
+        system
+            .set_input(running.excitation, excitation)
+            .map_err(master)?;
         if system.time().is_some() {
             if let StepEnd::Terminated { at } = system.step(time).map_err(master)? {
                 return Err(WatchError::Twin(TwinError::Message(format!(
@@ -196,11 +291,10 @@ impl<'t> Stepper<'t> {
         } else {
             system.initialize(time).map_err(master)?;
         }
-        let mut acc = [0.0; 3];
-        for (a, &port) in acc.iter_mut().zip(&running.acc) {
-            *a = system.value(port);
+        for (p, &port) in predicted.iter_mut().zip(&running.outputs) {
+            *p = system.value(port);
         }
-        Ok(acc)
+        Ok(())
     }
 
     /// Every FMU's state, serialised (refused when an FMU does not declare serialisable states).
@@ -217,7 +311,8 @@ impl<'t> Stepper<'t> {
             .collect())
     }
 
-    /// Put the FMUs (started) back in saved states; `last`: the last point's (time, force).
+    /// Put the FMUs (started) back in saved states; `last`: the last point's (time,
+    /// excitation).
     pub fn restore(
         &mut self,
         states: &[NodeState],
@@ -241,14 +336,14 @@ impl<'t> Stepper<'t> {
                 )));
             }
         }
-        let Some((time, force)) = last else {
+        let Some((time, excitation)) = last else {
             // Saved right after a start, before the segment's first point: the instances are
             // as started.
             return Ok(());
         };
         let saved = SavedState {
             time,
-            signals: vec![force],
+            signals: vec![excitation],
             nodes: states
                 .iter()
                 .map(|s| SavedNode {
@@ -270,11 +365,11 @@ impl<'t> Stepper<'t> {
         Ok(())
     }
 
-    /// The last point's (time, force), None before a segment's first point.
+    /// The last point's (time, excitation), None before a segment's first point.
     pub fn last(&self) -> Option<(f64, f64)> {
         let running = self.running.as_ref()?;
         let time = running.system.system.time()?;
-        Some((time, running.system.system.value(running.force)))
+        Some((time, running.system.system.value(running.excitation)))
     }
 }
 

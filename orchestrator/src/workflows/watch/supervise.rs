@@ -69,9 +69,10 @@ pub enum Decision {
 /// The supervisor's state (carried by checkpoints).
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Supervisor {
-    pub threshold: Option<[f64; 3]>,
+    /// Per corrected channel, in the stream's order.
+    pub threshold: Option<Vec<f64>>,
     /// The largest `V(f)` so far over the reference samples, and how many there were.
-    reference: [f64; 3],
+    reference: Vec<f64>,
     reference_samples: u64,
     pub queries: u64,
     /// The open excursion's start, and since when every floor has been below.
@@ -88,36 +89,40 @@ pub struct Supervisor {
 }
 
 impl Supervisor {
-    pub fn new(threshold: Option<f64>) -> Self {
+    /// For `channels` corrected channels; `threshold`: the same for every one (None: from
+    /// the reference samples).
+    pub fn new(threshold: Option<f64>, channels: usize) -> Self {
         Supervisor {
-            threshold: threshold.map(|t| [t; 3]),
+            threshold: threshold.map(|t| vec![t; channels]),
+            reference: vec![0.0; channels],
             ..Default::default()
         }
     }
 
     /// Decide for the sample at `time` with latent variances `v`; `window` (s): how long every
     /// floor must stay below for an excursion to close.
-    pub fn decide(&mut self, time: f64, v: [f64; 3], window: f64) -> Decision {
-        let Some(threshold) = self.threshold else {
+    pub fn decide(&mut self, time: f64, v: &[f64], window: f64) -> Decision {
+        let Some(threshold) = &self.threshold else {
             for (r, x) in self.reference.iter_mut().zip(v) {
-                *r = r.max(x);
+                *r = r.max(*x);
             }
             self.reference_samples += 1;
             if self.reference_samples >= REFERENCE_SAMPLES {
-                self.threshold = Some(self.reference);
+                self.threshold = Some(self.reference.clone());
             }
             return Decision::Quiet;
         };
-        let floors: Vec<usize> = (0..3)
+        let m = threshold.len().min(v.len());
+        let floors: Vec<usize> = (0..m)
             .filter(|&f| v[f] > threshold[f])
             .map(|f| f + 1)
             .collect();
         if self.open.is_some() || !floors.is_empty() {
-            for f in 0..3 {
+            for f in 0..m {
                 self.peak = self.peak.max(v[f] / threshold[f]);
             }
         }
-        for f in 0..3 {
+        for f in 0..m {
             self.largest_ratio = self.largest_ratio.max(v[f] / threshold[f]);
         }
         if !floors.is_empty() {
@@ -163,18 +168,18 @@ mod tests {
 
     #[test]
     fn the_threshold_is_the_largest_reference_variance_and_excursions_open_and_close() {
-        let mut s = Supervisor::new(None);
+        let mut s = Supervisor::new(None, 3);
         for k in 0..REFERENCE_SAMPLES {
             let v = 1e-4 * (1.0 + (k % 7) as f64);
             assert_eq!(
-                s.decide(k as f64 * 0.01, [v, v / 2.0, v / 4.0], 0.1),
+                s.decide(k as f64 * 0.01, &[v, v / 2.0, v / 4.0], 0.1),
                 Decision::Quiet
             );
         }
-        assert_eq!(s.threshold, Some([7e-4, 3.5e-4, 1.75e-4]));
+        assert_eq!(s.threshold, Some(vec![7e-4, 3.5e-4, 1.75e-4]));
         // Above T on floor 2 only: a query, no alarm; an excursion that ends below 10 T
         // raises nothing.
-        let d = s.decide(1.0, [1e-4, 4e-4, 1e-4], 0.1);
+        let d = s.decide(1.0, &[1e-4, 4e-4, 1e-4], 0.1);
         assert_eq!(
             d,
             Decision::Query {
@@ -182,10 +187,10 @@ mod tests {
                 alarm: false
             }
         );
-        assert_eq!(s.decide(1.02, [0.0; 3], 0.1), Decision::Quiet);
-        assert_eq!(s.decide(1.2, [0.0; 3], 0.1), Decision::Quiet);
+        assert_eq!(s.decide(1.02, &[0.0; 3], 0.1), Decision::Quiet);
+        assert_eq!(s.decide(1.2, &[0.0; 3], 0.1), Decision::Quiet);
         // Past 10 T on floor 1: the alarm, once; it closes after the window below T.
-        let d = s.decide(2.0, [8e-3, 4e-4, 1e-4], 0.1);
+        let d = s.decide(2.0, &[8e-3, 4e-4, 1e-4], 0.1);
         assert_eq!(
             d,
             Decision::Query {
@@ -193,7 +198,7 @@ mod tests {
                 alarm: true
             }
         );
-        let d = s.decide(2.01, [9e-3, 1e-4, 1e-4], 0.1);
+        let d = s.decide(2.01, &[9e-3, 1e-4, 1e-4], 0.1);
         assert_eq!(
             d,
             Decision::Query {
@@ -201,16 +206,16 @@ mod tests {
                 alarm: false
             }
         );
-        assert_eq!(s.decide(2.02, [0.0; 3], 0.1), Decision::Quiet);
-        assert_eq!(s.decide(2.08, [0.0; 3], 0.1), Decision::Quiet);
+        assert_eq!(s.decide(2.02, &[0.0; 3], 0.1), Decision::Quiet);
+        assert_eq!(s.decide(2.08, &[0.0; 3], 0.1), Decision::Quiet);
         assert_eq!(
-            s.decide(2.12, [0.0; 3], 0.1),
+            s.decide(2.12, &[0.0; 3], 0.1),
             Decision::Closes {
                 since: 2.0,
                 peak: 9e-3 / 7e-4
             }
         );
-        assert_eq!(s.decide(2.5, [0.0; 3], 0.1), Decision::Quiet);
+        assert_eq!(s.decide(2.5, &[0.0; 3], 0.1), Decision::Quiet);
         assert_eq!(s.queries, 3);
     }
 }
