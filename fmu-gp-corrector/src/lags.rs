@@ -1,8 +1,11 @@
-//! The GP input vector: the current and `q` previous samples of the three physics accelerations
-//! and the force (the reference paper's section 4.2), kept in a ring buffer that the FMU advances
-//! at each communication step.
+//! The lag vector: the current and `q` previous samples of the physics predictions of the
+//! measured channels and the excitation (the reference paper's section 4.2, there the three
+//! physics accelerations and the force), kept in a ring buffer that the FMU advances at each
+//! communication step. Each channel's GP takes the blocks of some of its columns
+//! ([`crate::layout::Layout::columns_of`]); on the paper's rig, all of them.
 //!
-//! Layout of `x` (length `4 (q + 1)`), channel by channel, oldest sample first:
+//! Layout of `x` (length `(M + 1)(q + 1)` for M measured channels; `4 (q + 1)` on the paper's
+//! rig), column by column, oldest sample first:
 //!
 //! ```text
 //! [ ÿp1(t−q) … ÿp1(t),  ÿp2(t−q) … ÿp2(t),  ÿp3(t−q) … ÿp3(t),  F(t−q) … F(t) ]
@@ -19,13 +22,15 @@ use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
-/// Channels of one sample: physics accelerations of floors 1..3 and the force.
+/// Columns of one sample on the paper's rig: physics accelerations of floors 1..3 and the force.
 pub const CHANNELS: usize = 4;
 
-/// One sample: `[ÿp1, ÿp2, ÿp3, F]` (m/s², m/s², m/s², N).
+/// One sample of the paper's rig: `[ÿp1, ÿp2, ÿp3, F]` (m/s², m/s², m/s², N). Another layout's
+/// sample is a slice of [`crate::layout::Layout::sample_width`] values, in the same order: the
+/// physics prediction of each measured channel, then the excitation.
 pub type Sample = [f64; CHANNELS];
 
-/// Length of the input vector for `lags` lags: `4 (lags + 1)`.
+/// Length of the paper rig's input vector for `lags` lags: `4 (lags + 1)`.
 pub fn input_dimension(lags: usize) -> usize {
     CHANNELS * (lags + 1)
 }
@@ -34,7 +39,7 @@ pub fn input_dimension(lags: usize) -> usize {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LagBuffer {
     lags: usize,
-    previous: VecDeque<Sample>,
+    previous: VecDeque<Vec<f64>>,
 }
 
 impl LagBuffer {
@@ -59,33 +64,37 @@ impl LagBuffer {
     }
 
     /// The current sample becomes lag 1; the oldest falls out once `lags` are held.
-    pub fn push(&mut self, sample: Sample) {
+    pub fn push(&mut self, sample: impl AsRef<[f64]>) {
         if self.lags == 0 {
             return;
         }
-        if self.previous.len() == self.lags {
-            self.previous.pop_back();
-        }
-        self.previous.push_front(sample);
+        let reused = if self.previous.len() == self.lags {
+            self.previous.pop_back()
+        } else {
+            None
+        };
+        let mut slot = reused.unwrap_or_default();
+        slot.clear();
+        slot.extend_from_slice(sample.as_ref());
+        self.previous.push_front(slot);
     }
 
     /// The sample `lag` steps before `current` (`lag` = 0 is `current`), padded with the first
     /// sample seen when the buffer does not reach that far back.
-    fn at(&self, lag: usize, current: &Sample) -> Sample {
+    fn at<'a>(&'a self, lag: usize, current: &'a [f64]) -> &'a [f64] {
         if lag == 0 {
-            return *current;
+            return current;
         }
         self.previous
             .get(lag - 1)
             .or_else(|| self.previous.back())
-            .copied()
-            .unwrap_or(*current)
+            .map_or(current, Vec::as_slice)
     }
 
-    /// The GP input vector for the current sample (layout in the module documentation).
-    pub fn input_vector(&self, current: &Sample) -> Vec<f64> {
-        let mut x = Vec::with_capacity(input_dimension(self.lags));
-        for channel in 0..CHANNELS {
+    /// The lag vector for the current sample (layout in the module documentation).
+    pub fn input_vector(&self, current: &[f64]) -> Vec<f64> {
+        let mut x = Vec::with_capacity(current.len() * (self.lags + 1));
+        for channel in 0..current.len() {
             for lag in (0..=self.lags).rev() {
                 x.push(self.at(lag, current)[channel]);
             }
@@ -96,13 +105,13 @@ impl LagBuffer {
 
 /// The input vectors of a whole record, one per sample, exactly as the FMU forms them when it is
 /// stepped through the record from its first sample.
-pub fn lagged_inputs(samples: &[Sample], lags: usize) -> Vec<Vec<f64>> {
+pub fn lagged_inputs<S: AsRef<[f64]>>(samples: &[S], lags: usize) -> Vec<Vec<f64>> {
     let mut buffer = LagBuffer::new(lags);
     samples
         .iter()
         .map(|sample| {
-            let x = buffer.input_vector(sample);
-            buffer.push(*sample);
+            let x = buffer.input_vector(sample.as_ref());
+            buffer.push(sample);
             x
         })
         .collect()

@@ -30,13 +30,17 @@
 //! read outputs → do step (learn, refit, advance the lag buffer).
 
 pub mod lags;
+pub mod layout;
 pub mod model;
 pub mod training;
 pub mod variables;
 
 pub use lags::{input_dimension, lagged_inputs, LagBuffer, Sample};
-pub use model::{FloorGp, Floors, GpCorrector, Settings, DEFAULT_LAGS, DEFAULT_REFIT_EVERY};
-pub use training::{FloorHyperparameters, TargetForm, TrainingFile};
+pub use layout::Layout;
+pub use model::{
+    per_channel, FloorGp, Floors, GpCorrector, Settings, DEFAULT_LAGS, DEFAULT_REFIT_EVERY,
+};
+pub use training::{FloorHyperparameters, LayoutTraining, TargetForm, TrainingFile};
 
 /// What can go wrong with the corrector's training data.
 #[derive(Debug, thiserror::Error)]

@@ -1,5 +1,6 @@
-//! The corrector: three GPs (one per floor) on the lag vector of the physics accelerations and
-//! the force, their training sets, learning and refitting.
+//! The corrector: one GP per measured channel (the paper's rig: three, one per floor) on lags of
+//! the physics predictions and the excitation ([`crate::layout`] says which), their training
+//! sets, learning and refitting.
 
 use std::path::{Path, PathBuf};
 
@@ -10,9 +11,10 @@ pub use numerics::gp::{FitOptions, FitReport, GaussianProcess, Inputs, TrackedPo
 use numerics::gp::{GpError, Hyperparameters, PendingAppend, PointPrediction};
 use serde::{Deserialize, Serialize};
 
-use crate::lags::{input_dimension, LagBuffer, Sample};
+use crate::lags::{input_dimension, LagBuffer};
+use crate::layout::{select, Layout};
 use crate::training::{
-    FloorHyperparameters, TargetForm, TrainingFile, MAX_LAGS, MAX_TRAINING_POINTS,
+    FloorHyperparameters, LayoutTraining, TargetForm, TrainingFile, MAX_LAGS, MAX_TRAINING_POINTS,
 };
 use crate::variables::*;
 use crate::CorrectorError;
@@ -183,9 +185,15 @@ impl Default for Settings {
 }
 
 impl Settings {
+    /// The `initial_*` hyperparameters of a paper rig's GP.
     pub fn initial_hyperparameters(&self) -> Result<Hyperparameters, GpError> {
+        self.initial_hyperparameters_of(input_dimension(self.lags))
+    }
+
+    /// The `initial_*` hyperparameters of a GP of `dimension` inputs.
+    pub fn initial_hyperparameters_of(&self, dimension: usize) -> Result<Hyperparameters, GpError> {
         Hyperparameters::new(
-            &vec![self.initial_length_scale; input_dimension(self.lags)],
+            &vec![self.initial_length_scale; dimension],
             self.initial_signal_variance,
             self.initial_noise_variance,
         )
@@ -195,23 +203,44 @@ impl Settings {
 /// The current values of the inputs.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct CorrectorInputs {
-    pub physics_acc: [f64; 3],
-    pub force: f64,
-    pub measured_acc: [f64; 3],
+    /// The physics prediction of each measured channel, in the layout's order.
+    pub physics: Vec<f64>,
+    /// The excitation: `force` (N) or `ground_acc` (m/s²).
+    pub excitation: f64,
+    pub measured: Vec<f64>,
     pub learn: bool,
 }
 
 impl CorrectorInputs {
-    pub fn sample(&self) -> Sample {
-        let [a1, a2, a3] = self.physics_acc;
-        [a1, a2, a3, self.force]
+    /// Zeros for the channels of `layout`.
+    pub fn for_layout(layout: &Layout) -> Self {
+        let m = layout.channels.len();
+        CorrectorInputs {
+            physics: vec![0.0; m],
+            excitation: 0.0,
+            measured: vec![0.0; m],
+            learn: false,
+        }
+    }
+
+    /// The current sample: the physics predictions, then the excitation.
+    pub fn sample(&self) -> Vec<f64> {
+        let mut s = self.physics.clone();
+        s.push(self.excitation);
+        s
     }
 }
 
-/// The three floors' GPs and the state of the schedule that refits them.
+/// One GP per measured channel, the columns of the lag vector each takes, and the state of the
+/// schedule that refits them. (The name is the paper rig's, whose channels are its floors.)
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Floors {
-    pub gps: [FloorGp; 3],
+    /// Channel j's GP, in the layout's order.
+    pub gps: Vec<FloorGp>,
+    pub layout: Layout,
+    pub lags: usize,
+    /// Channel j's columns of the sample ([`Layout::columns_of`]).
+    pub columns: Vec<Vec<usize>>,
     /// Whether the hyperparameters came from data (a file or a fit) rather than the
     /// `initial_*` parameters. The first refit of initial ones starts from data-based values.
     pub fitted: bool,
@@ -219,35 +248,51 @@ pub struct Floors {
 }
 
 impl Floors {
-    fn prior(hyper: Hyperparameters) -> Self {
-        Floors {
-            gps: [
-                FloorGp::Prior(hyper.clone()),
-                FloorGp::Prior(hyper.clone()),
-                FloorGp::Prior(hyper),
-            ],
+    /// Every channel's GP at its prior, with the `initial_*` hyperparameters.
+    pub fn prior(layout: &Layout, settings: &Settings) -> Result<Self, GpError> {
+        let columns: Vec<Vec<usize>> = (0..layout.channels.len())
+            .map(|j| layout.columns_of(j))
+            .collect();
+        let gps = columns
+            .iter()
+            .map(|c| {
+                settings
+                    .initial_hyperparameters_of(c.len() * (settings.lags + 1))
+                    .map(FloorGp::Prior)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Floors {
+            gps,
+            layout: layout.clone(),
+            lags: settings.lags,
+            columns,
             fitted: false,
             learned_since_refit: 0,
-        }
+        })
     }
 
-    /// The GPs of a training file, checked first, with the default settings for its lags and
-    /// target form (what `twin train` and `twin learn` fit).
-    pub fn fit_training(file: &TrainingFile) -> Result<Self, String> {
-        file.check()?;
+    /// The GPs of a training file (of any layout: a paper rig's [`TrainingFile`] converts with
+    /// `into()`), checked first, with the default settings for its lags and target form (what
+    /// `twin train` and `twin learn` fit).
+    pub fn fit_training(file: &LayoutTraining) -> Result<Self, String> {
+        let layout = file.check()?;
         let settings = Settings {
             lags: file.lags,
             target: file.target,
             ..Settings::default()
         };
-        Self::from_training(file, &settings).map_err(|e| e.to_string())
+        Self::from_training(file, &layout, &settings).map_err(|e| e.to_string())
     }
 
-    /// The GPs of a checked training file: conditioned on its hyperparameters, or fitted.
-    pub fn from_training(file: &TrainingFile, settings: &Settings) -> Result<Self, GpError> {
-        let dimension = file.input_dimension();
+    /// The GPs of a checked training file of `layout`: conditioned on its hyperparameters, or
+    /// fitted (the channels in parallel threads).
+    pub fn from_training(
+        file: &LayoutTraining,
+        layout: &Layout,
+        settings: &Settings,
+    ) -> Result<Self, GpError> {
+        let mut floors = Floors::prior(layout, settings)?;
         if file.inputs.is_empty() {
-            let mut floors = Floors::prior(settings.initial_hyperparameters()?);
             if let Some(sets) = &file.hyperparameters {
                 for (gp, set) in floors.gps.iter_mut().zip(sets) {
                     *gp = FloorGp::Prior(to_gp_hyperparameters(set)?);
@@ -256,88 +301,132 @@ impl Floors {
             }
             return Ok(floors);
         }
-        let inputs = Inputs::from_rows(&file.inputs)?;
-        let targets = |floor: usize| file.targets.iter().map(|y| y[floor]).collect::<Vec<_>>();
-        let build = |floor: usize| -> Result<FloorGp, GpError> {
+        let lags = settings.lags;
+        let columns = &floors.columns;
+        let build = |j: usize| -> Result<FloorGp, GpError> {
+            let rows: Vec<Vec<f64>> = file
+                .inputs
+                .iter()
+                .map(|x| select(x, &columns[j], lags))
+                .collect();
+            let inputs = Inputs::from_rows(&rows)?;
+            let targets: Vec<f64> = file.targets.iter().map(|y| y[j]).collect();
             let gp = match &file.hyperparameters {
                 Some(sets) => {
-                    let hyper = to_gp_hyperparameters(&sets[floor])?;
-                    hyper.validate(dimension)?;
-                    GaussianProcess::new(inputs.clone(), targets(floor), hyper)?
+                    let hyper = to_gp_hyperparameters(&sets[j])?;
+                    hyper.validate(rows[0].len())?;
+                    GaussianProcess::new(inputs, targets, hyper)?
                 }
-                None => GaussianProcess::fit(&inputs, &targets(floor), &initial_fit_options())?.0,
+                None => GaussianProcess::fit(&inputs, &targets, &initial_fit_options())?.0,
             };
             Ok(FloorGp::Trained(gp))
         };
-        let [g1, g2, g3] = per_floor(build);
-        Ok(Floors {
-            gps: [g1?, g2?, g3?],
-            fitted: true,
-            learned_since_refit: 0,
-        })
+        floors.gps = per_channel(layout.channels.len(), build)
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()?;
+        floors.fitted = true;
+        Ok(floors)
     }
 
     pub fn len(&self) -> usize {
-        self.gps[0].len()
+        self.gps.first().map_or(0, FloorGp::len)
     }
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
-    /// Add one point to every floor; refit on the schedule. On an error nothing has changed.
+    /// Channel j's GP input from the whole lag vector `x`.
+    pub fn input_of(&self, j: usize, x: &[f64]) -> Vec<f64> {
+        select(x, &self.columns[j], self.lags)
+    }
+
+    /// Channel j in messages: "floor i" on the paper's rig (its channels are its floors), else
+    /// the channel's name.
+    pub fn who(&self, j: usize) -> String {
+        if self.layout.is_paper() {
+            format!("floor {}", j + 1)
+        } else {
+            format!("channel {}", self.layout.channels[j].name())
+        }
+    }
+
+    /// Every channel's prediction at the whole lag vector `x`.
+    pub fn predict(&self, x: &[f64]) -> Result<Vec<PointPrediction>, GpError> {
+        self.gps
+            .iter()
+            .enumerate()
+            .map(|(j, gp)| {
+                if self.columns[j].len() * (self.lags + 1) == x.len() {
+                    gp.predict(x)
+                } else {
+                    gp.predict(&self.input_of(j, x))
+                }
+            })
+            .collect()
+    }
+
+    /// Add one point (the whole lag vector `x`, one target per channel) to every channel;
+    /// refit on the schedule. On an error nothing has changed.
     ///
-    /// All or none without copying the GPs on every step: every floor's append is planned
+    /// All or none without copying the GPs on every step: every channel's append is planned
     /// first (the fallible `O(n²)` work), then all are committed (beyond
     /// [`MAX_TRAINING_POINTS`] the oldest point goes after the append), which cannot fail. Only
-    /// a step that ends in a scheduled refit copies the floors first, to restore them if the
+    /// a step that ends in a scheduled refit copies the GPs first, to restore them if the
     /// refit fails (a refit costs far more than the copy).
     pub fn learn(
         &mut self,
         x: &[f64],
-        targets: [f64; 3],
+        targets: &[f64],
         refit_every: u32,
         budget: usize,
     ) -> Result<(), String> {
+        let m = self.gps.len();
+        if targets.len() != m {
+            return Err(format!(
+                "{} targets for {m} channel(s) ({})",
+                targets.len(),
+                self.layout.names().join(", ")
+            ));
+        }
         let parallel = self.len() >= PARALLEL_LEARNING;
-        let plan = |floor: usize| self.gps[floor].plan_learn(x, targets[floor]);
+        let plan = |j: usize| self.gps[j].plan_learn(&self.input_of(j, x), targets[j]);
         let plans = if parallel {
-            per_floor(plan)
+            per_channel(m, plan)
         } else {
-            [plan(0), plan(1), plan(2)]
+            (0..m).map(plan).collect()
         };
-        let failed =
-            |floor: usize, e: GpError| format!("floor {}: cannot add the point: {e}", floor + 1);
-        let [p0, p1, p2] = plans;
-        let plans = [
-            p0.map_err(|e| failed(0, e))?,
-            p1.map_err(|e| failed(1, e))?,
-            p2.map_err(|e| failed(2, e))?,
-        ];
+        let plans = plans
+            .into_iter()
+            .enumerate()
+            .map(|(j, p)| p.map_err(|e| format!("{}: cannot add the point: {e}", self.who(j))))
+            .collect::<Result<Vec<_>, _>>()?;
         let before = self.clone_if_refit_due(refit_every);
-        let [g0, g1, g2] = &mut self.gps;
-        let [p0, p1, p2] = plans;
-        let committed = if parallel {
+        let committed: Vec<Result<(), GpError>> = if parallel {
             std::thread::scope(|scope| {
-                let h1 = scope.spawn(|| g1.commit_learn(p1, budget));
-                let h2 = scope.spawn(|| g2.commit_learn(p2, budget));
-                let r0 = g0.commit_learn(p0, budget);
-                let join =
-                    |h: std::thread::ScopedJoinHandle<'_, Result<(), GpError>>| match h.join() {
+                let handles: Vec<_> = self
+                    .gps
+                    .iter_mut()
+                    .zip(plans)
+                    .map(|(g, p)| scope.spawn(move || g.commit_learn(p, budget)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| match h.join() {
                         Ok(r) => r,
                         Err(payload) => std::panic::resume_unwind(payload),
-                    };
-                [r0, join(h1), join(h2)]
+                    })
+                    .collect()
             })
         } else {
-            [
-                g0.commit_learn(p0, budget),
-                g1.commit_learn(p1, budget),
-                g2.commit_learn(p2, budget),
-            ]
+            self.gps
+                .iter_mut()
+                .zip(plans)
+                .map(|(g, p)| g.commit_learn(p, budget))
+                .collect()
         };
-        for (floor, r) in committed.into_iter().enumerate() {
-            r.map_err(|e| failed(floor, e))?;
+        for (j, r) in committed.into_iter().enumerate() {
+            r.map_err(|e| format!("{}: cannot add the point: {e}", self.who(j)))?;
         }
         self.learned_since_refit += 1;
         if refit_every > 0 && self.learned_since_refit >= refit_every {
@@ -356,62 +445,88 @@ impl Floors {
         (refit_every > 0 && self.learned_since_refit + 1 >= refit_every).then(|| self.clone())
     }
 
-    /// Refit every floor's hyperparameters (type-II ML, the floors in parallel threads): warm-
-    /// started from the current ones with [`refit_options`] once they came from data, else a
-    /// first fit from data-based starts. On an error nothing has changed.
+    /// Refit every channel's hyperparameters (type-II ML, the channels in parallel threads):
+    /// warm-started from the current ones with [`refit_options`] once they came from data, else
+    /// a first fit from data-based starts. On an error nothing has changed.
     pub fn refit(&mut self) -> Result<(), String> {
         self.refit_with(&refit_options()).map(|_| ())
     }
 
     /// [`Floors::refit`] with the given options for the warm-started refits (the warm start
-    /// itself is always the current hyperparameters); returns each floor's fit report (none
-    /// for a floor without data).
-    pub fn refit_with(&mut self, options: &FitOptions) -> Result<[Option<FitReport>; 3], String> {
+    /// itself is always the current hyperparameters); returns each channel's fit report (none
+    /// for a channel without data).
+    pub fn refit_with(&mut self, options: &FitOptions) -> Result<Vec<Option<FitReport>>, String> {
         let warm = self.fitted;
-        let results = per_floor(|floor| -> Result<(FloorGp, Option<FitReport>), GpError> {
-            Ok(match &self.gps[floor] {
-                FloorGp::Prior(h) => (FloorGp::Prior(h.clone()), None),
-                FloorGp::Trained(gp) => {
-                    let (model, report) = if warm {
-                        let mut options = options.clone();
-                        options.warm_start = Some(gp.hyperparameters().clone());
-                        GaussianProcess::fit(gp.inputs(), gp.targets(), &options)?
-                    } else {
-                        GaussianProcess::fit(gp.inputs(), gp.targets(), &initial_fit_options())?
-                    };
-                    (FloorGp::Trained(model), Some(report))
-                }
-            })
-        });
-        let failed = |floor: usize, e: GpError| {
-            format!(
-                "floor {}: refitting the hyperparameters failed: {e}",
-                floor + 1
-            )
-        };
-        let [r1, r2, r3] = results;
-        let (g1, f1) = r1.map_err(|e| failed(0, e))?;
-        let (g2, f2) = r2.map_err(|e| failed(1, e))?;
-        let (g3, f3) = r3.map_err(|e| failed(2, e))?;
-        self.fitted = warm || !g1.is_empty();
-        self.gps = [g1, g2, g3];
+        let results = per_channel(
+            self.gps.len(),
+            |j| -> Result<(FloorGp, Option<FitReport>), GpError> {
+                Ok(match &self.gps[j] {
+                    FloorGp::Prior(h) => (FloorGp::Prior(h.clone()), None),
+                    FloorGp::Trained(gp) => {
+                        let (model, report) = if warm {
+                            let mut options = options.clone();
+                            options.warm_start = Some(gp.hyperparameters().clone());
+                            GaussianProcess::fit(gp.inputs(), gp.targets(), &options)?
+                        } else {
+                            GaussianProcess::fit(gp.inputs(), gp.targets(), &initial_fit_options())?
+                        };
+                        (FloorGp::Trained(model), Some(report))
+                    }
+                })
+            },
+        );
+        let mut gps = Vec::with_capacity(results.len());
+        let mut reports = Vec::with_capacity(results.len());
+        for (j, r) in results.into_iter().enumerate() {
+            let (g, f) = r.map_err(|e| {
+                format!("{}: refitting the hyperparameters failed: {e}", self.who(j))
+            })?;
+            gps.push(g);
+            reports.push(f);
+        }
+        self.fitted = warm || gps.first().is_some_and(|g| !g.is_empty());
+        self.gps = gps;
         self.learned_since_refit = 0;
-        Ok([f1, f2, f3])
+        Ok(reports)
     }
 
-    /// The training set and hyperparameters as a training file.
-    pub fn to_training_file(&self, lags: usize, target: TargetForm) -> TrainingFile {
-        let inputs = match &self.gps[0] {
-            FloorGp::Prior(_) => Vec::new(),
-            FloorGp::Trained(gp) => gp.inputs().rows().map(<[f64]>::to_vec).collect(),
+    /// The training set and hyperparameters as a training file of the layout: each point's
+    /// whole lag vector put back together from the channels' GPs (every column is in its own
+    /// channel's inputs, the excitation in all).
+    pub fn to_training(&self, target: TargetForm) -> LayoutTraining {
+        let m = self.gps.len();
+        let block = self.lags + 1;
+        let points = self.len();
+        let position = |j: usize, column: usize| {
+            self.columns[j]
+                .iter()
+                .position(|&c| c == column)
+                .unwrap_or(0)
         };
-        let targets = (0..inputs.len())
+        let inputs = (0..points)
             .map(|n| {
-                let y = |floor: usize| match &self.gps[floor] {
-                    FloorGp::Trained(gp) => gp.targets()[n],
-                    FloorGp::Prior(_) => 0.0,
-                };
-                [y(0), y(1), y(2)]
+                let mut x = vec![0.0; (m + 1) * block];
+                for column in 0..=m {
+                    let j = if column == m { 0 } else { column };
+                    if let FloorGp::Trained(gp) = &self.gps[j] {
+                        let p = position(j, column);
+                        let row = gp.inputs().row(n);
+                        x[column * block..(column + 1) * block]
+                            .copy_from_slice(&row[p * block..(p + 1) * block]);
+                    }
+                }
+                x
+            })
+            .collect();
+        let targets = (0..points)
+            .map(|n| {
+                self.gps
+                    .iter()
+                    .map(|g| match g {
+                        FloorGp::Trained(gp) => gp.targets()[n],
+                        FloorGp::Prior(_) => 0.0,
+                    })
+                    .collect()
             })
             .collect();
         let hyperparameters = self
@@ -426,19 +541,26 @@ impl Floors {
                 }
             })
             .collect();
-        TrainingFile {
-            lags,
+        LayoutTraining {
+            channels: self.layout.names(),
+            excitation: self.layout.excitation_name(),
+            lags: self.lags,
             target,
             inputs,
             targets,
             hyperparameters: Some(hyperparameters),
         }
     }
+
+    /// The paper rig's training file (see [`Floors::to_training`]); `None` on another layout.
+    pub fn to_training_file(&self, target: TargetForm) -> Option<TrainingFile> {
+        self.to_training(target).to_rig()
+    }
 }
 
-/// From this many training points on, [`Floors::learn`] works on the three floors in parallel
+/// From this many training points on, [`Floors::learn`] works on the channels in parallel
 /// threads: its `O(n²)` step takes about 0.3 ms a floor at 1024 points and 40 inputs (1 ms at
-/// 2048); below, starting two threads (tens of µs) would eat much of the gain. Results are the
+/// 2048); below, starting threads (tens of µs) would eat much of the gain. Results are the
 /// same either way.
 const PARALLEL_LEARNING: usize = 1024;
 
@@ -457,6 +579,42 @@ pub fn per_floor<T: Send>(work: impl Fn(usize) -> T + Sync) -> [T; 3] {
     })
 }
 
+/// Run `work` for channels `0..n` in threads (as many as the machine runs at once, at least 3,
+/// at most `n`; channel j on thread j mod threads), results in channel order (a panic in one
+/// is resumed in the caller).
+pub fn per_channel<T: Send>(n: usize, work: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    if n <= 1 {
+        return (0..n).map(work).collect();
+    }
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |p| p.get())
+        .max(3)
+        .min(n);
+    let work = &work;
+    let mut out: Vec<(usize, T)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (1..threads)
+            .map(|t| {
+                scope.spawn(move || {
+                    (t..n)
+                        .step_by(threads)
+                        .map(|j| (j, work(j)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        let mut all: Vec<(usize, T)> = (0..n).step_by(threads).map(|j| (j, work(j))).collect();
+        for h in handles {
+            match h.join() {
+                Ok(r) => all.extend(r),
+                Err(payload) => std::panic::resume_unwind(payload),
+            }
+        }
+        all
+    });
+    out.sort_by_key(|(j, _)| *j);
+    out.into_iter().map(|(_, t)| t).collect()
+}
+
 pub fn to_gp_hyperparameters(set: &FloorHyperparameters) -> Result<Hyperparameters, GpError> {
     Hyperparameters::new(&set.length_scales, set.signal_variance, set.noise_variance)
 }
@@ -465,11 +623,13 @@ pub fn to_gp_hyperparameters(set: &FloorHyperparameters) -> Result<Hyperparamete
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GpCorrector {
     pub settings: Settings,
+    /// The channels and excitation, fixed at instantiation.
+    pub layout: Layout,
     pub inputs: CorrectorInputs,
     /// The FMU's unpacked `resources/` folder, when the host named one.
     pub resource_dir: Option<PathBuf>,
     /// `resources/training.json`, read and checked at instantiation; dropped once initialized.
-    pub bundled: Option<(PathBuf, TrainingFile)>,
+    pub bundled: Option<(PathBuf, LayoutTraining)>,
     /// The GPs: built from the training data on first need (an output read in initialization
     /// mode, or leaving it), cleared when a parameter they depend on changes.
     pub floors: Option<Floors>,
@@ -477,16 +637,26 @@ pub struct GpCorrector {
     pub history: LagBuffer,
     /// Predictions at the current lag vector, until an input or the GPs change.
     #[serde(skip)]
-    cache: Option<[PointPrediction; 3]>,
+    cache: Option<Vec<PointPrediction>>,
+    /// The layout's variable table.
+    #[serde(skip)]
+    table: Option<&'static ModelInfo>,
 }
 
 impl GpCorrector {
-    /// A corrector without bundled training data.
+    /// A corrector of the paper's rig without bundled training data.
     pub fn new(settings: Settings) -> Self {
+        Self::for_layout(Layout::default(), settings)
+    }
+
+    /// A corrector of a checked `layout` without bundled training data.
+    pub fn for_layout(layout: Layout, settings: Settings) -> Self {
         let history = LagBuffer::new(settings.lags);
         GpCorrector {
             settings,
-            inputs: CorrectorInputs::default(),
+            inputs: CorrectorInputs::for_layout(&layout),
+            table: Some(crate::variables::table(&layout)),
+            layout,
             resource_dir: None,
             bundled: None,
             floors: None,
@@ -495,17 +665,30 @@ impl GpCorrector {
         }
     }
 
-    /// As `fmi2Instantiate` makes it: reads and checks `resources/training.json` if present.
+    /// As `fmi2Instantiate` makes it: reads and checks `resources/training.json` if present,
+    /// whose channels and excitation give the layout (the paper's rig without it).
     pub fn with_resources(resource_dir: Option<&Path>) -> Result<Self, CorrectorError> {
-        let mut model = GpCorrector::new(Settings::default());
-        model.resource_dir = resource_dir.map(Path::to_path_buf);
+        let mut bundled = None;
         if let Some(dir) = resource_dir {
             let path = dir.join(BUNDLED_TRAINING_FILE);
             if path.is_file() {
-                let file = TrainingFile::read(&path)?;
-                model.bundled = Some((path, file));
+                let file = LayoutTraining::read(&path)?;
+                bundled = Some((path, file));
             }
         }
+        let layout = match &bundled {
+            Some((path, file)) => {
+                file.layout()
+                    .map_err(|problem| CorrectorError::TrainingFile {
+                        path: path.display().to_string(),
+                        problem,
+                    })?
+            }
+            None => Layout::default(),
+        };
+        let mut model = GpCorrector::for_layout(layout, Settings::default());
+        model.resource_dir = resource_dir.map(Path::to_path_buf);
+        model.bundled = bundled;
         Ok(model)
     }
 
@@ -540,13 +723,13 @@ impl GpCorrector {
         let loaded;
         let (path, file) = match self.training_file_path() {
             Some(path) => {
-                loaded = TrainingFile::read(&path)?;
+                loaded = LayoutTraining::read(&path)?;
                 (path, &loaded)
             }
             None => match &self.bundled {
                 Some((path, file)) => (path.clone(), file),
                 None => {
-                    return Ok(Floors::prior(self.settings.initial_hyperparameters()?));
+                    return Ok(Floors::prior(&self.layout, &self.settings)?);
                 }
             },
         };
@@ -554,6 +737,17 @@ impl GpCorrector {
             path: path.display().to_string(),
             problem,
         };
+        if file.channels != self.layout.names() || file.excitation != self.layout.excitation_name()
+        {
+            return Err(problem(format!(
+                "its channels are {} under {}, but this corrector's (fixed at instantiation by \
+                 resources/{BUNDLED_TRAINING_FILE}) are {} under {}",
+                file.channels.join(", "),
+                file.excitation,
+                self.layout.names().join(", "),
+                self.layout.excitation_name()
+            )));
+        }
         if file.lags != self.settings.lags {
             return Err(problem(format!(
                 "it was made with lags = {}, but the parameter lags is {}",
@@ -569,49 +763,59 @@ impl GpCorrector {
                 self.settings.target.name()
             )));
         }
-        Floors::from_training(file, &self.settings)
+        Floors::from_training(file, &self.layout, &self.settings)
             .map_err(|e| problem(format!("cannot build the GPs: {e}")))
     }
 
-    /// The GP input vector of the current sample.
+    /// The whole lag vector of the current sample.
     pub fn input_vector(&self) -> Vec<f64> {
         self.history.input_vector(&self.inputs.sample())
     }
 
-    /// Predictions of the three floors at the current lag vector.
-    pub fn predictions(&mut self) -> Result<[PointPrediction; 3], CorrectorError> {
-        if let Some(cached) = self.cache {
-            return Ok(cached);
+    /// Predictions of every channel at the current lag vector.
+    pub fn predictions(&mut self) -> Result<Vec<PointPrediction>, CorrectorError> {
+        if let Some(cached) = &self.cache {
+            return Ok(cached.clone());
         }
         let x = self.input_vector();
         let floors = self.prepare()?;
-        let mut out = [PointPrediction {
-            mean: 0.0,
-            latent_variance: 0.0,
-            predictive_variance: 0.0,
-        }; 3];
-        for (p, gp) in out.iter_mut().zip(&floors.gps) {
-            *p = gp.predict(&x)?;
-        }
-        self.cache = Some(out);
+        let out = floors.predict(&x)?;
+        self.cache = Some(out.clone());
         Ok(out)
     }
 
-    /// The training set and hyperparameters in the training file format (once built).
+    /// The prediction of channel `j` at the current lag vector.
+    fn prediction(&mut self, j: usize) -> Result<PointPrediction, CorrectorError> {
+        if self.cache.is_none() {
+            self.predictions()?;
+        }
+        Ok(self.cache.as_ref().map_or(
+            PointPrediction {
+                mean: 0.0,
+                latent_variance: 0.0,
+                predictive_variance: 0.0,
+            },
+            |c| c[j],
+        ))
+    }
+
+    /// The training set and hyperparameters in the paper rig's training file format (once
+    /// built; `None` on another layout: see [`GpCorrector::training`]).
     pub fn training_file(&self) -> Option<TrainingFile> {
+        self.training().and_then(|t| t.to_rig())
+    }
+
+    /// The training set and hyperparameters as a training file of the layout (once built).
+    pub fn training(&self) -> Option<LayoutTraining> {
         self.floors
             .as_ref()
-            .map(|f| f.to_training_file(self.settings.lags, self.settings.target))
+            .map(|f| f.to_training(self.settings.target))
     }
 
     /// A parameter the GPs depend on changed: build them again when next needed.
     fn parameters_changed(&mut self) {
         self.floors = None;
         self.cache = None;
-    }
-
-    fn floor_index(vr: u32, first: u32) -> Option<usize> {
-        vr.checked_sub(first).map(|i| i as usize).filter(|&i| i < 3)
     }
 }
 
@@ -640,34 +844,36 @@ impl CoSimModel for GpCorrector {
         info()
     }
 
+    fn table(&self) -> &'static ModelInfo {
+        self.table
+            .unwrap_or_else(|| crate::variables::table(&self.layout))
+    }
+
     fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError> {
         GpCorrector::with_resources(context.resource_dir.as_deref())
             .map_err(|e| ModelError::Other(e.to_string()))
     }
 
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError> {
-        if let Some(i) = Self::floor_index(vr, PHYSICS_ACC) {
-            return Ok(self.inputs.physics_acc[i]);
-        }
-        if let Some(i) = Self::floor_index(vr, MEASURED_ACC) {
-            return Ok(self.inputs.measured_acc[i]);
-        }
-        let output = [ACC, LATENT_VAR, SD]
-            .iter()
-            .find_map(|&first| Self::floor_index(vr, first).map(|i| (first, i)));
-        if let Some((first, i)) = output {
-            let p = self.predictions().map_err(refused)?[i];
-            return Ok(match first {
-                ACC => self
-                    .settings
-                    .target
-                    .corrected(self.inputs.physics_acc[i], p.mean),
-                LATENT_VAR => p.latent_variance,
-                _ => p.predictive_variance.sqrt(),
+        if let Some((role, j)) = role_of(&self.layout, vr) {
+            return Ok(match role {
+                Role::Physics => self.inputs.physics[j],
+                Role::Measured => self.inputs.measured[j],
+                Role::Corrected | Role::LatentVar | Role::Sd => {
+                    let p = self.prediction(j).map_err(refused)?;
+                    match role {
+                        Role::Corrected => self
+                            .settings
+                            .target
+                            .corrected(self.inputs.physics[j], p.mean),
+                        Role::LatentVar => p.latent_variance,
+                        _ => p.predictive_variance.sqrt(),
+                    }
+                }
             });
         }
         Ok(match vr {
-            FORCE => self.inputs.force,
+            vr if vr == excitation_vr(&self.layout) => self.inputs.excitation,
             INITIAL_SIGNAL_VARIANCE_VR => self.settings.initial_signal_variance,
             INITIAL_NOISE_VARIANCE_VR => self.settings.initial_noise_variance,
             INITIAL_LENGTH_SCALE_VR => self.settings.initial_length_scale,
@@ -678,21 +884,25 @@ impl CoSimModel for GpCorrector {
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {
         // The prediction is kept while its inputs keep their values (a master's second
         // pass sets the same ones again).
-        if let Some(i) = Self::floor_index(vr, PHYSICS_ACC) {
-            if self.inputs.physics_acc[i].to_bits() != value.to_bits() {
-                self.inputs.physics_acc[i] = value;
-                self.cache = None;
+        match role_of(&self.layout, vr) {
+            Some((Role::Physics, j)) => {
+                if self.inputs.physics[j].to_bits() != value.to_bits() {
+                    self.inputs.physics[j] = value;
+                    self.cache = None;
+                }
+                return Ok(());
             }
-            return Ok(());
-        }
-        if let Some(i) = Self::floor_index(vr, MEASURED_ACC) {
-            self.inputs.measured_acc[i] = value;
-            return Ok(());
+            Some((Role::Measured, j)) => {
+                self.inputs.measured[j] = value;
+                return Ok(());
+            }
+            Some(_) => return Err(ModelError::UnknownVariable { vr, kind: "Real" }),
+            None => {}
         }
         match vr {
-            FORCE => {
-                if self.inputs.force.to_bits() != value.to_bits() {
-                    self.inputs.force = value;
+            vr if vr == excitation_vr(&self.layout) => {
+                if self.inputs.excitation.to_bits() != value.to_bits() {
+                    self.inputs.excitation = value;
                     self.cache = None;
                 }
             }
@@ -843,19 +1053,23 @@ impl CoSimModel for GpCorrector {
         if self.inputs.learn {
             let x = self.input_vector();
             let target = self.settings.target;
-            let measured = self.inputs.measured_acc;
-            let physics = self.inputs.physics_acc;
-            let targets = [0, 1, 2].map(|i| target.target(measured[i], physics[i]));
+            let targets: Vec<f64> = self
+                .inputs
+                .measured
+                .iter()
+                .zip(&self.inputs.physics)
+                .map(|(&m, &p)| target.target(m, p))
+                .collect();
             let refit_every = self.settings.refit_every;
             let budget = self.settings.budget;
             let floors = self
                 .prepare()
                 .map_err(|e| ModelError::Other(e.to_string()))?;
             floors
-                .learn(&x, targets, refit_every, budget)
+                .learn(&x, &targets, refit_every, budget)
                 .map_err(|e| ModelError::Other(format!("learning the current sample: {e}")))?;
         }
-        self.history.push(sample);
+        self.history.push(&sample);
         self.cache = None;
         Ok(())
     }

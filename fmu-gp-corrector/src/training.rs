@@ -24,6 +24,28 @@
 //!   [`crate::model::initial_fit_options`]) when the FMU is initialized; a file with no points
 //!   and no hyperparameters leaves each GP at its prior with the `initial_*` parameters.
 //!
+//! Another layout than the paper's rig ([`crate::layout`]) writes its channels and excitation
+//! too, and one target per channel ([`LayoutTraining`]):
+//!
+//! ```json
+//! {
+//!   "channels": ["acc1", "acc3", "acc5"],
+//!   "excitation": "ground_acc",
+//!   "lags": 9, "target": "discrepancy",
+//!   "inputs": [[...], ...], "targets": [[0.001, -0.002, 0.0005], ...],
+//!   "hyperparameters": [...]
+//! }
+//! ```
+//!
+//! - `channels` (absent: acc1, acc2, acc3): the measured channels in the corrector's order
+//!   (accelerations, velocities, displacements, each by floor); `targets[n]` holds one value per
+//!   channel, in the channel's own SI quantity (m/s², m/s, m);
+//! - `excitation` (absent: `force`): `force` or `ground_acc`;
+//! - `inputs`: the whole lag vector of each point, `(M + 1)(q + 1)` values for M channels
+//!   ([`crate::lags`]); each channel's GP takes the blocks
+//!   [`crate::layout::Layout::columns_of`] chooses, and its `hyperparameters` entry has one length
+//!   scale per input of its own.
+//!
 //! Numbers are written in the shortest form that reads back as the same `f64` and read back
 //! exactly, so a file round trip changes nothing. Unknown fields are an error (a misspelt
 //! `hyperparameters` would otherwise be ignored silently).
@@ -33,6 +55,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::lags::input_dimension;
+use crate::layout::Layout;
 use crate::CorrectorError;
 
 /// Largest number of lags the FMU accepts (the `lags` parameter's max).
@@ -255,6 +278,182 @@ impl TrainingFile {
     }
 }
 
+/// The training file of any layout (format in the module documentation); the paper rig's
+/// [`TrainingFile`] is one without `channels` and `excitation`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayoutTraining {
+    #[serde(default = "rig_channels")]
+    pub channels: Vec<String>,
+    #[serde(default = "rig_excitation")]
+    pub excitation: String,
+    pub lags: usize,
+    pub target: TargetForm,
+    pub inputs: Vec<Vec<f64>>,
+    pub targets: Vec<Vec<f64>>,
+    #[serde(default)]
+    pub hyperparameters: Option<Vec<FloorHyperparameters>>,
+}
+
+fn rig_channels() -> Vec<String> {
+    Layout::default().names()
+}
+
+fn rig_excitation() -> String {
+    Layout::default().excitation_name()
+}
+
+impl From<TrainingFile> for LayoutTraining {
+    fn from(f: TrainingFile) -> Self {
+        LayoutTraining {
+            channels: rig_channels(),
+            excitation: rig_excitation(),
+            lags: f.lags,
+            target: f.target,
+            inputs: f.inputs,
+            targets: f.targets.into_iter().map(|y| y.to_vec()).collect(),
+            hyperparameters: f.hyperparameters,
+        }
+    }
+}
+
+impl LayoutTraining {
+    /// The layout its `channels` and `excitation` name (checked, in the corrector's order).
+    pub fn layout(&self) -> Result<Layout, String> {
+        let layout = Layout::from_names(&self.channels, &self.excitation)?;
+        if layout.names() != self.channels {
+            return Err(format!(
+                "channels {:?} are not in the corrector's order {:?} (accelerations, velocities, \
+                 displacements, each by floor)",
+                self.channels,
+                layout.names()
+            ));
+        }
+        Ok(layout)
+    }
+
+    /// The paper rig's training file, when this is the rig's layout.
+    pub fn to_rig(&self) -> Option<TrainingFile> {
+        if !self.layout().is_ok_and(|l| l.is_paper()) {
+            return None;
+        }
+        Some(TrainingFile {
+            lags: self.lags,
+            target: self.target,
+            inputs: self.inputs.clone(),
+            targets: self
+                .targets
+                .iter()
+                .map(|y| <[f64; 3]>::try_from(y.as_slice()).ok())
+                .collect::<Option<_>>()?,
+            hyperparameters: self.hyperparameters.clone(),
+        })
+    }
+
+    /// The whole file is consistent (as [`TrainingFile::check`], per channel). Says what is
+    /// wrong, naming the channel.
+    pub fn check(&self) -> Result<Layout, String> {
+        let layout = self.layout()?;
+        if self.lags > MAX_LAGS {
+            return Err(format!("lags is {}, at most {MAX_LAGS}", self.lags));
+        }
+        let dimension = layout.sample_width() * (self.lags + 1);
+        let m = layout.channels.len();
+        if self.inputs.len() != self.targets.len() {
+            return Err(format!(
+                "{} inputs but {} targets; there must be one target row per input",
+                self.inputs.len(),
+                self.targets.len()
+            ));
+        }
+        if self.inputs.len() > MAX_TRAINING_POINTS {
+            return Err(format!(
+                "{} training points, more than the {MAX_TRAINING_POINTS} a channel's GP holds",
+                self.inputs.len()
+            ));
+        }
+        for (n, x) in self.inputs.iter().enumerate() {
+            if x.len() != dimension {
+                return Err(format!(
+                    "inputs[{n}] has {} values, expected {dimension} = {}·(lags + 1) for {m} \
+                     channel(s) and the excitation, lags = {}",
+                    x.len(),
+                    m + 1,
+                    self.lags
+                ));
+            }
+            if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+                return Err(format!("inputs[{n}][{i}] is not a finite number"));
+            }
+        }
+        for (n, y) in self.targets.iter().enumerate() {
+            if y.len() != m {
+                return Err(format!(
+                    "targets[{n}] has {} values, expected {m} (one per channel: {})",
+                    y.len(),
+                    self.channels.join(", ")
+                ));
+            }
+            if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+                return Err(format!(
+                    "targets[{n}][{i}] ({}) is not a finite number",
+                    self.channels[i]
+                ));
+            }
+        }
+        if let Some(sets) = &self.hyperparameters {
+            if sets.len() != m {
+                return Err(format!(
+                    "hyperparameters has {} entries, expected {m} (one per channel)",
+                    sets.len()
+                ));
+            }
+            for (j, set) in sets.iter().enumerate() {
+                set.check(layout.input_dimension_of(j, self.lags))
+                    .map_err(|e| format!("hyperparameters[{j}] ({}): {e}", self.channels[j]))?;
+            }
+        }
+        Ok(layout)
+    }
+
+    /// Parse and check a training file's text of any layout; `source` names it in errors.
+    pub fn from_json(text: &str, source: &str) -> Result<Self, CorrectorError> {
+        let problem = |problem: String| CorrectorError::TrainingFile {
+            path: source.to_owned(),
+            problem,
+        };
+        let file: LayoutTraining =
+            serde_json::from_str(text).map_err(|e| problem(format!("not a training file: {e}")))?;
+        file.check().map_err(problem)?;
+        Ok(file)
+    }
+
+    /// Read and check a training file of any layout.
+    pub fn read(path: &Path) -> Result<Self, CorrectorError> {
+        let text = std::fs::read_to_string(path).map_err(|e| CorrectorError::TrainingFile {
+            path: path.display().to_string(),
+            problem: format!("cannot read it: {e}"),
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+
+    /// The JSON text: the paper rig's [`TrainingFile`] format on the rig's layout.
+    pub fn to_json(&self) -> String {
+        match self.to_rig() {
+            Some(rig) => rig.to_json(),
+            // A struct of numbers, strings and vectors always serializes.
+            None => serde_json::to_string_pretty(self).unwrap_or_default(),
+        }
+    }
+
+    pub fn write(&self, path: &Path) -> Result<(), CorrectorError> {
+        std::fs::write(path, self.to_json()).map_err(|e| CorrectorError::TrainingFile {
+            path: path.display().to_string(),
+            problem: format!("cannot write it: {e}"),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -369,5 +568,37 @@ mod tests {
             .expect_err("infinite")
             .to_string();
         assert!(message.contains("inf.json"), "{message}");
+    }
+
+    #[test]
+    fn a_layout_file_round_trips_and_an_old_file_reads_as_the_rig() {
+        let old = small();
+        let read = LayoutTraining::from_json(&old.to_json(), "old.json").expect("valid");
+        assert_eq!(read, LayoutTraining::from(old.clone()));
+        assert_eq!(read.to_rig(), Some(old));
+        let five = LayoutTraining {
+            channels: vec!["acc1".into(), "acc3".into()],
+            excitation: "ground_acc".into(),
+            lags: 0,
+            target: TargetForm::Discrepancy,
+            inputs: vec![vec![0.1, 0.2, 0.3]; 2],
+            targets: vec![vec![0.01, -0.02]; 2],
+            hyperparameters: Some(vec![FloorHyperparameters::isotropic(3, 1.0, 0.01, 1e-4); 2]),
+        };
+        let back = LayoutTraining::from_json(&five.to_json(), "five.json").expect("valid");
+        assert_eq!(back, five);
+        assert_eq!(back.to_rig(), None);
+        let mut bad = five.clone();
+        bad.targets[1].push(0.0);
+        let e = LayoutTraining::from_json(&bad.to_json(), "five.json")
+            .expect_err("three targets")
+            .to_string();
+        assert!(e.contains("targets[1] has 3 values, expected 2"), "{e}");
+        let mut bad = five;
+        bad.channels.reverse();
+        let e = LayoutTraining::from_json(&bad.to_json(), "five.json")
+            .expect_err("order")
+            .to_string();
+        assert!(e.contains("not in the corrector's order"), "{e}");
     }
 }

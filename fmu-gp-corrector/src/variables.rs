@@ -1,8 +1,22 @@
-//! The GP corrector's variable table. Value-reference constants carry the XML names.
+//! The GP corrector's variable table, per layout ([`crate::layout`]). Value-reference constants
+//! carry the XML names.
+//!
+//! FMI 2.0 fixes the variables in modelDescription.xml, so each layout has its own table and
+//! GUID, and one library serves them all ([`table`]). The paper's rig (acc1..3, force) keeps the
+//! value references and names below ([`info`], `modelDescription/fmu_gp_corrector.xml`); another
+//! layout has, for its j-th channel `<c>` (from 0, in the layout's order), the input
+//! `physics_<c>` at [`LAYOUT_PHYSICS`] + j and `measured_<c>` at [`LAYOUT_MEASURED`] + j, and
+//! the outputs `<c>` (corrected), the latent variance and the predictive sd
+//! ([`crate::layout::band_name`]: `latent_var<i>`/`sd<i>` for `acc<i>`, `latent_var_<c>`/`sd_<c>`
+//! otherwise) at [`LAYOUT_CORRECTED`], [`LAYOUT_LATENT_VAR`], [`LAYOUT_SD`] + j; the excitation
+//! `force` (vr 4) or `ground_acc` (vr 9); the parameters as on the rig.
 
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use fmi2::{Causality, DefaultExperiment, ModelInfo, Start, Unit, VarType, Variability, Variable};
+use structure::channel::{Channel, ExcitationKind, Quantity};
+
+use crate::layout::{band_name, Layout};
 
 use crate::model::{
     DEFAULT_LAGS, DEFAULT_REFIT_EVERY, INITIAL_LENGTH_SCALE, INITIAL_NOISE_VARIANCE,
@@ -34,7 +48,77 @@ pub const INITIAL_LENGTH_SCALE_VR: u32 = 36;
 /// The most training points a floor's GP keeps while learning (the oldest go first).
 pub const BUDGET: u32 = 37;
 
+/// Another layout's excitation when it is ground motion (m/s²).
+pub const GROUND_ACC: u32 = 9;
+/// Another layout's per-channel variables: the j-th channel's at base + j.
+pub const LAYOUT_PHYSICS: u32 = 1000;
+pub const LAYOUT_MEASURED: u32 = 2000;
+pub const LAYOUT_CORRECTED: u32 = 3000;
+pub const LAYOUT_LATENT_VAR: u32 = 4000;
+pub const LAYOUT_SD: u32 = 5000;
+
+// Three channels a floor fit in a block.
+const _: () = assert!(3 * structure::MAX_STOREYS as u32 <= 1000);
+
 pub const MODEL_IDENTIFIER: &str = "fmu_gp_corrector";
+
+/// A per-channel variable's role.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Physics,
+    Measured,
+    Corrected,
+    LatentVar,
+    Sd,
+}
+
+const ROLES: [Role; 5] = [
+    Role::Physics,
+    Role::Measured,
+    Role::Corrected,
+    Role::LatentVar,
+    Role::Sd,
+];
+
+fn base(layout: &Layout, role: Role) -> u32 {
+    let rig = layout.is_paper();
+    match role {
+        Role::Physics if rig => PHYSICS_ACC,
+        Role::Measured if rig => MEASURED_ACC,
+        Role::Corrected if rig => ACC,
+        Role::LatentVar if rig => LATENT_VAR,
+        Role::Sd if rig => SD,
+        Role::Physics => LAYOUT_PHYSICS,
+        Role::Measured => LAYOUT_MEASURED,
+        Role::Corrected => LAYOUT_CORRECTED,
+        Role::LatentVar => LAYOUT_LATENT_VAR,
+        Role::Sd => LAYOUT_SD,
+    }
+}
+
+/// The value reference of channel `j`'s variable of `role` in `layout`'s table.
+pub fn vr_of(layout: &Layout, role: Role, j: usize) -> u32 {
+    base(layout, role) + j as u32
+}
+
+/// Which channel's variable of which role `vr` is in `layout`'s table.
+pub fn role_of(layout: &Layout, vr: u32) -> Option<(Role, usize)> {
+    let m = layout.channels.len();
+    ROLES.into_iter().find_map(|role| {
+        vr.checked_sub(base(layout, role))
+            .map(|j| j as usize)
+            .filter(|&j| j < m)
+            .map(|j| (role, j))
+    })
+}
+
+/// The excitation's input in `layout`'s table: `force` or `ground_acc`.
+pub fn excitation_vr(layout: &Layout) -> u32 {
+    match layout.excitation {
+        ExcitationKind::Force => FORCE,
+        ExcitationKind::GroundAcc => GROUND_ACC,
+    }
+}
 
 /// The value references the corrected outputs depend on directly: the current sample of the
 /// lag vector.
@@ -63,6 +147,7 @@ fn units() -> Vec<Unit> {
     ]
 }
 
+/// The paper rig's variables: those of `modelDescription/fmu_gp_corrector.xml`.
 fn variables() -> Vec<Variable> {
     let mut v = Vec::new();
     for i in 0..3u32 {
@@ -125,6 +210,14 @@ fn variables() -> Vec<Variable> {
                 .depends_on(&FEEDTHROUGH),
         );
     }
+    v.extend(parameters(true));
+    v
+}
+
+/// The parameters and the `training_points` output, the same in every layout (only the rig's
+/// descriptions name its floors).
+fn parameters(rig: bool) -> Vec<Variable> {
+    let mut v = Vec::new();
     v.push(Variable {
         name: "training_points".to_owned(),
         vr: TRAINING_POINTS,
@@ -135,14 +228,22 @@ fn variables() -> Vec<Variable> {
         unit: None,
         min: None,
         max: None,
-        description: "number of points in each floor's training set".to_owned(),
+        description: if rig {
+            "number of points in each floor's training set".to_owned()
+        } else {
+            "number of points in each channel's training set".to_owned()
+        },
         depends_on: Vec::new(),
     });
     v.push(
         Variable::integer_parameter("lags", LAGS, DEFAULT_LAGS as i32)
             .min(0.0)
             .max(MAX_LAGS as f64)
-            .describe("q: the GP inputs are the current and q previous samples of physics_acc1..3 and force, 4 (q + 1) values"),
+            .describe(if rig {
+                "q: the GP inputs are the current and q previous samples of physics_acc1..3 and force, 4 (q + 1) values"
+            } else {
+                "q: each channel's GP takes the current and q previous samples of its own physics prediction, of at most two measured neighbours' and of the excitation, at most 4 (q + 1) values"
+            }),
     );
     v.push(
         Variable::integer_parameter("target", TARGET, 0)
@@ -155,7 +256,11 @@ fn variables() -> Vec<Variable> {
             .min(1.0)
             .max(MAX_TRAINING_POINTS as f64)
             .tunable()
-            .describe("the most training points a floor's GP keeps while learning: beyond, the oldest goes"),
+            .describe(if rig {
+                "the most training points a floor's GP keeps while learning: beyond, the oldest goes"
+            } else {
+                "the most training points a channel's GP keeps while learning: beyond, the oldest goes"
+            }),
     );
     v.push(
         Variable::integer_parameter("refit_every", REFIT_EVERY, DEFAULT_REFIT_EVERY as i32)
@@ -176,7 +281,11 @@ fn variables() -> Vec<Variable> {
             INITIAL_SIGNAL_VARIANCE,
         )
         .min(0.0)
-        .describe("signal variance of a GP the training data give no hyperparameters for"),
+        .describe(if rig {
+            "signal variance of a GP the training data give no hyperparameters for"
+        } else {
+            "signal variance of a GP the training data give no hyperparameters for (in the unit of its channel squared; the unit shown is an acceleration's)"
+        }),
     );
     v.push(
         Variable::real_parameter(
@@ -195,11 +304,186 @@ fn variables() -> Vec<Variable> {
         INITIAL_LENGTH_SCALE,
     )
     .min(0.0)
-    .describe("length scale, for every input, of a GP the training data give no hyperparameters for (in the unit of each input: m/s2 or N)");
+    .describe(if rig {
+        "length scale, for every input, of a GP the training data give no hyperparameters for (in the unit of each input: m/s2 or N)"
+    } else {
+        "length scale, for every input, of a GP the training data give no hyperparameters for (in the unit of each input)"
+    });
     // The inputs mix m/s² and N: the one value applies to each in its own unit.
     length_scale.unit = None;
     v.push(length_scale);
     v
+}
+
+/// The SI unit of a channel's quantity and of its square.
+fn units_of(c: &Channel) -> (&'static str, &'static str) {
+    match c.quantity() {
+        Quantity::Velocity => ("m/s", "m2/s2"),
+        Quantity::Displacement => ("m", "m2"),
+        _ => ("m/s2", "m2/s4"),
+    }
+}
+
+fn describe(c: &Channel) -> String {
+    match *c {
+        Channel::Response { quantity, floor } => match quantity {
+            Quantity::Velocity => format!("velocity of floor {floor} relative to the ground"),
+            Quantity::Displacement => {
+                format!("displacement of floor {floor} relative to the ground")
+            }
+            _ => format!("absolute acceleration of floor {floor}"),
+        },
+        _ => c.name(),
+    }
+}
+
+/// Another layout's variables (see the module documentation).
+fn layout_variables(layout: &Layout) -> Vec<Variable> {
+    let mut v = Vec::new();
+    let exc = excitation_vr(layout);
+    for (j, c) in layout.channels.iter().enumerate() {
+        let name = c.name();
+        v.push(
+            Variable::real_input(
+                &format!("physics_{name}"),
+                vr_of(layout, Role::Physics, j),
+                units_of(c).0,
+                0.0,
+            )
+            .describe(&format!("{} predicted by the physics model", describe(c))),
+        );
+    }
+    v.push(match layout.excitation {
+        ExcitationKind::Force => Variable::real_input("force", exc, "N", 0.0)
+            .describe("excitation force, as given to the physics model"),
+        ExcitationKind::GroundAcc => Variable::real_input("ground_acc", exc, "m/s2", 0.0)
+            .describe("ground acceleration at the base, as given to the physics model"),
+    });
+    for (j, c) in layout.channels.iter().enumerate() {
+        let name = c.name();
+        v.push(
+            Variable::real_input(
+                &format!("measured_{name}"),
+                vr_of(layout, Role::Measured, j),
+                units_of(c).0,
+                0.0,
+            )
+            .describe(&format!(
+                "measured {}: the training target when learn is true",
+                describe(c)
+            )),
+        );
+    }
+    v.push(Variable::boolean_input("learn", LEARN, false).describe(
+        "at each fmi2DoStep with learn true, the current sample joins every channel's training set",
+    ));
+    let depends = |j: usize| -> Vec<u32> {
+        layout
+            .columns_of(j)
+            .into_iter()
+            .map(|col| {
+                if col == layout.channels.len() {
+                    exc
+                } else {
+                    vr_of(layout, Role::Physics, col)
+                }
+            })
+            .collect()
+    };
+    for (role, what) in [
+        (Role::Corrected, "corrected"),
+        (Role::LatentVar, "latent"),
+        (Role::Sd, "sd"),
+    ] {
+        for (j, c) in layout.channels.iter().enumerate() {
+            let (unit, squared) = units_of(c);
+            let vr = vr_of(layout, role, j);
+            let var = match what {
+                "corrected" => Variable::real_output(&c.name(), vr, unit).describe(&format!(
+                    "corrected {}: physics + GP mean (target 0) or GP mean (target 1)",
+                    describe(c)
+                )),
+                "latent" => Variable::real_output(&band_name("latent_var", c), vr, squared)
+                    .describe(&format!(
+                        "latent predictive variance V(f*) of {}'s GP (noise excluded)",
+                        c.name()
+                    )),
+                _ => Variable::real_output(&band_name("sd", c), vr, unit).describe(&format!(
+                    "predictive standard deviation sqrt(V(f*) + noise variance) of {}",
+                    c.name()
+                )),
+            };
+            v.push(var.depends_on(&depends(j)));
+        }
+    }
+    v.extend(parameters(false));
+    v
+}
+
+fn layout_units(layout: &Layout) -> Vec<Unit> {
+    let mut names: Vec<&'static str> = vec!["m/s2", "m2/s4"];
+    for c in &layout.channels {
+        let (a, b) = units_of(c);
+        names.extend([a, b]);
+    }
+    if layout.excitation == ExcitationKind::Force {
+        names.push("N");
+    }
+    let mut out: Vec<Unit> = Vec::new();
+    for name in names {
+        if out.iter().any(|u| u.name == name) {
+            continue;
+        }
+        let (kg, m, s) = match name {
+            "m/s2" => (0, 1, -2),
+            "m2/s4" => (0, 2, -4),
+            "m/s" => (0, 1, -1),
+            "m2/s2" => (0, 2, -2),
+            "m" => (0, 1, 0),
+            "m2" => (0, 2, 0),
+            _ => (1, 1, -2),
+        };
+        out.push(Unit { name, kg, m, s });
+    }
+    out
+}
+
+fn build(layout: &Layout) -> ModelInfo {
+    let names = layout.names();
+    ModelInfo::new(
+        &format!("GpCorrector{}", names.len()),
+        MODEL_IDENTIFIER,
+        &format!(
+            "Gaussian-process bias corrector of a shear frame's physics model: one zero-mean Matérn 3/2 ARD GP per measured channel ({}) on lags of the physics predictions of the channel and its nearest measured neighbours and of the {}, with online learning",
+            names.join(", "),
+            layout.excitation_name()
+        ),
+        env!("CARGO_PKG_VERSION"),
+        layout_variables(layout),
+        layout_units(layout),
+        false,
+        Some(DefaultExperiment { start_time: 0.0, stop_time: 20.0, step_size: 1.0 / 51.2 }),
+    )
+    // Built from a checked layout; the unit tests build tables of several layouts.
+    .expect("the GP corrector's variable table is consistent")
+}
+
+/// The table of a checked layout: [`info`] for the paper's rig, else built once per layout and
+/// kept for the life of the library.
+pub fn table(layout: &Layout) -> &'static ModelInfo {
+    static TABLES: OnceLock<Mutex<Vec<(Layout, &'static ModelInfo)>>> = OnceLock::new();
+    if layout.is_paper() {
+        return info();
+    }
+    let tables = TABLES.get_or_init(Default::default);
+    // A poisoned lock only means another thread panicked while pushing; the list is still whole.
+    let mut tables = tables.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, info)) = tables.iter().find(|(l, _)| l == layout) {
+        return info;
+    }
+    let info: &'static ModelInfo = Box::leak(Box::new(build(layout)));
+    tables.push((layout.clone(), info));
+    info
 }
 
 /// The table, built and checked once.
@@ -227,5 +511,53 @@ mod tests {
     fn the_table_is_consistent() {
         let info = super::info();
         assert_eq!(info.model_identifier, super::MODEL_IDENTIFIER);
+    }
+
+    /// Other layouts build (distinct names and value references, checked by `ModelInfo::new`),
+    /// with their channels' variables and the rig's parameters, and a GUID of their own.
+    #[test]
+    fn other_layouts_have_tables_of_their_own() {
+        use super::*;
+        let five = Layout::from_names(&["acc1", "acc3", "acc5", "vel2"], "ground_acc").unwrap();
+        let t = table(&five);
+        for name in [
+            "physics_acc3",
+            "measured_vel2",
+            "acc5",
+            "vel2",
+            "latent_var3",
+            "sd_vel2",
+            "latent_var_vel2",
+            "ground_acc",
+            "lags",
+            "training_path",
+        ] {
+            assert!(t.by_name(name).is_some(), "{name}");
+        }
+        assert!(t.by_name("force").is_none());
+        assert!(t.by_name("acc2").is_none());
+        assert_ne!(t.guid, info().guid);
+        assert_eq!(table(&Layout::default()).guid, info().guid);
+        let vel = t.by_name("sd_vel2").unwrap();
+        assert_eq!(vel.unit, Some("m/s"));
+        assert_eq!(role_of(&five, vel.vr), Some((Role::Sd, 3)));
+        // vel2's GP: itself, acc1 and acc3 (floor distance 1), the ground acceleration.
+        assert_eq!(
+            vel.depends_on,
+            vec![
+                vr_of(&five, Role::Physics, 0),
+                vr_of(&five, Role::Physics, 1),
+                vr_of(&five, Role::Physics, 3),
+                GROUND_ACC
+            ]
+        );
+        let every: Vec<String> = (1..=structure::MAX_STOREYS)
+            .flat_map(|f| [format!("acc{f}"), format!("vel{f}"), format!("disp{f}")])
+            .collect();
+        let all = Layout::from_names(&every, "force").unwrap();
+        assert_eq!(
+            table(&all).by_name("disp50").map(|v| v.vr),
+            Some(LAYOUT_CORRECTED + 149)
+        );
     }
 }

@@ -238,7 +238,7 @@ fn with_one_record_the_reference_gp_learns_its_first_half_and_is_tested_on_what_
         ..options
     };
     let rule = fixed_threshold(&streams, &given).expect("given");
-    assert_eq!((rule.rule.as_str(), rule.values), ("given", [2e-6; 3]));
+    assert_eq!((rule.rule.as_str(), rule.values), ("given", vec![2e-6; 3]));
     assert!(rule.trained_on.is_none());
 }
 

@@ -707,7 +707,7 @@ impl Twin {
         if let Some(s) = &selection {
             s.validate().map_err(|e| to_py(kind, e))?;
         }
-        let data = record.for_twin(&self.twin, Some("train"))?;
+        let data = record.for_twin(&self.twin, None)?;
         let (twin, report) = detached(py, || {
             let trained = train_selected(&self.twin, data, &options, selection.as_ref())
                 .map_err(|e| to_py(kind, e))?;
@@ -780,7 +780,7 @@ impl Twin {
         }
         let data: Vec<Measurement> = records
             .iter()
-            .map(|r| r.for_twin(&self.twin, Some("learn")).cloned())
+            .map(|r| r.for_twin(&self.twin, None).cloned())
             .collect::<PyResult<_>>()?;
         let (report, learned) = detached(py, || {
             let started = std::time::Instant::now();

@@ -73,14 +73,14 @@ def test_records_with_units_column_maps_and_other_channels(tmp_path):
         np.testing.assert_array_equal(got["acc2"], d["acc2"])
         # g back to m/s²: measured at most 1.8e-16 relative on dataset1 (a rounding or two).
         np.testing.assert_allclose(got["acc1"], d["acc1"], rtol=1e-15, atol=0)
-    # Another set of channels is a record: compare serves it channel by channel, the
-    # paper-rig workflows refuse it by name, and a floor the twin lacks is refused by name.
+    # Another set of channels is a record: compare and train serve it channel by channel (the
+    # corrector one GP per measured channel), and a floor the twin lacks is refused by name.
     velocities = st.Record.from_arrays({"time": d["time"], "force": d["force"], "vel2": d["acc2"]})
     assert velocities.channels == ["force", "vel2"]
     compared = st.Twin.default().compare(velocities)
     assert compared.channels == ["vel2"] and len(compared.nmse) == 1
-    with pytest.raises(st.DataError, match="missing column 'acc1'"):
-        st.Twin.default().train(velocities)
+    _, trained = st.Twin.default().train(velocities, stride=16)
+    assert trained.channels == ["vel2"] and len(trained.nmse) == 1
     high = st.Record.from_arrays({"time": d["time"], "force": d["force"], "acc4": d["acc2"]})
     with pytest.raises(st.DataError, match="column 'acc4' is for floor 4; the structure has floors 1 to 3"):
         st.Twin.default().compare(high)

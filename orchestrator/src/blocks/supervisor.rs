@@ -42,40 +42,44 @@ impl Mode {
     }
 }
 
-/// The active-learning supervisor as a zero-time block. Inputs: `latent_var1..3`; outputs:
-/// the learn flag (1 or 0) and the thresholds of floors 1..3. Per evaluation (one streamed
+/// The active-learning supervisor as a zero-time block. Inputs: the latent variance of each of
+/// the corrector's channels (`latent_var1..3` on the paper's rig); outputs: the learn flag (1 or
+/// 0) and each channel's threshold. Per evaluation (one streamed
 /// point): adaptive mode first applies the forgetting factor (Algorithm 1, line 7), then flags
 /// the point if any floor's latent variance exceeds its threshold (line 8); uniform mode flags
 /// every `uniform_every`-th evaluation since [`Supervisor::start_record`].
 #[derive(Clone, Debug)]
 pub struct Supervisor {
     mode: Mode,
-    threshold: [f64; 3],
+    threshold: Vec<f64>,
     uniform_every: usize,
     seen: usize,
 }
 
 impl Supervisor {
+    /// The paper rig's inputs (three floors) and outputs; another layout has one input per
+    /// channel and one output more.
     pub const INPUTS: usize = 3;
     pub const OUTPUTS: usize = 4;
 
-    pub fn new(mode: Mode, threshold: [f64; 3], uniform_every: usize) -> Self {
+    /// One threshold per channel.
+    pub fn new(mode: Mode, threshold: impl Into<Vec<f64>>, uniform_every: usize) -> Self {
         Supervisor {
             mode,
-            threshold,
+            threshold: threshold.into(),
             uniform_every: uniform_every.max(1),
             seen: 0,
         }
     }
 
-    pub fn threshold(&self) -> [f64; 3] {
-        self.threshold
+    pub fn threshold(&self) -> Vec<f64> {
+        self.threshold.clone()
     }
 
     /// After a query, adaptive modes take the largest latent variance seen (line 12).
-    pub fn update_threshold(&mut self, threshold: [f64; 3]) {
+    pub fn update_threshold(&mut self, threshold: impl Into<Vec<f64>>) {
         if matches!(self.mode, Mode::Adaptive(_)) {
-            self.threshold = threshold;
+            self.threshold = threshold.into();
         }
     }
 
@@ -92,27 +96,27 @@ impl Block for Supervisor {
         inputs: &[f64],
         outputs: &mut [f64],
     ) -> Result<(), MasterError> {
-        if inputs.len() != Self::INPUTS || outputs.len() != Self::OUTPUTS {
+        let m = self.threshold.len();
+        if inputs.len() != m || outputs.len() != m + 1 {
             return Err(MasterError::Block {
                 block: "supervisor".into(),
                 message: format!(
-                    "{} inputs and {} outputs, expected {} (latent_var1..3) and {} (learn, threshold1..3)",
+                    "{} inputs and {} outputs, expected {m} (a latent variance per channel) and {} (learn, a threshold per channel)",
                     inputs.len(),
                     outputs.len(),
-                    Self::INPUTS,
-                    Self::OUTPUTS
+                    m + 1
                 ),
             });
         }
         self.seen += 1;
         let learn = match self.mode {
             Mode::Uniform => self.seen.is_multiple_of(self.uniform_every),
-            Mode::Fixed => inputs.iter().zip(self.threshold).any(|(v, t)| *v > t),
+            Mode::Fixed => inputs.iter().zip(&self.threshold).any(|(v, t)| v > t),
             Mode::Adaptive(f) => {
                 for t in &mut self.threshold {
                     *t *= f;
                 }
-                inputs.iter().zip(self.threshold).any(|(v, t)| *v > t)
+                inputs.iter().zip(&self.threshold).any(|(v, t)| v > t)
             }
         };
         outputs[0] = if learn { 1.0 } else { 0.0 };

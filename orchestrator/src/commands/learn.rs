@@ -140,11 +140,11 @@ pub fn run(args: &LearnArgs) -> Result<()> {
     let records = args
         .data
         .iter()
-        .map(|p| args.columns.read_record(p))
+        .map(|p| args.columns.read_any(p))
         .collect::<Result<Vec<_>, _>>()?;
     let twin = Twin::load(args.twin.as_deref())?;
     for record in &records {
-        crate::twin::guard::check_paper_rig(&twin, record, "learn")?;
+        crate::twin::guard::check_record(&twin, record)?;
     }
     let started = std::time::Instant::now();
     let streams = prepare(&twin, &records, &options)?;
@@ -169,10 +169,21 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             ),
             _ => String::new(),
         };
-        println!(
-            "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
-            fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
-        );
+        let channels = streams[0].layout.names();
+        if channels == ["acc1", "acc2", "acc3"] {
+            println!(
+                "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
+                fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
+            );
+        } else {
+            let each: Vec<String> = fixed.values.iter().map(|v| format!("{v:.3e}")).collect();
+            println!(
+                "fixed threshold ({}{how}): {} ({}; each in its unit squared)",
+                fixed.rule,
+                each.join(" / "),
+                channels.join(" / ")
+            );
+        }
     }
     for r in &results {
         for (k, rec) in r.records.iter().enumerate() {
@@ -199,11 +210,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         println!(
             "wrote {} (the corrector as learned: {} points)",
             path.display(),
-            result
-                .final_gps
-                .to_training_file(options.lags, options.target)
-                .inputs
-                .len()
+            result.final_gps.len()
         );
     }
     let report_path = args

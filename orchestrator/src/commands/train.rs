@@ -21,7 +21,8 @@ pub struct TrainArgs {
     /// The twin with the corrector (.ssp) to write.
     #[arg(long)]
     pub out: PathBuf,
-    /// Lags q: the GP's inputs are the current and q previous physics accelerations and forces.
+    /// Lags q: each channel's GP takes the current and q previous physics predictions of the
+    /// channel and its nearest measured neighbours (at most two) and of the excitation.
     #[arg(long, default_value_t = TrainOptions::default().lags)]
     pub lags: usize,
     /// What the GP models: the discrepancy measured − physics (default), or the measured
@@ -35,7 +36,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = TrainOptions::default().stride)]
     pub stride: usize,
     /// Choose the lags among these (e.g. 1,3,5,7,9,11) by the lowest total negative log
-    /// marginal likelihood of the three GPs, fitted on every `--selection-stride`-th sample;
+    /// marginal likelihood of the channels' GPs, fitted on every `--selection-stride`-th sample;
     /// overrides --lags.
     #[arg(long, value_delimiter = ',', num_args = 1..)]
     pub select_lags: Vec<usize>,
@@ -71,9 +72,9 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             args.out.display()
         );
     }
-    let data = args.columns.read_record(&args.data)?;
+    let data = args.columns.read_any(&args.data)?;
     let twin = Twin::load(args.twin.as_deref())?;
-    crate::twin::guard::check_paper_rig(&twin, &data, "train")?;
+    crate::twin::guard::check_record(&twin, &data)?;
     let (options, selection) = args.options();
     options.validate()?;
     if let Some(s) = &selection {
@@ -81,12 +82,22 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let trained = train_selected(&twin, &data, &options, selection.as_ref())?;
     if !trained.selection.is_empty() {
-        println!("lags   NLML (floors 1 / 2 / 3)                 total");
+        let rig = trained.channels == ["acc1", "acc2", "acc3"];
+        if rig {
+            println!("lags   NLML (floors 1 / 2 / 3)                 total");
+        } else {
+            println!("lags   NLML ({})   total", trained.channels.join(" / "));
+        }
         for s in &trained.selection {
-            println!(
-                "{:>4}   {:>11.1} / {:>11.1} / {:>11.1}   {:>11.1}",
-                s.lags, s.nlml[0], s.nlml[1], s.nlml[2], s.total
-            );
+            if rig {
+                println!(
+                    "{:>4}   {:>11.1} / {:>11.1} / {:>11.1}   {:>11.1}",
+                    s.lags, s.nlml[0], s.nlml[1], s.nlml[2], s.total
+                );
+            } else {
+                let each: Vec<String> = s.nlml.iter().map(|v| format!("{v:.1}")).collect();
+                println!("{:>4}   {}   {:.1}", s.lags, each.join(" / "), s.total);
+            }
         }
         println!(
             "chosen: {} lags (lowest negative log marginal likelihood)",
@@ -98,7 +109,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         let report = crate::report::json::train(&twin, &data, Some(&args.out), &trained);
         write_json(path, &report)?;
     }
-    let (summary, nmse) = (&trained.summary, trained.nmse);
+    let (summary, nmse) = (&trained.summary, &trained.nmse);
     println!(
         "trained the corrector on {}: {} points, {} inputs ({} lags), target {}, {:.2} s",
         data.path.display(),
@@ -108,13 +119,29 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         summary.target,
         summary.seconds
     );
-    println!(
-        "NMSE % of the corrected twin on {}: {:.3} / {:.3} / {:.3}",
-        data.path.display(),
-        nmse[0],
-        nmse[1],
-        nmse[2]
-    );
+    if trained.channels == ["acc1", "acc2", "acc3"] {
+        println!(
+            "NMSE % of the corrected twin on {}: {:.3} / {:.3} / {:.3}",
+            data.path.display(),
+            nmse[0],
+            nmse[1],
+            nmse[2]
+        );
+    } else {
+        let each = |v: &[f64]| -> String {
+            v.iter()
+                .map(|x| format!("{x:.3}"))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        println!(
+            "NMSE % on {} ({}): physics alone {}, corrected {}",
+            data.path.display(),
+            trained.channels.join(" / "),
+            each(&trained.nmse_physics),
+            each(nmse)
+        );
+    }
     println!("wrote {}", args.out.display());
     Ok(())
 }

@@ -139,7 +139,9 @@ pub fn train(
         "data": data.path.display().to_string(),
         "training": trained.summary,
         "lag_selection": trained.selection,
+        "channels": trained.channels,
         "nmse": trained.nmse,
+        "nmse_physics": trained.nmse_physics,
     });
     if let Some(out) = out {
         report["out"] = json!(out.display().to_string());

@@ -48,6 +48,30 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
                 ("sans-serif", 22).into_font(),
             ))
             .map_err(|e| text(&e))?;
+        // The channels: "floor i" on the paper's rig, the channel's name otherwise.
+        let channels = result
+            .records
+            .first()
+            .map(|r| r.trace.channels.clone())
+            .unwrap_or_default();
+        let rig = channels.is_empty() || channels == ["acc1", "acc2", "acc3"];
+        let labels: Vec<String> = if rig {
+            (1..=3).map(|f| format!("floor {f}")).collect()
+        } else {
+            channels.clone()
+        };
+        let unit = |f: usize| match channels
+            .get(f)
+            .and_then(|c| ::structure::channel::Channel::parse(c))
+        {
+            Some(c) if c.quantity() == ::structure::channel::Quantity::Velocity => {
+                ("m/s", "V(f) (m/s)²")
+            }
+            Some(c) if c.quantity() == ::structure::channel::Quantity::Displacement => {
+                ("m", "V(f) m²")
+            }
+            _ => ("m/s²", "V(f) (m/s²)²"),
+        };
         let (top, bottom) = body.split_vertically(380);
         let columns = top.split_evenly((1, result.records.len().max(1)));
         for (k, (area, rec)) in columns.iter().zip(&result.records).enumerate() {
@@ -57,7 +81,11 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
                 .map(|p| p.update)
                 .unwrap_or(0)
                 .max(1) as f64;
-            let (lo, hi) = log_range(rec.nmse_after_updates.iter().flat_map(|p| p.nmse));
+            let (lo, hi) = log_range(
+                rec.nmse_after_updates
+                    .iter()
+                    .flat_map(|p| p.nmse.iter().copied()),
+            );
             let mut chart = ChartBuilder::on(area)
                 .caption(
                     format!(
@@ -78,19 +106,20 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
                 .y_desc("NMSE %")
                 .draw()
                 .map_err(|e| text(&e))?;
-            for f in 0..3 {
+            for (f, label) in labels.iter().enumerate() {
+                let colour = FLOORS[f % FLOORS.len()];
                 chart
                     .draw_series(LineSeries::new(
                         rec.nmse_after_updates
                             .iter()
                             .map(|p| (p.update as f64, p.nmse[f]))
                             .filter(|(_, v)| *v > 0.0),
-                        FLOORS[f].stroke_width(2),
+                        colour.stroke_width(2),
                     ))
                     .map_err(|e| text(&e))?
-                    .label(format!("floor {}", f + 1))
+                    .label(label)
                     .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], FLOORS[f].stroke_width(2))
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
                     });
             }
             chart
@@ -103,7 +132,7 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
         let Some(last) = result.records.last() else {
             return Err("no record".into());
         };
-        let rows = bottom.split_evenly((3, 1));
+        let rows = bottom.split_evenly((labels.len().max(1), 1));
         let trace = &last.trace;
         let (t0, t1) = (
             trace.time.first().copied().unwrap_or(0.0),
@@ -141,8 +170,8 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
             let mut chart = ChartBuilder::on(&upper)
                 .caption(
                     format!(
-                        "last record, floor {}: measured, corrected (final GP), queries (red)",
-                        f + 1
+                        "last record, {}: measured, corrected (final GP), queries (red)",
+                        labels[f]
                     ),
                     ("sans-serif", 15),
                 )
@@ -153,7 +182,7 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
                 .map_err(|e| text(&e))?;
             chart
                 .configure_mesh()
-                .y_desc("m/s²")
+                .y_desc(unit(f).0)
                 .draw()
                 .map_err(|e| text(&e))?;
             for &q in &last.query_times {
@@ -187,7 +216,7 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
             chart
                 .configure_mesh()
                 .x_desc("time (s)")
-                .y_desc("V(f) (m/s²)²")
+                .y_desc(unit(f).1)
                 .y_label_formatter(&|v| format!("{v:.0e}"))
                 .draw()
                 .map_err(|e| text(&e))?;

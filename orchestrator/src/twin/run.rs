@@ -122,8 +122,9 @@ impl<F: FnMut(u64, u64)> Progress<F> {
 /// has a `control` column and the twin takes it, is replayed too) and record its value of every
 /// response channel the record measures: the system output of that name when the twin has one
 /// (a corrector's corrected acceleration), else the physics component's variable (`acc<i>`,
-/// `vel<i>`, `disp<i>`: the shear FMU has them for every floor); and for an `acc<i>`, the
-/// corrector's `latent_var<i>` and `sd<i>` when the twin gives them.
+/// `vel<i>`, `disp<i>`: the shear FMU has them for every floor); and the corrector's latent
+/// variance and sd of each channel when the twin gives them (`latent_var<i>`, `sd<i>` for
+/// `acc<i>`; `latent_var_vel2`, `sd_vel2` for another channel).
 pub fn run_twin(
     twin: &Twin,
     data: &Measurement,
@@ -173,9 +174,9 @@ pub fn run_twin(
     let builder = SystemBuilder::open(twin)?;
     let mut running = builder.build(start, inputs)?;
     let system_outputs = twin.system_outputs();
+    // The corrector's names: latent_var<i> / sd<i> for acc<i>, latent_var_<c> / sd_<c> else.
     let band_of = |name: &str, prefix: &str| -> Option<String> {
-        let floor = name.strip_prefix("acc")?;
-        let band = format!("{prefix}{floor}");
+        let band = fmu_gp_corrector::layout::band_name(prefix, &Channel::parse(name)?);
         system_outputs.contains(&band).then_some(band)
     };
     let mut watched = Vec::new();

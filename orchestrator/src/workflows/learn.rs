@@ -104,10 +104,10 @@
 //! results are the same either way.
 
 use fmu_gp_corrector::model::{
-    per_floor, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
+    per_channel, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
 };
 use fmu_gp_corrector::training::MAX_TRAINING_POINTS;
-use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Sample, TargetForm, TrainingFile};
+use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Layout, LayoutTraining, TargetForm};
 use serde::Serialize;
 
 pub use crate::blocks::supervisor::{Mode, Supervisor, FORGETTING_FACTORS};
@@ -117,7 +117,7 @@ use crate::twin::data::Measurement;
 use crate::twin::run::run_twin;
 use crate::twin::run::RunError;
 use crate::twin::Twin;
-use crate::workflows::train::physics_only;
+use crate::workflows::train::{physics_only, Channels};
 
 /// What can stop the learning. The messages say which record, floor or time.
 #[derive(Debug, thiserror::Error)]
@@ -236,16 +236,19 @@ impl Default for LearnOptions {
     }
 }
 
-/// One record, ready to stream: GP inputs and targets at every sample, physics and measured
-/// accelerations, and the first sample after the transient.
+/// One record, ready to stream: the corrector's layout (the record's channels and
+/// excitation), the whole lag vector and the targets (one per channel) at every sample, physics
+/// and measured values per channel (SI, the layout's order), and the first sample after the
+/// transient.
 #[derive(Clone, Debug)]
 pub struct Stream {
     pub name: String,
+    pub layout: Layout,
     pub time: Vec<f64>,
     pub inputs: Vec<Vec<f64>>,
-    pub targets: Vec<[f64; 3]>,
-    pub physics: [Vec<f64>; 3],
-    pub measured: [Vec<f64>; 3],
+    pub targets: Vec<Vec<f64>>,
+    pub physics: Vec<Vec<f64>>,
+    pub measured: Vec<Vec<f64>>,
     pub first: usize,
 }
 
@@ -258,9 +261,24 @@ impl Stream {
         self.time.is_empty()
     }
 
-    /// NMSE per floor after the transient of a prediction over the whole record.
-    pub fn nmse(&self, predicted: &[Vec<f64>; 3]) -> [f64; 3] {
-        [0, 1, 2].map(|f| nmse(&self.measured[f][self.first..], &predicted[f][self.first..]))
+    /// NMSE per channel after the transient of a prediction over the whole record.
+    pub fn nmse(&self, predicted: &[Vec<f64>]) -> Vec<f64> {
+        (0..self.measured.len())
+            .map(|f| nmse(&self.measured[f][self.first..], &predicted[f][self.first..]))
+            .collect()
+    }
+
+    /// Channel `f`'s GP inputs at samples `range` (its columns of the whole lag vectors).
+    fn channel_inputs(
+        &self,
+        floors: &Floors,
+        f: usize,
+        range: std::ops::Range<usize>,
+    ) -> Vec<Vec<f64>> {
+        self.inputs[range]
+            .iter()
+            .map(|x| floors.input_of(f, x))
+            .collect()
     }
 }
 
@@ -279,16 +297,8 @@ pub fn prepare(
                     record: data.path.display().to_string(),
                     source: Box::new(source),
                 })?;
-            let samples: Vec<Sample> = (0..data.len())
-                .map(|k| {
-                    [
-                        prediction.acc(0)[k],
-                        prediction.acc(1)[k],
-                        prediction.acc(2)[k],
-                        data.force()[k],
-                    ]
-                })
-                .collect();
+            let channels =
+                Channels::of(data, &prediction).map_err(|e| LearnError::Setup(e.to_string()))?;
             let first =
                 crate::evaluation::stats::first_after_transient(&data.time, options.transient)
                     .max(options.lags);
@@ -302,19 +312,35 @@ pub fn prepare(
             Ok(Stream {
                 name: data.path.display().to_string(),
                 time: data.time.clone(),
-                inputs: lagged_inputs(&samples, options.lags),
+                inputs: lagged_inputs(&channels.samples, options.lags),
                 targets: (0..data.len())
-                    .map(|k| {
-                        [0, 1, 2]
-                            .map(|f| options.target.target(data.acc(f)[k], prediction.acc(f)[k]))
-                    })
+                    .map(|k| channels.targets(k, options.target))
                     .collect(),
-                physics: prediction.accs().map(<[f64]>::to_vec),
-                measured: data.accs().map(<[f64]>::to_vec),
+                layout: channels.layout,
+                physics: channels.physics,
+                measured: channels.measured,
                 first,
             })
         })
-        .collect()
+        .collect::<Result<Vec<Stream>>>()
+        .and_then(|streams| {
+            // One corrector learns over all records: they measure the same channels.
+            if let Some(first) = streams.first() {
+                if let Some(other) = streams.iter().find(|s| s.layout != first.layout) {
+                    return Err(LearnError::Setup(format!(
+                        "{} measures {} under {}, but {} measures {} under {}: one corrector \
+                         learns over records of the same channels",
+                        other.name,
+                        other.layout.names().join(", "),
+                        other.layout.excitation_name(),
+                        first.name,
+                        first.layout.names().join(", "),
+                        first.layout.excitation_name()
+                    )));
+                }
+            }
+            Ok(streams)
+        })
 }
 
 /// Samples of the test stretch whose largest latent variance is the fixed threshold (the
@@ -326,8 +352,8 @@ pub const THRESHOLD_STRIDE: usize = 2;
 /// How the fixed threshold was set, for the report.
 #[derive(Clone, Debug, Serialize)]
 pub struct FixedThreshold {
-    /// Per floor, (m/s²)².
-    pub values: [f64; 3],
+    /// Per channel, in its unit squared ((m/s²)² for an acceleration).
+    pub values: Vec<f64>,
     /// `given` (`--threshold`), `reference GP` or `1e-3 × measured variance`.
     pub rule: String,
     /// The reference GP's training stretch: record, first and last time (s), points.
@@ -360,7 +386,7 @@ impl Stretch {
 pub fn fixed_threshold(streams: &[Stream], options: &LearnOptions) -> Result<FixedThreshold> {
     match options.threshold {
         Some(t) => Ok(FixedThreshold {
-            values: [t; 3],
+            values: vec![t; streams.first().map_or(3, |s| s.measured.len())],
             rule: "given".into(),
             trained_on: None,
             tested_on: None,
@@ -386,9 +412,11 @@ pub fn relative_threshold(streams: &[Stream]) -> Result<FixedThreshold> {
     let Some(first) = streams.first() else {
         return Err(LearnError::Setup("no record to learn from".into()));
     };
-    let values = [0, 1, 2].map(|f| {
-        PAPER_THRESHOLD * crate::evaluation::stats::variance(&first.measured[f][first.first..])
-    });
+    let values: Vec<f64> = first
+        .measured
+        .iter()
+        .map(|m| PAPER_THRESHOLD * crate::evaluation::stats::variance(&m[first.first..]))
+        .collect();
     if !values.iter().all(|v| *v > 0.0 && v.is_finite()) {
         return Err(LearnError::Setup(format!(
             "{}: the measured variance after the transient is {values:?}: no threshold can be \
@@ -443,28 +471,29 @@ pub fn reference_threshold(streams: &[Stream], options: &LearnOptions) -> Result
         )));
     }
     let floors = fit_floors(
+        &first.layout,
         picked.iter().map(|&k| first.inputs[k].clone()).collect(),
-        picked.iter().map(|&k| first.targets[k]).collect(),
+        picked.iter().map(|&k| first.targets[k].clone()).collect(),
         options,
     )
     .map_err(|e| LearnError::In {
         context: "the fixed threshold's reference GPs",
         source: Box::new(e),
     })?;
-    let mut values = [0.0f64; 3];
+    let mut values = vec![0.0f64; floors.gps.len()];
     for (f, value) in values.iter_mut().enumerate() {
         let gp = trained(&floors.gps[f])?;
         for k in test.clone() {
             let p = gp
-                .predict_point(&test_stream.inputs[k])
-                .map_err(|e| LearnError::Gp(format!("floor {}: reference GP: {e}", f + 1)))?;
+                .predict_point(&floors.input_of(f, &test_stream.inputs[k]))
+                .map_err(|e| LearnError::Gp(format!("{}: reference GP: {e}", floors.who(f))))?;
             *value = (*value).max(p.latent_variance);
         }
         if !(*value > 0.0 && value.is_finite()) {
             return Err(LearnError::Setup(format!(
-                "floor {}: the reference GP's latent variance on {} is {value}: no threshold \
+                "{}: the reference GP's latent variance on {} is {value}: no threshold \
                  can be set from it; give --threshold",
-                f + 1,
+                floors.who(f),
                 test_stream.name
             )));
         }
@@ -479,24 +508,28 @@ pub fn reference_threshold(streams: &[Stream], options: &LearnOptions) -> Result
 
 /// The corrected prediction over a whole record from the GP means at the record's points
 /// from `stream.first` on (`means[f][k − first]`); the physics alone before.
-fn corrected_from_means(stream: &Stream, means: [&[f64]; 3], target: TargetForm) -> [Vec<f64>; 3] {
-    [0, 1, 2].map(|f| {
-        let mut out = stream.physics[f].clone();
-        for (k, mean) in (stream.first..stream.len()).zip(means[f]) {
-            out[k] = target.corrected(stream.physics[f][k], *mean);
-        }
-        out
-    })
+fn corrected_from_means(
+    stream: &Stream,
+    tracked: &[TrackedPoints],
+    target: TargetForm,
+) -> Vec<Vec<f64>> {
+    tracked
+        .iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let mut out = stream.physics[f].clone();
+            for (k, mean) in (stream.first..stream.len()).zip(t.means()) {
+                out[k] = target.corrected(stream.physics[f][k], *mean);
+            }
+            out
+        })
+        .collect()
 }
 
 /// The corrected prediction over a whole record with the GPs' means (`E f(x) = k(x)ᵀ α`).
-pub fn corrected(floors: &Floors, stream: &Stream, target: TargetForm) -> Result<[Vec<f64>; 3]> {
+pub fn corrected(floors: &Floors, stream: &Stream, target: TargetForm) -> Result<Vec<Vec<f64>>> {
     let tracked = track(floors, stream)?;
-    Ok(corrected_from_means(
-        stream,
-        [0, 1, 2].map(|f| tracked[f].means()),
-        target,
-    ))
+    Ok(corrected_from_means(stream, &tracked, target))
 }
 
 fn trained(gp: &FloorGp) -> Result<&GaussianProcess> {
@@ -508,15 +541,17 @@ fn trained(gp: &FloorGp) -> Result<&GaussianProcess> {
     }
 }
 
-/// Each floor's latent variances and means at the record's points from `first` on.
-fn track(floors: &Floors, stream: &Stream) -> Result<[TrackedPoints; 3]> {
-    let points = Inputs::from_rows(&stream.inputs[stream.first..])
-        .map_err(|e| LearnError::Gp(format!("{}: GP inputs: {e}", stream.name)))?;
-    let [a, b, c] = per_floor(|f| -> Result<TrackedPoints> {
-        TrackedPoints::new(trained(&floors.gps[f])?, points.clone())
-            .map_err(|e| LearnError::Gp(format!("floor {}: {e}", f + 1)))
-    });
-    Ok([a?, b?, c?])
+/// Each channel's latent variances and means at the record's points from `first` on.
+fn track(floors: &Floors, stream: &Stream) -> Result<Vec<TrackedPoints>> {
+    per_channel(floors.gps.len(), |f| -> Result<TrackedPoints> {
+        let points =
+            Inputs::from_rows(&stream.channel_inputs(floors, f, stream.first..stream.len()))
+                .map_err(|e| LearnError::Gp(format!("{}: GP inputs: {e}", stream.name)))?;
+        TrackedPoints::new(trained(&floors.gps[f])?, points)
+            .map_err(|e| LearnError::Gp(format!("{}: {e}", floors.who(f))))
+    })
+    .into_iter()
+    .collect()
 }
 
 /// From this many (training points × tracked points) on, the floors' tracked values are
@@ -524,34 +559,39 @@ fn track(floors: &Floors, stream: &Stream) -> Result<[TrackedPoints; 3]> {
 /// tens of µs to start two threads).
 const PARALLEL_TRACKING: usize = 1 << 20;
 
-/// Brings the three floors' tracked values to the current GPs, in parallel threads if asked;
+/// Brings the channels' tracked values to the current GPs, in parallel threads if asked;
 /// returns how many were solved again.
-fn sync(tracked: &mut [TrackedPoints; 3], floors: &Floors, parallel: bool) -> Result<usize> {
-    let gps = [0, 1, 2].map(|f| trained(&floors.gps[f]));
-    let [g0, g1, g2] = gps;
-    let gps = [g0?, g1?, g2?];
+fn sync(tracked: &mut [TrackedPoints], floors: &Floors, parallel: bool) -> Result<usize> {
+    let gps = floors
+        .gps
+        .iter()
+        .map(trained)
+        .collect::<Result<Vec<&GaussianProcess>>>()?;
     let outcome = |t: &mut TrackedPoints, gp: &GaussianProcess| {
         t.sync(gp)
             .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))
     };
-    let [t0, t1, t2] = tracked;
-    let results = if parallel {
+    let results: Vec<Result<Tracking>> = if parallel {
         std::thread::scope(|scope| {
-            let h1 = scope.spawn(|| outcome(t1, gps[1]));
-            let h2 = scope.spawn(|| outcome(t2, gps[2]));
-            let r0 = outcome(t0, gps[0]);
-            let join = |h: std::thread::ScopedJoinHandle<'_, Result<Tracking>>| match h.join() {
-                Ok(r) => r,
-                Err(payload) => std::panic::resume_unwind(payload),
-            };
-            [r0, join(h1), join(h2)]
+            let handles: Vec<_> = tracked
+                .iter_mut()
+                .zip(&gps)
+                .map(|(t, gp)| scope.spawn(move || outcome(t, gp)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| match h.join() {
+                    Ok(r) => r,
+                    Err(payload) => std::panic::resume_unwind(payload),
+                })
+                .collect()
         })
     } else {
-        [
-            outcome(t0, gps[0]),
-            outcome(t1, gps[1]),
-            outcome(t2, gps[2]),
-        ]
+        tracked
+            .iter_mut()
+            .zip(&gps)
+            .map(|(t, gp)| outcome(t, gp))
+            .collect()
     };
     let mut rebuilt = 0;
     for r in results {
@@ -608,11 +648,14 @@ fn refit_floors(
     end_of_record: bool,
 ) -> Result<RefitRecord> {
     let clock = std::time::Instant::now();
-    let nlml_before = [0, 1, 2].map(|f| {
-        trained(&floors.gps[f])
-            .map(|gp| gp.negative_log_marginal_likelihood())
-            .unwrap_or(f64::NAN)
-    });
+    let m = floors.gps.len();
+    let nlml_before: Vec<f64> = (0..m)
+        .map(|f| {
+            trained(&floors.gps[f])
+                .map(|gp| gp.negative_log_marginal_likelihood())
+                .unwrap_or(f64::NAN)
+        })
+        .collect();
     let fit = FitOptions {
         max_iterations: refit_iterations(options.refit_iterations, floors.len()),
         ..fmu_gp_corrector::model::refit_options()
@@ -632,12 +675,20 @@ fn refit_floors(
         end_of_record,
         training_points: floors.len(),
         seconds: clock.elapsed().as_secs_f64(),
-        iterations: [0, 1, 2].map(|f| best(f).map_or(0, |b| b.1.iterations)),
+        iterations: (0..m)
+            .map(|f| best(f).map_or(0, |b| b.1.iterations))
+            .collect(),
         nlml_before,
-        nlml_after: [0, 1, 2].map(|f| best(f).map_or(f64::NAN, |b| b.0)),
-        termination: [0, 1, 2].map(|f| best(f).map_or_else(String::new, |b| b.1.termination)),
-        signal_variance: [0, 1, 2].map(|f| hyper(f).map_or(f64::NAN, |h| h.signal_variance())),
-        noise_variance: [0, 1, 2].map(|f| hyper(f).map_or(f64::NAN, |h| h.noise_variance())),
+        nlml_after: (0..m).map(|f| best(f).map_or(f64::NAN, |b| b.0)).collect(),
+        termination: (0..m)
+            .map(|f| best(f).map_or_else(String::new, |b| b.1.termination))
+            .collect(),
+        signal_variance: (0..m)
+            .map(|f| hyper(f).map_or(f64::NAN, |h| h.signal_variance()))
+            .collect(),
+        noise_variance: (0..m)
+            .map(|f| hyper(f).map_or(f64::NAN, |h| h.noise_variance()))
+            .collect(),
     })
 }
 
@@ -655,7 +706,7 @@ pub struct NmsePoint {
     pub update: usize,
     /// Time of the query (s); the record's first streamed time for update 0.
     pub time: f64,
-    pub nmse: [f64; 3],
+    pub nmse: Vec<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -663,13 +714,13 @@ pub struct RecordResult {
     pub record: String,
     pub queries: usize,
     pub query_times: Vec<f64>,
-    pub nmse_physics: [f64; 3],
-    pub nmse_before: [f64; 3],
+    pub nmse_physics: Vec<f64>,
+    pub nmse_before: Vec<f64>,
     pub nmse_after_updates: Vec<NmsePoint>,
-    pub final_nmse: [f64; 3],
+    pub final_nmse: Vec<f64>,
     pub training_points_at_end: usize,
     pub structure_may_have_changed: Vec<ChangeFlag>,
-    pub threshold_at_end: [f64; 3],
+    pub threshold_at_end: Vec<f64>,
     /// Streamed samples and their decision-time latent variances and thresholds (for the plot).
     #[serde(skip)]
     pub trace: Trace,
@@ -677,19 +728,21 @@ pub struct RecordResult {
 
 #[derive(Clone, Debug, Default)]
 pub struct Trace {
+    /// The channels, in the corrector's order (that of the lists below).
+    pub channels: Vec<String>,
     pub time: Vec<f64>,
-    pub latent: [Vec<f64>; 3],
-    pub threshold: [Vec<f64>; 3],
+    pub latent: Vec<Vec<f64>>,
+    pub threshold: Vec<Vec<f64>>,
     /// The whole record: measured, and corrected with the record's final GP.
-    pub measured: [Vec<f64>; 3],
-    pub corrected: [Vec<f64>; 3],
+    pub measured: Vec<Vec<f64>>,
+    pub corrected: Vec<Vec<f64>>,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct ModeResult {
     pub mode: String,
     pub forgetting_factor: Option<f64>,
-    pub initial_threshold: [f64; 3],
+    pub initial_threshold: Vec<f64>,
     /// How the fixed mode's threshold was set (fixed mode only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixed_threshold: Option<FixedThreshold>,
@@ -705,13 +758,13 @@ pub struct ModeResult {
     /// NMSE % per floor of the GPs at the end of the last record on every record (what the
     /// learned corrector does to the records learned before: `final_nmse` of a record is taken
     /// at its own end).
-    pub final_gps_nmse: Vec<[f64; 3]>,
+    pub final_gps_nmse: Vec<Vec<f64>>,
     /// The GPs at the end of the last record (what `--out` puts into the twin).
     #[serde(skip)]
     pub final_gps: Floors,
 }
 
-/// One hyperparameter refit of the three floors.
+/// One hyperparameter refit of the channels' GPs.
 #[derive(Clone, Debug, Serialize)]
 pub struct RefitRecord {
     /// Record (0-based) and query count in it after which the refit ran.
@@ -721,14 +774,14 @@ pub struct RefitRecord {
     pub end_of_record: bool,
     pub training_points: usize,
     pub seconds: f64,
-    /// Per floor: L-BFGS iterations, NLML before (old hyperparameters) and after.
-    pub iterations: [u64; 3],
-    pub nlml_before: [f64; 3],
-    pub nlml_after: [f64; 3],
-    pub termination: [String; 3],
-    /// Per floor, the fitted signal and noise variances σ_f², σ_n² ((m/s²)²).
-    pub signal_variance: [f64; 3],
-    pub noise_variance: [f64; 3],
+    /// Per channel: L-BFGS iterations, NLML before (old hyperparameters) and after.
+    pub iterations: Vec<u64>,
+    pub nlml_before: Vec<f64>,
+    pub nlml_after: Vec<f64>,
+    pub termination: Vec<String>,
+    /// Per channel, the fitted signal and noise variances σ_f², σ_n² (its unit squared).
+    pub signal_variance: Vec<f64>,
+    pub noise_variance: Vec<f64>,
 }
 
 /// Seconds per part of a mode's run (wall clock of its thread).
@@ -761,6 +814,7 @@ pub fn initial_floors(streams: &[Stream], options: &LearnOptions) -> Result<Floo
         )));
     }
     fit_floors(
+        &first.layout,
         first.inputs[first.first..end].to_vec(),
         first.targets[first.first..end].to_vec(),
         options,
@@ -771,13 +825,16 @@ pub fn initial_floors(streams: &[Stream], options: &LearnOptions) -> Result<Floo
     })
 }
 
-/// The three floors' GPs fitted (type-II ML, the corrector's initial fit) on a training set.
+/// The channels' GPs fitted (type-II ML, the corrector's initial fit) on a training set.
 fn fit_floors(
+    layout: &Layout,
     inputs: Vec<Vec<f64>>,
-    targets: Vec<[f64; 3]>,
+    targets: Vec<Vec<f64>>,
     options: &LearnOptions,
 ) -> Result<Floors> {
-    Floors::fit_training(&TrainingFile {
+    Floors::fit_training(&LayoutTraining {
+        channels: layout.names(),
+        excitation: layout.excitation_name(),
         lags: options.lags,
         target: options.target,
         inputs,
@@ -796,30 +853,29 @@ struct Reference {
     members: std::collections::VecDeque<(usize, usize)>,
     /// Per record, per tracked index: whether the point is in the training set.
     inside: Vec<Vec<bool>>,
-    /// Earlier records' points outside the training set, per floor.
-    earlier: [TrackedPoints; 3],
+    /// Earlier records' points outside the training set, per channel.
+    earlier: Vec<TrackedPoints>,
 }
 
 impl Reference {
     fn new(floors: &Floors, streams: &[Stream]) -> Result<Self> {
-        let dim = streams
-            .first()
-            .and_then(|s| s.inputs.first())
-            .map_or(1, Vec::len);
-        let none = Inputs::from_row_major(dim, Vec::new())
-            .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
-        let [a, b, c] = [0, 1, 2].map(|f| {
-            trained(&floors.gps[f]).and_then(|gp| {
-                TrackedPoints::new(gp, none.clone()).map_err(|e| LearnError::Gp(format!("{e}")))
+        let earlier = (0..floors.gps.len())
+            .map(|f| {
+                let dim = floors.columns[f].len() * (floors.lags + 1);
+                let none = Inputs::from_row_major(dim, Vec::new())
+                    .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
+                trained(&floors.gps[f]).and_then(|gp| {
+                    TrackedPoints::new(gp, none).map_err(|e| LearnError::Gp(format!("{e}")))
+                })
             })
-        });
+            .collect::<Result<Vec<_>>>()?;
         Ok(Reference {
             members: Default::default(),
             inside: streams
                 .iter()
                 .map(|s| vec![false; s.len() - s.first])
                 .collect(),
-            earlier: [a?, b?, c?],
+            earlier,
         })
     }
 
@@ -842,16 +898,19 @@ impl Reference {
         (r0 < current).then_some((r0, j0))
     }
 
-    /// The largest latent variance per floor over the reference set: the current record's
+    /// The largest latent variance per channel over the reference set: the current record's
     /// points up to `j` outside the training set, and the earlier ones; `None` while empty.
-    fn max(&self, tracked: &[TrackedPoints; 3], r: usize, j: usize) -> [Option<f64>; 3] {
-        [0, 1, 2].map(|f| {
-            let current = (0..=j)
-                .filter(|&i| !self.inside[r][i])
-                .map(|i| tracked[f].latent_variance(i));
-            let earlier = (0..self.earlier[f].len()).map(|i| self.earlier[f].latent_variance(i));
-            current.chain(earlier).reduce(f64::max)
-        })
+    fn max(&self, tracked: &[TrackedPoints], r: usize, j: usize) -> Vec<Option<f64>> {
+        (0..tracked.len())
+            .map(|f| {
+                let current = (0..=j)
+                    .filter(|&i| !self.inside[r][i])
+                    .map(|i| tracked[f].latent_variance(i));
+                let earlier =
+                    (0..self.earlier[f].len()).map(|i| self.earlier[f].latent_variance(i));
+                current.chain(earlier).reduce(f64::max)
+            })
+            .collect()
     }
 }
 
@@ -870,6 +929,7 @@ pub fn run_mode(
         return Err(LearnError::Setup("no record to learn from".into()));
     };
     let mut floors = initial.clone();
+    let m = floors.gps.len();
     let mut timing = Timing::default();
     let mut refits = Vec::new();
     let mut schedule = RefitSchedule::new(options, floors.len());
@@ -882,10 +942,10 @@ pub fn run_mode(
         reference.learned(0, j, false, 0);
     }
     timing.tracking_setup += clock.elapsed().as_secs_f64();
-    timing.rebuilds += 3;
-    let initial_threshold = match mode {
+    timing.rebuilds += m;
+    let initial_threshold: Vec<f64> = match mode {
         Mode::Fixed => match fixed {
-            Some(fixed) => fixed.values,
+            Some(fixed) => fixed.values.clone(),
             None => {
                 return Err(LearnError::Setup(
                     "the fixed mode needs its threshold".into(),
@@ -896,16 +956,18 @@ pub fn run_mode(
             // Held out: the initial points themselves are interpolated (V(f) ≈ 0 there).
             let held_out = (initial_end - first.first)
                 ..(initial_end + options.initial).min(first.len()) - first.first;
-            [0, 1, 2].map(|f| {
-                held_out
-                    .clone()
-                    .map(|j| tracked[f].latent_variance(j))
-                    .fold(0.0, f64::max)
-            })
+            (0..m)
+                .map(|f| {
+                    held_out
+                        .clone()
+                        .map(|j| tracked[f].latent_variance(j))
+                        .fold(0.0, f64::max)
+                })
+                .collect()
         }
-        Mode::Uniform => [f64::INFINITY; 3],
+        Mode::Uniform => vec![f64::INFINITY; m],
     };
-    let mut supervisor = Supervisor::new(mode, initial_threshold, options.uniform_every);
+    let mut supervisor = Supervisor::new(mode, initial_threshold.clone(), options.uniform_every);
     let mut records = Vec::new();
     let mut total = 0;
     for (r, stream) in streams.iter().enumerate() {
@@ -916,43 +978,49 @@ pub fn run_mode(
         if r > 0 {
             let clock = std::time::Instant::now();
             tracked = track(&floors, stream)?;
-            timing.rebuilds += 3;
+            timing.rebuilds += m;
             timing.tracking_setup += clock.elapsed().as_secs_f64();
         }
-        let nmse_now = |tracked: &[TrackedPoints; 3]| {
-            stream.nmse(&corrected_from_means(
-                stream,
-                [0, 1, 2].map(|f| tracked[f].means()),
-                options.target,
-            ))
+        let nmse_now = |tracked: &[TrackedPoints]| {
+            stream.nmse(&corrected_from_means(stream, tracked, options.target))
         };
         let nmse_physics = stream.nmse(&stream.physics);
         let nmse_before = nmse_now(&tracked);
         let mut nmse_after = vec![NmsePoint {
             update: 0,
             time: stream.time[start.min(stream.len() - 1)],
-            nmse: nmse_before,
+            nmse: nmse_before.clone(),
         }];
         let mut query_indices = Vec::new();
-        let mut trace = Trace::default();
-        let mut outputs = [0.0; Supervisor::OUTPUTS];
+        let mut trace = Trace {
+            channels: stream.layout.names(),
+            latent: vec![Vec::new(); m],
+            threshold: vec![Vec::new(); m],
+            ..Trace::default()
+        };
+        let mut outputs = vec![0.0; m + 1];
         for t in start..stream.len() {
             let j = t - seen_from;
-            let latent = [0, 1, 2].map(|f| tracked[f].latent_variance(j));
+            let latent: Vec<f64> = (0..m).map(|f| tracked[f].latent_variance(j)).collect();
             supervisor.evaluate(stream.time[t], &latent, &mut outputs)?;
             trace.time.push(stream.time[t]);
-            for f in 0..3 {
+            for f in 0..m {
                 trace.latent[f].push(latent[f]);
                 trace.threshold[f].push(outputs[1 + f]);
             }
             if outputs[0] < 0.5 {
                 continue;
             }
-            // Query: learn the point on all three floors; refit on the schedule.
+            // Query: learn the point on every channel; refit on the schedule.
             let clock = std::time::Instant::now();
             let before = floors.len();
             floors
-                .learn(&stream.inputs[t], stream.targets[t], 0, MAX_TRAINING_POINTS)
+                .learn(
+                    &stream.inputs[t],
+                    &stream.targets[t],
+                    0,
+                    MAX_TRAINING_POINTS,
+                )
                 .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
             query_indices.push(t);
             let dropped = reference.learned(r, j, floors.len() == before, r);
@@ -974,9 +1042,11 @@ pub fn run_mode(
                     refit_due || floors.len() * reference.earlier[0].len() >= PARALLEL_TRACKING;
                 timing.rebuilds += sync(&mut reference.earlier, &floors, parallel)?;
                 if let Some((r0, j0)) = dropped {
-                    let x = Inputs::from_rows(&[&streams[r0].inputs[streams[r0].first + j0]])
-                        .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
-                    for f in 0..3 {
+                    for f in 0..m {
+                        let at = streams[r0].first + j0;
+                        let x =
+                            Inputs::from_rows(&streams[r0].channel_inputs(&floors, f, at..at + 1))
+                                .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
                         reference.earlier[f]
                             .extend(trained(&floors.gps[f])?, &x)
                             .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
@@ -989,7 +1059,8 @@ pub fn run_mode(
                 // reference set; an empty one leaves the threshold as it is.
                 let old = supervisor.threshold();
                 let max = reference.max(&tracked, r, j);
-                supervisor.update_threshold([0, 1, 2].map(|f| max[f].unwrap_or(old[f])));
+                supervisor
+                    .update_threshold((0..m).map(|f| max[f].unwrap_or(old[f])).collect::<Vec<_>>());
             }
             if query_indices.len() % options.nmse_every.max(1) == 0 {
                 nmse_after.push(NmsePoint {
@@ -1014,21 +1085,25 @@ pub fn run_mode(
                 timing.rebuilds += sync(&mut reference.earlier, &floors, true)?;
                 let old = supervisor.threshold();
                 let max = reference.max(&tracked, r, stream.len() - 1 - seen_from);
-                supervisor.update_threshold([0, 1, 2].map(|f| max[f].unwrap_or(old[f])));
+                supervisor
+                    .update_threshold((0..m).map(|f| max[f].unwrap_or(old[f])).collect::<Vec<_>>());
             }
             timing.tracking += clock.elapsed().as_secs_f64();
         }
         if adaptive && r + 1 < streams.len() {
             // The record's points outside the training set join the earlier ones.
             let clock = std::time::Instant::now();
-            let outside: Vec<&[f64]> = (0..stream.len() - seen_from)
+            let outside: Vec<usize> = (0..stream.len() - seen_from)
                 .filter(|&i| !reference.inside[r][i])
-                .map(|i| stream.inputs[seen_from + i].as_slice())
                 .collect();
             if !outside.is_empty() {
-                let x = Inputs::from_rows(&outside)
-                    .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
-                for f in 0..3 {
+                for f in 0..m {
+                    let rows: Vec<Vec<f64>> = outside
+                        .iter()
+                        .map(|&i| floors.input_of(f, &stream.inputs[seen_from + i]))
+                        .collect();
+                    let x = Inputs::from_rows(&rows)
+                        .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
                     reference.earlier[f]
                         .extend(trained(&floors.gps[f])?, &x)
                         .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
@@ -1036,22 +1111,18 @@ pub fn run_mode(
             }
             timing.tracking_setup += clock.elapsed().as_secs_f64();
         }
-        let final_prediction = corrected_from_means(
-            stream,
-            [0, 1, 2].map(|f| tracked[f].means()),
-            options.target,
-        );
+        let final_prediction = corrected_from_means(stream, &tracked, options.target);
         let final_nmse = stream.nmse(&final_prediction);
         // The last point is the record's final GPs (after an end-of-record refit).
         match nmse_after.last_mut() {
-            Some(last) if last.update == query_indices.len() => last.nmse = final_nmse,
+            Some(last) if last.update == query_indices.len() => last.nmse = final_nmse.clone(),
             _ => nmse_after.push(NmsePoint {
                 update: query_indices.len(),
                 time: query_indices
                     .last()
                     .map(|&t| stream.time[t])
                     .unwrap_or(stream.time[start.min(stream.len() - 1)]),
-                nmse: final_nmse,
+                nmse: final_nmse.clone(),
             }),
         }
         trace.corrected = final_prediction;
@@ -1185,13 +1256,30 @@ pub fn table(results: &[ModeResult]) -> String {
     for r in results {
         out.push_str(&format!("{:>width$.2}", r.seconds));
     }
-    out.push_str("\n\nfinal NMSE % (floors 1/2/3); physics only in the first column\n");
+    let channels = results
+        .first()
+        .and_then(|r| r.records.first())
+        .map(|r| r.trace.channels.clone())
+        .unwrap_or_default();
+    if channels.is_empty() || channels == ["acc1", "acc2", "acc3"] {
+        out.push_str("\n\nfinal NMSE % (floors 1/2/3); physics only in the first column\n");
+    } else {
+        out.push_str(&format!(
+            "\n\nfinal NMSE % ({}); physics only in the first column\n",
+            channels.join("/")
+        ));
+    }
     out.push_str(&format!("{:<12}{:>width$}", "", "physics"));
     for r in results {
         out.push_str(&format!("{:>width$}", r.mode));
     }
     out.push('\n');
-    let fmt = |n: &[f64; 3]| format!("{:.2}/{:.2}/{:.2}", n[0], n[1], n[2]);
+    let fmt = |n: &[f64]| {
+        n.iter()
+            .map(|v| format!("{v:.2}"))
+            .collect::<Vec<_>>()
+            .join("/")
+    };
     for k in 0..records {
         out.push_str(&format!("{:<12}", format!("record {}", k + 1)));
         if let Some(r) = results.first() {
@@ -1278,9 +1366,7 @@ pub fn learned_twin(
     result: &ModeResult,
     options: &LearnOptions,
 ) -> Result<Twin, crate::workflows::train::TrainError> {
-    let trained = result
-        .final_gps
-        .to_training_file(options.lags, options.target);
+    let trained = result.final_gps.to_training(options.target);
     crate::workflows::train::with_corrector(twin, &trained)
 }
 

@@ -1,22 +1,30 @@
 //! `twin train`: fit the Gaussian-process bias corrector (reference paper §4.2) on a record and
 //! put it, connected behind the physics FMU, into the twin.
 //!
+//! Any building and any measured channels: the corrector's layout is the record's response
+//! channels (`acc<i>`, `vel<i>`, `disp<i>`) and its excitation (`force` or `ground_acc`), one GP
+//! per channel whose target is that channel's discrepancy (or measured value) in its own
+//! quantity, its inputs lags of the physics predictions of the channel and its nearest measured
+//! neighbours and of the excitation (`fmu_gp_corrector::layout`: at most 4 (q + 1) inputs). On
+//! the paper's rig (force, acc1..3) that is the three GPs on all four columns, as always.
+//!
 //! The corrector FMU's own code builds the training set (`lagged_inputs`, the target form) and
-//! fits the three GPs (`Floors::from_training`: type-II ML, the floors in parallel), so what is
+//! fits the GPs (`Floors::from_training`: type-II ML, the channels in parallel), so what is
 //! trained here is exactly what the FMU computes when it runs. The fitted set, with its
-//! hyperparameters, goes into a copy of the corrector FMU as `resources/training.json`.
+//! hyperparameters and layout, goes into a copy of the corrector FMU as
+//! `resources/training.json`, from which the FMU takes its variables at instantiation.
 
 use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::Arc;
 
-use fmu_gp_corrector::{lagged_inputs, Floors, Sample, TargetForm, TrainingFile};
+use ::structure::channel::{Channel, ExcitationKind};
+use fmu_gp_corrector::layout::band_name;
+use fmu_gp_corrector::{lagged_inputs, Floors, Layout, LayoutTraining, TargetForm};
 
 use crate::twin::data::Measurement;
-use crate::twin::run::{run_twin, RunError};
-use crate::twin::{
-    find_fmu, Component, Connection, ParameterValue, Twin, TwinError, OUTPUTS, PHYSICS,
-};
+use crate::twin::run::{compare_prediction, run_twin, Prediction, RunError};
+use crate::twin::{find_fmu, Component, Connection, ParameterValue, Twin, TwinError, PHYSICS};
 
 /// The corrector component's name and its FMU file in the twin.
 pub const CORRECTOR: &str = "corrector";
@@ -60,21 +68,37 @@ impl Default for TrainOptions {
 pub struct TrainSummary {
     pub points: usize,
     pub lags: usize,
+    /// The largest input dimension of a channel's GP.
     pub inputs: usize,
     pub target: &'static str,
-    /// Per floor: signal variance, noise variance, the three shortest length scales.
+    /// Per channel (the layout's order): signal variance, noise variance, the three shortest
+    /// length scales.
     pub hyperparameters: Vec<serde_json::Value>,
     pub seconds: f64,
 }
 
-/// The physics-only version of a twin (a trained twin's corrector taken out).
+/// The physics-only version of a twin (a trained twin's corrector taken out): the channels the
+/// corrector gave out are the physics component's again.
 pub fn physics_only(twin: &Twin) -> Twin {
     let mut out = twin.duplicate();
+    let corrected: Vec<String> = out
+        .connections
+        .iter()
+        .filter(|c| {
+            c.start_element.as_deref() == Some(CORRECTOR)
+                && c.end_element.is_none()
+                && matches!(
+                    Channel::parse(&c.end_connector),
+                    Some(Channel::Response { .. })
+                )
+        })
+        .map(|c| c.end_connector.clone())
+        .collect();
     out.components.retain(|c| c.name != CORRECTOR);
     out.connections.retain(|c| {
         c.start_element.as_deref() != Some(CORRECTOR) && c.end_element.as_deref() != Some(CORRECTOR)
     });
-    for output in OUTPUTS {
+    for output in corrected {
         if !out
             .connections
             .iter()
@@ -82,24 +106,89 @@ pub fn physics_only(twin: &Twin) -> Twin {
         {
             out.connections.push(Connection {
                 start_element: Some(PHYSICS.into()),
-                start_connector: output.into(),
+                start_connector: output.clone(),
                 end_element: None,
-                end_connector: output.into(),
+                end_connector: output,
             });
         }
     }
     out
 }
 
-/// The GP inputs (lags of `samples`) and targets after the transient, every `stride`-th sample,
-/// and the three GPs fitted on them.
+/// The corrector's layout for a record: its response channels and its excitation.
+pub fn layout_of(data: &Measurement) -> Result<Layout, TrainError> {
+    let excitation = match data.excitation.channel {
+        Channel::Excitation(kind) => kind,
+        _ => ExcitationKind::Force,
+    };
+    Layout {
+        channels: data.responses.iter().map(|s| s.channel).collect(),
+        excitation,
+    }
+    .checked()
+    .map_err(|e| TrainError::Setup(format!("{}: {e}", data.path.display())))
+}
+
+/// A record's channels as the corrector sees them: per channel in the layout's order, the
+/// physics prediction and the measured values (SI), and per sample the physics predictions
+/// followed by the excitation.
+pub struct Channels {
+    pub layout: Layout,
+    pub physics: Vec<Vec<f64>>,
+    pub measured: Vec<Vec<f64>>,
+    pub samples: Vec<Vec<f64>>,
+}
+
+impl Channels {
+    /// From a physics-only prediction of `data`.
+    pub fn of(data: &Measurement, prediction: &Prediction) -> Result<Channels, TrainError> {
+        let layout = layout_of(data)?;
+        let mut physics = Vec::new();
+        let mut measured = Vec::new();
+        for &c in &layout.channels {
+            let p = prediction.get(c).ok_or_else(|| {
+                TrainError::Setup(format!("the physics run did not predict {}", c.name()))
+            })?;
+            physics.push(p.values.clone());
+            measured.push(data.channel(c).map(<[f64]>::to_vec).ok_or_else(|| {
+                TrainError::Setup(format!("{}: no column {}", data.path.display(), c.name()))
+            })?);
+        }
+        let samples = (0..data.len())
+            .map(|k| {
+                physics
+                    .iter()
+                    .map(|p| p[k])
+                    .chain(std::iter::once(data.excitation.values[k]))
+                    .collect()
+            })
+            .collect();
+        Ok(Channels {
+            layout,
+            physics,
+            measured,
+            samples,
+        })
+    }
+
+    /// The GP targets of sample `k`, one per channel.
+    pub fn targets(&self, k: usize, target: TargetForm) -> Vec<f64> {
+        self.measured
+            .iter()
+            .zip(&self.physics)
+            .map(|(m, p)| target.target(m[k], p[k]))
+            .collect()
+    }
+}
+
+/// The GP inputs (lags of the samples) and targets after the transient, every `stride`-th
+/// sample, and the channels' GPs fitted on them.
 fn fit_floors(
     data: &Measurement,
-    samples: &[Sample],
-    physics: &[Vec<f64>; 3],
+    channels: &Channels,
     options: &TrainOptions,
 ) -> Result<Floors, TrainError> {
-    let inputs = lagged_inputs(samples, options.lags);
+    let inputs = lagged_inputs(&channels.samples, options.lags);
     let first = crate::evaluation::stats::first_after_transient(&data.time, options.transient)
         .max(options.lags);
     if data.len() <= first + 10 {
@@ -110,13 +199,15 @@ fn fit_floors(
         )));
     }
     let used: Vec<usize> = (first..data.len()).step_by(options.stride.max(1)).collect();
-    let file = TrainingFile {
+    let file = LayoutTraining {
+        channels: channels.layout.names(),
+        excitation: channels.layout.excitation_name(),
         lags: options.lags,
         target: options.target,
         inputs: used.iter().map(|&k| inputs[k].clone()).collect(),
         targets: used
             .iter()
-            .map(|&k| [0, 1, 2].map(|f| options.target.target(data.acc(f)[k], physics[f][k])))
+            .map(|&k| channels.targets(k, options.target))
             .collect(),
         hyperparameters: None,
     };
@@ -128,12 +219,13 @@ fn fit_floors(
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct LagScore {
     pub lags: usize,
-    /// Negative log marginal likelihood per floor at the type-II ML hyperparameters.
-    pub nlml: [f64; 3],
+    /// Negative log marginal likelihood per channel (the layout's order) at the type-II ML
+    /// hyperparameters.
+    pub nlml: Vec<f64>,
     pub total: f64,
 }
 
-/// Choose the number of lags as the reference paper did: fit the three GPs for each candidate
+/// Choose the number of lags as the reference paper did: fit the channels' GPs for each candidate
 /// `q` on the same samples and targets (only the inputs differ, so the marginal likelihoods are
 /// comparable) and take the lowest total negative log marginal likelihood. Returns the scores,
 /// best first.
@@ -147,42 +239,37 @@ pub fn select_lags(
         return Err(TrainError::Setup("no lag count to choose from".into()));
     }
     let physics = physics_only(twin);
-    let acc = run_twin(&physics, data, |_, _| {})?
-        .accs()
-        .map(<[f64]>::to_vec);
-    let samples = physics_samples(data, &acc);
+    let prediction = run_twin(&physics, data, |_, _| {})?;
+    let channels = Channels::of(data, &prediction)?;
     // The same samples for every q: the transient cut at the largest q.
     let largest = candidates.iter().copied().max().unwrap_or(1);
     let mut scores = Vec::new();
     for &q in candidates {
         let floors = fit_floors(
             data,
-            &samples,
-            &acc,
+            &channels,
             &TrainOptions {
                 lags: q,
                 transient: options.transient.max(largest as f64 * data.dt),
                 ..options.clone()
             },
         )?;
-        let nlml = [0, 1, 2].map(|f| match &floors.gps[f] {
-            fmu_gp_corrector::FloorGp::Trained(gp) => gp.negative_log_marginal_likelihood(),
-            fmu_gp_corrector::FloorGp::Prior(_) => f64::INFINITY,
-        });
+        let nlml: Vec<f64> = floors
+            .gps
+            .iter()
+            .map(|g| match g {
+                fmu_gp_corrector::FloorGp::Trained(gp) => gp.negative_log_marginal_likelihood(),
+                fmu_gp_corrector::FloorGp::Prior(_) => f64::INFINITY,
+            })
+            .collect();
         scores.push(LagScore {
             lags: q,
-            nlml,
             total: nlml.iter().sum(),
+            nlml,
         });
     }
     scores.sort_by(|a, b| a.total.total_cmp(&b.total));
     Ok(scores)
-}
-
-fn physics_samples(data: &Measurement, acc: &[Vec<f64>; 3]) -> Vec<Sample> {
-    (0..data.len())
-        .map(|k| [acc[0][k], acc[1][k], acc[2][k], data.force()[k]])
-        .collect()
 }
 
 /// Fit the corrector on `data` and return the twin with it.
@@ -191,19 +278,30 @@ pub fn train(
     data: &Measurement,
     options: &TrainOptions,
 ) -> Result<(Twin, TrainSummary), TrainError> {
+    train_with_physics(twin, data, options).map(|(t, s, _)| (t, s))
+}
+
+/// [`train`], also giving the physics-only prediction of `data` it trained on.
+fn train_with_physics(
+    twin: &Twin,
+    data: &Measurement,
+    options: &TrainOptions,
+) -> Result<(Twin, TrainSummary, Prediction), TrainError> {
     let started = std::time::Instant::now();
     let physics = physics_only(twin);
-    let acc = run_twin(&physics, data, |_, _| {})?
-        .accs()
-        .map(<[f64]>::to_vec);
-    let samples = physics_samples(data, &acc);
-    let floors = fit_floors(data, &samples, &acc, options)?;
-    let trained = floors.to_training_file(options.lags, options.target);
+    let prediction = run_twin(&physics, data, |_, _| {})?;
+    let channels = Channels::of(data, &prediction)?;
+    let floors = fit_floors(data, &channels, options)?;
+    let trained = floors.to_training(options.target);
+    let layout = &channels.layout;
 
     let summary = TrainSummary {
         points: trained.inputs.len(),
         lags: options.lags,
-        inputs: trained.input_dimension(),
+        inputs: (0..layout.channels.len())
+            .map(|j| layout.input_dimension_of(j, options.lags))
+            .max()
+            .unwrap_or(0),
         target: options.target.name(),
         hyperparameters: trained
             .hyperparameters
@@ -218,13 +316,18 @@ pub fn train(
         seconds: started.elapsed().as_secs_f64(),
     };
 
-    Ok((with_corrector(twin, &trained)?, summary))
+    Ok((with_corrector(twin, &trained)?, summary, prediction))
 }
 
-/// `twin`'s physics with a corrector behind it that carries `trained` (training set and
-/// hyperparameters) in a copy of the corrector FMU: its outputs become the twin's `acc1..3`,
-/// `latent_var1..3` and `sd1..3`. A corrector already in `twin` is replaced.
-pub fn with_corrector(twin: &Twin, trained: &TrainingFile) -> Result<Twin, TrainError> {
+/// `twin`'s physics with a corrector behind it that carries `trained` (training set,
+/// hyperparameters and layout) in a copy of the corrector FMU: the excitation goes in, each
+/// channel's physics prediction goes in, and its corrected value, latent variance and
+/// predictive sd (`acc<i>`, `latent_var<i>`, `sd<i>`; `vel2`, `latent_var_vel2`, `sd_vel2`)
+/// become the twin's outputs. A corrector already in `twin` is replaced.
+pub fn with_corrector(twin: &Twin, trained: &LayoutTraining) -> Result<Twin, TrainError> {
+    let layout = trained
+        .layout()
+        .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
     let physics = physics_only(twin);
     // A copy of the corrector FMU carrying the training set.
     let scratch = tempfile::Builder::new()
@@ -232,8 +335,12 @@ pub fn with_corrector(twin: &Twin, trained: &TrainingFile) -> Result<Twin, Train
         .tempdir()
         .map_err(|e| TrainError::Setup(format!("temporary directory: {e}")))?;
     let fmu_path = scratch.path().join(CORRECTOR_FMU);
-    let json = serde_json::to_vec(&trained)
-        .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
+    // The paper rig's file in its own format (no channels, no excitation).
+    let json = match trained.to_rig() {
+        Some(rig) => serde_json::to_vec(&rig),
+        None => serde_json::to_vec(&trained),
+    }
+    .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
     with_resource(
         &find_fmu(CORRECTOR_FMU)?,
         &fmu_path,
@@ -258,42 +365,34 @@ pub fn with_corrector(twin: &Twin, trained: &TrainingFile) -> Result<Twin, Train
         fmu_path,
         parameters,
     });
-    // The corrector's outputs replace the physics accelerations as the twin's outputs.
+    // The corrector's outputs replace the physics predictions as the twin's outputs.
+    let names = layout.names();
     out.connections
-        .retain(|c| !(c.end_element.is_none() && OUTPUTS.contains(&c.end_connector.as_str())));
+        .retain(|c| !(c.end_element.is_none() && names.contains(&c.end_connector)));
     let link = |from: Option<&str>, a: &str, to: Option<&str>, b: &str| Connection {
         start_element: from.map(str::to_owned),
         start_connector: a.into(),
         end_element: to.map(str::to_owned),
         end_connector: b.into(),
     };
+    let excitation = layout.excitation_name();
     out.connections
-        .push(link(None, "force", Some(CORRECTOR), "force"));
-    for f in 1..=3 {
+        .push(link(None, &excitation, Some(CORRECTOR), &excitation));
+    for c in &layout.channels {
+        let name = c.name();
         out.connections.push(link(
             Some(PHYSICS),
-            &format!("acc{f}"),
+            &name,
             Some(CORRECTOR),
-            &format!("physics_acc{f}"),
+            &format!("physics_{name}"),
         ));
-        out.connections.push(link(
-            Some(CORRECTOR),
-            &format!("acc{f}"),
-            None,
-            &format!("acc{f}"),
-        ));
-        out.connections.push(link(
-            Some(CORRECTOR),
-            &format!("latent_var{f}"),
-            None,
-            &format!("latent_var{f}"),
-        ));
-        out.connections.push(link(
-            Some(CORRECTOR),
-            &format!("sd{f}"),
-            None,
-            &format!("sd{f}"),
-        ));
+        out.connections
+            .push(link(Some(CORRECTOR), &name, None, &name));
+        for prefix in ["latent_var", "sd"] {
+            let band = band_name(prefix, c);
+            out.connections
+                .push(link(Some(CORRECTOR), &band, None, &band));
+        }
     }
     Ok(out)
 }
@@ -376,13 +475,16 @@ impl LagSelection {
 }
 
 /// What `twin train` computes: the twin with its corrector, the training's summary, the lag
-/// selection's scores (best first; empty without one) and the corrected twin's NMSE % per
-/// floor on the training record.
+/// selection's scores (best first; empty without one), the corrected twin's NMSE % per
+/// channel on the training record and the physics alone's.
 pub struct Trained {
     pub twin: Twin,
     pub summary: TrainSummary,
     pub selection: Vec<LagScore>,
-    pub nmse: [f64; 3],
+    /// The corrector's channels, in its order (that of `nmse` and the per-channel lists).
+    pub channels: Vec<String>,
+    pub nmse: Vec<f64>,
+    pub nmse_physics: Vec<f64>,
 }
 
 /// `twin train` as a whole: the lags chosen first when `selection` is given (overriding
@@ -409,12 +511,25 @@ pub fn train_selected(
         )?;
         options.lags = scores[0].lags;
     }
-    let (trained, summary) = train(twin, data, &options)?;
-    let nmse = crate::twin::run::nmse_on(&trained, data, options.transient)?;
+    let (trained, summary, physics) = train_with_physics(twin, data, &options)?;
+    let layout = layout_of(data)?;
+    let nmse_per_channel = |twin: &Twin, prediction: Prediction| -> Result<Vec<f64>, TrainError> {
+        let compared = compare_prediction(twin, data, options.transient, prediction)?;
+        Ok(layout
+            .channels
+            .iter()
+            .map(|&c| compared.comparison.nmse_of(c).unwrap_or(f64::NAN))
+            .collect())
+    };
+    let nmse_physics = nmse_per_channel(&physics_only(twin), physics)?;
+    let corrected = run_twin(&trained, data, |_, _| {})?;
+    let nmse = nmse_per_channel(&trained, corrected)?;
     Ok(Trained {
         twin: trained,
         summary,
         selection: scores,
+        channels: layout.names(),
         nmse,
+        nmse_physics,
     })
 }
