@@ -301,3 +301,58 @@ fn a_floor_the_twin_lacks_or_the_wrong_excitation_is_refused_naming_the_column()
         assert!(!alerts.exists(), "{header}: refused before any alert");
     }
 }
+
+/// A watcher stopped while the band's reference is still being taken (the first samples held,
+/// the prior's sums under way: 400 samples, 7.8 s) and restarted on its checkpoint gives the
+/// alerts of one uninterrupted run on the changed five-storey stream. (The first run reads its
+/// part to the end; its `end` alert is taken out of the file, as if it had been killed there.)
+#[test]
+fn a_five_storey_watch_resumes_from_its_checkpoint_during_the_band_s_reference() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let twin = five_storey_twin(d);
+    let changed = stream(d, "changed", "acc1,acc3,acc5", "acc=g", true);
+    let text = std::fs::read_to_string(&changed).expect("record");
+    let lines: Vec<&str> = text.lines().collect();
+    let part = d.join("part.csv");
+    std::fs::write(&part, lines[..401].join("\n") + "\n").expect("write");
+    let checkpoint = d.join("checkpoint.json");
+    let alerts = d.join("resumed.jsonl");
+    let args = ["--checkpoint", checkpoint.to_str().expect("utf-8")];
+    let first = watch(&twin, &part, &alerts, &args);
+    assert_eq!(first.len(), 1, "only the end: {first:?}");
+    let saved: Value =
+        serde_json::from_str(&std::fs::read_to_string(&checkpoint).expect("checkpoint"))
+            .expect("json");
+    assert_eq!(saved["samples"], 400);
+    assert!(
+        saved["held"].as_array().expect("held samples").len() > 100,
+        "the samples wait for the band's reference"
+    );
+    std::fs::write(&alerts, "").expect("the end taken out");
+    let resumed = watch(&twin, &changed, &alerts, &args);
+    let once = watch(&twin, &changed, &d.join("once.jsonl"), &[]);
+    let strip = |alerts: &[Value]| -> Vec<Value> {
+        alerts
+            .iter()
+            .map(|a| {
+                let mut a = a.clone();
+                if let Value::Object(m) = &mut a {
+                    for key in [
+                        "samples_per_second",
+                        "real_time_factor",
+                        "latency_median_us",
+                        "latency_p99_us",
+                        "samples_this_run",
+                    ] {
+                        m.remove(key);
+                    }
+                }
+                a
+            })
+            .collect()
+    };
+    assert!(!of_kind(&once, "failing").is_empty());
+    assert_eq!(strip(&resumed), strip(&once));
+    assert_eq!(resumed.last().expect("end")["samples_this_run"], 3072 - 400);
+}

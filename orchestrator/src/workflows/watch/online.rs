@@ -491,4 +491,66 @@ mod tests {
             }
         }
     }
+
+    /// Any channel set: a velocity and an acceleration of other floors (another quantity, its
+    /// own band), in the record's order — the online windows, their channels and floors are
+    /// `compare`'s.
+    #[test]
+    fn the_online_windows_are_compare_s_on_any_channels() {
+        let dt = 0.005;
+        let time: Vec<f64> = (0..2000).map(|k| k as f64 * dt).collect();
+        let channels: Vec<Channel> = ["vel4", "acc2"]
+            .iter()
+            .map(|n| Channel::parse(n).expect("a channel"))
+            .collect();
+        let predicted: Vec<Vec<f64>> = vec![
+            time.iter().map(|t| 0.01 * (3.0 * t).sin()).collect(),
+            time.iter().map(|t| (5.0 * t).cos()).collect(),
+        ];
+        let mut measured = predicted.clone();
+        // The velocity leaves its band (sd 1e-4) at 4.0–4.1 s, the acceleration (sd 0.01) at
+        // 7.0–7.2 s, both at 8.5–8.6 s.
+        for (c, from, to, offset) in [
+            (0, 800, 820, 3e-3),
+            (1, 1400, 1440, 0.5),
+            (0, 1700, 1720, -3e-3),
+            (1, 1700, 1720, 0.5),
+        ] {
+            for v in &mut measured[c][from..=to] {
+                *v += offset;
+            }
+        }
+        let noise = [1e-8, 1e-4];
+        let options = CompareOptions::default();
+        let batch = compare(
+            &time, &channels, &measured, &predicted, &noise, None, options,
+        );
+        let mut d = Detector::new(Options::new(options, 2.0), channels.clone(), &noise, dt);
+        let mut events = Vec::new();
+        for k in 0..time.len() {
+            events.extend(d.push(
+                time[k],
+                &[measured[0][k], measured[1][k]],
+                &[predicted[0][k], predicted[1][k]],
+            ));
+        }
+        events.extend(d.finish_segment());
+        let online: Vec<FailingWindow> = events
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Closed {
+                    window,
+                    failing: true,
+                    ..
+                } => Some(window),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(online, batch.failing_windows);
+        assert_eq!(online.len(), 3, "{online:?}");
+        assert_eq!(online[0].channels, ["vel4"]);
+        assert_eq!(online[1].channels, ["acc2"]);
+        assert_eq!(online[2].channels, ["vel4", "acc2"]);
+        assert_eq!(online[2].floors, [2, 4]);
+    }
 }
