@@ -3,6 +3,11 @@
 //!
 //! What is computed, and the choices made where the paper leaves room:
 //!
+//! - **Any building, any channels**: the corrector has one GP per measured channel of the
+//!   records (`acc<i>`, `vel<i>`, `disp<i>`, under `force` or `ground_acc`;
+//!   `fmu_gp_corrector::layout`), each on its own bounded inputs; every record must measure the
+//!   same channels. What is said below of "the three floors" is the paper's rig (acc1..3), where
+//!   the numbers are those the three-floor code gave.
 //! - **Inputs and targets** are the corrector's own (`fmu_gp_corrector::lagged_inputs`,
 //!   `TargetForm::target`) from the physics-only twin run through FMI on each record, exactly as
 //!   `twin train` builds them. The first `transient` seconds of every record (the physics model
