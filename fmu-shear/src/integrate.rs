@@ -59,8 +59,8 @@ impl AsRef<[f64]> for Switches {
     }
 }
 
-/// The exact contact flows (`piecewise`), which serve the paper's three storeys: the fixed
-/// array steps them, a vector (any other structure) does not.
+/// The exact contact flows: the fixed array of the paper's three storeys steps them with
+/// `piecewise`, a vector (any other structure) with `piecewise_any`.
 pub trait Exact: Sized {
     fn exact_contacts(
         model: &mut ShearModel,
@@ -93,12 +93,23 @@ impl Exact for State {
 
 impl Exact for Vec<f64> {
     fn exact_contacts(
-        _model: &mut ShearModel,
-        _x0: &Vec<f64>,
-        _inputs: &StepInputs,
-        _h: f64,
+        model: &mut ShearModel,
+        x0: &Vec<f64>,
+        inputs: &StepInputs,
+        h: f64,
     ) -> Option<Vec<f64>> {
-        None
+        use crate::piecewise_any::AnyContactMaps;
+        if !AnyContactMaps::serves(model) {
+            return None;
+        }
+        if !model
+            .any_contact_maps
+            .as_ref()
+            .is_some_and(|m| m.fits(model, h))
+        {
+            model.any_contact_maps = Some(Box::new(AnyContactMaps::new(model, h)));
+        }
+        model.any_contact_maps.as_mut()?.advance(x0, inputs).ok()
     }
 }
 

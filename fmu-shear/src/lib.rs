@@ -7,13 +7,15 @@
 //! `linear`). The structure comes from `resources/structure.json` ([`model::StructureResource`])
 //! at `fmi2Instantiate`, the paper's rig (3 storeys, a force at floor 1) without it; each
 //! structure has its own variable table and GUID (`variables::table`). `g` is the optional-effect
-//! library (`effects/`), every effect off by default, in the paper's layout only.
+//! library (`effects/`) at every site of the structure, every effect off by default; contacts
+//! alone step exactly (`piecewise` on the paper's rig, `piecewise_any` on any structure).
 
 pub mod effects;
 pub mod integrate;
 pub mod linear;
 pub mod model;
 pub mod piecewise;
+pub mod piecewise_any;
 pub mod sensitivity;
 pub mod variables;
 

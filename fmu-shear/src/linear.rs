@@ -35,7 +35,14 @@ pub struct AccelerationRows {
 /// `k d + c ḋ`, `d = y_s − y_{s−1}`, pushes floor `s` back and floor `s − 1` forward. Adds the
 /// coefficients of that force (for the given `k` and `c`) to the acceleration rows, row `f`
 /// divided by `m_f`.
-fn add_storey(rows: &mut DMatrix<f64>, n: usize, s: usize, k: f64, c: f64, mass: &[f64]) {
+pub(crate) fn add_storey(
+    rows: &mut DMatrix<f64>,
+    n: usize,
+    s: usize,
+    k: f64,
+    c: f64,
+    mass: &[f64],
+) {
     let mut push = |floor: usize, sign: f64| {
         let inv_m = 1.0 / mass[floor];
         rows[(floor, s)] -= sign * k * inv_m;

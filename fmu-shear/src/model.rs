@@ -95,8 +95,8 @@ impl ShearParameters {
     }
 
     /// The reference paper's layout: three storeys, the force and the control force on floor 1.
-    /// The exact contact flows (`piecewise`) are written for it; the rest of the effect library
-    /// serves every layout.
+    /// Its steps with effects keep their fixed arrays (`piecewise` for contacts, to the bit as
+    /// before); every other layout steps vectors (`piecewise_any` for contacts).
     pub fn is_paper_layout(&self) -> bool {
         self.storeys() == structure::building::PAPER_STOREYS
             && self.excitation == Excitation::Force { floor: 1 }
@@ -152,6 +152,9 @@ pub struct ShearModel {
     /// The contact regions' flows, cached for the current parameters and step.
     #[serde(skip)]
     pub contact_maps: Option<Box<crate::piecewise::ContactMaps>>,
+    /// The same for any other structure (`piecewise_any`).
+    #[serde(skip)]
+    pub any_contact_maps: Option<Box<crate::piecewise_any::AnyContactMaps>>,
     /// The error-controlled path's next trial step, carried between communication steps (part
     /// of the state, so that a restored state steps on exactly).
     #[serde(default)]
@@ -184,6 +187,7 @@ impl ShearModel {
             step_map: None,
             integrator: Integrator::default(),
             contact_maps: None,
+            any_contact_maps: None,
             adaptive_step: 0.0,
             sensitivities: Default::default(),
             origin: None,
@@ -352,8 +356,9 @@ impl ShearModel {
     }
 
     /// A step with effects from `x0` (`[y, ẏ]`, a fixed array on the paper's rig, a vector
-    /// otherwise). The exact contact flows serve the paper's layout (`piecewise`); elsewhere
-    /// contacts are stepped by the error-controlled path, split at their kinks.
+    /// otherwise). Contacts alone step exactly: the paper's layout by `piecewise`, any other
+    /// by `piecewise_any` (up to `piecewise_any::MAX_EXACT_CONTACTS` contacts); other effects,
+    /// and more contacts, by the error-controlled path, split at their kinks.
     fn advance_with_effects<S: numerics::ode::OdeState + integrate::Exact>(
         &mut self,
         x0: &S,
@@ -368,7 +373,9 @@ impl ShearModel {
         if !contacts_alone && self.integrator == Integrator::ExactContactsElseFixed {
             return integrate::rk4_with_events(self, x0, inputs, h, self.params.substeps);
         }
-        if contacts_alone && self.params.is_paper_layout() {
+        if contacts_alone {
+            // The paper's rig steps its fixed arrays (`piecewise`), any other structure its
+            // vectors (`piecewise_any`, up to its number of contacts).
             if let Some(x) = S::exact_contacts(self, x0, inputs, h) {
                 return x;
             }

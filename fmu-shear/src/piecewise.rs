@@ -507,7 +507,7 @@ impl ContactMaps {
 /// The earliest θ ∈ (0, 1] where the cubic Hermite interpolant (values `p0`, `p1`, slopes per
 /// unit θ `m0`, `m1`) changes sign, if it does: bisection on the cubic, bracketed by the ends or
 /// by its extremum on the other side.
-fn hermite_root(p0: f64, p1: f64, m0: f64, m1: f64) -> Option<f64> {
+pub(crate) fn hermite_root(p0: f64, p1: f64, m0: f64, m1: f64) -> Option<f64> {
     let b = 3.0 * (p1 - p0) - 2.0 * m0 - m1;
     let c = 2.0 * (p0 - p1) + m0 + m1;
     let p = |t: f64| p0 + t * (m0 + t * (b + t * c));
@@ -558,7 +558,7 @@ fn hermite_root(p0: f64, p1: f64, m0: f64, m1: f64) -> Option<f64> {
 
 /// The smallest |p(θ)| of the cubic Hermite interpolant on θ ∈ [0, 1] (values `p0`, `p1`,
 /// slopes per unit θ `m0`, `m1`), 0 when it crosses zero.
-fn hermite_distance(p0: f64, p1: f64, m0: f64, m1: f64) -> f64 {
+pub(crate) fn hermite_distance(p0: f64, p1: f64, m0: f64, m1: f64) -> f64 {
     if hermite_crosses(p0, p1, m0, m1) {
         return 0.0;
     }
@@ -592,7 +592,7 @@ fn hermite_distance(p0: f64, p1: f64, m0: f64, m1: f64) -> f64 {
 /// Whether the cubic Hermite interpolant on θ ∈ [0, 1] with values `p0`, `p1` and slopes (per
 /// unit θ) `m0`, `m1` takes the other sign than `p0` somewhere inside (ends of the same sign).
 #[inline]
-fn hermite_crosses(p0: f64, p1: f64, m0: f64, m1: f64) -> bool {
+pub(crate) fn hermite_crosses(p0: f64, p1: f64, m0: f64, m1: f64) -> bool {
     let positive = p0 > 0.0;
     if (p1 > 0.0) != positive {
         return true;

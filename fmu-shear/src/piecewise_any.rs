@@ -1,0 +1,584 @@
+//! Exact stepping of gap contacts on any shear building: N storeys (1..=50), a force at floor K
+//! or ground acceleration, the control force at its floor, any set of enabled contacts (storey
+//! L joins floors L and L + 1, storey 0 the ground and floor 1; each closing on the positive,
+//! the negative or both sides) — the algorithm of [`crate::piecewise`] (the paper's rig, fixed
+//! arrays, kept for it to the bit) on nalgebra's dynamic matrices.
+//!
+//! **The flow.** Between the instants where a gap opens or closes every bumper's force is
+//! affine in its drift, so the model is linear in its *region* `r` (per enabled contact: open,
+//! closed on the positive side, closed on the negative side). With both inputs ramps over the
+//! communication step, `e(τ) = e₀ + ė τ` (the force at floor K or the ground acceleration) and
+//! `c(τ) = c₀ + ċ τ` (the control force), the state augmented with `(e, ė, c, ċ, 1)` obeys an
+//! autonomous linear system `ż = M_r z` (2N + 5 square: the storeys' springs and dampers, each
+//! closed bumper's stiffness added to its storey and its `∓k_c·gap` in the constant column,
+//! `b_e = M⁻¹e_K` or `−1`, `b_c = −M⁻¹e_cf`, the ramps' `ė`, `ċ` integrating into `e`, `c`).
+//! Its flow over δ is `exp(M_r δ)` (nalgebra's Padé approximant with scaling and squaring,
+//! accurate to rounding for these norms). A region's flows over `h / 2^l`, `l = 0..=DEPTH`, are
+//! built the first time the step needs that level (most steps use level 0 and the check level
+//! alone) and cached per region in a map keyed by the region's base-3 code over the enabled
+//! contacts; any piece `[k·2^{-l} h, (k+1)·2^{-l} h]` is then one 2N × (2N + 5) matrix–vector
+//! product (the inputs' values at the piece's start are in the augmented state).
+//!
+//! **The kinks.** As in `piecewise`: a step whose every switch (`d ∓ gap` of each enabled
+//! side) stays clear of zero over the whole step — the cubic Hermite interpolant of the switch
+//! from its values and slopes at both ends (the drift and its rate are in the state) at least
+//! twice its interpolation error bound from zero — is one product. Otherwise the step advances
+//! by pieces of `h / 2^L` (the region's check level, `ρ h / 2^L ≤ 1/4` with ρ a bound of the
+//! region's fastest rate), a piece accepted unless the region at its end differs or a switch's
+//! interpolant crosses zero inside it; a flagged piece's first crossing is located by the
+//! interpolant's root and one Newton step on the exact flow (checked: the region unchanged a
+//! tick before, changed at it) or, failing that, by bisection down to one tick `h / 2^DEPTH`.
+//! That tick is taken with the old region's flow and the step goes on from the new region.
+//!
+//! **The error, and why it is the paper path's.** Inside a region each piece is the exact flow
+//! to rounding; the error comes from the kinks alone, the same two sources as on the rig, with
+//! the same bounds, because nothing in the argument uses N, the excitation or the input
+//! columns:
+//! - *A located crossing* is past by at most one tick (`h / 2^24`, 1.2e-9 s at 51.2 Hz), over
+//!   which the bumper's force is taken from the old region: a force error of `k_c |ḋ| · tick`
+//!   at most, acting for one tick, per crossing.
+//! - *A graze* (a switch that leaves zero and returns inside one piece, ends of one sign) is
+//!   seen when the interpolant dips across zero. The drift is a combination of the region's
+//!   modes plus the response to the ramps; the latter is affine in time when `M_r`'s
+//!   state block is invertible, so the drift's fourth derivative is that of the modes, at most
+//!   `ρ⁴` times its amplitude, and the cubic Hermite interpolant's error over a piece `δ` is at
+//!   most `(ρ δ)⁴/384` of that amplitude (≤ 1e-5 of it at `ρ δ ≤ 1/4`). ρ bounds every rate for
+//!   any N: `M⁻¹K_r` and `M⁻¹C` are similar to symmetric positive semi-definite matrices (a
+//!   closed bumper adds a non-negative stiffness to its storey), so their eigenvalues are real,
+//!   non-negative and under their Gershgorin row sums, and an eigenvalue λ of
+//!   `λ² M + λ C + K_r` has `|λ| ≤ ρ(M⁻¹C) + √ρ(M⁻¹K_r)`. A graze shallower than that error is
+//!   the only kind missed, as on the rig. The whole-step test uses the same bound over `h`,
+//!   with the drift amplitude `√(2E/k_s)` that the energy `E` of the relative motion (kinetic,
+//!   storey springs, closed bumpers; the larger of the step's ends) allows storey s.
+//!
+//! So the measured errors match the rig's: `tests/contact_storeys.rs` gives them for N = 1, 2,
+//! 5, 10 under both excitations with contacts at low and high sites.
+//!
+//! **When it does not apply.** Each region visited costs its flows (up to DEPTH + 1 exponentials
+//! of a (2N + 5)-square matrix), worth it when a run keeps returning to a few regions. With more
+//! than [`MAX_EXACT_CONTACTS`] contacts enabled the regions a run may visit (3^m) are too many
+//! for a cache to pay, and the model steps them with the error-controlled path
+//! (`integrate::dopri5_with_events`); the cache holds at most [`MAX_CACHED_REGIONS`] regions and
+//! is emptied when it would grow past them (bounded memory: a level of a 50-storey region is
+//! 100 × 105 numbers).
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use nalgebra::DMatrix;
+
+use crate::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
+use crate::effects::Contact;
+use crate::linear::{same_step, AccelerationRows, StepInputs};
+use crate::model::{ShearModel, ShearParameters};
+use crate::piecewise::{hermite_crosses, hermite_distance, hermite_root, ExactError, DEPTH};
+
+/// The most contacts enabled at once that the exact path steps (3^8 possible regions); more go
+/// to the error-controlled path.
+pub const MAX_EXACT_CONTACTS: usize = 8;
+/// The most regions cached at once; the cache is emptied when a new one would pass it.
+pub const MAX_CACHED_REGIONS: usize = 64;
+/// A piece between checks covers at most this much of the fastest mode's phase (radians).
+const CHECK_PHASE: f64 = 0.25;
+/// Columns of the augmented system after the 2N states: `e, ė, c, ċ, 1`.
+const EXTRA: usize = 5;
+
+/// A region's code is already a well-spread integer: hash it as itself.
+#[derive(Default)]
+struct CodeHasher(u64);
+
+impl Hasher for CodeHasher {
+    fn finish(&self) -> u64 {
+        // Spread the base-3 digits over the bits the table uses.
+        self.0.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = (self.0 << 8) | u64::from(*b);
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = i;
+    }
+}
+
+type RegionMap = HashMap<u64, Region, BuildHasherDefault<CodeHasher>>;
+
+#[derive(Clone, Debug)]
+struct Region {
+    /// `M_r`, 2N + 5 square.
+    matrix: DMatrix<f64>,
+    /// `levels[l]`: the first 2N rows of `exp(M_r h / 2^l)`, row-major, built when first used.
+    levels: Vec<Option<Box<[f64]>>>,
+    /// Pieces between checks are `h / 2^check_level`.
+    check_level: u32,
+    /// `(ρ h)⁴ / 384`: the cubic Hermite interpolant's error over the whole step, per unit of
+    /// drift amplitude.
+    whole_step_error: f64,
+}
+
+/// What the cached flows were built for.
+#[derive(Clone, Debug)]
+struct Key {
+    step: f64,
+    params: ShearParameters,
+    /// The enabled contacts: (storey, law), storey 0 the ground's.
+    contacts: Vec<(usize, Contact)>,
+}
+
+/// The cached flows of the regions visited so far, for one structure, set of contacts and step.
+#[derive(Clone, Debug)]
+pub struct AnyContactMaps {
+    key: Key,
+    /// Storeys.
+    n: usize,
+    regions: RegionMap,
+}
+
+fn enabled_contacts(model: &ShearModel) -> impl Iterator<Item = (usize, &Contact)> + '_ {
+    let lib = &model.effects.contact;
+    lib.enabled_sites().map(move |s| (s, lib.effect(s)))
+}
+
+/// The drift of storey `s` and its rate, in the state `x = [y, ẏ]` of `n` floors.
+#[inline]
+fn drift(x: &[f64], n: usize, s: usize) -> (f64, f64) {
+    if s == 0 {
+        (x[0], x[n])
+    } else {
+        (x[s] - x[s - 1], x[n + s] - x[n + s - 1])
+    }
+}
+
+/// The switch offsets of a contact: `+gap` when positive drift closes it, `−gap` when negative
+/// drift does.
+#[inline]
+fn offsets(c: &Contact) -> [Option<f64>; 2] {
+    [
+        (c.side != SIDE_NEGATIVE).then_some(c.gap),
+        (c.side != SIDE_POSITIVE).then_some(-c.gap),
+    ]
+}
+
+impl AnyContactMaps {
+    /// Whether the exact path steps this model: contacts are the only effects enabled, at most
+    /// [`MAX_EXACT_CONTACTS`] of them.
+    pub fn serves(model: &ShearModel) -> bool {
+        crate::piecewise::ContactMaps::applies(model)
+            && model.effects.contact.enabled_sites().count() <= MAX_EXACT_CONTACTS
+    }
+
+    pub fn new(model: &ShearModel, step: f64) -> Self {
+        AnyContactMaps {
+            key: Key {
+                step,
+                params: model.params.clone(),
+                contacts: enabled_contacts(model)
+                    .map(|(s, c)| (s, c.clone()))
+                    .collect(),
+            },
+            n: model.storeys(),
+            regions: RegionMap::default(),
+        }
+    }
+
+    /// Whether the flows were built for this model's structure and contacts and this step
+    /// (equal to the last bits, as the linear step map: [`same_step`]).
+    pub fn fits(&self, model: &ShearModel, step: f64) -> bool {
+        let (p, q) = (&self.key.params, &model.params);
+        same_step(self.key.step, step)
+            && p.mass == q.mass
+            && p.damping == q.damping
+            && p.stiffness == q.stiffness
+            && p.excitation == q.excitation
+            && p.control_floor == q.control_floor
+            && enabled_contacts(model).eq(self.key.contacts.iter().map(|(s, c)| (*s, c)))
+    }
+
+    /// The region of a state: per enabled contact (in storey order) 0 open, 1 closed on the
+    /// positive side, 2 on the negative side (the strict inequalities of
+    /// [`Contact::force_at`]), in base 3.
+    #[inline]
+    fn region_of(&self, x: &[f64]) -> u64 {
+        let mut region = 0;
+        let mut weight = 1;
+        for (s, c) in &self.key.contacts {
+            let (d, _) = drift(x, self.n, *s);
+            if c.side != SIDE_NEGATIVE && d > c.gap {
+                region += weight;
+            } else if c.side != SIDE_POSITIVE && d < -c.gap {
+                region += 2 * weight;
+            }
+            weight *= 3;
+        }
+        region
+    }
+
+    /// `M_r` of the augmented system `z = (y, ẏ, e, ė, c, ċ, 1)`.
+    fn augmented(&self, code: u64) -> DMatrix<f64> {
+        let n = self.n;
+        let p = &self.key.params;
+        let mut rows = AccelerationRows::new(p);
+        let mut constant = vec![0.0; n];
+        let mut rest = code;
+        for (s, c) in &self.key.contacts {
+            let state = rest % 3;
+            rest /= 3;
+            if state == 0 {
+                continue;
+            }
+            // Closed: the force k_c (d ∓ gap) on storey s, its stiffness added to the storey's
+            // and its constant −(±k_c gap) pushing floor s back and floor s − 1 forward.
+            crate::linear::add_storey(&mut rows.a, n, *s, c.stiffness, 0.0, &p.mass);
+            let sign = if state == 1 { 1.0 } else { -1.0 };
+            let force = -c.stiffness * sign * c.gap;
+            constant[*s] -= force / p.mass[*s];
+            if *s > 0 {
+                constant[*s - 1] += force / p.mass[*s - 1];
+            }
+        }
+        let size = 2 * n + EXTRA;
+        let mut f = DMatrix::zeros(size, size);
+        for i in 0..n {
+            f[(i, n + i)] = 1.0;
+        }
+        for r in 0..n {
+            for col in 0..2 * n {
+                f[(n + r, col)] = rows.a[(r, col)];
+            }
+            f[(n + r, 2 * n)] = rows.b_excitation[r];
+            f[(n + r, 2 * n + 2)] = rows.b_control[r];
+            f[(n + r, 2 * n + 4)] = constant[r];
+        }
+        f[(2 * n, 2 * n + 1)] = 1.0;
+        f[(2 * n + 2, 2 * n + 3)] = 1.0;
+        f
+    }
+
+    /// An upper bound of the region's fastest rate |λ|: Gershgorin bounds of M⁻¹C and M⁻¹K_r
+    /// (see the module documentation).
+    fn rate_bound(&self, a: &DMatrix<f64>) -> f64 {
+        let n = self.n;
+        let (mut kk, mut cc) = (0.0f64, 0.0f64);
+        for row in n..2 * n {
+            kk = kk.max((0..n).map(|j| a[(row, j)].abs()).sum::<f64>());
+            cc = cc.max((n..2 * n).map(|j| a[(row, j)].abs()).sum::<f64>());
+        }
+        cc + kk.sqrt()
+    }
+
+    fn build(&self, code: u64) -> Result<Region, ExactError> {
+        let matrix = self.augmented(code);
+        if !matrix.iter().all(|v| v.is_finite()) || !self.key.step.is_finite() {
+            return Err(self.not_finite());
+        }
+        let rate = self.rate_bound(&matrix);
+        let phase = rate * self.key.step / CHECK_PHASE;
+        let check_level = if phase > 1.0 {
+            (phase.log2().ceil() as u32).min(DEPTH - 4)
+        } else {
+            0
+        };
+        let rate_step = rate * self.key.step;
+        Ok(Region {
+            matrix,
+            levels: vec![None; DEPTH as usize + 1],
+            check_level,
+            whole_step_error: rate_step.powi(4) / 384.0,
+        })
+    }
+
+    fn not_finite(&self) -> ExactError {
+        ExactError::NotFinite(format!("{:?}", self.key))
+    }
+
+    /// The region `code`, built when first visited.
+    fn region(&mut self, code: u64) -> Result<&mut Region, ExactError> {
+        if !self.regions.contains_key(&code) {
+            if self.regions.len() >= MAX_CACHED_REGIONS {
+                self.regions.clear();
+            }
+            let region = self.build(code)?;
+            self.regions.insert(code, region);
+        }
+        match self.regions.get_mut(&code) {
+            Some(r) => Ok(r),
+            None => unreachable!("inserted above"),
+        }
+    }
+
+    /// The region's flow over `size` ticks (a power of two) from `x`, the inputs `tau` seconds
+    /// into the step.
+    #[inline]
+    fn apply(
+        &mut self,
+        code: u64,
+        x: &[f64],
+        size: u64,
+        tau: f64,
+        inputs: &StepInputs,
+    ) -> Result<Vec<f64>, ExactError> {
+        let n = self.n;
+        let step = self.key.step;
+        let level = (DEPTH - size.trailing_zeros()) as usize;
+        let region = self.region(code)?;
+        if region.levels[level].is_none() {
+            let delta = step / f64::from(1u32 << level);
+            let e = (&region.matrix * delta).exp();
+            if !e.iter().all(|v| v.is_finite()) {
+                return Err(ExactError::NotFinite(format!(
+                    "the flow over {delta} s of region {code}"
+                )));
+            }
+            let width = 2 * n + EXTRA;
+            let mut flow = Vec::with_capacity(2 * n * width);
+            for r in 0..2 * n {
+                for c in 0..width {
+                    flow.push(e[(r, c)]);
+                }
+            }
+            region.levels[level] = Some(flow.into_boxed_slice());
+        }
+        let Some(flow) = region.levels[level].as_deref() else {
+            unreachable!("built above")
+        };
+        let extra = [
+            inputs.excitation + inputs.excitation_slope * tau,
+            inputs.excitation_slope,
+            inputs.control + inputs.control_slope * tau,
+            inputs.control_slope,
+            1.0,
+        ];
+        let width = 2 * n + EXTRA;
+        Ok(flow
+            .chunks_exact(width)
+            .map(|row| {
+                let mut sum = 0.0;
+                for (a, b) in row[..2 * n].iter().zip(x) {
+                    sum += a * b;
+                }
+                for (a, b) in row[2 * n..].iter().zip(&extra) {
+                    sum += a * b;
+                }
+                sum
+            })
+            .collect())
+    }
+
+    /// Whether the piece from `a` to `b` (of `dt` seconds, in `region`) may hold a crossing: the
+    /// region changed at its end, or a switch's cubic Hermite interpolant crosses zero inside.
+    #[inline]
+    fn flagged(&self, region: u64, a: &[f64], b: &[f64], dt: f64) -> bool {
+        if self.region_of(b) != region {
+            return true;
+        }
+        for (s, c) in &self.key.contacts {
+            let (da, va) = drift(a, self.n, *s);
+            let (db, vb) = drift(b, self.n, *s);
+            for offset in offsets(c).into_iter().flatten() {
+                if hermite_crosses(da - offset, db - offset, dt * va, dt * vb) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// The energy of the relative motion: kinetic, storey springs and closed bumpers.
+    fn energy(&self, x: &[f64]) -> f64 {
+        let n = self.n;
+        let p = &self.key.params;
+        let mut e = 0.0;
+        for s in 0..n {
+            let (d, _) = drift(x, n, s);
+            e += 0.5 * p.mass[s] * x[n + s] * x[n + s] + 0.5 * p.stiffness[s] * d * d;
+        }
+        for (s, c) in &self.key.contacts {
+            let f = c.force_at(drift(x, n, *s).0);
+            if c.stiffness > 0.0 {
+                e += 0.5 * f * f / c.stiffness;
+            }
+        }
+        e
+    }
+
+    /// Whether the whole step from `a` to `b` (in `region`) stays clear of every switch: no
+    /// crossing, and each switch's cubic Hermite interpolant at least twice its interpolation
+    /// error bound `(ρ h)⁴/384 · D` from zero, `D = √(2E/k_s)` the largest drift of storey s the
+    /// energy E (the larger of the two ends) allows.
+    fn clear(&mut self, region: u64, a: &[f64], b: &[f64]) -> Result<bool, ExactError> {
+        if self.region_of(b) != region {
+            return Ok(false);
+        }
+        let error = self.region(region)?.whole_step_error;
+        let h = self.key.step;
+        let e = self.energy(a).max(self.energy(b));
+        for (s, c) in &self.key.contacts {
+            let amplitude = (2.0 * e / self.key.params.stiffness[*s]).sqrt();
+            let margin = 2.0 * error * amplitude;
+            if !margin.is_finite() {
+                return Ok(false);
+            }
+            let (da, va) = drift(a, self.n, *s);
+            let (db, vb) = drift(b, self.n, *s);
+            for offset in offsets(c).into_iter().flatten() {
+                if hermite_distance(da - offset, db - offset, h * va, h * vb) <= margin {
+                    return Ok(false);
+                }
+            }
+        }
+        Ok(true)
+    }
+
+    /// One communication step from `x0` (`[y, ẏ]`, 2N) under the inputs' ramps.
+    pub fn advance(&mut self, x0: &[f64], inputs: &StepInputs) -> Result<Vec<f64>, ExactError> {
+        let total: u64 = 1 << DEPTH;
+        let tick = self.key.step / total as f64;
+        let mut x = x0.to_vec();
+        let mut pos: u64 = 0;
+        let mut region = self.region_of(&x);
+        let whole = self.apply(region, &x, total, 0.0, inputs)?;
+        if self.clear(region, &x, &whole)? {
+            return Ok(whole);
+        }
+        while pos < total {
+            let check = self.region(region)?.check_level;
+            let left = total - pos;
+            let mut size = (total >> check).min(1 << (63 - left.leading_zeros()));
+            let at = pos as f64 * tick;
+            let mut end = self.apply(region, &x, size, at, inputs)?;
+            if !self.flagged(region, &x, &end, size as f64 * tick) {
+                x = end;
+                pos += size;
+                continue;
+            }
+            if let Some((ticks, past)) =
+                self.newton_event(region, &x, &end, pos, size, tick, inputs)?
+            {
+                x = past;
+                pos += ticks;
+                region = self.region_of(&x);
+                continue;
+            }
+            // Bisect: the flagged piece is [pos, pos + size] from x to end.
+            loop {
+                if size == 1 {
+                    x = end;
+                    pos += 1;
+                    region = self.region_of(&x);
+                    break;
+                }
+                let half = size / 2;
+                let mid = self.apply(region, &x, half, pos as f64 * tick, inputs)?;
+                size = half;
+                if self.flagged(region, &x, &mid, half as f64 * tick) {
+                    end = mid;
+                } else {
+                    x = mid;
+                    pos += half;
+                    if !self.flagged(region, &x, &end, half as f64 * tick) {
+                        x = end;
+                        pos += half;
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(x)
+    }
+
+    /// The state `count` ticks after `x` (at tick `pos`), as the flows of the binary digits of
+    /// `count`.
+    fn after_ticks(
+        &mut self,
+        region: u64,
+        x: &[f64],
+        pos: u64,
+        count: u64,
+        tick: f64,
+        inputs: &StepInputs,
+    ) -> Result<Vec<f64>, ExactError> {
+        let mut x = x.to_vec();
+        let mut at = pos;
+        let mut rest = count;
+        while rest > 0 {
+            let digit = 1u64 << (63 - rest.leading_zeros());
+            x = self.apply(region, &x, digit, at as f64 * tick, inputs)?;
+            at += digit;
+            rest -= digit;
+        }
+        Ok(x)
+    }
+
+    /// The first crossing inside a flagged piece `[pos, pos + size]` (from `a` to `b`): the
+    /// earliest root of the switches' interpolants, one Newton step on the exact flow from a
+    /// little before it, then a tick at a time (at most 4) until past; `(ticks, state)` of the
+    /// first tick past it, checked, or `None` (the caller bisects).
+    #[allow(clippy::too_many_arguments)]
+    fn newton_event(
+        &mut self,
+        region: u64,
+        a: &[f64],
+        b: &[f64],
+        pos: u64,
+        size: u64,
+        tick: f64,
+        inputs: &StepInputs,
+    ) -> Result<Option<(u64, Vec<f64>)>, ExactError> {
+        let n = self.n;
+        let dt = size as f64 * tick;
+        let mut first: Option<(f64, usize, f64)> = None;
+        for (s, c) in &self.key.contacts {
+            let (da, va) = drift(a, n, *s);
+            let (db, vb) = drift(b, n, *s);
+            for offset in offsets(c).into_iter().flatten() {
+                if let Some(theta) = hermite_root(da - offset, db - offset, dt * va, dt * vb) {
+                    if first.is_none_or(|(t, _, _)| theta < t) {
+                        first = Some((theta, *s, offset));
+                    }
+                }
+            }
+        }
+        let Some((theta, storey, offset)) = first else {
+            return Ok(None);
+        };
+        let back = 2.0 + 1e-4 * size as f64;
+        let k1 = ((theta * size as f64 - back).max(0.0).floor() as u64).min(size - 1);
+        let x1 = self.after_ticks(region, a, pos, k1, tick, inputs)?;
+        if self.region_of(&x1) != region {
+            return Ok(None);
+        }
+        let (d, v) = drift(&x1, n, storey);
+        let sigma = d - offset;
+        if v == 0.0 || !(sigma / v).is_finite() {
+            return Ok(None);
+        }
+        let ahead = -sigma / v / tick;
+        if !(0.0..=(size - k1) as f64).contains(&ahead) {
+            return Ok(None);
+        }
+        let k2 = k1 + (ahead.ceil() as u64).max(1) - 1;
+        let mut before = self.after_ticks(region, &x1, pos + k1, k2 - k1, tick, inputs)?;
+        if self.region_of(&before) != region {
+            return Ok(None);
+        }
+        let mut at = k2;
+        for _ in 0..4 {
+            if at >= size {
+                return Ok(None);
+            }
+            let past = self.apply(region, &before, 1, (pos + at) as f64 * tick, inputs)?;
+            at += 1;
+            if self.region_of(&past) != region {
+                return Ok(Some((at, past)));
+            }
+            before = past;
+        }
+        Ok(None)
+    }
+
+    /// How many regions are cached (for tests and benches).
+    pub fn cached_regions(&self) -> usize {
+        self.regions.len()
+    }
+}
