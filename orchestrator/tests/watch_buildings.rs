@@ -7,7 +7,8 @@
 //! or the wrong excitation, is refused at once naming the column.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
@@ -355,4 +356,160 @@ fn a_five_storey_watch_resumes_from_its_checkpoint_during_the_band_s_reference()
     assert!(!of_kind(&once, "failing").is_empty());
     assert_eq!(strip(&resumed), strip(&once));
     assert_eq!(resumed.last().expect("end")["samples_this_run"], 3072 - 400);
+}
+
+/// A mosquitto broker of the test's own on a free loopback port; stopped when dropped.
+struct Broker {
+    child: std::process::Child,
+    port: u16,
+}
+
+impl Broker {
+    fn start(dir: &Path) -> Broker {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let config = dir.join("mosquitto.conf");
+        std::fs::write(
+            &config,
+            format!("listener {port} 127.0.0.1\nallow_anonymous true\nuser root\n"),
+        )
+        .expect("write the broker's config");
+        let program = ["/usr/sbin/mosquitto", "/usr/bin/mosquitto"]
+            .into_iter()
+            .find(|p| Path::new(p).exists())
+            .expect("mosquitto is not installed: run scripts/prerequisites.sh as root");
+        let child = Command::new(program)
+            .arg("-c")
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start mosquitto");
+        wait_for("mosquitto to listen", 10, || {
+            std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+        Broker { child, port }
+    }
+}
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn wait_for(what: &str, seconds: u64, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    while !done() {
+        assert!(Instant::now() < deadline, "waited {seconds} s for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A five-storey stream from a broker whose messages carry no header: the watcher takes
+/// `time`, the excitation and an accelerometer on every floor (`time,ground_acc,acc1..acc5`),
+/// and gives the alerts of the same record read from a file with its header.
+#[test]
+fn a_five_storey_stream_from_a_broker_without_a_header_has_every_floor_s_accelerometer() {
+    use rumqttc::{Event, Packet, QoS};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let twin = five_storey_twin(d);
+    let changed = stream(d, "changed", "acc1,acc2,acc3,acc4,acc5", "acc=m/s2", true);
+    let text = std::fs::read_to_string(&changed).expect("record");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "time,ground_acc,acc1,acc2,acc3,acc4,acc5");
+    let broker = Broker::start(d);
+    let topic = "lab/five/samples";
+    let alerts = d.join("broker.jsonl");
+    let watcher = twin_cmd()
+        .args(["watch", "--no-diagnosis", "--twin"])
+        .arg(&twin)
+        .arg("--source")
+        .arg(format!("mqtt://127.0.0.1:{}/{topic}", broker.port))
+        .arg("--alerts")
+        .arg(&alerts)
+        .args(["--idle", "4"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn twin watch");
+    wait_for("the watcher to subscribe", 20, || {
+        std::fs::read_to_string(&alerts).is_ok_and(|t| t.contains("\"state\":\"connected\""))
+    });
+    let mut options = rumqttc::MqttOptions::new("test-five-publisher", "127.0.0.1", broker.port);
+    options.set_clean_session(false);
+    let (publisher, mut connection) = rumqttc::Client::new(options, 100_000);
+    let acked = Arc::new(AtomicU64::new(0));
+    let counted = acked.clone();
+    std::thread::spawn(move || loop {
+        match connection.recv() {
+            Ok(Ok(Event::Incoming(Packet::PubAck(_)))) => {
+                counted.fetch_add(1, Ordering::SeqCst);
+            }
+            Ok(_) => {}
+            Err(_) => return,
+        }
+    });
+    // Messages of 16 data lines, none with a header.
+    let messages: Vec<String> = lines[1..].chunks(16).map(|c| c.join("\n")).collect();
+    for m in &messages {
+        publisher
+            .publish(topic, QoS::AtLeastOnce, false, m.clone())
+            .expect("publish");
+    }
+    wait_for("the messages to be acknowledged", 30, || {
+        acked.load(Ordering::SeqCst) >= messages.len() as u64
+    });
+    let out = watcher.wait_with_output().expect("twin watch");
+    assert!(
+        out.status.success(),
+        "twin watch failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = |path: &Path| -> Vec<Value> {
+        std::fs::read_to_string(path)
+            .expect("alerts")
+            .lines()
+            .map(|l| serde_json::from_str(l).expect("JSON"))
+            .collect()
+    };
+    let data = |alerts: &[Value]| -> Vec<Value> {
+        alerts
+            .iter()
+            .filter(|a| a["kind"] != "connection")
+            .map(|a| {
+                let mut a = a.clone();
+                if let Value::Object(m) = &mut a {
+                    for key in [
+                        "samples_per_second",
+                        "real_time_factor",
+                        "latency_median_us",
+                        "latency_p99_us",
+                        "mqtt",
+                        "duplicates",
+                        "alerts",
+                    ] {
+                        m.remove(key);
+                    }
+                }
+                a
+            })
+            .collect()
+    };
+    let from_broker = read(&alerts);
+    let from_file = watch(&twin, &changed, &d.join("file.jsonl"), &[]);
+    assert!(!of_kind(&from_file, "failing").is_empty());
+    assert_eq!(data(&from_broker), data(&from_file));
+    let end = from_broker.last().expect("end");
+    assert_eq!(
+        names(&end["channels"]),
+        ["acc1", "acc2", "acc3", "acc4", "acc5"]
+    );
+    assert_eq!(end["samples"], 3072);
 }
