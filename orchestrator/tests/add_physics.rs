@@ -153,7 +153,7 @@ fn the_diagnosed_contact_refitted_over_every_record_passes_compare_on_all_three(
         "--report",
         s(&report),
     ]);
-    assert!(stdout.contains("NMSE per record and floor"), "{stdout}");
+    assert!(stdout.contains("NMSE per record and channel"), "{stdout}");
     let r = json(&report);
     let records = records_of(&r);
     for (n, (name, before, after)) in records.iter().enumerate() {
@@ -225,7 +225,7 @@ fn the_hybrid_tests_contact_law_with_the_structure_refitted_passes_compare_on_al
         "--report",
         s(&report),
     ]);
-    assert!(stdout.contains("NMSE per record and floor"), "{stdout}");
+    assert!(stdout.contains("NMSE per record and channel"), "{stdout}");
     let r = json(&report);
     let records = records_of(&r);
     // Measured 0.191 % worst floor on dataset3: with a margin of 1.5×.

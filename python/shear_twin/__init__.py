@@ -134,7 +134,7 @@ class Twin:
         return self._native.parameters
 
     @property
-    def noise_variance(self) -> list[float] | None:
+    def noise_variance(self) -> dict[str, float] | None:
         return self._native.noise_variance
 
     def __repr__(self) -> str:

@@ -45,19 +45,6 @@ impl Record {
         }
         Ok(&self.measurement)
     }
-
-    /// The record checked against `twin` by the guard (`check_record`) and holding the force
-    /// and acc1..acc3 that diagnose and add-physics still read, as the CLI's `read_record`.
-    pub(crate) fn for_twin_with_paper_columns(
-        &self,
-        twin: &orchestrator::twin::Twin,
-    ) -> PyResult<&Measurement> {
-        self.for_twin(twin, None)?;
-        self.measurement
-            .require_paper_rig()
-            .map_err(|e| to_py(Kind::Data, e))?;
-        Ok(&self.measurement)
-    }
 }
 
 /// A column map from a dict (`{"dotx1 (m/s)": "vel1"}`) or the path of a MAP.json.

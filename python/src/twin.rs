@@ -133,10 +133,14 @@ impl Twin {
         Ok(out)
     }
 
-    /// The calibrated sensor-noise variance per floor, (m/s²)²; None until calibrated.
+    /// The calibrated sensor-noise variance per measured channel (its SI unit squared), by
+    /// channel name; None until calibrated.
     #[getter]
-    fn noise_variance(&self) -> Option<[f64; 3]> {
-        self.twin.noise_variance
+    fn noise_variance(&self) -> Option<std::collections::BTreeMap<String, f64>> {
+        self.twin
+            .noise_variance
+            .as_ref()
+            .map(|n| n.iter().map(|(c, v)| (c.name(), v)).collect())
     }
 
     fn __repr__(&self) -> String {
@@ -343,7 +347,7 @@ impl Twin {
         o.transient = transient.unwrap_or(o.transient);
         o.threads = threads.unwrap_or(o.threads);
         o.block = block.unwrap_or(o.block);
-        let data = record.for_twin_with_paper_columns(&self.twin)?;
+        let data = record.for_twin(&self.twin, None)?;
         o.validate_for(data).map_err(|e| to_py(kind, e))?;
         if let Some(effects) = effects {
             o.candidates = Some(parse_candidates(&effects).map_err(|e| to_py(kind, e))?);
@@ -389,7 +393,7 @@ impl Twin {
         let others: Vec<orchestrator::twin::data::Measurement> = match records {
             Some(given) => given
                 .iter()
-                .map(|r| r.for_twin_with_paper_columns(&self.twin).cloned())
+                .map(|r| r.for_twin(&self.twin, None).cloned())
                 .collect::<PyResult<_>>()?,
             None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
         };
@@ -422,7 +426,7 @@ impl Twin {
             }
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
-        let data = record.for_twin_with_paper_columns(&self.twin)?;
+        let data = record.for_twin(&self.twin, None)?;
         let (new_twin, report) = detached(py, || {
             let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;

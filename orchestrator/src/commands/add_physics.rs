@@ -73,7 +73,7 @@ fn other_records(
         return Ok(args
             .records
             .iter()
-            .map(|p| args.columns.read_record(p))
+            .map(|p| args.columns.read_any(p))
             .collect::<Result<Vec<_>, _>>()?);
     }
     if twin.records.is_empty() {
@@ -104,7 +104,7 @@ fn print_records(text: &mut String, records: &[RecordNmse]) {
         let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
         format!("{} %", values.join(" / "))
     };
-    let _ = writeln!(text, "NMSE per record and floor, before → after:");
+    let _ = writeln!(text, "NMSE per record and channel, before → after:");
     for r in records {
         let _ = writeln!(
             text,
@@ -145,7 +145,7 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
     let data = args
         .data
         .as_deref()
-        .map(|p| args.columns.read_record(p))
+        .map(|p| args.columns.read_any(p))
         .transpose()?;
     for record in others.iter().chain(&data) {
         crate::twin::guard::check_record(&twin, record)?;

@@ -87,7 +87,7 @@ impl DiagnoseArgs {
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = args.options()?;
-    let data = args.columns.read_record(&args.data)?;
+    let data = args.columns.read_any(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
     crate::twin::guard::check_record(&twin, &data)?;
     // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).

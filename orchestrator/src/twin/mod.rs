@@ -17,6 +17,7 @@
 pub use crate::record as data;
 pub mod embedded;
 pub mod guard;
+pub mod noise;
 pub mod run;
 pub mod structure;
 pub mod system;
@@ -118,8 +119,8 @@ pub struct Twin {
     pub name: String,
     pub components: Vec<Component>,
     pub connections: Vec<Connection>,
-    /// Measurement noise variance per floor, (m/s²)²; None until calibrated.
-    pub noise_variance: Option<[f64; 3]>,
+    /// Measurement noise variance per measured channel (SI²); None until calibrated.
+    pub noise_variance: Option<noise::NoiseVariances>,
     /// The SSD's `DefaultExperiment` (start, stop), s; None: none written.
     pub default_experiment: Option<(f64, f64)>,
     /// Posterior covariance of the calibrated physics parameters; None unless calibrated.
@@ -244,7 +245,7 @@ impl Twin {
             name: self.name.clone(),
             components: self.components.clone(),
             connections: self.connections.clone(),
-            noise_variance: self.noise_variance,
+            noise_variance: self.noise_variance.clone(),
             default_experiment: self.default_experiment,
             parameter_covariance: self.parameter_covariance.clone(),
             validation_nmse: self.validation_nmse,
@@ -289,19 +290,10 @@ impl Twin {
         names
     }
 
-    /// The measurement noise variance the twin holds for `channel` (in its SI unit, squared):
-    /// the calibrated variances of floors 1 to 3's accelerations (`noise_variance1..3`); None
-    /// for any other channel or an uncalibrated twin.
+    /// The measurement noise variance the twin holds for `channel` (in its SI unit, squared);
+    /// None for a channel it was never calibrated on, or an uncalibrated twin.
     pub fn noise_variance_of(&self, channel: ::structure::channel::Channel) -> Option<f64> {
-        match channel {
-            ::structure::channel::Channel::Response {
-                quantity: ::structure::channel::Quantity::Acceleration,
-                floor,
-            } => self
-                .noise_variance
-                .and_then(|v| v.get(floor.checked_sub(1)?).copied()),
-            _ => None,
-        }
+        self.noise_variance.as_ref()?.get(channel)
     }
 
     pub fn component(&self, name: &str) -> Option<&Component> {
@@ -400,14 +392,8 @@ impl Twin {
                 values.insert(name, value);
             }
             records = read_records(&strings).map_err(|m| invalid(format!("{binding}: {m}")))?;
-            let get = |i: usize| match values.get(&format!("noise_variance{i}")) {
-                Some(ParameterValue::Real(x)) if *x > 0.0 && x.is_finite() => Ok(*x),
-                Some(other) => Err(invalid(format!(
-                    "{binding}: noise_variance{i} = {other} is not a positive real"
-                ))),
-                None => Err(invalid(format!("{binding}: noise_variance{i} is missing"))),
-            };
-            noise_variance = Some([get(1)?, get(2)?, get(3)?]);
+            noise_variance = noise::NoiseVariances::from_parameters(&values)
+                .map_err(|m| invalid(format!("{binding}: {m}")))?;
             parameter_covariance =
                 read_covariance(&values).map_err(|m| invalid(format!("{binding}: {m}")))?;
             validation_nmse = match values.get("validation_nmse") {
@@ -505,12 +491,10 @@ impl Twin {
     /// The system's own parameters, written to `resources/twin.ssv` (only with noise variances).
     fn system_values(&self) -> BTreeMap<String, ParameterValue> {
         let mut values = BTreeMap::new();
-        let Some(nv) = self.noise_variance else {
+        let Some(nv) = &self.noise_variance else {
             return values;
         };
-        for (i, v) in nv.iter().enumerate() {
-            values.insert(format!("noise_variance{}", i + 1), ParameterValue::Real(*v));
-        }
+        values.extend(nv.parameters());
         if let Some(c) = &self.parameter_covariance {
             for (a, na) in c.names.iter().enumerate() {
                 for (b, nb) in c.names.iter().enumerate().skip(a) {
@@ -854,12 +838,7 @@ impl RecordRef {
                 self.sha256
             )));
         }
-        let record =
-            data::Measurement::read(&self.path).map_err(|e| TwinError::Message(e.to_string()))?;
-        record
-            .require_paper_rig()
-            .map_err(|e| TwinError::Message(e.to_string()))?;
-        Ok(record)
+        data::Measurement::read(&self.path).map_err(|e| TwinError::Message(e.to_string()))
     }
 }
 

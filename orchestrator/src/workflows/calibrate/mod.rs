@@ -39,6 +39,7 @@ use ::structure::Structure;
 
 use crate::cosim::import::{Causality, Fmu, ScalarType};
 use crate::twin::data::Measurement;
+use crate::twin::noise::NoiseVariances;
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{
     default_prior, priors_from_json, read_priors, structure_prior, Prior, PriorSpec, Space,
@@ -164,31 +165,16 @@ pub struct Calibration {
 }
 
 impl Calibration {
-    /// The noise variances a twin of three storeys keeps, per floor (`acc1..acc3`): the first
-    /// record's when it measured all three (the paper's rig); on runs that each measured some
-    /// floors (a roving sensor), each floor's from the first run that measured it. None when a
-    /// floor was never measured, a run measured something else, or the structure is not of
-    /// three storeys (its records' noise variances are in the report).
-    pub fn floor_noise_variances(&self) -> Option<[f64; 3]> {
-        if self.storeys != 3 {
-            return None;
-        }
-        if let Some(own) = self.records[0].paper_floors(&self.records[0].noise_variance) {
-            return Some(own);
-        }
-        let mut out = [None; 3];
-        for r in &self.records {
-            for (name, v) in r.channels.iter().zip(&r.noise_variance) {
-                let f = match name.as_str() {
-                    "acc1" => 0,
-                    "acc2" => 1,
-                    "acc3" => 2,
-                    _ => return None,
-                };
-                out[f].get_or_insert(*v);
-            }
-        }
-        Some([out[0]?, out[1]?, out[2]?])
+    /// The noise variances the calibrated twin keeps, per measured channel: each channel's
+    /// from the first run that measured it (the paper's rig: its one record's acc1..acc3; runs
+    /// of a roving sensor: each floor's from its own run).
+    pub fn noise_variances(&self) -> NoiseVariances {
+        NoiseVariances::new(self.records.iter().flat_map(|r| {
+            r.channels
+                .iter()
+                .zip(&r.noise_variance)
+                .filter_map(|(name, v)| Some((Channel::parse(name)?, *v)))
+        }))
     }
 
     /// The Laplace posterior covariance of the calibrated parameters in their own units (for
@@ -1179,7 +1165,7 @@ pub fn calibrated_twin(twin: &Twin, calibration: &Calibration) -> Result<Twin, C
             .parameters
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
-    out.noise_variance = calibration.floor_noise_variances();
+    out.noise_variance = Some(calibration.noise_variances());
     out.parameter_covariance = Some(calibration.covariance());
     out.validation_nmse = None;
     // The records the input twin was fitted on are not this one's (the caller adds them).
@@ -1201,25 +1187,33 @@ pub fn fixed_log_evidence(
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
     let (_, used) = used_samples(data, setup.mask.as_deref(), setup.transient)?;
-    let mut sim = Simulator::new(
+    let mut sim = Simulator::driven(
         &fmu,
         component.parameters.clone(),
-        &data.force(),
+        &data.excitation.channel.name(),
+        &data.excitation.values,
         data.time[0],
         data.dt,
         "evidence",
     )?;
-    let mut buf: [Vec<f64>; 3] = Default::default();
-    sim.simulate(&[], &[], &mut buf)?;
+    // Every measured channel, the FMU's output of the same name.
+    let outputs = data
+        .responses
+        .iter()
+        .map(|s| fmu.value_reference(&s.channel.name()))
+        .collect::<Result<Vec<u32>, _>>()
+        .map_err(TwinError::from)?;
+    let mut buf: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
+    sim.record(&[], &[], &outputs, &mut buf)?;
     let n = used.len() as f64;
     let mut log_evidence = 0.0;
-    for f in 0..3 {
-        let y: Vec<f64> = used.iter().map(|&k| data.acc(f)[k]).collect();
+    for (signal, predicted) in data.responses.iter().zip(&buf) {
+        let y: Vec<f64> = used.iter().map(|&k| signal.values[k]).collect();
         let var = crate::evaluation::stats::variance(&y);
         let noise_mean = (setup.noise_fraction * var).ln();
         let sse: f64 = used
             .iter()
-            .map(|&k| (data.acc(f)[k] - buf[f][k]).powi(2))
+            .map(|&k| (signal.values[k] - predicted[k]).powi(2))
             .sum();
         let v = setup.noise_log_variance;
         let s = optimal_log_noise(n, sse, noise_mean, v, noise_mean);

@@ -617,18 +617,10 @@ pub fn run_control(
             )))
         }
         // The twin's calibrated noise, when it has one for every channel read.
-        None => twin.noise_variance.and_then(|v| {
-            measured
-                .iter()
-                .map(|c| match c {
-                    Channel::Response {
-                        quantity: Quantity::Acceleration,
-                        floor,
-                    } => v.get(floor - 1).map(|x| x.max(0.0).sqrt()),
-                    _ => None,
-                })
-                .collect()
-        }),
+        None => measured
+            .iter()
+            .map(|c| twin.noise_variance_of(*c).map(|x| x.max(0.0).sqrt()))
+            .collect(),
     };
     let mut gaps = closed_loop::twin_gaps(twin);
     for g in &options.gaps {
@@ -790,21 +782,23 @@ pub fn run_control(
                     }
                     Some(vec![v; floors])
                 }
-                VarianceTrigger::Auto if has_corrector => Some(match twin.noise_variance {
-                    Some(v) => v.to_vec(),
-                    None => (0..floors)
-                        .map(|f| {
-                            crate::workflows::learn::PAPER_THRESHOLD
-                                * crate::evaluation::stats::variance(
-                                    data.channel(Channel::Response {
-                                        quantity: Quantity::Acceleration,
-                                        floor: f + 1,
-                                    })
-                                    .unwrap_or(&[]),
-                                )
-                        })
-                        .collect(),
-                }),
+                VarianceTrigger::Auto if has_corrector => Some(
+                    match twin.noise_variance.as_ref().and_then(|v| v.floors(floors)) {
+                        Some(v) => v,
+                        None => (0..floors)
+                            .map(|f| {
+                                crate::workflows::learn::PAPER_THRESHOLD
+                                    * crate::evaluation::stats::variance(
+                                        data.channel(Channel::Response {
+                                            quantity: Quantity::Acceleration,
+                                            floor: f + 1,
+                                        })
+                                        .unwrap_or(&[]),
+                                    )
+                            })
+                            .collect(),
+                    },
+                ),
                 VarianceTrigger::Auto => None,
             };
             let schedule = Schedule {

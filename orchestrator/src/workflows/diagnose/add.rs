@@ -69,7 +69,7 @@ pub fn add_physics(
     let after: Vec<usize> = (first..n).collect();
     let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
     let reals = PhysicsReals::of(&physics)?;
-    let scales = prior_scales(&reals, &base_run, &data.force(), first)?;
+    let scales = prior_scales(&reals, &base_run, data, first)?;
     let mut switched = physics.duplicate();
     let mut effect_params = Vec::new();
     let mut initial = BTreeMap::new();
@@ -250,8 +250,7 @@ pub fn refit_over_records(
             .parameters
             .insert(p.name.clone(), ParameterValue::Real(p.value));
     }
-    chosen.noise_variance =
-        calibration.records[0].paper_floors(&calibration.records[0].noise_variance);
+    chosen.noise_variance = Some(calibration.noise_variances());
     chosen.parameter_covariance = Some(calibration.covariance());
     chosen.records = Vec::new();
     options.tell("the twin before and after on every record");

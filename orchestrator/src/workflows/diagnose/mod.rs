@@ -429,7 +429,15 @@ fn run_physics(
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
-    let mut sim = Simulator::new(&fmu, base, &data.force(), data.time[0], data.dt, "diagnose")?;
+    let mut sim = Simulator::driven(
+        &fmu,
+        base,
+        &data.excitation.channel.name(),
+        &data.excitation.values,
+        data.time[0],
+        data.dt,
+        "diagnose",
+    )?;
     let mut out: Vec<Vec<f64>> = vec![Vec::new(); recorded.len()];
     sim.record(&vrs, values, &outputs, &mut out)?;
     let velocity = out.split_off(2 * storeys);
@@ -521,17 +529,27 @@ fn worst(x: &[f64]) -> f64 {
 fn prior_scales(
     reals: &PhysicsReals,
     run: &PhysicsRun,
-    force: &[f64],
+    data: &Measurement,
     first: usize,
 ) -> Result<Scales> {
     let stiffness = (1..=run.drift.len())
         .map(|s| reals.get(&format!("k{s}")))
         .collect::<Result<Vec<f64>>>()?;
+    // The load's size: the force, or under ground motion the whole building's inertia times
+    // the ground's acceleration (the load −M·1·a_g of the relative coordinates).
+    let load = match data.excitation.channel {
+        ::structure::channel::Channel::Excitation(::structure::channel::ExcitationKind::Force) => {
+            1.0
+        }
+        _ => (1..=run.drift.len())
+            .map(|f| reals.get(&format!("m{f}")))
+            .sum::<Result<f64>>()?,
+    };
     Ok(Scales {
         stiffness,
         drift_rms: run.drift.iter().map(|d| rms(&d[first..])).collect(),
         velocity_rms: run.velocity.iter().map(|v| rms(&v[first..])).collect(),
-        force_rms: rms(&force[first..]),
+        force_rms: load * rms(&data.excitation.values[first..]),
     })
 }
 
@@ -690,7 +708,7 @@ enum Job {
 /// Diagnose `twin` on `data` (see the module documentation).
 pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
     let started = Instant::now();
-    let noise_variance = twin.noise_variance.ok_or_else(|| {
+    let noise = twin.noise_variance.clone().ok_or_else(|| {
         DiagnoseError::Setup(
             "the twin has no noise variances, so the noise level is unknown: diagnose a twin \
              made by `twin calibrate`"
@@ -718,6 +736,22 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let storeys = storeys_of(twin)?;
     let channels = Channels::of(data, storeys)?;
     let nc = channels.len();
+    let noise_variance = channels
+        .names
+        .iter()
+        .map(|name| {
+            ::structure::channel::Channel::parse(name)
+                .and_then(|c| noise.get(c))
+                .ok_or_else(|| {
+                    DiagnoseError::Setup(format!(
+                        "{}: column '{name}': {} has no noise variance for it (calibrate the \
+                         twin on a record that measures {name})",
+                        data.path.display(),
+                        twin.describe()
+                    ))
+                })
+        })
+        .collect::<Result<Vec<f64>>>()?;
     let candidates = match &options.candidates {
         Some(given) => {
             check_sites(given, storeys).map_err(DiagnoseError::Setup)?;
@@ -752,7 +786,6 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .map(|c| c.values.clone())
         .collect();
     let nmse_before = comparison.nmse.clone();
-    let noise_variance = channels.pick(&noise_variance);
     let nmse_before_held_out = channels.nmse_on(&predicted, &held_out);
     let noise_nmse_on = |idx: &[usize]| -> Vec<f64> {
         (0..nc)
@@ -786,7 +819,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let mass = (1..=storeys)
         .map(|f| reals.get(&format!("m{f}")))
         .collect::<Result<Vec<f64>>>()?;
-    let scales = prior_scales(&reals, &base_run, &data.force(), first)?;
+    let scales = prior_scales(&reals, &base_run, data, first)?;
 
     // Localisation from the residual of the twin as given.
     let floor_force = missing_floor_force(&channels, &mass, &predicted, storeys, n);
@@ -1049,7 +1082,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         nmse_after: recal.nmse_after.clone(),
         nmse_held_out: recal.nmse_held_out.clone(),
         parameters: moved,
-        noise_variance: channels.pick(&recal.calibration.noise_variance),
+        noise_variance: recal.calibration.noise_variance.clone(),
         simulations: recal.calibration.simulations,
         seconds: recal_seconds,
     });
