@@ -341,12 +341,18 @@ pub fn with_corrector(twin: &Twin, trained: &LayoutTraining) -> Result<Twin, Tra
         None => serde_json::to_vec(&trained),
     }
     .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
-    with_resource(
-        &find_fmu(CORRECTOR_FMU)?,
-        &fmu_path,
-        "resources/training.json",
-        &json,
-    )?;
+    // Another layout than the rig's: the modelDescription of its variable table, the one the
+    // library serves when it reads the training file at instantiation.
+    let xml = (!layout.is_paper()).then(|| {
+        fmu_gp_corrector::variables::table(&layout)
+            .to_model_description_xml()
+            .into_bytes()
+    });
+    let mut entries = vec![("resources/training.json", json.as_slice())];
+    if let Some(xml) = &xml {
+        entries.push(("modelDescription.xml", xml.as_slice()));
+    }
+    with_resources(&find_fmu(CORRECTOR_FMU)?, &fmu_path, &entries)?;
 
     let mut out = physics.duplicate();
     out.keep_alive(Arc::new(scratch));
@@ -397,8 +403,13 @@ pub fn with_corrector(twin: &Twin, trained: &LayoutTraining) -> Result<Twin, Tra
     Ok(out)
 }
 
-/// Copy the FMU at `source` to `target` with one resource file added (or replaced).
-fn with_resource(source: &Path, target: &Path, name: &str, bytes: &[u8]) -> Result<(), TrainError> {
+/// Copy the FMU at `source` to `target` with the files `entries` (name, bytes) added or
+/// replaced.
+fn with_resources(
+    source: &Path,
+    target: &Path,
+    entries: &[(&str, &[u8])],
+) -> Result<(), TrainError> {
     let bad = |m: String| TrainError::Setup(format!("{}: {m}", source.display()));
     let file = std::fs::File::open(source).map_err(|e| bad(e.to_string()))?;
     let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
@@ -406,7 +417,7 @@ fn with_resource(source: &Path, target: &Path, name: &str, bytes: &[u8]) -> Resu
     let mut zip = zip::ZipWriter::new(out);
     for i in 0..archive.len() {
         let mut entry = archive.by_index(i).map_err(|e| bad(e.to_string()))?;
-        if entry.name() == name || entry.is_dir() {
+        if entries.iter().any(|(name, _)| entry.name() == *name) || entry.is_dir() {
             continue;
         }
         let options =
@@ -420,13 +431,15 @@ fn with_resource(source: &Path, target: &Path, name: &str, bytes: &[u8]) -> Resu
             .map_err(|e| bad(e.to_string()))?;
         zip.write_all(&content).map_err(|e| bad(e.to_string()))?;
     }
-    zip.start_file(
-        name,
-        zip::write::SimpleFileOptions::default()
-            .compression_method(zip::CompressionMethod::Deflated),
-    )
-    .map_err(|e| bad(e.to_string()))?;
-    zip.write_all(bytes).map_err(|e| bad(e.to_string()))?;
+    for (name, bytes) in entries {
+        zip.start_file(
+            *name,
+            zip::write::SimpleFileOptions::default()
+                .compression_method(zip::CompressionMethod::Deflated),
+        )
+        .map_err(|e| bad(e.to_string()))?;
+        zip.write_all(bytes).map_err(|e| bad(e.to_string()))?;
+    }
     zip.finish().map_err(|e| bad(e.to_string()))?;
     Ok(())
 }
