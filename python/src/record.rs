@@ -27,22 +27,10 @@ fn column(values: &[f64], py: Python<'_>) -> Py<PyAny> {
 
 impl Record {
     /// The record checked against `twin` by the library's one guard (`twin::guard`) before any
-    /// work: for `command` Some(name), a command still written for the paper's rig
-    /// (`check_paper_rig`); for None, any building (`check_record`). `DataError` names the
-    /// column, or says the command serves the paper's rig only.
-    pub(crate) fn for_twin(
-        &self,
-        twin: &orchestrator::twin::Twin,
-        command: Option<&str>,
-    ) -> PyResult<&Measurement> {
-        use orchestrator::twin::guard;
-        match command {
-            Some(command) => guard::check_paper_rig(twin, &self.measurement, command)
-                .map_err(|e| to_py(Kind::Data, e))?,
-            None => {
-                guard::check_record(twin, &self.measurement).map_err(|e| to_py(Kind::Data, e))?;
-            }
-        }
+    /// work; `DataError` names the column.
+    pub(crate) fn for_twin(&self, twin: &orchestrator::twin::Twin) -> PyResult<&Measurement> {
+        orchestrator::twin::guard::check_record(twin, &self.measurement)
+            .map_err(|e| to_py(Kind::Data, e))?;
         Ok(&self.measurement)
     }
 }

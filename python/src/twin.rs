@@ -178,7 +178,7 @@ impl Twin {
             latent_threshold,
         };
         options.validate().map_err(|e| to_py(kind, e))?;
-        let data = record.for_twin(&self.twin, None)?;
+        let data = record.for_twin(&self.twin)?;
         options.validate_for(data).map_err(|e| to_py(kind, e))?;
         let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
         let compared = detached(py, || {
@@ -347,7 +347,7 @@ impl Twin {
         o.transient = transient.unwrap_or(o.transient);
         o.threads = threads.unwrap_or(o.threads);
         o.block = block.unwrap_or(o.block);
-        let data = record.for_twin(&self.twin, None)?;
+        let data = record.for_twin(&self.twin)?;
         o.validate_for(data).map_err(|e| to_py(kind, e))?;
         if let Some(effects) = effects {
             o.candidates = Some(parse_candidates(&effects).map_err(|e| to_py(kind, e))?);
@@ -393,7 +393,7 @@ impl Twin {
         let others: Vec<orchestrator::twin::data::Measurement> = match records {
             Some(given) => given
                 .iter()
-                .map(|r| r.for_twin(&self.twin, None).cloned())
+                .map(|r| r.for_twin(&self.twin).cloned())
                 .collect::<PyResult<_>>()?,
             None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
         };
@@ -426,7 +426,7 @@ impl Twin {
             }
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
-        let data = record.for_twin(&self.twin, None)?;
+        let data = record.for_twin(&self.twin)?;
         let (new_twin, report) = detached(py, || {
             let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;
@@ -528,7 +528,7 @@ impl Twin {
             dwell: dwell.unwrap_or(sd.dwell),
             variance,
         });
-        let data = record.for_twin(&self.twin, None)?;
+        let data = record.for_twin(&self.twin)?;
         let outcome = detached(py, || {
             let twin = twin_for_control(&self.twin, sensor_noise);
             let outcome =
@@ -711,7 +711,7 @@ impl Twin {
         if let Some(s) = &selection {
             s.validate().map_err(|e| to_py(kind, e))?;
         }
-        let data = record.for_twin(&self.twin, None)?;
+        let data = record.for_twin(&self.twin)?;
         let (twin, report) = detached(py, || {
             let trained = train_selected(&self.twin, data, &options, selection.as_ref())
                 .map_err(|e| to_py(kind, e))?;
@@ -784,7 +784,7 @@ impl Twin {
         }
         let data: Vec<Measurement> = records
             .iter()
-            .map(|r| r.for_twin(&self.twin, None).cloned())
+            .map(|r| r.for_twin(&self.twin).cloned())
             .collect::<PyResult<_>>()?;
         let (report, learned) = detached(py, || {
             let started = std::time::Instant::now();

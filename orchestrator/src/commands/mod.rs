@@ -159,14 +159,6 @@ pub struct ColumnsArg {
 }
 
 impl ColumnsArg {
-    /// Read a record for a command written for the paper's rig: the column map applied, a
-    /// record without a force or without acc1..acc3 refused at once, naming the column.
-    pub fn read_record(&self, path: &Path) -> Result<Measurement> {
-        let record = self.read_any(path)?;
-        record.require_paper_rig()?;
-        Ok(record)
-    }
-
     /// Read a record with the column map applied, whatever it measures; check it against the
     /// twin with `twin::guard` before any work.
     pub fn read_any(&self, path: &Path) -> Result<Measurement> {

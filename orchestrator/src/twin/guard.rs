@@ -3,11 +3,10 @@
 //! one the twin's structure takes (`force` for a force at a floor, `ground_acc` for ground
 //! motion), and every response channel is one the twin can predict (`acc<i>`, `vel<i>`,
 //! `disp<i>` of a floor the structure has). A refusal names the column, the file and its header
-//! line, and what the twin is. Commands still written for the paper's rig say so here too
-//! ([`check_paper_rig`]), before any work, instead of failing later or answering nonsense.
+//! line, and what the twin is.
 
 use ::structure::channel::Channel;
-use ::structure::{Excitation, Structure};
+use ::structure::Structure;
 
 use super::{Twin, TwinError};
 use crate::record::{DataError, Measurement};
@@ -21,17 +20,6 @@ pub enum Refused {
     /// The twin's structure could not be read.
     #[error(transparent)]
     Twin(#[from] TwinError),
-    /// The command serves the paper's rig only and the twin is another building.
-    #[error(
-        "twin {command} serves the paper's rig only (3 storeys, a force at floor 1); {twin} is \
-         {storeys} storey(s) under {excitation}"
-    )]
-    PaperRigOnly {
-        command: String,
-        twin: String,
-        storeys: usize,
-        excitation: String,
-    },
 }
 
 /// `storeys` storey(s) under `excitation`, in words.
@@ -69,47 +57,13 @@ pub fn check_against(
     Ok(())
 }
 
-/// Whether `structure` is laid out as the paper's rig: three storeys, a force at floor 1 (its
-/// masses, dampings and stiffnesses may be any).
-pub fn is_paper_rig(structure: &Structure) -> bool {
-    structure.storeys() == 3 && structure.excitation == Excitation::Force { floor: 1 }
-}
-
-/// For a command still written for the paper's rig (`command`, e.g. "diagnose"): the twin must
-/// be laid out as the rig ([`is_paper_rig`]), the record fit it ([`check_record`]) and have the
-/// rig's columns, a force and acc1..acc3 ([`Measurement::require_paper_rig`]).
-pub fn check_paper_rig(twin: &Twin, data: &Measurement, command: &str) -> Result<(), Refused> {
-    let structure = check_record(twin, data)?;
-    require_paper_twin(twin, &structure, command)?;
-    data.require_paper_rig()?;
-    Ok(())
-}
-
-/// For a command still written for the paper's rig that takes a twin without a record (or
-/// checks its records itself): refused unless the twin is laid out as the rig.
-pub fn check_paper_twin(twin: &Twin, command: &str) -> Result<(), Refused> {
-    let structure = twin.structure()?;
-    require_paper_twin(twin, &structure, command)
-}
-
-fn require_paper_twin(twin: &Twin, structure: &Structure, command: &str) -> Result<(), Refused> {
-    if is_paper_rig(structure) {
-        return Ok(());
-    }
-    Err(Refused::PaperRigOnly {
-        command: command.to_owned(),
-        twin: twin.describe(),
-        storeys: structure.storeys(),
-        excitation: structure.excitation.describe(),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use std::path::Path;
 
     use super::*;
     use crate::record::ColumnMap;
+    use ::structure::Excitation;
 
     /// A 20-sample record with the named columns (all zeros but a ramp of time).
     fn record(names: &[&str]) -> Measurement {
@@ -134,7 +88,6 @@ mod tests {
         let structure = check_record(&twin, &record(&["force", "acc1", "vel3", "disp2"]))
             .expect("a force and floors 1 to 3");
         assert_eq!(structure, Structure::default());
-        assert!(is_paper_rig(&structure));
 
         let e = refusal(&twin, &["force", "acc1", "acc4"]);
         assert!(
@@ -147,20 +100,10 @@ mod tests {
             "{e}"
         );
         assert!(e.contains("a force at floor 1"), "{e}");
-        assert!(check_paper_rig(
-            &twin,
-            &record(&["force", "acc1", "acc2", "acc3"]),
-            "diagnose"
-        )
-        .is_ok());
-        let e = check_paper_rig(&twin, &record(&["force", "vel1"]), "diagnose")
-            .expect_err("no acc1")
-            .to_string();
-        assert!(e.contains("missing column 'acc1'"), "{e}");
     }
 
     #[test]
-    fn a_twin_of_another_structure_knows_it_and_the_paper_rig_commands_say_so() {
+    fn a_twin_of_another_structure_knows_it() {
         let five = Structure::uniform(5, 2.0, 1.0, 3000.0, Excitation::Base);
         let twin = Twin::for_structure(&five).expect("a five-storey twin");
         assert_eq!(twin.structure().expect("its structure"), five);
@@ -172,17 +115,6 @@ mod tests {
         assert!(
             e.contains("column 'acc7' is for floor 7; the structure has floors 1 to 5"),
             "{e}"
-        );
-        let e = check_paper_twin(&twin, "control")
-            .expect_err("five storeys")
-            .to_string();
-        assert_eq!(
-            e,
-            format!(
-                "twin control serves the paper's rig only (3 storeys, a force at floor 1); {} is \
-                 5 storey(s) under ground acceleration at the base",
-                twin.describe()
-            )
         );
     }
 }
