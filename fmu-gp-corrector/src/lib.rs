@@ -1,8 +1,13 @@
 //! `fmu_gp_corrector`: the data-based component of the twin as an FMI 2.0 co-simulation FMU.
 //!
-//! Three independent zero-mean GPs (one per floor, Matérn 3/2 ARD kernel, Gaussian noise,
-//! `numerics::gp`) map the lag vector of the physics model's accelerations and the force
-//! ([`lags`]) to a correction of each floor's acceleration:
+//! One independent zero-mean GP per measured channel (Matérn 3/2 ARD kernel, Gaussian noise,
+//! `numerics::gp`) maps lags of the physics predictions and the excitation ([`lags`]) to a
+//! correction of that channel, in its own quantity. The channels and the excitation are the
+//! corrector's layout ([`layout`]): the paper's rig (acc1..3 and the force, three GPs on all
+//! four columns) by default, any set of `acc<i>`, `vel<i>`, `disp<i>` under `force` or
+//! `ground_acc` when the bundled training file names them, each GP then on its own channel, at
+//! most two nearest measured neighbours and the excitation. What is said below of "floors" and
+//! "accelerations" is the rig's case:
 //!
 //! - `target` = 0 (default, discrepancy): the GP models measured − physics; the corrected
 //!   acceleration is physics + GP mean;
