@@ -66,6 +66,7 @@ use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use nalgebra::DMatrix;
+use smallvec::SmallVec;
 
 use crate::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
 use crate::effects::Contact;
@@ -82,6 +83,9 @@ pub const MAX_CACHED_REGIONS: usize = 64;
 const CHECK_PHASE: f64 = 0.25;
 /// Columns of the augmented system after the 2N states: `e, ė, c, ċ, 1`.
 const EXTRA: usize = 5;
+
+/// A state `[y, ẏ]` inside a step: inline up to ten storeys (no allocation per piece).
+type X = SmallVec<[f64; 20]>;
 
 /// A region's code is already a well-spread integer: hash it as itself.
 #[derive(Default)]
@@ -317,7 +321,7 @@ impl AnyContactMaps {
         size: u64,
         tau: f64,
         inputs: &StepInputs,
-    ) -> Result<Vec<f64>, ExactError> {
+    ) -> Result<X, ExactError> {
         let n = self.n;
         let step = self.key.step;
         let level = (DEPTH - size.trailing_zeros()) as usize;
@@ -434,12 +438,12 @@ impl AnyContactMaps {
     pub fn advance(&mut self, x0: &[f64], inputs: &StepInputs) -> Result<Vec<f64>, ExactError> {
         let total: u64 = 1 << DEPTH;
         let tick = self.key.step / total as f64;
-        let mut x = x0.to_vec();
+        let mut x: X = SmallVec::from_slice(x0);
         let mut pos: u64 = 0;
         let mut region = self.region_of(&x);
         let whole = self.apply(region, &x, total, 0.0, inputs)?;
         if self.clear(region, &x, &whole)? {
-            return Ok(whole);
+            return Ok(whole.into_vec());
         }
         while pos < total {
             let check = self.region(region)?.check_level;
@@ -484,7 +488,7 @@ impl AnyContactMaps {
                 }
             }
         }
-        Ok(x)
+        Ok(x.into_vec())
     }
 
     /// The state `count` ticks after `x` (at tick `pos`), as the flows of the binary digits of
@@ -497,8 +501,8 @@ impl AnyContactMaps {
         count: u64,
         tick: f64,
         inputs: &StepInputs,
-    ) -> Result<Vec<f64>, ExactError> {
-        let mut x = x.to_vec();
+    ) -> Result<X, ExactError> {
+        let mut x: X = SmallVec::from_slice(x);
         let mut at = pos;
         let mut rest = count;
         while rest > 0 {
@@ -524,7 +528,7 @@ impl AnyContactMaps {
         size: u64,
         tick: f64,
         inputs: &StepInputs,
-    ) -> Result<Option<(u64, Vec<f64>)>, ExactError> {
+    ) -> Result<Option<(u64, X)>, ExactError> {
         let n = self.n;
         let dt = size as f64 * tick;
         let mut first: Option<(f64, usize, f64)> = None;
