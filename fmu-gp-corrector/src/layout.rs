@@ -231,7 +231,9 @@ mod tests {
             assert!(tall.input_dimension_of(j, 9) <= 40);
         }
         // acc7: itself, disp7 (same floor), then acc6 (the same quantity, lower floor first).
-        let acc7 = tall.index_of(Channel::parse("acc7").unwrap()).unwrap();
+        let acc7 = tall
+            .index_of(Channel::parse("acc7").expect("test value"))
+            .expect("test value");
         let names_of = |cols: Vec<usize>| -> Vec<String> {
             cols.iter()
                 .map(|&c| {
@@ -270,8 +272,8 @@ mod tests {
     fn a_selection_takes_the_columns_blocks() {
         let x: Vec<f64> = (0..12).map(f64::from).collect();
         assert_eq!(select(&x, &[0, 2], 2), vec![0.0, 1.0, 2.0, 6.0, 7.0, 8.0]);
-        let acc = Channel::parse("acc2").unwrap();
-        let vel = Channel::parse("vel4").unwrap();
+        let acc = Channel::parse("acc2").expect("test value");
+        let vel = Channel::parse("vel4").expect("test value");
         assert_eq!(band_name("latent_var", &acc), "latent_var2");
         assert_eq!(band_name("sd", &vel), "sd_vel4");
     }

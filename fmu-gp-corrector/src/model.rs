@@ -1089,7 +1089,8 @@ mod tests {
     /// whole lag vectors the corrector saw.
     #[test]
     fn a_corrector_of_another_layout_predicts_each_channel_from_its_own_inputs() {
-        let layout = Layout::from_names(&["acc1", "acc3", "acc5", "vel2"], "ground_acc").unwrap();
+        let layout = Layout::from_names(&["acc1", "acc3", "acc5", "vel2"], "ground_acc")
+            .expect("test value");
         let (m, lags) = (layout.channels.len(), 1);
         let samples: Vec<Vec<f64>> = (0..30)
             .map(|k| {
@@ -1141,32 +1142,36 @@ mod tests {
                 .collect();
             let h = &hyperparameters[j];
             GaussianProcess::new(
-                Inputs::from_rows(&rows).unwrap(),
+                Inputs::from_rows(&rows).expect("test value"),
                 targets[..points].iter().map(|y| y[j]).collect(),
                 Hyperparameters::new(&h.length_scales, h.signal_variance, h.noise_variance)
-                    .unwrap(),
+                    .expect("test value"),
             )
-            .unwrap()
+            .expect("test value")
         };
         for (k, sample) in samples.iter().enumerate().take(25) {
-            for j in 0..m {
+            for (j, &value) in sample.iter().enumerate().take(m) {
                 model
-                    .set_real(vr_of(&layout, Role::Physics, j), sample[j])
-                    .unwrap();
+                    .set_real(vr_of(&layout, Role::Physics, j), value)
+                    .expect("test value");
                 model
                     .set_real(vr_of(&layout, Role::Measured, j), sample[j] + targets[k][j])
-                    .unwrap();
+                    .expect("test value");
             }
-            model.set_real(GROUND_ACC, sample[m]).unwrap();
+            model.set_real(GROUND_ACC, sample[m]).expect("test value");
             // From sample 20 on the corrector learns each sample after reading it.
-            model.set_boolean(LEARN, k >= 20).unwrap();
+            model.set_boolean(LEARN, k >= 20).expect("test value");
             let known = if k <= 20 { 20 } else { k };
-            for j in 0..m {
+            for (j, &physics) in sample.iter().enumerate().take(m) {
                 let x = select(&inputs[k], &layout.columns_of(j), lags);
-                let p = gp(j, known).predict_point(&x).unwrap();
-                let corrected = model.get_real(vr_of(&layout, Role::Corrected, j)).unwrap();
-                let latent = model.get_real(vr_of(&layout, Role::LatentVar, j)).unwrap();
-                let expected = sample[j] + p.mean;
+                let p = gp(j, known).predict_point(&x).expect("test value");
+                let corrected = model
+                    .get_real(vr_of(&layout, Role::Corrected, j))
+                    .expect("test value");
+                let latent = model
+                    .get_real(vr_of(&layout, Role::LatentVar, j))
+                    .expect("test value");
+                let expected = physics + p.mean;
                 assert!(
                     (corrected - expected).abs() <= 1e-9 * expected.abs().max(1e-6),
                     "sample {k}, {}: {corrected} vs {expected}",
@@ -1179,7 +1184,7 @@ mod tests {
                     p.latent_variance
                 );
             }
-            model.do_step(k as f64, 1.0).unwrap();
+            model.do_step(k as f64, 1.0).expect("test value");
         }
         let learned = model.training().expect("built");
         assert_eq!(learned.inputs, inputs[..25].to_vec());

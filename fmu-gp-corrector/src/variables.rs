@@ -518,7 +518,8 @@ mod tests {
     #[test]
     fn other_layouts_have_tables_of_their_own() {
         use super::*;
-        let five = Layout::from_names(&["acc1", "acc3", "acc5", "vel2"], "ground_acc").unwrap();
+        let five = Layout::from_names(&["acc1", "acc3", "acc5", "vel2"], "ground_acc")
+            .expect("test value");
         let t = table(&five);
         for name in [
             "physics_acc3",
@@ -538,7 +539,7 @@ mod tests {
         assert!(t.by_name("acc2").is_none());
         assert_ne!(t.guid, info().guid);
         assert_eq!(table(&Layout::default()).guid, info().guid);
-        let vel = t.by_name("sd_vel2").unwrap();
+        let vel = t.by_name("sd_vel2").expect("test value");
         assert_eq!(vel.unit, Some("m/s"));
         assert_eq!(role_of(&five, vel.vr), Some((Role::Sd, 3)));
         // vel2's GP: itself, acc1 and acc3 (floor distance 1), the ground acceleration.
@@ -554,7 +555,7 @@ mod tests {
         let every: Vec<String> = (1..=structure::MAX_STOREYS)
             .flat_map(|f| [format!("acc{f}"), format!("vel{f}"), format!("disp{f}")])
             .collect();
-        let all = Layout::from_names(&every, "force").unwrap();
+        let all = Layout::from_names(&every, "force").expect("test value");
         assert_eq!(
             table(&all).by_name("disp50").map(|v| v.vr),
             Some(LAYOUT_CORRECTED + 149)
