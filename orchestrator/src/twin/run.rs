@@ -283,34 +283,6 @@ pub struct Compared {
     pub tolerance: Tolerance,
 }
 
-impl Compared {
-    /// NMSE (%) of floor `f`'s acceleration (`f` from 0), for the workflows written for the
-    /// paper's rig. Panics when the record has no such channel.
-    pub fn acc_nmse(&self, f: usize) -> f64 {
-        self.comparison
-            .nmse_of(acc_channel(f + 1))
-            .unwrap_or_else(|| panic!("the comparison has no acc{}", f + 1))
-    }
-
-    /// The paper rig's NMSE per floor (see [`Compared::acc_nmse`]).
-    pub fn paper_nmse(&self) -> [f64; 3] {
-        std::array::from_fn(|f| self.acc_nmse(f))
-    }
-
-    /// A per-channel array of this comparison (e.g. `band_nmse`) at floors 1 to 3's
-    /// accelerations, for the workflows written for the paper's rig. Panics when the record
-    /// lacks one of them.
-    pub fn paper(&self, per_channel: &[f64]) -> [f64; 3] {
-        std::array::from_fn(|f| {
-            let c = self
-                .comparison
-                .index_of(acc_channel(f + 1))
-                .unwrap_or_else(|| panic!("the comparison has no acc{}", f + 1));
-            per_channel[c]
-        })
-    }
-}
-
 /// Run `twin` on `data` and compare every measured channel after `transient`: the one sequence
 /// behind `twin compare`, the calibrated twin's plot and the NMSE after calibrating or training.
 /// The band includes the parameter uncertainty; the tolerance is the twin's default.
@@ -595,9 +567,10 @@ pub fn parameter_variance(
     ))
 }
 
-/// NMSE per floor of `twin` on `data` after the transient, for the workflows written for the
-/// paper's rig (acc1..acc3).
-pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<[f64; 3], RunError> {
+/// NMSE % of `twin` on `data` after the transient, per measured channel in the record's order.
+pub fn nmse_on(twin: &Twin, data: &Measurement, transient: f64) -> Result<Vec<f64>, RunError> {
     let prediction = run_twin(twin, data, |_, _| {})?;
-    Ok(compare_prediction(twin, data, transient, prediction)?.paper_nmse())
+    Ok(compare_prediction(twin, data, transient, prediction)?
+        .comparison
+        .nmse)
 }

@@ -74,8 +74,8 @@ pub fn channel_nmse(
     if paper_rig(twin, data)? {
         return Ok(ChannelNmse {
             data: name,
-            channels: (1..=3).map(|f| format!("acc{f}")).collect(),
-            nmse: nmse_on(twin, data, transient)?.to_vec(),
+            channels: data.responses.iter().map(|s| s.channel.name()).collect(),
+            nmse: nmse_on(twin, data, transient)?,
         });
     }
     let physics = twin

@@ -258,11 +258,11 @@ pub fn refit_over_records(
     let mut validated = Vec::with_capacity(records.len());
     for (data, fitted) in records.iter().zip(&calibration.records) {
         let nmse_after = crate::twin::run::nmse_on(&chosen, data, options.transient)?;
-        validated.push((fitted.record.clone(), nmse_after));
+        validated.push((fitted.record.clone(), nmse_after.clone()));
         out.push(RecordNmse {
             record: fitted.record.clone(),
-            nmse_before: crate::twin::run::nmse_on(original, data, options.transient)?.to_vec(),
-            nmse_after: nmse_after.to_vec(),
+            nmse_before: crate::twin::run::nmse_on(original, data, options.transient)?,
+            nmse_after,
             noise_variance: fitted.noise_variance.to_vec(),
         });
     }

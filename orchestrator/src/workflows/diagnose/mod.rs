@@ -996,6 +996,10 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     } else {
         candidates
     };
+    let current = parameter_names(storeys)
+        .into_iter()
+        .map(|name| Ok((name.clone(), reals.get(&name)?)))
+        .collect::<Result<BTreeMap<String, f64>>>()?;
     let mut jobs = vec![Job::Recalibrate];
     jobs.extend(candidates.iter().map(|c| Job::Effect(*c)));
     let done = AtomicUsize::new(0);
@@ -1013,6 +1017,10 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             ));
         });
         let fitted = match job {
+            // The prior's mean and random draws as a calibration starts, and one more start
+            // at the twin's own values: a change near them (a storey's stiffness loss) is
+            // found from there whatever the number of parameters, where random starts of a
+            // tall building's 3N parameters rarely come near.
             Job::Recalibrate => fit(
                 &physics,
                 data,
@@ -1021,12 +1029,12 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
                 &mask,
                 &held_out,
                 first,
-                options.recalibration_starts,
+                options.recalibration_starts + 1,
                 crate::workflows::calibrate::SIMULATIONS_PER_START,
                 options,
                 baseline_evidence,
                 &BTreeMap::new(),
-                Vec::new(),
+                vec![current.clone()],
             ),
             Job::Effect(c) => {
                 let twin = with_switches(&physics, Some(c))?;
