@@ -6,8 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::twin::structure::{InitOptions, Nominal};
-use crate::twin::Twin;
-use crate::workflows::calibrate::{priors_from_json, structure_prior};
+use crate::workflows::init::InitRequest;
 
 #[derive(clap::Args)]
 pub struct InitArgs {
@@ -40,47 +39,27 @@ fn parse_excitation(text: &str) -> Result<structure::Excitation, String> {
 }
 
 pub fn run(args: &InitArgs) -> Result<()> {
-    let structure = if args.storeys.is_none() && args.excitation.is_none() && args.nominal.is_none()
-    {
-        None
-    } else {
-        let nominal = match &args.nominal {
-            Some(path) => Some((path.clone(), Nominal::read(path)?)),
-            None => None,
-        };
-        let options = InitOptions {
+    let nominal = match &args.nominal {
+        Some(path) => Some((path.clone(), Nominal::read(path)?)),
+        None => None,
+    };
+    let priors = match &args.priors {
+        Some(path) => Some((
+            path.display().to_string(),
+            std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+        )),
+        None => None,
+    };
+    let request = InitRequest {
+        structure: InitOptions {
             storeys: args.storeys,
             excitation: args.excitation,
             nominal,
-        };
-        Some(options.structure()?)
+        },
+        priors,
     };
-    // The priors checked against the structure before anything is written.
-    let priors = match &args.priors {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            let spec =
-                priors_from_json(&text, &path.display().to_string()).map_err(anyhow::Error::msg)?;
-            let s = structure.clone().unwrap_or_default();
-            spec.check(&s, true).map_err(anyhow::Error::msg)?;
-            for name in s.parameter_names() {
-                if let Some(fallback) = structure_prior(&s, &name) {
-                    if let Some(prior) = spec.prior_for(&name, fallback) {
-                        prior.map_err(anyhow::Error::msg)?;
-                    }
-                }
-            }
-            Some(text)
-        }
-        None => None,
-    };
-    let mut twin = match &structure {
-        None => Twin::default_twin()?,
-        Some(s) => Twin::for_structure(s)?,
-    };
-    twin.priors = priors;
-    twin.write(&args.out)?;
+    request.twin()?.write(&args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

@@ -30,15 +30,20 @@ pub struct Nominal {
 
 impl Nominal {
     pub fn read(path: &Path) -> Result<Nominal, TwinError> {
-        let invalid = |message: String| TwinError::Invalid {
-            path: path.to_owned(),
-            message,
-        };
         let text = std::fs::read_to_string(path).map_err(|source| TwinError::Io {
             path: path.to_owned(),
             source,
         })?;
-        serde_json::from_str(&text).map_err(|e| {
+        Nominal::from_json(&text, path)
+    }
+
+    /// The nominal from its JSON text; `origin` names it in a refusal (a file, or the call).
+    pub fn from_json(text: &str, origin: &Path) -> Result<Nominal, TwinError> {
+        let invalid = |message: String| TwinError::Invalid {
+            path: origin.to_owned(),
+            message,
+        };
+        serde_json::from_str(text).map_err(|e| {
             invalid(format!(
                 "{e}; expected {{\"m\": [...], \"c\": [...], \"k\": [...]}} (kg, N s/m, N/m)"
             ))

@@ -6,6 +6,7 @@ pub mod compare;
 pub mod control;
 pub mod diagnose;
 pub mod hybrid;
+pub mod init;
 pub mod learn;
 pub mod options;
 pub mod train;
