@@ -439,11 +439,29 @@ def export_fmus(out: str | os.PathLike) -> list[str]:
     return [str(p) for p in _native.export_fmus(os.fspath(out))]
 
 
-def init(out: str | os.PathLike) -> Twin:
-    """``twin init``: write the default twin (the shear FMU, default parameters) as an SSP
-    archive; returns it."""
-    twin = Twin.default()
-    twin.save(os.fspath(out))
+def _json_argument(value: Any, name: str) -> tuple[str | None, str]:
+    """A JSON argument given as a dict or as the path of a JSON file: its text and its origin."""
+    if value is None:
+        return None, f"{name}="
+    if isinstance(value, (str, os.PathLike)):
+        path = os.fspath(value)
+        with open(path, encoding="utf-8") as f:
+            return f.read(), path
+    return json.dumps(value), f"{name}="
+
+
+def init(out: str | os.PathLike | None = None, *, storeys: int | None = None,
+         excitation: str | None = None, nominal: Any = None, priors: Any = None) -> Twin:
+    """``twin init``: the twin of a shear building — ``storeys`` (1 to 50), ``excitation``
+    (``"force:K"`` or ``"base"``), ``nominal`` (``{"m": [...], "c": [...], "k": [...]}``, SI, or
+    the path of such a file) and ``priors`` (``--priors``'s JSON as a dict or a path), none of
+    them: the default twin. Written to ``out`` as an SSP archive when given; returns it."""
+    nominal_text, nominal_origin = _json_argument(nominal, "nominal")
+    priors_text, priors_origin = _json_argument(priors, "priors")
+    twin = Twin(_native.Twin.init(storeys, excitation, nominal_text, nominal_origin,
+                                  priors_text, priors_origin))
+    if out is not None:
+        twin.save(os.fspath(out))
     return twin
 
 

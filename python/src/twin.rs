@@ -102,6 +102,51 @@ impl Twin {
         })
     }
 
+    /// The twin of a shear building, `twin init`'s: `storeys`, `excitation` ("force:K" or
+    /// "base"), the nominal structure and the priors as JSON texts (`*_origin` names them in a
+    /// refusal); none of them: the default twin.
+    #[staticmethod]
+    #[pyo3(signature = (storeys=None, excitation=None, nominal=None, nominal_origin=String::from("nominal="), priors=None, priors_origin=String::from("priors=")))]
+    fn init(
+        py: Python<'_>,
+        storeys: Option<usize>,
+        excitation: Option<String>,
+        nominal: Option<String>,
+        nominal_origin: String,
+        priors: Option<String>,
+        priors_origin: String,
+    ) -> PyResult<Self> {
+        use orchestrator::twin::structure::{InitOptions, Nominal};
+        use orchestrator::workflows::init::InitRequest;
+        detached(py, || {
+            let excitation = excitation
+                .map(|e| {
+                    structure::Excitation::parse(&e).map_err(|err| {
+                        to_py(Kind::Twin, anyhow::anyhow!("excitation={e:?}: {err}"))
+                    })
+                })
+                .transpose()?;
+            let nominal = nominal
+                .map(|text| {
+                    let origin = PathBuf::from(&nominal_origin);
+                    Nominal::from_json(&text, &origin)
+                        .map(|n| (origin, n))
+                        .map_err(|e| to_py(Kind::Twin, e))
+                })
+                .transpose()?;
+            let request = InitRequest {
+                structure: InitOptions {
+                    storeys,
+                    excitation,
+                    nominal,
+                },
+                priors: priors.map(|text| (priors_origin, text)),
+            };
+            let twin = request.twin().map_err(|e| to_py(Kind::Twin, e))?;
+            Twin::holding_fmus(twin).map_err(|e| to_py(Kind::Twin, e))
+        })
+    }
+
     /// Write the twin as an SSP archive.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         detached(py, || {
