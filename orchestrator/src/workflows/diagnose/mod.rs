@@ -1504,7 +1504,7 @@ fn none_reason(
         format!(
         "{} NMSE ({}) is within {}× of what the twin's band explains on this record ({}: noise \
          {} + parameter uncertainty {})",
-        if statistically { "not every floor's" } else { "every floor's" },
+        if statistically { "not every channel's" } else { "every channel's" },
         per_channel(nmse),
         factor,
         per_channel(&explained),
@@ -1513,7 +1513,7 @@ fn none_reason(
     );
     let worst_floor = worst(nmse);
     let practical = format!(
-        "the worst floor's NMSE {:.3} % {} the tolerance of {:.3} % ({})",
+        "the worst channel's NMSE {:.3} % {} the tolerance of {:.3} % ({})",
         worst_floor,
         if worst_floor > tolerance.value {
             "exceeds"
