@@ -62,12 +62,6 @@ impl NoiseVariances {
         (1..=n).map(|f| self.get(accelerometer(f))).collect()
     }
 
-    /// The paper rig's three floors (acc1..acc3), when the twin has each of them.
-    pub fn paper_floors(&self) -> Option<[f64; 3]> {
-        let v = self.floors(3)?;
-        Some([v[0], v[1], v[2]])
-    }
-
     /// The twin.ssv parameter name of `channel`'s variance.
     pub fn parameter_name(channel: Channel) -> String {
         match channel {
@@ -161,7 +155,7 @@ mod tests {
             ]
         );
         let back = NoiseVariances::from_parameters(&p).unwrap().unwrap();
-        assert_eq!(back.paper_floors(), Some([1e-4, 2e-4, 3e-4]));
+        assert_eq!(back.floors(3), Some(vec![1e-4, 2e-4, 3e-4]));
         assert_eq!(back.get(vel2), Some(5e-6));
         assert_eq!(back.floors(4), None);
     }
