@@ -5,5 +5,6 @@ pub mod control;
 pub mod excitation;
 pub mod gp;
 pub mod lqr;
+pub mod modal;
 pub mod ode;
 pub mod substructure;
