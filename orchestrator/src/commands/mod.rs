@@ -22,6 +22,7 @@ pub mod fleet;
 pub mod hybrid;
 pub mod init;
 pub mod learn;
+pub mod modal;
 pub mod pack_fmu;
 pub mod run;
 pub mod synth;
@@ -61,6 +62,9 @@ pub enum Command {
     /// Diagnose a failing twin: none, recalibrate, add physics (which effect, where, how
     /// strong) or update the data-based model, with the evidence.
     Diagnose(diagnose::DiagnoseArgs),
+    /// The structure by its modes: natural frequencies, damping ratios and mode shapes of the
+    /// twin, each with its sd from the calibration's posterior.
+    Modal(modal::ModalArgs),
     /// Switch an effect of the shear FMU's library on, estimate its parameters, write the twin.
     AddPhysics(add_physics::AddPhysicsArgs),
     /// Run any FMI 2.0 co-simulation FMU or SSP system and record its outputs as CSV.
@@ -92,6 +96,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Synth(args) => synth::run(&args),
         Command::Learn(args) => learn::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
+        Command::Modal(args) => modal::run(&args),
         Command::AddPhysics(args) => add_physics::run(&args),
         Command::Run(args) => run::run(&args),
         Command::Control(args) => control::run(&args),

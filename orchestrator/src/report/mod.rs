@@ -13,6 +13,7 @@ pub mod diagnose_plot;
 pub mod hybrid_plot;
 pub mod json;
 pub mod learn_plot;
+pub mod mode_plot;
 pub mod plot;
 
 /// Every plot's colours: the Okabe–Ito set (apart for colour-blind readers too), a red for

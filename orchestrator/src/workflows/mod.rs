@@ -8,6 +8,7 @@ pub mod diagnose;
 pub mod hybrid;
 pub mod init;
 pub mod learn;
+pub mod modal;
 pub mod options;
 pub mod train;
 pub mod watch;
