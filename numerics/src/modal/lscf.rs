@@ -1,0 +1,366 @@
+//! Input–output identification on FRFs: the least-squares complex frequency-domain method
+//! (LSCF; with one measured input the poly-reference form is this common-denominator one),
+//! then the shapes by a least-squares frequency-domain fit (LSFD).
+//!
+//! LSCF fits, over a band, `H_o(ω) ≈ N_o(Ω) / D(Ω)` with `Ω = e^{iωT}` (the z-domain basis,
+//! `T = 1 / (2 f_max)` so the band's top is the basis' Nyquist) and real polynomial
+//! coefficients, linearised as `N_o − H_o D ≈ 0`. The numerators are eliminated from the normal
+//! equations (`M = Σ_o T_o − S_oᵀ R⁻¹ S_o`), the denominator's last coefficient is fixed at 1,
+//! and the roots `z` of `D` give the poles `λ = ln z / T`. LSFD then fits
+//! `H_o(ω) = Σ_r R_or / (iω − λ_r) + conj(R_or) / (iω − conj λ_r) + U_o + L_o / (iω)² + V_o (iω)²`
+//! (linear in the residues and the residual terms) and the residues across outputs are the
+//! shapes.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::Complex;
+use serde::{Deserialize, Serialize};
+
+use super::error::IdentificationError;
+use super::spectral::Frf;
+use super::stabilisation::{ModelOrder, Pole};
+
+/// The band and polynomial orders of an LSCF run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LscfOptions {
+    /// Hz; the FRF's bins in [low, high] are fitted.
+    pub band: (f64, f64),
+    /// Denominator orders `min_order, min_order + order_step, …, max_order` (poles per order).
+    pub min_order: usize,
+    pub max_order: usize,
+    pub order_step: usize,
+}
+
+impl LscfOptions {
+    /// Orders 2 to 40 by 2 over `band`.
+    pub fn over(band: (f64, f64)) -> LscfOptions {
+        LscfOptions {
+            band,
+            min_order: 2,
+            max_order: 40,
+            order_step: 2,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), IdentificationError> {
+        let (low, high) = self.band;
+        if !(low.is_finite() && high.is_finite() && low >= 0.0 && high > low) {
+            return Err(IdentificationError::Option {
+                what: "band's upper frequency",
+                value: high,
+                rule: format!("a band is 0 <= low < high Hz; low is {low}"),
+            });
+        }
+        let option = |what, value: usize, rule: &str| {
+            Err(IdentificationError::Option {
+                what,
+                value: value as f64,
+                rule: rule.into(),
+            })
+        };
+        if self.order_step == 0 {
+            return option("order step", 0, "at least 1");
+        }
+        if self.min_order < 2 {
+            return option("least model order", self.min_order, "at least 2 (one mode)");
+        }
+        if self.max_order < self.min_order {
+            return option("largest model order", self.max_order, "at least the least order");
+        }
+        Ok(())
+    }
+}
+
+/// The FRF's bins inside `band`: (index, ω rad/s).
+fn band_bins(frf: &Frf, band: (f64, f64)) -> Vec<(usize, f64)> {
+    frf.frequencies
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| **f >= band.0 && **f <= band.1 && **f > 0.0)
+        .map(|(k, f)| (k, 2.0 * std::f64::consts::PI * f))
+        .collect()
+}
+
+fn check_frf(frf: &Frf) -> Result<(), IdentificationError> {
+    if frf.response.is_empty() {
+        return Err(IdentificationError::NoChannels { what: "the FRF" });
+    }
+    for (o, h) in frf.response.iter().enumerate() {
+        if h.len() != frf.frequencies.len() {
+            return Err(IdentificationError::Length {
+                what: format!("FRF of output {}", o + 1),
+                got: h.len(),
+                expected: frf.frequencies.len(),
+                reference: "the frequencies".into(),
+            });
+        }
+        if let Some(index) = h.iter().position(|v| !(v.re.is_finite() && v.im.is_finite())) {
+            return Err(IdentificationError::NonFinite {
+                what: format!("FRF of output {}", o + 1),
+                index,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The poles (and their LSFD shapes) of every order of `options`, fitted to `frf`.
+pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, IdentificationError> {
+    options.validate()?;
+    check_frf(frf)?;
+    let bins = band_bins(frf, options.band);
+    // Each order needs more equations than unknowns; 2 per bin (real and imaginary parts).
+    let needed = options.max_order + 2;
+    if bins.len() < needed {
+        return Err(IdentificationError::TooShort {
+            what: "the FRF's band".into(),
+            samples: bins.len(),
+            needed,
+            why: format!(
+                "LSCF of order {} over {:?} Hz (bins are {} Hz apart)",
+                options.max_order,
+                options.band,
+                frf.frequencies.get(1).copied().unwrap_or(f64::NAN)
+            ),
+        });
+    }
+    let period = 1.0 / (2.0 * options.band.1);
+    let max = options.max_order;
+    // Powers Ω_k^j, j = 0..=max, once for every order.
+    let powers: Vec<Vec<Complex>> = bins
+        .iter()
+        .map(|(_, w)| {
+            let omega = Complex::from_polar(1.0, w * period);
+            std::iter::successors(Some(Complex::new(1.0, 0.0)), |p| Some(p * omega))
+                .take(max + 1)
+                .collect()
+        })
+        .collect();
+    let outputs = frf.response.len();
+    // R, and per output S_o and T_o, at the largest order; each order takes the leading block.
+    // R_jm = Re Σ conj(Ω^j) Ω^m; S_jm = Re Σ conj(Ω^j) (−H Ω^m); T_jm = Re Σ |H|² conj(Ω^j) Ω^m.
+    let size = max + 1;
+    let mut r = DMatrix::<f64>::zeros(size, size);
+    let mut s = vec![DMatrix::<f64>::zeros(size, size); outputs];
+    let mut t = vec![DMatrix::<f64>::zeros(size, size); outputs];
+    for (b, (k, _)) in bins.iter().enumerate() {
+        let p = &powers[b];
+        for j in 0..size {
+            let pj = p[j].conj();
+            for m in 0..size {
+                let basis = pj * p[m];
+                r[(j, m)] += basis.re;
+                for o in 0..outputs {
+                    let h = frf.response[o][*k];
+                    s[o][(j, m)] -= (basis * h).re;
+                    t[o][(j, m)] += basis.re * h.norm_sqr();
+                }
+            }
+        }
+    }
+    let mut orders = Vec::new();
+    let mut order = options.min_order;
+    while order <= max {
+        let n = order + 1;
+        let r_n = r.view((0, 0), (n, n)).into_owned();
+        let r_chol = r_n.clone().cholesky().ok_or(IdentificationError::Numerical {
+            what: "LSCF",
+            why: format!("the basis' normal matrix of order {order} is singular"),
+        })?;
+        let mut reduced = DMatrix::<f64>::zeros(n, n);
+        for o in 0..outputs {
+            let s_n = s[o].view((0, 0), (n, n)).into_owned();
+            reduced += t[o].view((0, 0), (n, n)) - s_n.transpose() * r_chol.solve(&s_n);
+        }
+        // α_order = 1: the other coefficients solve the leading block.
+        let lead = reduced.view((0, 0), (order, order)).into_owned();
+        let rhs = -reduced.view((0, order), (order, 1)).into_owned();
+        let alpha = lead
+            .svd(true, true)
+            .solve(&rhs, 1e-14 * reduced.norm())
+            .map_err(|why| IdentificationError::Numerical {
+                what: "LSCF (denominator)",
+                why: why.to_owned(),
+            })?;
+        // Companion matrix of z^order + Σ α_j z^j.
+        let mut companion = DMatrix::<f64>::zeros(order, order);
+        for j in 0..order {
+            companion[(0, j)] = -alpha[order - 1 - j];
+            if j + 1 < order {
+                companion[(j + 1, j)] = 1.0;
+            }
+        }
+        let roots = companion.complex_eigenvalues();
+        let eigenvalues: Vec<Complex> = roots
+            .iter()
+            .filter(|z| z.im > 0.0 && z.norm() > 0.0)
+            .map(|z| z.ln() / period)
+            .filter(|l| {
+                let f = l.norm() / (2.0 * std::f64::consts::PI);
+                f >= options.band.0 && f <= options.band.1
+            })
+            .collect();
+        let shapes = lsfd(frf, options.band, &eigenvalues)?;
+        let mut poles: Vec<Pole> = eigenvalues
+            .into_iter()
+            .zip(shapes)
+            .map(|(l, shape)| Pole::new(l, shape))
+            .collect();
+        poles.sort_by(|a, b| a.frequency.total_cmp(&b.frequency));
+        orders.push(ModelOrder { order, poles });
+        order += options.order_step;
+    }
+    Ok(orders)
+}
+
+/// The residues of the poles `eigenvalues` (rad/s, positive imaginary part) in every output of
+/// `frf` over `band`: per pole, its shape across the outputs (unscaled).
+pub fn lsfd(
+    frf: &Frf,
+    band: (f64, f64),
+    eigenvalues: &[Complex],
+) -> Result<Vec<Vec<Complex>>, IdentificationError> {
+    check_frf(frf)?;
+    let bins = band_bins(frf, band);
+    let modes = eigenvalues.len();
+    // Unknowns per output: Re and Im of each residue, then U, L, V (real).
+    let unknowns = 2 * modes + 3;
+    if 2 * bins.len() < unknowns {
+        return Err(IdentificationError::TooShort {
+            what: "the FRF's band".into(),
+            samples: bins.len(),
+            needed: unknowns.div_ceil(2),
+            why: format!("LSFD of {modes} poles"),
+        });
+    }
+    let mut design = DMatrix::<f64>::zeros(2 * bins.len(), unknowns);
+    for (b, (_, w)) in bins.iter().enumerate() {
+        let s = Complex::new(0.0, *w);
+        for (r, l) in eigenvalues.iter().enumerate() {
+            let direct = 1.0 / (s - l);
+            let mirrored = 1.0 / (s - l.conj());
+            // R = a + ib: a (1/(s−λ) + 1/(s−λ*)) + b i (1/(s−λ) − 1/(s−λ*)).
+            let real_part = direct + mirrored;
+            let imaginary_part = Complex::i() * (direct - mirrored);
+            design[(2 * b, 2 * r)] = real_part.re;
+            design[(2 * b + 1, 2 * r)] = real_part.im;
+            design[(2 * b, 2 * r + 1)] = imaginary_part.re;
+            design[(2 * b + 1, 2 * r + 1)] = imaginary_part.im;
+        }
+        let residuals = [Complex::new(1.0, 0.0), 1.0 / (s * s), s * s];
+        for (c, v) in residuals.iter().enumerate() {
+            design[(2 * b, 2 * modes + c)] = v.re;
+            design[(2 * b + 1, 2 * modes + c)] = v.im;
+        }
+    }
+    // Columns of very different scale (1/ω², ω²): equilibrate before the least squares.
+    let scales: Vec<f64> = design
+        .column_iter()
+        .map(|c| {
+            let n = c.norm();
+            if n > 0.0 {
+                1.0 / n
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    for (c, scale) in scales.iter().enumerate() {
+        design.column_mut(c).scale_mut(*scale);
+    }
+    let svd = design.svd(true, true);
+    let mut residues = vec![vec![Complex::new(0.0, 0.0); frf.response.len()]; modes];
+    for (o, h) in frf.response.iter().enumerate() {
+        let target = DVector::from_iterator(
+            2 * bins.len(),
+            bins.iter().flat_map(|(k, _)| [h[*k].re, h[*k].im]),
+        );
+        let x = svd
+            .solve(&target, 1e-12)
+            .map_err(|why| IdentificationError::Numerical {
+                what: "LSFD",
+                why: why.to_owned(),
+            })?;
+        for (r, residue) in residues.iter_mut().enumerate() {
+            residue[o] = Complex::new(x[2 * r] * scales[2 * r], x[2 * r + 1] * scales[2 * r + 1]);
+        }
+    }
+    Ok(residues)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// The exact FRF of two modes, sampled finely: LSCF finds both poles and LSFD their
+    /// residues. A continuous-time FRF is not a rational function of the z-domain basis, so
+    /// order 4 is close, not exact: measured 4e-4 relative on the eigenvalues (bar 2e-3).
+    /// LSFD on the exact poles is exact: measured 1e-13-level (bar 1e-8).
+    #[test]
+    fn an_exact_two_mode_frf_is_recovered() {
+        let poles = [
+            Complex::new(-0.02 * 2.0 * PI * 3.0, 2.0 * PI * 3.0),
+            Complex::new(-0.01 * 2.0 * PI * 7.0, 2.0 * PI * 7.0),
+        ];
+        let residues = [
+            [Complex::new(0.0, -1.0), Complex::new(0.0, -0.5)],
+            [Complex::new(0.0, -0.3), Complex::new(0.0, 0.6)],
+        ];
+        let frequencies: Vec<f64> = (0..=2000).map(|k| k as f64 * 0.01).collect();
+        let response = (0..2)
+            .map(|o| {
+                frequencies
+                    .iter()
+                    .map(|f| {
+                        let s = Complex::new(0.0, 2.0 * PI * f);
+                        (0..2)
+                            .map(|r| {
+                                residues[r][o] / (s - poles[r])
+                                    + residues[r][o].conj() / (s - poles[r].conj())
+                            })
+                            .sum()
+                    })
+                    .collect()
+            })
+            .collect();
+        let frf = Frf {
+            coherence: vec![vec![1.0; frequencies.len()]; 2],
+            frequencies,
+            response,
+            segments: 1,
+        };
+        let orders = lscf(
+            &frf,
+            &LscfOptions {
+                min_order: 4,
+                max_order: 4,
+                ..LscfOptions::over((1.0, 10.0))
+            },
+        )
+        .expect("lscf");
+        let found = &orders[0].poles;
+        assert_eq!(found.len(), 2, "{found:?}");
+        for (pole, exact) in found.iter().zip(&poles) {
+            assert!((pole.eigenvalue - exact).norm() / exact.norm() < 2e-3, "{pole:?}");
+        }
+        let fitted = lsfd(&frf, (1.0, 10.0), &poles).expect("lsfd");
+        for r in 0..2 {
+            for o in 0..2 {
+                assert!((fitted[r][o] - residues[r][o]).norm() < 1e-8, "{:?}", fitted[r][o]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_band_without_bins_is_refused() {
+        let frf = Frf {
+            frequencies: vec![0.0, 1.0, 2.0],
+            response: vec![vec![Complex::new(1.0, 0.0); 3]],
+            coherence: vec![vec![1.0; 3]],
+            segments: 1,
+        };
+        let err = lscf(&frf, &LscfOptions::over((0.5, 1.5))).expect_err("too few bins");
+        assert!(err.to_string().contains("band"), "{err}");
+    }
+}

@@ -1,0 +1,432 @@
+//! The stabilisation diagram and the automatic choice of the physical modes in it.
+//!
+//! An identification method returns poles per model order ([`ModelOrder`]). The diagram flags
+//! each pole stable in frequency, damping and shape against the nearest pole of the previous
+//! order. The selection keeps the stable, physical poles (positive, bounded damping; shape
+//! nearly real by MPC / MPD), clusters them by frequency distance and shape (1 − MAC), keeps
+//! the clusters populated over enough orders, and reports per mode the median frequency and
+//! damping, a representative shape, their scatter over the cluster, MPC and MPD.
+
+use std::f64::consts::PI;
+
+use super::Complex;
+use serde::{Deserialize, Serialize};
+
+use super::error::IdentificationError;
+use super::indicators::{mac, mpc, mpd};
+
+/// A pole of an identified model: its eigenvalue λ (rad/s, continuous time), frequency
+/// `|λ| / 2π` (Hz), damping ratio `−Re λ / |λ|`, mode shape (over the measured channels,
+/// scaled so its largest component is 1) and the shape's MPC and MPD (degrees).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Pole {
+    pub eigenvalue: Complex,
+    pub frequency: f64,
+    pub damping: f64,
+    pub shape: Vec<Complex>,
+    pub mpc: f64,
+    pub mpd: f64,
+    #[serde(default)]
+    pub stable: Stability,
+}
+
+/// Whether a pole agrees with the nearest pole of the previous order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Stability {
+    pub frequency: bool,
+    pub damping: bool,
+    pub shape: bool,
+}
+
+impl Stability {
+    pub fn all(&self) -> bool {
+        self.frequency && self.damping && self.shape
+    }
+}
+
+impl Pole {
+    /// The pole of eigenvalue `eigenvalue` (rad/s) with mode shape `shape`.
+    pub fn new(eigenvalue: Complex, shape: Vec<Complex>) -> Pole {
+        let modulus = eigenvalue.norm();
+        let shape = normalised(shape);
+        Pole {
+            eigenvalue,
+            frequency: modulus / (2.0 * PI),
+            damping: if modulus > 0.0 {
+                -eigenvalue.re / modulus
+            } else {
+                0.0
+            },
+            mpc: mpc(&shape),
+            mpd: mpd(&shape),
+            shape,
+            stable: Stability::default(),
+        }
+    }
+}
+
+/// `shape` scaled so its largest component is 1 (real); unchanged if it is zero.
+pub fn normalised(shape: Vec<Complex>) -> Vec<Complex> {
+    let largest = shape
+        .iter()
+        .copied()
+        .max_by(|a, b| a.norm().total_cmp(&b.norm()));
+    match largest {
+        Some(l) if l.norm() > 0.0 => shape.into_iter().map(|v| v / l).collect(),
+        _ => shape,
+    }
+}
+
+/// The poles (one of each complex-conjugate pair, positive imaginary part) of one model order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelOrder {
+    pub order: usize,
+    pub poles: Vec<Pole>,
+}
+
+/// When a pole counts as stable against the previous order.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StabilityTolerances {
+    /// Relative frequency change.
+    pub frequency: f64,
+    /// Relative damping change.
+    pub damping: f64,
+    /// Least MAC with the previous order's pole.
+    pub mac: f64,
+}
+
+impl Default for StabilityTolerances {
+    /// 1 % in frequency, 5 % in damping, MAC 0.98: the usual defaults of OMA tools.
+    fn default() -> Self {
+        StabilityTolerances {
+            frequency: 0.01,
+            damping: 0.05,
+            mac: 0.98,
+        }
+    }
+}
+
+impl StabilityTolerances {
+    pub fn validate(&self) -> Result<(), IdentificationError> {
+        fraction("frequency tolerance", self.frequency)?;
+        fraction("damping tolerance", self.damping)?;
+        fraction("stability MAC", self.mac)
+    }
+}
+
+fn fraction(what: &'static str, value: f64) -> Result<(), IdentificationError> {
+    if value.is_finite() && value > 0.0 && value <= 1.0 {
+        Ok(())
+    } else {
+        Err(IdentificationError::Option {
+            what,
+            value,
+            rule: "a fraction in (0, 1]".into(),
+        })
+    }
+}
+
+/// Poles per model order, each flagged against the previous order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StabilisationDiagram {
+    pub orders: Vec<ModelOrder>,
+    pub tolerances: StabilityTolerances,
+}
+
+impl StabilisationDiagram {
+    /// Flags every pole of `orders` (ascending order) against the nearest pole in frequency of
+    /// the order before it; the first order's poles are not stable.
+    pub fn new(
+        mut orders: Vec<ModelOrder>,
+        tolerances: StabilityTolerances,
+    ) -> Result<StabilisationDiagram, IdentificationError> {
+        tolerances.validate()?;
+        orders.sort_by_key(|o| o.order);
+        for k in 1..orders.len() {
+            let (before, after) = orders.split_at_mut(k);
+            let previous = &before[k - 1].poles;
+            for pole in &mut after[0].poles {
+                let nearest = previous.iter().min_by(|a, b| {
+                    (a.frequency - pole.frequency)
+                        .abs()
+                        .total_cmp(&(b.frequency - pole.frequency).abs())
+                });
+                if let Some(p) = nearest {
+                    pole.stable = Stability {
+                        frequency: relative(pole.frequency, p.frequency) <= tolerances.frequency,
+                        damping: relative(pole.damping, p.damping) <= tolerances.damping,
+                        shape: mac(&pole.shape, &p.shape) >= tolerances.mac,
+                    };
+                }
+            }
+        }
+        Ok(StabilisationDiagram { orders, tolerances })
+    }
+}
+
+fn relative(a: f64, reference: f64) -> f64 {
+    if reference != 0.0 {
+        ((a - reference) / reference).abs()
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// How the physical modes are chosen from a diagram.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SelectionOptions {
+    /// A damping ratio above this is not a structural mode.
+    pub max_damping: f64,
+    /// Least MPC of a physical mode's shape.
+    pub min_mpc: f64,
+    /// Largest MPD (degrees) of a physical mode's shape.
+    pub max_mpd: f64,
+    /// Poles of one cluster lie within this relative frequency distance of its last pole.
+    pub cluster_frequency: f64,
+    /// ... and have at least this MAC with its last pole's shape.
+    pub cluster_mac: f64,
+    /// A cluster is a mode when it holds poles from at least this fraction of the diagram's
+    /// orders (and from at least [`MIN_CLUSTER_POLES`]).
+    pub min_fraction: f64,
+}
+
+/// The fewest poles a mode is made of, whatever the fraction.
+pub const MIN_CLUSTER_POLES: usize = 3;
+
+impl Default for SelectionOptions {
+    fn default() -> Self {
+        SelectionOptions {
+            max_damping: 0.2,
+            min_mpc: 0.7,
+            max_mpd: 30.0,
+            cluster_frequency: 0.01,
+            cluster_mac: 0.95,
+            min_fraction: 0.3,
+        }
+    }
+}
+
+impl SelectionOptions {
+    pub fn validate(&self) -> Result<(), IdentificationError> {
+        fraction("largest damping", self.max_damping)?;
+        if !(self.min_mpc.is_finite() && (0.0..=1.0).contains(&self.min_mpc)) {
+            return Err(IdentificationError::Option {
+                what: "least MPC",
+                value: self.min_mpc,
+                rule: "within [0, 1]".into(),
+            });
+        }
+        if !(self.max_mpd.is_finite() && (0.0..=90.0).contains(&self.max_mpd)) {
+            return Err(IdentificationError::Option {
+                what: "largest MPD",
+                value: self.max_mpd,
+                rule: "degrees within [0, 90]".into(),
+            });
+        }
+        fraction("cluster frequency distance", self.cluster_frequency)?;
+        fraction("cluster MAC", self.cluster_mac)?;
+        fraction("least fraction of orders", self.min_fraction)
+    }
+}
+
+/// A mode chosen from the diagram: medians over its cluster and their scatter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IdentifiedMode {
+    /// Hz: the median over the cluster, and the standard deviation over it.
+    pub frequency: f64,
+    pub frequency_sd: f64,
+    pub damping: f64,
+    pub damping_sd: f64,
+    /// The shape of the cluster's pole nearest the median frequency, largest component 1.
+    pub shape: Vec<Complex>,
+    /// Per component: the rms distance of the cluster's shapes (each scaled onto `shape`) from
+    /// it.
+    pub shape_sd: Vec<f64>,
+    pub mpc: f64,
+    pub mpd: f64,
+    /// The model orders whose poles make the cluster.
+    pub orders: Vec<usize>,
+}
+
+struct Cluster<'a> {
+    poles: Vec<(usize, &'a Pole)>,
+}
+
+impl Cluster<'_> {
+    fn last(&self) -> &Pole {
+        self.poles[self.poles.len() - 1].1
+    }
+}
+
+/// The physical modes of `diagram`, by ascending frequency.
+pub fn select_modes(
+    diagram: &StabilisationDiagram,
+    options: &SelectionOptions,
+) -> Result<Vec<IdentifiedMode>, IdentificationError> {
+    options.validate()?;
+    let physical = |p: &Pole| {
+        p.stable.all()
+            && p.damping > 0.0
+            && p.damping <= options.max_damping
+            && p.mpc >= options.min_mpc
+            && p.mpd <= options.max_mpd
+    };
+    let mut clusters: Vec<Cluster<'_>> = Vec::new();
+    for order in &diagram.orders {
+        for pole in order.poles.iter().filter(|p| physical(p)) {
+            let home = clusters
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| {
+                    c.poles.iter().all(|(o, _)| *o != order.order)
+                        && relative(pole.frequency, c.last().frequency) <= options.cluster_frequency
+                        && mac(&pole.shape, &c.last().shape) >= options.cluster_mac
+                })
+                .min_by(|(_, a), (_, b)| {
+                    relative(pole.frequency, a.last().frequency)
+                        .total_cmp(&relative(pole.frequency, b.last().frequency))
+                })
+                .map(|(i, _)| i);
+            match home {
+                Some(i) => clusters[i].poles.push((order.order, pole)),
+                None => clusters.push(Cluster {
+                    poles: vec![(order.order, pole)],
+                }),
+            }
+        }
+    }
+    let needed = ((options.min_fraction * diagram.orders.len() as f64).ceil() as usize)
+        .max(MIN_CLUSTER_POLES);
+    let mut modes: Vec<IdentifiedMode> = clusters
+        .iter()
+        .filter(|c| c.poles.len() >= needed)
+        .map(summarise)
+        .collect();
+    modes.sort_by(|a, b| a.frequency.total_cmp(&b.frequency));
+    Ok(modes)
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
+fn sd(values: &[f64]) -> f64 {
+    let n = values.len() as f64;
+    if values.len() < 2 {
+        return 0.0;
+    }
+    let mean = values.iter().sum::<f64>() / n;
+    (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+}
+
+fn summarise(cluster: &Cluster<'_>) -> IdentifiedMode {
+    let frequencies: Vec<f64> = cluster.poles.iter().map(|(_, p)| p.frequency).collect();
+    let dampings: Vec<f64> = cluster.poles.iter().map(|(_, p)| p.damping).collect();
+    let frequency = median(&mut frequencies.clone());
+    let damping = median(&mut dampings.clone());
+    let representative = cluster
+        .poles
+        .iter()
+        .map(|(_, p)| *p)
+        .min_by(|a, b| {
+            (a.frequency - frequency)
+                .abs()
+                .total_cmp(&(b.frequency - frequency).abs())
+        })
+        .unwrap_or(cluster.last());
+    let shape = representative.shape.clone();
+    let mut squared = vec![0.0; shape.len()];
+    for (_, pole) in &cluster.poles {
+        // The complex scale that best maps the pole's shape onto the representative one.
+        let along: Complex = pole
+            .shape
+            .iter()
+            .zip(&shape)
+            .map(|(v, r)| v.conj() * r)
+            .sum();
+        let power: f64 = pole.shape.iter().map(|v| v.norm_sqr()).sum();
+        let scale = if power > 0.0 { along / power } else { Complex::new(1.0, 0.0) };
+        for (s, (v, r)) in squared.iter_mut().zip(pole.shape.iter().zip(&shape)) {
+            *s += (v * scale - r).norm_sqr();
+        }
+    }
+    let count = cluster.poles.len() as f64;
+    IdentifiedMode {
+        frequency,
+        frequency_sd: sd(&frequencies),
+        damping,
+        damping_sd: sd(&dampings),
+        mpc: representative.mpc,
+        mpd: representative.mpd,
+        shape,
+        shape_sd: squared.iter().map(|s| (s / count).sqrt()).collect(),
+        orders: cluster.poles.iter().map(|(o, _)| *o).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pole(frequency: f64, damping: f64, shape: &[f64]) -> Pole {
+        let w = 2.0 * PI * frequency;
+        let eigenvalue = Complex::new(-damping * w, w * (1.0 - damping * damping).sqrt());
+        Pole::new(
+            eigenvalue,
+            shape.iter().map(|&v| Complex::new(v, 0.0)).collect(),
+        )
+    }
+
+    /// Two modes present at every order from the third; a noise pole that wanders; a
+    /// negatively damped pole that stays put: the selection finds the two modes only.
+    #[test]
+    fn stable_physical_clusters_are_the_modes() {
+        let orders: Vec<ModelOrder> = (1..=10)
+            .map(|k| {
+                let jitter = 1e-4 * (k as f64).sin();
+                let mut poles = vec![pole(
+                    7.0 + 3.0 * k as f64,
+                    0.3,
+                    &[1.0, (k as f64).cos(), 0.2],
+                )];
+                if k >= 3 {
+                    poles.push(pole(2.0 * (1.0 + jitter), 0.01, &[0.5, 1.0, 0.8]));
+                    poles.push(pole(5.0, 0.02 * (1.0 + jitter), &[1.0, -0.4, -0.9]));
+                    poles.push(pole(4.0, -0.01, &[1.0, 1.0, 1.0]));
+                }
+                ModelOrder {
+                    order: 2 * k,
+                    poles,
+                }
+            })
+            .collect();
+        let diagram =
+            StabilisationDiagram::new(orders, StabilityTolerances::default()).expect("valid");
+        assert!(!diagram.orders[0].poles[0].stable.frequency);
+        assert!(diagram.orders[5].poles[1].stable.all());
+        let modes = select_modes(&diagram, &SelectionOptions::default()).expect("valid");
+        assert_eq!(modes.len(), 2, "{modes:?}");
+        assert!((modes[0].frequency - 2.0).abs() < 1e-3);
+        assert!((modes[1].damping - 0.02).abs() < 1e-5);
+        // Stable from the fourth order (the third is the first with them): 7 of 10.
+        assert_eq!(modes[0].orders.len(), 7);
+        assert!(modes[0].mpc > 0.999 && modes[0].mpd < 1e-6);
+        assert!(modes[0].shape_sd.iter().all(|s| *s < 1e-12));
+    }
+
+    #[test]
+    fn bad_options_are_named() {
+        let options = SelectionOptions {
+            max_mpd: 120.0,
+            ..SelectionOptions::default()
+        };
+        let err = options.validate().expect_err("out of range");
+        assert!(err.to_string().contains("MPD"), "{err}");
+    }
+}
