@@ -4,16 +4,72 @@
 # Python venv with fmpy and the third-party tools, the FMUs, the shear_twin package (built from
 # python/ with maturin into .venv), both installs used from outside the repository
 # (scripts/test-installs.sh), then every Rust test of the workspace and the Python tests.
+#
+# Where the time goes is kept busy on every core: the venv is made (pip, mostly waiting on files
+# and the network) while the FMUs and `twin` compile; the Rust tests run with cargo-nextest when
+# it is installed (each test its own process, the tests of all binaries sharing the cores, so one
+# long test no longer holds the rest back; else `cargo test`), and the Python tests run beside
+# them. Each phase's wall time is printed at the end.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
-scripts/prerequisites.sh
-scripts/setup-python.sh
-scripts/build-fmus.sh
-scripts/make-third-party-fmus.sh
-scripts/make-c-fmus.sh
-scripts/install-python-package.sh
-scripts/test-installs.sh
-cargo test --workspace --no-fail-fast
-.venv/bin/python -m pytest tests/python -q
+phases=()
+phase() { # phase NAME COMMAND...: run it, note its wall time, return its status
+  local name=$1 start=$SECONDS status=0
+  shift
+  "$@" || status=$?
+  phases+=("$name: $((SECONDS - start)) s")
+  return "$status"
+}
+
+phase prerequisites scripts/prerequisites.sh
+
+start=$SECONDS
+python_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-setup-python.XXXXXX")
+scripts/setup-python.sh >"$python_log" 2>&1 &
+setup_python=$!
+phase "FMUs and twin (release; the venv beside it)" scripts/build-fmus.sh
+status=0
+wait "$setup_python" || status=$?
+cat "$python_log" >&2
+rm -f "$python_log"
+[ "$status" -eq 0 ] || { echo "test.sh: scripts/setup-python.sh failed" >&2; exit "$status"; }
+phases+=("venv and FMUs together: $((SECONDS - start)) s")
+
+phase "third-party FMUs" scripts/make-third-party-fmus.sh
+phase "C FMUs" scripts/make-c-fmus.sh
+phase "Python package" scripts/install-python-package.sh
+phase "installs" scripts/test-installs.sh
+
+# The Rust tests' build, then the Rust and the Python tests side by side.
+if cargo nextest --version >/dev/null 2>&1; then
+  phase "Rust tests build" cargo nextest run --workspace --no-run
+  rust_tests=(cargo nextest run --workspace --no-fail-fast)
+else
+  phase "Rust tests build" cargo test --workspace --no-run
+  rust_tests=(cargo test --workspace --no-fail-fast)
+fi
+start=$SECONDS
+pytest_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-pytest.XXXXXX")
+.venv/bin/python -m pytest tests/python -q >"$pytest_log" 2>&1 &
+pytest=$!
+rust_status=0
+"${rust_tests[@]}" || rust_status=$?
+phases+=("Rust tests (the Python tests beside them): $((SECONDS - start)) s")
+python_status=0
+wait "$pytest" || python_status=$?
+phases+=("Python tests (beside the Rust tests): $((SECONDS - start)) s")
+echo "--- pytest tests/python -q" >&2
+cat "$pytest_log" >&2
+rm -f "$pytest_log"
+# nextest runs no doc-tests: they run here (cargo test ran them with the rest).
+doc_status=0
+if [ "${rust_tests[1]}" = nextest ]; then
+  phase "doc-tests" cargo test --workspace --doc || doc_status=$?
+fi
+
+printf '  %s\n' "${phases[@]}" >&2
+[ "$rust_status" -eq 0 ] || { echo "test.sh: Rust tests failed" >&2; exit "$rust_status"; }
+[ "$doc_status" -eq 0 ] || { echo "test.sh: doc-tests failed" >&2; exit "$doc_status"; }
+[ "$python_status" -eq 0 ] || { echo "test.sh: Python tests failed" >&2; exit "$python_status"; }
