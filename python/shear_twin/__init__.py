@@ -188,6 +188,14 @@ class Twin:
                                             tolerance=tolerance, threads=threads, block=block,
                                             always_fit=always_fit, plot=_path(plot)))
 
+    def modes(self, *, samples: int | None = None, plot: str | os.PathLike | None = None) -> Report:
+        """``twin modal --twin``: the natural frequencies (Hz), damping ratios and mode shapes
+        (floors 1..N, the largest component 1) of the twin's linear structure, each with its sd
+        from the calibration's posterior (None for an uncalibrated twin) and, beside it, the sds
+        of ``samples`` draws from the posterior (default 2000; 0: none). ``plot``: an SVG of the
+        shapes along the height."""
+        return Report(self._native.modes(samples=samples, plot=_path(plot)))
+
     def add_physics(self, record: Record, *, effects: list[str] | None = None,
                     diagnosis: Report | dict[str, Any] | None = None, refine: bool = False,
                     transient: float | None = None, threads: int | None = None,

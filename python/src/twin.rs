@@ -410,6 +410,34 @@ impl Twin {
         to_object(py, &d)
     }
 
+    /// `twin modal`: the twin's natural frequencies (Hz), damping ratios and mode shapes (floors
+    /// 1..N), each with its sd from the calibration's posterior and the sds of `samples` draws
+    /// from it beside (0: no sampling check); `plot` an SVG of the shapes along the height.
+    #[pyo3(signature = (*, samples = None, plot = None))]
+    fn modes<'py>(
+        &self,
+        py: Python<'py>,
+        samples: Option<usize>,
+        plot: Option<PathBuf>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let kind = Kind::Twin;
+        if let Some(path) = &plot {
+            orchestrator::workflows::options::check_svg(path).map_err(|e| to_py(kind, e))?;
+        }
+        let mut options = orchestrator::workflows::modal::ModalOptions::default();
+        options.samples = samples.unwrap_or(options.samples);
+        let modes = detached(py, || {
+            let modes = orchestrator::workflows::modal::twin_modes(&self.twin, &options)
+                .map_err(|e| to_py(kind, e))?;
+            if let Some(path) = &plot {
+                orchestrator::report::mode_plot::plot_mode_shapes(&modes, None, path)
+                    .map_err(|e| to_py(kind, e))?;
+            }
+            Ok(modes)
+        })?;
+        to_object(py, &modes)
+    }
+
     /// `twin add-physics`: switch effects on (`effects=["contact@2-3"]`, or all of a
     /// `diagnosis` report's), estimate them on the record, then refit them jointly with the
     /// structure over the record and `records` (default: the records the twin remembers from
