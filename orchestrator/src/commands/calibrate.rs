@@ -21,8 +21,21 @@ pub struct CalibrateArgs {
     /// Measurement CSV(s) to calibrate on. Several are runs of one test (one MAP over all: the
     /// structure's parameters shared, each run its own excitation, measured channels and noise
     /// variances), e.g. a roving accelerometer moved floor to floor.
-    #[arg(long, num_args = 1.., required = true)]
+    #[arg(long, num_args = 1.., required_unless_present = "frf", conflicts_with = "frf")]
     pub data: Vec<PathBuf>,
+    /// A measured FRF to calibrate on instead of records (CSV: `frequency` and per channel
+    /// `<ch>_re,<ch>_im` or `<ch>_db`; or a universal file, dataset 58): the MAP of the twin's
+    /// linear structure (m, c, k) on the log magnitude (and the phase where given), resonances
+    /// weighted.
+    #[arg(long, value_name = "FRF")]
+    pub frf: Option<PathBuf>,
+    /// With --frf: the band used, `LO:HI` Hz (default every line above 0 Hz).
+    #[arg(long, requires = "frf", value_parser = super::frf_band)]
+    pub band: Option<(f64, f64)>,
+    /// With --frf: the file's dB reference is unknown; fit a gain offset (dB) on the magnitudes
+    /// as a nuisance parameter, reported.
+    #[arg(long, requires = "frf")]
+    pub gain_offset: bool,
     /// The twin to start from (.ssp); the default twin when absent. It is not modified.
     #[arg(long)]
     pub twin: Option<PathBuf>,
@@ -68,6 +81,12 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     }
     if let Some(plot) = &args.plot {
         check_svg(plot)?;
+    }
+    if let Some(frf) = &args.frf {
+        if !args.validate.is_empty() {
+            bail!("--validate takes time records; with --frf, compare the twin on them afterwards");
+        }
+        return run_frf(args, frf);
     }
     let runs = args
         .data
@@ -245,4 +264,122 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     );
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// `twin calibrate --frf FRF --out T.ssp`.
+fn run_frf(args: &CalibrateArgs, path: &std::path::Path) -> Result<()> {
+    use crate::workflows::calibrate::frf::{calibrate_frf, FrfSetup};
+    let frf = args.columns.read_frf(path)?;
+    let twin = Twin::load(args.twin.as_deref())?;
+    let setup = FrfSetup {
+        parameters: args.params.clone(),
+        prior_spec: match &args.priors {
+            Some(p) => Some(read_priors(p).map_err(anyhow::Error::msg)?),
+            None => None,
+        },
+        band: args.band,
+        gain_offset: args.gain_offset,
+        starts: args.starts,
+        seed: args.seed,
+    };
+    let (new_twin, calibration) = calibrate_frf(&twin, &frf, &setup)?;
+    let plot = match &args.plot {
+        Some(p) => Some(crate::report::frf_plot::draw_frf_comparison(
+            &crate::workflows::compare::frf_view(&new_twin, &frf, args.band, args.gain_offset)?,
+            &format!("{} on {}", new_twin.describe(), path.display()),
+            p,
+        )?),
+        None => None,
+    };
+    // All computed: now write, each file atomically.
+    new_twin.write(&args.out)?;
+    if let Some(report) = &args.report {
+        write_json(report, &calibration)?;
+    }
+    if let (Some(p), Some(svg)) = (&args.plot, plot) {
+        crate::fsutil::write_text_atomically(p, &svg)?;
+    }
+    println!(
+        "calibrated on the FRF {} ({} channels, {} lines {:.3}–{:.3} Hz; {} starts, {:.2} s)",
+        path.display(),
+        calibration.channels.len(),
+        calibration.lines,
+        calibration.band_hz.0,
+        calibration.band_hz.1,
+        calibration.starts.len(),
+        calibration.seconds
+    );
+    println!(
+        "{:<10} {:>12} {:>12} {:>14}",
+        "parameter", "MAP", "sd", "prior mean"
+    );
+    for p in &calibration.parameters {
+        println!(
+            "{:<10} {:>12.4} {:>12.4} {:>14.4}",
+            p.name,
+            p.value,
+            p.sd,
+            p.prior.value(p.prior.mean)
+        );
+    }
+    if let Some(g) = &calibration.gain_offset_db {
+        println!(
+            "gain offset {:+.2} ± {:.2} dB (measured − twin; the file's dB reference is unknown)",
+            g.value, g.sd
+        );
+    }
+    for (c, name) in calibration.channels.iter().enumerate() {
+        println!(
+            "{name:<6} magnitude error RMS {:.2} dB (resonance-weighted sd {:.2} dB){}",
+            calibration.rms_error_db[c],
+            calibration.magnitude_sd_db[c],
+            calibration.phase_sd_rad[c]
+                .map(|s| format!(", phase sd {s:.3} rad"))
+                .unwrap_or_default()
+        );
+    }
+    print_modes(&calibration.twin_modes, &calibration.measured_peaks);
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// The twin's modes beside the measured peaks, nearest first.
+pub fn print_modes(
+    twin: &[crate::workflows::calibrate::frf::TwinMode],
+    measured: &[crate::workflows::calibrate::frf::MeasuredPeak],
+) {
+    println!(
+        "{:<5} {:>18} {:>9} {:>14} {:>9} {:>8}",
+        "mode", "twin f (Hz) ± sd", "twin ζ %", "measured peak", "ζ % (½P)", "Δf %"
+    );
+    for (i, m) in twin.iter().enumerate() {
+        let nearest = measured.iter().min_by(|a, b| {
+            (a.frequency_hz - m.frequency_hz.value)
+                .abs()
+                .total_cmp(&(b.frequency_hz - m.frequency_hz.value).abs())
+        });
+        let (peak, zeta, shift) = match nearest {
+            Some(p) => (
+                format!("{:.3}", p.frequency_hz),
+                p.damping_ratio
+                    .map(|z| format!("{:.2}", 100.0 * z))
+                    .unwrap_or_else(|| "–".into()),
+                format!(
+                    "{:+.2}",
+                    100.0 * (m.frequency_hz.value - p.frequency_hz) / p.frequency_hz
+                ),
+            ),
+            None => ("–".into(), "–".into(), "–".into()),
+        };
+        println!(
+            "{:<5} {:>10.3} ± {:<6.3} {:>9.2} {:>14} {:>9} {:>8}",
+            i + 1,
+            m.frequency_hz.value,
+            m.frequency_hz.sd,
+            100.0 * m.damping_ratio,
+            peak,
+            zeta,
+            shift
+        );
+    }
 }

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 
 use super::{progress_bar, write_atomically, write_json, Compared};
 use crate::evaluation::compare::Comparison;
@@ -23,8 +23,8 @@ pub struct CompareArgs {
     pub twin: Option<PathBuf>,
     /// Measurement CSV: time, the excitation (force or ground_acc) and any of the twin's
     /// response channels (acc<i>, vel<i>, disp<i>), units in the header.
-    #[arg(long)]
-    pub data: PathBuf,
+    #[arg(long, required_unless_present = "frf")]
+    pub data: Option<PathBuf>,
     /// JSON report.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -34,9 +34,20 @@ pub struct CompareArgs {
     /// Plot (.svg): measured, predicted, ±3σ band, residual, failing windows.
     #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// Also draw the frequency-response view.
+    /// Alone (`--data D.csv --frf`): also draw the frequency-response view of the record.
+    /// With a file (`--frf FRF.csv`, instead of --data): compare the twin's exact FRF with a
+    /// measured one (CSV of `frequency` and `<ch>_re,<ch>_im` or `<ch>_db`, or a universal
+    /// file, dataset 58): the error per channel (RMS dB over the band), both sets of resonances,
+    /// and with --plot the overlay measured / twin / ±3σ band.
+    #[arg(long, value_name = "FRF", num_args = 0..=1)]
+    pub frf: Option<Option<PathBuf>>,
+    /// With --frf FRF: the band compared, `LO:HI` Hz (default every line above 0 Hz).
+    #[arg(long, value_parser = super::frf_band)]
+    pub band: Option<(f64, f64)>,
+    /// With --frf FRF: the file's dB reference is unknown; take the mean difference measured −
+    /// twin off the measured magnitudes first (reported).
     #[arg(long)]
-    pub frf: bool,
+    pub gain_offset: bool,
     /// Threshold line of the latent-variance view (`<plot>-latent.svg`, drawn when the twin has
     /// a corrector), (m/s²)², every floor. Default: each floor's sensor-noise variance from the
     /// twin's calibration — above it the GP is less sure of the bias than a single measurement
@@ -77,9 +88,21 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         check_svg(plot)?;
     }
+    let frf_file = args.frf.as_ref().and_then(|f| f.as_deref());
+    let data_path = match (&args.data, frf_file) {
+        (Some(_), Some(_)) => {
+            bail!("give --data D.csv (a time record) or --frf FRF (a measured FRF), not both")
+        }
+        (None, Some(frf)) => return run_frf(args, frf),
+        (Some(data), None) => data,
+        (None, None) => bail!("--data D.csv is needed (or --frf FRF with a measured FRF)"),
+    };
+    if args.band.is_some() || args.gain_offset {
+        bail!("--band and --gain-offset go with --frf FRF (a measured FRF)");
+    }
     let options = args.options();
     options.validate()?;
-    let data = args.columns.read_any(&args.data)?;
+    let data = args.columns.read_any(data_path)?;
     let twin = Twin::load(args.twin.as_deref())?;
     guard::check_record(&twin, &data)?;
     options.validate_for(&data)?;
@@ -108,7 +131,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        crate::workflows::compare::plot(&twin, &data, &compared, &options, path, args.frf)?;
+        crate::workflows::compare::plot(
+            &twin,
+            &data,
+            &compared,
+            &options,
+            path,
+            args.frf.is_some(),
+        )?;
     }
     print_summary(&twin, &data, comparison);
     if parameter_variance.is_some() {
@@ -194,4 +224,58 @@ fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {
             );
         }
     }
+}
+
+/// `twin compare --frf FRF`: the twin's exact FRF against a measured one.
+fn run_frf(args: &CompareArgs, path: &std::path::Path) -> Result<()> {
+    if args.controller.is_some() || args.predictions.is_some() {
+        bail!("--controller and --predictions go with --data (a time record), not --frf FRF");
+    }
+    let frf = args.columns.read_frf(path)?;
+    let twin = Twin::load(args.twin.as_deref())?;
+    let view = crate::workflows::compare::frf_view(&twin, &frf, args.band, args.gain_offset)?;
+    let svg = match &args.plot {
+        Some(p) => Some(crate::report::frf_plot::draw_frf_comparison(
+            &view,
+            &format!("{} on {}", twin.describe(), path.display()),
+            p,
+        )?),
+        None => None,
+    };
+    if let Some(report) = &args.report {
+        write_json(report, &view)?;
+    }
+    if let (Some(p), Some(svg)) = (&args.plot, svg) {
+        crate::fsutil::write_text_atomically(p, &svg)?;
+    }
+    println!("twin: {}", twin.describe());
+    println!(
+        "FRF: {} ({} channels, {} lines {:.3}–{:.3} Hz)",
+        path.display(),
+        view.channels.len(),
+        view.frequency.len(),
+        view.frequency[0],
+        view.frequency[view.frequency.len() - 1]
+    );
+    if let Some(g) = view.gain_offset_db {
+        println!("gain offset {g:+.2} dB taken off the measured magnitudes (unknown dB reference)");
+    }
+    println!(
+        "{:<8} {:>16} {:>16}",
+        "channel", "RMS error (dB)", "inside ±3σ %"
+    );
+    for c in &view.channels {
+        println!(
+            "{:<8} {:>16.2} {:>16}",
+            c.channel,
+            c.rms_error_db,
+            c.inside_band
+                .map(|b| format!("{:.1}", 100.0 * b))
+                .unwrap_or_else(|| "–".into())
+        );
+    }
+    println!("error: {}", view.error_measure);
+    super::calibrate::print_modes(&view.twin_modes, &view.measured_peaks);
+    println!("measured peaks: {}", view.peak_method);
+    Ok(())
 }

@@ -173,4 +173,32 @@ impl ColumnsArg {
         };
         Ok(Measurement::read_with(path, &ReadOptions { columns })?)
     }
+
+    /// Read a measured FRF with the column map applied.
+    pub fn read_frf(&self, path: &Path) -> Result<crate::record::frf::MeasuredFrf> {
+        let columns = match &self.columns {
+            Some(map) => ColumnMap::read(map)?,
+            None => ColumnMap::default(),
+        };
+        Ok(crate::record::frf::MeasuredFrf::read(path, &columns)?)
+    }
+}
+
+/// `--band LO:HI` (Hz).
+pub fn frf_band(text: &str) -> Result<(f64, f64), String> {
+    let (lo, hi) = text
+        .split_once(':')
+        .ok_or_else(|| format!("'{text}': give the band as LO:HI in Hz, e.g. 3:40"))?;
+    let number = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .ok_or_else(|| format!("'{s}' in the band '{text}' is not a non-negative number (Hz)"))
+    };
+    let (lo, hi) = (number(lo)?, number(hi)?);
+    if hi <= lo {
+        return Err(format!("the band '{text}' is empty: LO must be below HI"));
+    }
+    Ok((lo, hi))
 }

@@ -8,11 +8,15 @@
 //! [`structure::channel::Unit`]); values are converted to SI on reading. A [`ColumnMap`] maps
 //! other header names to these. Without a time column, comment lines before the header give
 //! `# rate = <Hz>` and `# start = <s>`. Written times are put back on their nominal grid
-//! ([`grid`]).
+//! ([`grid`]). A universal file (`.uff`, `.unv`, dataset 58, [`uff`]) is read into the same
+//! record. A measured FRF ([`frf`]) is a CSV of `frequency` and `<ch>_re,<ch>_im` or `<ch>_db`
+//! columns, or a universal file's FRFs.
 
+pub mod frf;
 pub mod grid;
 mod read;
 pub mod stream;
+pub mod uff;
 pub(crate) mod write;
 
 use std::collections::BTreeMap;
@@ -39,10 +43,14 @@ impl ColumnMap {
     pub fn new(map: BTreeMap<String, String>) -> Result<Self, String> {
         for (key, target) in &map {
             let (name, _) = split_unit(target);
-            if Channel::parse(name).is_none() && !EXTRA_COLUMNS.contains(&name) {
+            if Channel::parse(name).is_none()
+                && !EXTRA_COLUMNS.contains(&name)
+                && !frf::is_frf_column(name)
+            {
                 return Err(format!(
                     "'{key}' is mapped to '{target}', not a column the twin knows (time, force, \
-                     ground_acc, acc<i>, vel<i>, disp<i>, control)"
+                     ground_acc, acc<i>, vel<i>, disp<i>, control; in an FRF file frequency, \
+                     <channel>_re, <channel>_im, <channel>_db)"
                 ));
             }
         }

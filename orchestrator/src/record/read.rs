@@ -209,11 +209,15 @@ impl Measurement {
         Self::read_with(path, &ReadOptions::default())
     }
 
-    /// Read a CSV record: leading `#` lines may give `# rate = <Hz>` and `# start = <s>` for a
+    /// Read a CSV record (a `.uff`/`.unv` universal file by [`super::uff::read_record`]): leading
+    /// `#` lines may give `# rate = <Hz>` and `# start = <s>` for a
     /// file without a time column; the header names the columns, each `name` or `name (unit)`
     /// (mapped through `options.columns` first); every value is converted to SI and the times
     /// are put back on the nominal grid they were rounded from.
     pub fn read_with(path: &Path, options: &ReadOptions) -> Result<Self, DataError> {
+        if super::uff::is_universal_file(path) {
+            return super::uff::read_record(path, &options.columns);
+        }
         let err = |line: Option<u64>, message: String| DataError {
             path: path.to_owned(),
             line,

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 pub mod control_plot;
 pub mod diagnose_plot;
+pub mod frf_plot;
 pub mod hybrid_plot;
 pub mod json;
 pub mod learn_plot;

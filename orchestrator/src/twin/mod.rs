@@ -471,7 +471,7 @@ impl Twin {
                 zip.start_file(PRIORS_RESOURCE, options).map_err(zip_err)?;
                 zip.write_all(priors.as_bytes())?;
             }
-            if self.noise_variance.is_some() {
+            if self.has_system_values() {
                 let values = self.system_values();
                 zip.start_file("resources/twin.ssv", options)
                     .map_err(zip_err)?;
@@ -488,13 +488,23 @@ impl Twin {
         })
     }
 
-    /// The system's own parameters, written to `resources/twin.ssv` (only with noise variances).
+    /// Whether the twin has values of its own for `resources/twin.ssv`: noise variances from a
+    /// calibration on records, or a posterior covariance alone (a calibration on an FRF, which
+    /// says nothing of the sensors' noise in time).
+    fn has_system_values(&self) -> bool {
+        self.noise_variance.is_some() || self.parameter_covariance.is_some()
+    }
+
+    /// The system's own parameters, written to `resources/twin.ssv` (only with noise variances
+    /// or a posterior covariance).
     fn system_values(&self) -> BTreeMap<String, ParameterValue> {
         let mut values = BTreeMap::new();
-        let Some(nv) = &self.noise_variance else {
+        if !self.has_system_values() {
             return values;
-        };
-        values.extend(nv.parameters());
+        }
+        if let Some(nv) = &self.noise_variance {
+            values.extend(nv.parameters());
+        }
         if let Some(c) = &self.parameter_covariance {
             for (a, na) in c.names.iter().enumerate() {
                 for (b, nb) in c.names.iter().enumerate().skip(a) {
@@ -575,14 +585,14 @@ impl Twin {
         for name in self.system_values().keys() {
             connector(&mut w, name, "parameter", "Real");
         }
-        if self.noise_variance.is_some() {
+        if self.has_system_values() {
             for name in self.system_strings().keys() {
                 connector(&mut w, name, "parameter", "String");
             }
         }
         w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
             .expect(ok);
-        if self.noise_variance.is_some() {
+        if self.has_system_values() {
             binding(&mut w, "resources/twin.ssv");
         }
 

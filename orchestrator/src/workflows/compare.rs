@@ -129,3 +129,172 @@ pub fn plot(
     }
     Ok(())
 }
+
+/// One channel of `twin compare --frf FRF`: the measured and the twin's magnitude over the band
+/// (dB re 1 SI unit per unit excitation; the measured one less the gain offset, if any), the
+/// twin's ±3σ band from its parameters' posterior, and the error.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FrfChannelView {
+    pub channel: String,
+    pub measured_db: Vec<f64>,
+    pub twin_db: Vec<f64>,
+    /// The twin's sd of 20 log10|H| (dB) from its posterior covariance; None when uncalibrated.
+    pub twin_sd_db: Option<Vec<f64>>,
+    /// RMS over the band of the difference of the log magnitudes, measured − twin, dB.
+    pub rms_error_db: f64,
+    /// The share of lines where the measured magnitude is inside the twin's ±3σ band.
+    pub inside_band: Option<f64>,
+}
+
+/// The measured FRF against the twin's: per channel, the resonances of both.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FrfView {
+    pub record: String,
+    pub twin: String,
+    /// Hz, the band's lines.
+    pub frequency: Vec<f64>,
+    pub channels: Vec<FrfChannelView>,
+    /// The error measure, in words.
+    pub error_measure: &'static str,
+    /// The constant (dB) taken off the measured magnitudes when their reference is unknown:
+    /// the mean difference measured − twin over every channel and line.
+    pub gain_offset_db: Option<f64>,
+    pub twin_modes: Vec<crate::workflows::calibrate::frf::TwinMode>,
+    pub measured_peaks: Vec<crate::workflows::calibrate::frf::MeasuredPeak>,
+    /// How the measured resonances were found.
+    pub peak_method: &'static str,
+}
+
+/// `twin compare --frf FRF`: the twin's exact FRF (its linear structure: any effect it carries
+/// is linearised away) against the measured one over `band` (every line above 0 Hz when None).
+pub fn frf_view(
+    twin: &Twin,
+    frf: &crate::record::frf::MeasuredFrf,
+    band: Option<(f64, f64)>,
+    gain_offset: bool,
+) -> Result<FrfView, crate::workflows::calibrate::CalibrateError> {
+    use crate::evaluation::frf::structure_frf;
+    use crate::record::frf::db;
+    use crate::workflows::calibrate::frf::{band_lines, measured_peaks, twin_modes};
+    use crate::workflows::calibrate::CalibrateError;
+    let structure = twin.structure()?;
+    let lines = band_lines(frf, band);
+    if lines.len() < 2 {
+        return Err(CalibrateError::Setup(format!(
+            "{}: {} frequency lines in the band; at least 2 are needed",
+            frf.path.display(),
+            lines.len()
+        )));
+    }
+    let frequency: Vec<f64> = lines.iter().map(|&k| frf.frequency[k]).collect();
+    let channels: Vec<_> = frf.channels.iter().map(|c| c.channel).collect();
+    for c in &channels {
+        c.check(&c.name(), &structure)
+            .map_err(|e| CalibrateError::Setup(format!("{}: {e}", frf.path.display())))?;
+    }
+    // The posterior over the structure's own parameters (others, e.g. an effect's, are not in
+    // the linear FRF).
+    let covariance = twin.parameter_covariance.as_ref().map(|cov| {
+        let keep: Vec<usize> = (0..cov.names.len())
+            .filter(|&a| structure.get(&cov.names[a]).is_some())
+            .collect();
+        crate::twin::ParameterCovariance {
+            names: keep.iter().map(|&a| cov.names[a].clone()).collect(),
+            matrix: keep
+                .iter()
+                .map(|&a| keep.iter().map(|&b| cov.matrix[a][b]).collect())
+                .collect(),
+        }
+    });
+    let names = covariance
+        .as_ref()
+        .map(|c| c.names.clone())
+        .unwrap_or_default();
+    let model = structure_frf(&structure, &channels, &frequency, &names)
+        .map_err(|e| CalibrateError::Setup(format!("{}: {e}", frf.path.display())))?;
+    let measured: Vec<Vec<f64>> = frf
+        .channels
+        .iter()
+        .map(|c| {
+            let all = c.values.magnitude_db();
+            lines.iter().map(|&k| all[k]).collect()
+        })
+        .collect();
+    let twin_db: Vec<Vec<f64>> = model
+        .values
+        .iter()
+        .map(|h| h.iter().map(|h| db(h.norm())).collect())
+        .collect();
+    let offset = gain_offset.then(|| {
+        let (sum, n) = measured
+            .iter()
+            .zip(&twin_db)
+            .flat_map(|(m, t)| m.iter().zip(t).map(|(m, t)| m - t))
+            .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+        sum / n as f64
+    });
+    let to_db = 20.0 / std::f64::consts::LN_10;
+    let views = (0..channels.len())
+        .map(|c| {
+            let measured_db: Vec<f64> = measured[c]
+                .iter()
+                .map(|m| m - offset.unwrap_or(0.0))
+                .collect();
+            let twin_sd_db = covariance.as_ref().map(|cov| {
+                (0..frequency.len())
+                    .map(|k| {
+                        let g: Vec<f64> = (0..names.len())
+                            .map(|j| to_db * (model.sensitivities[c][j][k] / model.values[c][k]).re)
+                            .collect();
+                        let mut v = 0.0;
+                        for a in 0..g.len() {
+                            for b in 0..g.len() {
+                                v += g[a] * cov.matrix[a][b] * g[b];
+                            }
+                        }
+                        v.max(0.0).sqrt()
+                    })
+                    .collect::<Vec<f64>>()
+            });
+            let n = frequency.len() as f64;
+            let rms_error_db = (measured_db
+                .iter()
+                .zip(&twin_db[c])
+                .map(|(m, t)| (m - t).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt();
+            let inside_band = twin_sd_db.as_ref().map(|sd| {
+                measured_db
+                    .iter()
+                    .zip(&twin_db[c])
+                    .zip(sd)
+                    .filter(|((m, t), s)| (*m - *t).abs() <= 3.0 * *s)
+                    .count() as f64
+                    / n
+            });
+            FrfChannelView {
+                channel: channels[c].name(),
+                measured_db,
+                twin_db: twin_db[c].clone(),
+                twin_sd_db,
+                rms_error_db,
+                inside_band,
+            }
+        })
+        .collect();
+    Ok(FrfView {
+        record: frf.path.display().to_string(),
+        twin: twin.describe(),
+        error_measure:
+            "RMS over the band's lines of 20 log10|H_measured| − 20 log10|H_twin| (dB), \
+                        unweighted",
+        gain_offset_db: offset,
+        twin_modes: twin_modes(&structure, covariance.as_ref()),
+        measured_peaks: measured_peaks(&frequency, &measured),
+        peak_method: "peaks of the channels' summed power standing 10 dB above their valleys; \
+                      damping from the half-power (−3 dB) bandwidth",
+        frequency,
+        channels: views,
+    })
+}

@@ -19,6 +19,7 @@
 //! Uncertainty: the Hessian of `J` at the optimum (Gauss–Newton for the model part, from a
 //! central-difference Jacobian; exact for the noise part and the cross terms), inverted.
 
+pub mod frf;
 pub mod lm;
 pub mod prior;
 pub mod simulator;
