@@ -595,3 +595,149 @@ pub fn read_record(path: &Path, map: &ColumnMap) -> Result<Measurement, DataErro
     }
     Measurement::from_named_columns(path, named, &ColumnMap::default())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// One ASCII dataset 58 in the fixed columns of the format, double precision, even abscissa.
+    fn dataset(
+        function_type: i64,
+        node: i64,
+        direction: i64,
+        (abscissa, ordinate, units): (i64, i64, &str),
+        start: f64,
+        step: f64,
+        values: &[Complex<f64>],
+        complex: bool,
+    ) -> String {
+        let mut s = format!("{:>6}\n{:>6}{:74}\n", -1, 58, "");
+        for i in 1..=5 {
+            s.push_str(&format!("{:<80}\n", format!("id{i}")));
+        }
+        s.push_str(&format!(
+            "{:>5}{:>10}{:>5}{:>10} {:>10}{:>10}{:>4} {:>10}{:>10}{:>4}\n",
+            function_type, 1, 0, 0, "rig", node, direction, "rig", 1, 1
+        ));
+        s.push_str(&format!(
+            "{:>10}{:>10}{:>10}{:>13.5e}{:>13.5e}{:>13.5e}\n",
+            if complex { 6 } else { 4 },
+            values.len(),
+            1,
+            start,
+            step,
+            0.0
+        ));
+        for (kind, label) in [(abscissa, "Hz"), (ordinate, units), (13, "N"), (0, "NONE")] {
+            s.push_str(&format!(
+                "{kind:>10}{:>5}{:>5}{:>5} {:<20} {:<20}\n",
+                0, 0, 0, "axis", label
+            ));
+        }
+        let numbers: Vec<f64> = values
+            .iter()
+            .flat_map(|v| {
+                if complex {
+                    vec![v.re, v.im]
+                } else {
+                    vec![v.re]
+                }
+            })
+            .collect();
+        for chunk in numbers.chunks(4) {
+            for x in chunk {
+                s.push_str(&format!("{x:>20.11e}"));
+            }
+            s.push('\n');
+        }
+        s.push_str(&format!("{:>6}\n", -1));
+        s
+    }
+
+    fn file(text: &str) -> tempfile::NamedTempFile {
+        let mut f = tempfile::Builder::new()
+            .suffix(".uff")
+            .tempfile()
+            .expect("temp");
+        f.write_all(text.as_bytes()).expect("write");
+        f
+    }
+
+    #[test]
+    fn reads_ascii_frfs_with_units_and_directions() {
+        let h: Vec<Complex<f64>> = (0..5)
+            .map(|k| Complex::new(k as f64, -0.5 * k as f64))
+            .collect();
+        let text = dataset(4, 1, 1, (18, 12, "g"), 1.0, 0.5, &h, true)
+            + &dataset(4, 2, -1, (18, 12, "m/s^2"), 1.0, 0.5, &h, true);
+        let f = file(&text);
+        let m = MeasuredFrf::read(f.path(), &ColumnMap::default()).expect("reads");
+        assert_eq!(m.channel_names(), ["acc1", "acc2"]);
+        assert_eq!(m.frequency, vec![1.0, 1.5, 2.0, 2.5, 3.0]);
+        let FrfValues::Complex(a1) = &m.channels[0].values else {
+            panic!("complex")
+        };
+        let FrfValues::Complex(a2) = &m.channels[1].values else {
+            panic!("complex")
+        };
+        assert_eq!(a1[2], Complex::new(2.0, -1.0) * 9.80665);
+        // A negative response direction flips the sign.
+        assert_eq!(a2[2], Complex::new(-2.0, 1.0));
+    }
+
+    #[test]
+    fn reads_a_time_record_with_its_force() {
+        let force: Vec<Complex<f64>> = (0..4).map(|k| Complex::new(k as f64, 0.0)).collect();
+        let acc: Vec<Complex<f64>> = (0..4).map(|k| Complex::new(0.1 * k as f64, 0.0)).collect();
+        let text = dataset(1, 1, 1, (17, 13, "N"), 0.0, 0.25, &force, false)
+            + &dataset(1, 3, 1, (17, 12, "NONE"), 0.0, 0.25, &acc, false);
+        let f = file(&text);
+        let m = Measurement::read(f.path()).expect("reads");
+        assert_eq!(m.channel_names(), ["force", "acc3"]);
+        assert_eq!(m.dt, 0.25);
+        assert_eq!(m.excitation.values, vec![0.0, 1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn refuses_bad_files_naming_file_and_line() {
+        let h: Vec<Complex<f64>> = (0..5).map(|k| Complex::new(k as f64, 1.0)).collect();
+        let good = dataset(4, 1, 1, (18, 12, "g"), 1.0, 0.5, &h, true);
+        let cases: Vec<(String, u64, &str)> = vec![
+            (
+                good.replacen("   6         5", "   7         5", 1),
+                9,
+                "ordinate data type 7",
+            ),
+            (
+                good.replacen("2.00000000000e0", "2.0000000000xe0", 1),
+                15,
+                "not a finite number",
+            ),
+            (
+                good.replacen("g                   ", "furlong             ", 1),
+                2,
+                "units label 'furlong'",
+            ),
+            (
+                good.lines().take(15).collect::<Vec<_>>().join("\n"),
+                15,
+                "the file ends after",
+            ),
+            (
+                "    -1\n    58\n".to_owned(),
+                2,
+                "the file ends before ID line 1",
+            ),
+            ("hello\n".to_owned(), 1, "expected '-1'"),
+        ];
+        for (text, line, needle) in cases {
+            let f = file(&text);
+            let e = MeasuredFrf::read(f.path(), &ColumnMap::default()).expect_err(needle);
+            let shown = e.to_string();
+            assert!(shown.contains(needle), "{needle}: {shown}");
+            assert!(shown.contains(&f.path().display().to_string()), "{shown}");
+            assert_eq!(e.line, Some(line), "{shown}");
+        }
+    }
+}
