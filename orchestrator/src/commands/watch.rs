@@ -11,6 +11,7 @@ use anyhow::Result;
 use crate::twin::Twin;
 use crate::workflows::options::check_tolerance;
 use crate::workflows::watch::background::DiagnosisOptions;
+use crate::workflows::watch::modes::TrackOptions;
 use crate::workflows::watch::supervise::LearnOptions;
 use crate::workflows::watch::{
     watch, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW,
@@ -94,6 +95,20 @@ pub struct WatchArgs {
     /// never; a refit holds the stream up for as long as it takes).
     #[arg(long, default_value_t = LearnOptions::default().refit_every)]
     pub refit_every: u32,
+    /// Track the natural frequencies: every --modes-every seconds of stream, identify the modes
+    /// of the last --modes-window seconds (output-only, SSI-COV) against the twin's and its
+    /// band; alerts `modes` (each identification), `frequency` (a mode left its band),
+    /// `frequency_back`.
+    #[arg(long)]
+    pub track_modes: bool,
+    #[arg(long, default_value_t = TrackOptions::default().window, requires = "track_modes")]
+    pub modes_window: f64,
+    #[arg(long, default_value_t = TrackOptions::default().every, requires = "track_modes")]
+    pub modes_every: f64,
+    /// The band's least half-width, % of the twin's frequency (it is otherwise 3 combined sds
+    /// of the twin's and the identified frequency).
+    #[arg(long, default_value_t = TrackOptions::default().tolerance, requires = "track_modes")]
+    pub modes_tolerance: f64,
 }
 
 impl WatchArgs {
@@ -119,6 +134,12 @@ impl WatchArgs {
             tolerance: self.tolerance,
             transient: self.transient,
             rate: self.rate,
+            modes: self.track_modes.then_some(TrackOptions {
+                window: self.modes_window,
+                every: self.modes_every,
+                tolerance: self.modes_tolerance,
+                ..TrackOptions::default()
+            }),
             columns: match &self.columns {
                 Some(path) => crate::record::ColumnMap::read(path)?,
                 None => Default::default(),

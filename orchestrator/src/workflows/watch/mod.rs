@@ -12,6 +12,7 @@
 //! resume exactly where the last one saved.
 
 pub mod background;
+pub mod modes;
 pub mod mqtt;
 pub mod online;
 pub mod stepper;
@@ -123,6 +124,8 @@ pub struct WatchOptions {
     pub learning: LearnOptions,
     /// Header names the stream uses for the twin's (`--columns MAP.json`).
     pub columns: ColumnMap,
+    /// Frequency tracking on a sliding window (None: off).
+    pub modes: Option<modes::TrackOptions>,
 }
 
 /// `--checkpoint-every`'s default, samples.
@@ -153,6 +156,7 @@ impl WatchOptions {
             diagnosis: Some(DiagnosisOptions::default()),
             learning: LearnOptions::default(),
             columns: ColumnMap::default(),
+            modes: None,
         }
     }
 
@@ -633,6 +637,9 @@ struct Watcher<'a> {
     /// The sample's measured values and the twin's predictions (per channel; reused).
     measured: Vec<f64>,
     predicted: Vec<f64>,
+    /// The twin's modes while the tracker waits for the sampling interval, then the tracker.
+    twin_modes: Option<crate::workflows::modal::TwinModes>,
+    tracker: Option<modes::Tracker>,
 }
 
 impl Watcher<'_> {
@@ -874,6 +881,9 @@ impl Watcher<'_> {
                 if let Some(s) = &mut self.state.supervisor {
                     s.gap();
                 }
+                if let Some(t) = &mut self.tracker {
+                    t.gap();
+                }
                 self.state.segment_start = None;
                 self.state.held.clear();
                 if self.state.noise_variance.is_none() {
@@ -897,6 +907,7 @@ impl Watcher<'_> {
         if let Some(b) = &mut self.background {
             b.push(time, excitation, &self.measured);
         }
+        self.track(time)?;
         self.state.samples += 1;
         self.state.last_time = Some(time);
         let known = self.noise_known(time - start);
@@ -926,6 +937,59 @@ impl Watcher<'_> {
         }
         if let Some(finished) = self.background.as_mut().and_then(|b| b.poll(time)) {
             self.diagnosed(finished)?;
+        }
+        Ok(())
+    }
+
+    /// The modes on the sliding window: a `modes` alert per identification, `frequency` when a
+    /// twin mode leaves its band (`frequency_back` when it returns), `modes_failed` when the
+    /// window could not be identified.
+    fn track(&mut self, time: f64) -> Result<(), WatchError> {
+        if self.tracker.is_none() {
+            if let (Some(dt), Some(options)) = (self.state.dt, self.options.modes) {
+                if let Some(twin) = self.twin_modes.take() {
+                    self.tracker = Some(modes::Tracker::new(
+                        options,
+                        twin,
+                        self.state.channels.clone(),
+                        dt,
+                    ));
+                }
+            }
+        }
+        let Some(tracker) = &mut self.tracker else {
+            return Ok(());
+        };
+        let Some(result) = tracker.push(time, &self.measured) else {
+            return Ok(());
+        };
+        match result {
+            Ok(tracked) => {
+                for mode in &tracked.left {
+                    let m = &tracked.modes[mode - 1];
+                    self.alert(
+                        Some(time),
+                        "frequency",
+                        json!({"mode": mode, "twin_frequency": m.twin_frequency,
+                               "frequency": m.frequency, "shift_percent": m.shift_percent,
+                               "shift_sd": m.shift_sd, "band": m.band}),
+                    )?;
+                }
+                for mode in &tracked.returned {
+                    let m = &tracked.modes[mode - 1];
+                    self.alert(
+                        Some(time),
+                        "frequency_back",
+                        json!({"mode": mode, "twin_frequency": m.twin_frequency,
+                               "frequency": m.frequency}),
+                    )?;
+                }
+                let body = serde_json::to_value(&tracked).unwrap_or(Value::Null);
+                self.alert(Some(time), "modes", body)?;
+            }
+            Err(reason) => {
+                self.alert(Some(time), "modes_failed", json!({"reason": reason}))?;
+            }
         }
         Ok(())
     }
@@ -1226,6 +1290,22 @@ pub fn watch_with_alerts(
         .iter()
         .map(|&c| twin.noise_variance_of(c))
         .collect();
+    let twin_modes = match &options.modes {
+        Some(track) => {
+            track.validate().map_err(WatchError::Options)?;
+            Some(
+                crate::workflows::modal::twin_modes(
+                    twin,
+                    &crate::workflows::modal::ModalOptions {
+                        samples: 0,
+                        ..Default::default()
+                    },
+                )
+                .map_err(|e| WatchError::Options(format!("the twin's modes: {e}")))?,
+            )
+        }
+        None => None,
+    };
     let mut w = Watcher {
         on_alert,
         state,
@@ -1238,6 +1318,8 @@ pub fn watch_with_alerts(
         options,
         measured: vec![0.0; channels.len()],
         predicted: vec![0.0; channels.len()],
+        twin_modes,
+        tracker: None,
     };
     w.report_connection(early_events)?;
     // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:

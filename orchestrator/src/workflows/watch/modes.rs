@@ -1,0 +1,284 @@
+//! Frequency tracking in operation: the modes identified on a sliding window of the stream
+//! (output-only, SSI-COV: in operation the excitation is whatever the structure meets) and set
+//! against the twin's modes and their band. Every `every` seconds of stream time the last
+//! `window` seconds of every response channel are identified; each identified mode is paired
+//! with the twin's, and a twin mode whose tracked frequency stays outside its band for
+//! `persistence` identifications in a row is reported once as having left it (and again only
+//! after it came back). The band of a mode: `sigmas` times the combined sd of the twin's
+//! frequency (its posterior) and the identified one (the scatter over the stabilisation
+//! diagram's orders), and never narrower than `tolerance` % of the twin's frequency: a window
+//! of a minute identifies a frequency to a few tenths of a per cent, and a band that ignored
+//! that would cry wolf.
+//!
+//! The buffer is not checkpointed: a resumed watch fills its first window anew.
+
+use std::collections::VecDeque;
+
+use serde::Serialize;
+
+use crate::workflows::modal::{pair_modes, ModeComparison, ObservedMode, TwinModes};
+use ::structure::channel::{Channel, Quantity};
+use numerics::modal::spectral::Run;
+use numerics::modal::ssi::{ssi_cov, SsiOptions};
+use numerics::modal::stabilisation::{
+    select_modes, SelectionOptions, StabilisationDiagram, StabilityTolerances,
+};
+
+/// `twin watch --track-modes`: the sliding window and the band.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackOptions {
+    /// Seconds of stream identified each time.
+    pub window: f64,
+    /// Seconds of stream between identifications.
+    pub every: f64,
+    /// The band's half-width in combined sds …
+    pub sigmas: f64,
+    /// … and at least this, % of the twin's frequency.
+    pub tolerance: f64,
+    /// Identifications in a row outside the band before a `frequency` alert.
+    pub persistence: usize,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        TrackOptions {
+            window: 60.0,
+            every: 10.0,
+            sigmas: 3.0,
+            tolerance: 1.5,
+            persistence: 2,
+        }
+    }
+}
+
+impl TrackOptions {
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |what: &str, v: f64| {
+            if v > 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("{what} must be a positive number, was {v}"))
+            }
+        };
+        positive("--modes-window", self.window)?;
+        positive("--modes-every", self.every)?;
+        positive("the band's sds", self.sigmas)?;
+        positive("--modes-tolerance", self.tolerance)?;
+        if self.persistence == 0 {
+            return Err("the persistence must be at least 1 identification".into());
+        }
+        Ok(())
+    }
+}
+
+/// One twin mode at one identification.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrackedMode {
+    pub mode: usize,
+    pub twin_frequency: f64,
+    /// None: no identified mode paired with it in this window.
+    pub frequency: Option<f64>,
+    pub frequency_sd: Option<f64>,
+    pub damping: Option<f64>,
+    pub shift_percent: Option<f64>,
+    pub shift_sd: Option<f64>,
+    /// The band's half-width here, Hz.
+    pub band: f64,
+    pub outside: bool,
+}
+
+/// What an identification found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Tracked {
+    /// Stream time at the window's end.
+    pub time: f64,
+    pub window: f64,
+    pub modes: Vec<TrackedMode>,
+    /// Twin modes that left their band at this identification (persistently).
+    pub left: Vec<usize>,
+    /// Twin modes back inside.
+    pub returned: Vec<usize>,
+}
+
+pub struct Tracker {
+    options: TrackOptions,
+    twin: TwinModes,
+    channels: Vec<Channel>,
+    buffers: Vec<VecDeque<f64>>,
+    capacity: usize,
+    every: usize,
+    since: usize,
+    dt: f64,
+    outside_runs: Vec<usize>,
+    reported: Vec<bool>,
+    ssi: SsiOptions,
+}
+
+impl Tracker {
+    /// A tracker of `channels` sampled every `dt` s against `twin`'s modes.
+    pub fn new(options: TrackOptions, twin: TwinModes, channels: Vec<Channel>, dt: f64) -> Tracker {
+        let capacity = (options.window / dt).round().max(1.0) as usize;
+        let every = (options.every / dt).round().max(1.0) as usize;
+        let n = twin.modes.len();
+        Tracker {
+            options,
+            buffers: vec![VecDeque::with_capacity(capacity); channels.len()],
+            channels,
+            capacity,
+            every,
+            since: 0,
+            dt,
+            outside_runs: vec![0; n],
+            reported: vec![false; n],
+            ssi: SsiOptions {
+                min_order: 2,
+                max_order: (4 * n).max(20),
+                order_step: 2,
+                block_rows: None,
+            },
+            twin,
+        }
+    }
+
+    /// A gap in the stream: the window starts anew.
+    pub fn gap(&mut self) {
+        for b in &mut self.buffers {
+            b.clear();
+        }
+        self.since = 0;
+    }
+
+    /// One sample of every channel; an identification when one is due and the window is full.
+    pub fn push(&mut self, time: f64, values: &[f64]) -> Option<Result<Tracked, String>> {
+        if values.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        for (b, &v) in self.buffers.iter_mut().zip(values) {
+            if b.len() == self.capacity {
+                b.pop_front();
+            }
+            b.push_back(v);
+        }
+        self.since += 1;
+        let full = self
+            .buffers
+            .first()
+            .is_some_and(|b| b.len() == self.capacity);
+        if !full || self.since < self.every {
+            return None;
+        }
+        self.since = 0;
+        Some(self.identify(time))
+    }
+
+    fn identify(&mut self, time: f64) -> Result<Tracked, String> {
+        // Each channel scaled to unit variance (acceleration, velocity and displacement
+        // channels side by side), the shapes scaled back afterwards.
+        let mut scales = Vec::with_capacity(self.buffers.len());
+        let data: Vec<Vec<f64>> = self
+            .buffers
+            .iter()
+            .map(|b| {
+                let n = b.len() as f64;
+                let mean = b.iter().sum::<f64>() / n;
+                let sd = (b.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+                let sd = if sd > 0.0 { sd } else { 1.0 };
+                scales.push(sd);
+                b.iter().map(|v| (v - mean) / sd).collect()
+            })
+            .collect();
+        let outputs: Vec<&[f64]> = data.iter().map(Vec::as_slice).collect();
+        let run = Run {
+            input: None,
+            outputs: &outputs,
+        };
+        let orders = ssi_cov(&[run], self.dt, &self.ssi).map_err(|e| e.to_string())?;
+        let diagram = StabilisationDiagram::new(orders, StabilityTolerances::default())
+            .map_err(|e| e.to_string())?;
+        let identified =
+            select_modes(&diagram, &SelectionOptions::default()).map_err(|e| e.to_string())?;
+        let comparison = self.compare(&identified, &scales);
+        Ok(self.judge(time, &identified, &comparison))
+    }
+
+    /// The identified modes paired with the twin's, by shape at the floors the acceleration
+    /// channels measure when there are two or more of them, else by frequency.
+    fn compare(
+        &self,
+        identified: &[numerics::modal::stabilisation::IdentifiedMode],
+        scales: &[f64],
+    ) -> ModeComparison {
+        let acc: Vec<usize> = (0..self.channels.len())
+            .filter(|&c| self.channels[c].quantity() == Quantity::Acceleration)
+            .collect();
+        let floors: Vec<usize> = acc
+            .iter()
+            .filter_map(|&c| match self.channels[c] {
+                Channel::Response { floor, .. } => Some(floor),
+                _ => None,
+            })
+            .collect();
+        let observed: Vec<ObservedMode> = identified
+            .iter()
+            .map(|m| ObservedMode {
+                frequency: m.frequency,
+                frequency_sd: Some(m.frequency_sd),
+                damping: m.damping,
+                damping_sd: Some(m.damping_sd),
+                shape: acc.iter().map(|&c| m.shape[c] * scales[c]).collect(),
+            })
+            .collect();
+        pair_modes(&self.twin, &observed, &floors)
+    }
+
+    fn judge(
+        &mut self,
+        time: f64,
+        identified: &[numerics::modal::stabilisation::IdentifiedMode],
+        comparison: &ModeComparison,
+    ) -> Tracked {
+        let mut modes = Vec::with_capacity(self.twin.modes.len());
+        let (mut left, mut returned) = (Vec::new(), Vec::new());
+        for (i, t) in self.twin.modes.iter().enumerate() {
+            let pair = comparison.pairs.iter().find(|p| p.twin_mode == i + 1);
+            let id = pair.map(|p| &identified[p.observed_mode - 1]);
+            let combined = (t.frequency_sd.unwrap_or(0.0).powi(2)
+                + id.map_or(0.0, |m| m.frequency_sd.powi(2)))
+            .sqrt();
+            let band =
+                (self.options.sigmas * combined).max(self.options.tolerance / 100.0 * t.frequency);
+            let outside = id.is_some_and(|m| (m.frequency - t.frequency).abs() > band);
+            if outside {
+                self.outside_runs[i] += 1;
+                if self.outside_runs[i] >= self.options.persistence && !self.reported[i] {
+                    self.reported[i] = true;
+                    left.push(i + 1);
+                }
+            } else if id.is_some() {
+                self.outside_runs[i] = 0;
+                if self.reported[i] {
+                    self.reported[i] = false;
+                    returned.push(i + 1);
+                }
+            }
+            modes.push(TrackedMode {
+                mode: i + 1,
+                twin_frequency: t.frequency,
+                frequency: id.map(|m| m.frequency),
+                frequency_sd: id.map(|m| m.frequency_sd),
+                damping: id.map(|m| m.damping),
+                shift_percent: pair.map(|p| p.frequency_shift_percent),
+                shift_sd: pair.and_then(|p| p.frequency_shift_sd),
+                band,
+                outside,
+            });
+        }
+        Tracked {
+            time,
+            window: self.options.window,
+            modes,
+            left,
+            returned,
+        }
+    }
+}
