@@ -156,7 +156,7 @@ fn an_frf_calibration_recovers_known_parameters() {
             // the ratios to 1 % (measured: below 0.2 %).
             for i in 1..=storeys {
                 let ratio = |s: &Structure| {
-                    s.get(&format!("k{i}")).unwrap() / s.get(&format!("m{i}")).unwrap()
+                    s.get(&format!("k{i}")).expect("k") / s.get(&format!("m{i}")).expect("m")
                 };
                 let error = (ratio(&fitted) - ratio(&truth)).abs() / ratio(&truth);
                 assert!(error < 0.01, "{what}: k{i}/m{i} off by {error}");

@@ -124,11 +124,8 @@ fn read_functions(path: &Path) -> Result<Vec<Function>, DataError> {
         line: 0,
     };
     let mut functions = Vec::new();
-    loop {
-        // A dataset opens with a "-1" line and its number.
-        let Some(line) = cursor.next_line() else {
-            break;
-        };
+    // A dataset opens with a "-1" line and its number.
+    while let Some(line) = cursor.next_line() {
         if line.trim().is_empty() {
             continue;
         }
@@ -602,6 +599,7 @@ mod tests {
     use std::io::Write;
 
     /// One ASCII dataset 58 in the fixed columns of the format, double precision, even abscissa.
+    #[allow(clippy::too_many_arguments)]
     fn dataset(
         function_type: i64,
         node: i64,

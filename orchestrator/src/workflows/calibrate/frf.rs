@@ -123,6 +123,9 @@ pub struct FrfCalibration {
     pub seconds: f64,
 }
 
+/// Measured − twin per channel: the magnitude (dB) and, where given, the phase (rad).
+type Errors = Vec<(Vec<f64>, Option<Vec<f64>>)>;
+
 /// The measured data in the band, per channel.
 struct Block {
     magnitude_db: Vec<f64>,
@@ -187,10 +190,7 @@ impl Problem<'_> {
         &self,
         z: &[f64],
         with: &[String],
-    ) -> Option<(
-        Vec<(Vec<f64>, Option<Vec<f64>>)>,
-        crate::evaluation::frf::StructureFrf,
-    )> {
+    ) -> Option<(Errors, crate::evaluation::frf::StructureFrf)> {
         let s = self.structure_at(z)?;
         let frf = structure_frf(&s, &self.channels, &self.frequency, with).ok()?;
         let g = self.gain_db(z);
@@ -421,7 +421,7 @@ pub fn band_lines(frf: &MeasuredFrf, band: Option<(f64, f64)>) -> Vec<usize> {
     (0..frf.frequency.len())
         .filter(|&k| {
             let f = frf.frequency[k];
-            f > 0.0 && band.map_or(true, |(lo, hi)| f >= lo && f <= hi)
+            f > 0.0 && band.is_none_or(|(lo, hi)| f >= lo && f <= hi)
         })
         .collect()
 }
@@ -556,7 +556,7 @@ pub fn calibrate_frf(
         let fit = run_start(&mut problem, z0);
         outcomes.push(fit.as_ref().map(|f| f.objective));
         if let Some(fit) = fit {
-            if best.as_ref().map_or(true, |b| fit.objective < b.objective) {
+            if best.as_ref().is_none_or(|b| fit.objective < b.objective) {
                 best = Some(fit);
             }
         }
