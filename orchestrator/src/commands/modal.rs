@@ -1,13 +1,19 @@
 //! `twin modal`: the twin's natural frequencies, damping ratios and mode shapes, each with its
-//! sd from the calibration's posterior (checked against sampling it).
+//! sd from the calibration's posterior (checked against sampling it); with `--data`, the modes
+//! identified from a record (SSI-COV, and LSCF when the excitation was measured), beside the
+//! twin's when `--twin` is given too.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 
 use super::write_json;
+use crate::record::Measurement;
 use crate::twin::Twin;
-use crate::workflows::modal::{twin_modes, ModalOptions, TwinModes};
+use crate::workflows::modal::identify::{MethodModes, RecordModes};
+use crate::workflows::modal::{
+    identify, pair_modes, twin_modes, IdentifyOptions, ModalOptions, ModeComparison, TwinModes,
+};
 use crate::workflows::options::check_svg;
 
 #[derive(clap::Args)]
@@ -24,11 +30,45 @@ pub struct ModalArgs {
     /// Draws from the posterior that check the linearised sds (0: no check).
     #[arg(long, default_value_t = ModalOptions::default().samples)]
     pub samples: usize,
+    /// A record (CSV) to identify the modes of; repeat for several runs of one test. With
+    /// --plot, P.svg is the stabilisation diagram over the spectrum and P-frf.svg the FRFs.
+    #[arg(long, value_name = "D.csv")]
+    pub data: Vec<PathBuf>,
+    /// Samples per Welch segment (FRF, spectrum); default: a power of two giving 12 segments.
+    #[arg(long)]
+    pub segment: Option<usize>,
+    /// The band LSCF fits, LOW:HIGH Hz; default: up to 0.8 × Nyquist.
+    #[arg(long, value_name = "LOW:HIGH", value_parser = parse_band)]
+    pub band: Option<(f64, f64)>,
+    /// The largest model order of both methods (even).
+    #[arg(long, default_value_t = IdentifyOptions::default().max_order)]
+    pub max_order: usize,
+    /// SSI-COV's block rows; default: enough for the order, at least 20.
+    #[arg(long)]
+    pub block_rows: Option<usize>,
+    /// SSI-COV only, even when the excitation was measured.
+    #[arg(long)]
+    pub output_only: bool,
+}
+
+fn parse_band(text: &str) -> Result<(f64, f64), String> {
+    let (low, high) = text
+        .split_once(':')
+        .ok_or_else(|| format!("'{text}' is not LOW:HIGH (Hz)"))?;
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("'{t}' in '{text}' is not a number of Hz"))
+    };
+    Ok((number(low)?, number(high)?))
 }
 
 pub fn run(args: &ModalArgs) -> Result<()> {
     if let Some(plot) = &args.plot {
         check_svg(plot)?;
+    }
+    if !args.data.is_empty() {
+        return run_data(args);
     }
     let twin = Twin::load(args.twin.as_deref())?;
     let options = ModalOptions {
@@ -85,6 +125,146 @@ pub(crate) fn print_twin_modes(modes: &TwinModes) {
                 .unwrap_or_default(),
             sampled,
             shape.join(" ")
+        );
+    }
+}
+
+/// `--data`: the record's modes, beside the twin's with `--twin`.
+fn run_data(args: &ModalArgs) -> Result<()> {
+    let options = IdentifyOptions {
+        segment_length: args.segment,
+        band: args.band,
+        max_order: args.max_order,
+        block_rows: args.block_rows,
+        input_output: !args.output_only,
+        ..IdentifyOptions::default()
+    };
+    options.validate()?;
+    let runs = args
+        .data
+        .iter()
+        .map(|path| Measurement::read(path))
+        .collect::<Result<Vec<_>, _>>()?;
+    let record = identify(&runs, &options)?;
+    print_record_modes(&record);
+    let twin = match &args.twin {
+        Some(path) => {
+            let twin = Twin::load(Some(path))?;
+            let modes = twin_modes(
+                &twin,
+                &ModalOptions {
+                    samples: args.samples,
+                    ..ModalOptions::default()
+                },
+            )?;
+            let comparison = pair_modes(&modes, &record.observed(), &record.floors);
+            print_twin_modes(&modes);
+            print_comparison(&record, &comparison);
+            Some((modes, comparison))
+        }
+        None => None,
+    };
+    if let Some(path) = &args.report {
+        let value = match &twin {
+            Some((modes, comparison)) => serde_json::json!({
+                "record": &record, "twin": modes, "comparison": comparison
+            }),
+            None => serde_json::json!({ "record": &record }),
+        };
+        write_json(path, &value)?;
+    }
+    if let Some(path) = &args.plot {
+        crate::report::modal_plot::plot_stabilisation(&record, path)?;
+        if record.frf.is_some() {
+            let frf_path = crate::report::modal_plot::frf_path(path);
+            crate::report::modal_plot::plot_frf(&record, &frf_path)?;
+        }
+    }
+    Ok(())
+}
+
+fn print_method(method: &MethodModes) {
+    let orders = &method.diagram.orders;
+    let span = match (orders.first(), orders.last()) {
+        (Some(a), Some(b)) => format!("orders {}..{}", a.order, b.order),
+        _ => "no orders".into(),
+    };
+    let band = method
+        .band
+        .map(|(l, h)| format!(", band {l:.3}..{h:.3} Hz"))
+        .unwrap_or_default();
+    println!(
+        "  {} ({span}{band}): {} modes",
+        method.method,
+        method.modes.len()
+    );
+    for (i, m) in method.modes.iter().enumerate() {
+        let id = &m.identified;
+        let shape: Vec<String> = m
+            .displacement_shape
+            .iter()
+            .map(|x| format!("{:+.3}", if x.re < 0.0 { -x.norm() } else { x.norm() }))
+            .collect();
+        println!(
+            "    mode {}: {:.4} ± {:.4} Hz  ζ {:.4} ± {:.4} %  MPC {:.3}  MPD {:.1}°  ({} orders)  \
+             shape [{}]",
+            i + 1,
+            id.frequency,
+            id.frequency_sd,
+            100.0 * id.damping,
+            100.0 * id.damping_sd,
+            id.mpc,
+            id.mpd,
+            id.orders.len(),
+            shape.join(" ")
+        );
+    }
+}
+
+pub(crate) fn print_record_modes(record: &RecordModes) {
+    println!(
+        "{}: {}, excitation {}, {} samples at {:.6} Hz; shapes at floors {:?}",
+        record.records.join(", "),
+        record.channels.join(", "),
+        record.excitation,
+        record.samples.iter().sum::<usize>(),
+        1.0 / record.dt,
+        record.floors
+    );
+    if let Some(io) = &record.input_output {
+        print_method(io);
+    }
+    print_method(&record.ssi);
+}
+
+fn print_comparison(record: &RecordModes, comparison: &ModeComparison) {
+    let method = record
+        .input_output
+        .as_ref()
+        .map_or(record.ssi.method, |m| m.method);
+    println!("  the record's modes ({method}) beside the twin's:");
+    for p in &comparison.pairs {
+        println!(
+            "    twin mode {} {:.4} Hz ↔ record mode {} {:.4} Hz: {:+.2} %{}, damping {:+.4} %, MAC {:.4}",
+            p.twin_mode,
+            p.twin_frequency,
+            p.observed_mode,
+            p.observed_frequency,
+            p.frequency_shift_percent,
+            p.frequency_shift_sd
+                .map(|s| format!(" ({s:+.1} sd)"))
+                .unwrap_or_default(),
+            100.0 * p.damping_change,
+            p.mac
+        );
+    }
+    if !comparison.unpaired_twin.is_empty() {
+        println!("    twin modes without a partner: {:?}", comparison.unpaired_twin);
+    }
+    if !comparison.unpaired_observed.is_empty() {
+        println!(
+            "    record modes without a partner: {:?}",
+            comparison.unpaired_observed
         );
     }
 }

@@ -14,6 +14,7 @@ pub mod frf_plot;
 pub mod hybrid_plot;
 pub mod json;
 pub mod learn_plot;
+pub mod modal_plot;
 pub mod mode_plot;
 pub mod plot;
 

@@ -1,0 +1,534 @@
+//! Modes identified from a record (`twin modal --data`): the FRF of every response channel to
+//! the measured excitation (H1, with its coherence), the modes by the input–output method
+//! (LSCF with LSFD shapes) when the excitation was measured, and by the output-only one
+//! (SSI-COV) always, each with its stabilisation diagram and the automatically chosen physical
+//! modes. Any channels, units and excitation; several runs of one test average together.
+
+use serde::Serialize;
+use structure::channel::{Channel, Quantity};
+
+use super::pair::ObservedMode;
+use crate::record::Measurement;
+use numerics::modal::lscf::{lscf, LscfOptions};
+use numerics::modal::spectral::{Run, Welch, MIN_SEGMENT};
+use numerics::modal::ssi::{ssi_cov, SsiOptions};
+use numerics::modal::stabilisation::{
+    select_modes, IdentifiedMode, SelectionOptions, StabilisationDiagram, StabilityTolerances,
+};
+use numerics::modal::{Complex, IdentificationError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum IdentifyError {
+    #[error("{0}")]
+    Options(String),
+    #[error("{path}: {message}")]
+    Record { path: String, message: String },
+    #[error("{method} on {records}: {source}")]
+    Method {
+        method: &'static str,
+        records: String,
+        #[source]
+        source: IdentificationError,
+    },
+}
+
+/// What `twin modal --data` identifies, and how.
+#[derive(Debug, Clone, Serialize)]
+pub struct IdentifyOptions {
+    /// Samples per Welch segment of the FRF and the spectrum; None: the largest power of two
+    /// that gives [`DEFAULT_SEGMENTS`] half-overlapping segments in the shortest run.
+    pub segment_length: Option<usize>,
+    /// Hz, the band LSCF fits; None: from the first bin to [`DEFAULT_BAND_TOP`] of Nyquist.
+    pub band: Option<(f64, f64)>,
+    /// The largest model order of both methods (orders 2, 4, …).
+    pub max_order: usize,
+    /// SSI-COV's block rows; None: SSI-COV's default for the channels and order.
+    pub block_rows: Option<usize>,
+    pub stability: StabilityTolerances,
+    pub selection: SelectionOptions,
+    /// Whether to run the input–output method when the excitation has power.
+    pub input_output: bool,
+}
+
+/// Segments a default Welch segment length leaves in the shortest run (at least).
+pub const DEFAULT_SEGMENTS: usize = 12;
+/// The default LSCF band's top, as a fraction of Nyquist (the anti-aliasing roll-off above).
+pub const DEFAULT_BAND_TOP: f64 = 0.8;
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        IdentifyOptions {
+            segment_length: None,
+            band: None,
+            max_order: 40,
+            block_rows: None,
+            stability: StabilityTolerances::default(),
+            selection: SelectionOptions::default(),
+            input_output: true,
+        }
+    }
+}
+
+impl IdentifyOptions {
+    /// Checks the options on their own, before any record is read.
+    pub fn validate(&self) -> Result<(), IdentifyError> {
+        let bad = |m: String| Err(IdentifyError::Options(m));
+        if let Some(segment) = self.segment_length {
+            if segment < MIN_SEGMENT {
+                return bad(format!(
+                    "--segment {segment}: a Welch segment holds at least {MIN_SEGMENT} samples"
+                ));
+            }
+        }
+        if let Some((low, high)) = self.band {
+            if !(low.is_finite() && high.is_finite() && low >= 0.0 && high > low) {
+                return bad(format!(
+                    "--band {low}:{high}: a band is LOW:HIGH Hz with 0 <= LOW < HIGH"
+                ));
+            }
+        }
+        if self.max_order < 2 || self.max_order % 2 != 0 {
+            return bad(format!(
+                "--max-order {}: an even model order of at least 2 (two per mode)",
+                self.max_order
+            ));
+        }
+        if self.block_rows == Some(0) || self.block_rows == Some(1) {
+            return bad("--block-rows: at least 2".into());
+        }
+        self.stability
+            .validate()
+            .and_then(|()| self.selection.validate())
+            .map_err(|e| IdentifyError::Options(e.to_string()))
+    }
+
+    fn ssi(&self) -> SsiOptions {
+        SsiOptions {
+            max_order: self.max_order,
+            block_rows: self.block_rows,
+            ..SsiOptions::default()
+        }
+    }
+}
+
+/// One response channel's FRF to the excitation.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelFrf {
+    pub channel: String,
+    /// The FRF's unit: the channel's SI unit per the excitation's.
+    pub unit: String,
+    /// Per frequency, `[re, im]`.
+    pub response: Vec<Complex>,
+    pub coherence: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct FrfReport {
+    pub segment_length: usize,
+    pub segments: usize,
+    /// Hz.
+    pub frequencies: Vec<f64>,
+    pub channels: Vec<ChannelFrf>,
+}
+
+/// The sum of the response channels' PSDs (each in its SI unit² / Hz): the spectrum the
+/// stabilisation diagram is drawn over.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpectrumReport {
+    pub frequencies: Vec<f64>,
+    pub total: Vec<f64>,
+}
+
+/// A mode identified from the record.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordMode {
+    #[serde(flatten)]
+    pub identified: IdentifiedMode,
+    /// The shape at [`RecordModes::floors`] as displacements (each channel's component divided
+    /// by `λ²` for an accelerometer, `λ` for a velocity sensor), largest component 1.
+    pub displacement_shape: Vec<Complex>,
+}
+
+/// One method's diagram and modes.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodModes {
+    /// `SSI-COV` or `LSCF`.
+    pub method: &'static str,
+    /// Hz, the band fitted (LSCF).
+    pub band: Option<(f64, f64)>,
+    pub diagram: StabilisationDiagram,
+    pub modes: Vec<RecordMode>,
+}
+
+/// Everything identified from a record.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordModes {
+    pub records: Vec<String>,
+    /// s.
+    pub dt: f64,
+    /// Samples per run.
+    pub samples: Vec<usize>,
+    pub excitation: String,
+    /// The response channels, in the order of the shapes' components.
+    pub channels: Vec<String>,
+    /// The floors (1-based) of [`RecordMode::displacement_shape`]: the first channel of each
+    /// measured floor, by floor.
+    pub floors: Vec<usize>,
+    pub frf: Option<FrfReport>,
+    pub spectrum: SpectrumReport,
+    pub ssi: MethodModes,
+    pub input_output: Option<MethodModes>,
+    pub options: IdentifyOptions,
+}
+
+impl RecordModes {
+    /// The modes to compare with a twin's: the input–output method's when it ran (an FRF
+    /// fit is the more accurate), otherwise SSI-COV's; shapes at [`RecordModes::floors`].
+    pub fn observed(&self) -> Vec<ObservedMode> {
+        let method = self.input_output.as_ref().unwrap_or(&self.ssi);
+        method
+            .modes
+            .iter()
+            .map(|m| ObservedMode {
+                frequency: m.identified.frequency,
+                frequency_sd: Some(m.identified.frequency_sd),
+                damping: m.identified.damping,
+                damping_sd: Some(m.identified.damping_sd),
+                shape: m.displacement_shape.clone(),
+            })
+            .collect()
+    }
+}
+
+/// Every run has the first's channels, in its order, and its sampling interval.
+fn check_runs(runs: &[Measurement]) -> Result<(), IdentifyError> {
+    let first = runs
+        .first()
+        .ok_or_else(|| IdentifyError::Options("no record given".into()))?;
+    for run in &runs[1..] {
+        let err = |message: String| IdentifyError::Record {
+            path: run.path.display().to_string(),
+            message,
+        };
+        if run.channel_names() != first.channel_names() {
+            return Err(err(format!(
+                "its channels ({}) differ from {}'s ({}): runs of one test share their channels",
+                run.channel_names().join(", "),
+                first.path.display(),
+                first.channel_names().join(", ")
+            )));
+        }
+        if ((run.dt - first.dt) / first.dt).abs() > 1e-9 {
+            return Err(err(format!(
+                "sampled every {} s, {} every {} s: runs of one test share their rate",
+                run.dt,
+                first.path.display(),
+                first.dt
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Identifies the modes of `runs` (one record, or several runs of one test).
+pub fn identify(
+    runs: &[Measurement],
+    options: &IdentifyOptions,
+) -> Result<RecordModes, IdentifyError> {
+    options.validate()?;
+    check_runs(runs)?;
+    let first = &runs[0];
+    let records: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
+    let names = records.join(", ");
+    let dt = first.dt;
+    let nyquist = 0.5 / dt;
+    let shortest = runs.iter().map(Measurement::len).min().unwrap_or(0);
+    let segment_length = match options.segment_length {
+        Some(s) => s,
+        None => default_segment(shortest),
+    };
+    if segment_length > shortest {
+        return Err(IdentifyError::Options(format!(
+            "--segment {segment_length}: longer than the shortest run ({shortest} samples)"
+        )));
+    }
+    if let Some((_, high)) = options.band {
+        if high > nyquist {
+            return Err(IdentifyError::Options(format!(
+                "--band up to {high} Hz: above the record's Nyquist frequency, {nyquist} Hz"
+            )));
+        }
+    }
+    let method_err = |method: &'static str| {
+        let records = names.clone();
+        move |source| IdentifyError::Method {
+            method,
+            records,
+            source,
+        }
+    };
+    let outputs: Vec<Vec<&[f64]>> = runs
+        .iter()
+        .map(|r| r.responses.iter().map(|s| s.values.as_slice()).collect())
+        .collect();
+    let spectral_runs: Vec<Run<'_>> = runs
+        .iter()
+        .zip(&outputs)
+        .map(|(r, o)| Run {
+            input: Some(r.excitation.values.as_slice()),
+            outputs: o,
+        })
+        .collect();
+    let welch = Welch::new(dt, segment_length).map_err(method_err("the spectra"))?;
+    let spectra = welch
+        .output_spectra(&spectral_runs)
+        .map_err(method_err("the spectra"))?;
+    let channels: Vec<Channel> = first.responses.iter().map(|s| s.channel).collect();
+    let floors = shape_floors(&channels);
+
+    let diagram = |orders| {
+        StabilisationDiagram::new(orders, options.stability).map_err(method_err("the diagram"))
+    };
+    let ssi_orders = ssi_cov(&spectral_runs, dt, &options.ssi()).map_err(method_err("SSI-COV"))?;
+    let ssi_diagram = diagram(ssi_orders)?;
+    let ssi_modes = select_modes(&ssi_diagram, &options.selection)
+        .map_err(method_err("SSI-COV"))?;
+    let ssi = MethodModes {
+        method: "SSI-COV",
+        band: None,
+        modes: record_modes(ssi_modes, &floors),
+        diagram: ssi_diagram,
+    };
+
+    let excited = runs.iter().any(|r| {
+        let v = &r.excitation.values;
+        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        v.iter().any(|x| (x - mean).abs() > 0.0)
+    });
+    let (frf, input_output) = if excited {
+        let frf = welch.h1(&spectral_runs).map_err(method_err("the FRF"))?;
+        let band = options
+            .band
+            .unwrap_or((frf.frequencies[1], DEFAULT_BAND_TOP * nyquist));
+        let input_output = if options.input_output {
+            let lscf_options = LscfOptions {
+                max_order: options.max_order,
+                ..LscfOptions::over(band)
+            };
+            let orders = lscf(&frf, &lscf_options).map_err(method_err("LSCF"))?;
+            let d = diagram(orders)?;
+            let modes = select_modes(&d, &options.selection).map_err(method_err("LSCF"))?;
+            Some(MethodModes {
+                method: "LSCF",
+                band: Some(band),
+                modes: record_modes(modes, &floors),
+                diagram: d,
+            })
+        } else {
+            None
+        };
+        let excitation_unit = first.excitation.channel.quantity().si().symbol();
+        let report = FrfReport {
+            segment_length,
+            segments: frf.segments,
+            channels: first
+                .responses
+                .iter()
+                .zip(frf.response.iter().zip(&frf.coherence))
+                .map(|(s, (h, c))| ChannelFrf {
+                    channel: s.channel.name(),
+                    unit: format!("({})/{excitation_unit}", s.channel.quantity().si().symbol()),
+                    response: h.clone(),
+                    coherence: c.clone(),
+                })
+                .collect(),
+            frequencies: frf.frequencies,
+        };
+        (Some(report), input_output)
+    } else {
+        (None, None)
+    };
+
+    Ok(RecordModes {
+        records,
+        dt,
+        samples: runs.iter().map(Measurement::len).collect(),
+        excitation: first.excitation.channel.name(),
+        channels: channels.iter().map(|c| c.name()).collect(),
+        floors: floors.iter().map(|(floor, _)| *floor).collect(),
+        frf,
+        spectrum: SpectrumReport {
+            total: spectra.total(),
+            frequencies: spectra.frequencies,
+        },
+        ssi,
+        input_output,
+        options: options.clone(),
+    })
+}
+
+/// The largest power of two (at least the shortest segment accepted) giving
+/// [`DEFAULT_SEGMENTS`] half-overlapping segments in `samples`.
+pub fn default_segment(samples: usize) -> usize {
+    // k segments of L with 50 % overlap span (k + 1) L / 2 samples.
+    let longest = 2 * samples / (DEFAULT_SEGMENTS + 1);
+    let mut segment = MIN_SEGMENT;
+    while segment * 2 <= longest {
+        segment *= 2;
+    }
+    segment
+}
+
+/// Per measured floor (ascending), its first channel's index and the power of `λ` that
+/// turns that channel's shape component into a displacement.
+fn shape_floors(channels: &[Channel]) -> Vec<(usize, (usize, i32))> {
+    let mut floors: Vec<(usize, (usize, i32))> = Vec::new();
+    for (index, channel) in channels.iter().enumerate() {
+        if let Channel::Response { quantity, floor } = channel {
+            if floors.iter().any(|(f, _)| f == floor) {
+                continue;
+            }
+            let power = match quantity {
+                Quantity::Acceleration => 2,
+                Quantity::Velocity => 1,
+                Quantity::Displacement | Quantity::Time | Quantity::Force => 0,
+            };
+            floors.push((*floor, (index, power)));
+        }
+    }
+    floors.sort_by_key(|(f, _)| *f);
+    floors
+}
+
+fn record_modes(
+    modes: Vec<IdentifiedMode>,
+    floors: &[(usize, (usize, i32))],
+) -> Vec<RecordMode> {
+    modes
+        .into_iter()
+        .map(|identified| {
+            let w = 2.0 * std::f64::consts::PI * identified.frequency;
+            let z = identified.damping;
+            let lambda = Complex::new(-z * w, w * (1.0 - z * z).max(0.0).sqrt());
+            let shape: Vec<Complex> = floors
+                .iter()
+                .map(|(_, (index, power))| identified.shape[*index] / lambda.powi(*power))
+                .collect();
+            RecordMode {
+                displacement_shape: numerics::modal::stabilisation::normalised(shape),
+                identified,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+    use numerics::modal::{mac, modes};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    use std::path::Path;
+    use structure::{Excitation, Structure};
+
+    /// A four-storey building shaken at its top floor, measured by acc1, vel2, disp3 and acc4
+    /// (mixed quantities, so the displacement shapes need each channel's power of λ), exact
+    /// zero-order-hold simulation, 2 % sensor noise; 900 s at 100 Hz.
+    fn record(structure: &Structure, seed: u64) -> Measurement {
+        let n = structure.storeys();
+        let ss = structure.state_space().expect("state space");
+        let dt = 0.01;
+        let mut augmented = DMatrix::zeros(2 * n + 1, 2 * n + 1);
+        augmented.view_mut((0, 0), (2 * n, 2 * n)).copy_from(&ss.a);
+        augmented.view_mut((0, 2 * n), (2 * n, 1)).copy_from(&ss.b);
+        let exponential = (augmented * dt).exp();
+        let ad = exponential.view((0, 0), (2 * n, 2 * n)).into_owned();
+        let bd = exponential.view((0, 2 * n), (2 * n, 1)).into_owned();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let unit = Normal::new(0.0, 1.0).expect("unit normal");
+        let samples = 90_000;
+        let force: Vec<f64> = (0..samples).map(|_| 50.0 * unit.sample(&mut rng)).collect();
+        let names = ["acc1", "vel2", "disp3", "acc4"];
+        let mut columns = vec![Vec::with_capacity(samples); names.len()];
+        let mut x = DVector::zeros(2 * n);
+        for u in &force {
+            let acc = &ss.c * &x + &ss.d * *u;
+            columns[0].push(acc[0]);
+            columns[1].push(x[n + 1]);
+            columns[2].push(x[2]);
+            columns[3].push(acc[3]);
+            x = &ad * &x + &bd * *u;
+        }
+        for column in &mut columns {
+            let rms = (column.iter().map(|v| v * v).sum::<f64>() / samples as f64).sqrt();
+            for v in column.iter_mut() {
+                *v += 0.02 * rms * unit.sample(&mut rng);
+            }
+        }
+        let mut named = vec![
+            ("time".to_owned(), (0..samples).map(|k| k as f64 * dt).collect()),
+            ("force".to_owned(), force),
+        ];
+        named.extend(names.iter().map(|s| s.to_string()).zip(columns));
+        Measurement::from_named_columns(Path::new("synthetic"), named, &Default::default())
+            .expect("a valid record")
+    }
+
+    #[test]
+    fn both_methods_find_the_modes_of_a_mixed_channel_record() {
+        let mut structure = Structure::uniform(4, 1000.0, 0.0, 2.0e6, Excitation::Force { floor: 4 });
+        // Storey dampers proportional to the stiffness: 1 % on the first mode.
+        let first = structure.natural_frequencies()[0] * 2.0 * std::f64::consts::PI;
+        structure.damping = structure.stiffness.iter().map(|k| 2.0 * 0.01 * k / first).collect();
+        let exact = modes(
+            &structure.mass_matrix(),
+            &structure.damping_matrix(),
+            &structure.stiffness_matrix(),
+        )
+        .expect("exact modes");
+        let found = identify(&[record(&structure, 5)], &IdentifyOptions::default())
+            .expect("identified");
+        assert_eq!(found.floors, vec![1, 2, 3, 4]);
+        assert!(found.frf.is_some());
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        for method in [io, &found.ssi] {
+            assert_eq!(method.modes.len(), exact.len(), "{}", method.method);
+            for (m, e) in method.modes.iter().zip(&exact) {
+                let f = m.identified.frequency / e.frequency - 1.0;
+                let z = m.identified.damping / e.damping - 1.0;
+                let shape = mac(&m.displacement_shape, &e.shape);
+                println!(
+                    "{}: {:.4} Hz ({:+.3} %), ζ {:.4} % ({:+.2} %), MAC {:.5}",
+                    method.method,
+                    m.identified.frequency,
+                    100.0 * f,
+                    100.0 * m.identified.damping,
+                    100.0 * z,
+                    shape
+                );
+                // The bars. Measured: LSCF within 0.012 % in frequency, 0.21 % in
+                // damping, MAC ≥ 0.99987; SSI-COV within 0.28 %, 6.9 %, MAC ≥ 0.9984.
+                assert!(f.abs() < 0.005, "{} {f}", method.method);
+                assert!(z.abs() < 0.10, "{} {z}", method.method);
+                assert!(shape > 0.99, "{} MAC {shape}", method.method);
+            }
+        }
+        assert_eq!(found.observed().len(), exact.len());
+    }
+
+    #[test]
+    fn bad_options_are_refused_before_any_work() {
+        let options = IdentifyOptions {
+            max_order: 7,
+            ..IdentifyOptions::default()
+        };
+        assert!(options.validate().expect_err("odd").to_string().contains("--max-order"));
+        let options = IdentifyOptions {
+            band: Some((5.0, 2.0)),
+            ..IdentifyOptions::default()
+        };
+        assert!(options.validate().expect_err("reversed").to_string().contains("--band"));
+        assert_eq!(default_segment(120_000), 16_384);
+    }
+}
