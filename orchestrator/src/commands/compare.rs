@@ -112,7 +112,22 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         .map(ControllerSpec::load)
         .transpose()?;
     let compared = compare(&twin, &data, &options, spec.as_ref(), progress_bar())?;
-    let report = crate::report::json::compare(&twin, &data, &compared, args.transient);
+    let mut report = crate::report::json::compare(&twin, &data, &compared, args.transient);
+    // The record's modes beside the twin's (information: the time-domain verdict stands).
+    let modes = crate::workflows::modal::modal_evidence(
+        &twin,
+        &data,
+        crate::workflows::modal::ModalBand::default(),
+    );
+    if let serde_json::Value::Object(map) = &mut report {
+        map.insert(
+            "modes".into(),
+            match &modes {
+                Ok(evidence) => serde_json::to_value(evidence)?,
+                Err(e) => serde_json::json!({ "error": e.to_string() }),
+            },
+        );
+    }
     let Compared {
         prediction,
         comparison,
@@ -141,6 +156,10 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         )?;
     }
     print_summary(&twin, &data, comparison);
+    match &modes {
+        Ok(evidence) => print_modes(evidence),
+        Err(e) => println!("modes: not identified ({e})"),
+    }
     if parameter_variance.is_some() {
         let join = |values: Vec<f64>| {
             values
@@ -195,6 +214,43 @@ fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<(
     }
     w.flush()?;
     Ok(())
+}
+
+/// The record's modes beside the twin's, one line per paired mode.
+pub(crate) fn print_modes(e: &crate::workflows::modal::ModalEvidence) {
+    println!(
+        "modes ({} on the record; band: {} sd, at least {} %):",
+        e.method, e.band.sigmas, e.band.tolerance
+    );
+    for m in &e.modes {
+        let sd = |v: Option<f64>| v.map(|s| format!(" ± {s:.4}")).unwrap_or_default();
+        println!(
+            "  mode {}: twin {:.4}{} Hz, record {:.4}{} Hz: {:+.2} %{}; ζ {:.2} → {:.2} %; MAC {:.3}{}",
+            m.pair.twin_mode,
+            m.pair.twin_frequency,
+            sd(m.twin_frequency_sd),
+            m.pair.observed_frequency,
+            sd(m.observed_frequency_sd),
+            m.pair.frequency_shift_percent,
+            m.pair
+                .frequency_shift_sd
+                .map(|s| format!(" ({s:+.1} sd)"))
+                .unwrap_or_default(),
+            100.0 * m.twin_damping,
+            100.0 * m.observed_damping,
+            m.pair.mac,
+            if m.outside { "  OUTSIDE the band" } else { "" }
+        );
+        if let Some(f) = m.other_frequency {
+            println!("           (SSI-COV: {f:.4} Hz)");
+        }
+    }
+    if !e.comparison.unpaired_twin.is_empty() {
+        println!(
+            "  twin modes not found on the record: {:?}",
+            e.comparison.unpaired_twin
+        );
+    }
 }
 
 fn print_summary(twin: &Twin, data: &Measurement, c: &Comparison) {

@@ -226,6 +226,30 @@ pub fn summary(d: &Diagnosis) -> String {
         );
     }
     s += &format!("NMSE after    {}\n", pct(&d.nmse_after));
+    match &d.modes {
+        Some(m) => {
+            let line: Vec<String> = m
+                .modes
+                .iter()
+                .map(|x| {
+                    format!(
+                        "{}: {:.3}→{:.3} Hz {:+.2} %{}",
+                        x.pair.twin_mode,
+                        x.pair.twin_frequency,
+                        x.pair.observed_frequency,
+                        x.pair.frequency_shift_percent,
+                        if x.outside { " OUTSIDE" } else { "" }
+                    )
+                })
+                .collect();
+            s += &format!("modes ({})  {}\n", m.method, line.join("; "));
+        }
+        None => {
+            if let Some(e) = &d.modes_error {
+                s += &format!("modes         not identified: {e}\n");
+            }
+        }
+    }
     s += &format!("why           {}\n", d.reason);
     s += &format!("time          {:.1} s\n", d.seconds);
     s

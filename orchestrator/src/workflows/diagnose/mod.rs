@@ -826,6 +826,16 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let missing_shear = missing_shear(&floor_force);
     let localisation = localise(&missing_shear, &floor_force, &base_run, first);
 
+    // The record's modes beside the twin's: shown with the verdict, and a `none` says so when
+    // they moved beyond the twin's band.
+    let (modes, modes_error) = match crate::workflows::modal::modal_evidence(
+        twin,
+        data,
+        crate::workflows::modal::ModalBand::default(),
+    ) {
+        Ok(e) => (Some(e), None),
+        Err(e) => (None, Some(e.to_string())),
+    };
     let mut diagnosis = Diagnosis {
         record: data.path.display().to_string(),
         channels: channels.names.clone(),
@@ -861,6 +871,8 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         failed_candidates: Vec::new(),
         screened_out: Vec::new(),
         localisation,
+        modes,
+        modes_error,
         gates: options.gates,
         block_seconds: options.block,
         seconds: 0.0,
@@ -895,7 +907,16 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     );
     if no_alarm && !options.always_fit {
         diagnosis.action = Action::None;
-        diagnosis.reason = none_reason;
+        diagnosis.reason = match diagnosis.modes.as_ref().filter(|m| !m.shifted.is_empty()) {
+            Some(m) => format!(
+                "{none_reason}; but the record's modes ({}) moved beyond the twin's band: {} — a \
+                 change the time domain does not show yet, or an identification to check \
+                 (twin modal --data, twin watch --track-modes)",
+                m.method,
+                m.describe_shifts()
+            ),
+            None => none_reason,
+        };
         diagnosis.seconds = started.elapsed().as_secs_f64();
         return Ok(diagnosis);
     }

@@ -234,6 +234,10 @@ pub struct Diagnosis {
     /// ([`super::discover::screen`]); empty when every candidate was fitted.
     pub screened_out: Vec<(String, f64)>,
     pub localisation: Localisation,
+    /// The record's modes beside the twin's (`workflows::modal::evidence`); None when the
+    /// record could not be identified (`modes_error` says why).
+    pub modes: Option<crate::workflows::modal::ModalEvidence>,
+    pub modes_error: Option<String>,
     pub gates: Gates,
     pub block_seconds: f64,
     pub seconds: f64,

@@ -4,10 +4,12 @@
 //! record ([`pair`]): each mode's frequency shift in % and in units of the combined sd, the
 //! damping change, the MAC matrix.
 
+pub mod evidence;
 pub mod identify;
 pub mod pair;
 pub mod twin;
 
+pub use evidence::{modal_evidence, ModalBand, ModalEvidence, ModeShift};
 pub use identify::{identify, IdentifyError, IdentifyOptions, RecordModes};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
 pub use twin::{twin_modes, ModalOptions, TwinMode, TwinModes};
