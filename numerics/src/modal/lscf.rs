@@ -11,7 +11,7 @@
 //! (linear in the residues and the residual terms) and the residues across outputs are the
 //! shapes.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use super::Complex;
 use serde::{Deserialize, Serialize};
@@ -268,21 +268,38 @@ pub fn lsfd(
     for (c, scale) in scales.iter().enumerate() {
         design.column_mut(c).scale_mut(*scale);
     }
-    let svd = design.svd(true, true);
-    let mut residues = vec![vec![Complex::new(0.0, 0.0); frf.response.len()]; modes];
-    for (o, h) in frf.response.iter().enumerate() {
-        let target = DVector::from_iterator(
-            2 * bins.len(),
-            bins.iter().flat_map(|(k, _)| [h[*k].re, h[*k].im]),
-        );
-        let x = svd
-            .solve(&target, 1e-12)
+    // One QR of the tall design matrix serves every output: x = R⁻¹ (Qᵀ h). An SVD of the
+    // same matrix took most of an hour-long record's identification.
+    let mut targets = DMatrix::from_fn(2 * bins.len(), frf.response.len(), |row, o| {
+        let value = frf.response[o][bins[row / 2].0];
+        if row % 2 == 0 {
+            value.re
+        } else {
+            value.im
+        }
+    });
+    let qr = design.qr();
+    qr.q_tr_mul(&mut targets);
+    let projected = targets.rows(0, unknowns).into_owned();
+    let r = qr.r();
+    let solution = match r.solve_upper_triangular(&projected) {
+        Some(x) if x.iter().all(|v| v.is_finite()) => x,
+        // Nearly equal poles make R singular: fall back to the SVD's least-squares solution.
+        _ => r
+            .svd(true, true)
+            .solve(&projected, 1e-12)
             .map_err(|why| IdentificationError::Numerical {
                 what: "LSFD",
                 why: why.to_owned(),
-            })?;
+            })?,
+    };
+    let mut residues = vec![vec![Complex::new(0.0, 0.0); frf.response.len()]; modes];
+    for o in 0..frf.response.len() {
         for (r, residue) in residues.iter_mut().enumerate() {
-            residue[o] = Complex::new(x[2 * r] * scales[2 * r], x[2 * r + 1] * scales[2 * r + 1]);
+            residue[o] = Complex::new(
+                solution[(2 * r, o)] * scales[2 * r],
+                solution[(2 * r + 1, o)] * scales[2 * r + 1],
+            );
         }
     }
     Ok(residues)
