@@ -291,8 +291,8 @@ pub fn identify(
     };
     let ssi_orders = ssi_cov(&spectral_runs, dt, &options.ssi()).map_err(method_err("SSI-COV"))?;
     let ssi_diagram = diagram(ssi_orders)?;
-    let ssi_modes = select_modes(&ssi_diagram, &options.selection)
-        .map_err(method_err("SSI-COV"))?;
+    let ssi_modes =
+        select_modes(&ssi_diagram, &options.selection).map_err(method_err("SSI-COV"))?;
     let ssi = MethodModes {
         method: "SSI-COV",
         band: None,
@@ -368,7 +368,11 @@ pub fn identify(
 }
 
 /// The largest power of two (at least the shortest segment accepted) giving
-/// [`DEFAULT_SEGMENTS`] half-overlapping segments in `samples`.
+/// [`DEFAULT_SEGMENTS`] half-overlapping segments in `samples` — but never shorter than
+/// [`RESOLVING_SEGMENT`] samples (or the whole run, when it is shorter): a short record cut in
+/// twelve leaves bins too wide to resolve a lightly damped resonance. On the paper rig's 20 s
+/// records (1024 samples) twelve segments of 128 left LSCF finding one or two of the three
+/// modes, one of them 5.8 % off; the whole record finds all three within 0.45 % of the twin.
 pub fn default_segment(samples: usize) -> usize {
     // k segments of L with 50 % overlap span (k + 1) L / 2 samples.
     let longest = 2 * samples / (DEFAULT_SEGMENTS + 1);
@@ -376,8 +380,15 @@ pub fn default_segment(samples: usize) -> usize {
     while segment * 2 <= longest {
         segment *= 2;
     }
-    segment
+    let mut resolving = MIN_SEGMENT;
+    while resolving * 2 <= samples.min(RESOLVING_SEGMENT) {
+        resolving *= 2;
+    }
+    segment.max(resolving)
 }
+
+/// The shortest default segment where the record allows it, samples.
+pub const RESOLVING_SEGMENT: usize = 1024;
 
 /// Per measured floor (ascending), its first channel's index and the power of `λ` that
 /// turns that channel's shape component into a displacement.
@@ -400,10 +411,7 @@ fn shape_floors(channels: &[Channel]) -> Vec<(usize, (usize, i32))> {
     floors
 }
 
-fn record_modes(
-    modes: Vec<IdentifiedMode>,
-    floors: &[(usize, (usize, i32))],
-) -> Vec<RecordMode> {
+fn record_modes(modes: Vec<IdentifiedMode>, floors: &[(usize, (usize, i32))]) -> Vec<RecordMode> {
     modes
         .into_iter()
         .map(|identified| {
@@ -467,7 +475,10 @@ mod tests {
             }
         }
         let mut named = vec![
-            ("time".to_owned(), (0..samples).map(|k| k as f64 * dt).collect()),
+            (
+                "time".to_owned(),
+                (0..samples).map(|k| k as f64 * dt).collect(),
+            ),
             ("force".to_owned(), force),
         ];
         named.extend(names.iter().map(|s| s.to_string()).zip(columns));
@@ -477,18 +488,23 @@ mod tests {
 
     #[test]
     fn both_methods_find_the_modes_of_a_mixed_channel_record() {
-        let mut structure = Structure::uniform(4, 1000.0, 0.0, 2.0e6, Excitation::Force { floor: 4 });
+        let mut structure =
+            Structure::uniform(4, 1000.0, 0.0, 2.0e6, Excitation::Force { floor: 4 });
         // Storey dampers proportional to the stiffness: 1 % on the first mode.
         let first = structure.natural_frequencies()[0] * 2.0 * std::f64::consts::PI;
-        structure.damping = structure.stiffness.iter().map(|k| 2.0 * 0.01 * k / first).collect();
+        structure.damping = structure
+            .stiffness
+            .iter()
+            .map(|k| 2.0 * 0.01 * k / first)
+            .collect();
         let exact = modes(
             &structure.mass_matrix(),
             &structure.damping_matrix(),
             &structure.stiffness_matrix(),
         )
         .expect("exact modes");
-        let found = identify(&[record(&structure, 5)], &IdentifyOptions::default())
-            .expect("identified");
+        let found =
+            identify(&[record(&structure, 5)], &IdentifyOptions::default()).expect("identified");
         assert_eq!(found.floors, vec![1, 2, 3, 4]);
         assert!(found.frf.is_some());
         let io = found.input_output.as_ref().expect("LSCF ran");
@@ -523,12 +539,20 @@ mod tests {
             max_order: 7,
             ..IdentifyOptions::default()
         };
-        assert!(options.validate().expect_err("odd").to_string().contains("--max-order"));
+        assert!(options
+            .validate()
+            .expect_err("odd")
+            .to_string()
+            .contains("--max-order"));
         let options = IdentifyOptions {
             band: Some((5.0, 2.0)),
             ..IdentifyOptions::default()
         };
-        assert!(options.validate().expect_err("reversed").to_string().contains("--band"));
+        assert!(options
+            .validate()
+            .expect_err("reversed")
+            .to_string()
+            .contains("--band"));
         assert_eq!(default_segment(120_000), 16_384);
     }
 }
