@@ -146,9 +146,11 @@ pub fn modal_evidence(
                     .find(|q| q.twin_mode == p.twin_mode)
                     .map(|q| ssi[q.observed_mode - 1].frequency)
             });
+            // The other method, when it found the mode, must agree; when it did not (SSI-COV
+            // misses a mode little excited, LSCF one narrower than its bins), the primary's
+            // verdict stands.
             let confirmed = match (&other, other_frequency) {
-                (None, _) => true,
-                (Some(_), None) => false,
+                (None, _) | (Some(_), None) => true,
                 (Some(_), Some(f)) => {
                     (f - o.frequency).abs() <= band
                         && (f - t.frequency).abs() > band
