@@ -259,7 +259,10 @@ fn print_comparison(record: &RecordModes, comparison: &ModeComparison) {
         );
     }
     if !comparison.unpaired_twin.is_empty() {
-        println!("    twin modes without a partner: {:?}", comparison.unpaired_twin);
+        println!(
+            "    twin modes without a partner: {:?}",
+            comparison.unpaired_twin
+        );
     }
     if !comparison.unpaired_observed.is_empty() {
         println!(

@@ -135,7 +135,11 @@ fn draw_stabilisation(record: &RecordModes) -> Result<String, String> {
                 }
             }
             chart
-                .draw_series(unstable.iter().map(|&p| Circle::new(p, 2, UNSTABLE.filled())))
+                .draw_series(
+                    unstable
+                        .iter()
+                        .map(|&p| Circle::new(p, 2, UNSTABLE.filled())),
+                )
                 .map_err(|e| err(&e))?
                 .label("not stable")
                 .legend(|(x, y)| Circle::new((x + 8, y), 2, UNSTABLE.filled()));
@@ -228,7 +232,11 @@ pub fn plot_frf(record: &RecordModes, path: &Path) -> Result<(), ReportError> {
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (_, v)| {
                     (l.min(*v), h.max(*v))
                 });
-            let (low, high) = if high > low { (low - 3.0, high + 3.0) } else { (-1.0, 1.0) };
+            let (low, high) = if high > low {
+                (low - 3.0, high + 3.0)
+            } else {
+                (-1.0, 1.0)
+            };
             let mut chart = ChartBuilder::on(&upper)
                 .margin(8)
                 .caption(
