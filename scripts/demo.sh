@@ -158,7 +158,7 @@ echo '{"ground_motion": {"strong_end": 100000}}' > "$b5/stationary.json"
 "$twin" synth --scenario "$b5/stationary.json" --storeys 5 --excitation base --nominal data/five-storey/nominal.json \
   --channels acc1,acc3,acc5 --units acc=g --duration 300 --seed 4 --change k2@150:0.85 --out "$b5/softer-storey.csv" >/dev/null
 "$twin" watch --no-diagnosis --track-modes --twin "$b5/nominal.ssp" --source "$b5/softer-storey.csv" \
-  --alerts "$b5/softer-storey-alerts.jsonl" >/dev/null
+  --alerts "$b5/softer-storey-alerts.jsonl" --modes-plot "$b5/softer-storey-frequencies.svg" >/dev/null
 grep '"kind":"frequency"' "$b5/softer-storey-alerts.jsonl" | head -2
 "$twin" modal --twin "$b5/nominal.ssp" --plot "$b5/modes.svg" --samples 0 | head -3
 

@@ -93,13 +93,19 @@ fn stream(dir: &Path, name: &str, seed: u64, change: bool) -> PathBuf {
 }
 
 fn watch(twin: &Path, source: &Path, alerts: &Path) -> Vec<Value> {
+    let plot = alerts.with_extension("svg");
     run(twin_cmd()
         .args(["watch", "--no-diagnosis", "--track-modes", "--twin"])
         .arg(twin)
         .arg("--source")
         .arg(source)
         .arg("--alerts")
-        .arg(alerts));
+        .arg(alerts)
+        .arg("--modes-plot")
+        .arg(&plot));
+    // The frequencies against time: a panel per twin mode.
+    let svg = std::fs::read_to_string(&plot).expect("the tracked frequencies' plot");
+    assert!(svg.starts_with("<svg") && svg.contains("mode 1: twin") && svg.contains("mode 5: twin"));
     std::fs::read_to_string(alerts)
         .expect("alerts")
         .lines()

@@ -109,6 +109,10 @@ pub struct WatchArgs {
     /// of the twin's and the identified frequency).
     #[arg(long, default_value_t = TrackOptions::default().tolerance, requires = "track_modes")]
     pub modes_tolerance: f64,
+    /// At the end, the tracked frequencies against time with the twin's bands (.svg), from the
+    /// alerts file's `modes` lines.
+    #[arg(long, requires = "track_modes")]
+    pub modes_plot: Option<PathBuf>,
 }
 
 impl WatchArgs {
@@ -152,6 +156,9 @@ impl WatchArgs {
 }
 
 pub fn run(args: &WatchArgs) -> Result<()> {
+    if let Some(plot) = &args.modes_plot {
+        crate::workflows::options::check_svg(plot)?;
+    }
     let options = args.options()?;
     let twin = Twin::load(args.twin.as_deref())?;
     let spinner = std::io::stderr().is_terminal().then(|| {
@@ -246,5 +253,11 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         );
     }
     println!("alerts: {}", args.alerts.display());
+    if let Some(plot) = &args.modes_plot {
+        let tracked = crate::workflows::watch::modes::read_tracked(&args.alerts)
+            .map_err(anyhow::Error::msg)?;
+        crate::report::mode_plot::plot_tracked_frequencies(&tracked, plot)?;
+        println!("tracked frequencies: {}", plot.display());
+    }
     Ok(())
 }

@@ -217,3 +217,102 @@ pub fn plot_mac_matrix(comparison: &ModeComparison, path: &Path) -> Result<(), R
     write_text_atomically(path, &svg)?;
     Ok(())
 }
+
+/// Frequencies against time in `twin watch --track-modes`: one panel per twin mode, its band
+/// (the twin's frequency ± the band's half-width) shaded, the tracked frequency at each
+/// identification (red where it was outside).
+pub fn plot_tracked_frequencies(
+    tracked: &[crate::workflows::watch::modes::Tracked],
+    path: &Path,
+) -> Result<(), ReportError> {
+    let modes = tracked.first().map_or(0, |t| t.modes.len());
+    if modes == 0 {
+        return Err(ReportError::BadInput {
+            path: path.to_owned(),
+            message: "no identification to draw (the stream was shorter than one window?)".into(),
+        });
+    }
+    let (t0, t1) = (
+        tracked.first().map_or(0.0, |t| t.time),
+        tracked.last().map_or(1.0, |t| t.time),
+    );
+    let (t0, t1) = if t1 > t0 {
+        (t0, t1)
+    } else {
+        (t0 - 1.0, t0 + 1.0)
+    };
+    let mut svg = String::new();
+    {
+        let size = (1200u32, 60 + 200 * modes as u32);
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        let err = |e: &dyn std::fmt::Display| ReportError::Draw {
+            path: path.to_owned(),
+            message: e.to_string(),
+        };
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let root = root
+            .titled(
+                "tracked natural frequencies against the twin's band",
+                ("sans-serif", 18),
+            )
+            .map_err(|e| err(&e))?;
+        for (i, area) in root.split_evenly((modes, 1)).iter().enumerate() {
+            let twin_f = tracked[0].modes[i].twin_frequency;
+            let band = tracked
+                .iter()
+                .map(|t| t.modes[i].band)
+                .fold(0.0f64, f64::max);
+            let points: Vec<(f64, f64, bool)> = tracked
+                .iter()
+                .filter_map(|t| {
+                    t.modes[i]
+                        .frequency
+                        .map(|f| (t.time, f, t.modes[i].outside))
+                })
+                .collect();
+            let (lo, hi) = points
+                .iter()
+                .fold((twin_f - 2.0 * band, twin_f + 2.0 * band), |(l, h), p| {
+                    (l.min(p.1), h.max(p.1))
+                });
+            let pad = 0.05 * (hi - lo).max(1e-9);
+            let mut chart = ChartBuilder::on(area)
+                .margin(8)
+                .caption(
+                    format!("mode {}: twin {twin_f:.4} Hz ± {band:.4} Hz", i + 1),
+                    ("sans-serif", 13),
+                )
+                .x_label_area_size(28)
+                .y_label_area_size(60)
+                .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
+                .map_err(|e| err(&e))?;
+            chart
+                .configure_mesh()
+                .x_desc("stream time (s)")
+                .y_desc("Hz")
+                .draw()
+                .map_err(|e| err(&e))?;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(t0, twin_f - band), (t1, twin_f + band)],
+                    TWIN.mix(0.15).filled(),
+                )))
+                .map_err(|e| err(&e))?;
+            chart
+                .draw_series(LineSeries::new(
+                    [(t0, twin_f), (t1, twin_f)],
+                    TWIN.stroke_width(1),
+                ))
+                .map_err(|e| err(&e))?;
+            chart
+                .draw_series(points.iter().map(|&(t, f, outside)| {
+                    let colour = if outside { palette::RED } else { OBSERVED };
+                    Circle::new((t, f), 3, colour.filled())
+                }))
+                .map_err(|e| err(&e))?;
+        }
+        root.present().map_err(|e| err(&e))?;
+    }
+    write_text_atomically(path, &svg)?;
+    Ok(())
+}

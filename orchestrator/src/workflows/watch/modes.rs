@@ -14,7 +14,7 @@
 
 use std::collections::VecDeque;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::workflows::modal::{pair_modes, ModeComparison, ObservedMode, TwinModes};
 use ::structure::channel::{Channel, Quantity};
@@ -72,7 +72,7 @@ impl TrackOptions {
 }
 
 /// One twin mode at one identification.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TrackedMode {
     pub mode: usize,
     pub twin_frequency: f64,
@@ -87,8 +87,8 @@ pub struct TrackedMode {
     pub outside: bool,
 }
 
-/// What an identification found.
-#[derive(Debug, Clone, Serialize)]
+/// What an identification found (a `modes` alert's body).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Tracked {
     /// Stream time at the window's end.
     pub time: f64,
@@ -281,4 +281,25 @@ impl Tracker {
             returned,
         }
     }
+}
+
+/// The `modes` alerts of an alerts file (JSON lines), in order; other kinds are skipped, and a
+/// line that is not JSON is an error naming the file and line.
+pub fn read_tracked(path: &std::path::Path) -> Result<Vec<Tracked>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let value: serde_json::Value =
+            serde_json::from_str(line).map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
+        if value.get("kind").and_then(|k| k.as_str()) == Some("modes") {
+            out.push(
+                serde_json::from_value(value)
+                    .map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?,
+            );
+        }
+    }
+    Ok(out)
 }
