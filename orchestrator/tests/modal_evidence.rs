@@ -125,3 +125,62 @@ fn a_softer_storey_shows_in_the_modes_and_an_unchanged_building_does_not() {
         }
     }
 }
+
+/// `twin modal --data D --twin T --plot P.svg`: the stabilisation diagrams (P.svg), the FRFs
+/// (P-frf.svg), the shapes along the height with the record's beside the twin's
+/// (P-shapes.svg) and the MAC matrix (P-mac.svg); the report pairs the modes.
+#[test]
+fn twin_modal_with_a_record_and_a_twin_draws_every_view() {
+    let dir = tempfile::tempdir().expect("dir");
+    let d = dir.path();
+    let nominal = d.join("nominal.json");
+    std::fs::write(
+        &nominal,
+        r#"{"m": [5.2, 5.2, 5.2, 5.2, 5.2], "c": [3, 3, 3, 3, 3], "k": [4021, 4021, 4021, 4021, 4021]}"#,
+    )
+    .expect("nominal");
+    let twin = d.join("T.ssp");
+    run(twin_cmd()
+        .args([
+            "init",
+            "--storeys",
+            "5",
+            "--excitation",
+            "base",
+            "--nominal",
+        ])
+        .arg(&nominal)
+        .arg("--out")
+        .arg(&twin));
+    let data = record(d, "unchanged", false);
+    let (plot, report) = (d.join("modal.svg"), d.join("modal.json"));
+    run(twin_cmd()
+        .args(["modal", "--samples", "0", "--data"])
+        .arg(&data)
+        .arg("--twin")
+        .arg(&twin)
+        .arg("--plot")
+        .arg(&plot)
+        .arg("--report")
+        .arg(&report));
+    for name in [
+        "modal.svg",
+        "modal-frf.svg",
+        "modal-shapes.svg",
+        "modal-mac.svg",
+    ] {
+        let svg = std::fs::read_to_string(d.join(name)).expect(name);
+        assert!(svg.starts_with("<svg"), "{name}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    let pairs = json["comparison"]["pairs"].as_array().expect("pairs");
+    assert!(pairs.len() >= 3, "paired {}", pairs.len());
+    assert_eq!(
+        json["comparison"]["mac_matrix"]
+            .as_array()
+            .expect("MAC")
+            .len(),
+        5
+    );
+}

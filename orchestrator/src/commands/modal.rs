@@ -179,6 +179,33 @@ fn run_data(args: &ModalArgs) -> Result<()> {
             let frf_path = crate::report::modal_plot::frf_path(path);
             crate::report::modal_plot::plot_frf(&record, &frf_path)?;
         }
+        // With the twin: its shapes along the height with the record's beside them
+        // (`<stem>-shapes.svg`) and the MAC matrix (`<stem>-mac.svg`).
+        if let Some((modes, comparison)) = &twin {
+            let sibling = |suffix: &str| {
+                let stem = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "modal".into());
+                path.with_file_name(format!("{stem}-{suffix}.svg"))
+            };
+            let observed: Vec<(f64, Vec<f64>)> = record
+                .observed()
+                .iter()
+                .map(|o| (o.frequency, o.shape.iter().map(|c| c.re).collect()))
+                .collect();
+            let shapes = crate::report::mode_plot::ObservedShapes {
+                floors: &record.floors,
+                modes: observed,
+                comparison: Some(comparison),
+            };
+            crate::report::mode_plot::plot_mode_shapes(modes, Some(&shapes), &sibling("shapes"))?;
+            if !comparison.mac_matrix.is_empty()
+                && comparison.mac_matrix.first().is_some_and(|r| !r.is_empty())
+            {
+                crate::report::mode_plot::plot_mac_matrix(comparison, &sibling("mac"))?;
+            }
+        }
     }
     Ok(())
 }

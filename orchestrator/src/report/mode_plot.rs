@@ -53,7 +53,7 @@ fn draw_mode_shapes(twin: &TwinModes, observed: Option<&ObservedShapes>) -> Resu
         let areas = root.split_evenly((1, panels));
         let storeys = twin.storeys as f64;
         for (mode, area) in twin.modes.iter().zip(areas.iter()) {
-            let sd = |v: Option<f64>| v.map(|s| format!(" ± {:.3}", s)).unwrap_or_default();
+            let sd = |v: Option<f64>| v.map(|s| format!(" ± {:.2e}", s)).unwrap_or_default();
             let caption = format!(
                 "mode {}: {:.3}{} Hz, ζ {:.3}{} %",
                 mode.number,
@@ -61,7 +61,7 @@ fn draw_mode_shapes(twin: &TwinModes, observed: Option<&ObservedShapes>) -> Resu
                 sd(mode.frequency_sd),
                 100.0 * mode.damping,
                 mode.damping_sd
-                    .map(|s| format!(" ± {:.3}", 100.0 * s))
+                    .map(|s| format!(" ± {:.2e}", 100.0 * s))
                     .unwrap_or_default()
             );
             let mut chart = ChartBuilder::on(area)
@@ -179,7 +179,7 @@ pub fn plot_mac_matrix(comparison: &ModeComparison, path: &Path) -> Result<(), R
             )
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(0f64..cols as f64, 0f64..rows as f64)
+            .build_cartesian_2d(-0.5f64..cols as f64 - 0.5, -0.5f64..rows as f64 - 0.5)
             .map_err(|e| err(&e))?;
         chart
             .configure_mesh()
@@ -188,17 +188,17 @@ pub fn plot_mac_matrix(comparison: &ModeComparison, path: &Path) -> Result<(), R
             .y_desc("twin mode")
             .x_labels(cols)
             .y_labels(rows)
-            .x_label_formatter(&|x| format!("{:.0}", x + 0.5))
-            .y_label_formatter(&|y| format!("{:.0}", rows as f64 - y + 0.5))
+            .x_label_formatter(&|x| format!("{}", x.round() as i64 + 1))
+            .y_label_formatter(&|y| format!("{}", rows as i64 - y.round() as i64))
             .draw()
             .map_err(|e| err(&e))?;
         for (i, row) in comparison.mac_matrix.iter().enumerate() {
             for (j, &v) in row.iter().enumerate() {
-                let y0 = (rows - 1 - i) as f64;
+                let (x0, y0) = (j as f64 - 0.5, (rows - 1 - i) as f64 - 0.5);
                 let shade = (255.0 * (1.0 - v.clamp(0.0, 1.0))) as u8;
                 chart
                     .draw_series(std::iter::once(Rectangle::new(
-                        [(j as f64, y0), (j as f64 + 1.0, y0 + 1.0)],
+                        [(x0, y0), (x0 + 1.0, y0 + 1.0)],
                         RGBColor(shade, shade, 255).filled(),
                     )))
                     .map_err(|e| err(&e))?;
@@ -206,7 +206,7 @@ pub fn plot_mac_matrix(comparison: &ModeComparison, path: &Path) -> Result<(), R
                 chart
                     .draw_series(std::iter::once(Text::new(
                         format!("{v:.2}"),
-                        (j as f64 + 0.3, y0 + 0.6),
+                        (x0 + 0.3, y0 + 0.6),
                         ("sans-serif", 14).into_font().color(&colour),
                     )))
                     .map_err(|e| err(&e))?;
