@@ -105,7 +105,9 @@ fn watch(twin: &Path, source: &Path, alerts: &Path) -> Vec<Value> {
         .arg(&plot));
     // The frequencies against time: a panel per twin mode.
     let svg = std::fs::read_to_string(&plot).expect("the tracked frequencies' plot");
-    assert!(svg.starts_with("<svg") && svg.contains("mode 1: twin") && svg.contains("mode 5: twin"));
+    assert!(
+        svg.starts_with("<svg") && svg.contains("mode 1: twin") && svg.contains("mode 5: twin")
+    );
     std::fs::read_to_string(alerts)
         .expect("alerts")
         .lines()
