@@ -112,22 +112,13 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         .map(ControllerSpec::load)
         .transpose()?;
     let compared = compare(&twin, &data, &options, spec.as_ref(), progress_bar())?;
-    let mut report = crate::report::json::compare(&twin, &data, &compared, args.transient);
-    // The record's modes beside the twin's (information: the time-domain verdict stands).
+    // The report carries the record's modes beside the twin's; the printout needs them typed.
+    let report = crate::report::json::compare(&twin, &data, &compared, args.transient);
     let modes = crate::workflows::modal::modal_evidence(
         &twin,
         &data,
         crate::workflows::modal::ModalBand::default(),
     );
-    if let serde_json::Value::Object(map) = &mut report {
-        map.insert(
-            "modes".into(),
-            match &modes {
-                Ok(evidence) => serde_json::to_value(evidence)?,
-                Err(e) => serde_json::json!({ "error": e.to_string() }),
-            },
-        );
-    }
     let Compared {
         prediction,
         comparison,

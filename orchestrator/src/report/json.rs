@@ -42,6 +42,15 @@ pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: 
         "transient": transient,
         "samples": data.len(),
         "sample_interval": data.dt,
+        // The record's modes beside the twin's (information: the time-domain verdict stands).
+        "modes": match crate::workflows::modal::modal_evidence(
+            twin,
+            data,
+            crate::workflows::modal::ModalBand::default(),
+        ) {
+            Ok(evidence) => serde_json::to_value(evidence).unwrap_or(Value::Null),
+            Err(e) => json!({ "error": e.to_string() }),
+        },
     })
 }
 
