@@ -37,7 +37,7 @@ import shear_twin as st
 TASKS = ("compare", "diagnose", "calibrate")
 COLUMNS = [
     "structure", "record", "action", "effect", "nmse_before", "nmse_after",
-    "seconds", "worker", "pid", "error",
+    "frequency_shift", "modes_moved", "seconds", "worker", "pid", "error",
 ]
 
 # One twin per path and worker process, kept between tasks (keyed by path and modification
@@ -93,6 +93,16 @@ def _worst(nmse: list[float]) -> float:
     return max(nmse)
 
 
+def _frequency_shift(modes: dict[str, Any] | None) -> tuple[float | None, str | None]:
+    """From a compare report's ``modes``: the paired mode's frequency shift (%) largest in size,
+    signed, and the twin modes that left their band (``"1,4"``; None when none did)."""
+    if not modes or "modes" not in modes or not modes["modes"]:
+        return None, None
+    largest = max(modes["modes"], key=lambda m: abs(m["frequency_shift_percent"]))
+    moved = ",".join(str(n) for n in modes.get("shifted") or []) or None
+    return float(largest["frequency_shift_percent"]), moved
+
+
 def run_structure(spec: dict[str, Any]) -> dict[str, Any]:
     """One structure's work (runs on a worker): its row of the fleet report."""
     started = time.perf_counter()
@@ -109,6 +119,7 @@ def run_structure(spec: dict[str, Any]) -> dict[str, Any]:
         before = twin.compare(record)
         row["nmse_before"] = _worst(before.nmse)
         row["nmse_after"] = row["nmse_before"]
+        row["frequency_shift"], row["modes_moved"] = _frequency_shift(before.to_dict().get("modes"))
         row["action"] = "compare"
         if "diagnose" in spec["tasks"]:
             diagnosis = twin.diagnose(record, threads=1)
