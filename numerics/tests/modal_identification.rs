@@ -81,7 +81,9 @@ fn simulate(building: &Building, dt: f64, samples: usize, seed: u64) -> Record {
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     // A force of about the building's weight / 100 keeps the numbers physical.
     let scale = 0.01 * 9.81 * building.m.trace();
-    let force: Vec<f64> = (0..samples).map(|_| scale * unit.sample(&mut rng)).collect();
+    let force: Vec<f64> = (0..samples)
+        .map(|_| scale * unit.sample(&mut rng))
+        .collect();
     let mut state = DVector::zeros(2 * n);
     let mut accelerations = vec![Vec::with_capacity(samples); n];
     for u in &force {
@@ -217,7 +219,11 @@ fn ssi_cov_finds_the_exact_modes_output_only() {
         // MAC 0.99). Measured (20 min at 100 Hz, orders 2..40): 3 storeys worst frequency
         // error 0.083 %, damping 4.6 %, least MAC 0.99999; 5 storeys 0.14 %, 4.2 %, 0.9993.
         let errors = compare(&exact, &identified, &format!("SSI-COV, {name}"));
-        assert!(errors.frequency < 0.005, "{name}: frequency {}", errors.frequency);
+        assert!(
+            errors.frequency < 0.005,
+            "{name}: frequency {}",
+            errors.frequency
+        );
         assert!(errors.damping < 0.10, "{name}: damping {}", errors.damping);
         assert!(errors.mac > 0.99, "{name}: MAC {}", errors.mac);
     }
@@ -237,7 +243,11 @@ fn lscf_finds_the_exact_modes_input_output() {
         // MAC 1.00000; 5 storeys 0.001 %, 1.6 %, 1.00000 (the Hann window's leakage biases the
         // damping up by about 1.5 %).
         let errors = compare(&exact, &identified, &format!("LSCF, {name}"));
-        assert!(errors.frequency < 0.005, "{name}: frequency {}", errors.frequency);
+        assert!(
+            errors.frequency < 0.005,
+            "{name}: frequency {}",
+            errors.frequency
+        );
         assert!(errors.damping < 0.10, "{name}: damping {}", errors.damping);
         assert!(errors.mac > 0.99, "{name}: MAC {}", errors.mac);
     }

@@ -65,7 +65,11 @@ impl LscfOptions {
             return option("least model order", self.min_order, "at least 2 (one mode)");
         }
         if self.max_order < self.min_order {
-            return option("largest model order", self.max_order, "at least the least order");
+            return option(
+                "largest model order",
+                self.max_order,
+                "at least the least order",
+            );
         }
         Ok(())
     }
@@ -94,7 +98,10 @@ fn check_frf(frf: &Frf) -> Result<(), IdentificationError> {
                 reference: "the frequencies".into(),
             });
         }
-        if let Some(index) = h.iter().position(|v| !(v.re.is_finite() && v.im.is_finite())) {
+        if let Some(index) = h
+            .iter()
+            .position(|v| !(v.re.is_finite() && v.im.is_finite()))
+        {
             return Err(IdentificationError::NonFinite {
                 what: format!("FRF of output {}", o + 1),
                 index,
@@ -163,10 +170,13 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
     while order <= max {
         let n = order + 1;
         let r_n = r.view((0, 0), (n, n)).into_owned();
-        let r_chol = r_n.clone().cholesky().ok_or(IdentificationError::Numerical {
-            what: "LSCF",
-            why: format!("the basis' normal matrix of order {order} is singular"),
-        })?;
+        let r_chol = r_n
+            .clone()
+            .cholesky()
+            .ok_or(IdentificationError::Numerical {
+                what: "LSCF",
+                why: format!("the basis' normal matrix of order {order} is singular"),
+            })?;
         let mut reduced = DMatrix::<f64>::zeros(n, n);
         for o in 0..outputs {
             let s_n = s[o].view((0, 0), (n, n)).into_owned();
@@ -285,13 +295,12 @@ pub fn lsfd(
     let solution = match r.solve_upper_triangular(&projected) {
         Some(x) if x.iter().all(|v| v.is_finite()) => x,
         // Nearly equal poles make R singular: fall back to the SVD's least-squares solution.
-        _ => r
-            .svd(true, true)
-            .solve(&projected, 1e-12)
-            .map_err(|why| IdentificationError::Numerical {
+        _ => r.svd(true, true).solve(&projected, 1e-12).map_err(|why| {
+            IdentificationError::Numerical {
                 what: "LSFD",
                 why: why.to_owned(),
-            })?,
+            }
+        })?,
     };
     let mut residues = vec![vec![Complex::new(0.0, 0.0); frf.response.len()]; modes];
     for o in 0..frf.response.len() {
@@ -359,12 +368,19 @@ mod tests {
         let found = &orders[0].poles;
         assert_eq!(found.len(), 2, "{found:?}");
         for (pole, exact) in found.iter().zip(&poles) {
-            assert!((pole.eigenvalue - exact).norm() / exact.norm() < 2e-3, "{pole:?}");
+            assert!(
+                (pole.eigenvalue - exact).norm() / exact.norm() < 2e-3,
+                "{pole:?}"
+            );
         }
         let fitted = lsfd(&frf, (1.0, 10.0), &poles).expect("lsfd");
         for r in 0..2 {
             for o in 0..2 {
-                assert!((fitted[r][o] - residues[r][o]).norm() < 1e-8, "{:?}", fitted[r][o]);
+                assert!(
+                    (fitted[r][o] - residues[r][o]).norm() < 1e-8,
+                    "{:?}",
+                    fitted[r][o]
+                );
             }
         }
     }

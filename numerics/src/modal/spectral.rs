@@ -113,7 +113,9 @@ impl Welch {
     /// Bins 0..=segment/2, Hz.
     pub fn frequencies(&self) -> Vec<f64> {
         let df = 1.0 / (self.segment_length as f64 * self.dt);
-        (0..=self.segment_length / 2).map(|k| k as f64 * df).collect()
+        (0..=self.segment_length / 2)
+            .map(|k| k as f64 * df)
+            .collect()
     }
 
     /// The windowed spectrum of one segment, bins 0..=segment/2.
@@ -140,7 +142,9 @@ impl Welch {
     /// Checks every run (lengths, finite values, at least one whole segment; the input present
     /// when `need_input`); the number of outputs.
     fn check_runs(&self, runs: &[Run<'_>], need_input: bool) -> Result<usize, IdentificationError> {
-        let first = runs.first().ok_or(IdentificationError::NoChannels { what: "the runs" })?;
+        let first = runs
+            .first()
+            .ok_or(IdentificationError::NoChannels { what: "the runs" })?;
         let outputs = first.outputs.len();
         for (r, run) in runs.iter().enumerate() {
             let n = check_channels("the responses", run.outputs)?;
@@ -267,7 +271,11 @@ impl Welch {
         let scale = self.dt / (power * segments.max(1) as f64);
         let nyquist = self.segment_length.is_multiple_of(2).then_some(bins - 1);
         for (k, g) in cross.iter_mut().enumerate() {
-            let one_sided = if k == 0 || Some(k) == nyquist { 1.0 } else { 2.0 };
+            let one_sided = if k == 0 || Some(k) == nyquist {
+                1.0
+            } else {
+                2.0
+            };
             for v in g.iter_mut() {
                 *v *= scale * one_sided;
             }
@@ -309,10 +317,13 @@ mod tests {
         let frf = welch.h1(&[run]).expect("h1");
         let mut worst: f64 = 0.0;
         for (k, f) in frf.frequencies.iter().enumerate().skip(1) {
-            let exact = Complex::new(0.5, 0.0)
-                + Complex::from_polar(0.25, -2.0 * PI * f * dt);
+            let exact = Complex::new(0.5, 0.0) + Complex::from_polar(0.25, -2.0 * PI * f * dt);
             worst = worst.max((frf.response[0][k] - exact).norm() / exact.norm());
-            assert!(frf.coherence[0][k] > 0.99, "coherence {}", frf.coherence[0][k]);
+            assert!(
+                frf.coherence[0][k] > 0.99,
+                "coherence {}",
+                frf.coherence[0][k]
+            );
         }
         // Measured 2e-16-level (the filter is exact within a segment but for its first
         // sample, a leakage of order 1/segment): 4e-3 bounds it with margin.

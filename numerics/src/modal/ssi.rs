@@ -66,7 +66,11 @@ impl SsiOptions {
             return option("order step", 0, "at least 1".into());
         }
         if self.min_order < 2 {
-            return option("least model order", self.min_order, "at least 2 (one mode)".into());
+            return option(
+                "least model order",
+                self.min_order,
+                "at least 2 (one mode)".into(),
+            );
         }
         if self.max_order < self.min_order {
             return option(
@@ -100,7 +104,9 @@ pub fn output_correlations(
     runs: &[Run<'_>],
     max_lag: usize,
 ) -> Result<Vec<DMatrix<f64>>, IdentificationError> {
-    let first = runs.first().ok_or(IdentificationError::NoChannels { what: "the runs" })?;
+    let first = runs
+        .first()
+        .ok_or(IdentificationError::NoChannels { what: "the runs" })?;
     let channels = first.outputs.len();
     let mut sums = vec![DMatrix::<f64>::zeros(channels, channels); max_lag + 1];
     let mut counts = vec![0usize; max_lag + 1];
@@ -337,7 +343,10 @@ mod tests {
                         .map(|t| centred[a][t + lag] * centred[b][t])
                         .sum::<f64>()
                         / (n - lag) as f64;
-                    assert!((matrix[(a, b)] - direct).abs() < 1e-12, "lag {lag} ({a},{b})");
+                    assert!(
+                        (matrix[(a, b)] - direct).abs() < 1e-12,
+                        "lag {lag} ({a},{b})"
+                    );
                 }
             }
         }

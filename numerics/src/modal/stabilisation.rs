@@ -351,7 +351,11 @@ fn summarise(cluster: &Cluster<'_>) -> IdentifiedMode {
             .map(|(v, r)| v.conj() * r)
             .sum();
         let power: f64 = pole.shape.iter().map(|v| v.norm_sqr()).sum();
-        let scale = if power > 0.0 { along / power } else { Complex::new(1.0, 0.0) };
+        let scale = if power > 0.0 {
+            along / power
+        } else {
+            Complex::new(1.0, 0.0)
+        };
         for (s, (v, r)) in squared.iter_mut().zip(pole.shape.iter().zip(&shape)) {
             *s += (v * scale - r).norm_sqr();
         }
