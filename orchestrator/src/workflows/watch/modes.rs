@@ -242,11 +242,11 @@ impl Tracker {
         for (i, t) in self.twin.modes.iter().enumerate() {
             let pair = comparison.pairs.iter().find(|p| p.twin_mode == i + 1);
             let id = pair.map(|p| &identified[p.observed_mode - 1]);
-            let combined = (t.frequency_sd.unwrap_or(0.0).powi(2)
-                + id.map_or(0.0, |m| m.frequency_sd.powi(2)))
-            .sqrt();
-            let band =
-                (self.options.sigmas * combined).max(self.options.tolerance / 100.0 * t.frequency);
+            let band = crate::workflows::modal::ModalBand {
+                sigmas: self.options.sigmas,
+                tolerance: self.options.tolerance,
+            }
+            .half_width(t.frequency, t.frequency_sd, id.map(|m| m.frequency_sd));
             let outside = id.is_some_and(|m| (m.frequency - t.frequency).abs() > band);
             if outside {
                 self.outside_runs[i] += 1;
