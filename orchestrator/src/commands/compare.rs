@@ -112,13 +112,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         .map(ControllerSpec::load)
         .transpose()?;
     let compared = compare(&twin, &data, &options, spec.as_ref(), progress_bar())?;
-    // The report carries the record's modes beside the twin's; the printout needs them typed.
-    let report = crate::report::json::compare(&twin, &data, &compared, args.transient);
+    // The record's modes, identified once for the report and the printout.
     let modes = crate::workflows::modal::modal_evidence(
         &twin,
         &data,
         crate::workflows::modal::ModalBand::default(),
     );
+    let report =
+        crate::report::json::compare_with_modes(&twin, &data, &compared, args.transient, &modes);
     let Compared {
         prediction,
         comparison,

@@ -16,6 +16,22 @@ use crate::workflows::calibrate::Calibration;
 /// in the order of `channels`, the record's measured channels by name (on the paper's rig,
 /// `acc1`, `acc2`, `acc3`); each value in the channel's own quantity, SI.
 pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: f64) -> Value {
+    let modes = crate::workflows::modal::modal_evidence(
+        twin,
+        data,
+        crate::workflows::modal::ModalBand::default(),
+    );
+    compare_with_modes(twin, data, compared, transient, &modes)
+}
+
+/// [`compare`] with the record's modes already identified (the CLI prints them too).
+pub fn compare_with_modes(
+    twin: &Twin,
+    data: &Measurement,
+    compared: &Compared,
+    transient: f64,
+    modes: &Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>,
+) -> Value {
     let explained: Vec<f64> = compared
         .noise_nmse
         .iter()
@@ -43,11 +59,7 @@ pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: 
         "samples": data.len(),
         "sample_interval": data.dt,
         // The record's modes beside the twin's (information: the time-domain verdict stands).
-        "modes": match crate::workflows::modal::modal_evidence(
-            twin,
-            data,
-            crate::workflows::modal::ModalBand::default(),
-        ) {
+        "modes": match modes {
             Ok(evidence) => serde_json::to_value(evidence).unwrap_or(Value::Null),
             Err(e) => json!({ "error": e.to_string() }),
         },
