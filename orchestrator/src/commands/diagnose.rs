@@ -8,7 +8,8 @@ use anyhow::{bail, Result};
 use super::{write_json, write_text_atomically};
 use crate::twin::Twin;
 use crate::workflows::diagnose::{
-    diagnose, parse_candidates, DiagnoseOptions, Diagnosis, Progress,
+    diagnose, diagnose_ambient, parse_candidates, AmbientDiagnosis, DiagnoseOptions, Diagnosis,
+    Progress,
 };
 
 #[derive(clap::Args)]
@@ -87,8 +88,11 @@ impl DiagnoseArgs {
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut o = args.options()?;
-    let data = args.columns.read_any(&args.data)?;
     let twin = Twin::load(Some(&args.twin))?;
+    let data = match args.columns.read_or_ambient(&args.data)? {
+        Ok(data) => data,
+        Err(ambient) => return run_ambient(args, &twin, &ambient),
+    };
     crate::twin::guard::check_record(&twin, &data)?;
     // A spinner with the stage on a terminal (indicatif draws nothing when stderr is not one).
     let spinner = indicatif::ProgressBar::new_spinner();
@@ -112,6 +116,97 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     }
     print!("{}", summary(&d));
     Ok(())
+}
+
+/// `twin diagnose` on a record without the excitation: by its modes alone.
+fn run_ambient(
+    args: &DiagnoseArgs,
+    twin: &Twin,
+    record: &crate::record::AmbientRecord,
+) -> Result<()> {
+    if !args.effects.is_empty() || args.always_fit {
+        bail!(
+            "{}: no excitation column, so the twin cannot be run on it and --effects / \
+             --always-fit have nothing to fit; the diagnosis of an ambient record compares modes",
+            record.path.display()
+        );
+    }
+    let spinner = indicatif::ProgressBar::new_spinner();
+    spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+    spinner.set_message("identifying the record's modes (output-only)");
+    let d = diagnose_ambient(twin, record, crate::workflows::modal::ModalBand::default());
+    spinner.finish_and_clear();
+    let d = d?;
+    let plot = match &args.plot {
+        Some(path) => Some((path, ambient_plot(twin, &d)?)),
+        None => None,
+    };
+    write_json(&args.report, &d)?;
+    if let Some((path, svg)) = plot {
+        write_text_atomically(path, &svg)?;
+    }
+    print!("{}", ambient_summary(&d));
+    Ok(())
+}
+
+/// The ambient diagnosis' plot: the twin's shapes along the height with the record's beside
+/// them, each panel titled with both frequencies.
+fn ambient_plot(twin: &Twin, d: &AmbientDiagnosis) -> Result<String> {
+    let modes = crate::workflows::modal::twin_modes(
+        twin,
+        &crate::workflows::modal::ModalOptions {
+            samples: 0,
+            ..Default::default()
+        },
+    )?;
+    let observed: Vec<(f64, Vec<f64>)> = d
+        .identified
+        .iter()
+        .map(|m| (m.frequency, m.shape.clone()))
+        .collect();
+    let shapes = crate::report::mode_plot::ObservedShapes {
+        floors: &d.modes.floors,
+        modes: observed,
+        comparison: Some(&d.modes.comparison),
+    };
+    crate::report::mode_plot::draw_mode_shapes(&modes, Some(&shapes)).map_err(anyhow::Error::msg)
+}
+
+/// What `twin diagnose` prints for an ambient record.
+pub fn ambient_summary(d: &AmbientDiagnosis) -> String {
+    let mut s = String::new();
+    s += &format!("record        {} (ambient: no excitation)\n", d.record);
+    s += &format!("channels      {}\n", d.channels.join(" / "));
+    s += &format!(
+        "modes         {} (band {} sd, at least {} %)\n",
+        d.modes.method, d.modes.band.sigmas, d.modes.band.tolerance
+    );
+    for m in &d.modes.modes {
+        s += &format!(
+            "  mode {}  twin {:>8.4} Hz  record {:>8.4} Hz  {:+6.2} %  MAC {:.3}{}\n",
+            m.pair.twin_mode,
+            m.pair.twin_frequency,
+            m.pair.observed_frequency,
+            m.pair.frequency_shift_percent,
+            m.pair.mac,
+            if m.outside { "  moved" } else { "" }
+        );
+    }
+    if !d.explanations.is_empty() {
+        s += &format!(
+            "explanations  (one parameter each, best first; misfit {:.1} unchanged)\n",
+            d.misfit_unchanged
+        );
+        for e in d.explanations.iter().take(4) {
+            s += &format!(
+                "  {:<4} {:+7.1} %  misfit {:.1}\n",
+                e.parameter, e.change_percent, e.misfit
+            );
+        }
+    }
+    s += &format!("action        {}\n", d.action.name());
+    s += &format!("reason        {}\n", d.reason);
+    s
 }
 
 /// What `twin diagnose` prints.

@@ -178,6 +178,23 @@ impl ColumnsArg {
         Ok(Measurement::read_with(path, &ReadOptions { columns })?)
     }
 
+    /// Read a record that may lack the excitation: Ok(Err(ambient)) when its header has none.
+    pub fn read_or_ambient(
+        &self,
+        path: &Path,
+    ) -> Result<std::result::Result<Measurement, crate::record::AmbientRecord>> {
+        let columns = match &self.columns {
+            Some(map) => ColumnMap::read(map)?,
+            None => ColumnMap::default(),
+        };
+        let options = ReadOptions { columns };
+        Ok(if crate::record::has_excitation_column(path, &options)? {
+            Ok(Measurement::read_with(path, &options)?)
+        } else {
+            Err(crate::record::AmbientRecord::read(path, &options)?)
+        })
+    }
+
     /// Read a measured FRF with the column map applied.
     pub fn read_frf(&self, path: &Path) -> Result<crate::record::frf::MeasuredFrf> {
         let columns = match &self.columns {

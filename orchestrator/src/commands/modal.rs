@@ -5,14 +5,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 
 use super::write_json;
-use crate::record::Measurement;
+use crate::record::{has_excitation_column, AmbientRecord, Measurement, ReadOptions};
 use crate::twin::Twin;
 use crate::workflows::modal::identify::{MethodModes, RecordModes};
 use crate::workflows::modal::{
-    identify, pair_modes, twin_modes, IdentifyOptions, ModalOptions, ModeComparison, TwinModes,
+    identify, identify_ambient, pair_modes, twin_modes, IdentifyOptions, ModalOptions,
+    ModeComparison, TwinModes,
 };
 use crate::workflows::options::check_svg;
 
@@ -129,6 +130,16 @@ pub(crate) fn print_twin_modes(modes: &TwinModes) {
     }
 }
 
+fn names(paths: &[std::path::PathBuf], measured: &[bool], which: bool) -> String {
+    paths
+        .iter()
+        .zip(measured)
+        .filter(|(_, &m)| m == which)
+        .map(|(p, _)| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// `--data`: the record's modes, beside the twin's with `--twin`.
 fn run_data(args: &ModalArgs) -> Result<()> {
     let options = IdentifyOptions {
@@ -140,12 +151,34 @@ fn run_data(args: &ModalArgs) -> Result<()> {
         ..IdentifyOptions::default()
     };
     options.validate()?;
-    let runs = args
+    // Records with the excitation, or ambient ones (responses only: SSI-COV alone).
+    let read = ReadOptions::default();
+    let measured = args
         .data
         .iter()
-        .map(|path| Measurement::read(path))
+        .map(|path| has_excitation_column(path, &read))
         .collect::<Result<Vec<_>, _>>()?;
-    let record = identify(&runs, &options)?;
+    let record = if measured.iter().all(|&m| m) {
+        let runs = args
+            .data
+            .iter()
+            .map(|path| Measurement::read_with(path, &read))
+            .collect::<Result<Vec<_>, _>>()?;
+        identify(&runs, &options)?
+    } else if measured.iter().all(|&m| !m) {
+        let runs = args
+            .data
+            .iter()
+            .map(|path| AmbientRecord::read(path, &read))
+            .collect::<Result<Vec<_>, _>>()?;
+        identify_ambient(&runs, &options)?
+    } else {
+        bail!(
+            "runs of one test share their channels: {} have the excitation, {} do not",
+            names(&args.data, &measured, true),
+            names(&args.data, &measured, false)
+        );
+    };
     print_record_modes(&record);
     let twin = match &args.twin {
         Some(path) => {

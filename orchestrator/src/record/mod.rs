@@ -24,7 +24,10 @@ use std::path::Path;
 
 use ::structure::channel::{split_unit, Channel};
 
-pub use read::{DataError, Measurement, ReadOptions, Signal, EXTRA_COLUMNS};
+pub use read::{
+    has_excitation_column, AmbientRecord, DataError, Measurement, ReadOptions, Signal,
+    EXTRA_COLUMNS,
+};
 pub use stream::{default_header, nominal_step, LineLayout, DEFAULT_HEADER};
 pub use write::{csv_text, format_g9};
 

@@ -218,113 +218,20 @@ impl Measurement {
         if super::uff::is_universal_file(path) {
             return super::uff::read_record(path, &options.columns);
         }
-        let err = |line: Option<u64>, message: String| DataError {
+        let read = read_file(path, options, true)?;
+        let excitation = read.excitation.ok_or_else(|| DataError {
             path: path.to_owned(),
-            line,
-            message,
-        };
-        let bytes = std::fs::read(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
-        // Line numbers from byte offsets: the csv crate's own line count is off by one on CRLF files.
-        let line_at = |p: Option<&csv::Position>| {
-            p.map(|p| {
-                let mut at = (p.byte() as usize).min(bytes.len());
-                // A record's recorded start can sit on the line break before it.
-                while at < bytes.len() && (bytes[at] == b'\r' || bytes[at] == b'\n') {
-                    at += 1;
-                }
-                1 + bytes[..at].iter().filter(|&&b| b == b'\n').count() as u64
-            })
-        };
-        let (comments, comment_lines) =
-            leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
-        let header_line = comment_lines + 1;
-        let mut reader = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .comment(Some(b'#'))
-            .from_reader(bytes.as_slice());
-        let header: Vec<String> = reader
-            .headers()
-            .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
-            .iter()
-            .map(str::to_owned)
-            .collect();
-        if header.iter().all(|h| h.is_empty()) {
-            return Err(err(
-                Some(header_line),
-                format!(
-                    "missing columns: no header (the paper's header is {})",
-                    REQUIRED_COLUMNS.join(",")
-                ),
-            ));
-        }
-        let layout =
-            Layout::parse(&header, &options.columns).map_err(|m| err(Some(header_line), m))?;
-        let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-        let mut time_resolution = Vec::new();
-        // One record reused for every row (a fresh one per row was a tenth of the read's time).
-        let mut record = csv::StringRecord::new();
-        while reader
-            .read_record(&mut record)
-            .map_err(|e| err(line_at(e.position()), format!("malformed row: {e}")))?
-        {
-            // Worked out only for an error: counting lines is linear in the file.
-            let line = || line_at(record.position());
-            if record.len() != header.len() {
-                return Err(err(
-                    line(),
-                    format!("{} fields, the header has {}", record.len(), header.len()),
-                ));
-            }
-            for (i, field) in record.iter().enumerate() {
-                let value = parse_value(&header[i], field).map_err(|m| err(line(), m))?;
-                columns[i].push(value);
-            }
-            if let Some(t) = layout.time {
-                time_resolution.push(resolution(&record[t]));
-            }
-        }
-        let n = columns.first().map_or(0, Vec::len);
-        if n < 2 {
-            return Err(err(None, format!("{n} data rows; at least 2 are needed")));
-        }
-        let first_data_line = header_line + 1;
-        let (t0, dt) = match layout.time {
-            Some(t) => {
-                if let Some(rate) = comments.rate {
-                    return Err(err(
-                        Some(1),
-                        format!("'# rate = {rate}' and a time column: give one or the other"),
-                    ));
-                }
-                let time = &columns[t];
-                nominal_grid(time, &time_resolution).map_err(|e| {
-                    grid_error(e, |k| err(Some(first_data_line + k as u64), String::new()))
-                })?
-            }
-            None => {
-                let rate = comments.rate.ok_or_else(|| {
-                    err(
-                        Some(header_line),
-                        "no 'time' column: give the sample rate in a comment line before the \
-                         header, '# rate = <Hz>' (and '# start = <s>' unless it is 0)"
-                            .to_owned(),
-                    )
-                })?;
-                (comments.start.unwrap_or(0.0), 1.0 / rate)
-            }
-        };
-        let (excitation, responses, extra) = layout.take_signals(&mut columns);
+            line: Some(read.header_line),
+            message: "missing column 'force' or 'ground_acc'".into(),
+        })?;
         Ok(Measurement {
             path: path.to_owned(),
-            time: match layout.time {
-                Some(t) => std::mem::take(&mut columns[t]),
-                None => (0..n).map(|k| t0 + k as f64 * dt).collect(),
-            },
-            dt,
+            time: read.time,
+            dt: read.dt,
             excitation,
-            responses,
-            extra,
-            header_line: Some(header_line),
+            responses: read.responses,
+            extra: read.extra,
+            header_line: Some(read.header_line),
         })
     }
 
@@ -370,6 +277,7 @@ impl Measurement {
         let (_, dt) = nominal_grid(&columns[time_index], &vec![1e-6; n])
             .map_err(|e| grid_error(e, |k| err(format!("sample {k}"))))?;
         let (excitation, responses, extra) = layout.take_signals(&mut columns);
+        let excitation = excitation.ok_or_else(|| err("no excitation column".to_owned()))?;
         Ok(Measurement {
             path: origin.to_owned(),
             time: std::mem::take(&mut columns[time_index]),
@@ -401,6 +309,201 @@ impl Measurement {
     }
 }
 
+/// A record of the responses alone, without the excitation: ambient vibration (wind,
+/// traffic, microtremor), what a building's permanent monitoring usually measures. Kept apart
+/// from [`Measurement`] so that no time-domain comparison can take it: only output-only modal
+/// identification does (`workflows::modal::identify_ambient`).
+#[derive(Debug, Clone)]
+pub struct AmbientRecord {
+    pub path: PathBuf,
+    pub time: Vec<f64>,
+    pub dt: f64,
+    pub responses: Vec<Signal>,
+    pub header_line: Option<u64>,
+}
+
+impl AmbientRecord {
+    /// Read a CSV record as [`Measurement::read_with`] does, an excitation column not required
+    /// (one the file has is left out).
+    pub fn read(path: &Path, options: &ReadOptions) -> Result<Self, DataError> {
+        let read = read_file(path, options, false)?;
+        Ok(AmbientRecord {
+            path: path.to_owned(),
+            time: read.time,
+            dt: read.dt,
+            responses: read.responses,
+            header_line: Some(read.header_line),
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.time.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.time.is_empty()
+    }
+}
+
+/// Whether a CSV record's header names an excitation column (`force` or `ground_acc`, after
+/// `options.columns`); a universal file is taken to have one (its reader says otherwise).
+pub fn has_excitation_column(path: &Path, options: &ReadOptions) -> Result<bool, DataError> {
+    if super::uff::is_universal_file(path) {
+        return Ok(true);
+    }
+    let err = |line: Option<u64>, message: String| DataError {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    // The header is within the file's first MiB (the comments before it are read to 64 KiB).
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 1 << 20), &mut bytes))
+        .map_err(|e| err(None, format!("cannot read: {e}")))?;
+    let (_, comment_lines) = leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
+    let header_line = comment_lines + 1;
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(bytes.as_slice());
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
+        .iter()
+        .map(str::to_owned)
+        .collect();
+    let layout = Layout::parse_with(&header, &options.columns, false)
+        .map_err(|m| err(Some(header_line), m))?;
+    Ok(layout.excitation.is_some())
+}
+
+/// A CSV record's columns as read: the excitation None when `require_excitation` is false and
+/// the file has none (an ambient record).
+struct FileColumns {
+    time: Vec<f64>,
+    dt: f64,
+    excitation: Option<Signal>,
+    responses: Vec<Signal>,
+    extra: HashMap<String, Vec<f64>>,
+    header_line: u64,
+}
+
+/// Read a CSV record (see [`Measurement::read_with`]).
+fn read_file(
+    path: &Path,
+    options: &ReadOptions,
+    require_excitation: bool,
+) -> Result<FileColumns, DataError> {
+    let err = |line: Option<u64>, message: String| DataError {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
+    // Line numbers from byte offsets: the csv crate's own line count is off by one on CRLF files.
+    let line_at = |p: Option<&csv::Position>| {
+        p.map(|p| {
+            let mut at = (p.byte() as usize).min(bytes.len());
+            // A record's recorded start can sit on the line break before it.
+            while at < bytes.len() && (bytes[at] == b'\r' || bytes[at] == b'\n') {
+                at += 1;
+            }
+            1 + bytes[..at].iter().filter(|&&b| b == b'\n').count() as u64
+        })
+    };
+    let (comments, comment_lines) =
+        leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
+    let header_line = comment_lines + 1;
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(bytes.as_slice());
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
+        .iter()
+        .map(str::to_owned)
+        .collect();
+    if header.iter().all(|h| h.is_empty()) {
+        return Err(err(
+            Some(header_line),
+            format!(
+                "missing columns: no header (the paper's header is {})",
+                REQUIRED_COLUMNS.join(",")
+            ),
+        ));
+    }
+    let layout = Layout::parse_with(&header, &options.columns, require_excitation)
+        .map_err(|m| err(Some(header_line), m))?;
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    let mut time_resolution = Vec::new();
+    // One record reused for every row (a fresh one per row was a tenth of the read's time).
+    let mut record = csv::StringRecord::new();
+    while reader
+        .read_record(&mut record)
+        .map_err(|e| err(line_at(e.position()), format!("malformed row: {e}")))?
+    {
+        // Worked out only for an error: counting lines is linear in the file.
+        let line = || line_at(record.position());
+        if record.len() != header.len() {
+            return Err(err(
+                line(),
+                format!("{} fields, the header has {}", record.len(), header.len()),
+            ));
+        }
+        for (i, field) in record.iter().enumerate() {
+            let value = parse_value(&header[i], field).map_err(|m| err(line(), m))?;
+            columns[i].push(value);
+        }
+        if let Some(t) = layout.time {
+            time_resolution.push(resolution(&record[t]));
+        }
+    }
+    let n = columns.first().map_or(0, Vec::len);
+    if n < 2 {
+        return Err(err(None, format!("{n} data rows; at least 2 are needed")));
+    }
+    let first_data_line = header_line + 1;
+    let (t0, dt) = match layout.time {
+        Some(t) => {
+            if let Some(rate) = comments.rate {
+                return Err(err(
+                    Some(1),
+                    format!("'# rate = {rate}' and a time column: give one or the other"),
+                ));
+            }
+            let time = &columns[t];
+            nominal_grid(time, &time_resolution).map_err(|e| {
+                grid_error(e, |k| err(Some(first_data_line + k as u64), String::new()))
+            })?
+        }
+        None => {
+            let rate = comments.rate.ok_or_else(|| {
+                err(
+                    Some(header_line),
+                    "no 'time' column: give the sample rate in a comment line before the \
+                     header, '# rate = <Hz>' (and '# start = <s>' unless it is 0)"
+                        .to_owned(),
+                )
+            })?;
+            (comments.start.unwrap_or(0.0), 1.0 / rate)
+        }
+    };
+    let (excitation, responses, extra) = layout.take_signals(&mut columns);
+    Ok(FileColumns {
+        time: match layout.time {
+            Some(t) => std::mem::take(&mut columns[t]),
+            None => (0..n).map(|k| t0 + k as f64 * dt).collect(),
+        },
+        dt,
+        excitation,
+        responses,
+        extra,
+        header_line,
+    })
+}
+
 /// The message of a sampling problem at sample `k`, placed by `at(k)` (a line or a sample).
 fn grid_error(e: GridError, at: impl Fn(usize) -> DataError) -> DataError {
     let mut error = at(e.sample);
@@ -415,7 +518,8 @@ fn grid_error(e: GridError, at: impl Fn(usize) -> DataError) -> DataError {
 /// Where each column goes (a file's header, or a stream's: [`super::stream::LineLayout`]).
 pub(super) struct Layout {
     pub(super) time: Option<usize>,
-    pub(super) excitation: (usize, Channel, Unit),
+    /// None only for an ambient record ([`Layout::parse_with`] not requiring it).
+    pub(super) excitation: Option<(usize, Channel, Unit)>,
     pub(super) responses: Vec<(usize, Channel, Unit)>,
     pub(super) extra: Vec<(usize, String)>,
 }
@@ -425,7 +529,7 @@ impl Layout {
     fn take_signals(
         &self,
         columns: &mut [Vec<f64>],
-    ) -> (Signal, Vec<Signal>, HashMap<String, Vec<f64>>) {
+    ) -> (Option<Signal>, Vec<Signal>, HashMap<String, Vec<f64>>) {
         let mut take = |i: usize, unit: Unit| -> Vec<f64> {
             let mut values = std::mem::take(&mut columns[i]);
             let factor = unit.to_si();
@@ -434,12 +538,11 @@ impl Layout {
             }
             values
         };
-        let (ex_index, ex_channel, ex_unit) = self.excitation;
-        let excitation = Signal {
-            channel: ex_channel,
-            unit: ex_unit,
-            values: take(ex_index, ex_unit),
-        };
+        let excitation = self.excitation.map(|(index, channel, unit)| Signal {
+            channel,
+            unit,
+            values: take(index, unit),
+        });
         let responses = self
             .responses
             .iter()
@@ -458,6 +561,16 @@ impl Layout {
     }
 
     pub(super) fn parse(header: &[String], map: &ColumnMap) -> Result<Layout, String> {
+        Self::parse_with(header, map, true)
+    }
+
+    /// As [`Layout::parse`]; without `require_excitation` a header with no excitation column
+    /// is taken (an ambient record).
+    pub(super) fn parse_with(
+        header: &[String],
+        map: &ColumnMap,
+        require_excitation: bool,
+    ) -> Result<Layout, String> {
         let mut time = None;
         let mut excitation: Option<(usize, Channel, Unit)> = None;
         let mut responses: Vec<(usize, Channel, Unit)> = Vec::new();
@@ -505,12 +618,12 @@ impl Layout {
                 Channel::Response { .. } => responses.push((i, channel, unit)),
             }
         }
-        let excitation = excitation.ok_or_else(|| {
-            format!(
+        if excitation.is_none() && require_excitation {
+            return Err(format!(
                 "missing column 'force' or 'ground_acc' (the excitation; the paper's header is {})",
                 REQUIRED_COLUMNS.join(",")
-            )
-        })?;
+            ));
+        }
         if responses.is_empty() {
             return Err(format!(
                 "no response column: at least one of acc<i>, vel<i>, disp<i> (the paper's header is {})",

@@ -67,7 +67,9 @@ impl LineLayout {
             .unwrap_or(1.0);
         roles[time] = Role::Time(time_unit);
         names[time] = "time".to_owned();
-        let (i, excitation, unit) = layout.excitation;
+        let (i, excitation, unit) = layout
+            .excitation
+            .ok_or_else(|| format!("'{line}' has no excitation column"))?;
         roles[i] = Role::Excitation(unit.to_si());
         names[i] = excitation.name();
         let mut responses = Vec::with_capacity(layout.responses.len());

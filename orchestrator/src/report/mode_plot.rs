@@ -36,7 +36,11 @@ pub fn plot_mode_shapes(
     Ok(())
 }
 
-fn draw_mode_shapes(twin: &TwinModes, observed: Option<&ObservedShapes>) -> Result<String, String> {
+/// The mode-shape view as SVG text.
+pub fn draw_mode_shapes(
+    twin: &TwinModes,
+    observed: Option<&ObservedShapes>,
+) -> Result<String, String> {
     let panels = twin.modes.len().max(1);
     let size = (PANEL.0 * panels as u32 + 40, PANEL.1 + 60);
     let mut svg = String::new();

@@ -72,6 +72,7 @@
 //! (more starts), optionally refines the physics parameters jointly, and writes the new twin.
 
 pub mod add;
+pub mod ambient;
 pub mod candidate;
 pub mod discover;
 mod options;
@@ -144,6 +145,7 @@ pub use add::{
     add_hybrid_contact, add_physics, effects_from_report, refit_over_records, with_record,
     HybridAddReport, Refit, JOINT_STARTS,
 };
+pub use ambient::{diagnose_ambient, AmbientDiagnosis};
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
 pub use discover::Found;
 pub use options::{check_sites, parse_additions, parse_candidates};

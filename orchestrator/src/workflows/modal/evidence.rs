@@ -12,7 +12,7 @@
 
 use serde::Serialize;
 
-use super::identify::{identify, IdentifyOptions};
+use super::identify::{identify, IdentifyOptions, RecordModes};
 use super::{pair_modes, twin_modes, ModalError, ModalOptions, ModeComparison, ModePair};
 use crate::record::Measurement;
 use crate::twin::Twin;
@@ -105,6 +105,15 @@ pub fn modal_evidence(
 ) -> Result<ModalEvidence, ModalError> {
     let record = identify(std::slice::from_ref(data), &IdentifyOptions::default())
         .map_err(|e| ModalError::Options(format!("identifying {}: {e}", data.path.display())))?;
+    evidence_of(twin, &record, band)
+}
+
+/// The modes identified from a record (`identify`, `identify_ambient`) against the twin's.
+pub fn evidence_of(
+    twin: &Twin,
+    record: &RecordModes,
+    band: ModalBand,
+) -> Result<ModalEvidence, ModalError> {
     let twin_modes = twin_modes(
         twin,
         &ModalOptions {

@@ -8,7 +8,7 @@ use serde::Serialize;
 use structure::channel::{Channel, Quantity};
 
 use super::pair::ObservedMode;
-use crate::record::Measurement;
+use crate::record::{AmbientRecord, Measurement, Signal};
 use numerics::modal::lscf::{lscf, LscfOptions};
 use numerics::modal::spectral::{Run, Welch, MIN_SEGMENT};
 use numerics::modal::ssi::{ssi_cov, SsiOptions};
@@ -200,8 +200,27 @@ impl RecordModes {
     }
 }
 
-/// Every run has the first's channels, in its order, and its sampling interval.
-fn check_runs(runs: &[Measurement]) -> Result<(), IdentifyError> {
+/// A run as identification sees it: its responses, and its excitation when it was measured.
+struct RunView<'a> {
+    path: &'a std::path::Path,
+    dt: f64,
+    excitation: Option<&'a Signal>,
+    responses: &'a [Signal],
+}
+
+impl RunView<'_> {
+    fn len(&self) -> usize {
+        self.responses.first().map_or(0, |s| s.values.len())
+    }
+
+    fn channel_names(&self) -> Vec<String> {
+        self.responses.iter().map(|s| s.channel.name()).collect()
+    }
+}
+
+/// Every run has the first's response channels, in its order, its sampling interval, and an
+/// excitation if the first has one.
+fn check_runs(runs: &[RunView<'_>]) -> Result<(), IdentifyError> {
     let first = runs
         .first()
         .ok_or_else(|| IdentifyError::Options("no record given".into()))?;
@@ -210,12 +229,22 @@ fn check_runs(runs: &[Measurement]) -> Result<(), IdentifyError> {
             path: run.path.display().to_string(),
             message,
         };
-        if run.channel_names() != first.channel_names() {
+        if run.channel_names() != first.channel_names()
+            || run.excitation.map(|s| s.channel) != first.excitation.map(|s| s.channel)
+        {
+            let names = |r: &RunView<'_>| {
+                r.excitation
+                    .map(|s| s.channel.name())
+                    .into_iter()
+                    .chain(r.channel_names())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
             return Err(err(format!(
                 "its channels ({}) differ from {}'s ({}): runs of one test share their channels",
-                run.channel_names().join(", "),
+                names(run),
                 first.path.display(),
-                first.channel_names().join(", ")
+                names(first)
             )));
         }
         if ((run.dt - first.dt) / first.dt).abs() > 1e-9 {
@@ -235,6 +264,39 @@ pub fn identify(
     runs: &[Measurement],
     options: &IdentifyOptions,
 ) -> Result<RecordModes, IdentifyError> {
+    let views: Vec<RunView<'_>> = runs
+        .iter()
+        .map(|r| RunView {
+            path: &r.path,
+            dt: r.dt,
+            excitation: Some(&r.excitation),
+            responses: &r.responses,
+        })
+        .collect();
+    identify_runs(&views, options)
+}
+
+/// Identifies the modes of ambient records (responses only): SSI-COV alone, no FRF.
+pub fn identify_ambient(
+    runs: &[AmbientRecord],
+    options: &IdentifyOptions,
+) -> Result<RecordModes, IdentifyError> {
+    let views: Vec<RunView<'_>> = runs
+        .iter()
+        .map(|r| RunView {
+            path: &r.path,
+            dt: r.dt,
+            excitation: None,
+            responses: &r.responses,
+        })
+        .collect();
+    identify_runs(&views, options)
+}
+
+fn identify_runs(
+    runs: &[RunView<'_>],
+    options: &IdentifyOptions,
+) -> Result<RecordModes, IdentifyError> {
     options.validate()?;
     check_runs(runs)?;
     let first = &runs[0];
@@ -242,7 +304,7 @@ pub fn identify(
     let names = records.join(", ");
     let dt = first.dt;
     let nyquist = 0.5 / dt;
-    let shortest = runs.iter().map(Measurement::len).min().unwrap_or(0);
+    let shortest = runs.iter().map(RunView::len).min().unwrap_or(0);
     let segment_length = match options.segment_length {
         Some(s) => s,
         None => default_segment(shortest),
@@ -275,7 +337,7 @@ pub fn identify(
         .iter()
         .zip(&outputs)
         .map(|(r, o)| Run {
-            input: Some(r.excitation.values.as_slice()),
+            input: r.excitation.map(|s| s.values.as_slice()),
             outputs: o,
         })
         .collect();
@@ -300,8 +362,8 @@ pub fn identify(
         diagram: ssi_diagram,
     };
 
-    let excited = runs.iter().any(|r| {
-        let v = &r.excitation.values;
+    let excited = runs.iter().filter_map(|r| r.excitation).any(|e| {
+        let v = &e.values;
         let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
         v.iter().any(|x| (x - mean).abs() > 0.0)
     });
@@ -327,7 +389,9 @@ pub fn identify(
         } else {
             None
         };
-        let excitation_unit = first.excitation.channel.quantity().si().symbol();
+        let excitation_unit = first
+            .excitation
+            .map_or("?", |e| e.channel.quantity().si().symbol());
         let report = FrfReport {
             segment_length,
             segments: frf.segments,
@@ -352,8 +416,10 @@ pub fn identify(
     Ok(RecordModes {
         records,
         dt,
-        samples: runs.iter().map(Measurement::len).collect(),
-        excitation: first.excitation.channel.name(),
+        samples: runs.iter().map(RunView::len).collect(),
+        excitation: first
+            .excitation
+            .map_or_else(|| "none (ambient)".to_owned(), |e| e.channel.name()),
         channels: channels.iter().map(|c| c.name()).collect(),
         floors: floors.iter().map(|(floor, _)| *floor).collect(),
         frf,

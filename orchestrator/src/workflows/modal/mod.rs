@@ -5,12 +5,14 @@
 //! damping change, the MAC matrix.
 
 pub mod evidence;
+pub mod explain;
 pub mod identify;
 pub mod pair;
 pub mod twin;
 
-pub use evidence::{modal_evidence, ModalBand, ModalEvidence, ModeShift};
-pub use identify::{identify, IdentifyError, IdentifyOptions, RecordModes};
+pub use evidence::{evidence_of, modal_evidence, ModalBand, ModalEvidence, ModeShift};
+pub use explain::{explain_shifts, Explanation};
+pub use identify::{identify, identify_ambient, IdentifyError, IdentifyOptions, RecordModes};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
 pub use twin::{twin_modes, ModalOptions, TwinMode, TwinModes};
 
