@@ -271,7 +271,7 @@ impl Background {
 }
 
 /// A job's samples as a record of the stream's channels (SI) for `diagnose`.
-fn record(job: &Job) -> Result<Measurement, String> {
+pub fn record(job: &Job) -> Result<Measurement, String> {
     let width = job.columns.width();
     let n = job.samples.len() / width;
     if n < 2 {

@@ -22,7 +22,7 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, Write};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 use ::structure::channel::Channel;
 use serde::{Deserialize, Serialize};
@@ -251,6 +251,65 @@ pub struct Status {
     pub open_window: bool,
     /// Whether a diagnosis runs in the background.
     pub diagnosing: bool,
+}
+
+/// A live view of the watch (the page's hub, `twin watch --serve`). Every call must return at
+/// once: the watcher calls them on its own thread between samples and never waits for a reader.
+/// A panic in an observer is caught; the watch goes on without it.
+///
+/// Call order: `start` once; per good sample `due`, and when it says so `point`; every alert as it is written
+/// `alert`; the state now and then (as the progress display) and once at the end `state`.
+pub trait Observer {
+    /// The watch begins: the measured channels (in the order of every per-channel list), the
+    /// tolerance (NMSE %) and the rolling window (s).
+    fn start(&mut self, channels: &[String], tolerance: f64, window: f64);
+    /// Whether the sample at `time` (s of the stream) is to be shown: the observer decimates.
+    fn due(&mut self, time: f64) -> bool;
+    /// A shown sample.
+    fn point(&mut self, point: &Point<'_>);
+    /// An alert, as written to the alerts file.
+    fn alert(&mut self, alert: &Value);
+    fn state(&mut self, state: &LiveState);
+}
+
+/// One shown sample: per measured channel (the order of [`Status::channels`]).
+pub struct Point<'a> {
+    pub time: f64,
+    /// When the watcher read the sample's line.
+    pub read_at: SystemTime,
+    pub measured: &'a [f64],
+    /// The twin's prediction (the corrected one with a GP corrector).
+    pub predicted: &'a [f64],
+    /// The band's half-width, 3 sds of the noise (None until the noise variances are known).
+    pub band: Option<Vec<f64>>,
+    /// The corrector's latent sd √V(f), with a GP corrector.
+    pub latent_sd: Option<Vec<f64>>,
+    /// The rolling NMSE % (NaN until the comparison starts).
+    pub rolling_nmse: Vec<f64>,
+    pub open_window: bool,
+}
+
+/// The watcher's state for a live view.
+#[derive(Debug, Clone, Serialize)]
+pub struct LiveState {
+    pub samples: u64,
+    /// The last sample's time, s of the stream.
+    pub time: f64,
+    pub samples_per_second: f64,
+    /// Stream seconds per wall second (NaN before the sampling interval is known).
+    pub real_time_factor: f64,
+    pub gaps: u64,
+    pub missing_samples: u64,
+    pub bad_lines: u64,
+    pub duplicates: u64,
+    /// The broker connection (an MQTT source only).
+    pub mqtt: Option<ConnectionStats>,
+    /// Seconds since the last checkpoint was saved (None: none saved, or no --checkpoint).
+    pub checkpoint_age: Option<f64>,
+    pub diagnosing: bool,
+    pub open_window: bool,
+    /// The stream has ended.
+    pub finished: bool,
 }
 
 /// The `end` alert's figures.
@@ -640,6 +699,10 @@ struct Watcher<'a> {
     /// The twin's modes while the tracker waits for the sampling interval, then the tracker.
     twin_modes: Option<crate::workflows::modal::TwinModes>,
     tracker: Option<modes::Tracker>,
+    /// The live view (`--serve`), dropped if it panics.
+    observer: Option<&'a mut dyn Observer>,
+    /// When the checkpoint was last saved.
+    saved_at: Option<Instant>,
 }
 
 impl Watcher<'_> {
@@ -660,9 +723,91 @@ impl Watcher<'_> {
             if let Some(m) = self.reader.mqtt() {
                 m.publish_alert(body.to_string())?;
             }
+            self.observe(|o| o.alert(body));
             (self.on_alert)(body).map_err(WatchError::Callback)?;
         }
         Ok(())
+    }
+
+    /// Tell the live view, if any; a panic in it drops the view, never the watch.
+    fn observe<R>(&mut self, call: impl FnOnce(&mut dyn Observer) -> R) -> Option<R> {
+        let observer = self.observer.as_deref_mut()?;
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| call(observer))) {
+            Ok(r) => Some(r),
+            Err(_) => {
+                eprintln!("the live page failed; the watch goes on without it");
+                self.observer = None;
+                None
+            }
+        }
+    }
+
+    /// The sample just processed, to the live view when it is due.
+    fn show(&mut self, time: f64, read_at: SystemTime) {
+        if self.observer.is_none() || !self.observe(|o| o.due(time)).unwrap_or(false) {
+            return;
+        }
+        let band = self
+            .state
+            .noise_variance
+            .as_ref()
+            .map(|v| v.iter().map(|v| 3.0 * v.sqrt()).collect());
+        let latent_sd = if self.stepper.has_learner() && self.state.segment_start.is_some() {
+            self.stepper
+                .latent_variance()
+                .ok()
+                .flatten()
+                .map(|v| v.iter().map(|v| v.max(0.0).sqrt()).collect())
+        } else {
+            None
+        };
+        let (rolling_nmse, open_window) = match &self.state.detector {
+            Some(d) => (d.rolling_nmse(), d.window_open()),
+            None => (self.nan(), false),
+        };
+        let measured = std::mem::take(&mut self.measured);
+        let predicted = std::mem::take(&mut self.predicted);
+        let point = Point {
+            time,
+            read_at,
+            measured: &measured,
+            predicted: &predicted,
+            band,
+            latent_sd,
+            rolling_nmse,
+            open_window,
+        };
+        self.observe(|o| o.point(&point));
+        self.measured = measured;
+        self.predicted = predicted;
+    }
+
+    /// The state, to the live view.
+    fn show_state(&mut self, this_run: u64, elapsed: f64, finished: bool) {
+        if self.observer.is_none() {
+            return;
+        }
+        let samples_per_second = this_run as f64 / elapsed.max(1e-9);
+        let state = LiveState {
+            samples: self.state.samples,
+            time: self.state.last_time.unwrap_or(0.0),
+            samples_per_second,
+            real_time_factor: self.state.dt.map_or(f64::NAN, |dt| samples_per_second * dt),
+            gaps: self.state.gaps,
+            missing_samples: self.state.missing_samples,
+            bad_lines: self.state.bad_lines,
+            duplicates: self.state.duplicates,
+            mqtt: self.reader.mqtt().map(|m| m.stats),
+            checkpoint_age: self.saved_at.map(|t| t.elapsed().as_secs_f64()),
+            diagnosing: self.background.as_ref().is_some_and(Background::busy),
+            open_window: self
+                .state
+                .detector
+                .as_ref()
+                .is_some_and(Detector::window_open),
+            finished,
+        };
+        self.observe(|o| o.state(&state));
     }
 
     /// The broker connection's changes as `connection` alerts (without a sequence number: a
@@ -779,6 +924,7 @@ impl Watcher<'_> {
         let text = serde_json::to_string(&self.state)
             .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
         write_text_atomically(path, &text)?;
+        self.saved_at = Some(Instant::now());
         Ok(())
     }
 
@@ -1059,6 +1205,12 @@ impl Watcher<'_> {
                 let text = serde_json::to_string_pretty(&d)
                     .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
                 write_text_atomically(&path, &text)?;
+                // The samples it ran on, for `twin add-physics --diagnosis R --data R.csv`
+                // (the live page's accept).
+                let samples = path.with_extension("csv");
+                if let Ok(m) = background::record(&job) {
+                    write_text_atomically(&samples, &crate::record::csv_text(&m))?;
+                }
                 if let Value::Object(m) = &mut body {
                     m.insert("action".into(), json!(d.action));
                     m.insert("reason".into(), json!(d.reason));
@@ -1067,6 +1219,10 @@ impl Watcher<'_> {
                     m.insert("nmse_before".into(), floats(&d.nmse_before));
                     m.insert("nmse_after".into(), floats(&d.nmse_after));
                     m.insert("report".into(), json!(path.display().to_string()));
+                    m.insert(
+                        "samples".into(),
+                        json!(path.with_extension("csv").display().to_string()),
+                    );
                 }
             }
             Err(error) => {
@@ -1095,8 +1251,20 @@ pub fn watch(
 pub fn watch_with_alerts(
     twin: &Twin,
     options: &WatchOptions,
+    progress: impl FnMut(&Status),
+    on_alert: &mut dyn FnMut(&Value) -> Result<(), String>,
+) -> Result<Summary, WatchError> {
+    watch_observed(twin, options, progress, on_alert, None)
+}
+
+/// [`watch_with_alerts`], with a live view told of the samples, alerts and state as they come
+/// (`twin watch --serve`); it never holds the stream up.
+pub fn watch_observed(
+    twin: &Twin,
+    options: &WatchOptions,
     mut progress: impl FnMut(&Status),
     on_alert: &mut dyn FnMut(&Value) -> Result<(), String>,
+    observer: Option<&mut dyn Observer>,
 ) -> Result<Summary, WatchError> {
     let structure = twin.structure()?;
     if !(options.window > 0.0 && options.window.is_finite()) {
@@ -1320,7 +1488,15 @@ pub fn watch_with_alerts(
         predicted: vec![0.0; channels.len()],
         twin_modes,
         tracker: None,
+        // A shorter borrow of the observer (its object lifetime shortened with it).
+        observer: match observer {
+            Some(o) => Some(o as &mut dyn Observer),
+            None => None,
+        },
+        saved_at: None,
     };
+    let names: Vec<String> = channels.iter().map(Channel::name).collect();
+    w.observe(|o| o.start(&names, tolerance.value, options.window));
     w.report_connection(early_events)?;
     // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:
     // there only the samples' times tell what was seen).
@@ -1374,6 +1550,11 @@ pub fn watch_with_alerts(
             }
         }
         let began = Instant::now();
+        let read_at = if w.observer.is_some() {
+            SystemTime::now()
+        } else {
+            SystemTime::UNIX_EPOCH
+        };
         let sample = header.0.sample_into(&line, &mut w.measured);
         if line_number <= skip_lines {
             continue;
@@ -1412,6 +1593,7 @@ pub fn watch_with_alerts(
             }
             Ok((time, excitation)) => {
                 w.sample(time, excitation)?;
+                w.show(time, read_at);
                 this_run += 1;
                 latency.add(began.elapsed().as_secs_f64());
                 since_save += 1;
@@ -1422,6 +1604,8 @@ pub fn watch_with_alerts(
                 if last_status.elapsed() > Duration::from_millis(200) {
                     last_status = Instant::now();
                     progress(&status(&w, this_run, started));
+                    let elapsed = started.elapsed().saturating_sub(waited).as_secs_f64();
+                    w.show_state(this_run, elapsed, false);
                 }
             }
         }
@@ -1487,6 +1671,7 @@ pub fn watch_with_alerts(
         map.insert("tolerance_source".into(), json!(tolerance.source));
     }
     w.alert(last, "end", body)?;
+    w.show_state(this_run, elapsed, true);
     if let Some(m) = w.reader.mqtt() {
         m.close(Duration::from_secs(5));
     }
