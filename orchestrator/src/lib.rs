@@ -20,6 +20,7 @@ pub mod evaluation;
 pub mod fsutil;
 pub mod record;
 pub mod report;
+pub mod serve;
 pub mod synth;
 pub mod twin;
 pub mod workflows;

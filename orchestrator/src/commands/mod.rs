@@ -25,6 +25,7 @@ pub mod learn;
 pub mod modal;
 pub mod pack_fmu;
 pub mod run;
+pub mod serve;
 pub mod synth;
 pub mod train;
 pub mod watch;
@@ -83,6 +84,9 @@ pub enum Command {
     /// a LocalCluster, or `--scheduler tcp://HOST:PORT`; a fleet report (CSV, Parquet, plot).
     /// Runs `python -m shear_twin.fleet` in the project's venv (`twin fleet -- --help`: its options).
     Fleet(fleet::FleetArgs),
+    /// The live page over what is already there: a finished watch (its alerts, checkpoint and
+    /// diagnoses), a record against its twin, or a fleet report.
+    Serve(serve::ServeArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -103,6 +107,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Hybrid(args) => hybrid::run(&args),
         Command::Watch(args) => watch::run(&args),
         Command::Fleet(args) => fleet::run(&args),
+        Command::Serve(args) => serve::run(&args),
     }
 }
 

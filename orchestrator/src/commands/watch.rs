@@ -4,17 +4,20 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Result;
 
+use crate::serve::http::Actions;
+use crate::serve::hub::{Hub, Limits};
 use crate::twin::Twin;
 use crate::workflows::options::check_tolerance;
 use crate::workflows::watch::background::DiagnosisOptions;
 use crate::workflows::watch::modes::TrackOptions;
 use crate::workflows::watch::supervise::LearnOptions;
 use crate::workflows::watch::{
-    watch, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW,
+    watch_observed, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW,
 };
 
 #[derive(clap::Args)]
@@ -113,6 +116,20 @@ pub struct WatchArgs {
     /// alerts file's `modes` lines.
     #[arg(long, requires = "track_modes")]
     pub modes_plot: Option<PathBuf>,
+    /// Serve a live page of the watch at ADDRESS (`127.0.0.1:8080`; port 0: a free one); the
+    /// URL goes to standard error as `serving http://ADDRESS/`. Read-only without --token.
+    #[arg(long, value_name = "ADDRESS")]
+    pub serve: Option<std::net::SocketAddr>,
+    /// Allow --serve on an address other machines reach (not loopback).
+    #[arg(long, requires = "serve")]
+    pub serve_public: bool,
+    /// The token the page's changes need (acknowledge an alert, accept a diagnosis and add its
+    /// physics into a new twin beside --twin), sent as `Authorization: Bearer TOKEN`.
+    #[arg(long, requires = "serve")]
+    pub token: Option<String>,
+    /// Seconds the page stays up after the stream ends.
+    #[arg(long, default_value_t = 0.0, requires = "serve", value_parser = super::transient_seconds)]
+    pub serve_linger: f64,
 }
 
 impl WatchArgs {
@@ -161,43 +178,80 @@ pub fn run(args: &WatchArgs) -> Result<()> {
     }
     let options = args.options()?;
     let twin = Twin::load(args.twin.as_deref())?;
+    let page = match args.serve {
+        Some(addr) => Some(serve_page(args, addr)?),
+        None => None,
+    };
+    let mut view = page.as_ref().map(|(hub, _)| {
+        crate::serve::live::LiveView::new(
+            hub.clone(),
+            match args.source.as_str() {
+                "-" => "twin watch: standard input".to_owned(),
+                source => format!("twin watch: {source}"),
+            },
+            args.token.is_some(),
+        )
+    });
     let spinner = std::io::stderr().is_terminal().then(|| {
         let s = indicatif::ProgressBar::new_spinner();
         s.enable_steady_tick(Duration::from_millis(120));
         s
     });
-    let summary = watch(&twin, &options, |status: &Status| {
-        if let Some(s) = &spinner {
-            let nmse: Vec<String> = status
-                .channels
-                .iter()
-                .zip(&status.rolling_nmse)
-                .map(|(name, v)| {
-                    if v.is_finite() {
-                        format!("{name} {v:.2}")
+    let observer = view
+        .as_mut()
+        .map(|v| v as &mut dyn crate::workflows::watch::Observer);
+    let watched = watch_observed(
+        &twin,
+        &options,
+        |status: &Status| {
+            if let Some(s) = &spinner {
+                let nmse: Vec<String> = status
+                    .channels
+                    .iter()
+                    .zip(&status.rolling_nmse)
+                    .map(|(name, v)| {
+                        if v.is_finite() {
+                            format!("{name} {v:.2}")
+                        } else {
+                            format!("{name} -")
+                        }
+                    })
+                    .collect();
+                s.set_message(format!(
+                    "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
+                    status.samples,
+                    status.time,
+                    status.samples_per_second,
+                    nmse.join(", "),
+                    if status.open_window { ", FAILING" } else { "" },
+                    if status.diagnosing {
+                        ", diagnosing in the background"
                     } else {
-                        format!("{name} -")
+                        ""
                     }
-                })
-                .collect();
-            s.set_message(format!(
-                "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
-                status.samples,
-                status.time,
-                status.samples_per_second,
-                nmse.join(", "),
-                if status.open_window { ", FAILING" } else { "" },
-                if status.diagnosing {
-                    ", diagnosing in the background"
-                } else {
-                    ""
-                }
-            ));
-        }
-    })?;
+                ));
+            }
+        },
+        &mut |_| Ok(()),
+        observer,
+    );
     if let Some(s) = spinner {
         s.finish_and_clear();
     }
+    let summary = match watched {
+        Ok(summary) => summary,
+        Err(e) => {
+            // The page shows why the watch stopped, for as long as it lingers.
+            if let Some((hub, _)) = &page {
+                hub.publish(
+                    crate::serve::hub::Kind::Other,
+                    serde_json::json!({"type": "stopped", "error": e.to_string()}),
+                );
+            }
+            linger(args, page);
+            return Err(e.into());
+        }
+    };
     let nmse: Vec<String> = summary
         .channels
         .iter()
@@ -259,5 +313,43 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         crate::report::mode_plot::plot_tracked_frequencies(&tracked, plot)?;
         println!("tracked frequencies: {}", plot.display());
     }
+    linger(args, page);
     Ok(())
+}
+
+/// Start the page's server: `serving URL` on standard error (one line, for scripts).
+fn serve_page(
+    args: &WatchArgs,
+    addr: std::net::SocketAddr,
+) -> Result<(Arc<Hub>, crate::serve::Server)> {
+    crate::serve::check_bind(addr, args.serve_public, "--serve", "--serve-public")?;
+    let hub = Hub::new(Limits::default());
+    let acks = {
+        let stem = args
+            .alerts
+            .file_stem()
+            .map_or_else(|| "alerts".into(), |s| s.to_string_lossy().into_owned());
+        args.alerts.with_file_name(format!("{stem}.acks.jsonl"))
+    };
+    let actions = Actions {
+        token: args.token.clone(),
+        acks: Some(acks),
+        twin: args.twin.clone(),
+        binary: std::env::current_exe().ok(),
+    };
+    let server = crate::serve::start(addr, hub.clone(), Default::default(), actions)?;
+    eprintln!("serving {}", server.url());
+    Ok((hub, server))
+}
+
+/// Keep the page up for --serve-linger seconds after the stream (while its server runs).
+fn linger(args: &WatchArgs, page: Option<(Arc<Hub>, crate::serve::Server)>) {
+    let Some((_, server)) = page else {
+        return;
+    };
+    let until = std::time::Instant::now() + Duration::from_secs_f64(args.serve_linger);
+    while std::time::Instant::now() < until && server.running() {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    server.stop();
 }
