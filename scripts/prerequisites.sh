@@ -7,7 +7,8 @@
 # Needed: cargo (Rust), CPython ≥ 3.10, a C compiler (the importer's logger shim, the C test
 # FMUs), libclang (bindgen, for fmi-sys: the compile-time check of the exported C signatures
 # and the independent rust-fmi importer test), mosquitto (the MQTT broker `twin watch`'s tests
-# start on a loopback port). Rust and Python are not installed here:
+# start on a loopback port), chromium and chromium-driver (the headless browser the live page's
+# test, tests/python/test_page.py, drives through selenium). Rust and Python are not installed here:
 # they come with the machine. The Debian packages are installed when this runs as root on a
 # machine with apt-get; otherwise it stops at once with the command to run.
 set -euo pipefail
@@ -45,6 +46,8 @@ have_mosquitto() {
   command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ]
 }
 have_mosquitto || packages+=(mosquitto)
+command -v chromium >/dev/null 2>&1 || packages+=(chromium)
+command -v chromedriver >/dev/null 2>&1 || packages+=(chromium-driver)
 
 [ ${#packages[@]} -eq 0 ] && exit 0
 
@@ -61,3 +64,5 @@ apt-get update -qq || die "apt-get update failed; run: apt-get update && $comman
 apt-get install -y -qq "${packages[@]}" >/dev/null || die "'$command' failed"
 have_libclang || die "libclang-dev is installed but no libclang.so is found; set LIBCLANG_PATH"
 have_mosquitto || die "mosquitto is installed but not found in PATH or /usr/sbin"
+command -v chromium >/dev/null 2>&1 || die "chromium is installed but not found in PATH"
+command -v chromedriver >/dev/null 2>&1 || die "chromium-driver is installed but chromedriver is not in PATH"
