@@ -6,7 +6,8 @@
 # synthetic records, two changes at once and a force outside the library, discovered), run the
 # simulated real-time hybrid test (the contact threshold, the law learned from it), stream
 # dataset3 through `twin watch` (its failing window diagnosed in the background; with the GP
-# corrector, its latent variance flagging the change and the corrector learning online), run
+# corrector, its latent variance flagging the change and the corrector learning online; on a
+# live page in a headless browser, photographed to out/demo/page.png), run
 # the resulting twin with `twin run` as any SSP system, and control the structure with LQR
 # designs on the twin (attenuation, contacts, retuning and gain scheduling, a controlled record
 # predicted in the closed loop), and end from Python: the shear_twin package on dataset3 and a
@@ -226,6 +227,15 @@ for path in sys.argv[1:]:
             print(f"    corrector: {l['queries']} queries learned, {l['training_points']} training points;"
                   f" worst-floor NMSE over the stream {max(a['nmse']):.2f} %")
 PY
+
+echo
+echo "== the watch on a screen: dataset3 replayed at 2× real time into twin watch --serve, the page opened"
+echo "   in a headless chromium and photographed once the background diagnosis has landed on it =="
+echo "   to watch it in your browser (then open the URL it prints):"
+echo "   python3 scripts/replay.py data/dataset3.csv --speed 0.5 | $twin watch --twin $out/calibrated.ssp \\"
+echo "     --source - --alerts $out/page-alerts.jsonl --serve 127.0.0.1:8080 --serve-linger 600"
+.venv/bin/python scripts/page_demo.py --twin-bin "$twin" --twin "$out/calibrated.ssp" \
+  --record data/dataset3.csv --alerts "$out/page-alerts.jsonl" --out "$out/page.png"
 
 echo
 echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
