@@ -10,7 +10,7 @@ and passes their paths. Uses .venv's selenium and Debian's chromium (headless).
 2. Speed. The same twin on a 120 s record sampled at 1 kHz (120 000 samples), written into the
    watch's standard input as fast as the pipe takes it, `--no-diagnosis`: samples per second
    from the `end` alert, with no page open, then with ten pages open — nine headless chromium
-   windows and one raw socket that sends GET /events and never reads. Each condition is run
+   windows (three browsers of three) and one raw socket that sends GET /events and never reads. Each condition is run
    `--runs` times, alternating; medians and their ratio. The pages and the watch share the
    machine's cores: the ratio includes the browsers' own CPU use, not only the hub's.
 
@@ -120,19 +120,23 @@ def speed_once(args, env, work, pages):
     drivers, stalled = [], None
     try:
         if pages:
-            driver = browser(work / "chrome-speed")
-            drivers.append(driver)
-            driver.get(url)
-            for _ in range(pages - 2):
-                driver.switch_to.new_window("window")
+            # Three pages a browser: over HTTP/1.1 a browser keeps six connections to a host, and
+            # each page holds one for its event stream.
+            for k in range(0, pages - 1, 3):
+                driver = browser(work / f"chrome-speed-{k}")
+                drivers.append(driver)
                 driver.get(url)
+                for _ in range(min(3, pages - 1 - k) - 1):
+                    driver.switch_to.new_window("window")
+                    driver.get(url)
             host, port = url[len("http://"):-1].split(":")
             stalled = socket.create_connection((host, int(port)))
             stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
             stalled.sendall(f"GET /events HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n".encode())
-            for handle in driver.window_handles:
-                driver.switch_to.window(handle)
-                wait(lambda: driver.execute_script("return window.twinPage && window.twinPage.live()"))
+            for driver in drivers:
+                for handle in driver.window_handles:
+                    driver.switch_to.window(handle)
+                    wait(lambda: driver.execute_script("return window.twinPage && window.twinPage.live()"))
         watch.stdin.buffer.write(stream) if hasattr(watch.stdin, "buffer") else watch.stdin.write(stream.decode())
         watch.stdin.close()
         watch.wait(timeout=600)

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use orchestrator::serve::http::Actions;
 use orchestrator::serve::hub::{Hub, Kind, Limits};
-use orchestrator::serve::live::LiveView;
+use orchestrator::serve::live::{LiveView, WALL_BURST, WALL_RATE};
 use orchestrator::workflows::watch::{Observer, Point};
 use serde_json::{json, Value};
 
@@ -130,8 +130,7 @@ fn shown_points(view: &mut LiveView, rate: f64, seconds: f64) -> u64 {
 #[test]
 fn a_khz_stream_is_decimated_to_50_points_a_second_of_stream() {
     let hub = Hub::new(Limits::default());
-    let mut view =
-        LiveView::new(hub.clone(), "test".into(), false).with_steps(0.02, Duration::ZERO);
+    let mut view = LiveView::new(hub.clone(), "test".into(), false).with_steps(0.02, f64::INFINITY);
     // 10 s at 1 kHz: one point per 20 ms of stream (the first sample shown too).
     let shown = shown_points(&mut view, 1000.0, 10.0);
     assert!((499..=501).contains(&shown), "{shown} points");
@@ -146,15 +145,16 @@ fn a_khz_stream_is_decimated_to_50_points_a_second_of_stream() {
 }
 
 #[test]
-fn a_stream_faster_than_the_wall_step_is_decimated_by_wall_time() {
+fn a_stream_faster_than_the_wall_rate_is_decimated_by_wall_time() {
     let hub = Hub::new(Limits::default());
-    // The page's defaults: 20 ms of stream and 4 ms of wall time between points.
+    // The page's defaults: 20 ms of stream between points, 250 points a second of wall time
+    // after a burst of 50.
     let mut view = LiveView::new(hub.clone(), "test".into(), false);
     let started = Instant::now();
     // 1000 s of a 1 kHz stream, as fast as the loop goes (far above real time).
     let shown = shown_points(&mut view, 1000.0, 1000.0);
     let elapsed = started.elapsed().as_secs_f64();
-    let bound = (elapsed / 0.004).ceil() as u64 + 1;
+    let bound = (elapsed * WALL_RATE).ceil() as u64 + WALL_BURST as u64 + 1;
     assert!(
         shown <= bound,
         "{shown} points in {elapsed:.3} s: above {bound}"

@@ -1,13 +1,15 @@
 //! The watch's side of the page: [`LiveView`], the watcher's [`Observer`], decimates the
 //! samples and publishes points, alerts and state into the [`Hub`].
 //!
-//! Decimation: a point is shown when at least [`POINT_STEP`] s of stream and [`WALL_STEP`] of
-//! wall time have passed since the last shown one (the sample then, as it is: the last value of
-//! its bucket). A kHz stream at hundreds of times real time reaches the hub as at most 1 /
-//! `WALL_STEP` points a second, each carrying every channel.
+//! Decimation: a point is shown when at least [`POINT_STEP`] s of stream have passed since the
+//! last shown one (the sample then, as it is) and the wall-time budget allows it: a token bucket
+//! of [`WALL_BURST`] points refilled at [`WALL_RATE`] a second. A kHz stream at hundreds of times
+//! real time reaches the hub as at most `WALL_RATE` points a second (after a first burst), each
+//! carrying every channel; a stream that comes in bursts (a pipe's chunks) keeps its points as
+//! long as the average stays under the rate.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant, UNIX_EPOCH};
+use std::time::{Instant, UNIX_EPOCH};
 
 use serde_json::{json, Value};
 
@@ -16,8 +18,10 @@ use crate::workflows::watch::{LiveState, Observer, Point};
 
 /// Stream seconds between shown points (50 a second of stream).
 pub const POINT_STEP: f64 = 0.02;
-/// Wall time between shown points (at most 250 a second).
-pub const WALL_STEP: Duration = Duration::from_millis(4);
+/// Points a second of wall time, at most, on average.
+pub const WALL_RATE: f64 = 250.0;
+/// Points shown at once before the wall-time rate holds.
+pub const WALL_BURST: f64 = 50.0;
 
 pub struct LiveView {
     hub: Arc<Hub>,
@@ -27,7 +31,9 @@ pub struct LiveView {
     token: bool,
     run: String,
     point_step: f64,
-    wall_step: Duration,
+    wall_rate: f64,
+    /// The bucket: points it allows now, as of `last_wall`.
+    tokens: f64,
     last_time: f64,
     last_wall: Option<Instant>,
     /// Points shown and samples seen, for the benchmark and the tests.
@@ -36,10 +42,10 @@ pub struct LiveView {
 }
 
 impl LiveView {
-    /// Other decimation steps than [`POINT_STEP`] and [`WALL_STEP`].
-    pub fn with_steps(mut self, point_step: f64, wall_step: Duration) -> Self {
+    /// Other decimation than [`POINT_STEP`] and [`WALL_RATE`] (infinite: no wall-time limit).
+    pub fn with_steps(mut self, point_step: f64, wall_rate: f64) -> Self {
         self.point_step = point_step;
-        self.wall_step = wall_step;
+        self.wall_rate = wall_rate;
         self
     }
 
@@ -50,7 +56,8 @@ impl LiveView {
             token,
             run: run_id(),
             point_step: POINT_STEP,
-            wall_step: WALL_STEP,
+            wall_rate: WALL_RATE,
+            tokens: WALL_BURST,
             last_time: f64::NEG_INFINITY,
             last_wall: None,
             shown: 0,
@@ -85,11 +92,17 @@ impl Observer for LiveView {
         if time >= self.last_time && time - self.last_time < self.point_step * (1.0 - 1e-6) {
             return false;
         }
-        if self.last_wall.is_some_and(|w| w.elapsed() < self.wall_step) {
+        let now = Instant::now();
+        if let Some(last) = self.last_wall {
+            let refill = now.duration_since(last).as_secs_f64() * self.wall_rate;
+            self.tokens = (self.tokens + refill).min(WALL_BURST);
+        }
+        self.last_wall = Some(now);
+        if self.tokens < 1.0 && self.wall_rate.is_finite() {
             return false;
         }
+        self.tokens -= 1.0;
         self.last_time = time;
-        self.last_wall = Some(Instant::now());
         true
     }
 
