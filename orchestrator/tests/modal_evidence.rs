@@ -300,7 +300,10 @@ fn an_ambient_record_is_diagnosed_by_its_modes() {
     assert_eq!(json["record"]["excitation"], "none (ambient)");
     assert!(json["record"]["frf"].is_null());
     assert!(json["record"]["input_output"].is_null());
-    assert!(!json["comparison"]["pairs"].as_array().expect("pairs").is_empty());
+    assert!(!json["comparison"]["pairs"]
+        .as_array()
+        .expect("pairs")
+        .is_empty());
 
     // An ambient record with --effects is refused, saying why.
     let out = twin_cmd()

@@ -188,6 +188,17 @@ class Twin:
                                             tolerance=tolerance, threads=threads, block=block,
                                             always_fit=always_fit, plot=_path(plot)))
 
+    def diagnose_ambient(self, path: str | os.PathLike, *,
+                         plot: str | os.PathLike | None = None) -> Report:
+        """``twin diagnose`` on an ambient record: a CSV of the responses alone (no ``force`` or
+        ``ground_acc`` column; one it has is left out), as a building's monitoring measures
+        them. The twin cannot run on it, so its modes are compared: identified output-only
+        (SSI-COV) and set against the twin's band, ``none`` when every mode is inside it, else
+        ``recalibrate`` with ``explanations``: each floor's mass or storey's stiffness alone
+        fitted to the identified frequencies, best first (``tied_for_best`` of them fit as
+        well). ``plot``: an SVG of the twin's shapes with the record's."""
+        return Report(self._native.diagnose_ambient(os.fspath(path), plot=_path(plot)))
+
     def modes(self, *, samples: int | None = None, plot: str | os.PathLike | None = None) -> Report:
         """``twin modal --twin``: the natural frequencies (Hz), damping ratios and mode shapes
         (floors 1..N, the largest component 1) of the twin's linear structure, each with its sd

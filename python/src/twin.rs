@@ -410,6 +410,46 @@ impl Twin {
         to_object(py, &d)
     }
 
+    /// `twin diagnose` on an ambient record (a CSV of the responses alone, no excitation
+    /// column; one it has is left out): the record's modes identified output-only (SSI-COV)
+    /// against the twin's band, `none` or `recalibrate` with the single floor mass or storey
+    /// stiffness that explains the frequencies best. Returns the CLI's JSON report as a dict;
+    /// `plot` an SVG of the shapes, the twin's and the record's.
+    #[pyo3(signature = (path, *, plot = None))]
+    fn diagnose_ambient<'py>(
+        &self,
+        py: Python<'py>,
+        path: PathBuf,
+        plot: Option<PathBuf>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let kind = Kind::Diagnose;
+        if let Some(p) = &plot {
+            check_svg(p).map_err(|e| to_py(kind, e))?;
+        }
+        let d = detached(py, || {
+            let record = orchestrator::record::AmbientRecord::read(
+                &path,
+                &orchestrator::record::ReadOptions::default(),
+            )
+            .map_err(|e| to_py(Kind::Data, e))?;
+            let d = orchestrator::workflows::diagnose::diagnose_ambient(
+                &self.twin,
+                &record,
+                orchestrator::workflows::modal::ModalBand::default(),
+            )
+            .map_err(|e| to_py(kind, e))?;
+            if let Some(p) = &plot {
+                let svg = orchestrator::report::mode_plot::draw_ambient_diagnosis(&self.twin, &d)
+                    .map_err(|m| {
+                    to_py(kind, anyhow::anyhow!("cannot draw {}: {m}", p.display()))
+                })?;
+                orchestrator::fsutil::write_text_atomically(p, &svg).map_err(|e| to_py(kind, e))?;
+            }
+            Ok(d)
+        })?;
+        to_object(py, &d)
+    }
+
     /// `twin modal`: the twin's natural frequencies (Hz), damping ratios and mode shapes (floors
     /// 1..N), each with its sd from the calibration's posterior and the sds of `samples` draws
     /// from it beside (0: no sampling check); `plot` an SVG of the shapes along the height.

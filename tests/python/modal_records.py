@@ -22,11 +22,11 @@ DAMPING = (0.01, 0.02)
 NOISE_FRACTION = 0.02
 
 
-def matrices():
+def matrices(stiffness=None):
     n = len(MASS)
     m = np.diag(MASS)
     k = np.zeros((n, n))
-    for i, ki in enumerate(STIFFNESS):
+    for i, ki in enumerate(STIFFNESS if stiffness is None else stiffness):
         k[i, i] += ki
         if i > 0:
             k[i - 1, i - 1] += ki
@@ -53,9 +53,11 @@ def exact_modes():
     return sorted(modes, key=lambda mode: mode[0])
 
 
-def simulate(duration: float, dt: float, seed: int):
-    """(time, force, accelerations (floors × samples))."""
-    m, c, k = matrices()
+def simulate(duration: float, dt: float, seed: int, stiffness=None):
+    """(time, force, accelerations (floors × samples)); `stiffness` other storey stiffnesses
+    (the damping stays the building's)."""
+    m, c, _ = matrices()
+    _, _, k = matrices(stiffness)
     n = len(MASS)
     minv = np.linalg.inv(m)
     load = np.zeros(n)

@@ -138,7 +138,11 @@ fn run_ambient(
     spinner.finish_and_clear();
     let d = d?;
     let plot = match &args.plot {
-        Some(path) => Some((path, ambient_plot(twin, &d)?)),
+        Some(path) => Some((
+            path,
+            crate::report::mode_plot::draw_ambient_diagnosis(twin, &d)
+                .map_err(|message| anyhow::anyhow!("cannot draw {}: {message}", path.display()))?,
+        )),
         None => None,
     };
     write_json(&args.report, &d)?;
@@ -147,29 +151,6 @@ fn run_ambient(
     }
     print!("{}", ambient_summary(&d));
     Ok(())
-}
-
-/// The ambient diagnosis' plot: the twin's shapes along the height with the record's beside
-/// them, each panel titled with both frequencies.
-fn ambient_plot(twin: &Twin, d: &AmbientDiagnosis) -> Result<String> {
-    let modes = crate::workflows::modal::twin_modes(
-        twin,
-        &crate::workflows::modal::ModalOptions {
-            samples: 0,
-            ..Default::default()
-        },
-    )?;
-    let observed: Vec<(f64, Vec<f64>)> = d
-        .identified
-        .iter()
-        .map(|m| (m.frequency, m.shape.clone()))
-        .collect();
-    let shapes = crate::report::mode_plot::ObservedShapes {
-        floors: &d.modes.floors,
-        modes: observed,
-        comparison: Some(&d.modes.comparison),
-    };
-    crate::report::mode_plot::draw_mode_shapes(&modes, Some(&shapes)).map_err(anyhow::Error::msg)
 }
 
 /// What `twin diagnose` prints for an ambient record.

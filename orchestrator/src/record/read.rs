@@ -361,21 +361,46 @@ pub fn has_excitation_column(path: &Path, options: &ReadOptions) -> Result<bool,
     std::fs::File::open(path)
         .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 1 << 20), &mut bytes))
         .map_err(|e| err(None, format!("cannot read: {e}")))?;
-    let (_, comment_lines) = leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
+    let (_, header_line, _, header) = csv_header(path, &bytes)?;
+    let layout = Layout::parse_with(&header, &options.columns, false)
+        .map_err(|m| err(Some(header_line), m))?;
+    Ok(layout.excitation.is_some())
+}
+
+/// A CSV record's leading comments, its header's line, the reader after the header, and the
+/// header's fields; Err for a file without a header.
+fn csv_header<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+) -> Result<(Comments, u64, csv::Reader<&'a [u8]>, Vec<String>), DataError> {
+    let err = |line: Option<u64>, message: String| DataError {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    let (comments, comment_lines) =
+        leading_comments(bytes).map_err(|(line, m)| err(Some(line), m))?;
     let header_line = comment_lines + 1;
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
-        .from_reader(bytes.as_slice());
+        .from_reader(bytes);
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
         .iter()
         .map(str::to_owned)
         .collect();
-    let layout = Layout::parse_with(&header, &options.columns, false)
-        .map_err(|m| err(Some(header_line), m))?;
-    Ok(layout.excitation.is_some())
+    if header.iter().all(|h| h.is_empty()) {
+        return Err(err(
+            Some(header_line),
+            format!(
+                "missing columns: no header (the paper's header is {})",
+                REQUIRED_COLUMNS.join(",")
+            ),
+        ));
+    }
+    Ok((comments, header_line, reader, header))
 }
 
 /// A CSV record's columns as read: the excitation None when `require_excitation` is false and
@@ -412,28 +437,7 @@ fn read_file(
             1 + bytes[..at].iter().filter(|&&b| b == b'\n').count() as u64
         })
     };
-    let (comments, comment_lines) =
-        leading_comments(&bytes).map_err(|(line, m)| err(Some(line), m))?;
-    let header_line = comment_lines + 1;
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .comment(Some(b'#'))
-        .from_reader(bytes.as_slice());
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
-        .iter()
-        .map(str::to_owned)
-        .collect();
-    if header.iter().all(|h| h.is_empty()) {
-        return Err(err(
-            Some(header_line),
-            format!(
-                "missing columns: no header (the paper's header is {})",
-                REQUIRED_COLUMNS.join(",")
-            ),
-        ));
-    }
+    let (comments, header_line, mut reader, header) = csv_header(path, &bytes)?;
     let layout = Layout::parse_with(&header, &options.columns, require_excitation)
         .map_err(|m| err(Some(header_line), m))?;
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];

@@ -174,6 +174,9 @@ mod tests {
         for e in &explanations[..2] {
             assert!(e.misfit < 1e-4 * unchanged, "{e:?} against {unchanged}");
         }
-        assert!(explanations[2].misfit > 0.05 * unchanged, "{explanations:?}");
+        assert!(
+            explanations[2].misfit > 0.05 * unchanged,
+            "{explanations:?}"
+        );
     }
 }
