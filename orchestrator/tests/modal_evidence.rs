@@ -37,6 +37,29 @@ fn run(cmd: &mut Command) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// `building()` as a twin file, by `twin init --nominal`: `dir/T.ssp`.
+fn building_twin(dir: &Path) -> PathBuf {
+    let b = building();
+    let nominal = dir.join("nominal.json");
+    let json = serde_json::json!({"m": b.mass, "c": b.damping, "k": b.stiffness});
+    std::fs::write(&nominal, json.to_string()).expect("nominal");
+    let twin = dir.join("T.ssp");
+    let storeys = b.storeys().to_string();
+    run(twin_cmd()
+        .args([
+            "init",
+            "--storeys",
+            &storeys,
+            "--excitation",
+            "base",
+            "--nominal",
+        ])
+        .arg(&nominal)
+        .arg("--out")
+        .arg(&twin));
+    twin
+}
+
 /// 120 s of stationary ground motion, acc1/3/5 in g; `softer`: k2 × 0.85 throughout.
 fn record(dir: &Path, name: &str, softer: bool) -> PathBuf {
     let scenario = dir.join("stationary.json");
@@ -136,25 +159,7 @@ fn a_softer_storey_shows_in_the_modes_and_an_unchanged_building_does_not() {
 fn twin_modal_with_a_record_and_a_twin_draws_every_view() {
     let dir = tempfile::tempdir().expect("dir");
     let d = dir.path();
-    let nominal = d.join("nominal.json");
-    std::fs::write(
-        &nominal,
-        r#"{"m": [5.2, 5.2, 5.2, 5.2, 5.2], "c": [3, 3, 3, 3, 3], "k": [4021, 4021, 4021, 4021, 4021]}"#,
-    )
-    .expect("nominal");
-    let twin = d.join("T.ssp");
-    run(twin_cmd()
-        .args([
-            "init",
-            "--storeys",
-            "5",
-            "--excitation",
-            "base",
-            "--nominal",
-        ])
-        .arg(&nominal)
-        .arg("--out")
-        .arg(&twin));
+    let twin = building_twin(d);
     let data = record(d, "unchanged", false);
     let (plot, report) = (d.join("modal.svg"), d.join("modal.json"));
     run(twin_cmd()
@@ -222,25 +227,7 @@ fn ambient(dir: &Path, name: &str, softer: bool) -> PathBuf {
 fn an_ambient_record_is_diagnosed_by_its_modes() {
     let dir = tempfile::tempdir().expect("dir");
     let d = dir.path();
-    let nominal = d.join("nominal.json");
-    std::fs::write(
-        &nominal,
-        r#"{"m": [5.2, 5.2, 5.2, 5.2, 5.2], "c": [3, 3, 3, 3, 3], "k": [4021, 4021, 4021, 4021, 4021]}"#,
-    )
-    .expect("nominal");
-    let twin = d.join("T.ssp");
-    run(twin_cmd()
-        .args([
-            "init",
-            "--storeys",
-            "5",
-            "--excitation",
-            "base",
-            "--nominal",
-        ])
-        .arg(&nominal)
-        .arg("--out")
-        .arg(&twin));
+    let twin = building_twin(d);
     let diagnose = |data: &Path, name: &str| -> serde_json::Value {
         let report = d.join(format!("{name}.json"));
         let plot = d.join(format!("{name}.svg"));
