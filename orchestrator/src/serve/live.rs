@@ -92,17 +92,22 @@ impl Observer for LiveView {
         if time >= self.last_time && time - self.last_time < self.point_step * (1.0 - 1e-6) {
             return false;
         }
+        // A bucket of stream time is over: shown if the wall-time budget allows, else skipped
+        // (either way the clock is read once a bucket, not once a sample).
+        self.last_time = time;
+        if !self.wall_rate.is_finite() {
+            return true;
+        }
         let now = Instant::now();
         if let Some(last) = self.last_wall {
             let refill = now.duration_since(last).as_secs_f64() * self.wall_rate;
             self.tokens = (self.tokens + refill).min(WALL_BURST);
         }
         self.last_wall = Some(now);
-        if self.tokens < 1.0 && self.wall_rate.is_finite() {
+        if self.tokens < 1.0 {
             return false;
         }
         self.tokens -= 1.0;
-        self.last_time = time;
         true
     }
 

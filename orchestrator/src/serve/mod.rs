@@ -17,6 +17,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
+use axum::serve::ListenerExt;
 use hub::Hub;
 
 #[derive(Debug, thiserror::Error)]
@@ -119,7 +120,10 @@ pub fn start(
         .name("page".into())
         .spawn(move || {
             let served = runtime.block_on(async move {
-                let listener = tokio::net::TcpListener::from_std(listener)?;
+                // Each event goes out as it is written (no Nagle delay for a small event).
+                let listener = tokio::net::TcpListener::from_std(listener)?.tap_io(|tcp| {
+                    let _ = tcp.set_nodelay(true);
+                });
                 // Stopped without waiting for the open event streams (they never end).
                 tokio::select! {
                     served = axum::serve(listener, http::router(app)) => served,

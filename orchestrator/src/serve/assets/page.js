@@ -21,10 +21,14 @@
   let channels = [];
   let modes = [];
   const latencies = [];
+  const drawMs = [];                // how long each drawn frame took, ms (bounded)
+  const arrivals = [];              // sample read → its event handled here, ms (bounded)
   const acknowledged = new Set();
 
   window.twinPage = {
     latencies,
+    drawMs,
+    arrivals,
     received: () => received,
     kept: () => points.length,
     live: () => live,
@@ -74,7 +78,11 @@
   function addPoint(e) {
     points.push(e);
     received += 1;
-    if (live) fresh.push(e);
+    if (live) {
+      fresh.push(e);
+      if (e.wall) arrivals.push(performance.timeOrigin + performance.now() - e.wall);
+      if (arrivals.length > MAX_LATENCIES) arrivals.splice(0, arrivals.length - MAX_LATENCIES);
+    }
     if (points.length > MAX_POINTS * 1.25) points.splice(0, points.length - MAX_POINTS);
     if (fresh.length > MAX_POINTS) fresh.splice(0, fresh.length - MAX_POINTS);
     dirty = true;
@@ -257,7 +265,7 @@
   }
 
   function shadeFailing(g, from, x, h) {
-    g.fillStyle = getComputedStyle(document.body).getPropertyValue("--fail") || "rgba(200,30,40,0.14)";
+    g.fillStyle = "rgba(200, 30, 40, 0.14)";
     let start = null;
     for (let i = from; i < points.length; i++) {
       const p = points[i];
@@ -412,7 +420,13 @@
   }
 
   function frame() {
-    if (dirty) { dirty = false; draw(); }
+    if (dirty) {
+      dirty = false;
+      const began = performance.now();
+      draw();
+      drawMs.push(performance.now() - began);
+      if (drawMs.length > MAX_LATENCIES) drawMs.splice(0, drawMs.length - MAX_LATENCIES);
+    }
     requestAnimationFrame(frame);
   }
   $("span").addEventListener("change", () => { dirty = true; });

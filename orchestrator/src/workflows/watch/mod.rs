@@ -742,11 +742,16 @@ impl Watcher<'_> {
         }
     }
 
-    /// The sample just processed, to the live view when it is due.
-    fn show(&mut self, time: f64, read_at: SystemTime) {
+    /// The sample just processed (its line read at `began`), to the live view when it is due.
+    fn show(&mut self, time: f64, began: Instant) {
         if self.observer.is_none() || !self.observe(|o| o.due(time)).unwrap_or(false) {
             return;
         }
+        // The wall time it was read at, from the instant the loop took anyway: no clock read
+        // per sample for the page.
+        let read_at = SystemTime::now()
+            .checked_sub(began.elapsed())
+            .unwrap_or(SystemTime::UNIX_EPOCH);
         let band = self
             .state
             .noise_variance
@@ -1550,11 +1555,6 @@ pub fn watch_observed(
             }
         }
         let began = Instant::now();
-        let read_at = if w.observer.is_some() {
-            SystemTime::now()
-        } else {
-            SystemTime::UNIX_EPOCH
-        };
         let sample = header.0.sample_into(&line, &mut w.measured);
         if line_number <= skip_lines {
             continue;
@@ -1593,7 +1593,7 @@ pub fn watch_observed(
             }
             Ok((time, excitation)) => {
                 w.sample(time, excitation)?;
-                w.show(time, read_at);
+                w.show(time, began);
                 this_run += 1;
                 latency.add(began.elapsed().as_secs_f64());
                 since_save += 1;
