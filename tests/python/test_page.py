@@ -193,6 +193,9 @@ def test_the_live_page_shows_the_change_its_alert_and_diagnosis(building, twin_b
         # The diagnosis lands (the stream's end waits for it).
         action = wait_for("the diagnosis", lambda: first.find_element("id", "diagnosis").get_attribute("data-action"),
                           limit=600, every=0.5)
+        if action != "add_physics":
+            status, body = post(url + "api/accept", "{}", TOKEN)
+            assert status == 409 and "only add_physics adds physics" in body["error"], body
         kinds = [k for k, _ in reversed(page_alerts(first))]
         assert kinds.index("failing") < kinds.index("diagnosis"), kinds
         feeder.join(timeout=120)
@@ -223,6 +226,50 @@ def test_the_live_page_shows_the_change_its_alert_and_diagnosis(building, twin_b
     finally:
         for d in drivers:
             d.quit()
+        if watch.poll() is None:
+            watch.terminate()
+        watch.wait(timeout=60)
+
+
+def test_accepting_a_diagnosis_writes_a_new_twin_beside_the_old(twin_binary, tmp_path):  # noqa: F811
+    """dataset3 (contact between floors 2 and 3) watched by the twin calibrated on dataset1,
+    with a token: the background diagnosis is add_physics; `POST /api/accept` runs add-physics
+    on its report and samples and the page's `accept` event names the new twin, written beside
+    the old one, which is unchanged; a diagnosis that has not landed is refused (404)."""
+    root = Path(__file__).resolve().parents[2]
+    twin = tmp_path / "T.ssp"
+    cli(twin_binary, "calibrate", "--data", str(root / "data" / "dataset1.csv"), "--out", str(twin))
+    original = twin.read_bytes()
+    alerts = tmp_path / "alerts.jsonl"
+    watch = subprocess.Popen(
+        [str(twin_binary), "watch", "--twin", str(twin), "--source", str(root / "data" / "dataset3.csv"),
+         "--alerts", str(alerts), "--serve", "127.0.0.1:0", "--serve-linger", "600", "--token", TOKEN],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")))
+    try:
+        url = re.fullmatch(r"serving (http://127\.0\.0\.1:\d+/)\n", watch.stderr.readline()).group(1)
+
+        def history():
+            with urllib.request.urlopen(url + "api/history", timeout=30) as r:
+                return json.loads(r.read())
+        wait_for("the end alert", lambda: any(e.get("alert", {}).get("kind") == "end" for e in history()),
+                 limit=600, every=0.5)
+        diagnosis = next(e["alert"] for e in history() if e.get("alert", {}).get("kind") == "diagnosis")
+        assert diagnosis["action"] == "add_physics", diagnosis
+        status, body = post(url + "api/accept", '{"diagnosis": 2}', TOKEN)
+        assert status == 404 and "no diagnosis 2" in body["error"], body
+        status, body = post(url + "api/accept", "{}", TOKEN)
+        assert status == 202 and body["status"] == "started", body
+        out = Path(body["out"])
+        assert out.parent == twin.parent and out.name == "T.accepted-1.ssp", out
+        done = wait_for("the accepted twin", lambda: [e for e in history()
+                                                      if e["type"] == "accept" and e["status"] != "started"],
+                        limit=600, every=0.5)
+        assert done[0]["status"] == "done", done
+        assert "contact@2-3" in done[0]["printout"], done[0]["printout"]
+        assert out.is_file() and twin.read_bytes() == original
+        assert watch.poll() is None
+    finally:
         if watch.poll() is None:
             watch.terminate()
         watch.wait(timeout=60)
