@@ -273,3 +273,46 @@ def test_accepting_a_diagnosis_writes_a_new_twin_beside_the_old(twin_binary, tmp
         if watch.poll() is None:
             watch.terminate()
         watch.wait(timeout=60)
+
+
+def test_twin_serve_shows_a_finished_watch_and_a_fleet(twin_binary, tmp_path):  # noqa: F811
+    """`twin serve --fleet` over a fleet report: one row per structure with its status, and the
+    structure whose finished watch is beside the report has its own view, whose history is that
+    watch's alerts; an unknown view is 404; a public address is refused without --public."""
+    alerts = [
+        {"seq": 1, "time": 30.4, "kind": "failing", "channels": ["acc2"], "floors": [2], "nmse": [1.0, 4.0]},
+        {"time": 40.0, "kind": "diagnosis", "action": "recalibrate", "channels": ["acc1", "acc2"],
+         "effects": [], "nmse_before": [1.0, 4.0], "nmse_after": [0.1, 0.2]},
+        {"seq": 2, "time": 60.0, "kind": "end", "channels": ["acc1", "acc2"], "nmse": [0.5, 1.5],
+         "tolerance": 0.5, "samples": 3072},
+    ]
+    (tmp_path / "s001.alerts.jsonl").write_text("".join(json.dumps(a) + "\n" for a in alerts))
+    (tmp_path / "fleet.csv").write_text(
+        "structure,record,action,effect,nmse_before,nmse_after,frequency_shift,modes_moved,seconds,worker,pid,error\n"
+        "s000,s000.csv,none,,0.2,0.2,0.31,,1,local,1,\n"
+        "s001,s001.csv,recalibrate,,4.0,0.2,-3.66,2,1,local,1,\n"
+        "s002,s002.csv,,,,,,,0,local,1,cannot read s002.csv\n")
+    refused = subprocess.run([str(twin_binary), "serve", "--fleet", str(tmp_path / "fleet.csv"), "--addr", "0.0.0.0:0"],
+                             capture_output=True, text=True, timeout=60)
+    assert refused.returncode != 0 and "add --public" in refused.stderr, refused.stderr
+    serve = subprocess.Popen([str(twin_binary), "serve", "--fleet", str(tmp_path / "fleet.csv"),
+                              "--addr", "127.0.0.1:0", "--seconds", "120"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        url = re.fullmatch(r"serving (http://127\.0\.0\.1:\d+/)\n", serve.stderr.readline()).group(1)
+        with urllib.request.urlopen(url + "api/history", timeout=30) as r:
+            fleet = json.loads(r.read())
+        rows = next(e["rows"] for e in fleet if e["type"] == "fleet")
+        assert [(r["name"], r["status"], r["view"]) for r in rows] == [
+            ("s000", "ok", False), ("s001", "attention", True), ("s002", "error", False)]
+        assert rows[1]["frequency_shift"] == -3.66 and rows[1]["nmse"] == 4.0
+        with urllib.request.urlopen(url + "api/history?view=s001", timeout=30) as r:
+            view = json.loads(r.read())
+        assert view[0]["type"] == "meta" and view[0]["channels"] == ["acc1", "acc2"]
+        assert [e["alert"]["kind"] for e in view if e["type"] == "alert"] == ["failing", "diagnosis", "end"]
+        with pytest.raises(urllib.error.HTTPError) as missing:
+            urllib.request.urlopen(url + "api/history?view=nobody", timeout=30)
+        assert missing.value.code == 404
+    finally:
+        serve.terminate()
+        serve.wait(timeout=60)

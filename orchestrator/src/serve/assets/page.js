@@ -59,6 +59,7 @@
     $("title").textContent = m.title || "shear-twin";
     $("token-box").hidden = !m.token;
     document.body.dataset.mode = m.mode || "";
+    if (m.mode === "fleet") document.querySelector("main").style.gridTemplateColumns = "1fr";
     if (channels.length) return;
     channels = (m.channels || []).map((name, c) => {
       const box = el("div", { class: "channel", "data-channel": name });
