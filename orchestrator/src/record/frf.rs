@@ -66,15 +66,6 @@ impl MeasuredFrf {
     pub fn channel_names(&self) -> Vec<String> {
         self.channels.iter().map(|c| c.channel.name()).collect()
     }
-
-    /// Read a measured FRF: a universal file (`.uff`, `.unv`) by [`super::uff`], anything else
-    /// as CSV.
-    pub fn read(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, DataError> {
-        if super::uff::is_universal_file(path) {
-            return super::uff::read_frf(path, columns);
-        }
-        read_csv(path, columns)
-    }
 }
 
 /// Which part of a channel's FRF a column holds.
@@ -159,7 +150,7 @@ pub(crate) fn check_frequency(frequency: &[f64]) -> Result<(), (usize, String)> 
     Ok(())
 }
 
-fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, DataError> {
+pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, DataError> {
     let err = |line: Option<u64>, message: String| DataError {
         path: path.to_owned(),
         line,

@@ -24,12 +24,53 @@ use std::path::Path;
 
 use ::structure::channel::{split_unit, Channel};
 
-pub use read::{
-    has_excitation_column, AmbientRecord, DataError, Measurement, ReadOptions, Signal,
-    EXTRA_COLUMNS,
-};
+pub use read::{AmbientRecord, DataError, Measurement, ReadOptions, Signal, EXTRA_COLUMNS};
 pub use stream::{default_header, nominal_step, LineLayout, DEFAULT_HEADER};
 pub use write::{csv_text, format_g9};
+
+// Which reader a file goes to, here above the readers: a universal file (`.uff`, `.unv`) to
+// `uff`, anything else to the CSV readers of `read` and `frf`.
+impl Measurement {
+    /// Read a record as its header says (see [`Measurement::read_with`]).
+    pub fn read(path: &Path) -> Result<Self, DataError> {
+        Self::read_with(path, &ReadOptions::default())
+    }
+
+    /// Read a record: a universal file by [`uff::read_record`], else a CSV file whose leading
+    /// `#` lines may give `# rate = <Hz>` and `# start = <s>` for a file without a time column;
+    /// the header names the columns, each `name` or `name (unit)` (mapped through
+    /// `options.columns` first); every value is converted to SI and the times are put back on
+    /// the nominal grid they were rounded from.
+    pub fn read_with(path: &Path, options: &ReadOptions) -> Result<Self, DataError> {
+        if uff::is_universal_file(path) {
+            uff::read_record(path, &options.columns)
+        } else {
+            read::read_csv(path, options)
+        }
+    }
+}
+
+impl frf::MeasuredFrf {
+    /// Read a measured FRF: a universal file by [`uff::read_frf`], anything else as CSV.
+    pub fn read(path: &Path, columns: &ColumnMap) -> Result<Self, DataError> {
+        if uff::is_universal_file(path) {
+            uff::read_frf(path, columns)
+        } else {
+            frf::read_csv(path, columns)
+        }
+    }
+}
+
+/// Whether a record has an excitation column (`force` or `ground_acc`, after
+/// `options.columns`): a record without one is ambient ([`AmbientRecord`]). A universal file is
+/// taken to have one (its reader says otherwise).
+pub fn has_excitation_column(path: &Path, options: &ReadOptions) -> Result<bool, DataError> {
+    if uff::is_universal_file(path) {
+        Ok(true)
+    } else {
+        read::csv_has_excitation(path, options)
+    }
+}
 
 /// The columns of the paper's records.
 pub const REQUIRED_COLUMNS: [&str; 5] = ["time", "force", "acc1", "acc2", "acc3"];

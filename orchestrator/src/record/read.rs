@@ -204,37 +204,6 @@ impl Measurement {
         );
     }
 
-    /// Read a record as its header says (see [`Measurement::read_with`]).
-    pub fn read(path: &Path) -> Result<Self, DataError> {
-        Self::read_with(path, &ReadOptions::default())
-    }
-
-    /// Read a CSV record (a `.uff`/`.unv` universal file by [`super::uff::read_record`]): leading
-    /// `#` lines may give `# rate = <Hz>` and `# start = <s>` for a
-    /// file without a time column; the header names the columns, each `name` or `name (unit)`
-    /// (mapped through `options.columns` first); every value is converted to SI and the times
-    /// are put back on the nominal grid they were rounded from.
-    pub fn read_with(path: &Path, options: &ReadOptions) -> Result<Self, DataError> {
-        if super::uff::is_universal_file(path) {
-            return super::uff::read_record(path, &options.columns);
-        }
-        let read = read_file(path, options, true)?;
-        let excitation = read.excitation.ok_or_else(|| DataError {
-            path: path.to_owned(),
-            line: Some(read.header_line),
-            message: "missing column 'force' or 'ground_acc'".into(),
-        })?;
-        Ok(Measurement {
-            path: path.to_owned(),
-            time: read.time,
-            dt: read.dt,
-            excitation,
-            responses: read.responses,
-            extra: read.extra,
-            header_line: Some(read.header_line),
-        })
-    }
-
     /// A record from named columns in memory (the Python package's arrays), checked as a file
     /// is: names (`name` or `name (unit)`, mapped through `columns`), equal lengths, finite
     /// numbers, at least 2 samples, the times on a uniform grid (taken as written to 1 µs).
@@ -309,6 +278,26 @@ impl Measurement {
     }
 }
 
+/// Read a CSV record (see [`Measurement::read_with`], which dispatches a universal file to
+/// [`super::uff`]).
+pub(super) fn read_csv(path: &Path, options: &ReadOptions) -> Result<Measurement, DataError> {
+    let read = read_file(path, options, true)?;
+    let excitation = read.excitation.ok_or_else(|| DataError {
+        path: path.to_owned(),
+        line: Some(read.header_line),
+        message: "missing column 'force' or 'ground_acc'".into(),
+    })?;
+    Ok(Measurement {
+        path: path.to_owned(),
+        time: read.time,
+        dt: read.dt,
+        excitation,
+        responses: read.responses,
+        extra: read.extra,
+        header_line: Some(read.header_line),
+    })
+}
+
 /// A record of the responses alone, without the excitation: ambient vibration (wind,
 /// traffic, microtremor), what a building's permanent monitoring usually measures. Kept apart
 /// from [`Measurement`] so that no time-domain comparison can take it: only output-only modal
@@ -346,11 +335,8 @@ impl AmbientRecord {
 }
 
 /// Whether a CSV record's header names an excitation column (`force` or `ground_acc`, after
-/// `options.columns`); a universal file is taken to have one (its reader says otherwise).
-pub fn has_excitation_column(path: &Path, options: &ReadOptions) -> Result<bool, DataError> {
-    if super::uff::is_universal_file(path) {
-        return Ok(true);
-    }
+/// `options.columns`).
+pub(super) fn csv_has_excitation(path: &Path, options: &ReadOptions) -> Result<bool, DataError> {
     let err = |line: Option<u64>, message: String| DataError {
         path: path.to_owned(),
         line,
