@@ -316,3 +316,33 @@ def test_twin_serve_shows_a_finished_watch_and_a_fleet(twin_binary, tmp_path):  
     finally:
         serve.terminate()
         serve.wait(timeout=60)
+
+
+def test_twin_serve_shows_a_record_against_its_twin(building, twin_binary):  # noqa: F811
+    """`twin serve --twin T --data D`: compare's series as points (measured, twin, the ±3σ band,
+    the rolling NMSE, failing windows shaded) and the failing windows as alerts; its NMSE after
+    the change above the NMSE before it."""
+    serve = subprocess.Popen([str(twin_binary), "serve", "--twin", str(building / "T.ssp"),
+                              "--data", str(building / "changed.csv"), "--addr", "127.0.0.1:0", "--seconds", "120"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                             env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")))
+    try:
+        line = serve.stderr.readline()
+        url = re.fullmatch(r"serving (http://127\.0\.0\.1:\d+/)\n", line).group(1)
+        with urllib.request.urlopen(url + "api/history", timeout=30) as r:
+            history = json.loads(r.read())
+    finally:
+        serve.terminate()
+        serve.wait(timeout=60)
+    assert history[0]["type"] == "meta" and history[0]["mode"] == "record"
+    assert history[0]["channels"] == ["acc1", "acc2", "acc3"]
+    points = [e for e in history if e["type"] == "point"]
+    assert len(points) == 3072, len(points)
+    assert all(p["band"][0] > 0 for p in points)
+    failing = [e["alert"] for e in history if e["type"] == "alert" and e["alert"]["kind"] == "failing"]
+    assert failing and failing[0]["start"] > CHANGE_AT - 1.0, failing
+    assert any(p["open"] for p in points) and not any(p["open"] for p in points if p["t"] < CHANGE_AT)
+    worst = lambda p: max(v for v in p["nmse"] if v is not None)  # noqa: E731
+    before = max(worst(p) for p in points if 15.0 < p["t"] < CHANGE_AT)
+    after = max(worst(p) for p in points if p["t"] > CHANGE_AT + 5.0)
+    assert after > before, (before, after)

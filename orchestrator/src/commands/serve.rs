@@ -95,7 +95,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let until = args
         .seconds
         .map(|s| Instant::now() + Duration::from_secs_f64(s));
-    while server.running() && until.map_or(true, |u| Instant::now() < u) {
+    while server.running() && until.is_none_or(|u| Instant::now() < u) {
         std::thread::sleep(Duration::from_millis(100));
     }
     server.stop();

@@ -165,23 +165,23 @@ async fn stats(State(app): State<Arc<App>>) -> Response {
 
 /// The token from `Authorization: Bearer T` or `X-Twin-Token: T`: 401 without one, 403 when
 /// it is wrong or the page is read-only.
-fn authorize(app: &App, headers: &HeaderMap, request: &str) -> Result<(), Response> {
+fn authorize(app: &App, headers: &HeaderMap, request: &str) -> Result<(), Box<Response>> {
     let given = headers
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "))
         .or_else(|| headers.get("x-twin-token").and_then(|v| v.to_str().ok()));
     let Some(expected) = &app.actions.token else {
-        return Err(error(
+        return Err(Box::new(error(
             StatusCode::FORBIDDEN,
             format!("{request}: the page is read-only (start it with --token to allow this)"),
-        ));
+        )));
     };
     let Some(given) = given else {
-        return Err(error(
+        return Err(Box::new(error(
             StatusCode::UNAUTHORIZED,
             format!("{request}: no token (send it as 'Authorization: Bearer TOKEN')"),
-        ));
+        )));
     };
     // Compared without an early exit on the first differing byte.
     let same = given.len() == expected.len()
@@ -191,10 +191,10 @@ fn authorize(app: &App, headers: &HeaderMap, request: &str) -> Result<(), Respon
             .fold(0u8, |acc, (a, b)| acc | (a ^ b))
             == 0;
     if !same {
-        return Err(error(
+        return Err(Box::new(error(
             StatusCode::FORBIDDEN,
             format!("{request}: wrong token"),
-        ));
+        )));
     }
     Ok(())
 }
@@ -204,12 +204,12 @@ fn json_object(
     body: &str,
     request: &str,
     expected: &str,
-) -> Result<serde_json::Map<String, Value>, Response> {
+) -> Result<serde_json::Map<String, Value>, Box<Response>> {
     let bad = |why: String| {
-        error(
+        Box::new(error(
             StatusCode::BAD_REQUEST,
             format!("{request}: {why}; expected {expected}"),
-        )
+        ))
     };
     if body.trim().is_empty() {
         return Ok(Default::default());
@@ -227,11 +227,11 @@ async fn ack(State(app): State<Arc<App>>, headers: HeaderMap, body: String) -> R
     const REQUEST: &str = "POST /api/ack";
     const EXPECTED: &str = r#"{"seq": N, "note": "..."} with N an alert's sequence number"#;
     if let Err(r) = authorize(&app, &headers, REQUEST) {
-        return r;
+        return *r;
     }
     let map = match json_object(&body, REQUEST, EXPECTED) {
         Ok(m) => m,
-        Err(r) => return r,
+        Err(r) => return *r,
     };
     let Some(seq) = map.get("seq").and_then(Value::as_u64).filter(|&s| s > 0) else {
         return error(
@@ -312,11 +312,11 @@ async fn accept(State(app): State<Arc<App>>, headers: HeaderMap, body: String) -
     const REQUEST: &str = "POST /api/accept";
     const EXPECTED: &str = r#"{"diagnosis": K} with K a diagnosis's number (1, 2, …), or {}"#;
     if let Err(r) = authorize(&app, &headers, REQUEST) {
-        return r;
+        return *r;
     }
     let map = match json_object(&body, REQUEST, EXPECTED) {
         Ok(m) => m,
-        Err(r) => return r,
+        Err(r) => return *r,
     };
     let diagnoses = app.hub.diagnoses();
     let k = match map.get("diagnosis") {
