@@ -396,36 +396,56 @@ fn a_stalled_browser_does_not_hold_up_the_others() {
     }
     assert_eq!(s.hub.stats().clients, 10);
     drop(readers);
-    // Big events, so the stalled socket's buffers fill and its queue (64) with them.
+    // Big events, so the stalled socket's buffers fill and its queue (64) with them. The
+    // publisher waits for the reading browser after every 32 events (half its queue), so that
+    // browser is never the slow one however loaded the machine; the stalled one falls behind
+    // by the whole stream. `seen` is the largest point number the reader has read.
     let filler = "x".repeat(4096);
+    let seen = Arc::new(std::sync::atomic::AtomicI64::new(-1));
+    let reader_seen = seen.clone();
     let reading = std::thread::spawn(move || {
-        let mut seen = Vec::new();
+        let mut tail = Vec::new();
         let mut buffer = [0u8; 65536];
         loop {
             match reader.read(&mut buffer) {
                 Ok(0) | Err(_) => break,
                 Ok(n) => {
-                    seen.extend_from_slice(&buffer[..n]);
-                    if String::from_utf8_lossy(&seen[seen.len().saturating_sub(200)..])
-                        .contains("\"last\":true")
-                    {
+                    tail.extend_from_slice(&buffer[..n]);
+                    let text = String::from_utf8_lossy(&tail).into_owned();
+                    if text.contains("\"last\":true") {
                         return true;
                     }
-                    if seen.len() > 1 << 20 {
-                        seen.drain(..seen.len() - 4096);
+                    // Points are written {"filler":…,"t":K,"type":"point"}: the last whole K.
+                    if let Some(at) = text.rfind(",\"type\":\"point\"") {
+                        if let Some(start) = text[..at].rfind("\"t\":") {
+                            if let Ok(k) = text[start + 4..at].parse::<i64>() {
+                                reader_seen.fetch_max(k, std::sync::atomic::Ordering::SeqCst);
+                            }
+                        }
+                    }
+                    if tail.len() > 1 << 16 {
+                        tail.drain(..tail.len() - 8192);
                     }
                 }
             }
         }
         false
     });
-    for k in 0..20_000 {
+    let events: i64 = 20_000;
+    for k in 0..events {
         s.hub.publish(
             Kind::Point,
             json!({"type": "point", "t": k, "filler": filler}),
         );
-        if k % 10 == 0 {
-            std::thread::sleep(Duration::from_millis(1));
+        if k % 32 == 31 {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            while seen.load(std::sync::atomic::Ordering::SeqCst) < k && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            assert!(
+                seen.load(std::sync::atomic::Ordering::SeqCst) >= k,
+                "the reading browser did not get point {k} within 60 s"
+            );
         }
     }
     s.hub
