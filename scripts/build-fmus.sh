@@ -9,5 +9,8 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 target_dir=${CARGO_TARGET_DIR:-$root/target}
 
-cargo build --release --quiet -p orchestrator --bin twin
+# The demo (SHEAR_TWIN_PROGRESS=1) shows cargo's progress; the tests keep it quiet.
+quiet=(--quiet)
+[ -n "${SHEAR_TWIN_PROGRESS:-}" ] && quiet=()
+cargo build --release "${quiet[@]}" -p orchestrator --bin twin
 "$target_dir/release/twin" export-fmus --out "$target_dir/fmu" >/dev/null

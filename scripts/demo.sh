@@ -18,89 +18,104 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
-# The Python environment (.venv with the pinned packages; quick when it is up to date), the FMUs
-# and the CLI, then the shear_twin package built from python/ into .venv: the Python part and
-# the fleet at the end need it, and a package built from older sources would not be this
-# checkout's.
-echo "== set-up: .venv (scripts/setup-python.sh), the FMUs and the CLI, the shear_twin package =="
+# Every section starts with the time since the demo began, so a newcomer sees how far along it
+# is; the set-up steps below show pip's and cargo's own progress (SHEAR_TWIN_PROGRESS).
+demo_start=$SECONDS
+section() {
+  local t=$((SECONDS - demo_start))
+  printf '[%2d:%02d] %s\n' $((t / 60)) $((t % 60)) "$*"
+}
+export SHEAR_TWIN_PROGRESS=1
+trap 'status=$?; [ "$status" -eq 0 ] || section "the demo stopped (exit $status) at the section above"' EXIT
+
+# What the demo needs from the machine, first: the Debian packages (chromium and its driver, for
+# the live page's screenshot) installed as root with apt-get, or a stop at once naming them —
+# never a failure at the end. Then the Python environment (.venv with the pinned packages; quick
+# when it is up to date), the FMUs and the CLI, then the shear_twin package built from python/
+# into .venv: the Python part and the fleet at the end need it, and a package built from older
+# sources would not be this checkout's.
+section "== set-up 1/4: the machine's packages (scripts/prerequisites.sh --demo) =="
+scripts/prerequisites.sh --demo
+section "== set-up 2/4: the Python environment .venv (scripts/setup-python.sh; pip's progress below) =="
 scripts/setup-python.sh
+section "== set-up 3/4: the FMUs and the twin CLI (scripts/build-fmus.sh: cargo, release; minutes the first time) =="
 scripts/build-fmus.sh
-echo "building the shear_twin package into .venv (maturin, release; minutes the first time)"
+section "== set-up 4/4: the shear_twin package into .venv (maturin, release; minutes the first time) =="
 scripts/install-python-package.sh
 twin=target/release/twin
 out=out/demo
 mkdir -p "$out"
 
-echo "== twin calibrate on dataset1 (MAP, priors of the reference paper) =="
+section "== twin calibrate on dataset1 (MAP, priors of the reference paper) =="
 "$twin" calibrate --data data/dataset1.csv --out "$out/calibrated.ssp" \
   --validate data/dataset2.csv data/dataset3.csv \
   --report "$out/calibrate-dataset1.json" --plot "$out/calibrate-dataset1.svg"
 
 for n in 1 2 3; do
   echo
-  echo "== twin compare on dataset$n =="
+  section "== twin compare on dataset$n =="
   "$twin" compare --twin "$out/calibrated.ssp" --data "data/dataset$n.csv" \
     --report "$out/compare-dataset$n.json" --predictions "$out/predictions-dataset$n.csv" \
     --plot "$out/compare-dataset$n.svg" --frf
 done
 
 echo
-echo "== twin modal: the calibrated twin's natural frequencies, damping and shapes with their posterior sd"
+section "== twin modal: the calibrated twin's natural frequencies, damping and shapes with their posterior sd"
 echo "   (checked by sampling the posterior), beside the modes identified from dataset2 (LSCF, SSI-COV) =="
 "$twin" modal --twin "$out/calibrated.ssp" --data data/dataset2.csv --report "$out/modal-dataset2.json" \
   --plot "$out/modal-dataset2.svg"
 
 echo
-echo "== twin train: the GP bias corrector on dataset1, behind the calibrated physics =="
+section "== twin train: the GP bias corrector on dataset1, behind the calibrated physics =="
 "$twin" train --twin "$out/calibrated.ssp" --data data/dataset1.csv --out "$out/corrected.ssp" \
   --stride 2 --report "$out/train-dataset1.json"
 for n in 2 3; do
   echo
-  echo "== twin compare with the corrector on dataset$n (latent variance in the predictions CSV) =="
+  section "== twin compare with the corrector on dataset$n (latent variance in the predictions CSV) =="
   "$twin" compare --twin "$out/corrected.ssp" --data "data/dataset$n.csv" \
     --report "$out/compare-corrected-dataset$n.json" \
     --predictions "$out/predictions-corrected-dataset$n.csv" --plot "$out/compare-corrected-dataset$n.svg"
 done
 
 echo
-echo "== twin learn: active learning (Algorithm 1) over datasets 1-3, every query mode (Table 2) =="
+section "== twin learn: active learning (Algorithm 1) over datasets 1-3, every query mode (Table 2) =="
 echo "   (the reference paper's form: GPs of the measured accelerations)"
 "$twin" learn --twin "$out/calibrated.ssp" --data data/dataset1.csv data/dataset2.csv \
   data/dataset3.csv --modes all --target measured --out-dir "$out/learn"
 
 echo
-echo "== twin diagnose on dataset3: which action, which effect, where, how strong =="
+section "== twin diagnose on dataset3: which action, which effect, where, how strong =="
 "$twin" diagnose --twin "$out/calibrated.ssp" --data data/dataset3.csv \
   --report "$out/diagnose-dataset3.json" --plot "$out/diagnose-dataset3.svg"
 
 echo
-echo "== twin add-physics: switch the diagnosed effect on, estimate it on dataset3, then refit it with"
+section "== twin add-physics: switch the diagnosed effect on, estimate it on dataset3, then refit it with"
 echo "   the structure over dataset3 and the twin's own records (datasets 1-3: a multi-record MAP) =="
 "$twin" add-physics --twin "$out/calibrated.ssp" --diagnosis "$out/diagnose-dataset3.json" \
   --data data/dataset3.csv --out "$out/with-contact.ssp" --report "$out/add-physics-dataset3.json"
 
 for n in 1 2 3; do
   echo
-  echo "== twin compare with the added physics on dataset$n =="
+  section "== twin compare with the added physics on dataset$n =="
   "$twin" compare --twin "$out/with-contact.ssp" --data "data/dataset$n.csv" \
     --report "$out/compare-with-contact-dataset$n.json" --plot "$out/compare-with-contact-dataset$n.svg"
 done
 
 echo
-echo "== twin run: the twin with the added physics is an SSP system any FMI master runs; run it as one =="
+section "== twin run: the twin with the added physics is an SSP system any FMI master runs; run it as one =="
 cut -d, -f1,2 data/dataset3.csv >"$out/force-dataset3.csv"
 "$twin" run "$out/with-contact.ssp" --input "$out/force-dataset3.csv" --stop 19.98046875 --step 0.01953125 \
   --output "$out/run-with-contact-dataset3.csv" --plot "$out/run-with-contact-dataset3.svg"
 
 echo
-echo "== a faulty sensor is not physics: dataset2 with floor 2's accelerometer reading 0.8 of the truth =="
+section "== a faulty sensor is not physics: dataset2 with floor 2's accelerometer reading 0.8 of the truth =="
 awk -F, 'NR == 1 { print; next } { printf "%s,%s,%s,%.9g,%s\n", $1, $2, $3, $4 * 0.8, $5 }' \
   data/dataset2.csv >"$out/dataset2-sensor2-gain0.8.csv"
 "$twin" diagnose --twin "$out/calibrated.ssp" --data "$out/dataset2-sensor2-gain0.8.csv" \
   --report "$out/diagnose-sensor-fault.json"
 
 echo
-echo "== several changes at once, and a force outside the library: records of twin synth's structure =="
+section "== several changes at once, and a force outside the library: records of twin synth's structure =="
 "$twin" synth --seed 1 --noise-sd 0.003 --out "$out/synth-unchanged.csv" >/dev/null
 "$twin" calibrate --data "$out/synth-unchanged.csv" --out "$out/synth-calibrated.ssp" >/dev/null
 echo "-- storey 2 lost 15 % of its stiffness and floors 2 and 3 touch: forward selection --"
@@ -121,7 +136,7 @@ echo "-- velocity-squared damping in storey 2, which the FMU's library lacks: di
   --report "$out/compare-with-discovered.json"
 
 echo
-echo "== another building: five storeys shaken at the base, accelerometers on floors 1, 3 and 5 reading in g =="
+section "== another building: five storeys shaken at the base, accelerometers on floors 1, 3 and 5 reading in g =="
 echo "-- the twin from the drawings (data/five-storey/nominal.json), calibrated on a small shake of the building --"
 b5="$out/five-storey"
 mkdir -p "$b5"
@@ -172,7 +187,7 @@ head -1 "$b5/softer-ambient.csv"
   --plot "$b5/diagnose-ambient.svg"
 
 echo
-echo "== the simulated real-time hybrid test (paper section 5): where contact starts, and the contact law learned from it =="
+section "== the simulated real-time hybrid test (paper section 5): where contact starts, and the contact law learned from it =="
 echo "-- cut as the paper cuts it (the specimen is floors 2 and 3), then with floor 2 numerical --"
 "$twin" hybrid threshold --twin "$out/calibrated.ssp" \
   --report "$out/hybrid-threshold.json" --plot "$out/hybrid-threshold.svg"
@@ -195,13 +210,13 @@ for n in 1 2 3; do
 done
 
 echo
-echo "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample;"
+section "== twin watch: dataset3 streamed through the twin calibrated on dataset1, sample by sample;"
 echo "   the failing window is diagnosed in the background =="
 rm -f "$out"/watch-dataset3*  # a fresh stream, not a resume
 "$twin" watch --twin "$out/calibrated.ssp" --source - --alerts "$out/watch-dataset3.jsonl" \
   --checkpoint "$out/watch-dataset3-checkpoint.json" <data/dataset3.csv
 echo
-echo "== twin watch: the same stream through the twin with the GP corrector, which queries and"
+section "== twin watch: the same stream through the twin with the GP corrector, which queries and"
 echo "   learns online (its budget: 256 points) and says where it is unsure =="
 "$twin" watch --no-diagnosis --twin "$out/corrected.ssp" --source data/dataset3.csv \
   --alerts "$out/watch-corrected-dataset3.jsonl" 
@@ -229,7 +244,7 @@ for path in sys.argv[1:]:
 PY
 
 echo
-echo "== the watch on a screen: dataset3 replayed at 2× real time into twin watch --serve, the page opened"
+section "== the watch on a screen: dataset3 replayed at 2× real time into twin watch --serve, the page opened"
 echo "   in a headless chromium and photographed once the background diagnosis has landed on it =="
 echo "   to watch it in your browser (then open the URL it prints):"
 echo "   python3 scripts/replay.py data/dataset3.csv --speed 0.5 | $twin watch --twin $out/calibrated.ssp \\"
@@ -238,35 +253,35 @@ echo "     --source - --alerts $out/page-alerts.jsonl --serve 127.0.0.1:8080 --s
   --record data/dataset3.csv --alerts "$out/page-alerts.jsonl" --out "$out/page.png"
 
 echo
-echo "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
+section "== twin control: LQR designed on the twin calibrated on dataset1 (paper section 6: q = 1e3, 5e3, R = 0.1), on dataset2 =="
 "$twin" control --twin "$out/calibrated.ssp" --data data/dataset2.csv --q 1e3 --q 5e3 --r 0.1 \
   --estimator-costs --report "$out/control-dataset2.json" --plot "$out/control-dataset2.svg" \
   --ssp "$out/controlled-dataset2.ssp"
 
 echo
-echo "== the controlled system (shear FMU + LQR FMU, q = 1e3) is an SSP any FMI master runs: twin run it =="
+section "== the controlled system (shear FMU + LQR FMU, q = 1e3) is an SSP any FMI master runs: twin run it =="
 cut -d, -f1,2 data/dataset2.csv >"$out/force-dataset2.csv"
 control_step=$(python3 -c "import json, sys; print(1 / json.load(open(sys.argv[1]))['control_rate_hz'])" "$out/control-dataset2.json")
 "$twin" run "$out/controlled-dataset2.ssp" --algorithm jacobi --input "$out/force-dataset2.csv" \
   --step "$control_step" --stop 19.98046875 --output "$out/run-controlled-dataset2.csv"
 
 echo
-echo "== twin control on dataset3, the structure with the contact add-physics found: contacts passive, fixed gains, scheduled =="
+section "== twin control on dataset3, the structure with the contact add-physics found: contacts passive, fixed gains, scheduled =="
 "$twin" control --twin "$out/with-contact.ssp" --data data/dataset3.csv --q 1e3 --q 5e3 --r 0.1 \
   --schedule --report "$out/control-dataset3.json" --plot "$out/control-dataset3.svg"
 
 echo
-echo "== twin-informed control: from a light controller (q = 10) the retune finds the smallest q keeping the contacts at 3 or fewer; the schedule uses it only near the gap =="
+section "== twin-informed control: from a light controller (q = 10) the retune finds the smallest q keeping the contacts at 3 or fewer; the schedule uses it only near the gap =="
 "$twin" control --twin "$out/with-contact.ssp" --data data/dataset3.csv --q 10 --r 0.1 \
   --retune --schedule --report "$out/control-retune-dataset3.json" --plot "$out/control-retune-dataset3.svg"
 
 echo
-echo "== gain scheduling on the twin's uncertainty: the twin with the GP corrector (no contact physics) switches to the high gain where the corrector is unsure =="
+section "== gain scheduling on the twin's uncertainty: the twin with the GP corrector (no contact physics) switches to the high gain where the corrector is unsure =="
 "$twin" control --twin "$out/corrected.ssp" --data data/dataset3.csv --q 10 --q 300 --r 0.1 \
   --schedule --gap 2-3:5e-4:negative --report "$out/control-corrected-dataset3.json"
 
 echo
-echo "== the controlled structure: a synthetic record with the q = 1e3 controller in its loop, predicted by the twin in the closed loop =="
+section "== the controlled structure: a synthetic record with the q = 1e3 controller in its loop, predicted by the twin in the closed loop =="
 "$twin" synth --out "$out/synth-passive.csv" --seed 5
 "$twin" calibrate --data "$out/synth-passive.csv" --out "$out/synth-calibrated.ssp" >/dev/null
 "$twin" control --twin "$out/synth-calibrated.ssp" --data "$out/synth-passive.csv" --q 1e3 \
@@ -279,11 +294,11 @@ echo "-- controlled record, twin in the closed loop with the same controller:"
   --controller "$out/synth-control.json"
 
 echo
-echo "== for contrast: recalibrating on dataset3 instead biases the parameters =="
+section "== for contrast: recalibrating on dataset3 instead biases the parameters =="
 "$twin" calibrate --data data/dataset3.csv --out "$out/calibrated-dataset3.ssp" \
   --validate data/dataset1.csv data/dataset2.csv --report "$out/calibrate-dataset3.json"
 echo
-echo "== a measured FRF as data: the Swansea three-storey rig (data/frf, BSD-3 licence beside it) =="
+section "== a measured FRF as data: the Swansea three-storey rig (data/frf, BSD-3 licence beside it) =="
 echo "-- the twin from its description (data/frf/nominal.json), calibrated on the measured FRF (dB of"
 echo "   unknown reference: a gain offset is fitted), then drawn over it; twin frequencies beside the peaks --"
 frf="$out/frf"
@@ -295,7 +310,7 @@ mkdir -p "$frf"
   --report "$frf/compare.json" --plot "$frf/compare.svg"
 
 echo
-echo "== from Python (shear_twin) and a fleet of synthetic structures on Dask =="
+section "== from Python (shear_twin) and a fleet of synthetic structures on Dask =="
 .venv/bin/python - "$out" <<'PY'
 import sys
 import shear_twin as st
@@ -310,4 +325,4 @@ PY
 "$twin" fleet synth --out "$out/fleet" --structures 4 --duration 10 --bad 1 >/dev/null
 "$twin" fleet "$out/fleet/manifest.json" --workers 2 --out "$out/fleet/report"
 echo
-echo "reports, predictions and plots are in $out/"
+section "the demo is done: reports, predictions and plots are in $out/"

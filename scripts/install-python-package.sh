@@ -7,5 +7,9 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 # maturin from the venv (scripts/requirements.txt pins it), found by pip's build hooks on PATH.
-PATH="$root/.venv/bin:$PATH" .venv/bin/python -m pip install --quiet --disable-pip-version-check \
+# The demo (SHEAR_TWIN_PROGRESS=1) shows maturin's cargo build as it goes (pip -v); the tests keep
+# it quiet.
+quiet=(--quiet)
+[ -n "${SHEAR_TWIN_PROGRESS:-}" ] && quiet=(-v)
+PATH="$root/.venv/bin:$PATH" .venv/bin/python -m pip install "${quiet[@]}" --disable-pip-version-check \
   --no-build-isolation --no-deps --force-reinstall ./python

@@ -3,6 +3,10 @@
 #
 #   scripts/prerequisites.sh          # check; as root with apt-get, install what is missing
 #   scripts/prerequisites.sh --check  # check only, never install
+#   scripts/prerequisites.sh --demo   # only what scripts/demo.sh needs (no libclang, no mosquitto)
+#
+# SHEAR_TWIN_NO_INSTALL=1 makes it check only, as --check does (tests/python/test_fresh_machine.py
+# uses it to show that the demo stops at once, naming the packages, on a machine without them).
 #
 # Needed: cargo (Rust), CPython ≥ 3.10, a C compiler (the importer's logger shim, the C test
 # FMUs), libclang (bindgen, for fmi-sys: the compile-time check of the exported C signatures
@@ -14,7 +18,15 @@
 set -euo pipefail
 
 check_only=false
-[ "${1:-}" = "--check" ] && check_only=true
+demo_only=false
+for arg in "$@"; do
+  case "$arg" in
+    --check) check_only=true ;;
+    --demo) demo_only=true ;;
+    *) echo "prerequisites: unknown option '$arg' (use --check, --demo)" >&2; exit 2 ;;
+  esac
+done
+[ -n "${SHEAR_TWIN_NO_INSTALL:-}" ] && check_only=true
 
 die() {
   echo "prerequisites: $*" >&2
@@ -41,11 +53,13 @@ have_libclang() {
 
 packages=()
 command -v cc >/dev/null 2>&1 || packages+=(gcc)
-have_libclang || packages+=(libclang-dev)
 have_mosquitto() {
   command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ]
 }
-have_mosquitto || packages+=(mosquitto)
+if ! $demo_only; then
+  have_libclang || packages+=(libclang-dev)
+  have_mosquitto || packages+=(mosquitto)
+fi
 command -v chromium >/dev/null 2>&1 || packages+=(chromium)
 command -v chromedriver >/dev/null 2>&1 || packages+=(chromium-driver)
 
@@ -62,7 +76,7 @@ echo "prerequisites: installing ${packages[*]}" >&2
 export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq || die "apt-get update failed; run: apt-get update && $command"
 apt-get install -y -qq "${packages[@]}" >/dev/null || die "'$command' failed"
-have_libclang || die "libclang-dev is installed but no libclang.so is found; set LIBCLANG_PATH"
-have_mosquitto || die "mosquitto is installed but not found in PATH or /usr/sbin"
+$demo_only || have_libclang || die "libclang-dev is installed but no libclang.so is found; set LIBCLANG_PATH"
+$demo_only || have_mosquitto || die "mosquitto is installed but not found in PATH or /usr/sbin"
 command -v chromium >/dev/null 2>&1 || die "chromium is installed but not found in PATH"
 command -v chromedriver >/dev/null 2>&1 || die "chromium-driver is installed but chromedriver is not in PATH"

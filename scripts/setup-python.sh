@@ -54,5 +54,8 @@ fi
 
 rm -f "$stamp"
 echo "setup-python: installing scripts/requirements.txt into .venv" >&2
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check --requirement "$requirements"
+# The demo (SHEAR_TWIN_PROGRESS=1) shows pip's own progress, a line a package; the tests keep it quiet.
+quiet=(--quiet)
+[ -n "${SHEAR_TWIN_PROGRESS:-}" ] && quiet=()
+"$venv/bin/python" -m pip install "${quiet[@]}" --disable-pip-version-check --requirement "$requirements"
 echo "$wanted_stamp" >"$stamp"
