@@ -3,7 +3,8 @@
 # missing Debian packages are installed, otherwise it stops with the command to run), the
 # Python venv with fmpy and the third-party tools, the FMUs, the shear_twin package (built from
 # python/ with maturin into .venv), both installs used from outside the repository
-# (scripts/test-installs.sh), then every Rust test of the workspace and the Python tests.
+# (scripts/test-installs.sh), then every Rust test of the workspace and the Python tests; the
+# book (docs/, scripts/book.sh: built and its links checked) beside the venv's set-up.
 #
 # Where the time goes is kept busy on every core: the venv is made (pip, mostly waiting on files
 # and the network) while the FMUs and `twin` compile; the Rust tests run with cargo-nextest when
@@ -29,6 +30,16 @@ start=$SECONDS
 python_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-setup-python.XXXXXX")
 scripts/setup-python.sh >"$python_log" 2>&1 &
 setup_python=$!
+# The book (scripts/book.sh: mdbook into target/tools once, the build, the link check) beside
+# the venv; its phase line goes through a file, the subshell's phases being its own.
+book_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-book.XXXXXX")
+(
+  book_status=0
+  phase "book" scripts/book.sh || book_status=$?
+  printf '%s\n' "${phases[-1]}" >"$book_log.phase"
+  exit "$book_status"
+) >"$book_log" 2>&1 &
+book=$!
 phase "FMUs and twin (release; the venv beside it)" scripts/build-fmus.sh
 status=0
 wait "$setup_python" || status=$?
@@ -36,6 +47,13 @@ cat "$python_log" >&2
 rm -f "$python_log"
 [ "$status" -eq 0 ] || { echo "test.sh: scripts/setup-python.sh failed" >&2; exit "$status"; }
 phases+=("venv and FMUs together: $((SECONDS - start)) s")
+book_status=0
+wait "$book" || book_status=$?
+echo "--- scripts/book.sh" >&2
+cat "$book_log" >&2
+phases+=("$(cat "$book_log.phase" 2>/dev/null || echo "book: did not finish") (beside the venv and FMUs)")
+rm -f "$book_log" "$book_log.phase"
+[ "$book_status" -eq 0 ] || { echo "test.sh: scripts/book.sh failed" >&2; exit "$book_status"; }
 
 phase "third-party FMUs" scripts/make-third-party-fmus.sh
 phase "C FMUs" scripts/make-c-fmus.sh
