@@ -345,26 +345,39 @@ def median(xs):
     return statistics.median(xs)
 
 
-def building(twin: str, work: Path, storeys: int) -> dict:
+def truth_of(storeys: int) -> dict:
     rng = np.random.default_rng(7)
     u = rng.uniform(-1, 1, (3, 20))[:, :storeys]  # the same draws' prefix at every N
-    truth = {"m": NOMINAL["m"] * (1 + 0.05 * u[0]), "c": NOMINAL["c"] * (1 + 0.3 * u[1]),
-             "k": NOMINAL["k"] * (1 + 0.15 * u[2])}
-    d = work / f"n{storeys}"
+    return {"m": NOMINAL["m"] * (1 + 0.05 * u[0]), "c": NOMINAL["c"] * (1 + 0.3 * u[1]),
+            "k": NOMINAL["k"] * (1 + 0.15 * u[2])}
+
+
+def synth_command(twin: str, storeys: int, truth: dict, duration: float = 20.0, sample_rate: float = 51.2) -> list[str]:
+    """`twin synth` of the building `truth` (the seed, effect, channels and output left to add)."""
+    params = ["--mass", ",".join(f"{x:.6g}" for x in truth["m"]), "--damping", ",".join(f"{x:.6g}" for x in truth["c"]),
+              "--stiffness", ",".join(f"{x:.6g}" for x in truth["k"])]
+    return [twin, "synth", "--storeys", str(storeys), "--excitation", "force:1", *params, "--duration", f"{duration:.9g}",
+            "--sample-rate", f"{sample_rate:g}"]
+
+
+def building(twin: str, work: Path, storeys: int, duration: float = 20.0, sample_rate: float = 51.2,
+             effect: str | None = None, name: str | None = None) -> dict:
+    """The nominal twin (INIT.ssp), a calibration record (seed 1) and a diagnosis record (seed 2, a
+    hidden cubic spring in storey 1 unless `effect` says otherwise)."""
+    truth = truth_of(storeys)
+    d = work / (name or f"n{storeys}")
     d.mkdir()
     nominal = d / "nominal.json"
     nominal.write_text(json.dumps({f: [NOMINAL[f]] * storeys for f in "mck"}))
     init = d / "init.ssp"
     subprocess.run([twin, "init", "--storeys", str(storeys), "--excitation", "force:1", "--nominal", str(nominal),
                     "--out", str(init)], check=True, stdout=subprocess.DEVNULL)
-    params = ["--mass", ",".join(f"{x:.6g}" for x in truth["m"]), "--damping", ",".join(f"{x:.6g}" for x in truth["c"]),
-              "--stiffness", ",".join(f"{x:.6g}" for x in truth["k"])]
-    common = [twin, "synth", "--storeys", str(storeys), "--excitation", "force:1", *params, "--duration", "20",
-              "--sample-rate", "51.2"]
+    common = synth_command(twin, storeys, truth, duration, sample_rate)
     cal, diag = d / "cal.csv", d / "diag.csv"
     subprocess.run(common + ["--seed", "1", "--out", str(cal), "--truth", str(d / "cal.truth.json")],
                    check=True, stdout=subprocess.DEVNULL)
-    subprocess.run(common + ["--seed", "2", "--effect", f"cubic@1:stiffness={CUBIC.get(storeys, 1e11):g}",
+    effect = effect or f"cubic@1:stiffness={CUBIC.get(storeys, 1e11):g}"
+    subprocess.run(common + ["--seed", "2", "--effect", effect,
                              "--out", str(diag), "--truth", str(d / "diag.truth.json")], check=True, stdout=subprocess.DEVNULL)
     return {"dir": d, "init": init, "cal": cal, "diag": diag, "truth": truth}
 
