@@ -78,8 +78,18 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 # -- running with a time cap ----------------------------------------------------------------------
+def wait_for(binary: str) -> None:
+    """`twin` may be missing for a moment while it is rebuilt: wait for it (up to 10 minutes)."""
+    for _ in range(600):
+        if os.access(binary, os.X_OK):
+            return
+        time.sleep(1)
+    raise SystemExit(f"{binary}: missing for 10 minutes")
+
+
 def timed(cmd: list[str], cap: float) -> float | None:
     """Wall seconds of a whole process; None when it ran past `cap` (its process group killed)."""
+    wait_for(cmd[0])
     t = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     try:
@@ -105,8 +115,12 @@ def peer_job(job: dict, work: Path, cap: float) -> dict | None:
         p.wait()
         return None
     if p.returncode != 0:
-        raise SystemExit(f"peer job {job['kind']} failed ({p.returncode})")
+        raise PeerFailed(f"peer job {job['kind']} failed ({p.returncode})")
     return pickle.loads(path.with_suffix(".out").read_bytes())
+
+
+class PeerFailed(Exception):
+    pass
 
 
 class Run:
@@ -196,7 +210,7 @@ class Bench:
         """Interleaved repetitions of ours (a command, or a callable returning seconds or None) and
         the peer (a callable returning (seconds or None, info)); a side past the cap stops."""
         ours, peers, info = [], [], None
-        ours_over = peer_over = False
+        ours_over = peer_over = peer_failed = False
         for i in range(self.reps):
             if not ours_over:
                 t = ours_cmd() if callable(ours_cmd) else timed(ours_cmd, self.cap)
@@ -205,7 +219,11 @@ class Bench:
                 else:
                     ours.append(t)
             if peer is not None and not peer_over:
-                t, got = peer()
+                try:
+                    t, got = peer()
+                except PeerFailed as e:
+                    self.log(f"{label}: {e} (its traceback above); the peer is shown 'failed'")
+                    t, got, peer_failed = None, None, True
                 if t is None:
                     peer_over = True
                 else:
@@ -217,7 +235,8 @@ class Bench:
                 break
         return {"ours": None if not ours else float(np.median(ours)), "ours_runs": ours, "ours_over": ours_over and not ours,
                 "peer": None if not peers else float(np.median(peers)), "peer_runs": peers,
-                "peer_over": peer_over and not peers, "peer_info": info}
+                "peer_over": peer_over and not peers and not peer_failed, "peer_failed": peer_failed and not peers,
+                "peer_info": info}
 
     # one building, one length
     def grid_point(self, n: int, samples: int, b1: dict, cal_ssp: Path, cal_priors: list[dict]) -> None:
@@ -326,6 +345,7 @@ class Bench:
 
     def calibrate_setup(self, init: Path, data: list[Path], out: Path, report: Path, starts: int | None = None
                         ) -> tuple[float, dict]:
+        wait_for(self.twin)
         t = time.perf_counter()
         more = [] if starts is None else ["--starts", str(starts)]
         subprocess.run([self.twin, "calibrate", "--twin", str(init), "--data", *map(str, data), "--out", str(out),
@@ -446,6 +466,8 @@ def cell(r: dict, side: str, cap: float, width: int = 9) -> str:
         return f"{v:{width}.3f}" if v < 10 else f"{v:{width}.1f}"
     if r.get(f"{side}_over"):
         return f"{'> ' + format(cap, 'g') + ' s':>{width}}"
+    if r.get(f"{side}_failed"):
+        return f"{'failed':>{width}}"
     return f"{'—':>{width}}"
 
 

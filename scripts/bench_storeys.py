@@ -165,6 +165,8 @@ def simulate(m, c, k, force: np.ndarray, dt: float) -> np.ndarray:
     aug = np.zeros((ns + 2, ns + 2))
     aug[:ns, :ns], aug[:ns, ns], aug[ns, ns + 1] = a, b[:, 0], 1.0
     e = expm(aug * dt)
+    if not np.all(np.isfinite(e)):  # a start far out in the prior: refused, as below
+        return np.full((cy.shape[0], len(force)), np.nan)
     phi, gu, gs = e[:ns, :ns], e[:ns, ns], e[:ns, ns + 1]
     lam, v = np.linalg.eig(phi)
     vinv = np.linalg.inv(v)
