@@ -593,7 +593,8 @@ def targets(bench: Bench, cap: float) -> None:
         fast = t <= 10
         faster = None if p is None or t == math.inf else p / t >= 10
         ok = fast and bool(faster)
-        ratio_text = f"{p / t:.2f}×" if p not in (None, math.inf) and t != math.inf else "—"
+        ratio_text = (f"{p / t:.2f}×" if p not in (None, math.inf) and t != math.inf else
+                      f"> {cap / t:.1f}× (the peer past the cap)" if p == math.inf and t != math.inf else "—")
         line("calibrate, the two roving runs ≤ 10 s and ≥ 10× the peer", ok if faster is not None or not fast else None,
              f"ours {text}, peer {ptext}, peer/ours {ratio_text}")
     cmp_rows = rows["compare"]
