@@ -56,7 +56,7 @@ for n in 1 2 3; do
   section "== twin compare on dataset$n =="
   "$twin" compare --twin "$out/calibrated.ssp" --data "data/dataset$n.csv" \
     --report "$out/compare-dataset$n.json" --predictions "$out/predictions-dataset$n.csv" \
-    --plot "$out/compare-dataset$n.svg" --frf
+    --plot "$out/compare-dataset$n.svg" --frf --modes
 done
 
 echo

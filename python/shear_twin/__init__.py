@@ -143,7 +143,8 @@ class Twin:
     def compare(self, record: Record, *, transient: float | None = None,
                 tolerance: float | None = None, controller: str | os.PathLike | Report | dict | None = None,
                 controller_q: float | None = None, plot: str | os.PathLike | None = None,
-                frf: bool = False, latent_threshold: float | None = None) -> Comparison:
+                frf: bool = False, latent_threshold: float | None = None,
+                modes: bool = False) -> Comparison:
         """``twin compare``: run the twin on the record's excitation (``force`` or
         ``ground_acc``) and compare every measured channel, each in its own quantity; a record
         the twin cannot serve (another excitation, a floor it lacks) raises ``DataError``
@@ -152,10 +153,12 @@ class Twin:
         closes the loop. None means the CLI's default (``transient`` 2 s; ``tolerance`` 2 × the
         twin's worst validation NMSE, else 0.5 %). ``plot``: the CLI's ``--plot`` (.svg; with
         ``frf`` the frequency view, and with a corrector ``PLOT-latent.svg`` against
-        ``latent_threshold``)."""
+        ``latent_threshold``). ``modes``: also identify the record's modes beside the twin's
+        (the CLI's ``--modes``; the report's ``modes``)."""
         out = self._native.compare(record, transient=transient, tolerance=tolerance,
                                    controller=_report_or_path(controller), controller_q=controller_q,
-                                   plot=_path(plot), frf=frf, latent_threshold=latent_threshold)
+                                   plot=_path(plot), frf=frf, latent_threshold=latent_threshold,
+                                   modes=modes)
         return Comparison(out["report"], out["predictions"])
 
     def calibrate(self, record: Record | Sequence[Record], *, parameters: list[str] | None = None,

@@ -70,7 +70,7 @@ class Twin:
     def compare(self, record: Record, *, transient: float | None = None, tolerance: float | None = None,
                 controller: str | dict[str, Any] | None = None,
                 controller_q: float | None = None, plot: str | None = None, frf: bool = False,
-                latent_threshold: float | None = None) -> dict[str, Any]: ...
+                latent_threshold: float | None = None, modes: bool = False) -> dict[str, Any]: ...
     def calibrate(self, record: Record | list[Record], *, parameters: list[str] | None = None,
                   priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
                   seed: int | None = None, transient: float | None = None, validate: list[Record] = ...,

@@ -116,7 +116,7 @@ def run_structure(spec: dict[str, Any]) -> dict[str, Any]:
     try:
         record = st.Record.read(spec["record"])
         twin = _twin(spec["twin"])
-        before = twin.compare(record)
+        before = twin.compare(record, modes=True)
         row["nmse_before"] = _worst(before.nmse)
         row["nmse_after"] = row["nmse_before"]
         row["frequency_shift"], row["modes_moved"] = _frequency_shift(before.to_dict().get("modes"))

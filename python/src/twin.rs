@@ -197,7 +197,8 @@ impl Twin {
     /// channel. Returns `{"report": <the CLI's JSON report>, "predictions": {"time", each
     /// measured channel by name [, "latent_var1".., "sd1"..]: arrays}}`.
     #[pyo3(signature = (record, *, transient = None, tolerance = None, controller = None,
-                        controller_q = None, plot = None, frf = false, latent_threshold = None))]
+                        controller_q = None, plot = None, frf = false, latent_threshold = None,
+                        modes = false))]
     #[allow(clippy::too_many_arguments)]
     fn compare<'py>(
         &self,
@@ -210,6 +211,7 @@ impl Twin {
         plot: Option<PathBuf>,
         frf: bool,
         latent_threshold: Option<f64>,
+        modes: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let kind = Kind::Twin;
         if let Some(path) = &plot {
@@ -226,7 +228,7 @@ impl Twin {
         let data = record.for_twin(&self.twin)?;
         options.validate_for(data).map_err(|e| to_py(kind, e))?;
         let spec = controller.map(|c| controller_spec(kind, c)).transpose()?;
-        let compared = detached(py, || {
+        let (compared, modes) = detached(py, || {
             let compared = compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
                 .map_err(|e| to_py(kind, e))?;
             if let Some(path) = &plot {
@@ -235,11 +237,23 @@ impl Twin {
                 )
                 .map_err(|e| to_py(kind, e))?;
             }
-            Ok(compared)
+            let modes = modes.then(|| {
+                orchestrator::workflows::modal::modal_evidence(
+                    &self.twin,
+                    data,
+                    orchestrator::workflows::modal::ModalBand::default(),
+                )
+            });
+            Ok((compared, modes))
         })?;
-        // The same report as `twin compare --report`.
-        let report =
-            orchestrator::report::json::compare(&self.twin, data, &compared, options.transient);
+        // The same report as `twin compare --report [--modes]`.
+        let report = orchestrator::report::json::compare(
+            &self.twin,
+            data,
+            &compared,
+            options.transient,
+            modes.as_ref(),
+        );
         let prediction = compared.prediction;
         let predictions = PyDict::new(py);
         predictions.set_item("time", floats(py, &prediction.time))?;

@@ -62,6 +62,11 @@ pub struct CompareArgs {
     /// Which of the report's designs (its q); default the first stable one.
     #[arg(long, requires = "controller")]
     pub controller_q: Option<f64>,
+    /// Also identify the record's modes (LSCF, SSI-COV) and set them beside the twin's, in the
+    /// printout and the report's `modes` (information: the time-domain verdict stands). Off by
+    /// default: the identification costs several times the comparison.
+    #[arg(long)]
+    pub modes: bool,
     /// Seconds at the start left out of the error measures.
     #[arg(long, default_value_t = CompareOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,
@@ -112,14 +117,16 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         .map(ControllerSpec::load)
         .transpose()?;
     let compared = compare(&twin, &data, &options, spec.as_ref(), progress_bar())?;
-    // The record's modes, identified once for the report and the printout.
-    let modes = crate::workflows::modal::modal_evidence(
-        &twin,
-        &data,
-        crate::workflows::modal::ModalBand::default(),
-    );
+    // The record's modes, when asked for: identified once for the report and the printout.
+    let modes = args.modes.then(|| {
+        crate::workflows::modal::modal_evidence(
+            &twin,
+            &data,
+            crate::workflows::modal::ModalBand::default(),
+        )
+    });
     let report =
-        crate::report::json::compare_with_modes(&twin, &data, &compared, args.transient, &modes);
+        crate::report::json::compare(&twin, &data, &compared, args.transient, modes.as_ref());
     let Compared {
         prediction,
         comparison,
@@ -149,8 +156,9 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     print_summary(&twin, &data, comparison);
     match &modes {
-        Ok(evidence) => print_modes(evidence),
-        Err(e) => println!("modes: not identified ({e})"),
+        Some(Ok(evidence)) => print_modes(evidence),
+        Some(Err(e)) => println!("modes: not identified ({e})"),
+        None => {}
     }
     if parameter_variance.is_some() {
         let join = |values: Vec<f64>| {

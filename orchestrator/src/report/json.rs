@@ -14,23 +14,15 @@ use crate::workflows::calibrate::Calibration;
 /// `twin compare --report`: `compared` is `twin` run on `data` after `transient` seconds.
 /// Every per-channel array (`nmse`, `noise_variance`, the band's, a failing window's `nmse`) is
 /// in the order of `channels`, the record's measured channels by name (on the paper's rig,
-/// `acc1`, `acc2`, `acc3`); each value in the channel's own quantity, SI.
-pub fn compare(twin: &Twin, data: &Measurement, compared: &Compared, transient: f64) -> Value {
-    let modes = crate::workflows::modal::modal_evidence(
-        twin,
-        data,
-        crate::workflows::modal::ModalBand::default(),
-    );
-    compare_with_modes(twin, data, compared, transient, &modes)
-}
-
-/// [`compare`] with the record's modes already identified (the CLI prints them too).
-pub fn compare_with_modes(
+/// `acc1`, `acc2`, `acc3`); each value in the channel's own quantity, SI. `modes`: the record's
+/// modes beside the twin's when they were asked for (`twin compare --modes`: the
+/// identification costs more than the comparison itself), else the report has no `modes`.
+pub fn compare(
     twin: &Twin,
     data: &Measurement,
     compared: &Compared,
     transient: f64,
-    modes: &Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>,
+    modes: Option<&Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>>,
 ) -> Value {
     let explained: Vec<f64> = compared
         .noise_nmse
@@ -38,7 +30,7 @@ pub fn compare_with_modes(
         .zip(&compared.band_nmse)
         .map(|(noise, band)| noise + band)
         .collect();
-    json!({
+    let mut report = json!({
         "twin": twin.describe(),
         "data": data.path.display().to_string(),
         "channels": compared.comparison.names(),
@@ -58,12 +50,16 @@ pub fn compare_with_modes(
         "transient": transient,
         "samples": data.len(),
         "sample_interval": data.dt,
-        // The record's modes beside the twin's (information: the time-domain verdict stands).
-        "modes": match modes {
+    });
+    // The record's modes beside the twin's (information: the time-domain verdict stands).
+    if let (Some(modes), Some(object)) = (modes, report.as_object_mut()) {
+        let value = match modes {
             Ok(evidence) => serde_json::to_value(evidence).unwrap_or(Value::Null),
             Err(e) => json!({ "error": e.to_string() }),
-        },
-    })
+        };
+        object.insert("modes".to_owned(), value);
+    }
+    report
 }
 
 /// Whether a validation record's NMSE (per floor or channel, %) counts as the twin's validation level.
