@@ -395,7 +395,7 @@ pub fn terminate<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
 
 pub fn reset<M: CoSimModel>(c: fmi2Component) -> fmi2Status {
     with_instance::<M>(c, "fmi2Reset", mask::ANY_LIVE, |inst| {
-        inst.model = M::instantiate(&inst.context)?;
+        inst.model.reset(&inst.context)?;
         inst.time = 0.0;
         inst.stop_time = None;
         inst.state = FsmState::Instantiated;

@@ -59,6 +59,14 @@ pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
 
     fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError>;
 
+    /// `fmi2Reset`: the model as `instantiate` made it. By default instantiated again; a model
+    /// that reads files at `instantiate` may rebuild itself from what it read instead (a
+    /// calibration resets an instance once per simulation).
+    fn reset(&mut self, context: &InstantiateContext) -> Result<(), ModelError> {
+        *self = Self::instantiate(context)?;
+        Ok(())
+    }
+
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError>;
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError>;
 

@@ -393,11 +393,16 @@ impl ShearModel {
         if !self.sensitivities.on {
             return f64::NAN;
         }
+        let inputs = self.step_inputs();
+        // A host reads the N × 3N outputs one by one: all are computed at the first read after a
+        // step or an input change, the rest come from there.
+        if let Some(value) = self.sensitivities.cached(&self.params, &inputs, floor, parameter) {
+            return value;
+        }
         let n = self.storeys();
         let mut x = Vec::with_capacity(2 * n);
         x.extend_from_slice(&self.displacement);
         x.extend_from_slice(&self.velocity);
-        let inputs = self.step_inputs();
         self.sensitivities
             .output(&self.params, &self.effects, &x, &inputs, floor, parameter)
     }
@@ -487,6 +492,21 @@ impl CoSimModel for ShearModel {
 
     fn instantiate(context: &InstantiateContext) -> Result<Self, ModelError> {
         ShearModel::from_resources(context.resource_dir.as_deref())
+    }
+
+    /// The structure read at `instantiate` (its parameters, as `origin` keeps them) without
+    /// reading `resources/structure.json` again; every effect off, the state at rest.
+    fn reset(&mut self, context: &InstantiateContext) -> Result<(), ModelError> {
+        let Some(origin) = self.origin.take() else {
+            *self = Self::instantiate(context)?;
+            return Ok(());
+        };
+        let storeys = origin.storeys();
+        let mut model = ShearModel::new(origin.clone(), Effects::new(storeys));
+        model.table = self.table.or_else(|| Some(crate::variables::table(&origin)));
+        model.origin = Some(origin);
+        *self = model;
+        Ok(())
     }
 
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError> {
