@@ -129,7 +129,19 @@ pub struct StartOutcome {
     pub start: usize,
     pub neg_log_posterior: f64,
     pub evaluations: usize,
+    /// Left after the screening ([`SCREEN_EVALUATIONS`]): its posterior there was not among
+    /// the best [`SCREEN_KEEP`] starts', so it was not run to the end.
+    pub screened_out: bool,
 }
+
+/// Evaluations (a sensitivity run counts as the p finite-difference runs it replaces) every
+/// start gets before the starts are compared: a few Levenberg–Marquardt iterations, by then a
+/// start in a poor basin is far behind (measured on 3–20 storeys: the starts that end best are
+/// among the best three after the screen). Only the best [`SCREEN_KEEP`] run on to their end.
+pub const SCREEN_EVALUATIONS_PER_PARAMETER: usize = 6;
+
+/// Starts run to the end after the screen.
+pub const SCREEN_KEEP: usize = 3;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Calibration {
@@ -279,9 +291,15 @@ impl Sensitivity {
     }
 }
 
+/// The value reference of the FMU's Boolean parameter that switches its forward sensitivities
+/// on, if it has one.
+pub(crate) fn sensitivity_switch(fmu: &Fmu) -> Option<u32> {
+    Sensitivity::find(fmu).map(|s| s.switch)
+}
+
 /// The value references of `d_{channel}_d_{p}` for every calibrated parameter, if the FMU has
 /// them all.
-fn channel_sensitivities(fmu: &Fmu, channel: &str, parameters: &[String]) -> Option<Vec<u32>> {
+pub(crate) fn channel_sensitivities(fmu: &Fmu, channel: &str, parameters: &[String]) -> Option<Vec<u32>> {
     parameters
         .iter()
         .map(|p| {
@@ -579,15 +597,19 @@ struct StartResult {
     runs: usize,
 }
 
+/// One start from `z0` (and the noise `s0`, else the priors' means), within `budget`
+/// evaluations.
 fn run_start<'a>(
     sims: &mut [Simulator<'a>],
     target: &Target<'a>,
     z0: Vec<f64>,
+    s0: Option<Vec<f64>>,
+    budget: usize,
 ) -> Option<StartResult> {
     let blocks = target.blocks();
     let means = target.noise_means();
     let records = target.records.len();
-    let mut s = means.clone();
+    let mut s = s0.unwrap_or_else(|| means.clone());
     let mut z = z0;
     let mut evaluations = 0;
     let mut runs = 0;
@@ -605,7 +627,7 @@ fn run_start<'a>(
             evaluations: RefCell::new(0),
             runs: RefCell::new(0),
             at_hand: RefCell::new(None),
-            budget: target.budget.saturating_sub(evaluations),
+            budget: budget.saturating_sub(evaluations),
         };
         if let Some(r0) = problem.weighted(&z) {
             z = lm::minimize(&mut problem, z, r0, lm::Settings::default()).0;
@@ -635,6 +657,59 @@ fn run_start<'a>(
         objective,
         runs: runs + records,
     })
+}
+
+/// A start: its index, parameters and (when it goes on from a screen) noise.
+type StartJob = (usize, Vec<f64>, Option<Vec<f64>>);
+
+/// The starts `jobs` within `budget` evaluations each, over `threads` threads (one FMU instance
+/// each), in no particular order.
+fn run_starts(
+    target: &Target,
+    jobs: Vec<StartJob>,
+    budget: usize,
+    threads: usize,
+) -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
+    let threads = threads.clamp(1, jobs.len().max(1));
+    let mut chunks: Vec<Vec<StartJob>> = (0..threads).map(|_| Vec::new()).collect();
+    for (k, job) in jobs.into_iter().enumerate() {
+        chunks[k % threads].push(job);
+    }
+    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> =
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = chunks
+                .into_iter()
+                .map(|chunk| {
+                    scope.spawn(
+                        move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
+                            let mut sims = simulators(target, "calibration")?;
+                            Ok(chunk
+                                .into_iter()
+                                .map(|(i, z0, s0)| {
+                                    (i, run_start(&mut sims, target, z0, s0, budget))
+                                })
+                                .collect())
+                        },
+                    )
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(TwinError::Invalid {
+                            path: "calibration".into(),
+                            message: "a worker thread panicked".into(),
+                        })
+                    })
+                })
+                .collect()
+        });
+    let mut out = Vec::new();
+    for r in results {
+        out.extend(r?);
+    }
+    Ok(out)
 }
 
 /// The residuals at `z` and their Jacobian by central differences (2p runs per record).
@@ -942,63 +1017,74 @@ pub fn calibrate_records(
             }
         })
         .collect();
+    // Every start for a few iterations, then the best few to their end (the screen: more
+    // starts than that, and a budget above the screen's).
     let threads = setup.threads.clamp(1, starts.len());
-    let chunks: Vec<Vec<(usize, Vec<f64>)>> = (0..threads)
-        .map(|t| {
-            starts
-                .iter()
-                .cloned()
-                .enumerate()
-                .skip(t)
-                .step_by(threads)
-                .collect()
-        })
+    let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
+    let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
+    let first_budget = if screening { screen_budget } else { target.budget };
+    let jobs: Vec<StartJob> = starts
+        .iter()
+        .cloned()
+        .enumerate()
+        .map(|(i, z0)| (i, z0, None))
         .collect();
-    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> =
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = chunks
-                .into_iter()
-                .map(|chunk| {
-                    let target = &target;
-                    scope.spawn(
-                        move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
-                            let mut sims = simulators(target, "calibration")?;
-                            Ok(chunk
-                                .into_iter()
-                                .map(|(i, z0)| (i, run_start(&mut sims, target, z0)))
-                                .collect())
-                        },
-                    )
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(TwinError::Invalid {
-                            path: "calibration".into(),
-                            message: "a worker thread panicked".into(),
-                        })
-                    })
-                })
-                .collect()
-        });
+    let mut first = run_starts(&target, jobs, first_budget, threads)?;
     let mut outcomes = Vec::new();
-    let mut best: Option<StartResult> = None;
     let mut simulations = 0;
-    for r in results {
-        for (i, res) in r? {
+    let mut finished: Vec<(usize, StartResult)> = Vec::new();
+    if screening {
+        first.sort_by(|a, b| match (&a.1, &b.1) {
+            (Some(x), Some(y)) => x.objective.total_cmp(&y.objective),
+            (Some(_), None) => std::cmp::Ordering::Less,
+            (None, Some(_)) => std::cmp::Ordering::Greater,
+            (None, None) => a.0.cmp(&b.0),
+        });
+        let rest = first.split_off(SCREEN_KEEP.min(first.len()));
+        for (i, res) in rest.into_iter() {
             if let Some(res) = res {
                 simulations += res.runs;
                 outcomes.push(StartOutcome {
                     start: i,
                     neg_log_posterior: res.objective,
                     evaluations: res.runs,
+                    screened_out: true,
                 });
-                if best.as_ref().map_or(true, |b| res.objective < b.objective) {
-                    best = Some(res);
-                }
             }
+        }
+        let mut spent = std::collections::BTreeMap::new();
+        let jobs: Vec<StartJob> = first
+            .into_iter()
+            .filter_map(|(i, res)| {
+                let res = res?;
+                spent.insert(i, res.runs);
+                // The noise starts again from its prior mean, as every start does: from the
+                // screen's (a poor fit's) larger noise the prior outweighs the data and the
+                // outer iterations end before the fit is done.
+                Some((i, res.z, None))
+            })
+            .collect();
+        let remaining = target.budget.saturating_sub(screen_budget);
+        for (i, res) in run_starts(&target, jobs, remaining, threads)? {
+            if let Some(mut res) = res {
+                res.runs += spent.get(&i).copied().unwrap_or(0);
+                finished.push((i, res));
+            }
+        }
+    } else {
+        finished.extend(first.into_iter().filter_map(|(i, res)| Some((i, res?))));
+    }
+    let mut best: Option<StartResult> = None;
+    for (i, res) in finished {
+        simulations += res.runs;
+        outcomes.push(StartOutcome {
+            start: i,
+            neg_log_posterior: res.objective,
+            evaluations: res.runs,
+            screened_out: false,
+        });
+        if best.as_ref().map_or(true, |b| res.objective < b.objective) {
+            best = Some(res);
         }
     }
     outcomes.sort_by_key(|o| o.start);
