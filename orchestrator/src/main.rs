@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    restore_sigpipe();
     match orchestrator::commands::run(orchestrator::commands::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
@@ -13,3 +14,19 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// A command whose output is piped into `head` (or any reader that stops early) ends quietly, as
+/// Unix tools do, killed by SIGPIPE: Rust's runtime ignores the signal, and every `println!`
+/// after the reader has gone would panic on the broken pipe.
+#[cfg(unix)]
+#[allow(unsafe_code)]
+fn restore_sigpipe() {
+    // SAFETY: setting a signal's disposition to its default, first thing in `main`, before any
+    // thread exists; no handler of ours is involved.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn restore_sigpipe() {}

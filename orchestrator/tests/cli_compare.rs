@@ -660,3 +660,23 @@ fn bad_measurement_files_are_refused_with_one_line_and_no_output() {
         );
     }
 }
+
+/// `twin … | head`: a reader that has gone ends `twin` quietly, killed by SIGPIPE as any Unix
+/// tool, instead of a panic on the broken pipe (exit 101, "failed printing to stdout"). The
+/// pipe's reading end is closed before `twin` starts, so its first line meets it.
+#[test]
+fn a_closed_pipe_ends_a_command_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .args(["modal", "--samples", "200"])
+        .env("TWIN_FMU_DIR", fmu_dir())
+        .stdout(writer)
+        .output()
+        .expect("the twin binary runs");
+    let stderr = text(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    // SIGPIPE is 13 on Linux and the BSDs.
+    assert_eq!(out.status.signal(), Some(13), "{:?}: {stderr}", out.status);
+}
