@@ -22,10 +22,14 @@ on Dask: ``shear_twin.fleet``.
 
 from __future__ import annotations
 
-import json
-import os
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+import json as _json
+import os as _os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names for the annotations only: the package's namespace is its API
+    import os
+    from collections.abc import Callable, Mapping, Sequence
+    from typing import Any
 
 from . import _native
 from ._native import (
@@ -81,7 +85,7 @@ class Report:
         return self._data
 
     def to_json(self, indent: int | None = 2) -> str:
-        return json.dumps(self._data, indent=indent)
+        return _json.dumps(self._data, indent=indent)
 
     def __repr__(self) -> str:
         shown = {k: self._data[k] for k in ("action", "nmse", "nmse_before", "nmse_after") if k in self._data}
@@ -200,7 +204,7 @@ class Twin:
         ``recalibrate`` with ``explanations``: each floor's mass or storey's stiffness alone
         fitted to the identified frequencies, best first (``tied_for_best`` of them fit as
         well). ``plot``: an SVG of the twin's shapes with the record's."""
-        return Report(self._native.diagnose_ambient(os.fspath(path), plot=_path(plot)))
+        return Report(self._native.diagnose_ambient(_os.fspath(path), plot=_path(plot)))
 
     def modes(self, *, samples: int | None = None, plot: str | os.PathLike | None = None) -> Report:
         """``twin modal --twin``: the natural frequencies (Hz), damping ratios and mode shapes
@@ -359,7 +363,7 @@ def _hybrid(common: dict[str, Any]) -> dict[str, Any]:
 
 
 def _path(p: str | os.PathLike | None) -> str | None:
-    return None if p is None else os.fspath(p)
+    return None if p is None else _os.fspath(p)
 
 
 def _report_or_path(r: str | os.PathLike | Report | dict | None) -> str | dict | None:
@@ -367,7 +371,7 @@ def _report_or_path(r: str | os.PathLike | Report | dict | None) -> str | dict |
         return r
     if isinstance(r, Report):
         return r.to_dict()
-    return os.fspath(r)
+    return _os.fspath(r)
 
 
 def _frame(columns: dict[str, Any]):
@@ -430,7 +434,7 @@ def run(model: str | os.PathLike, *, start: float | None = None, stop: float | N
     ``algorithm``: "gauss-seidel" (default) or "jacobi". None: the model's DefaultExperiment,
     then fmpy's rules, as the CLI."""
     scratch = None
-    if input is not None and not isinstance(input, (str, os.PathLike)):
+    if input is not None and not isinstance(input, (str, _os.PathLike)):
         import tempfile
 
         scratch = tempfile.NamedTemporaryFile("w", suffix=".csv", delete=False)
@@ -438,12 +442,12 @@ def run(model: str | os.PathLike, *, start: float | None = None, stop: float | N
         scratch.close()
         input = scratch.name
     try:
-        columns, info = _native.run(os.fspath(model), start=start, stop=stop, step=step,
+        columns, info = _native.run(_os.fspath(model), start=start, stop=stop, step=step,
                                     input=_path(input), sets=sets, output_all=output_all,
                                     hold_inputs=hold_inputs, algorithm=algorithm, plot=_path(plot))
     finally:
         if scratch is not None:
-            os.unlink(scratch.name)
+            _os.unlink(scratch.name)
     return RunResult(columns, info)
 
 
@@ -451,25 +455,25 @@ def pack_fmu(model_description: str | os.PathLike, library: str | os.PathLike, o
              documentation: str | os.PathLike | None = None, resources: str | os.PathLike | None = None) -> str:
     """``twin pack-fmu``: a built FMU library and its modelDescription.xml into a ``.fmu``
     archive. Returns the modelIdentifier."""
-    return _native.pack_fmu(os.fspath(model_description), os.fspath(library), os.fspath(out),
+    return _native.pack_fmu(_os.fspath(model_description), _os.fspath(library), _os.fspath(out),
                             documentation=_path(documentation), resources=_path(resources))
 
 
 def export_fmus(out: str | os.PathLike) -> list[str]:
     """``twin export-fmus``: write the FMUs built into the package (shear, GP corrector, LQR,
     substructure) as ``out/<modelIdentifier>.fmu``, for other FMI tools; returns their paths."""
-    return [str(p) for p in _native.export_fmus(os.fspath(out))]
+    return [str(p) for p in _native.export_fmus(_os.fspath(out))]
 
 
 def _json_argument(value: Any, name: str) -> tuple[str | None, str]:
     """A JSON argument given as a dict or as the path of a JSON file: its text and its origin."""
     if value is None:
         return None, f"{name}="
-    if isinstance(value, (str, os.PathLike)):
-        path = os.fspath(value)
+    if isinstance(value, (str, _os.PathLike)):
+        path = _os.fspath(value)
         with open(path, encoding="utf-8") as f:
             return f.read(), path
-    return json.dumps(value), f"{name}="
+    return _json.dumps(value), f"{name}="
 
 
 def init(out: str | os.PathLike | None = None, *, storeys: int | None = None,
@@ -483,7 +487,7 @@ def init(out: str | os.PathLike | None = None, *, storeys: int | None = None,
     twin = Twin(_native.Twin.init(storeys, excitation, nominal_text, nominal_origin,
                                   priors_text, priors_origin))
     if out is not None:
-        twin.save(os.fspath(out))
+        twin.save(_os.fspath(out))
     return twin
 
 
@@ -497,8 +501,8 @@ def record_from_frame(frame: Any, name: str = "<DataFrame>", *,
 
     arrays = {str(c): np.ascontiguousarray(frame[c].to_numpy(dtype=np.float64))
               for c in frame.columns}
-    if isinstance(columns, os.PathLike):
-        columns = os.fspath(columns)
+    if isinstance(columns, _os.PathLike):
+        columns = _os.fspath(columns)
     return Record.from_arrays(arrays, columns=columns, name=name)
 
 
@@ -512,3 +516,5 @@ def synth(scenario: dict[str, Any], out: str | os.PathLike | None = None, *,
     the structure's loop; the record gets a ``control`` column."""
     return _native.synth(scenario, _path(out), controller=_report_or_path(controller),
                          controller_q=controller_q)
+
+del TYPE_CHECKING, annotations  # the API alone: no helper of the implementation
