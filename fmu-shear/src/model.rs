@@ -396,7 +396,10 @@ impl ShearModel {
         let inputs = self.step_inputs();
         // A host reads the N × 3N outputs one by one: all are computed at the first read after a
         // step or an input change, the rest come from there.
-        if let Some(value) = self.sensitivities.cached(&self.params, &inputs, floor, parameter) {
+        if let Some(value) = self
+            .sensitivities
+            .cached(&self.params, &inputs, floor, parameter)
+        {
             return value;
         }
         let n = self.storeys();
@@ -503,7 +506,9 @@ impl CoSimModel for ShearModel {
         };
         let storeys = origin.storeys();
         let mut model = ShearModel::new(origin.clone(), Effects::new(storeys));
-        model.table = self.table.or_else(|| Some(crate::variables::table(&origin)));
+        model.table = self
+            .table
+            .or_else(|| Some(crate::variables::table(&origin)));
         model.origin = Some(origin);
         *self = model;
         Ok(())

@@ -118,9 +118,9 @@ impl Sensitivities {
         parameter: usize,
     ) -> Option<f64> {
         match &self.outputs {
-            Some((at, values)) if at == inputs => {
-                values.get(floor * 3 * params.storeys() + parameter).copied()
-            }
+            Some((at, values)) if at == inputs => values
+                .get(floor * 3 * params.storeys() + parameter)
+                .copied(),
             _ => None,
         }
     }
@@ -348,7 +348,9 @@ mod tests {
             let count = 3 * n;
             let mut s = Sensitivities {
                 on: true,
-                states: (0..2 * n * count).map(|i| 1e-4 * ((i * 7 % 11) as f64 - 5.0)).collect(),
+                states: (0..2 * n * count)
+                    .map(|i| 1e-4 * ((i * 7 % 11) as f64 - 5.0))
+                    .collect(),
                 ..Sensitivities::default()
             };
             assert_eq!(s.cached(&params, &inputs, 0, 0), None);
@@ -360,10 +362,16 @@ mod tests {
             for j in 0..count {
                 let d = acceleration_derivative(&params, &x, &inputs, j);
                 for f in 0..n {
-                    let a_s: f64 = (0..2 * n).map(|c| rows.a[(f, c)] * s.states[c * count + j]).sum();
+                    let a_s: f64 = (0..2 * n)
+                        .map(|c| rows.a[(f, c)] * s.states[c * count + j])
+                        .sum();
                     let want = d[f] + a_s;
                     let err = (all[f * count + j] - want).abs();
-                    assert!(err <= 1e-12 * want.abs().max(1.0), "floor {f} parameter {j}: {} vs {want}", all[f * count + j]);
+                    assert!(
+                        err <= 1e-12 * want.abs().max(1.0),
+                        "floor {f} parameter {j}: {} vs {want}",
+                        all[f * count + j]
+                    );
                 }
             }
         }

@@ -22,7 +22,9 @@ pub fn compare(
     data: &Measurement,
     compared: &Compared,
     transient: f64,
-    modes: Option<&Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>>,
+    modes: Option<
+        &Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>,
+    >,
 ) -> Value {
     let explained: Vec<f64> = compared
         .noise_nmse

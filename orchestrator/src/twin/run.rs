@@ -596,8 +596,8 @@ fn sensitivity_columns(
     names: &[String],
 ) -> Option<Vec<Vec<Vec<f64>>>> {
     use crate::cosim::import::Fmu;
-    use crate::workflows::calibrate::{channel_sensitivities, sensitivity_switch};
     use crate::workflows::calibrate::simulator::Simulator;
+    use crate::workflows::calibrate::{channel_sensitivities, sensitivity_switch};
     if data.extra.contains_key("control") || twin.components.len() != 1 {
         return None;
     }
@@ -608,16 +608,7 @@ fn sensitivity_columns(
     for s in &data.responses {
         outputs.extend(channel_sensitivities(&fmu, &s.channel.name(), names)?);
     }
-    let mut sim = Simulator::driven(
-        &fmu,
-        physics.parameters.clone(),
-        &data.excitation.channel.name(),
-        &data.excitation.values,
-        data.time[0],
-        data.dt,
-        "band",
-    )
-    .ok()?;
+    let mut sim = Simulator::for_record(&fmu, physics.parameters.clone(), data, "band").ok()?;
     let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
     sim.record_switched(&[], &[], switch, &outputs, &mut out)
         .ok()?;
@@ -628,7 +619,11 @@ fn sensitivity_columns(
     let channels = data.responses.len();
     Some(
         (0..p)
-            .map(|j| (0..channels).map(|c| std::mem::take(&mut out[c * p + j])).collect())
+            .map(|j| {
+                (0..channels)
+                    .map(|c| std::mem::take(&mut out[c * p + j]))
+                    .collect()
+            })
             .collect(),
     )
 }
@@ -671,7 +666,9 @@ mod tests {
             // As a calibrated twin holds them: every parameter set in the SSP.
             let physics = twin.component_mut(PHYSICS).expect("physics");
             for (name, v) in names.iter().zip(&values) {
-                physics.parameters.insert(name.clone(), ParameterValue::Real(*v));
+                physics
+                    .parameters
+                    .insert(name.clone(), ParameterValue::Real(*v));
             }
             let scenario = Scenario {
                 mass: structure.mass.clone(),
@@ -686,7 +683,13 @@ mod tests {
             let base: Vec<&[f64]> = data
                 .responses
                 .iter()
-                .map(|s| prediction.get(s.channel).expect("channel").values.as_slice())
+                .map(|s| {
+                    prediction
+                        .get(s.channel)
+                        .expect("channel")
+                        .values
+                        .as_slice()
+                })
                 .collect();
             let exact = sensitivity_columns(&twin, &data, &names).expect("sensitivities");
             let fd = finite_difference_columns(&twin, &data, &names, &values, &base).expect("fd");

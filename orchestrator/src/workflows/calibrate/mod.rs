@@ -299,7 +299,11 @@ pub(crate) fn sensitivity_switch(fmu: &Fmu) -> Option<u32> {
 
 /// The value references of `d_{channel}_d_{p}` for every calibrated parameter, if the FMU has
 /// them all.
-pub(crate) fn channel_sensitivities(fmu: &Fmu, channel: &str, parameters: &[String]) -> Option<Vec<u32>> {
+pub(crate) fn channel_sensitivities(
+    fmu: &Fmu,
+    channel: &str,
+    parameters: &[String],
+) -> Option<Vec<u32>> {
     parameters
         .iter()
         .map(|p| {
@@ -1022,7 +1026,11 @@ pub fn calibrate_records(
     let threads = setup.threads.clamp(1, starts.len());
     let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
     let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
-    let first_budget = if screening { screen_budget } else { target.budget };
+    let first_budget = if screening {
+        screen_budget
+    } else {
+        target.budget
+    };
     let jobs: Vec<StartJob> = starts
         .iter()
         .cloned()
@@ -1274,15 +1282,7 @@ pub fn fixed_log_evidence(
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path).map_err(TwinError::from)?;
     let (_, used) = used_samples(data, setup.mask.as_deref(), setup.transient)?;
-    let mut sim = Simulator::driven(
-        &fmu,
-        component.parameters.clone(),
-        &data.excitation.channel.name(),
-        &data.excitation.values,
-        data.time[0],
-        data.dt,
-        "evidence",
-    )?;
+    let mut sim = Simulator::for_record(&fmu, component.parameters.clone(), data, "evidence")?;
     // Every measured channel, the FMU's output of the same name.
     let outputs = data
         .responses

@@ -9,6 +9,7 @@ use std::rc::Rc;
 
 use crate::cosim::import::{Fmu, Instance, StepEnd};
 use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
+use crate::twin::data::Measurement;
 use crate::twin::system::initialise;
 use crate::twin::{ParameterValue, TwinError, OUTPUTS};
 
@@ -87,6 +88,25 @@ impl<'a> Simulator<'a> {
     ) -> Result<(), TwinError> {
         let acc_vrs = self.acc_vrs;
         self.record(vrs, values, &acc_vrs, out)
+    }
+
+    /// The physics with `base` driven by `data`'s excitation (`force` or `ground_acc`) from its
+    /// first time, at its interval.
+    pub fn for_record(
+        fmu: &'a Fmu,
+        base: BTreeMap<String, ParameterValue>,
+        data: &'a Measurement,
+        name: &str,
+    ) -> Result<Self, TwinError> {
+        Self::driven(
+            fmu,
+            base,
+            &data.excitation.channel.name(),
+            &data.excitation.values,
+            data.time[0],
+            data.dt,
+            name,
+        )
     }
 
     /// Like [`Simulator::simulate`], but records the real outputs `outputs` (value

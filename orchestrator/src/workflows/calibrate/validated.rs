@@ -83,16 +83,8 @@ pub fn channel_nmse(
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = crate::cosim::import::Fmu::open(&physics.fmu_path)
         .map_err(|e| CalibrateError::from(TwinError::from(e)))?;
-    let mut sim = Simulator::driven(
-        &fmu,
-        physics.parameters.clone(),
-        &data.excitation.channel.name(),
-        &data.excitation.values,
-        data.time[0],
-        data.dt,
-        "validation",
-    )
-    .map_err(CalibrateError::from)?;
+    let mut sim = Simulator::for_record(&fmu, physics.parameters.clone(), data, "validation")
+        .map_err(CalibrateError::from)?;
     let outputs = data
         .responses
         .iter()

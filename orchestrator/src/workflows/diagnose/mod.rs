@@ -431,15 +431,7 @@ fn run_physics(
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
-    let mut sim = Simulator::driven(
-        &fmu,
-        base,
-        &data.excitation.channel.name(),
-        &data.excitation.values,
-        data.time[0],
-        data.dt,
-        "diagnose",
-    )?;
+    let mut sim = Simulator::for_record(&fmu, base, data, "diagnose")?;
     let mut out: Vec<Vec<f64>> = vec![Vec::new(); recorded.len()];
     sim.record(&vrs, values, &outputs, &mut out)?;
     let velocity = out.split_off(2 * storeys);
