@@ -483,18 +483,7 @@ pub fn parameter_variance(
     if p == 0 {
         return Ok(None);
     }
-    let base: Vec<&[f64]> = data
-        .responses
-        .iter()
-        .map(|s| {
-            prediction
-                .get(s.channel)
-                .map(|c| c.values.as_slice())
-                .ok_or_else(|| {
-                    RunError::Wiring(format!("the prediction has no '{}'", s.channel.name()))
-                })
-        })
-        .collect::<Result<_, _>>()?;
+    let base = measured_columns(data, prediction)?;
     let n = data.len();
     // Per channel, `diag(J Σ Jᵀ)` as one matrix product `(J Σ) ∘ J` summed along rows (a
     // blocked product: p² per sample, as the scalar form, at the speed of a matrix kernel).
@@ -520,6 +509,24 @@ pub fn parameter_variance(
         None => finite_difference_columns(twin, data, &cov.names, &values, &base)?,
     };
     Ok(Some(band(&jac)))
+}
+
+/// The prediction's values of each of `data`'s measured channels, in the record's order.
+fn measured_columns<'p>(
+    data: &Measurement,
+    prediction: &'p Prediction,
+) -> Result<Vec<&'p [f64]>, RunError> {
+    data.responses
+        .iter()
+        .map(|s| {
+            prediction
+                .get(s.channel)
+                .map(|c| c.values.as_slice())
+                .ok_or_else(|| {
+                    RunError::Wiring(format!("the prediction has no '{}'", s.channel.name()))
+                })
+        })
+        .collect()
 }
 
 /// `∂y/∂θ` (`[parameter][channel][sample]`) by forward differences of the whole twin, one run
@@ -680,17 +687,7 @@ mod tests {
             };
             let data = synth_record(&scenario).expect("record").0.measurement;
             let prediction = run_twin(&twin, &data, |_, _| {}).expect("run");
-            let base: Vec<&[f64]> = data
-                .responses
-                .iter()
-                .map(|s| {
-                    prediction
-                        .get(s.channel)
-                        .expect("channel")
-                        .values
-                        .as_slice()
-                })
-                .collect();
+            let base = measured_columns(&data, &prediction).expect("every channel");
             let exact = sensitivity_columns(&twin, &data, &names).expect("sensitivities");
             let fd = finite_difference_columns(&twin, &data, &names, &values, &base).expect("fd");
             let mut worst: f64 = 0.0;

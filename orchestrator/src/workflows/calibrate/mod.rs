@@ -601,19 +601,17 @@ struct StartResult {
     runs: usize,
 }
 
-/// One start from `z0` (and the noise `s0`, else the priors' means), within `budget`
-/// evaluations.
+/// One start from `z0` (the noise from its priors' means), within `budget` evaluations.
 fn run_start<'a>(
     sims: &mut [Simulator<'a>],
     target: &Target<'a>,
     z0: Vec<f64>,
-    s0: Option<Vec<f64>>,
     budget: usize,
 ) -> Option<StartResult> {
     let blocks = target.blocks();
     let means = target.noise_means();
     let records = target.records.len();
-    let mut s = s0.unwrap_or_else(|| means.clone());
+    let mut s = means.clone();
     let mut z = z0;
     let mut evaluations = 0;
     let mut runs = 0;
@@ -663,8 +661,86 @@ fn run_start<'a>(
     })
 }
 
-/// A start: its index, parameters and (when it goes on from a screen) noise.
-type StartJob = (usize, Vec<f64>, Option<Vec<f64>>);
+/// Every start for a few iterations, then the best [`SCREEN_KEEP`] on to their end (the screen:
+/// more starts than that, and a budget above the screen's). Every start's outcome, the
+/// simulations spent, and the best start.
+fn screened_starts(
+    target: &Target,
+    starts: &[Vec<f64>],
+    p: usize,
+    threads: usize,
+) -> Result<(Vec<StartOutcome>, usize, Option<StartResult>), TwinError> {
+    let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
+    let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
+    let first_budget = if screening {
+        screen_budget
+    } else {
+        target.budget
+    };
+    let jobs: Vec<StartJob> = starts.iter().cloned().enumerate().collect();
+    let mut first = run_starts(target, jobs, first_budget, threads)?;
+    let mut outcomes = Vec::new();
+    let mut simulations = 0;
+    let mut finished: Vec<(usize, StartResult)> = Vec::new();
+    if screening {
+        first.sort_by(|a, b| match (&a.1, &b.1) {
+            (Some(x), Some(y)) => x.objective.total_cmp(&y.objective),
+            (Some(_), None) => std::cmp::Ordering::Less,
+            (None, Some(_)) => std::cmp::Ordering::Greater,
+            (None, None) => a.0.cmp(&b.0),
+        });
+        let rest = first.split_off(SCREEN_KEEP.min(first.len()));
+        for (i, res) in rest.into_iter() {
+            if let Some(res) = res {
+                simulations += res.runs;
+                outcomes.push(StartOutcome {
+                    start: i,
+                    neg_log_posterior: res.objective,
+                    evaluations: res.runs,
+                    screened_out: true,
+                });
+            }
+        }
+        let mut spent = std::collections::BTreeMap::new();
+        let jobs: Vec<StartJob> = first
+            .into_iter()
+            .filter_map(|(i, res)| {
+                let res = res?;
+                spent.insert(i, res.runs);
+                // The noise starts again from its prior mean, as every start does: from the
+                // screen's (a poor fit's) larger noise the prior outweighs the data and the
+                // outer iterations end before the fit is done.
+                Some((i, res.z))
+            })
+            .collect();
+        let remaining = target.budget.saturating_sub(screen_budget);
+        for (i, res) in run_starts(target, jobs, remaining, threads)? {
+            if let Some(mut res) = res {
+                res.runs += spent.get(&i).copied().unwrap_or(0);
+                finished.push((i, res));
+            }
+        }
+    } else {
+        finished.extend(first.into_iter().filter_map(|(i, res)| Some((i, res?))));
+    }
+    let mut best: Option<StartResult> = None;
+    for (i, res) in finished {
+        simulations += res.runs;
+        outcomes.push(StartOutcome {
+            start: i,
+            neg_log_posterior: res.objective,
+            evaluations: res.runs,
+            screened_out: false,
+        });
+        if best.as_ref().map_or(true, |b| res.objective < b.objective) {
+            best = Some(res);
+        }
+    }
+    Ok((outcomes, simulations, best))
+}
+
+/// A start: its index and parameters.
+type StartJob = (usize, Vec<f64>);
 
 /// The starts `jobs` within `budget` evaluations each, over `threads` threads (one FMU instance
 /// each), in no particular order.
@@ -689,9 +765,7 @@ fn run_starts(
                             let mut sims = simulators(target, "calibration")?;
                             Ok(chunk
                                 .into_iter()
-                                .map(|(i, z0, s0)| {
-                                    (i, run_start(&mut sims, target, z0, s0, budget))
-                                })
+                                .map(|(i, z0)| (i, run_start(&mut sims, target, z0, budget)))
                                 .collect())
                         },
                     )
@@ -1021,80 +1095,8 @@ pub fn calibrate_records(
             }
         })
         .collect();
-    // Every start for a few iterations, then the best few to their end (the screen: more
-    // starts than that, and a budget above the screen's).
     let threads = setup.threads.clamp(1, starts.len());
-    let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
-    let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
-    let first_budget = if screening {
-        screen_budget
-    } else {
-        target.budget
-    };
-    let jobs: Vec<StartJob> = starts
-        .iter()
-        .cloned()
-        .enumerate()
-        .map(|(i, z0)| (i, z0, None))
-        .collect();
-    let mut first = run_starts(&target, jobs, first_budget, threads)?;
-    let mut outcomes = Vec::new();
-    let mut simulations = 0;
-    let mut finished: Vec<(usize, StartResult)> = Vec::new();
-    if screening {
-        first.sort_by(|a, b| match (&a.1, &b.1) {
-            (Some(x), Some(y)) => x.objective.total_cmp(&y.objective),
-            (Some(_), None) => std::cmp::Ordering::Less,
-            (None, Some(_)) => std::cmp::Ordering::Greater,
-            (None, None) => a.0.cmp(&b.0),
-        });
-        let rest = first.split_off(SCREEN_KEEP.min(first.len()));
-        for (i, res) in rest.into_iter() {
-            if let Some(res) = res {
-                simulations += res.runs;
-                outcomes.push(StartOutcome {
-                    start: i,
-                    neg_log_posterior: res.objective,
-                    evaluations: res.runs,
-                    screened_out: true,
-                });
-            }
-        }
-        let mut spent = std::collections::BTreeMap::new();
-        let jobs: Vec<StartJob> = first
-            .into_iter()
-            .filter_map(|(i, res)| {
-                let res = res?;
-                spent.insert(i, res.runs);
-                // The noise starts again from its prior mean, as every start does: from the
-                // screen's (a poor fit's) larger noise the prior outweighs the data and the
-                // outer iterations end before the fit is done.
-                Some((i, res.z, None))
-            })
-            .collect();
-        let remaining = target.budget.saturating_sub(screen_budget);
-        for (i, res) in run_starts(&target, jobs, remaining, threads)? {
-            if let Some(mut res) = res {
-                res.runs += spent.get(&i).copied().unwrap_or(0);
-                finished.push((i, res));
-            }
-        }
-    } else {
-        finished.extend(first.into_iter().filter_map(|(i, res)| Some((i, res?))));
-    }
-    let mut best: Option<StartResult> = None;
-    for (i, res) in finished {
-        simulations += res.runs;
-        outcomes.push(StartOutcome {
-            start: i,
-            neg_log_posterior: res.objective,
-            evaluations: res.runs,
-            screened_out: false,
-        });
-        if best.as_ref().map_or(true, |b| res.objective < b.objective) {
-            best = Some(res);
-        }
-    }
+    let (mut outcomes, simulations, best) = screened_starts(&target, &starts, p, threads)?;
     outcomes.sort_by_key(|o| o.start);
     let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
 
