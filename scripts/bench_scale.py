@@ -630,6 +630,8 @@ def main() -> None:
     parser.add_argument("--max-seconds", type=float, default=600.0,
                         help="a single run longer than this is stopped, not repeated and shown as '> S s'")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--work", type=Path,
+                        help="keep the buildings, records and twins in this directory (default: a temporary one)")
     args = parser.parse_args()
     args.skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     unknown = args.skip - set(COMMANDS + CASES)
@@ -638,7 +640,11 @@ def main() -> None:
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        bench = Bench(args, Path(tmp), cpus)
+        work = Path(tmp)
+        if args.work:
+            args.work.mkdir(parents=True, exist_ok=True)
+            work = args.work
+        bench = Bench(args, work, cpus)
         for n in args.storeys:
             b1 = bs.building(args.twin, bench.work, n)
             cal_ssp = b1["dir"] / "cal.ssp"
