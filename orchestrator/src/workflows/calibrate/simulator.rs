@@ -139,30 +139,52 @@ impl<'a> Simulator<'a> {
         self.acc_vrs
     }
 
-    fn run(
+    /// Like [`Simulator::record_switched`], but each sample's values of `outputs` go to `each`
+    /// as the run makes them, none kept: for outputs too many to hold (a Jacobian, samples ×
+    /// channels × parameters) that are reduced on the way.
+    pub fn stream_switched(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        switch: u32,
+        outputs: &[u32],
+        each: impl FnMut(&[f64]),
+    ) -> Result<(), TwinError> {
+        self.prepare(vrs, values, Some(switch))?;
+        if self.force.is_empty() {
+            return Ok(());
+        }
+        let (mut system, node) = self.system(outputs)?;
+        let mut stream = Stream {
+            ports: (0..outputs.len()).map(|i| Port::Output(node, i)).collect(),
+            each,
+        };
+        let clock = Clock::new(self.start, self.dt, (self.force.len() - 1) as u64);
+        system
+            .run(clock, &mut [&mut stream], |_, _| {})
+            .map_err(master_error)?;
+        Ok(())
+    }
+
+    /// Reset the instance and initialise it with `vrs` = `values` (and `switch` on).
+    fn prepare(
         &mut self,
         vrs: &[u32],
         values: &[f64],
         switch: Option<u32>,
-        outputs: &[u32],
-        out: &mut [Vec<f64>],
     ) -> Result<(), TwinError> {
-        {
-            let mut inst = self.instance.borrow_mut();
-            inst.reset()?;
-            initialise(self.fmu, &mut inst, self.start, &self.base, |inst| {
-                if let Some(switch) = switch {
-                    inst.set_boolean(&[switch], &[true])?;
-                }
-                Ok(inst.set_real(vrs, values)?)
-            })?;
-        }
-        for o in out.iter_mut() {
-            o.clear();
-        }
-        if self.force.is_empty() {
-            return Ok(());
-        }
+        let mut inst = self.instance.borrow_mut();
+        inst.reset()?;
+        initialise(self.fmu, &mut inst, self.start, &self.base, |inst| {
+            if let Some(switch) = switch {
+                inst.set_boolean(&[switch], &[true])?;
+            }
+            Ok(inst.set_real(vrs, values)?)
+        })
+    }
+
+    /// The master's system: the record's excitation into the instance, `outputs` its ports.
+    fn system(&self, outputs: &[u32]) -> Result<(System, crate::cosim::master::NodeId), TwinError> {
         let mut system = System::new();
         let node = system.add_slave(
             &self.name,
@@ -172,6 +194,25 @@ impl<'a> Simulator<'a> {
         );
         let force = system.add_signal("force", self.force.to_vec());
         system.connect(force, node, 0).map_err(master_error)?;
+        Ok((system, node))
+    }
+
+    fn run(
+        &mut self,
+        vrs: &[u32],
+        values: &[f64],
+        switch: Option<u32>,
+        outputs: &[u32],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), TwinError> {
+        self.prepare(vrs, values, switch)?;
+        for o in out.iter_mut() {
+            o.clear();
+        }
+        if self.force.is_empty() {
+            return Ok(());
+        }
+        let (mut system, node) = self.system(outputs)?;
         let mut recorder = Recorder::with_capacity(
             (0..outputs.len())
                 .map(|i| (i.to_string(), Port::Output(node, i)))
@@ -186,6 +227,21 @@ impl<'a> Simulator<'a> {
             *o = column;
         }
         Ok(())
+    }
+}
+
+/// An observer handing each sample's values to a closure.
+struct Stream<F> {
+    ports: Vec<Port>,
+    each: F,
+}
+
+impl<F: FnMut(&[f64])> crate::cosim::master::Observer for Stream<F> {
+    fn record(&mut self, _time: f64, values: &[f64]) {
+        (self.each)(values);
+    }
+    fn ports(&self) -> &[Port] {
+        &self.ports
     }
 }
 
