@@ -12,6 +12,7 @@
 
 pub mod effects;
 pub mod integrate;
+pub mod kernels;
 pub mod linear;
 pub mod model;
 pub mod piecewise;

@@ -213,6 +213,13 @@ impl LinearStepMap {
         self.rows[r * (self.states + INPUT_COLUMNS) + c]
     }
 
+    /// `Φ`'s row `r` (2N).
+    #[inline]
+    pub fn phi_row(&self, r: usize) -> &[f64] {
+        let width = self.states + INPUT_COLUMNS;
+        &self.rows[r * width..r * width + self.states]
+    }
+
     pub fn fits(&self, params: &ShearParameters, step: f64) -> bool {
         same_step(self.step, step) && self.params == *params
     }

@@ -21,6 +21,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::effects::Effects;
+use crate::kernels::add_rows;
 use crate::linear::{AccelerationRows, LinearStepMap, StepInputs, INPUT_COLUMNS};
 use crate::model::ShearParameters;
 use structure::Excitation;
@@ -46,9 +47,11 @@ pub struct Sensitivities {
     pub states: Vec<f64>,
     #[serde(skip)]
     maps: Option<Box<SensitivityMaps>>,
-    /// The next step's states (reused: a step allocates nothing).
+    /// The next step's states and the step's `[x, u]` (reused: a step allocates nothing).
     #[serde(skip)]
     scratch: Vec<f64>,
+    #[serde(skip)]
+    inputs: Vec<f64>,
     /// The N × 3N outputs for the current state, and the inputs they were computed with.
     #[serde(skip)]
     outputs: Option<(StepInputs, Vec<f64>)>,
@@ -87,30 +90,25 @@ impl Sensitivities {
             inputs.control,
             inputs.control_slope,
         ];
-        // S' = Φ S + Σ_c Φ_θ[·][c] x0[c] + G_θ u, all parameters of a row at a time.
+        // S' = Φ S + Σ_c Φ_θ[·][c] x0[c] + G_θ u, all parameters of a row at a time: row i
+        // is the rows of S times Φ's row i, plus the derivative maps' columns for row i
+        // (contiguous over the parameters) times the state and the inputs.
+        let mut z = std::mem::take(&mut self.inputs);
+        z.clear();
+        z.extend(x0.iter().chain(&u));
         let mut next = std::mem::take(&mut self.scratch);
         next.clear();
         next.resize(states * count, 0.0);
         let s = &self.states;
-        for i in 0..states {
-            let row = &mut next[i * count..(i + 1) * count];
-            for c in 0..states {
-                let a = map.phi(i, c);
-                if a != 0.0 {
-                    for (out, sc) in row.iter_mut().zip(&s[c * count..(c + 1) * count]) {
-                        *out += a * sc;
-                    }
-                }
-            }
-            let d = &maps.derivative[i * width * count..(i + 1) * width * count];
-            for (c, zc) in x0.iter().chain(&u).enumerate() {
-                if *zc != 0.0 {
-                    for (out, dc) in row.iter_mut().zip(&d[c * count..(c + 1) * count]) {
-                        *out += zc * dc;
-                    }
-                }
-            }
+        for (i, row) in next.chunks_exact_mut(count).enumerate() {
+            add_rows(map.phi_row(i), s, row);
+            add_rows(
+                &z,
+                &maps.derivative[i * width * count..(i + 1) * width * count],
+                row,
+            );
         }
+        self.inputs = z;
         self.scratch = std::mem::replace(&mut self.states, next);
     }
 
