@@ -436,13 +436,27 @@ macro_rules! getter {
     };
 }
 
-getter!(
-    get_real,
-    "fmi2GetReal",
-    fmi2Real,
-    VarType::Real,
-    |model, vr| model.get_real(vr)?
-);
+/// # Safety
+/// `vr` and `value` point to `n` elements (or are null when `n == 0`).
+pub unsafe fn get_real<M: CoSimModel>(
+    c: fmi2Component,
+    vr: *const fmi2ValueReference,
+    n: usize,
+    value: *mut fmi2Real,
+) -> fmi2Status {
+    with_instance::<M>(c, "fmi2GetReal", mask::GET, |inst| {
+        // SAFETY: promised by the caller.
+        let (Some(vrs), Some(out)) = (unsafe { c_slice(vr, n) }, unsafe { c_slice_mut(value, n) })
+        else {
+            return refuse("vr or value is null but nvr > 0");
+        };
+        for &vr in vrs {
+            lookup(&inst.model, VarType::Real, vr)?;
+        }
+        inst.model.get_reals(vrs, out)?;
+        Ok(fmi2OK)
+    })
+}
 getter!(
     get_integer,
     "fmi2GetInteger",

@@ -70,6 +70,16 @@ pub trait CoSimModel: Sized + Clone + Serialize + DeserializeOwned + 'static {
     fn get_real(&mut self, vr: u32) -> Result<f64, ModelError>;
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError>;
 
+    /// One `fmi2GetReal` call: `out[i]` the value of `vrs[i]`. By default [`Self::get_real`] one
+    /// by one; a model whose outputs share a computation (every floor's acceleration from one
+    /// solve) does it once per call here, as nothing can change between the values of one call.
+    fn get_reals(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), ModelError> {
+        for (slot, &vr) in out.iter_mut().zip(vrs) {
+            *slot = self.get_real(vr)?;
+        }
+        Ok(())
+    }
+
     fn get_integer(&mut self, vr: u32) -> Result<i32, ModelError> {
         Err(ModelError::UnknownVariable {
             vr,

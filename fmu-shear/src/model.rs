@@ -243,8 +243,16 @@ impl ShearModel {
             out[i] = rhs;
         }
         if self.effects.any_enabled() {
-            let mut g = [0.0; structure::MAX_STOREYS];
-            let g = &mut g[..n];
+            // The effects' forces in a buffer on the stack for the usual buildings (zeroing
+            // one of MAX_STOREYS for three floors was a tenth of a nonlinear step's cost).
+            const ON_STACK: usize = 16;
+            let (mut small, mut large) = ([0.0; ON_STACK], Vec::new());
+            let g: &mut [f64] = if n <= ON_STACK {
+                &mut small[..n]
+            } else {
+                large.resize(n, 0.0);
+                &mut large
+            };
             self.effects.add_forces(&y[..n], &v[..n], g);
             for (o, g) in out.iter_mut().zip(g.iter()) {
                 *o -= g;
@@ -552,6 +560,21 @@ impl CoSimModel for ShearModel {
             }
         };
         Ok(value)
+    }
+
+    /// Every floor's acceleration comes from one evaluation of the equations of motion (the
+    /// effects' forces included): computed once for the call, not once per floor.
+    fn get_reals(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), ModelError> {
+        let mut accelerations: Option<Vec<f64>> = None;
+        for (slot, &vr) in out.iter_mut().zip(vrs) {
+            *slot = match self.index_in(vr, ACC) {
+                Some(i) if sensitivity_index(vr, self.storeys()).is_none() => {
+                    accelerations.get_or_insert_with(|| self.absolute_acceleration())[i]
+                }
+                _ => self.get_real(vr)?,
+            };
+        }
+        Ok(())
     }
 
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {

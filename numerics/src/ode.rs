@@ -72,6 +72,8 @@ pub fn rk4_with_events<X: OdeState, S: AsRef<[f64]>>(
     let n = n.max(1);
     let dt = h / f64::from(n);
     let mut state = x.clone();
+    // The switches at `state`, carried from the sub-step that ended there.
+    let mut at_state = switches(&state);
     for i in 0..n {
         let mut tau = f64::from(i) * dt;
         let end = f64::from(i + 1) * dt;
@@ -81,8 +83,8 @@ pub fn rk4_with_events<X: OdeState, S: AsRef<[f64]>>(
                 break;
             }
             let next = rk4_step(&f, tau, &state, remaining);
-            let (s0, s1) = (switches(&state), switches(&next));
-            let (s0, s1) = (s0.as_ref(), s1.as_ref());
+            let at_next = switches(&next);
+            let (s0, s1) = (at_state.as_ref(), at_next.as_ref());
             // The earliest crossing among the switches that change sign.
             let mut theta = 1.0f64;
             for (j, (&a, &b)) in s0.iter().zip(s1).enumerate() {
@@ -94,10 +96,12 @@ pub fn rk4_with_events<X: OdeState, S: AsRef<[f64]>>(
             }
             if theta >= 1.0 {
                 state = next;
+                at_state = at_next;
                 break;
             }
             // Step to just past the crossing, then go on from there.
             state = rk4_step(&f, tau, &state, theta * remaining);
+            at_state = switches(&state);
             tau += theta * remaining;
         }
     }
