@@ -13,7 +13,9 @@
 //! The damping follows Madsen, Nielsen & Tingleff (*Methods for non-linear least squares
 //! problems*, 2004, algorithm 3.16), scaled by `D = diag(JᵀJ)` as Marquardt's (invariant to the
 //! parameters' scales); the stopping rules are MINPACK's relative reduction (`ftol`) and step
-//! (`xtol`).
+//! (`xtol`), and an absolute floor on the reduction the model predicts (`min_predicted`): where
+//! the cost is a negative log-likelihood, a step that can gain less than a fraction of a nat
+//! moves the parameters by a vanishing share of their posterior width, and costs a run.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -34,6 +36,9 @@ pub struct Settings {
     pub xtol: f64,
     /// Stop after this many rejected trials in a row.
     pub rejections: usize,
+    /// Stop, without trying it, when the step the model predicts gains less than this (in the
+    /// cost's own units; 0: never).
+    pub min_predicted: f64,
 }
 
 impl Default for Settings {
@@ -42,6 +47,7 @@ impl Default for Settings {
             ftol: 1e-9,
             xtol: 1e-9,
             rejections: 25,
+            min_predicted: 0.0,
         }
     }
 }
@@ -94,6 +100,9 @@ pub fn minimize(
                 * (0..p)
                     .map(|i| h[i] * (damping * d[i] * h[i] - g[i]))
                     .sum::<f64>();
+            if predicted < settings.min_predicted && rejected == 0 {
+                break 'outer;
+            }
             let accepted = problem.residuals(&trial).and_then(|r_trial| {
                 let cost_trial = 0.5 * r_trial.norm_squared();
                 (cost_trial.is_finite() && cost_trial < cost).then_some((r_trial, cost_trial))

@@ -561,6 +561,16 @@ impl lm::LeastSquares for Problem<'_, '_> {
     }
 }
 
+/// A fit under noise weights still on their way stops when its next step is predicted to gain
+/// less than this (nats of the negative log posterior): about 0.14 posterior sd along the step.
+pub const COARSE_GAIN: f64 = 1e-2;
+/// The fit under settled noise weights stops below this gain: about 0.004 posterior sd, far
+/// below anything a report shows (the steps it saves each moved the estimates by less).
+pub const FINE_GAIN: f64 = 1e-5;
+/// The noise estimates (log variances) have all but settled when no block's moved by more
+/// than this in an outer iteration.
+const NOISE_NEARLY_SETTLED: f64 = 0.1;
+
 /// Newton on `N s/2 + SSE e^{−s}/2 + (s − μ)²/(2v)`, convex in s.
 fn optimal_log_noise(n: f64, sse: f64, mean: f64, var: f64, start: f64) -> f64 {
     let mut s = start;
@@ -616,7 +626,16 @@ fn run_start<'a>(
     let mut evaluations = 0;
     let mut runs = 0;
     let mut buf: Vec<Vec<f64>> = Vec::new();
-    for _outer in 0..5 {
+    // The noise starts at its prior's mean, usually far from the record's: the fit under those
+    // weights is only a way to the next noise estimate, and stops at a coarse gain
+    // ([`COARSE_GAIN`]); once the noise has all but settled the fit goes on to [`FINE_GAIN`].
+    // The last fit is always a fine one.
+    let mut fine = false;
+    for _outer in 0..6 {
+        let settings = lm::Settings {
+            min_predicted: if fine { FINE_GAIN } else { COARSE_GAIN },
+            ..lm::Settings::default()
+        };
         let mut weights = Vec::with_capacity(target.rows());
         for (&(_, n), sb) in blocks.iter().zip(&s) {
             weights.extend(std::iter::repeat((-sb / 2.0).exp()).take(n));
@@ -632,7 +651,7 @@ fn run_start<'a>(
             budget: budget.saturating_sub(evaluations),
         };
         if let Some(r0) = problem.weighted(&z) {
-            z = lm::minimize(&mut problem, z, r0, lm::Settings::default()).0;
+            z = lm::minimize(&mut problem, z, r0, settings).0;
         }
         evaluations += *problem.evaluations.borrow();
         runs += *problem.runs.borrow();
@@ -645,11 +664,16 @@ fn run_start<'a>(
                 optimal_log_noise(blocks[b].1 as f64, sse[b], means[b], target.noise_var, s[b])
             })
             .collect();
-        let settled = s_new.iter().zip(&s).all(|(a, b)| (a - b).abs() < 1e-3);
+        let moved = s_new
+            .iter()
+            .zip(&s)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         s = s_new;
-        if settled {
+        if moved < 1e-3 && fine {
             break;
         }
+        fine = moved < NOISE_NEARLY_SETTLED;
     }
     let r = raw_residuals(sims, target, &z, &mut buf)?;
     let objective = neg_log_posterior(target, &sse_per_block(&r, &blocks), &s, &z);
