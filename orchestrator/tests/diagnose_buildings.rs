@@ -195,7 +195,11 @@ fn diagnoses_of(building: &Building, cubic_at: u64, weak: usize) {
     let r = diagnose(d, &t, &hidden, "hidden.json");
     assert_eq!(r["action"], "add_physics", "{}", r["reason"]);
     let effects = r["effects"].as_array().expect("effects");
-    assert_eq!(effects[0]["kind"], "cubic", "{effects:?}");
+    assert_eq!(
+        effects[0]["kind"], "cubic",
+        "{effects:?}; not fitted (screened out): {}",
+        r["screened_out"]
+    );
     assert_eq!(
         effects[0]["location"],
         serde_json::json!([cubic_at]),

@@ -229,8 +229,8 @@ pub struct Diagnosis {
     /// Candidates whose fit failed (no start converged, the FMU refused every value): label
     /// and error. They take no part in the decision.
     pub failed_candidates: Vec<(String, String)>,
-    /// Candidates of a taller building's library not fitted (beyond [`super::SCREEN_KEEP`]):
-    /// label and the share of the held-out residual their linearised force leaves
+    /// Candidates of the default library not fitted (at none of the [`super::SCREEN_SITES`]
+    /// best sites): label and the share of the held-out residual their linearised force leaves
     /// ([`super::discover::screen`]); empty when every candidate was fitted.
     pub screened_out: Vec<(String, f64)>,
     pub localisation: Localisation,
