@@ -228,16 +228,21 @@ for path in sys.argv[1:]:
         a = json.loads(line)
         if a["kind"] in ("failing", "recovered", "uncertain", "certain", "gap", "bad_sample"):
             floors = a.get("floors", "")
-            print(f"    alert at {a['time']:7.3f} s: {a['kind']} {floors}")
+            change = a.get("change")
+            located = f" (changed at {change['time']:.2f} s, {change['low']:.2f}-{change['high']:.2f})" if change else ""
+            print(f"    alert at {a['time']:7.3f} s: {a['kind']} {floors}{located}")
         elif a["kind"] == "diagnosis":
             effects = ", ".join(
                 e["label"] + " (" + ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items()) + ")"
                 for e in a.get("effects", []))
             before = max(a["nmse_before"]); after = max(a["nmse_after"])
             print(f"    alert at {a['time']:7.3f} s: diagnosis of the window from {a['window_start']:.3f} s"
-                  f" (run on {a['from']:.2f}-{a['to']:.2f} s, {a['seconds']:.1f} s in the background):"
+                  f" (run on {a['from']:.2f}-{a['to']:.2f} s, {a['samples_used']} samples, {a['seconds']:.1f} s in the background):"
                   f" {a['action']} {effects}; worst-floor NMSE {before:.2f} % -> {after:.3f} %")
-        elif a["kind"] == "end" and a.get("learning"):
+        elif a["kind"] == "end" and a.get("still_failing"):
+            for w in a["still_failing"]:
+                print(f"    end at {a['time']:7.3f} s: still failing since {w['start']:.3f} s {w['floors']} (no recovery)")
+        if a["kind"] == "end" and a.get("learning"):
             l = a["learning"]
             print(f"    corrector: {l['queries']} queries learned, {l['training_points']} training points;"
                   f" worst-floor NMSE over the stream {max(a['nmse']):.2f} %")

@@ -727,9 +727,10 @@ fn a_stream_from_a_broker_survives_the_broker_going_away() {
     assert_eq!(numbered(heard), numbered(from_broker.clone()));
 }
 
-/// A failing window is diagnosed on a thread while the stream goes on: the `diagnosis` alert
-/// names the contact between floors 2 and 3, and it is `twin diagnose`'s answer on the same
-/// samples, whose report is written beside the alerts.
+/// A failing window is diagnosed on a thread while the stream goes on, on the samples after
+/// the change its opening located: the `diagnosis` alert names the contact between floors 2
+/// and 3, and it is `twin diagnose`'s answer on the same samples, whose report is written
+/// beside the alerts.
 #[test]
 fn a_failing_window_is_diagnosed_in_the_background_as_twin_diagnose_would() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -762,12 +763,17 @@ fn a_failing_window_is_diagnosed_in_the_background_as_twin_diagnose_would() {
     let effect = &diagnosis["effects"][0];
     assert_eq!(effect["kind"], "contact", "{diagnosis}");
     assert_eq!(effect["location"], serde_json::json!([2, 3]), "{diagnosis}");
-    // The samples it was run on: the last 20 s (here the whole record) when it started.
+    // The samples it was run on: from the located change (less the 10 s warm-up) to the
+    // stream's end (the window stays open to it: one look).
     let (from, to) = (
         diagnosis["from"].as_f64().expect("from"),
         diagnosis["to"].as_f64().expect("to"),
     );
-    assert_eq!(from, 0.0);
+    let change = failing["change"]["time"]
+        .as_f64()
+        .expect("a located change");
+    assert_eq!(diagnosis["change_time"], failing["change"]["time"]);
+    assert!((from - (change - 10.0)).abs() <= 0.02, "{diagnosis}");
     assert!(
         to > failing["start"].as_f64().expect("start"),
         "{diagnosis}"
@@ -780,17 +786,19 @@ fn a_failing_window_is_diagnosed_in_the_background_as_twin_diagnose_would() {
                 .next()
                 .and_then(|t| t.parse().ok())
                 .expect("time");
-            t <= to + 1e-9
+            from - 1e-9 <= t && t <= to + 1e-9
         }))
         .collect();
     let cut_csv = dir.path().join("cut.csv");
     std::fs::write(&cut_csv, cut.join("\n") + "\n").expect("write");
     let report = dir.path().join("diagnose.json");
+    // Its warm-up before the change left out of the error measures, as `--transient`.
     let status = twin_cmd()
         .args(["diagnose", "--twin"])
         .arg(twin_path())
         .arg("--data")
         .arg(&cut_csv)
+        .args(["--transient", &format!("{}", change - from)])
         .arg("--report")
         .arg(&report)
         .stdout(Stdio::null())
@@ -980,4 +988,168 @@ fn the_corrector_queries_and_learns_online_within_its_budget() {
             f + 1
         );
     }
+}
+
+/// A stream of the hidden-change twin's structure (seed `seed`, its sensor noise, `duration`
+/// s at 51.2 Hz) with the parameter `parameter` (`k2`, `m3`, …) × `factor` from `at` s on
+/// (no change without one), as CSV text.
+fn changed_stream(seed: u64, duration: f64, change: Option<(&str, f64, f64)>) -> String {
+    use orchestrator::synth::{
+        synth_record, Change, ChangeHow, GroundMotion, NoiseLevel, ParamName, Scenario,
+    };
+    let mut s = Scenario {
+        seed,
+        duration,
+        ground: GroundMotion::for_duration(duration),
+        ..Scenario::default()
+    };
+    s.noise.level = NoiseLevel::Sd(vec![HIDDEN_CHANGE_NOISE_SD; 3]);
+    if let Some((parameter, at, factor)) = change {
+        s.changes.push(Change {
+            at,
+            parameter: ParamName::parse(parameter).expect("a parameter"),
+            how: ChangeHow::Factor(factor),
+        });
+    }
+    csv_text(&synth_record(&s).expect("synth").0.measurement)
+}
+
+/// A change time drawn at random (a fixed seed per case) in `from..to` s, on the sample grid.
+fn random_time(seed: u64, from: f64, to: f64) -> f64 {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let t: f64 = rng.gen_range(from..to);
+    (t * 51.2).round() / 51.2
+}
+
+/// A storey's stiffness lost and a floor's mass added at random times: the `failing` alert
+/// locates the change within a second, its interval within 0.1 s of it; the stream then ends
+/// still failing, which the `end` alert says — no `recovered` is written. The same stream
+/// without a change raises nothing. Measured (release): k2 −15 % at 10.449 s located at
+/// 10.449 s [10.430, 10.449]; m3 +20 % at 8.516 s at 8.574 s [8.535, 8.594]; k1 −10 % at
+/// 9.004 s at 9.082 s [9.082, 9.082] — errors 0 to 0.08 s against the 1 s asked, but the
+/// interval can miss the truth by up to 0.08 s (hence the 0.1 s slack): the residual grows
+/// from zero as the two structures' responses part, so the step is a little late and sharp.
+#[test]
+fn a_change_is_located_and_a_stream_that_ends_failing_is_not_recovered() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (case, change) in [("k2", 0.85), ("m3", 1.2), ("k1", 0.9)]
+        .into_iter()
+        .enumerate()
+    {
+        let at = random_time(100 + case as u64, 6.0, 14.0);
+        let csv = dir.path().join(format!("change{case}.csv"));
+        let text = changed_stream(10 + case as u64, at + 8.0, Some((change.0, at, change.1)));
+        std::fs::write(&csv, text).expect("write");
+        let alerts = watch(
+            csv.to_str().expect("utf-8"),
+            None,
+            &dir.path().join(format!("change{case}.jsonl")),
+            &[],
+        );
+        let failing = of_kind(&alerts, "failing");
+        assert!(!failing.is_empty(), "{change:?} at {at}: {alerts:?}");
+        let first = failing[0];
+        let c = &first["change"];
+        let (time, low, high) = (
+            c["time"].as_f64().expect("a change time"),
+            c["low"].as_f64().expect("low"),
+            c["high"].as_f64().expect("high"),
+        );
+        eprintln!(
+            "{change:?} at {at:.3} s: failing from {} (alert at {}), change {time:.3} s [{low:.3}, {high:.3}], error {:+.3} s",
+            first["start"], first["time"], time - at
+        );
+        assert!((time - at).abs() <= 1.0, "{change:?} at {at}: {first}");
+        assert!(
+            low <= at + 0.1 && at - 0.1 <= high,
+            "{change:?} at {at}: {first}"
+        );
+        // No recovery of a structure that stays changed; the end says it still fails.
+        assert!(of_kind(&alerts, "recovered").is_empty(), "{alerts:?}");
+        let end = alerts.last().expect("end");
+        assert_eq!(end["kind"], "end");
+        let still = end["still_failing"].as_array().expect("still failing");
+        assert_eq!(still.len(), 1, "{end}");
+        assert_eq!(
+            still[0]["start"],
+            failing.last().expect("a window")["start"]
+        );
+    }
+    // No change, the same length: no alert at all but the end, nothing still failing.
+    let csv = dir.path().join("none.csv");
+    std::fs::write(&csv, changed_stream(10, 22.0, None)).expect("write");
+    let alerts = watch(
+        csv.to_str().expect("utf-8"),
+        None,
+        &dir.path().join("none.jsonl"),
+        &[],
+    );
+    assert_eq!(alerts.len(), 1, "{alerts:?}");
+    assert_eq!(alerts[0]["still_failing"], serde_json::json!([]));
+}
+
+/// Storey 2 loses 15 % of its stiffness at a random time: the background diagnosis waits for
+/// the samples after the located change and runs on them (not on a window that mixes the two
+/// structures), again as more come, and names recalibration of k2 — never
+/// `update_data_model`.
+///
+/// Not met yet, and over the CI budget: measured with the release build, the change is located
+/// at 19.375 s for 19.316 s, the first look (10 s after it, from a 10 s warm-up) takes 46 s of
+/// work and answers `update_data_model` — recalibration from rest cuts the worst floor's
+/// held-out NMSE from 62.4 % to 11.8 % only, the twin's state at the change being the new
+/// structure's forced response rather than the old one's. The hypothesis "the old structure
+/// until t₀, the new one after" is the diagnosis's to fit.
+#[test]
+#[ignore = "issue 38 (c): update_data_model on the post-change samples; 47 s"]
+fn a_stiffness_loss_mid_stream_is_diagnosed_on_what_came_after() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let at = random_time(200, 10.0, 20.0);
+    let csv = dir.path().join("record.csv");
+    std::fs::write(&csv, changed_stream(20, at + 22.0, Some(("k2", at, 0.85)))).expect("write");
+    let alerts = dir.path().join("alerts.jsonl");
+    let started = Instant::now();
+    let out = twin_cmd()
+        .args(["watch", "--twin"])
+        .arg(twin_path())
+        .arg("--source")
+        .arg(&csv)
+        .arg("--alerts")
+        .arg(&alerts)
+        .output()
+        .expect("twin watch");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let all = read_alerts(&alerts);
+    let diagnoses = of_kind(&all, "diagnosis");
+    for d in &diagnoses {
+        eprintln!(
+            "change at {at:.3}: look {} on {}–{} s ({} samples, {:.1} s after the change at {}): {} {} firm {} ({:.1} s of work)\n  {}",
+            d["round"], d["from"], d["to"], d["samples_used"], d["post_change_seconds"].as_f64().unwrap_or(f64::NAN),
+            d["change_time"], d["action"], d["reason"].as_str().unwrap_or(""), d["firm"], d["seconds"].as_f64().unwrap_or(f64::NAN),
+            d["report"]
+        );
+    }
+    eprintln!("{:.1} s in all", started.elapsed().as_secs_f64());
+    assert!(!diagnoses.is_empty(), "{all:?}");
+    for d in &diagnoses {
+        let change = d["change_time"].as_f64().expect("a change time");
+        assert!((change - at).abs() <= 1.0, "{d}");
+        // The samples it used start the warm-up (10 s) before the change, no earlier.
+        let from = d["from"].as_f64().expect("from");
+        assert!(from >= change - 10.0 - 1e-6, "{d}");
+        assert_ne!(d["action"], "update_data_model", "{d}");
+    }
+    let last = diagnoses.last().expect("a diagnosis");
+    assert_eq!(last["action"], "recalibrate", "{last}");
+    let report: Value = serde_json::from_str(
+        &std::fs::read_to_string(last["report"].as_str().expect("a report")).expect("report"),
+    )
+    .expect("json");
+    let moved = &report["recalibration"]["parameters"][0];
+    assert_eq!(moved["name"], "k2", "{moved}");
+    assert!(of_kind(&all, "recovered").is_empty(), "{all:?}");
 }

@@ -768,6 +768,8 @@ impl Twin {
         options.diagnosis = diagnosis.then_some(DiagnosisOptions {
             record: diagnosis_record.unwrap_or(d.record),
             after: diagnosis_after.unwrap_or(d.after),
+            transient: options.transient,
+            ..d
         });
         options.learning.threshold = query_threshold;
         options.learning.learn = learning;

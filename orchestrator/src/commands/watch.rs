@@ -84,6 +84,10 @@ pub struct WatchArgs {
     /// open (it starts at once when the window closes).
     #[arg(long, default_value_t = DiagnosisOptions::default().after)]
     pub diagnosis_after: f64,
+    /// After a located change: the post-change seconds of the first diagnosis, and the step
+    /// of the next ones while the window stays open (up to 30 s, until two agree).
+    #[arg(long, default_value_t = DiagnosisOptions::default().post)]
+    pub diagnosis_post: f64,
     /// With a GP corrector: query where its latent variance V(f) exceeds this (m²/s⁴);
     /// default: the largest V(f) over the first 100 samples after the transient.
     #[arg(long)]
@@ -148,6 +152,9 @@ impl WatchArgs {
             diagnosis: (!self.no_diagnosis).then_some(DiagnosisOptions {
                 record: self.diagnosis_record,
                 after: self.diagnosis_after,
+                post: self.diagnosis_post,
+                transient: self.transient,
+                ..DiagnosisOptions::default()
             }),
             checkpoint: self.checkpoint.clone(),
             checkpoint_every: self.checkpoint_every,

@@ -95,14 +95,23 @@
     if (a.channels && a.channels.length) parts.push(a.channels.join(", "));
     switch (a.kind) {
       case "failing": case "recovered":
-        if (a.nmse) parts.push(`NMSE ${a.nmse.map((v) => fmt(v, 2)).join(" / ")} %`); break;
-      case "diagnosis": parts.push(a.action || (a.error ? `failed: ${a.error}` : "")); break;
+        if (a.nmse) parts.push(`NMSE ${a.nmse.map((v) => fmt(v, 2)).join(" / ")} %`);
+        if (a.change) parts.push(`changed at ${fmt(a.change.time, 2)} s (${fmt(a.change.low, 2)}–${fmt(a.change.high, 2)})`);
+        break;
+      case "diagnosis":
+        parts.push(a.action || (a.error ? `failed: ${a.error}` : ""));
+        parts.push(`samples ${fmt(a.from, 1)}–${fmt(a.to, 1)} s`);
+        if (a.change_time !== undefined) parts.push(`${fmt(a.post_change_seconds, 1)} s after the change, look ${a.round}${a.firm ? ", firm" : ""}`);
+        break;
+      case "end":
+        parts.push(`${a.samples} samples`);
+        if (a.still_failing && a.still_failing.length) parts.push(`still failing since ${a.still_failing.map((w) => fmt(w.start, 2)).join(", ")} s`);
+        break;
       case "gap": parts.push(`${a.missing} missing`); break;
       case "bad_sample": parts.push(`line ${a.line}: ${a.reason}`); break;
       case "frequency": parts.push(`mode ${a.mode}: ${fmt(a.frequency, 3)} Hz (twin ${fmt(a.twin_frequency, 3)})`); break;
       case "acknowledged": parts.push(`alert ${a.ack}${a.note ? ": " + a.note : ""}`); break;
       case "connection": parts.push(a.state); break;
-      case "end": parts.push(`${a.samples} samples`); break;
       default: break;
     }
     return parts.filter(Boolean).join(" · ");
@@ -152,6 +161,7 @@
     const rows = (d.channels || []).map((c, i) => `${c} ${fmt(nb[i], 3)} → ${fmt(na[i], 3)} %`);
     if (rows.length) body.append(el("p", { "data-field": "nmse" }, `NMSE ${rows.join("; ")}`));
     body.append(el("p", { class: "muted" }, `samples ${fmt(d.from, 1)}–${fmt(d.to, 1)} s, ${fmt(d.seconds, 1)} s of work`));
+    if (d.change_time !== undefined) body.append(el("p", { "data-field": "change" }, `after the change at ${fmt(d.change_time, 2)} s: ${fmt(d.post_change_seconds, 1)} s of it, look ${d.round}${d.firm ? " (firm: the same verdict as the look before)" : ""}`));
     if (d.report) body.append(el("p", { "data-field": "report" }, `report: ${d.report}`));
     if (d.plot) body.append(el("p", { "data-field": "plot" }, `plot: ${d.plot}`));
     $("accept").hidden = !(meta && meta.token && d.action === "add_physics");

@@ -8,6 +8,17 @@
 //! `diagnosis` alert (action, effects, NMSE before and after) and the whole report in a file
 //! beside the alerts, ready for `twin add-physics --diagnosis`.
 //!
+//! A window whose opening located a change ([`super::online::locate_change`]) is diagnosed on
+//! what came after it instead: the samples from the change's time (less a warm-up of
+//! `warmup` s, which the diagnosis leaves out of its error measures, so that it scores only
+//! samples after the change) to now, once `post` seconds of them exist, and again with each
+//! further `post` seconds while the window stays open, up to [`MAX_POST`] s, until two in a
+//! row give the same verdict (the action and where: the parameter recalibration moves most,
+//! the effects, the faulty sensor) — then it is firm. The first look's `post` (10 s by
+//! default, about 20 periods of the paper's building's first mode) is the least that the
+//! candidates' fits need; the repeat is what makes the answer the evidence's rather than the
+//! window's.
+//!
 //! What a checkpoint needs is here too: the kept samples, the due diagnosis, and the running
 //! one's samples, so a restarted watcher runs again what its predecessor had not reported.
 
@@ -20,26 +31,72 @@ use serde::{Deserialize, Serialize};
 
 use ::structure::channel::Channel;
 
+use super::online::ChangePoint;
 use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
-use crate::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
+use crate::workflows::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
+
+/// The most post-change seconds a diagnosis waits for.
+pub const MAX_POST: f64 = 30.0;
 
 /// When and on what the background diagnosis runs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisOptions {
     /// Seconds of samples kept for it.
     pub record: f64,
-    /// Seconds after a window opens that the diagnosis starts if the window is still open.
+    /// Seconds after a window opens that the diagnosis starts if the window is still open
+    /// (a window without a located change).
     pub after: f64,
+    /// Post-change seconds of the first diagnosis after a located change, and the step of
+    /// the next ones.
+    #[serde(default = "default_post")]
+    pub post: f64,
+    /// The comparison's transient (s).
+    #[serde(default)]
+    pub transient: f64,
+    /// Seconds before a located change that its diagnosis starts with, left out of its error
+    /// measures: the twin starts at rest, the structure does not, and with a few % damping
+    /// the difference takes seconds to die out (e^(−ζωt): 2 s leave about half of it on the
+    /// paper's building's first mode, 10 s a twentieth); what is left at the change is the
+    /// difference of two structures' forced responses, a small one.
+    #[serde(default = "default_warmup")]
+    pub warmup: f64,
+}
+
+fn default_warmup() -> f64 {
+    10.0
+}
+
+fn default_post() -> f64 {
+    10.0
 }
 
 impl Default for DiagnosisOptions {
     fn default() -> Self {
         DiagnosisOptions {
-            record: 20.0,
+            record: 45.0,
             after: 5.0,
+            post: default_post(),
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
+            warmup: default_warmup(),
         }
     }
+}
+
+/// A located change being diagnosed while its window stays open.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Episode {
+    pub window_start: f64,
+    pub change: f64,
+    /// The change time's interval's end: samples after it are surely the new structure's.
+    pub change_high: f64,
+    /// Diagnoses started for it so far.
+    pub rounds: u32,
+    /// The last diagnosis's verdict, and whether the one before agreed.
+    pub verdict: Option<String>,
+    pub firm: bool,
+    /// Its window closed (back in band): no further rounds.
+    pub closed: bool,
 }
 
 /// The stream's columns as kept: the excitation and the measured channels; each sample kept
@@ -67,6 +124,16 @@ pub struct Job {
     pub columns: Columns,
     /// The samples, flat ([`Columns`]).
     pub samples: Vec<f64>,
+    /// The located change it diagnoses what came after (None: the window's samples), and
+    /// which look at it this is (1 first).
+    #[serde(default)]
+    pub change: Option<f64>,
+    #[serde(default)]
+    pub round: u32,
+    /// The seconds before the change it starts with, left out of its error measures (None:
+    /// the comparison's transient).
+    #[serde(default)]
+    pub warmup: Option<f64>,
 }
 
 impl Job {
@@ -94,6 +161,9 @@ pub struct Saved {
     pub launched: Option<f64>,
     /// Diagnoses reported so far (they number the report files).
     pub reported: u64,
+    /// The located change being diagnosed.
+    #[serde(default)]
+    pub episode: Option<Episode>,
 }
 
 /// A finished diagnosis.
@@ -102,6 +172,8 @@ pub struct Finished {
     pub result: Result<Diagnosis, String>,
     /// Wall-clock seconds from its start.
     pub seconds: f64,
+    /// Its verdict is the one before's on the same change: firm.
+    pub firm: bool,
 }
 
 pub struct Background {
@@ -159,15 +231,55 @@ impl Background {
         self.saved.kept.clear();
     }
 
-    /// A failing window opened at `time`.
-    pub fn opened(&mut self, window_start: f64, time: f64) {
+    /// A failing window opened at `time`; `change`: the change located behind it.
+    pub fn opened(&mut self, window_start: f64, time: f64, change: Option<ChangePoint>) {
+        if let Some(c) = change {
+            // What came after the change is diagnosed, in rounds (`poll`).
+            if self
+                .saved
+                .due
+                .is_some_and(|(start, _)| start == window_start)
+            {
+                self.saved.due = None;
+            }
+            self.saved.episode = Some(Episode {
+                window_start,
+                change: c.time,
+                change_high: c.high,
+                rounds: 0,
+                verdict: None,
+                firm: false,
+                closed: false,
+            });
+            return;
+        }
         if self.saved.due.is_none() && self.saved.launched != Some(window_start) {
             self.saved.due = Some((window_start, time));
         }
     }
 
+    /// The post-change seconds the next round of `episode` waits for (None: no more).
+    fn next_post(&self, e: &Episode) -> Option<f64> {
+        if e.firm || e.closed {
+            return None;
+        }
+        let post = self.options.post * (e.rounds + 1) as f64;
+        (post <= MAX_POST + 1e-9 || e.rounds == 0).then_some(post.min(MAX_POST))
+    }
+
     /// A window closed: its diagnosis starts now if it was failing, is dropped if not.
     pub fn closed(&mut self, window_start: f64, failing: bool) {
+        if let Some(e) = &mut self.saved.episode {
+            if e.window_start == window_start {
+                // Back in band: one look if none was taken, then no more.
+                let first = e.rounds == 0;
+                e.closed = true;
+                if first && failing {
+                    self.launch_episode(f64::INFINITY);
+                }
+                return;
+            }
+        }
         match self.saved.due {
             Some((start, _)) if start == window_start && !failing => self.saved.due = None,
             Some((start, _)) if start == window_start => self.launch(),
@@ -187,15 +299,42 @@ impl Background {
                 self.launch();
             }
         }
+        if let Some(e) = &self.saved.episode {
+            if let Some(post) = self.next_post(e) {
+                if time - e.change_high >= post {
+                    self.launch_episode(post);
+                }
+            }
+        }
         self.collect(false)
     }
 
-    /// At the stream's end: start what is due and wait for what runs; each finished one.
+    /// At the stream's end: start what is due and wait for what runs; each finished one. A
+    /// located change not yet looked at is diagnosed on what came after it, however little.
     pub fn finish(&mut self) -> Vec<Finished> {
         let mut done = Vec::new();
         loop {
             if self.worker.is_none() && self.saved.due.is_some() {
                 self.launch();
+            }
+            if self.worker.is_none() {
+                // The looks the stream's samples allow that a busy worker held back, each on
+                // its own amount; a change not looked at yet, on what there is.
+                let last = self.saved.kept.back().map(|_| {
+                    let width = self.columns.width();
+                    self.saved.kept[self.saved.kept.len() - width]
+                });
+                let look = match (&self.saved.episode, last) {
+                    (Some(e), Some(last)) => match self.next_post(e) {
+                        Some(post) if last - e.change_high >= post => Some(post),
+                        _ if e.rounds == 0 => Some(f64::INFINITY),
+                        _ => None,
+                    },
+                    _ => None,
+                };
+                if let Some(post) = look {
+                    self.launch_episode(post);
+                }
             }
             match self.collect(true) {
                 Some(f) => done.push(f),
@@ -226,6 +365,45 @@ impl Background {
             dt: self.dt,
             columns: self.columns.clone(),
             samples: self.saved.kept.iter().copied().collect(),
+            change: None,
+            round: 1,
+            warmup: None,
+        };
+        self.saved.running = Some(job.clone());
+        self.saved.launched = Some(window_start);
+        self.start(job);
+    }
+
+    /// The next round of the episode: the samples from its change less the warm-up to `post`
+    /// seconds after the change's interval.
+    fn launch_episode(&mut self, post: f64) {
+        if self.worker.is_some() {
+            return;
+        }
+        let Some(e) = &mut self.saved.episode else {
+            return;
+        };
+        e.rounds += 1;
+        let (window_start, change, round) = (e.window_start, e.change, e.rounds);
+        let until = e.change_high + post;
+        let from = change - self.options.warmup;
+        let width = self.columns.width();
+        let kept = &self.saved.kept;
+        let first = (0..kept.len() / width)
+            .find(|&k| kept[k * width] >= from - 1e-9)
+            .unwrap_or(kept.len() / width);
+        let last = (first..kept.len() / width)
+            .find(|&k| kept[k * width] > until + 1e-9)
+            .unwrap_or(kept.len() / width);
+        let start = kept.get(first * width).copied().unwrap_or(change);
+        let job = Job {
+            window_start,
+            dt: self.dt,
+            columns: self.columns.clone(),
+            samples: kept.range(first * width..last * width).copied().collect(),
+            change: Some(change),
+            round,
+            warmup: Some((change - start).max(self.options.transient)),
         };
         self.saved.running = Some(job.clone());
         self.saved.launched = Some(window_start);
@@ -235,7 +413,10 @@ impl Background {
     fn start(&mut self, job: Job) {
         let (send, receive) = std::sync::mpsc::channel();
         let twin = self.twin.duplicate();
-        let options = self.diagnose.clone();
+        let mut options = self.diagnose.clone();
+        if let Some(w) = job.warmup {
+            options.transient = w;
+        }
         std::thread::spawn(move || {
             let result =
                 record(&job).and_then(|m| diagnose(&twin, &m, &options).map_err(|e| e.to_string()));
@@ -262,12 +443,48 @@ impl Background {
         self.worker = None;
         let job = self.saved.running.take()?;
         self.saved.reported += 1;
+        let mut firm = false;
+        if let (Some(e), Some(_)) = (&mut self.saved.episode, job.change) {
+            if e.window_start == job.window_start {
+                let now = result.as_ref().ok().map(verdict);
+                e.firm = now.is_some() && now == e.verdict;
+                e.verdict = now;
+                firm = e.firm;
+            }
+        }
         Some(Finished {
             job,
             result,
             seconds,
+            firm,
         })
     }
+}
+
+/// A diagnosis's verdict: its action and where (the parameter recalibration moved most, in
+/// posterior sds; the effects; the faulty sensor).
+pub fn verdict(d: &Diagnosis) -> String {
+    let site = match d.action {
+        Action::Recalibrate => d
+            .recalibration
+            .as_ref()
+            .and_then(|r| r.parameters.first())
+            .map(|p| p.name.clone())
+            .unwrap_or_default(),
+        Action::AddPhysics => d
+            .effects
+            .iter()
+            .map(|e| e.name.label.clone())
+            .collect::<Vec<_>>()
+            .join("+"),
+        Action::SensorFault => d
+            .sensor
+            .as_ref()
+            .map(|s| s.channel.clone())
+            .unwrap_or_default(),
+        _ => String::new(),
+    };
+    format!("{}:{site}", d.action.name())
 }
 
 /// A job's samples as a record of the stream's channels (SI) for `diagnose`.

@@ -175,6 +175,13 @@ impl WatchOptions {
                     )));
                 }
             }
+            if !(d.post > 0.0 && d.post <= background::MAX_POST) {
+                return Err(WatchError::Options(format!(
+                    "--diagnosis-post must be a number of seconds in (0, {}], was {}",
+                    background::MAX_POST,
+                    d.post
+                )));
+            }
         }
         if let Some(t) = self.learning.threshold {
             if !(t > 0.0 && t.is_finite()) {
@@ -341,6 +348,9 @@ pub struct Summary {
     pub latency_median_us: f64,
     pub latency_p99_us: f64,
     pub tolerance: f64,
+    /// The failing windows still open when the stream ended (the residual never came back
+    /// into its band: not recovered).
+    pub still_failing: Vec<crate::evaluation::compare::FailingWindow>,
 }
 
 /// What the active-learning supervisor did over the stream.
@@ -602,8 +612,8 @@ struct Alerts {
     file: File,
     /// Alerts with a sequence number up to this are in the file already.
     written: u64,
-    /// The windows (their starts) whose diagnosis the file holds already.
-    diagnosed: Vec<f64>,
+    /// The diagnoses (their window's start and round) the file holds already.
+    diagnosed: Vec<(f64, u32)>,
 }
 
 impl Alerts {
@@ -643,7 +653,10 @@ impl Alerts {
         let diagnosed = alerts
             .iter()
             .filter(|v| v["kind"] == "diagnosis")
-            .filter_map(|v| v["window_start"].as_f64())
+            .filter_map(|v| {
+                let round = v["round"].as_u64().unwrap_or(1) as u32;
+                v["window_start"].as_f64().map(|s| (s, round))
+            })
             .collect();
         Ok(Alerts {
             file,
@@ -668,6 +681,19 @@ impl Alerts {
         self.written = self.written.max(seq);
         Ok(true)
     }
+}
+
+/// Windows as JSON (NaN NMSE as null).
+fn window_values(windows: Vec<crate::evaluation::compare::FailingWindow>) -> Value {
+    Value::Array(
+        windows
+            .into_iter()
+            .map(|w| {
+                json!({"start": w.start, "end": w.end, "floors": w.floors,
+                       "channels": w.channels, "nmse": floats(&w.nmse)})
+            })
+            .collect(),
+    )
 }
 
 /// NaN as JSON null.
@@ -703,6 +729,9 @@ struct Watcher<'a> {
     observer: Option<&'a mut dyn Observer>,
     /// When the checkpoint was last saved.
     saved_at: Option<Instant>,
+    /// Windows open when their segment ended (a gap, the stream's end), for the gap's or the
+    /// end's alert.
+    cut_windows: Vec<crate::evaluation::compare::FailingWindow>,
 }
 
 impl Watcher<'_> {
@@ -867,9 +896,10 @@ impl Watcher<'_> {
                     start,
                     channels,
                     nmse,
+                    change,
                 } => {
                     if let Some(b) = &mut self.background {
-                        b.opened(start, time);
+                        b.opened(start, time, change.clone());
                     }
                     let rolling = self
                         .state
@@ -877,17 +907,25 @@ impl Watcher<'_> {
                         .as_ref()
                         .map_or_else(|| self.nan(), Detector::rolling_nmse);
                     let (channels, floors) = names_and_floors(&self.state.channels, &channels);
+                    let change = change.map(|c| {
+                        json!({"time": c.time, "low": c.low, "high": c.high,
+                               "log_likelihood_ratio": c.log_likelihood_ratio,
+                               "variance_ratio": floats(&c.variance_ratio),
+                               "inflation": c.inflation})
+                    });
                     self.alert(
                         Some(time),
                         "failing",
                         json!({"start": start, "floors": floors, "channels": channels,
-                               "nmse": floats(nmse), "rolling_nmse": floats(rolling)}),
+                               "nmse": floats(nmse), "rolling_nmse": floats(rolling),
+                               "change": change}),
                     )?;
                 }
                 Event::Closed {
                     window,
                     failing,
                     was_opened,
+                    cut,
                 } => {
                     if let Some(b) = &mut self.background {
                         b.closed(window.start, failing);
@@ -900,13 +938,26 @@ impl Watcher<'_> {
                                    "channels": window.channels, "nmse": floats(&window.nmse)}),
                         )?;
                     }
-                    if failing || was_opened {
+                    if cut {
+                        // The segment ended with the window open: no return to the band. The
+                        // gap's or the end's alert carries it.
+                        if failing || was_opened {
+                            self.cut_windows.push(window);
+                        }
+                    } else if failing || was_opened {
+                        let rolling = self
+                            .state
+                            .detector
+                            .as_ref()
+                            .map_or_else(|| self.nan(), Detector::rolling_nmse);
                         self.alert(
                             Some(time),
                             "recovered",
                             json!({"start": window.start, "end": window.end,
                                    "floors": window.floors, "channels": window.channels,
-                                   "nmse": floats(&window.nmse), "withdrawn": !failing}),
+                                   "nmse": floats(&window.nmse), "withdrawn": !failing,
+                                   "in_band_for": self.state.options.merge_gap,
+                                   "rolling_nmse": floats(rolling)}),
                         )?;
                     }
                 }
@@ -1018,11 +1069,12 @@ impl Watcher<'_> {
                 }
                 self.state.gaps += 1;
                 self.state.missing_samples += missing;
+                let cut = window_values(std::mem::take(&mut self.cut_windows));
                 self.alert(
                     Some(time),
                     "gap",
                     json!({"after": last, "missing": missing,
-                           "step": step, "nominal_step": dt}),
+                           "step": step, "nominal_step": dt, "still_failing": cut}),
                 )?;
                 // Re-synchronise: the twin at rest from here, the comparison's transient anew
                 // (and the band's reference, if it was not complete).
@@ -1192,17 +1244,31 @@ impl Watcher<'_> {
             job,
             result,
             seconds,
+            firm,
         } = finished;
         *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
-        if self.alerts.diagnosed.contains(&job.window_start) {
+        if self
+            .alerts
+            .diagnosed
+            .contains(&(job.window_start, job.round))
+        {
             // Reported before a restart.
             return Ok(());
         }
         let (from, to) = job.span();
+        let width = job.columns.width();
+        // The samples it used: all from `from` to `to`; after a located change, those from the
+        // change on are the ones its error measures score.
         let mut body = json!({
             "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
-            "from": from, "to": to, "seconds": seconds,
+            "from": from, "to": to, "samples_used": job.samples.len() / width,
+            "seconds": seconds, "round": job.round,
         });
+        if let (Some(change), Value::Object(m)) = (job.change, &mut body) {
+            m.insert("change_time".into(), json!(change));
+            m.insert("post_change_seconds".into(), json!(to - change));
+            m.insert("firm".into(), json!(firm));
+        }
         match result {
             Ok(d) => {
                 let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
@@ -1236,7 +1302,7 @@ impl Watcher<'_> {
                 }
             }
         }
-        self.alerts.diagnosed.push(job.window_start);
+        self.alerts.diagnosed.push((job.window_start, job.round));
         self.send(&body)
     }
 }
@@ -1499,6 +1565,7 @@ pub fn watch_observed(
             None => None,
         },
         saved_at: None,
+        cut_windows: Vec::new(),
     };
     let names: Vec<String> = channels.iter().map(Channel::name).collect();
     w.observe(|o| o.start(&names, tolerance.value, options.window));
@@ -1663,12 +1730,17 @@ pub fn watch_observed(
         latency_median_us: 1e6 * latency.quantile(0.5),
         latency_p99_us: 1e6 * latency.quantile(0.99),
         tolerance: tolerance.value,
+        still_failing: std::mem::take(&mut w.cut_windows),
     };
     let mut body =
         serde_json::to_value(&summary).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
     if let Value::Object(map) = &mut body {
         map.insert("nmse".into(), floats(&summary.nmse));
         map.insert("tolerance_source".into(), json!(tolerance.source));
+        map.insert(
+            "still_failing".into(),
+            window_values(summary.still_failing.clone()),
+        );
     }
     w.alert(last, "end", body)?;
     w.show_state(this_run, elapsed, true);

@@ -66,17 +66,23 @@ pub fn names_and_floors(channels: &[Channel], positions: &[usize]) -> (Vec<Strin
 pub enum Event {
     /// A window has enough out-of-band samples and is above the tolerance so far.
     /// `channels`: the positions of those that left the band.
+    /// `change`: where the residual's variance changed, located in the samples before
+    /// ([`locate_change`]).
     Opened {
         start: f64,
         channels: Vec<usize>,
         nmse: Vec<f64>,
+        change: Option<ChangePoint>,
     },
-    /// A window closed (no out-of-band sample within the merge gap after its last one).
+    /// A window closed: the residual stayed in its band for the merge gap after its last
+    /// out-of-band sample, or (`cut`) the segment ended (the stream's end, a gap) while it was
+    /// open — that is no return to the band.
     /// `failing`: whether it is a failing window by `compare`'s rule on its whole extent.
     Closed {
         window: FailingWindow,
         failing: bool,
         was_opened: bool,
+        cut: bool,
     },
 }
 
@@ -159,6 +165,133 @@ pub struct Detector {
     scratch: Vec<f64>,
     #[serde(skip)]
     outside: Vec<bool>,
+    /// The last [`CHANGE_LOOKBACK`] seconds after the transient for the change's location:
+    /// time and each channel's squared band-normalised residual (1 + m values a sample).
+    #[serde(default)]
+    recent: VecDeque<f64>,
+    /// The last closed window's end: a change is looked for after it.
+    #[serde(default)]
+    search_from: Option<f64>,
+}
+
+/// Seconds of residuals kept to locate a change in when a window opens.
+pub const CHANGE_LOOKBACK: f64 = 30.0;
+/// Samples each side of a candidate change time at least.
+const CHANGE_MIN_SIDE: usize = 8;
+/// The least log-likelihood ratio (per unit of the correlation's inflation) of a located
+/// change: white residuals without a step give a few units (the largest of many correlated
+/// splits' χ²₁/2), a storey's 10 % stiffness loss hundreds.
+const CHANGE_MIN_LLR: f64 = 10.0;
+/// Half the 95 % quantile of χ² with one degree of freedom: the drop of the log-likelihood
+/// ratio that bounds the change time's interval (before the correlation's inflation).
+const HALF_CHI2_95: f64 = 1.92;
+
+/// Where the residual's variance changed: the generalised likelihood ratio of a variance
+/// step in the band-normalised residuals, maximised over the step's time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChangePoint {
+    /// The first sample after the step (s of the stream).
+    pub time: f64,
+    /// The times whose log-likelihood ratio is within the interval's drop of the largest
+    /// (an approximate 95 % interval, widened by the residuals' correlation).
+    pub low: f64,
+    pub high: f64,
+    /// The largest log-likelihood ratio (summed over the channels).
+    pub log_likelihood_ratio: f64,
+    /// The residual's variance after the step over that before, per channel.
+    pub variance_ratio: Vec<f64>,
+    /// The drop's inflation for the correlated residuals (1: independent samples).
+    pub inflation: f64,
+}
+
+/// Locate a variance step in `u2` (per sample, `m` channels' squared band-normalised
+/// residuals, flat) at the times `time`: for each candidate split `j` (at least
+/// [`CHANGE_MIN_SIDE`] samples each side) the log-likelihood ratio of Gaussian residuals with
+/// one variance before and another after against one throughout, summed over the channels,
+/// `½ Σ_c [n ln(S/n) − j ln(S₀/j) − (n−j) ln(S₁/(n−j))]`. Its interval: the splits within
+/// `1.92 κ` of the largest, κ = 1 + 2 Σ ρ_k, the lag correlations of the after-step squared
+/// residuals (summed over channels) up to the first that is not positive — correlated
+/// samples carry less evidence than their number. None with too few samples, or when the
+/// largest ratio is below [`CHANGE_MIN_LLR`] κ.
+pub fn locate_change(time: &[f64], u2: &[f64], m: usize) -> Option<ChangePoint> {
+    let n = time.len();
+    if m == 0 || n < 2 * CHANGE_MIN_SIDE || u2.len() != n * m {
+        return None;
+    }
+    let floor = 1e-300;
+    let mut prefix = vec![0.0; (n + 1) * m];
+    for k in 0..n {
+        for c in 0..m {
+            prefix[(k + 1) * m + c] = prefix[k * m + c] + u2[k * m + c];
+        }
+    }
+    let xlnx = |count: usize, sum: f64| {
+        let count = count as f64;
+        count * (sum.max(floor) / count).ln()
+    };
+    let llr = |j: usize| -> f64 {
+        (0..m)
+            .map(|c| {
+                let total = prefix[n * m + c];
+                let before = prefix[j * m + c];
+                0.5 * (xlnx(n, total) - xlnx(j, before) - xlnx(n - j, total - before))
+            })
+            .sum()
+    };
+    let splits = CHANGE_MIN_SIDE..=n - CHANGE_MIN_SIDE;
+    let values: Vec<(usize, f64)> = splits.map(|j| (j, llr(j))).collect();
+    let &(best, largest) = values
+        .iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .filter(|v| v.1.is_finite())?;
+    // The after-step residuals' correlation.
+    let after: Vec<f64> = (best..n)
+        .map(|k| (0..m).map(|c| u2[k * m + c]).sum())
+        .collect();
+    let mean = after.iter().sum::<f64>() / after.len() as f64;
+    let centred: Vec<f64> = after.iter().map(|x| x - mean).collect();
+    let var: f64 = centred.iter().map(|x| x * x).sum();
+    let mut inflation = 1.0;
+    if var > 0.0 {
+        for lag in 1..centred.len() / 2 {
+            let rho: f64 = centred[lag..]
+                .iter()
+                .zip(&centred)
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                / var;
+            if rho <= 0.0 {
+                break;
+            }
+            inflation += 2.0 * rho;
+        }
+    }
+    if largest < CHANGE_MIN_LLR * inflation {
+        // No step stands out of chance's.
+        return None;
+    }
+    let drop = HALF_CHI2_95 * inflation;
+    let within: Vec<usize> = values
+        .iter()
+        .filter(|v| v.1 >= largest - drop)
+        .map(|v| v.0)
+        .collect();
+    let (lo, hi) = (within[0], within[within.len() - 1]);
+    let variance_ratio = (0..m)
+        .map(|c| {
+            let before = prefix[best * m + c] / best as f64;
+            let after = (prefix[n * m + c] - prefix[best * m + c]) / (n - best) as f64;
+            after / before.max(floor)
+        })
+        .collect();
+    Some(ChangePoint {
+        time: time[best],
+        low: time[lo],
+        high: time[hi],
+        log_likelihood_ratio: largest,
+        variance_ratio,
+        inflation,
+    })
 }
 
 /// The comparison's rule (as `compare` takes it) and the rolling window's length.
@@ -207,6 +340,8 @@ impl Detector {
             failing_windows: 0,
             scratch: Vec::new(),
             outside: Vec::new(),
+            recent: VecDeque::new(),
+            search_from: None,
             channels,
         }
     }
@@ -232,13 +367,31 @@ impl Detector {
         self.pending.extend(&measured[..m]);
         self.pending.extend(&predicted[..m]);
         self.pending.extend(&self.prefix);
+        let after_transient = time - start >= self.options.transient;
+        if after_transient {
+            self.recent.push_back(time);
+        }
         for f in 0..m {
             let u = (measured[f] - predicted[f]) / self.noise_sd[f];
             self.prefix[f] += if u.is_finite() { u * u } else { f64::MAX / 4.0 };
+            if after_transient {
+                self.recent.push_back(if u.is_finite() {
+                    (u * u).min(1e12)
+                } else {
+                    1e12
+                });
+            }
+        }
+        while self
+            .recent
+            .front()
+            .is_some_and(|&t| time - t > CHANGE_LOOKBACK)
+        {
+            self.recent.drain(..1 + m);
         }
         self.pending.extend(&self.prefix);
         self.count += 1;
-        if time - start >= self.options.transient {
+        if after_transient {
             self.overall.add(measured, predicted);
             self.rolling.push_back(time);
             self.rolling.extend(&measured[..m]);
@@ -267,8 +420,10 @@ impl Detector {
             self.judge(&mut events);
         }
         if let Some(group) = self.group.take() {
-            events.push(self.close(group));
+            events.push(self.close(group, true));
         }
+        self.recent.clear();
+        self.search_from = None;
         self.start_time = None;
         self.count = 0;
         self.judged = 0;
@@ -343,7 +498,7 @@ impl Detector {
         if let Some(group) = &self.group {
             if time - group.last > self.options.merge_gap {
                 let group = self.group.take().expect("an open group");
-                events.push(self.close(group));
+                events.push(self.close(group, false));
             }
         }
         let (measured, predicted) = self.scratch.split_at(m);
@@ -380,6 +535,7 @@ impl Detector {
             return;
         }
         let options = self.options;
+        let mut opened = None;
         if let Some(group) = &mut self.group {
             // Checked while it grows (not at every sample of a long one: the final word is
             // the close's, on the whole window).
@@ -388,17 +544,42 @@ impl Detector {
                 let nmse = group.nmse(group.through_last);
                 if passes(group, &nmse, options.tolerance) {
                     group.alerted = true;
-                    events.push(Event::Opened {
-                        start: group.start,
-                        channels: group.out(),
-                        nmse,
-                    });
+                    opened = Some((group.start, group.out(), nmse));
                 }
             }
         }
+        if let Some((start, channels, nmse)) = opened {
+            let change = self.locate();
+            events.push(Event::Opened {
+                start,
+                channels,
+                nmse,
+                change,
+            });
+        }
     }
 
-    fn close(&mut self, group: Group) -> Event {
+    /// The change behind the window opening now: located in the residuals kept since the
+    /// last closed window (at most [`CHANGE_LOOKBACK`] s), up to the newest sample.
+    pub fn locate(&self) -> Option<ChangePoint> {
+        let m = self.channels.len();
+        let width = 1 + m;
+        let samples = self.recent.len() / width;
+        let from = self.search_from.unwrap_or(f64::NEG_INFINITY);
+        let first = (0..samples)
+            .find(|&k| self.recent[k * width] > from)
+            .unwrap_or(samples);
+        let mut time = Vec::with_capacity(samples - first);
+        let mut u2 = Vec::with_capacity((samples - first) * m);
+        for k in first..samples {
+            time.push(self.recent[k * width]);
+            u2.extend(self.recent.range(k * width + 1..(k + 1) * width));
+        }
+        locate_change(&time, &u2, m)
+    }
+
+    fn close(&mut self, group: Group, cut: bool) -> Event {
+        self.search_from = Some(group.last);
         let nmse = group.nmse(group.through_last);
         let failing = group.outliers >= self.options.min_outliers
             && passes(&group, &nmse, self.options.tolerance);
@@ -416,6 +597,7 @@ impl Detector {
             },
             failing,
             was_opened: group.alerted,
+            cut,
         }
     }
 }
@@ -552,5 +734,40 @@ mod tests {
         assert_eq!(online[1].channels, ["acc2"]);
         assert_eq!(online[2].channels, ["vel4", "acc2"]);
         assert_eq!(online[2].floors, [2, 4]);
+    }
+
+    /// A variance step in white residuals is located within a few samples, inside its interval;
+    /// without a step the largest ratio stays small and the interval is wide.
+    #[test]
+    fn a_variance_step_is_located_with_its_interval() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (n, m, step) = (1000, 2, 613);
+        let time: Vec<f64> = (0..n).map(|k| k as f64 * 0.02).collect();
+        let mut stepped = Vec::new();
+        let mut flat = Vec::new();
+        for k in 0..n {
+            for c in 0..m {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                // Channel 0's sd ×2 after the step, channel 1 unchanged.
+                let sd = if k >= step && c == 0 { 2.0 } else { 1.0 };
+                stepped.push((sd * z).powi(2));
+                flat.push(z * z);
+            }
+        }
+        let found = locate_change(&time, &stepped, m).expect("a change");
+        assert!((found.time - time[step]).abs() <= 10.0 * 0.02, "{found:?}");
+        assert!(
+            found.low <= time[step] && time[step] <= found.high,
+            "{found:?}"
+        );
+        assert!(found.high - found.low < 2.0, "{found:?}");
+        assert!((found.variance_ratio[0] - 4.0).abs() < 1.0, "{found:?}");
+        assert!((found.variance_ratio[1] - 1.0).abs() < 0.3, "{found:?}");
+        // No step: none stands out of chance's (the ratio a few units), the step's is far above.
+        assert_eq!(locate_change(&time, &flat, m), None);
+        assert!(found.log_likelihood_ratio > 100.0, "{found:?}");
+        assert!(locate_change(&time[..10], &stepped[..20], m).is_none());
     }
 }
