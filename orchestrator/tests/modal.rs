@@ -274,9 +274,11 @@ mod records {
             .collect()
     }
 
-    /// Five storeys (3.5–35 Hz, damping 0.3–2.7 %), the force at floor 2 band-limited to
+    /// Five storeys (5.0–33.9 Hz, damping 0.35–2.3 %), the force at floor 2 band-limited to
     /// 0.5–40 Hz (the fifth mode near the band's top), 200 Hz for 300 s, every floor measured,
-    /// 2 % white and 5 % coloured noise. The default LSCF finds every mode and nothing else.
+    /// 2 % white and 5 % coloured noise. The default LSCF finds every mode and nothing else:
+    /// measured within 0.007 %, MAC 1.0000 (bars 0.5 %, 0.95); fitted over 2.98–40.0 Hz (the
+    /// coloured noise takes the coherence below 0.5 under 3 Hz).
     #[test]
     fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
         let (data, exact) = record(
