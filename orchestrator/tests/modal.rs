@@ -151,3 +151,257 @@ fn a_softer_storey_pairs_as_a_frequency_drop_in_units_of_the_sd() {
     assert!(drop.frequency_shift_sd.unwrap() < first.frequency_shift_sd.unwrap() + 1e-12);
     assert_eq!(comparison.mac_matrix.len(), 5);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Modes identified from records unlike the twin's own: band-limited forces, light damping,
+// coloured sensor noise, one accelerometer per run (made by `twin synth`'s generator).
+// ---------------------------------------------------------------------------------------------
+
+mod records {
+    use numerics::modal::{mac, modes, Mode};
+    use orchestrator::record::Measurement;
+    use orchestrator::synth::{synth_record, NoiseLevel, Scenario};
+    use orchestrator::workflows::modal::identify::RecordModes;
+    use orchestrator::workflows::modal::{identify, IdentifyOptions};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    use structure::channel::{Channel, Quantity, Unit};
+    use structure::Excitation;
+
+    /// A record of a uniform building (`mass` kg, `stiffness` N/m, `damping` N s/m per storey)
+    /// under a force at `floor`, band-limited to `band` Hz, measured at `floors` by
+    /// accelerometers with white noise of 2 % of each channel's RMS plus coloured noise (a
+    /// first-order low-pass of white noise, pole 0.98 per sample: most of its power below
+    /// 1 % of the sample rate) of `coloured` × the channel's RMS.
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        storeys: usize,
+        (mass, stiffness, damping): (f64, f64, f64),
+        floor: usize,
+        (rate, duration): (f64, f64),
+        band: (f64, f64),
+        floors: &[usize],
+        coloured: f64,
+        seed: u64,
+    ) -> (Measurement, Vec<Mode>) {
+        let mut s = Scenario::default();
+        s.set_storeys(storeys);
+        s.mass = vec![mass; storeys];
+        s.stiffness = vec![stiffness; storeys];
+        s.damping = vec![damping; storeys];
+        s.excitation = Excitation::Force { floor };
+        s.seed = seed;
+        s.sample_rate = rate;
+        s.duration = duration;
+        s.oversample = 16;
+        s.force.low_hz = band.0;
+        s.force.band_hz = Some(band.1);
+        s.force.rms = 1.0;
+        s.noise.level = NoiseLevel::Fraction(vec![0.02]);
+        s.channels = Some(
+            floors
+                .iter()
+                .map(|&floor| {
+                    (
+                        Channel::Response {
+                            quantity: Quantity::Acceleration,
+                            floor,
+                        },
+                        Unit::MetrePerSecond2,
+                    )
+                })
+                .collect(),
+        );
+        s.validate("test").expect("a valid scenario");
+        let (mut made, _) = synth_record(&s).expect("a record");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed + 1000);
+        for signal in &mut made.measurement.responses {
+            let n = signal.values.len() as f64;
+            let rms = (signal.values.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+            let mut state = 0.0;
+            let drift: Vec<f64> = (0..signal.values.len())
+                .map(|_| {
+                    let w: f64 = StandardNormal.sample(&mut rng);
+                    state = 0.98 * state + w;
+                    state
+                })
+                .collect();
+            let drift_rms = (drift.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+            for (v, d) in signal.values.iter_mut().zip(&drift) {
+                *v += coloured * rms * d / drift_rms;
+            }
+        }
+        let structure = s.structure();
+        let exact = modes(
+            &structure.mass_matrix(),
+            &structure.damping_matrix(),
+            &structure.stiffness_matrix(),
+        )
+        .expect("exact modes");
+        (made.measurement, exact)
+    }
+
+    /// Per exact mode, the found mode nearest in frequency and its relative frequency error;
+    /// and the found modes no exact mode is within 1 % of (spurious).
+    fn matched(found: &[f64], exact: &[Mode]) -> (Vec<(usize, f64)>, Vec<f64>) {
+        let nearest = exact
+            .iter()
+            .map(|e| {
+                found
+                    .iter()
+                    .enumerate()
+                    .map(|(i, f)| (i, f / e.frequency - 1.0))
+                    .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                    .unwrap_or((usize::MAX, f64::INFINITY))
+            })
+            .collect();
+        let spurious = found
+            .iter()
+            .copied()
+            .filter(|f| exact.iter().all(|e| (f / e.frequency - 1.0).abs() > 0.01))
+            .collect();
+        (nearest, spurious)
+    }
+
+    fn lscf_frequencies(found: &RecordModes) -> Vec<f64> {
+        found
+            .input_output
+            .as_ref()
+            .expect("LSCF ran")
+            .modes
+            .iter()
+            .map(|m| m.identified.frequency)
+            .collect()
+    }
+
+    /// Five storeys (5.0–33.9 Hz, damping 0.35–2.3 %), the force at floor 2 band-limited to
+    /// 0.5–40 Hz (the fifth mode near the band's top), 200 Hz for 300 s, every floor measured,
+    /// 2 % white and 5 % coloured noise. The default LSCF finds every mode and nothing else:
+    /// measured within 0.007 %, MAC 1.0000 (bars 0.5 %, 0.95); fitted over 2.98–40.0 Hz (the
+    /// coloured noise takes the coherence below 0.5 under 3 Hz).
+    #[test]
+    fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
+        let (data, exact) = record(
+            5,
+            (5.2, 64_000.0, 14.0),
+            2,
+            (200.0, 300.0),
+            (0.5, 40.0),
+            &[1, 2, 3, 4, 5],
+            0.05,
+            11,
+        );
+        let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        println!("band {:?}", io.band);
+        for e in &exact {
+            println!("exact {:.4} Hz ζ {:.3} %", e.frequency, 100.0 * e.damping);
+        }
+        for m in &io.modes {
+            println!(
+                "LSCF {:.4} Hz ζ {:.3} % ± {:.3} %",
+                m.identified.frequency,
+                100.0 * m.identified.damping,
+                100.0 * m.identified.damping_sd
+            );
+        }
+        for m in &found.ssi.modes {
+            println!(
+                "SSI {:.4} Hz ζ {:.3} %",
+                m.identified.frequency,
+                100.0 * m.identified.damping
+            );
+        }
+        let (nearest, spurious) = matched(&lscf_frequencies(&found), &exact);
+        for ((i, error), e) in nearest.iter().zip(&exact) {
+            let m = &io.modes[*i];
+            let shape = mac(&m.displacement_shape, &e.shape);
+            println!(
+                "{:.4} Hz: {:+.4} %, MAC {shape:.5}",
+                e.frequency,
+                100.0 * error
+            );
+            assert!(error.abs() < 0.005, "{} Hz: {error}", e.frequency);
+            assert!(shape > 0.95, "{} Hz: MAC {shape}", e.frequency);
+        }
+        assert!(spurious.is_empty(), "spurious {spurious:?}");
+        assert_eq!(io.modes.len(), exact.len());
+    }
+
+    /// A laboratory frame like the Swansea rig of `shared/data/frf` (three storeys of 5.2 kg,
+    /// storey stiffness 52.5 kN/m: 7.1, 19.9 and 28.7 Hz; damping 0.4–1.6 %), a shaker at
+    /// floor 1 band-limited to 1–100 Hz, 500 Hz for 30 s per run, one accelerometer moved
+    /// floor to floor over three runs, 2 % white and 5 % coloured noise. Each run alone gives
+    /// no mode the structure lacks and modes 2 and 3 within 1 %; the three runs together (a
+    /// roving test, merged through the measured force) give the three modes with shapes at the
+    /// three floors: measured +0.16, +0.010, +0.013 %, MAC 0.973, 0.9989, 0.9997 (bars 1 %,
+    /// 0.95).
+    #[test]
+    fn a_roving_accelerometer_gives_every_mode_and_its_shape_at_every_floor() {
+        let runs: Vec<(Measurement, Vec<Mode>)> = (1..=3)
+            .map(|floor| {
+                record(
+                    3,
+                    (5.201, 52_460.0, 10.0),
+                    1,
+                    (500.0, 30.0),
+                    (1.0, 100.0),
+                    &[floor],
+                    0.05,
+                    20 + floor as u64,
+                )
+            })
+            .collect();
+        let exact = runs[0].1.clone();
+        for e in &exact {
+            println!("exact {:.4} Hz ζ {:.3} %", e.frequency, 100.0 * e.damping);
+        }
+        for (data, _) in &runs {
+            let found = identify(std::slice::from_ref(data), &IdentifyOptions::default())
+                .expect("identified");
+            let frequencies = lscf_frequencies(&found);
+            println!(
+                "{}: LSCF {frequencies:.4?} over {:?}; SSI-COV {:.4?}",
+                data.responses[0].channel.name(),
+                found.input_output.as_ref().and_then(|m| m.band),
+                found
+                    .ssi
+                    .modes
+                    .iter()
+                    .map(|m| m.identified.frequency)
+                    .collect::<Vec<_>>()
+            );
+            let (nearest, spurious) = matched(&frequencies, &exact);
+            // Modes 2 and 3 in every run. Mode 1 (0.43 %: a quarter of a 0.24 Hz bin wide)
+            // is in every run's diagram, within 0.4 % at most orders, but its leakage-made
+            // damping (0.9–2 %) jumps by more than the 5 % damping tolerance between orders,
+            // so runs 2 and 3 do not make it a mode alone: measured +0.35 %, missed, missed.
+            for ((_, error), e) in nearest.iter().zip(&exact).skip(1) {
+                assert!(error.abs() < 0.01, "{} Hz: {error}", e.frequency);
+            }
+            assert!(spurious.is_empty(), "spurious {spurious:?}");
+        }
+        let data: Vec<Measurement> = runs.into_iter().map(|(d, _)| d).collect();
+        let found = identify(&data, &IdentifyOptions::default()).expect("a roving test");
+        assert_eq!(found.floors, vec![1, 2, 3]);
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        assert_eq!(
+            io.modes.len(),
+            exact.len(),
+            "{:?}",
+            lscf_frequencies(&found)
+        );
+        for (m, e) in io.modes.iter().zip(&exact) {
+            let error = m.identified.frequency / e.frequency - 1.0;
+            let shape = mac(&m.displacement_shape, &e.shape);
+            println!(
+                "roving: {:.4} Hz ({:+.4} %), ζ {:.3} %, MAC {shape:.5}",
+                m.identified.frequency,
+                100.0 * error,
+                100.0 * m.identified.damping
+            );
+            assert!(error.abs() < 0.01, "{} Hz: {error}", e.frequency);
+            assert!(shape >= 0.95, "{} Hz: MAC {shape}", e.frequency);
+        }
+    }
+}

@@ -29,6 +29,52 @@ pub struct LscfOptions {
     pub min_order: usize,
     pub max_order: usize,
     pub order_step: usize,
+    /// How much each bin of each output counts in the fit.
+    #[serde(default)]
+    pub weighting: Weighting,
+}
+
+/// The weight of each FRF bin in LSCF's least squares (applied to the linearised residual
+/// `N_o − H_o D`, so the normal equations carry its square).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Weighting {
+    /// Every bin alike; each output scaled by its rms FRF over the band, so outputs of
+    /// different size or unit count alike.
+    Uniform,
+    /// Each bin by its coherence γ² (each output scaled as for `Uniform`): bins where the
+    /// response is not explained by the force (noise, a band the force does not reach) count
+    /// for little.
+    #[default]
+    Coherence,
+    /// Each bin by the inverse of H1's variance, `σ²_H ≈ |H|² (1 − γ²) / (2 n_d γ²)` (n_d the
+    /// segments averaged; the relative variance floored at [`VARIANCE_FLOOR`]): the maximum
+    /// likelihood weighting when the FRF's errors are random.
+    Variance,
+}
+
+/// The least relative variance of an FRF bin under [`Weighting::Variance`]: a coherence of
+/// 1 (a noise-free record) would otherwise give a bin infinite weight.
+pub const VARIANCE_FLOOR: f64 = 1e-4;
+
+impl Weighting {
+    pub fn name(self) -> &'static str {
+        match self {
+            Weighting::Uniform => "uniform",
+            Weighting::Coherence => "coherence",
+            Weighting::Variance => "variance",
+        }
+    }
+
+    pub fn parse(text: &str) -> Option<Weighting> {
+        [
+            Weighting::Uniform,
+            Weighting::Coherence,
+            Weighting::Variance,
+        ]
+        .into_iter()
+        .find(|w| w.name() == text)
+    }
 }
 
 impl LscfOptions {
@@ -39,6 +85,7 @@ impl LscfOptions {
             min_order: 2,
             max_order: 40,
             order_step: 2,
+            weighting: Weighting::default(),
         }
     }
 
@@ -144,10 +191,12 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
         })
         .collect();
     let outputs = frf.response.len();
-    // R, and per output S_o and T_o, at the largest order; each order takes the leading block.
-    // R_jm = Re Σ conj(Ω^j) Ω^m; S_jm = Re Σ conj(Ω^j) (−H Ω^m); T_jm = Re Σ |H|² conj(Ω^j) Ω^m.
+    let weights = bin_weights(frf, &bins, options.weighting);
+    // Per output R_o, S_o and T_o at the largest order; each order takes the leading block.
+    // With w the squared weight: R_jm = Re Σ w conj(Ω^j) Ω^m; S_jm = Re Σ w conj(Ω^j) (−H Ω^m);
+    // T_jm = Re Σ w |H|² conj(Ω^j) Ω^m.
     let size = max + 1;
-    let mut r = DMatrix::<f64>::zeros(size, size);
+    let mut r = vec![DMatrix::<f64>::zeros(size, size); outputs];
     let mut s = vec![DMatrix::<f64>::zeros(size, size); outputs];
     let mut t = vec![DMatrix::<f64>::zeros(size, size); outputs];
     for (b, (k, _)) in bins.iter().enumerate() {
@@ -156,11 +205,12 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
             let pj = p[j].conj();
             for m in 0..size {
                 let basis = pj * p[m];
-                r[(j, m)] += basis.re;
                 for o in 0..outputs {
+                    let w = weights[o][b];
                     let h = frf.response[o][*k];
-                    s[o][(j, m)] -= (basis * h).re;
-                    t[o][(j, m)] += basis.re * h.norm_sqr();
+                    r[o][(j, m)] += w * basis.re;
+                    s[o][(j, m)] -= w * (basis * h).re;
+                    t[o][(j, m)] += w * basis.re * h.norm_sqr();
                 }
             }
         }
@@ -169,16 +219,18 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
     let mut order = options.min_order;
     while order <= max {
         let n = order + 1;
-        let r_n = r.view((0, 0), (n, n)).into_owned();
-        let r_chol = r_n
-            .clone()
-            .cholesky()
-            .ok_or(IdentificationError::Numerical {
-                what: "LSCF",
-                why: format!("the basis' normal matrix of order {order} is singular"),
-            })?;
         let mut reduced = DMatrix::<f64>::zeros(n, n);
         for o in 0..outputs {
+            let r_chol = r[o].view((0, 0), (n, n)).into_owned().cholesky().ok_or(
+                IdentificationError::Numerical {
+                    what: "LSCF",
+                    why: format!(
+                        "the basis' normal matrix of order {order} (output {}) is singular: \
+                         too few bins of weight in the band",
+                        o + 1
+                    ),
+                },
+            )?;
             let s_n = s[o].view((0, 0), (n, n)).into_owned();
             reduced += t[o].view((0, 0), (n, n)) - s_n.transpose() * r_chol.solve(&s_n);
         }
@@ -221,6 +273,39 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
         order += options.order_step;
     }
     Ok(orders)
+}
+
+/// The squared weight of each band bin (`bins`' order) of each output under `weighting`.
+fn bin_weights(frf: &Frf, bins: &[(usize, f64)], weighting: Weighting) -> Vec<Vec<f64>> {
+    let segments = frf.segments.max(1) as f64;
+    frf.response
+        .iter()
+        .zip(&frf.coherence)
+        .map(|(h, coherence)| {
+            let power =
+                bins.iter().map(|(k, _)| h[*k].norm_sqr()).sum::<f64>() / bins.len().max(1) as f64;
+            let scale = if power > 0.0 { 1.0 / power } else { 1.0 };
+            bins.iter()
+                .map(|(k, _)| {
+                    let g = coherence.get(*k).copied().unwrap_or(1.0).clamp(0.0, 1.0);
+                    match weighting {
+                        Weighting::Uniform => scale,
+                        Weighting::Coherence => scale * g,
+                        Weighting::Variance => {
+                            let size = h[*k].norm_sqr();
+                            if g <= 0.0 || size <= 0.0 {
+                                0.0
+                            } else {
+                                let relative =
+                                    ((1.0 - g) / (2.0 * segments * g)).max(VARIANCE_FLOOR);
+                                1.0 / (relative * size)
+                            }
+                        }
+                    }
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// The residues of the poles `eigenvalues` (rad/s, positive imaginary part) in every output of

@@ -306,6 +306,119 @@ pub fn select_modes(
     Ok(modes)
 }
 
+/// Why a stable, physical-looking mode is not reported as a mode of the structure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rejection {
+    /// Within [`ScreenOptions::edge`] of an edge of the band the measured force excites: the
+    /// force's spectrum falling off, which an output-only method (and a fit of the FRF near
+    /// where it ends) reads as a pole.
+    ExcitationEdge,
+    /// Outside the band the measured force excites: nothing there was driven to respond.
+    OutsideExcitation,
+    /// Its shape is one channel (of at least [`ONE_CHANNEL_AMONG`]): the largest component
+    /// holds [`ScreenOptions::one_channel`] of the shape's power or more — noise, or a
+    /// sensor's own resonance, not a mode of a frame whose floors move together.
+    OneChannel,
+}
+
+impl Rejection {
+    pub fn reason(self) -> &'static str {
+        match self {
+            Rejection::ExcitationEdge => "at the edge of the force's band (excitation)",
+            Rejection::OutsideExcitation => "outside the force's band (excitation)",
+            Rejection::OneChannel => "its shape is one channel",
+        }
+    }
+}
+
+/// The fewest channels at which a one-channel shape is rejected.
+pub const ONE_CHANNEL_AMONG: usize = 3;
+
+/// What [`screen_modes`] knows of the excitation, and its thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ScreenOptions {
+    /// Hz: the band the measured force excites (None: not measured, an ambient record).
+    pub excited: Option<(f64, f64)>,
+    /// Whether each end of `excited` is an edge (the force's power falls off there), rather
+    /// than the end of the record's band.
+    pub edges: (bool, bool),
+    /// Relative distance from an edge within which a mode is the excitation's.
+    pub edge: f64,
+    /// The share of a shape's power in its largest component that makes it one channel.
+    pub one_channel: f64,
+}
+
+impl Default for ScreenOptions {
+    /// No measured force; 5 % from an edge; 90 % of the power in one channel.
+    fn default() -> Self {
+        ScreenOptions {
+            excited: None,
+            edges: (false, false),
+            edge: 0.05,
+            one_channel: 0.9,
+        }
+    }
+}
+
+impl ScreenOptions {
+    pub fn validate(&self) -> Result<(), IdentificationError> {
+        fraction("distance from the force's band edge", self.edge)?;
+        fraction("one channel's share of a shape", self.one_channel)
+    }
+}
+
+/// A mode set aside by [`screen_modes`], with the reason.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RejectedMode {
+    #[serde(flatten)]
+    pub mode: IdentifiedMode,
+    pub rejection: Rejection,
+    pub reason: String,
+}
+
+/// Splits `modes` into those of the structure and those set aside as the excitation's or a
+/// single channel's ([`Rejection`]), each list by ascending frequency.
+pub fn screen_modes(
+    modes: Vec<IdentifiedMode>,
+    options: &ScreenOptions,
+) -> (Vec<IdentifiedMode>, Vec<RejectedMode>) {
+    let mut kept = Vec::new();
+    let mut rejected = Vec::new();
+    for mode in modes {
+        let f = mode.frequency;
+        let near = |edge: f64| relative(f, edge) <= options.edge;
+        let rejection = match options.excited {
+            Some((low, high))
+                if (options.edges.0 && near(low)) || (options.edges.1 && near(high)) =>
+            {
+                Some(Rejection::ExcitationEdge)
+            }
+            Some((low, high)) if (options.edges.0 && f < low) || (options.edges.1 && f > high) => {
+                Some(Rejection::OutsideExcitation)
+            }
+            _ => None,
+        }
+        .or_else(|| {
+            let power: f64 = mode.shape.iter().map(|v| v.norm_sqr()).sum();
+            let largest = mode.shape.iter().map(|v| v.norm_sqr()).fold(0.0, f64::max);
+            (mode.shape.len() >= ONE_CHANNEL_AMONG
+                && power > 0.0
+                && largest >= options.one_channel * power)
+                .then_some(Rejection::OneChannel)
+        });
+        match rejection {
+            None => kept.push(mode),
+            Some(rejection) => rejected.push(RejectedMode {
+                reason: rejection.reason().to_owned(),
+                mode,
+                rejection,
+            }),
+        }
+    }
+    (kept, rejected)
+}
+
 fn median(values: &mut [f64]) -> f64 {
     values.sort_by(f64::total_cmp);
     let n = values.len();
@@ -422,6 +535,53 @@ mod tests {
         assert_eq!(modes[0].orders.len(), 7);
         assert!(modes[0].mpc > 0.999 && modes[0].mpd < 1e-6);
         assert!(modes[0].shape_sd.iter().all(|s| *s < 1e-12));
+    }
+
+    /// A mode at the force's upper edge, one above the force's band and one whose shape is a
+    /// single channel are set aside with their reasons; the others, and every mode when the
+    /// force was not measured but for the one-channel shape, are kept.
+    #[test]
+    fn the_excitations_modes_and_one_channel_shapes_are_set_aside() {
+        let mode = |frequency: f64, shape: &[f64]| IdentifiedMode {
+            frequency,
+            frequency_sd: 0.0,
+            damping: 0.01,
+            damping_sd: 0.0,
+            shape: shape.iter().map(|&v| Complex::new(v, 0.0)).collect(),
+            shape_sd: vec![0.0; shape.len()],
+            mpc: 1.0,
+            mpd: 0.0,
+            orders: vec![],
+        };
+        let modes = vec![
+            mode(3.0, &[0.5, 0.9, 1.0]),
+            mode(9.0, &[1.0, 0.1, -0.2]),
+            mode(12.0, &[1.0, -0.5, 0.8]),
+            mode(39.0, &[1.0, 0.6, 0.3]),
+            mode(60.0, &[0.2, 1.0, 0.4]),
+        ];
+        let options = ScreenOptions {
+            excited: Some((0.5, 40.0)),
+            edges: (true, true),
+            ..ScreenOptions::default()
+        };
+        let (kept, rejected) = screen_modes(modes.clone(), &options);
+        let frequencies = |m: &[IdentifiedMode]| m.iter().map(|m| m.frequency).collect::<Vec<_>>();
+        assert_eq!(frequencies(&kept), vec![3.0, 12.0]);
+        let why: Vec<(f64, Rejection)> = rejected
+            .iter()
+            .map(|r| (r.mode.frequency, r.rejection))
+            .collect();
+        assert_eq!(
+            why,
+            vec![
+                (9.0, Rejection::OneChannel),
+                (39.0, Rejection::ExcitationEdge),
+                (60.0, Rejection::OutsideExcitation)
+            ]
+        );
+        let (kept, _) = screen_modes(modes, &ScreenOptions::default());
+        assert_eq!(frequencies(&kept), vec![3.0, 12.0, 39.0, 60.0]);
     }
 
     #[test]

@@ -31,14 +31,17 @@ pub struct ModalArgs {
     /// Draws from the posterior that check the linearised sds (0: no check).
     #[arg(long, default_value_t = ModalOptions::default().samples)]
     pub samples: usize,
-    /// A record (CSV) to identify the modes of; repeat for several runs of one test. With
-    /// --plot, P.svg is the stabilisation diagram over the spectrum and P-frf.svg the FRFs.
+    /// A record (CSV) to identify the modes of; repeat for several runs of one test (the same
+    /// channels, or — a roving test — each with the measured force and its own response
+    /// channels: their FRFs join into one). With --plot, P.svg is the stabilisation diagram
+    /// over the spectrum and P-frf.svg the FRFs.
     #[arg(long, value_name = "D.csv")]
     pub data: Vec<PathBuf>,
     /// Samples per Welch segment (FRF, spectrum); default: a power of two giving 12 segments.
     #[arg(long)]
     pub segment: Option<usize>,
-    /// The band LSCF fits, LOW:HIGH Hz; default: up to 0.8 × Nyquist.
+    /// The band LSCF fits, LOW:HIGH Hz; default: where the force has power and the coherence
+    /// reaches 0.5, at most up to 0.8 × Nyquist.
     #[arg(long, value_name = "LOW:HIGH", value_parser = parse_band)]
     pub band: Option<(f64, f64)>,
     /// The largest model order of both methods (even).
@@ -277,6 +280,15 @@ fn print_method(method: &MethodModes) {
             id.mpd,
             id.orders.len(),
             shape.join(" ")
+        );
+    }
+    for r in &method.rejected {
+        println!(
+            "    set aside: {:.4} Hz  ζ {:.4} %  MPC {:.3}: {}",
+            r.mode.frequency,
+            100.0 * r.mode.damping,
+            r.mode.mpc,
+            r.reason
         );
     }
 }

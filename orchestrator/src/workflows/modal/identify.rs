@@ -9,11 +9,12 @@ use structure::channel::{Channel, Quantity};
 
 use super::pair::ObservedMode;
 use crate::record::{AmbientRecord, Measurement, Signal};
-use numerics::modal::lscf::{lscf, LscfOptions};
+use numerics::modal::lscf::{lscf, LscfOptions, Weighting};
 use numerics::modal::spectral::{Run, Welch, MIN_SEGMENT};
 use numerics::modal::ssi::{ssi_cov, SsiOptions};
 use numerics::modal::stabilisation::{
-    select_modes, IdentifiedMode, SelectionOptions, StabilisationDiagram, StabilityTolerances,
+    screen_modes, select_modes, IdentifiedMode, RejectedMode, ScreenOptions, SelectionOptions,
+    StabilisationDiagram, StabilityTolerances,
 };
 use numerics::modal::{Complex, IdentificationError};
 
@@ -46,6 +47,11 @@ pub struct IdentifyOptions {
     pub block_rows: Option<usize>,
     pub stability: StabilityTolerances,
     pub selection: SelectionOptions,
+    /// What sets an identified mode aside as not the structure's (the excitation's band is
+    /// filled in from the record's force).
+    pub screen: ScreenOptions,
+    /// How LSCF weights the FRF's bins.
+    pub weighting: Weighting,
     /// Whether to run the input–output method when the excitation has power.
     pub input_output: bool,
 }
@@ -64,6 +70,8 @@ impl Default for IdentifyOptions {
             block_rows: None,
             stability: StabilityTolerances::default(),
             selection: SelectionOptions::default(),
+            screen: ScreenOptions::default(),
+            weighting: Weighting::default(),
             input_output: true,
         }
     }
@@ -99,6 +107,7 @@ impl IdentifyOptions {
         self.stability
             .validate()
             .and_then(|()| self.selection.validate())
+            .and_then(|()| self.screen.validate())
             .map_err(|e| IdentifyError::Options(e.to_string()))
     }
 
@@ -158,6 +167,8 @@ pub struct MethodModes {
     pub band: Option<(f64, f64)>,
     pub diagram: StabilisationDiagram,
     pub modes: Vec<RecordMode>,
+    /// Modes the diagram holds that are not the structure's, each with its reason.
+    pub rejected: Vec<RejectedMode>,
 }
 
 /// Everything identified from a record.
@@ -218,19 +229,27 @@ impl RunView<'_> {
     }
 }
 
-/// Every run has the first's response channels, in its order, its sampling interval, and an
-/// excitation if the first has one.
-fn check_runs(runs: &[RunView<'_>]) -> Result<(), IdentifyError> {
+/// Every run has the first's sampling interval, and its response channels in its order and
+/// an excitation if the first has one — or, a roving test, every run has a measured
+/// excitation (the same channel) and its own response channels: Ok(true).
+fn check_runs(runs: &[RunView<'_>]) -> Result<bool, IdentifyError> {
     let first = runs
         .first()
         .ok_or_else(|| IdentifyError::Options("no record given".into()))?;
+    let roving = runs.iter().all(|r| {
+        r.excitation.map(|s| s.channel) == first.excitation.map(|s| s.channel)
+            && r.excitation.is_some()
+    }) && runs[1..]
+        .iter()
+        .any(|r| r.channel_names() != first.channel_names());
     for run in &runs[1..] {
         let err = |message: String| IdentifyError::Record {
             path: run.path.display().to_string(),
             message,
         };
-        if run.channel_names() != first.channel_names()
-            || run.excitation.map(|s| s.channel) != first.excitation.map(|s| s.channel)
+        if !roving
+            && (run.channel_names() != first.channel_names()
+                || run.excitation.map(|s| s.channel) != first.excitation.map(|s| s.channel))
         {
             let names = |r: &RunView<'_>| {
                 r.excitation
@@ -241,7 +260,8 @@ fn check_runs(runs: &[RunView<'_>]) -> Result<(), IdentifyError> {
                     .join(", ")
             };
             return Err(err(format!(
-                "its channels ({}) differ from {}'s ({}): runs of one test share their channels",
+                "its channels ({}) differ from {}'s ({}): runs of one test share their \
+                 channels, or (a roving test) each measures the same excitation",
                 names(run),
                 first.path.display(),
                 names(first)
@@ -256,7 +276,22 @@ fn check_runs(runs: &[RunView<'_>]) -> Result<(), IdentifyError> {
             )));
         }
     }
-    Ok(())
+    Ok(roving)
+}
+
+/// The response channels of every run, each once, in the order they first appear; per
+/// channel, the (run, index) pairs that measured it.
+fn all_channels(runs: &[RunView<'_>]) -> Vec<(Channel, Vec<(usize, usize)>)> {
+    let mut all: Vec<(Channel, Vec<(usize, usize)>)> = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        for (i, signal) in run.responses.iter().enumerate() {
+            match all.iter_mut().find(|(c, _)| *c == signal.channel) {
+                Some((_, at)) => at.push((r, i)),
+                None => all.push((signal.channel, vec![(r, i)])),
+            }
+        }
+    }
+    all
 }
 
 /// Identifies the modes of `runs` (one record, or several runs of one test).
@@ -298,7 +333,7 @@ fn identify_runs(
     options: &IdentifyOptions,
 ) -> Result<RecordModes, IdentifyError> {
     options.validate()?;
-    check_runs(runs)?;
+    let roving = check_runs(runs)?;
     let first = &runs[0];
     let records: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
     let names = records.join(", ");
@@ -342,48 +377,157 @@ fn identify_runs(
         })
         .collect();
     let welch = Welch::new(dt, segment_length).map_err(method_err("the spectra"))?;
-    let spectra = welch
-        .output_spectra(&spectral_runs)
-        .map_err(method_err("the spectra"))?;
-    let channels: Vec<Channel> = first.responses.iter().map(|s| s.channel).collect();
+    // A roving test: each channel's spectra and FRF from the runs that measured it (the
+    // measured force is the common reference, so FRFs of different runs share one scale and
+    // phase and join into one FRF matrix).
+    let everywhere = all_channels(runs);
+    let single: Vec<[&[f64]; 1]> = everywhere
+        .iter()
+        .flat_map(|(_, at)| at.iter())
+        .map(|(r, i)| [runs[*r].responses[*i].values.as_slice()])
+        .collect();
+    let per_channel: Vec<Vec<Run<'_>>> = {
+        let mut next = 0;
+        everywhere
+            .iter()
+            .map(|(_, at)| {
+                at.iter()
+                    .map(|(r, _)| {
+                        let run = Run {
+                            input: runs[*r].excitation.map(|s| s.values.as_slice()),
+                            outputs: &single[next],
+                        };
+                        next += 1;
+                        run
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let (frequencies, total) = if roving {
+        let mut total = vec![0.0; segment_length / 2 + 1];
+        for runs in &per_channel {
+            let spectra = welch
+                .output_spectra(runs)
+                .map_err(method_err("the spectra"))?;
+            for (t, v) in total.iter_mut().zip(spectra.auto(0)) {
+                *t += v;
+            }
+        }
+        (welch.frequencies(), total)
+    } else {
+        let spectra = welch
+            .output_spectra(&spectral_runs)
+            .map_err(method_err("the spectra"))?;
+        (spectra.frequencies.clone(), spectra.total())
+    };
+    let channels: Vec<Channel> = everywhere.iter().map(|(c, _)| *c).collect();
     let floors = shape_floors(&channels);
+    // SSI-COV needs every run to measure the same channels: on a roving test it reads the
+    // first run alone, and its shapes are that run's.
+    let ssi_runs = if roving {
+        &spectral_runs[..1]
+    } else {
+        &spectral_runs[..]
+    };
+    let ssi_floors = if roving {
+        shape_floors(
+            &first
+                .responses
+                .iter()
+                .map(|s| s.channel)
+                .collect::<Vec<_>>(),
+        )
+    } else {
+        floors.clone()
+    };
 
     let diagram = |orders| {
         StabilisationDiagram::new(orders, options.stability).map_err(method_err("the diagram"))
     };
-    let ssi_orders = ssi_cov(&spectral_runs, dt, &options.ssi()).map_err(method_err("SSI-COV"))?;
-    let ssi_diagram = diagram(ssi_orders)?;
-    let ssi_modes =
-        select_modes(&ssi_diagram, &options.selection).map_err(method_err("SSI-COV"))?;
-    let ssi = MethodModes {
-        method: "SSI-COV",
-        band: None,
-        modes: record_modes(ssi_modes, &floors),
-        diagram: ssi_diagram,
-    };
-
     let excited = runs.iter().filter_map(|r| r.excitation).any(|e| {
         let v = &e.values;
         let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
         v.iter().any(|x| (x - mean).abs() > 0.0)
     });
-    let (frf, input_output) = if excited {
-        let frf = welch.h1(&spectral_runs).map_err(method_err("the FRF"))?;
-        let band = options
-            .band
-            .unwrap_or((frf.frequencies[1], DEFAULT_BAND_TOP * nyquist));
+    // The force's spectrum (every run's): where it excites the structure.
+    let force_psd = if excited {
+        let forces: Vec<[&[f64]; 1]> = runs
+            .iter()
+            .filter_map(|r| r.excitation.map(|e| [e.values.as_slice()]))
+            .collect();
+        let force_runs: Vec<Run<'_>> = forces
+            .iter()
+            .map(|f| Run {
+                input: None,
+                outputs: f,
+            })
+            .collect();
+        let force = welch
+            .output_spectra(&force_runs)
+            .map_err(method_err("the force's spectrum"))?;
+        Some(force.auto(0))
+    } else {
+        None
+    };
+    let excitation = force_psd
+        .as_deref()
+        .and_then(|psd| excited_band(&frequencies, psd));
+    let screen = ScreenOptions {
+        excited: excitation.map(|e| e.0),
+        edges: excitation.map_or((false, false), |e| e.1),
+        ..options.screen
+    };
+    let ssi_orders = ssi_cov(ssi_runs, dt, &options.ssi()).map_err(method_err("SSI-COV"))?;
+    let ssi_diagram = diagram(ssi_orders)?;
+    let ssi_modes =
+        select_modes(&ssi_diagram, &options.selection).map_err(method_err("SSI-COV"))?;
+    let (ssi_modes, ssi_rejected) = screen_modes(ssi_modes, &screen);
+    let ssi = MethodModes {
+        method: "SSI-COV",
+        band: None,
+        modes: record_modes(ssi_modes, &ssi_floors),
+        rejected: ssi_rejected,
+        diagram: ssi_diagram,
+    };
+
+    let (frf, input_output) = if let Some(force_psd) = &force_psd {
+        let frf = if roving {
+            let mut joined: Option<numerics::modal::spectral::Frf> = None;
+            for runs in &per_channel {
+                let one = welch.h1(runs).map_err(method_err("the FRF"))?;
+                match joined.as_mut() {
+                    None => joined = Some(one),
+                    Some(j) => {
+                        j.response.extend(one.response);
+                        j.coherence.extend(one.coherence);
+                        j.segments = j.segments.min(one.segments);
+                    }
+                }
+            }
+            joined.ok_or(IdentifyError::Options("no response channel".into()))?
+        } else {
+            welch.h1(&spectral_runs).map_err(method_err("the FRF"))?
+        };
+        let band = match options.band {
+            Some(band) => band,
+            None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * nyquist),
+        };
         let input_output = if options.input_output {
             let lscf_options = LscfOptions {
                 max_order: options.max_order,
+                weighting: options.weighting,
                 ..LscfOptions::over(band)
             };
             let orders = lscf(&frf, &lscf_options).map_err(method_err("LSCF"))?;
             let d = diagram(orders)?;
             let modes = select_modes(&d, &options.selection).map_err(method_err("LSCF"))?;
+            let (modes, rejected) = screen_modes(modes, &screen);
             Some(MethodModes {
                 method: "LSCF",
                 band: Some(band),
                 modes: record_modes(modes, &floors),
+                rejected,
                 diagram: d,
             })
         } else {
@@ -395,13 +539,12 @@ fn identify_runs(
         let report = FrfReport {
             segment_length,
             segments: frf.segments,
-            channels: first
-                .responses
+            channels: channels
                 .iter()
                 .zip(frf.response.iter().zip(&frf.coherence))
-                .map(|(s, (h, c))| ChannelFrf {
-                    channel: s.channel.name(),
-                    unit: format!("({})/{excitation_unit}", s.channel.quantity().si().symbol()),
+                .map(|(channel, (h, c))| ChannelFrf {
+                    channel: channel.name(),
+                    unit: format!("({})/{excitation_unit}", channel.quantity().si().symbol()),
                     response: h.clone(),
                     coherence: c.clone(),
                 })
@@ -423,10 +566,7 @@ fn identify_runs(
         channels: channels.iter().map(|c| c.name()).collect(),
         floors: floors.iter().map(|(floor, _)| *floor).collect(),
         frf,
-        spectrum: SpectrumReport {
-            total: spectra.total(),
-            frequencies: spectra.frequencies,
-        },
+        spectrum: SpectrumReport { total, frequencies },
         ssi,
         input_output,
         options: options.clone(),
@@ -451,6 +591,62 @@ pub fn default_segment(samples: usize) -> usize {
         resolving *= 2;
     }
     segment.max(resolving)
+}
+
+/// A bin is excited when the force's PSD there is at least this fraction of its typical
+/// level (the 90th percentile over the bins above DC): 20 dB down.
+pub const EXCITED_FRACTION: f64 = 0.01;
+/// The default band's ends are the outermost excited bins where some output's coherence
+/// reaches this.
+pub const BAND_COHERENCE: f64 = 0.5;
+
+/// The band the force excites, Hz: from the lowest to the highest bin above DC where its PSD
+/// is [`EXCITED_FRACTION`] of its typical level; and whether each end is an edge (at least two
+/// bins beyond it, inside the record's band, are not excited). None when the force has no
+/// power.
+pub fn excited_band(frequencies: &[f64], force_psd: &[f64]) -> Option<((f64, f64), (bool, bool))> {
+    let bins = frequencies.len().min(force_psd.len());
+    if bins < 2 {
+        return None;
+    }
+    let mut levels: Vec<f64> = force_psd[1..bins].to_vec();
+    levels.sort_by(f64::total_cmp);
+    let typical = levels[((0.9 * levels.len() as f64) as usize).min(levels.len() - 1)];
+    if typical <= 0.0 || !typical.is_finite() {
+        return None;
+    }
+    let excited = |k: &usize| force_psd[*k] >= EXCITED_FRACTION * typical;
+    let low = (1..bins).find(excited)?;
+    let high = (1..bins).rev().find(excited)?;
+    Some((
+        (frequencies[low], frequencies[high]),
+        (low >= 3, high + 2 < bins - 1),
+    ))
+}
+
+/// The band LSCF fits by default: from the lowest to the highest bin (below `top` Hz) where
+/// the force has power ([`EXCITED_FRACTION`] of its typical level) and some output's
+/// coherence with it is at least [`BAND_COHERENCE`]. Outside it the FRF is noise divided by
+/// next to nothing, which a rational fit turns into poles. Falls back to the first bin to
+/// `top` when no bin qualifies (the fit then says so by its diagram).
+pub fn fit_band(frf: &numerics::modal::spectral::Frf, force_psd: &[f64], top: f64) -> (f64, f64) {
+    let fallback = (frf.frequencies[1], top);
+    let Some(((low, high), _)) = excited_band(&frf.frequencies, force_psd) else {
+        return fallback;
+    };
+    let usable: Vec<usize> = (1..frf.frequencies.len())
+        .filter(|k| {
+            let f = frf.frequencies[*k];
+            f >= low && f <= high.min(top)
+        })
+        .collect();
+    let good = |k: &usize| frf.coherence.iter().any(|c| c[*k] >= BAND_COHERENCE);
+    let first = usable.iter().copied().find(good);
+    let last = usable.iter().rev().copied().find(good);
+    match (first, last) {
+        (Some(l), Some(h)) if h > l => (frf.frequencies[l], frf.frequencies[h]),
+        _ => fallback,
+    }
 }
 
 /// The shortest default segment where the record allows it, samples.
