@@ -611,6 +611,136 @@ struct StartResult {
     runs: usize,
 }
 
+/// A start on its way: the parameters and noise after its outer iterations so far.
+struct Running {
+    z: Vec<f64>,
+    /// log σ² of every block (record, floor).
+    s: Vec<f64>,
+    /// The next fit is a fine one (the noise has all but settled).
+    fine: bool,
+    /// The noise has settled after a fine fit: the start is done.
+    done: bool,
+    outer: usize,
+    evaluations: usize,
+    runs: usize,
+    /// The negative log posterior at (z, s).
+    objective: f64,
+}
+
+/// Outer iterations a start makes at most: a fit of the parameters under fixed noise weights,
+/// then the noise's own optimum for those parameters.
+const OUTER_ITERATIONS: usize = 6;
+
+/// A start from `z0`, the noise at its priors' means, before any iteration.
+fn new_start(target: &Target, z0: Vec<f64>) -> Running {
+    Running {
+        z: z0,
+        s: target.noise_means(),
+        fine: false,
+        done: false,
+        outer: 0,
+        evaluations: 0,
+        runs: 0,
+        objective: f64::INFINITY,
+    }
+}
+
+/// One outer iteration of `start` within `budget` evaluations in all: the parameters fitted
+/// under the current noise weights, then the noise's optimum for them. None when the FMU
+/// refused the parameters.
+fn outer_iteration<'a>(
+    sims: &mut [Simulator<'a>],
+    target: &Target<'a>,
+    start: &mut Running,
+    budget: usize,
+) -> Option<()> {
+    let blocks = target.blocks();
+    let means = target.noise_means();
+    let records = target.records.len();
+    let mut buf: Vec<Vec<f64>> = Vec::new();
+    // The noise starts at its prior's mean, usually far from the record's: the fit under those
+    // weights is only a way to the next noise estimate, and stops at a coarse gain
+    // ([`COARSE_GAIN`]); once the noise has all but settled the fit goes on to [`FINE_GAIN`].
+    // The last fit is always a fine one.
+    let settings = lm::Settings {
+        min_predicted: if start.fine { FINE_GAIN } else { COARSE_GAIN },
+        ..lm::Settings::default()
+    };
+    let mut weights = Vec::with_capacity(target.rows());
+    for (&(_, n), sb) in blocks.iter().zip(&start.s) {
+        weights.extend(std::iter::repeat((-sb / 2.0).exp()).take(n));
+    }
+    let mut problem = Problem {
+        sims: RefCell::new(&mut *sims),
+        target,
+        weights,
+        buf: RefCell::new(Default::default()),
+        evaluations: RefCell::new(0),
+        runs: RefCell::new(0),
+        at_hand: RefCell::new(None),
+        budget: budget.saturating_sub(start.evaluations),
+    };
+    let z = std::mem::take(&mut start.z);
+    start.z = match problem.weighted(&z) {
+        Some(r0) => lm::minimize(&mut problem, z, r0, settings).0,
+        None => z,
+    };
+    start.evaluations += *problem.evaluations.borrow();
+    start.runs += *problem.runs.borrow();
+    let r = raw_residuals(sims, target, &start.z, &mut buf)?;
+    start.evaluations += 1;
+    start.runs += records;
+    let sse = sse_per_block(&r, &blocks);
+    let s_new: Vec<f64> = (0..blocks.len())
+        .map(|b| {
+            optimal_log_noise(
+                blocks[b].1 as f64,
+                sse[b],
+                means[b],
+                target.noise_var,
+                start.s[b],
+            )
+        })
+        .collect();
+    let moved = s_new
+        .iter()
+        .zip(&start.s)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    start.s = s_new;
+    start.objective = neg_log_posterior(target, &sse, &start.s, &start.z);
+    start.outer += 1;
+    start.done = (moved < 1e-3 && start.fine) || start.outer >= OUTER_ITERATIONS;
+    start.fine = moved < NOISE_NEARLY_SETTLED;
+    Some(())
+}
+
+/// Run `start` on to its end within `budget` evaluations in all.
+fn finish_start<'a>(
+    sims: &mut [Simulator<'a>],
+    target: &Target<'a>,
+    mut start: Running,
+    budget: usize,
+) -> Option<StartResult> {
+    while !start.done {
+        outer_iteration(sims, target, &mut start, budget)?;
+    }
+    let mut buf: Vec<Vec<f64>> = Vec::new();
+    let r = raw_residuals(sims, target, &start.z, &mut buf)?;
+    let objective = neg_log_posterior(
+        target,
+        &sse_per_block(&r, &target.blocks()),
+        &start.s,
+        &start.z,
+    );
+    objective.is_finite().then_some(StartResult {
+        z: start.z,
+        s: start.s,
+        objective,
+        runs: start.runs + target.records.len(),
+    })
+}
+
 /// One start from `z0` (the noise from its priors' means), within `budget` evaluations.
 fn run_start<'a>(
     sims: &mut [Simulator<'a>],
@@ -618,76 +748,47 @@ fn run_start<'a>(
     z0: Vec<f64>,
     budget: usize,
 ) -> Option<StartResult> {
-    let blocks = target.blocks();
-    let means = target.noise_means();
-    let records = target.records.len();
-    let mut s = means.clone();
-    let mut z = z0;
-    let mut evaluations = 0;
-    let mut runs = 0;
-    let mut buf: Vec<Vec<f64>> = Vec::new();
-    // The noise starts at its prior's mean, usually far from the record's: the fit under those
-    // weights is only a way to the next noise estimate, and stops at a coarse gain
-    // ([`COARSE_GAIN`]); once the noise has all but settled the fit goes on to [`FINE_GAIN`].
-    // The last fit is always a fine one.
-    let mut fine = false;
-    for _outer in 0..6 {
-        let settings = lm::Settings {
-            min_predicted: if fine { FINE_GAIN } else { COARSE_GAIN },
-            ..lm::Settings::default()
-        };
-        let mut weights = Vec::with_capacity(target.rows());
-        for (&(_, n), sb) in blocks.iter().zip(&s) {
-            weights.extend(std::iter::repeat((-sb / 2.0).exp()).take(n));
+    finish_start(sims, target, new_start(target, z0), budget)
+}
+
+/// Starts whose negative log posterior after their first outer iteration is more than this
+/// above the best start's stop there (nats). Measured on dataset3's diagnosis (58 starts of 16
+/// fits): a start near its fit's best gained at most 14 nats after its first outer iteration
+/// (a start far behind, up to 183 — still thousands of nats behind).
+pub const RACE_MARGIN: f64 = 50.0;
+/// Two starts whose parameters (in prior standard deviations) after their first outer
+/// iteration differ by less than this in every coordinate have reached the same optimum (the
+/// same fit's starts there differed by at most 0.012; distinct optima by 0.2 or more): only
+/// the better goes on.
+pub const SAME_OPTIMUM: f64 = 0.05;
+
+/// The race after the first outer iteration: the starts (index, state) that go on — the best,
+/// and every other within [`RACE_MARGIN`] of it at an optimum of its own — and those that stop.
+fn race(mut first: Vec<(usize, Running)>) -> (Vec<(usize, Running)>, Vec<(usize, Running)>) {
+    first.sort_by(|a, b| a.1.objective.total_cmp(&b.1.objective));
+    let best = first.first().map_or(f64::INFINITY, |b| b.1.objective);
+    let (mut going, mut stopped) = (Vec::new(), Vec::new());
+    for (i, start) in first {
+        let behind = start.objective > best + RACE_MARGIN;
+        let same = going.iter().any(|(_, kept): &(usize, Running)| {
+            kept.z
+                .iter()
+                .zip(&start.z)
+                .all(|(a, b)| (a - b).abs() < SAME_OPTIMUM)
+        });
+        if behind || same {
+            stopped.push((i, start));
+        } else {
+            going.push((i, start));
         }
-        let mut problem = Problem {
-            sims: RefCell::new(&mut *sims),
-            target,
-            weights,
-            buf: RefCell::new(Default::default()),
-            evaluations: RefCell::new(0),
-            runs: RefCell::new(0),
-            at_hand: RefCell::new(None),
-            budget: budget.saturating_sub(evaluations),
-        };
-        if let Some(r0) = problem.weighted(&z) {
-            z = lm::minimize(&mut problem, z, r0, settings).0;
-        }
-        evaluations += *problem.evaluations.borrow();
-        runs += *problem.runs.borrow();
-        let r = raw_residuals(sims, target, &z, &mut buf)?;
-        evaluations += 1;
-        runs += records;
-        let sse = sse_per_block(&r, &blocks);
-        let s_new: Vec<f64> = (0..blocks.len())
-            .map(|b| {
-                optimal_log_noise(blocks[b].1 as f64, sse[b], means[b], target.noise_var, s[b])
-            })
-            .collect();
-        let moved = s_new
-            .iter()
-            .zip(&s)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        s = s_new;
-        if moved < 1e-3 && fine {
-            break;
-        }
-        fine = moved < NOISE_NEARLY_SETTLED;
     }
-    let r = raw_residuals(sims, target, &z, &mut buf)?;
-    let objective = neg_log_posterior(target, &sse_per_block(&r, &blocks), &s, &z);
-    objective.is_finite().then_some(StartResult {
-        z,
-        s,
-        objective,
-        runs: runs + records,
-    })
+    (going, stopped)
 }
 
 /// Every start for a few iterations, then the best [`SCREEN_KEEP`] on to their end (the screen:
-/// more starts than that, and a budget above the screen's). Every start's outcome, the
-/// simulations spent, and the best start.
+/// more starts than that, and a budget above the screen's); with fewer starts, every start
+/// for its first outer iteration, then the [`race`]'s on to their end. Every start's outcome,
+/// the simulations spent, and the best start.
 fn screened_starts(
     target: &Target,
     starts: &[Vec<f64>],
@@ -696,17 +797,21 @@ fn screened_starts(
 ) -> Result<(Vec<StartOutcome>, usize, Option<StartResult>), TwinError> {
     let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
     let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
-    let first_budget = if screening {
-        screen_budget
-    } else {
-        target.budget
-    };
     let jobs: Vec<StartJob> = starts.iter().cloned().enumerate().collect();
-    let mut first = run_starts(target, jobs, first_budget, threads)?;
     let mut outcomes = Vec::new();
     let mut simulations = 0;
     let mut finished: Vec<(usize, StartResult)> = Vec::new();
+    let mut stop = |i: usize, objective: f64, runs: usize| {
+        simulations += runs;
+        outcomes.push(StartOutcome {
+            start: i,
+            neg_log_posterior: objective,
+            evaluations: runs,
+            screened_out: true,
+        });
+    };
     if screening {
+        let mut first = run_starts(target, jobs, screen_budget, threads)?;
         first.sort_by(|a, b| match (&a.1, &b.1) {
             (Some(x), Some(y)) => x.objective.total_cmp(&y.objective),
             (Some(_), None) => std::cmp::Ordering::Less,
@@ -716,13 +821,7 @@ fn screened_starts(
         let rest = first.split_off(SCREEN_KEEP.min(first.len()));
         for (i, res) in rest.into_iter() {
             if let Some(res) = res {
-                simulations += res.runs;
-                outcomes.push(StartOutcome {
-                    start: i,
-                    neg_log_posterior: res.objective,
-                    evaluations: res.runs,
-                    screened_out: true,
-                });
+                stop(i, res.objective, res.runs);
             }
         }
         let mut spent = std::collections::BTreeMap::new();
@@ -745,7 +844,27 @@ fn screened_starts(
             }
         }
     } else {
-        finished.extend(first.into_iter().filter_map(|(i, res)| Some((i, res?))));
+        let budget = target.budget;
+        let first = on_threads(target, jobs, threads, |sims, (i, z0)| {
+            let mut start = new_start(target, z0);
+            (
+                i,
+                outer_iteration(sims, target, &mut start, budget).map(|()| start),
+            )
+        })?;
+        let (going, stopped) = race(
+            first
+                .into_iter()
+                .filter_map(|(i, s)| Some((i, s?)))
+                .collect(),
+        );
+        for (i, start) in stopped {
+            stop(i, start.objective, start.runs);
+        }
+        let done = on_threads(target, going, threads, |sims, (i, start)| {
+            (i, finish_start(sims, target, start, budget))
+        })?;
+        finished.extend(done.into_iter().filter_map(|(i, res)| Some((i, res?))));
     }
     let mut best: Option<StartResult> = None;
     for (i, res) in finished {
@@ -760,6 +879,7 @@ fn screened_starts(
             best = Some(res);
         }
     }
+    outcomes.sort_by_key(|o| o.start);
     Ok((outcomes, simulations, best))
 }
 
@@ -774,39 +894,47 @@ fn run_starts(
     budget: usize,
     threads: usize,
 ) -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
+    on_threads(target, jobs, threads, |sims, (i, z0)| {
+        (i, run_start(sims, target, z0, budget))
+    })
+}
+
+/// `work` on every job over `threads` threads, each with simulators of its own (one FMU
+/// instance per record), results in no particular order.
+fn on_threads<'a, J: Send, T: Send>(
+    target: &Target<'a>,
+    jobs: Vec<J>,
+    threads: usize,
+    work: impl Fn(&mut [Simulator<'a>], J) -> T + Sync,
+) -> Result<Vec<T>, TwinError> {
     let threads = threads.clamp(1, jobs.len().max(1));
-    let mut chunks: Vec<Vec<StartJob>> = (0..threads).map(|_| Vec::new()).collect();
+    let mut chunks: Vec<Vec<J>> = (0..threads).map(|_| Vec::new()).collect();
     for (k, job) in jobs.into_iter().enumerate() {
         chunks[k % threads].push(job);
     }
-    let results: Vec<Result<Vec<(usize, Option<StartResult>)>, TwinError>> =
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = chunks
-                .into_iter()
-                .map(|chunk| {
-                    scope.spawn(
-                        move || -> Result<Vec<(usize, Option<StartResult>)>, TwinError> {
-                            let mut sims = simulators(target, "calibration")?;
-                            Ok(chunk
-                                .into_iter()
-                                .map(|(i, z0)| (i, run_start(&mut sims, target, z0, budget)))
-                                .collect())
-                        },
-                    )
+    let work = &work;
+    let results: Vec<Result<Vec<T>, TwinError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = chunks
+            .into_iter()
+            .map(|chunk| {
+                scope.spawn(move || -> Result<Vec<T>, TwinError> {
+                    let mut sims = simulators(target, "calibration")?;
+                    Ok(chunk.into_iter().map(|job| work(&mut sims, job)).collect())
                 })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(TwinError::Invalid {
-                            path: "calibration".into(),
-                            message: "a worker thread panicked".into(),
-                        })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(TwinError::Invalid {
+                        path: "calibration".into(),
+                        message: "a worker thread panicked".into(),
                     })
                 })
-                .collect()
-        });
+            })
+            .collect()
+    });
     let mut out = Vec::new();
     for r in results {
         out.extend(r?);
@@ -1335,4 +1463,51 @@ pub fn fixed_log_evidence(
         log_evidence += -j - 0.5 * curvature.ln();
     }
     Ok(log_evidence)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(objective: f64, z: &[f64]) -> Running {
+        Running {
+            z: z.to_vec(),
+            s: Vec::new(),
+            fine: false,
+            done: false,
+            outer: 1,
+            evaluations: 10,
+            runs: 10,
+            objective,
+        }
+    }
+
+    /// The race keeps the best start and every start within the margin at an optimum of its
+    /// own; a start behind by more than the margin, or at the best's optimum, stops.
+    #[test]
+    fn the_race_keeps_the_best_and_the_distinct_near_it() {
+        let first = vec![
+            (0, at(-1000.0, &[0.5, 0.2])),
+            (1, at(-2000.0, &[0.9, 0.0])),
+            // The best's optimum, a little behind it.
+            (
+                2,
+                at(-1999.0, &[0.9 + 0.4 * SAME_OPTIMUM, -0.4 * SAME_OPTIMUM]),
+            ),
+            // Another optimum, within the margin.
+            (3, at(-2000.0 + 0.9 * RACE_MARGIN, &[-0.3, 0.0])),
+            // Another optimum, beyond the margin.
+            (4, at(-2000.0 + 1.1 * RACE_MARGIN, &[2.0, 1.0])),
+        ];
+        let (going, stopped) = race(first);
+        let going: Vec<usize> = going.iter().map(|g| g.0).collect();
+        let mut stopped: Vec<usize> = stopped.iter().map(|s| s.0).collect();
+        stopped.sort();
+        assert_eq!(
+            going,
+            vec![1, 3],
+            "the best first, then the distinct one near it"
+        );
+        assert_eq!(stopped, vec![0, 2, 4]);
+    }
 }

@@ -1807,3 +1807,56 @@ fn localise(
         strongest: strongest.1,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use structure::effects::Kind;
+
+    /// A decisive screen (its best site at most SCREEN_DECISIVE of the residual) keeps every
+    /// candidate at its SCREEN_SITES best sites, and only those; an undecided one keeps the
+    /// best SCREEN_KEEP; nothing is lost either way.
+    #[test]
+    fn a_decisive_screen_keeps_the_best_sites_candidates() {
+        let library = Candidate::library(5);
+        let site = |c: &Candidate| (c.placement() == Placement::Floor, c.at);
+        // Storey 4's contact scores best, then storey 2's cubic, then friction on floor 1;
+        // everything else explains little.
+        let scores: Vec<f64> = library
+            .iter()
+            .map(|c| match (c.kind, c.at) {
+                (Kind::Contact, 4) => 0.2,
+                (Kind::Cubic, 2) => 0.6,
+                (Kind::Friction, 1) => 0.7,
+                _ => 0.95,
+            })
+            .collect();
+        let (kept, dropped) = screen_sites(library.clone(), scores.clone());
+        assert_eq!(kept.len() + dropped.len(), library.len());
+        let best_sites: Vec<(bool, usize)> = [Kind::Contact, Kind::Cubic, Kind::Friction]
+            .iter()
+            .zip([4, 2, 1])
+            .filter_map(|(k, at)| library.iter().find(|c| c.kind == *k && c.at == at))
+            .map(site)
+            .collect();
+        assert_eq!(best_sites.len(), 3);
+        for c in &library {
+            assert_eq!(
+                kept.contains(c),
+                best_sites.contains(&site(c)),
+                "{} kept: {}",
+                c.label(),
+                kept.contains(c)
+            );
+        }
+        // Undecided: the best screen score above the bar keeps the best SCREEN_KEEP.
+        let undecided: Vec<f64> = scores.iter().map(|s| s + SCREEN_DECISIVE).collect();
+        let (kept, dropped) = screen_sites(library.clone(), undecided);
+        assert_eq!(kept.len(), SCREEN_KEEP.min(library.len()));
+        assert_eq!(kept.len() + dropped.len(), library.len());
+        assert!(
+            dropped.windows(2).all(|w| w[0].1 <= w[1].1),
+            "dropped by score"
+        );
+    }
+}
