@@ -88,7 +88,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 use structure::building::parameter_names;
-use structure::effects::{Law, Placement};
+use structure::effects::{Law, Placement, Term};
 
 use crate::cosim::import::ImportError;
 use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
@@ -753,6 +753,321 @@ enum Job {
 /// Diagnose `twin` on `data` (see the module documentation).
 pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
     let started = Instant::now();
+    let Baseline {
+        n,
+        first,
+        mask,
+        held_out,
+        after,
+        storeys,
+        channels,
+        nc,
+        candidates,
+        physics,
+        base_run,
+        predicted,
+        nmse_before,
+        nmse_before_held_out,
+        noise_nmse,
+        noise_nmse_held_out,
+        band_nmse,
+        explained_nmse,
+        tolerance,
+        reals,
+        mass,
+        scales,
+        mut diagnosis,
+    } = baseline(twin, data, options)?;
+
+    // 2. Significant, statistically and practically?
+    let gates = options.gates;
+    let statistically = (0..nc).any(|c| nmse_before[c] > gates.none_factor * explained_nmse[c]);
+    let practically = worst(&nmse_before) > tolerance.value;
+    diagnosis.statistically_significant = statistically;
+    diagnosis.practically_significant = practically;
+    let no_alarm = !(statistically && practically);
+    let none_reason = none_reason(
+        &nmse_before,
+        &noise_nmse,
+        &band_nmse,
+        gates.none_factor,
+        statistically,
+        &tolerance,
+    );
+    if no_alarm && !options.always_fit {
+        diagnosis.action = Action::None;
+        diagnosis.reason = match diagnosis.modes.as_ref().filter(|m| !m.shifted.is_empty()) {
+            Some(m) => format!(
+                "{none_reason}; but the record's modes ({}) moved beyond the twin's band: {} — a \
+                 change the time domain does not show yet, or an identification to check \
+                 (twin modal --data, twin watch --track-modes)",
+                m.method,
+                m.describe_shifts()
+            ),
+            None => none_reason,
+        };
+        diagnosis.seconds = started.elapsed().as_secs_f64();
+        return Ok(diagnosis);
+    }
+
+    // 3a. Faulty sensors: per floor, the channel as gain·ŷ + offset + drift·t of the twin's
+    // prediction, least squares on the fitted blocks, scored on the held-out ones.
+    let fitted_idx: Vec<usize> = (0..n).filter(|&k| mask[k]).collect();
+    diagnosis.sensor_candidates = (0..nc)
+        .filter_map(|c| {
+            sensor::fit_channel(
+                &channels.names[c],
+                channels.floors[c] + 1,
+                &channels.measured[c],
+                &predicted[c],
+                &data.time,
+                &fitted_idx,
+                &held_out,
+                &after,
+            )
+        })
+        .collect();
+    let sensor_fault = sensor_decision(
+        &channels.names,
+        &diagnosis.sensor_candidates,
+        &nmse_before_held_out,
+        &noise_nmse_held_out,
+        &band_nmse,
+        tolerance.value,
+        &gates,
+    );
+    if let Some((fault, reason)) = &sensor_fault {
+        if !no_alarm {
+            let c = channels.index(&fault.channel);
+            diagnosis.action = Action::SensorFault;
+            diagnosis.reason = reason.clone();
+            diagnosis.sensor = Some(fault.clone());
+            diagnosis.series.after[c] = fault.apply(&predicted[c], &data.time);
+            diagnosis.nmse_after[c] = fault.nmse_after;
+            if !options.always_fit {
+                diagnosis.seconds = started.elapsed().as_secs_f64();
+                return Ok(diagnosis);
+            }
+        }
+    }
+
+    // 3–4. The alternatives, in parallel.
+    let evidence_setup = CalibrationSetup {
+        transient: options.transient,
+        mask: Some(mask.clone()),
+        ..CalibrationSetup::default()
+    };
+    let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
+    let ground = Ground {
+        data,
+        options,
+        physics: &physics,
+        storeys,
+        first,
+        mask: &mask,
+        held_out: &held_out,
+        channels: &channels,
+        reals: &reals,
+        scales: &scales,
+        base_run: &base_run,
+    };
+    let candidates = screened(&ground, &mut diagnosis, candidates)?;
+    let results = fit_round_one(&ground, &candidates, baseline_evidence)?;
+    let before_worst = worst(&nmse_before_held_out);
+    let RoundOne {
+        recal,
+        recal_worst,
+        fitted: fitted_candidates,
+    } = report_round_one(&ground, &mut diagnosis, &candidates, results, before_worst)?;
+    let mut order: Vec<usize> = (0..diagnosis.candidates.len()).collect();
+    order.sort_by(|&a, &b| {
+        diagnosis.candidates[b]
+            .evidence
+            .total_cmp(&diagnosis.candidates[a].evidence)
+    });
+
+    // 5. Forward selection: the best effect, refitted jointly with the physics, then the next
+    // while the error falls by the step gate (see `select`).
+    let recal_explains = recal_worst * gates.required_cut <= before_worst
+        && (0..nc).all(|c| {
+            recal.nmse_held_out[c] <= gates.recalibration_noise_factor * noise_nmse_held_out[c]
+        });
+    let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
+    let ctx = select::Context {
+        physics: &physics,
+        data,
+        options,
+        scales: &scales,
+        reals: &reals,
+        mask: &mask,
+        held_out: &held_out,
+        first,
+        baseline_evidence,
+        explained_held_out: (0..nc)
+            .map(|c| noise_nmse_held_out[c] + band_nmse[c])
+            .collect(),
+        channels: &channels,
+        candidates: &candidates,
+        tolerance: tolerance.value,
+    };
+    let selection = if no_alarm || sensor_fault.is_some() {
+        None
+    } else {
+        Some(select::forward(
+            &ctx,
+            &fitted_candidates,
+            &passes,
+            &recal,
+            before_worst,
+            &|what| options.tell(what),
+        )?)
+    };
+    let combination = selection.as_ref().and_then(|s| {
+        if s.chosen.is_empty() {
+            return None;
+        }
+        let fitted = s.fitted.as_ref()?;
+        let w = worst(&fitted.nmse_held_out);
+        (w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst)
+            .then_some((s, fitted, w))
+    });
+    if let Some(s) = &selection {
+        diagnosis.selection = s.steps.clone();
+    }
+
+    // 7. Discovery: when neither recalibration nor any combination of library effects explains
+    // the error, the missing force by sparse regression on top of the selection's model (see
+    // `discover`), refitted through FMI as the FMU's `discovered` effect and gated the same way.
+    // Also when the library's combination passes but leaves the model short of good enough:
+    // then discovery on the twin's own physics competes with it, and replaces it when its
+    // held-out error is lower by the step gate.
+    let combination_short =
+        combination.is_some_and(|(_, fitted, _)| !ctx.good_enough(&fitted.nmse_held_out));
+    let discovered = match &selection {
+        Some(s) if combination.is_none() && !recal_explains => {
+            options.tell("discovering the missing force by sparse regression");
+            let run = s.fitted.as_ref().map(|f| &f.run).unwrap_or(&base_run);
+            Some(discover::missing(
+                &ctx,
+                &s.chosen,
+                &s.values,
+                run,
+                before_worst,
+                recal_worst,
+            )?)
+        }
+        Some(_) if combination_short => {
+            options.tell("the library's answer leaves more than the noise: discovering");
+            let d = discover::missing(
+                &ctx,
+                &[],
+                &BTreeMap::new(),
+                &base_run,
+                before_worst,
+                recal_worst,
+            )?;
+            let better = |(_, fitted): &(Vec<_>, Fitted)| {
+                combination
+                    .is_some_and(|(_, _, w)| worst(&fitted.nmse_held_out) * gates.step_cut <= w)
+            };
+            Some((d.0, d.1.filter(better)))
+        }
+        _ => None,
+    };
+    let combination = if discovered.as_ref().is_some_and(|d| d.1.is_some()) {
+        None
+    } else {
+        combination
+    };
+    let discovered_passes = discovered.as_ref().and_then(|d| d.1.as_ref());
+    diagnosis.discovery = discovered.as_ref().map(|d| d.0.clone());
+
+    // 6. Decide.
+    let verdict = Verdict {
+        channels: &channels,
+        mass: &mass,
+        reals: &reals,
+        scales: &scales,
+        storeys,
+        before_worst,
+        recal_worst,
+    };
+    if no_alarm {
+        diagnosis.action = Action::None;
+        diagnosis.reason = none_reason;
+    } else if sensor_fault.is_some() {
+        // Decided above (the alternatives were fitted for the report only).
+    } else if let Some((selection, fitted, w)) = combination {
+        verdict.add_library(&mut diagnosis, selection, fitted, w);
+    } else if recal_explains {
+        verdict.recalibrate(&mut diagnosis, &recal, &gates);
+    } else if let (Some(s), Some((terms, fitted))) = (&selection, discovered_passes) {
+        verdict.add_discovered(&mut diagnosis, s, terms, fitted, combination_short);
+    } else {
+        verdict.update_data_model(&mut diagnosis, &order);
+    }
+    diagnosis.candidates = order
+        .into_iter()
+        .map(|i| diagnosis.candidates[i].clone())
+        .collect();
+    diagnosis.seconds = started.elapsed().as_secs_f64();
+    Ok(diagnosis)
+}
+
+/// The diagnosis's first stage: the record checked against the twin, the twin as given and its
+/// physics alone run on it, and the scores every later stage is measured against.
+struct Baseline {
+    /// Samples in the record.
+    n: usize,
+    /// The first sample after the transient.
+    first: usize,
+    /// The fitted blocks' samples.
+    mask: Vec<bool>,
+    /// The held-out blocks' samples.
+    held_out: Vec<usize>,
+    /// Every sample after the transient.
+    after: Vec<usize>,
+    /// The building's storeys.
+    storeys: usize,
+    /// The record's responses.
+    channels: Channels,
+    /// How many.
+    nc: usize,
+    /// The library's candidates, or the ones given.
+    candidates: Vec<Candidate>,
+    /// The twin's physics alone.
+    physics: Twin,
+    /// Its run on the record (accelerations, drifts, velocities).
+    base_run: PhysicsRun,
+    /// The twin's prediction per channel.
+    predicted: Vec<Vec<f64>>,
+    /// NMSE per channel after the transient (%).
+    nmse_before: Vec<f64>,
+    /// On the held-out samples.
+    nmse_before_held_out: Vec<f64>,
+    /// The noise's share (%).
+    noise_nmse: Vec<f64>,
+    /// On the held-out samples.
+    noise_nmse_held_out: Vec<f64>,
+    /// The parameter uncertainty's share (%).
+    band_nmse: Vec<f64>,
+    /// Noise and band together (%).
+    explained_nmse: Vec<f64>,
+    /// The practical bar.
+    tolerance: Tolerance,
+    /// The physics' parameter values.
+    reals: PhysicsReals,
+    /// Floor masses, floor 1 first.
+    mass: Vec<f64>,
+    /// What the candidates' priors are scaled by.
+    scales: Scales,
+    /// The report so far: the scores above, the localisation and the modes, no verdict.
+    diagnosis: Diagnosis,
+}
+
+/// The first stage of [`diagnose`]: check the record and the options, run the twin and its
+/// physics on the record, score them, locate the residual and identify the record's modes.
+fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Baseline> {
     let noise = twin.noise_variance.clone().ok_or_else(|| {
         DiagnoseError::Setup(
             "the twin has no noise variances, so the noise level is unknown: diagnose a twin \
@@ -881,7 +1196,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         Ok(e) => (Some(e), None),
         Err(e) => (None, Some(e.to_string())),
     };
-    let mut diagnosis = Diagnosis {
+    let diagnosis = Diagnosis {
         record: data.path.display().to_string(),
         channels: channels.names.clone(),
         twin: twin
@@ -934,89 +1249,82 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             evidence_axis: None,
         },
     };
+    Ok(Baseline {
+        n,
+        first,
+        mask,
+        held_out,
+        after,
+        storeys,
+        channels,
+        nc,
+        candidates,
+        physics,
+        base_run,
+        predicted,
+        nmse_before,
+        nmse_before_held_out,
+        noise_nmse,
+        noise_nmse_held_out,
+        band_nmse,
+        explained_nmse,
+        tolerance,
+        reals,
+        mass,
+        scales,
+        diagnosis,
+    })
+}
 
-    // 2. Significant, statistically and practically?
-    let gates = options.gates;
-    let statistically = (0..nc).any(|c| nmse_before[c] > gates.none_factor * explained_nmse[c]);
-    let practically = worst(&nmse_before) > tolerance.value;
-    diagnosis.statistically_significant = statistically;
-    diagnosis.practically_significant = practically;
-    let no_alarm = !(statistically && practically);
-    let none_reason = none_reason(
-        &nmse_before,
-        &noise_nmse,
-        &band_nmse,
-        gates.none_factor,
-        statistically,
-        &tolerance,
-    );
-    if no_alarm && !options.always_fit {
-        diagnosis.action = Action::None;
-        diagnosis.reason = match diagnosis.modes.as_ref().filter(|m| !m.shifted.is_empty()) {
-            Some(m) => format!(
-                "{none_reason}; but the record's modes ({}) moved beyond the twin's band: {} — a \
-                 change the time domain does not show yet, or an identification to check \
-                 (twin modal --data, twin watch --track-modes)",
-                m.method,
-                m.describe_shifts()
-            ),
-            None => none_reason,
-        };
-        diagnosis.seconds = started.elapsed().as_secs_f64();
-        return Ok(diagnosis);
-    }
+/// What the stages after the baseline share: the record and its split into fitted and
+/// held-out blocks, the structure, and the twin's physics with its run on the record.
+#[derive(Clone, Copy)]
+struct Ground<'a> {
+    data: &'a Measurement,
+    options: &'a DiagnoseOptions,
+    physics: &'a Twin,
+    storeys: usize,
+    first: usize,
+    mask: &'a [bool],
+    held_out: &'a [usize],
+    channels: &'a Channels,
+    reals: &'a PhysicsReals,
+    scales: &'a Scales,
+    base_run: &'a PhysicsRun,
+}
 
-    // 3a. Faulty sensors: per floor, the channel as gain·ŷ + offset + drift·t of the twin's
-    // prediction, least squares on the fitted blocks, scored on the held-out ones.
-    let fitted_idx: Vec<usize> = (0..n).filter(|&k| mask[k]).collect();
-    diagnosis.sensor_candidates = (0..nc)
-        .filter_map(|c| {
-            sensor::fit_channel(
-                &channels.names[c],
-                channels.floors[c] + 1,
-                &channels.measured[c],
-                &predicted[c],
-                &data.time,
-                &fitted_idx,
-                &held_out,
-                &after,
-            )
-        })
-        .collect();
-    let sensor_fault = sensor_decision(
-        &channels.names,
-        &diagnosis.sensor_candidates,
-        &nmse_before_held_out,
-        &noise_nmse_held_out,
-        &band_nmse,
-        tolerance.value,
-        &gates,
-    );
-    if let Some((fault, reason)) = &sensor_fault {
-        if !no_alarm {
-            let c = channels.index(&fault.channel);
-            diagnosis.action = Action::SensorFault;
-            diagnosis.reason = reason.clone();
-            diagnosis.sensor = Some(fault.clone());
-            diagnosis.series.after[c] = fault.apply(&predicted[c], &data.time);
-            diagnosis.nmse_after[c] = fault.nmse_after;
-            if !options.always_fit {
-                diagnosis.seconds = started.elapsed().as_secs_f64();
-                return Ok(diagnosis);
-            }
-        }
-    }
+/// Round 1's fits: the recalibration (and its worst-floor held-out NMSE) and every candidate
+/// fitted alone that did not fail.
+struct RoundOne {
+    recal: Fitted,
+    recal_worst: f64,
+    fitted: Vec<(Candidate, Fitted)>,
+}
 
-    // 3–4. The alternatives, in parallel.
-    let evidence_setup = CalibrationSetup {
-        transient: options.transient,
-        mask: Some(mask.clone()),
-        ..CalibrationSetup::default()
-    };
-    let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
-    // The default library: only the candidates at the sites whose force, linearised through
-    // the structure, explains most of the residual are fitted (see `screen_sites`).
-    let candidates = if options.candidates.is_none() {
+/// Round 1's screen: the default library only at the sites whose force, linearised through
+/// the structure, explains most of the residual (see `screen_sites`); given candidates as
+/// they are. The screened-out go into the diagnosis with their scores.
+fn screened(
+    g: &Ground,
+    diagnosis: &mut Diagnosis,
+    candidates: Vec<Candidate>,
+) -> Result<Vec<Candidate>> {
+    let Ground {
+        data,
+        options,
+        storeys,
+        first,
+        mask,
+        held_out,
+        channels,
+        reals,
+        base_run,
+        ..
+    } = *g;
+    let fitted_idx: Vec<usize> = (0..data.len()).filter(|&k| mask[k]).collect();
+    let n = data.len();
+    let nc = channels.len();
+    Ok(if options.candidates.is_none() {
         options.tell(&format!("screening {} candidates", candidates.len()));
         let values = |p: char| -> Result<Vec<f64>> {
             (1..=storeys)
@@ -1059,7 +1367,28 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         kept
     } else {
         candidates
-    };
+    })
+}
+
+/// Round 1's fits, in parallel: the recalibration first, then every candidate alone; each
+/// with the seconds it took.
+fn fit_round_one(
+    g: &Ground,
+    candidates: &[Candidate],
+    baseline_evidence: f64,
+) -> Result<Vec<Result<(Fitted, f64)>>> {
+    let Ground {
+        data,
+        options,
+        physics,
+        storeys,
+        first,
+        mask,
+        held_out,
+        reals,
+        scales,
+        ..
+    } = *g;
     let current = parameter_names(storeys)
         .into_iter()
         .map(|name| Ok((name.clone(), reals.get(&name)?)))
@@ -1072,56 +1401,79 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         "round 1: recalibration and {} candidates",
         total - 1
     ));
-    let results = parallel(&jobs, options.threads, |job| -> Result<(Fitted, f64)> {
-        let t = Instant::now();
-        let _told = Told(|| {
-            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-            options.tell(&format!(
-                "round 1: {k}/{total} fits (recalibration and candidates)"
-            ));
-        });
-        let fitted = match job {
-            // The prior's mean and random draws as a calibration starts, and one more start
-            // at the twin's own values: a change near them (a storey's stiffness loss) is
-            // found from there whatever the number of parameters, where random starts of a
-            // tall building's 3N parameters rarely come near.
-            Job::Recalibrate => fit(
-                &physics,
-                data,
-                parameter_names(storeys),
-                BTreeMap::new(),
-                &mask,
-                &held_out,
-                first,
-                options.recalibration_starts + 1,
-                crate::workflows::calibrate::SIMULATIONS_PER_START,
-                options,
-                baseline_evidence,
-                &BTreeMap::new(),
-                vec![current.clone()],
-            ),
-            Job::Effect(c) => {
-                let twin = with_switches(&physics, Some(c))?;
-                let params = c.parameters(&scales);
-                fit(
-                    &twin,
+    Ok(parallel(
+        &jobs,
+        options.threads,
+        |job| -> Result<(Fitted, f64)> {
+            let t = Instant::now();
+            let _told = Told(|| {
+                let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+                options.tell(&format!(
+                    "round 1: {k}/{total} fits (recalibration and candidates)"
+                ));
+            });
+            let fitted = match job {
+                // The prior's mean and random draws as a calibration starts, and one more start
+                // at the twin's own values: a change near them (a storey's stiffness loss) is
+                // found from there whatever the number of parameters, where random starts of a
+                // tall building's 3N parameters rarely come near.
+                Job::Recalibrate => fit(
+                    &physics,
                     data,
-                    params.iter().map(|p| p.0.clone()).collect(),
-                    params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+                    parameter_names(storeys),
+                    BTreeMap::new(),
                     &mask,
                     &held_out,
                     first,
-                    options.starts,
-                    options.simulations_per_start,
+                    options.recalibration_starts + 1,
+                    crate::workflows::calibrate::SIMULATIONS_PER_START,
                     options,
                     baseline_evidence,
                     &BTreeMap::new(),
-                    c.starts_at(&scales),
-                )
-            }
-        }?;
-        Ok((fitted, t.elapsed().as_secs_f64()))
-    });
+                    vec![current.clone()],
+                ),
+                Job::Effect(c) => {
+                    let twin = with_switches(&physics, Some(c))?;
+                    let params = c.parameters(&scales);
+                    fit(
+                        &twin,
+                        data,
+                        params.iter().map(|p| p.0.clone()).collect(),
+                        params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+                        &mask,
+                        &held_out,
+                        first,
+                        options.starts,
+                        options.simulations_per_start,
+                        options,
+                        baseline_evidence,
+                        &BTreeMap::new(),
+                        c.starts_at(&scales),
+                    )
+                }
+            }?;
+            Ok((fitted, t.elapsed().as_secs_f64()))
+        },
+    ))
+}
+
+/// Round 1's results into the diagnosis: the recalibration's report and every candidate's
+/// (or its failure), the candidates' gates against `before_worst`, the twin's worst-floor
+/// held-out NMSE.
+fn report_round_one(
+    g: &Ground,
+    diagnosis: &mut Diagnosis,
+    candidates: &[Candidate],
+    results: Vec<Result<(Fitted, f64)>>,
+    before_worst: f64,
+) -> Result<RoundOne> {
+    let Ground {
+        options,
+        reals,
+        scales,
+        ..
+    } = *g;
+    let gates = options.gates;
     let mut results = results.into_iter();
     let (recal, recal_seconds) = results
         .next()
@@ -1130,7 +1482,6 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             context: "recalibrating".into(),
             source: Box::new(e),
         })?;
-    let before_worst = worst(&nmse_before_held_out);
     let recal_worst = worst(&recal.nmse_held_out);
     let mut moved: Vec<MovedParameter> = recal
         .calibration
@@ -1196,142 +1547,61 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         });
         fitted_candidates.push((*c, fitted));
     }
-    let mut order: Vec<usize> = (0..diagnosis.candidates.len()).collect();
-    order.sort_by(|&a, &b| {
-        diagnosis.candidates[b]
-            .evidence
-            .total_cmp(&diagnosis.candidates[a].evidence)
-    });
+    Ok(RoundOne {
+        recal,
+        recal_worst,
+        fitted: fitted_candidates,
+    })
+}
 
-    // 5. Forward selection: the best effect, refitted jointly with the physics, then the next
-    // while the error falls by the step gate (see `select`).
-    let recal_explains = recal_worst * gates.required_cut <= before_worst
-        && (0..nc).all(|c| {
-            recal.nmse_held_out[c] <= gates.recalibration_noise_factor * noise_nmse_held_out[c]
-        });
-    let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
-    let ctx = select::Context {
-        physics: &physics,
-        data,
-        options,
-        scales: &scales,
-        reals: &reals,
-        mask: &mask,
-        held_out: &held_out,
-        first,
-        baseline_evidence,
-        explained_held_out: (0..nc)
-            .map(|c| noise_nmse_held_out[c] + band_nmse[c])
-            .collect(),
-        channels: &channels,
-        candidates: &candidates,
-        tolerance: tolerance.value,
-    };
-    let selection = if no_alarm || sensor_fault.is_some() {
-        None
-    } else {
-        Some(select::forward(
-            &ctx,
-            &fitted_candidates,
-            &passes,
-            &recal,
-            before_worst,
-            &|what| options.tell(what),
-        )?)
-    };
-    let combination = selection.as_ref().and_then(|s| {
-        if s.chosen.is_empty() {
-            return None;
-        }
-        let fitted = s.fitted.as_ref()?;
-        let w = worst(&fitted.nmse_held_out);
-        (w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst)
-            .then_some((s, fitted, w))
-    });
-    if let Some(s) = &selection {
-        diagnosis.selection = s.steps.clone();
-    }
+/// The decision's stage: what each verdict's explanation reads (the round's results come as
+/// arguments), and one method per verdict that writes its action, reason, scores and evidence
+/// into the diagnosis.
+struct Verdict<'a> {
+    channels: &'a Channels,
+    mass: &'a [f64],
+    reals: &'a PhysicsReals,
+    scales: &'a Scales,
+    storeys: usize,
+    /// Worst-floor held-out NMSE of the twin as given, and after recalibration.
+    before_worst: f64,
+    recal_worst: f64,
+}
 
-    // 7. Discovery: when neither recalibration nor any combination of library effects explains
-    // the error, the missing force by sparse regression on top of the selection's model (see
-    // `discover`), refitted through FMI as the FMU's `discovered` effect and gated the same way.
-    // Also when the library's combination passes but leaves the model short of good enough:
-    // then discovery on the twin's own physics competes with it, and replaces it when its
-    // held-out error is lower by the step gate.
-    let combination_short =
-        combination.is_some_and(|(_, fitted, _)| !ctx.good_enough(&fitted.nmse_held_out));
-    let discovered = match &selection {
-        Some(s) if combination.is_none() && !recal_explains => {
-            options.tell("discovering the missing force by sparse regression");
-            let run = s.fitted.as_ref().map(|f| &f.run).unwrap_or(&base_run);
-            Some(discover::missing(
-                &ctx,
-                &s.chosen,
-                &s.values,
-                run,
-                before_worst,
-                recal_worst,
-            )?)
-        }
-        Some(_) if combination_short => {
-            options.tell("the library's answer leaves more than the noise: discovering");
-            let d = discover::missing(
-                &ctx,
-                &[],
-                &BTreeMap::new(),
-                &base_run,
-                before_worst,
-                recal_worst,
-            )?;
-            let better = |(_, fitted): &(Vec<_>, Fitted)| {
-                combination
-                    .is_some_and(|(_, _, w)| worst(&fitted.nmse_held_out) * gates.step_cut <= w)
-            };
-            Some((d.0, d.1.filter(better)))
-        }
-        _ => None,
-    };
-    let combination = if discovered.as_ref().is_some_and(|d| d.1.is_some()) {
-        None
-    } else {
-        combination
-    };
-    let discovered_passes = discovered.as_ref().and_then(|d| d.1.as_ref());
-    diagnosis.discovery = discovered.as_ref().map(|d| d.0.clone());
-
-    // 6. Decide.
-    if no_alarm {
-        diagnosis.action = Action::None;
-        diagnosis.reason = none_reason;
-    } else if sensor_fault.is_some() {
-        // Decided above (the alternatives were fitted for the report only).
-    } else if let Some((selection, fitted, w)) = combination {
+impl Verdict<'_> {
+    /// `add_physics` with the library's effects the forward selection chose.
+    fn add_library(
+        &self,
+        diagnosis: &mut Diagnosis,
+        selection: &select::Selection,
+        fitted: &Fitted,
+        w: f64,
+    ) {
         diagnosis.action = Action::AddPhysics;
         let labels: Vec<String> = selection.chosen.iter().map(|c| c.label()).collect();
         diagnosis.effects = selection
             .chosen
             .iter()
-            .map(|c| effect_report(&Addition::Library(*c), &selection.values, &scales))
+            .map(|c| effect_report(&Addition::Library(*c), &selection.values, self.scales))
             .collect();
         diagnosis.effect = diagnosis.effects.first().cloned();
-        diagnosis.physics_moved = moved_physics(&reals, &selection.values, storeys);
+        diagnosis.physics_moved = moved_physics(self.reals, &selection.values, self.storeys);
         let moved: Vec<String> = diagnosis
             .physics_moved
             .iter()
             .map(|p| format!("{} {:+.1} %", p.name, 100.0 * p.relative_change))
             .collect();
+        let plural = if labels.len() == 1 { "s" } else { "" };
         diagnosis.reason =
             format!(
-            "{} cut{} the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×) and beat{} \
-             recalibration ({:.3} %) by {:.1}×{}",
+            "{} cut{plural} the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×) and \
+             beat{plural} recalibration ({:.3} %) by {:.1}×{}",
             labels.join(" + "),
-            if labels.len() == 1 { "s" } else { "" },
-            before_worst,
+            self.before_worst,
             w,
-            before_worst / w,
-            if labels.len() == 1 { "s" } else { "" },
-            recal_worst,
-            recal_worst / w,
+            self.before_worst / w,
+            self.recal_worst,
+            self.recal_worst / w,
             if moved.is_empty() {
                 String::new()
             } else {
@@ -1339,28 +1609,17 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             }
         );
         diagnosis.nmse_after = fitted.nmse_after.clone();
-        diagnosis.series.after = channels.pick(&fitted.run.acc);
+        diagnosis.series.after = self.channels.pick(&fitted.run.acc);
         // The evidence: along the fitted model's drift (which follows the structure), the
         // storey shear the linear part misses = the effect's force plus what is still missed.
         let c = &selection.chosen[0];
-        if let Some(force) = effect_force(c, &selection.values, &scales, &fitted.run) {
-            let s = c.at - 1;
-            diagnosis.series.drift = fitted.run.drift.clone();
-            let still = missing_floor_force(
-                &channels,
-                &mass,
-                &channels.pick(&fitted.run.acc),
-                storeys,
-                n,
-            );
-            diagnosis.series.missing_shear[s] = storey_shear(&still, s)
-                .iter()
-                .zip(&force)
-                .map(|(still, force)| still - force)
-                .collect();
-            diagnosis.series.effect_force = Some(force);
+        if let Some(force) = effect_force(c, &selection.values, self.scales, &fitted.run) {
+            self.evidence_panel(diagnosis, &fitted.run, c.at - 1, force);
         }
-    } else if recal_explains {
+    }
+
+    /// `recalibrate`: the recalibration explains the error and no effect beats it.
+    fn recalibrate(&self, diagnosis: &mut Diagnosis, recal: &Fitted, gates: &Gates) {
         diagnosis.action = Action::Recalibrate;
         let top: Vec<String> = diagnosis
             .recalibration
@@ -1379,39 +1638,49 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             "recalibration cuts the worst-floor held-out NMSE from {:.3} % to {:.3} % ({:.1}×), \
              within {}× of the noise level on every floor, and no effect beats it by {}×; moved \
              most: {}",
-            before_worst,
-            recal_worst,
-            before_worst / recal_worst,
+            self.before_worst,
+            self.recal_worst,
+            self.before_worst / self.recal_worst,
             gates.recalibration_noise_factor,
             gates.beat_recalibration,
             top.join(", ")
         );
         diagnosis.nmse_after = recal.nmse_after.clone();
-        diagnosis.series.after = channels.pick(&recal.run.acc);
-    } else if let (Some(s), Some((terms, fitted))) = (&selection, discovered_passes) {
+        diagnosis.series.after = self.channels.pick(&recal.run.acc);
+    }
+
+    /// `add_physics` with the terms discovery found, on top of the selection's effects unless
+    /// they replaced them (`replaced`: the library's answer left more than the noise).
+    fn add_discovered(
+        &self,
+        diagnosis: &mut Diagnosis,
+        selection: &select::Selection,
+        terms: &[Term],
+        fitted: &Fitted,
+        replaced: bool,
+    ) {
         diagnosis.action = Action::AddPhysics;
-        // On top of the selection's effects, unless discovery replaced them.
-        let (chosen, mut values) = if combination_short {
+        let (chosen, mut values) = if replaced {
             (Vec::new(), BTreeMap::new())
         } else {
-            (s.chosen.clone(), s.values.clone())
+            (selection.chosen.clone(), selection.values.clone())
         };
         let mut additions: Vec<Addition> = chosen.into_iter().map(Addition::Library).collect();
-        additions.push(Addition::Discovered(terms.clone()));
+        additions.push(Addition::Discovered(terms.to_vec()));
         values.extend(estimates(&fitted.calibration));
         diagnosis.effects = additions
             .iter()
-            .map(|a| effect_report(a, &values, &scales))
+            .map(|a| effect_report(a, &values, self.scales))
             .collect();
         diagnosis.effect = diagnosis.effects.first().cloned();
-        diagnosis.physics_moved = moved_physics(&reals, &values, storeys);
+        diagnosis.physics_moved = moved_physics(self.reals, &values, self.storeys);
         let w = worst(&fitted.nmse_held_out);
         let found = diagnosis
             .effects
             .last()
             .map(discover::describe_terms)
             .unwrap_or_default();
-        let library = if combination_short {
+        let library = if replaced {
             let best = diagnosis
                 .selection
                 .iter()
@@ -1426,35 +1695,25 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             "{library} (recalibration leaves {:.3} % held out); sparse regression found {found}, \
              which, refitted through the FMU, cuts the worst-floor held-out NMSE from {:.3} % \
              to {:.3} % ({:.1}×) and beats recalibration by {:.1}×",
-            recal_worst,
-            before_worst,
+            self.recal_worst,
+            self.before_worst,
             w,
-            before_worst / w,
-            recal_worst / w
+            self.before_worst / w,
+            self.recal_worst / w
         );
         diagnosis.nmse_after = fitted.nmse_after.clone();
-        diagnosis.series.after = channels.pick(&fitted.run.acc);
+        diagnosis.series.after = self.channels.pick(&fitted.run.acc);
         // The evidence panel: at a storey, the discovered terms' storey force along the fitted
         // model's drift or drift rate, beside the shear the linear part still misses.
         if let Some((force, axis)) = discover::storey_force(terms, &fitted.run) {
             diagnosis.series.evidence_axis = Some(axis);
-            let s = terms[0].site.at() - 1;
-            diagnosis.series.drift = fitted.run.drift.clone();
-            let still = missing_floor_force(
-                &channels,
-                &mass,
-                &channels.pick(&fitted.run.acc),
-                storeys,
-                n,
-            );
-            diagnosis.series.missing_shear[s] = storey_shear(&still, s)
-                .iter()
-                .zip(&force)
-                .map(|(still, force)| still - force)
-                .collect();
-            diagnosis.series.effect_force = Some(force);
+            self.evidence_panel(diagnosis, &fitted.run, terms[0].site.at() - 1, force);
         }
-    } else {
+    }
+
+    /// `update_data_model`: neither recalibration, the library nor discovery explains the
+    /// error. `order`: the candidates, best evidence first.
+    fn update_data_model(&self, diagnosis: &mut Diagnosis, order: &[usize]) {
         diagnosis.action = Action::UpdateDataModel;
         let best = order.first().map(|&i| &diagnosis.candidates[i]);
         let discovery = match &diagnosis.discovery {
@@ -1481,18 +1740,38 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             "neither recalibration (worst-floor held-out NMSE {:.3} % from {:.3} %) nor any \
              effect of the library (best: {}) explains the error{discovery}: the corrector \
              should learn it",
-            recal_worst,
-            before_worst,
+            self.recal_worst,
+            self.before_worst,
             best.map(|b| format!("{} at {:.3} %", b.name.label, worst(&b.nmse_held_out)))
                 .unwrap_or_else(|| "none tried".into())
         );
     }
-    diagnosis.candidates = order
-        .into_iter()
-        .map(|i| diagnosis.candidates[i].clone())
-        .collect();
-    diagnosis.seconds = started.elapsed().as_secs_f64();
-    Ok(diagnosis)
+
+    /// The evidence panel at storey `s` (0-based): along the fitted model's drift, the storey
+    /// shear the linear part still misses plus the added `force`, beside that force.
+    fn evidence_panel(
+        &self,
+        diagnosis: &mut Diagnosis,
+        run: &PhysicsRun,
+        s: usize,
+        force: Vec<f64>,
+    ) {
+        diagnosis.series.drift = run.drift.clone();
+        let n = diagnosis.series.time.len();
+        let still = missing_floor_force(
+            self.channels,
+            self.mass,
+            &self.channels.pick(&run.acc),
+            self.storeys,
+            n,
+        );
+        diagnosis.series.missing_shear[s] = storey_shear(&still, s)
+            .iter()
+            .zip(&force)
+            .map(|(still, force)| still - force)
+            .collect();
+        diagnosis.series.effect_force = Some(force);
+    }
 }
 
 /// A sensor fault: exactly one floor's channel candidate cuts that floor's held-out NMSE by
