@@ -60,37 +60,28 @@ phase "C FMUs" scripts/make-c-fmus.sh
 phase "Python package" scripts/install-python-package.sh
 phase "installs" scripts/test-installs.sh
 
-# The Python tests from here on, beside the Rust tests' build and then the Rust tests: they
-# need only the FMUs and the package, and they are the longest pole (545 s against a 334 s
-# build and 429 s of Rust tests, run one after the other). The Rust tests build in the release
-# profile: the dependencies are the ones `twin` was just built with (the dev profile compiled
-# them all a second time, 508 s of a 39-minute run), and the tests that drive `twin` and the
-# diagnosis run its optimised code (the hybrid test's contact law: 220 s in the dev profile,
-# 22 s in release).
-python_start=$SECONDS
+# The Rust tests' build, then the Rust and the Python tests side by side. The tests build in
+# the release profile: the dependencies are the ones `twin` was just built with (the dev
+# profile compiled them all a second time, 508 s of a 39-minute run), and the tests that drive
+# `twin` and the diagnosis run its optimised code (the hybrid test's contact law: 220 s in the
+# dev profile, 22 s in release).
+if cargo nextest --version >/dev/null 2>&1; then
+  phase "Rust tests build" cargo nextest run --workspace --release --no-run
+  rust_tests=(cargo nextest run --workspace --release --no-fail-fast)
+else
+  phase "Rust tests build" cargo test --workspace --release --no-run
+  rust_tests=(cargo test --workspace --release --no-fail-fast)
+fi
+start=$SECONDS
 pytest_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-pytest.XXXXXX")
 .venv/bin/python -m pytest tests/python -q >"$pytest_log" 2>&1 &
 pytest=$!
-if cargo nextest --version >/dev/null 2>&1; then
-  rust_tests=(cargo nextest run --workspace --release --no-fail-fast)
-  build=(cargo nextest run --workspace --release --no-run)
-else
-  rust_tests=(cargo test --workspace --release --no-fail-fast)
-  build=(cargo test --workspace --release --no-run)
-fi
-phase "Rust tests build (the Python tests beside it)" "${build[@]}" || {
-  status=$?
-  kill "$pytest" 2>/dev/null || true
-  echo "test.sh: the Rust tests' build failed" >&2
-  exit "$status"
-}
-start=$SECONDS
 rust_status=0
 "${rust_tests[@]}" || rust_status=$?
 phases+=("Rust tests (the Python tests beside them): $((SECONDS - start)) s")
 python_status=0
 wait "$pytest" || python_status=$?
-phases+=("Python tests (beside the Rust tests' build and run): $((SECONDS - python_start)) s")
+phases+=("Python tests (beside the Rust tests): $((SECONDS - start)) s")
 echo "--- pytest tests/python -q" >&2
 cat "$pytest_log" >&2
 rm -f "$pytest_log"
