@@ -3,7 +3,8 @@
 # dataset1, compare it with the three records (dataset3 has contact the twin does not know
 # about), train the GP corrector, run active learning over the three records in every query
 # mode, then diagnose dataset3, add the physics the diagnosis names and compare again (and, on
-# synthetic records, two changes at once and a force outside the library, discovered), run the
+# synthetic records, two changes at once, a force outside the library, discovered, and a
+# building measured by velocity sensors in mm/s), run the
 # simulated real-time hybrid test (the contact threshold, the law learned from it), stream
 # dataset3 through `twin watch` (its failing window diagnosed in the background; with the GP
 # corrector, its latent variance flagging the change and the corrector learning online; on a
@@ -134,6 +135,16 @@ echo "-- velocity-squared damping in storey 2, which the FMU's library lacks: di
   --data "$out/synth-quadratic-damping.csv" --out "$out/with-discovered.ssp"
 "$twin" compare --twin "$out/with-discovered.ssp" --data "$out/synth-quadratic-damping.csv" \
   --report "$out/compare-with-discovered.json"
+echo "-- velocity sensors in mm/s instead of accelerometers (geophones): the twin calibrated on them, --"
+echo "   and a cubic stiffness in storey 1 diagnosed with every channel in its own quantity --"
+"$twin" synth --seed 1 --noise-fraction 0.03 --channels vel1,vel2,vel3 --units vel=mm/s \
+  --out "$out/synth-velocities.csv" >/dev/null
+"$twin" calibrate --data "$out/synth-velocities.csv" --out "$out/synth-velocities.ssp" >/dev/null
+"$twin" synth --seed 2 --noise-fraction 0.03 --channels vel1,vel2,vel3 --units vel=mm/s \
+  --force-window 12:17:3:0.5 --effect cubic@1:stiffness=2e9 \
+  --out "$out/synth-velocities-cubic.csv" --truth "$out/synth-velocities-cubic-truth.json" >/dev/null
+"$twin" diagnose --twin "$out/synth-velocities.ssp" --data "$out/synth-velocities-cubic.csv" \
+  --report "$out/diagnose-velocities.json"
 
 echo
 section "== another building: five storeys shaken at the base, accelerometers on floors 1, 3 and 5 reading in g =="

@@ -147,6 +147,31 @@ def test_diagnose_and_add_physics_find_the_contact(tmp_path):
     assert st.Twin.open(str(path)).parameters["physics"]["contact23_enabled"] is True
 
 
+def test_a_building_measured_by_velocity_sensors_is_diagnosed_in_their_quantity():
+    """Velocity sensors in mm/s on every floor (``twin synth``'s frame): the twin calibrated on
+    them diagnoses a hidden cubic stiffness in storey 1, each channel in its own quantity, as
+    for accelerometers (tests/diagnose_sensors.rs holds the other effects, displacements and a
+    mix, from Rust)."""
+    channels = ["vel1 (mm/s)", "vel2 (mm/s)", "vel3 (mm/s)"]
+    # 9e-5 m/s: 3 % of the change-free record's velocity RMS (2.9–3.6e-3 m/s), on every record.
+    base, _ = st.synth({"seed": 1, "channels": channels, "noise": {"sd": [9e-5]}})
+    twin, _ = st.Twin.default().calibrate(base)
+    record, _ = st.synth({
+        "seed": 2, "channels": channels, "noise": {"sd": [9e-5]},
+        "force": {"windows": [{"start": 12, "end": 17, "gain": 3, "ramp": 0.5}]},
+        "effects": [{"kind": "cubic", "location": [1], "stiffness": 2e9}],
+    })
+    d = twin.diagnose(record)
+    assert d.channels == ["vel1", "vel2", "vel3"]
+    assert d.action == "add_physics", d.reason
+    assert d.effect["label"] == "cubic@1", d.reason
+    # Measured: 1.99e9 for 2e9 and every channel's NMSE at its noise level; bars 5 % and 4×.
+    assert abs(d.effect["parameters"]["stiffness"] - 2e9) < 0.05 * 2e9
+    assert max(d.nmse_after) < max(d.nmse_before) / 4
+    assert [s["quantity"] for s in d.sensing] == ["velocity"] * 3
+    assert all(s["localisation"] == "differentiated once" and s["visibility"] > 3 for s in d.sensing)
+
+
 def test_long_work_releases_the_gil():
     """While a calibration runs, another Python thread keeps running."""
     record = st.Record.read(str(DATA / "dataset1.csv"))

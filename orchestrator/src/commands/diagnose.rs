@@ -190,6 +190,35 @@ pub fn ambient_summary(d: &AmbientDiagnosis) -> String {
     s
 }
 
+/// The channels' quantities and what each saw of the verdict, when the record has other
+/// sensors than accelerometers (an accelerometer-only record prints nothing more).
+fn sensing_lines(d: &Diagnosis) -> String {
+    if d.sensing.iter().all(|c| c.quantity == "acceleration") {
+        return String::new();
+    }
+    let mut s = String::from("sensors       ");
+    let described: Vec<String> = d
+        .sensing
+        .iter()
+        .map(|c| {
+            let seen = match c.visibility {
+                Some(v) => format!(", the verdict's change {v:.1}× its noise sd"),
+                None => String::new(),
+            };
+            format!(
+                "{} {} (localisation: {}{seen})",
+                c.channel, c.quantity, c.localisation
+            )
+        })
+        .collect();
+    s += &described.join("; ");
+    s += "\n              velocity and displacement sensors weigh a structure's low modes more \
+          and its high ones less than accelerometers: an effect of high frequency (a contact's \
+          impacts, friction's stick-slip) shows less in them, a slow one more; the ratios above \
+          are what each sensor saw of this answer\n";
+    s
+}
+
 /// What `twin diagnose` prints.
 pub fn summary(d: &Diagnosis) -> String {
     let pct = |x: &[f64]| {
@@ -295,12 +324,18 @@ pub fn summary(d: &Diagnosis) -> String {
         );
     }
     if let Some(x) = &d.sensor {
+        let (unit, rate) = match d.sensing.iter().find(|c| c.channel == x.channel) {
+            Some(c) if c.quantity == "velocity" => ("m/s", "m/s²"),
+            Some(c) if c.quantity == "displacement" => ("m", "m/s"),
+            _ => ("m/s²", "m/s³"),
+        };
         s += &format!(
-            "sensor        floor {}: gain {:.4} ± {:.1e}, offset {:.4e} ± {:.1e} m/s², drift \
-             {:.4e} ± {:.1e} m/s³ (a sensor fault is not physics: fix or recalibrate it)\n",
-            x.floor, x.gain, x.sd.gain, x.offset, x.sd.offset, x.drift, x.sd.drift
+            "sensor        {} (floor {}): gain {:.4} ± {:.1e}, offset {:.4e} ± {:.1e} {unit}, \
+             drift {:.4e} ± {:.1e} {rate} (a sensor fault is not physics: fix or recalibrate it)\n",
+            x.channel, x.floor, x.gain, x.sd.gain, x.offset, x.sd.offset, x.drift, x.sd.drift
         );
     }
+    s += &sensing_lines(d);
     s += &format!("NMSE after    {}\n", pct(&d.nmse_after));
     match &d.modes {
         Some(m) => {

@@ -63,7 +63,9 @@
 //!    - else `update_data_model`: nothing in the library or sparse explains the error; the
 //!      corrector should learn it (no effect is named).
 //! 6. **Localise**: the residual acceleration times the floor masses is the force the model
-//!    misses on each floor; summed from the top it is the storey shear the model misses, which
+//!    misses on each floor (a velocity or displacement sensor's residual differentiated once
+//!    or twice; every other stage reads each channel in its own quantity: acc<i>, vel<i>,
+//!    disp<i>); summed from the top it is the storey shear the model misses, which
 //!    is correlated with each storey's drift (linear, cubic) and each floor's velocity sign
 //!    (friction). Reported as evidence beside the fits.
 //!
@@ -88,6 +90,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 use structure::building::parameter_names;
+use structure::channel::{Channel, Quantity};
 use structure::effects::{Law, Placement, Term};
 
 use crate::cosim::import::ImportError;
@@ -291,7 +294,7 @@ pub enum Action {
     Recalibrate,
     AddPhysics,
     UpdateDataModel,
-    /// One accelerometer is faulty (gain, offset, drift, dead): not physics.
+    /// One sensor is faulty (gain, offset, drift, dead): not physics.
     SensorFault,
 }
 
@@ -307,13 +310,28 @@ impl Action {
     }
 }
 
-/// One physics run: every floor's acceleration and velocity and every storey's drift, floor
-/// (storey) 1 first.
+/// One physics run: every floor's acceleration, velocity and displacement and every storey's
+/// drift, floor (storey) 1 first.
 #[derive(Clone)]
 struct PhysicsRun {
+    /// Per floor: absolute accelerations, and velocities and displacements relative to the
+    /// ground.
     acc: Vec<Vec<f64>>,
-    drift: Vec<Vec<f64>>,
     velocity: Vec<Vec<f64>>,
+    displacement: Vec<Vec<f64>>,
+    /// Per storey.
+    drift: Vec<Vec<f64>>,
+}
+
+impl PhysicsRun {
+    /// Floor `floor`'s (from 0) series of `quantity`.
+    fn at(&self, floor: usize, quantity: Quantity) -> &[f64] {
+        match quantity {
+            Quantity::Velocity => &self.velocity[floor],
+            Quantity::Displacement => &self.displacement[floor],
+            _ => &self.acc[floor],
+        }
+    }
 }
 
 /// The storeys of the building `twin`'s physics models: the one place a diagnosis learns them,
@@ -342,14 +360,20 @@ fn storeys_in(md: &ModelDescription, fmu: &str) -> Result<usize> {
     }
 }
 
-/// The measured channels a diagnosis reads, in the record's order: each one's name, floor and
-/// values. A diagnosis works on accelerations (the residual times the floor mass is the force
-/// the model misses); another response, or a floor the structure lacks, is refused by name.
+/// The measured channels a diagnosis reads, in the record's order: each one's name, floor,
+/// quantity and values (SI). Accelerometers, velocity and displacement sensors alike: each
+/// channel is predicted, fitted and scored in its own quantity; only the localisation, which
+/// reads forces, takes the residual as an acceleration ([`Channels::residual_acceleration`]).
+/// A floor the structure lacks is refused by name.
 #[derive(Clone, Debug)]
 pub(crate) struct Channels {
     pub names: Vec<String>,
     /// Each channel's floor, from 0.
     pub floors: Vec<usize>,
+    /// Each channel's quantity: acceleration (absolute), velocity or displacement (relative
+    /// to the ground), as the record's `acc<i>`, `vel<i>`, `disp<i>` and the shear FMU's
+    /// outputs of those names.
+    pub quantities: Vec<Quantity>,
     pub measured: Vec<Vec<f64>>,
 }
 
@@ -358,19 +382,21 @@ impl Channels {
         let mut out = Channels {
             names: Vec::new(),
             floors: Vec::new(),
+            quantities: Vec::new(),
             measured: Vec::new(),
         };
         for signal in &data.responses {
             let name = signal.channel.name();
-            let floor = match signal.channel {
-                structure::channel::Channel::Response {
-                    quantity: structure::channel::Quantity::Acceleration,
+            let (quantity, floor) = match signal.channel {
+                Channel::Response {
+                    quantity:
+                        q @ (Quantity::Acceleration | Quantity::Velocity | Quantity::Displacement),
                     floor,
-                } => floor,
+                } => (q, floor),
                 _ => {
                     return Err(DiagnoseError::Setup(format!(
-                        "{}: column '{name}': a diagnosis reads accelerometers (acc<i>); the \
-                         record has {}",
+                        "{}: column '{name}': a diagnosis reads responses (acc<i>, vel<i>, \
+                         disp<i>); the record has {}",
                         data.path.display(),
                         data.channel_names().join(", ")
                     )))
@@ -384,15 +410,72 @@ impl Channels {
             }
             out.names.push(name);
             out.floors.push(floor - 1);
+            out.quantities.push(quantity);
             out.measured.push(signal.values.clone());
         }
         if out.names.is_empty() {
             return Err(DiagnoseError::Setup(format!(
-                "{}: no accelerometer to diagnose",
+                "{}: no response channel (acc<i>, vel<i>, disp<i>) to diagnose",
                 data.path.display()
             )));
         }
         Ok(out)
+    }
+
+    /// The (floor, quantity) of each channel: where and what a sensitivity is read at.
+    pub fn sensors(&self) -> Vec<(usize, Quantity)> {
+        self.floors
+            .iter()
+            .copied()
+            .zip(self.quantities.iter().copied())
+            .collect()
+    }
+
+    /// How each channel enters the diagnosis (its visibility is measured at the end).
+    pub fn sensing(&self) -> Vec<Sensing> {
+        self.names
+            .iter()
+            .zip(&self.quantities)
+            .map(|(name, q)| {
+                let (quantity, localisation) = match q {
+                    Quantity::Velocity => ("velocity", "differentiated once"),
+                    Quantity::Displacement => ("displacement", "differentiated twice"),
+                    _ => ("acceleration", "as measured"),
+                };
+                Sensing {
+                    channel: name.clone(),
+                    quantity: quantity.into(),
+                    localisation: localisation.into(),
+                    visibility: None,
+                }
+            })
+            .collect()
+    }
+
+    /// Per channel, what the physics run `run` gives at its floor in its quantity.
+    fn predicted(&self, run: &PhysicsRun) -> Vec<Vec<f64>> {
+        self.sensors()
+            .into_iter()
+            .map(|(f, q)| run.at(f, q).to_vec())
+            .collect()
+    }
+
+    /// Channel `c`'s residual (measured − `predicted`) as an acceleration: as it is for an
+    /// accelerometer, differentiated once (velocity) or twice (displacement) by central
+    /// differences (one-sided at the ends) on the sampling interval `dt`. Differencing
+    /// amplifies the noise in proportion to the frequency, so such a channel's localisation
+    /// is noisier at high frequency; the fits never use it.
+    pub fn residual_acceleration(&self, c: usize, predicted: &[f64], dt: f64) -> Vec<f64> {
+        let residual: Vec<f64> = self.measured[c]
+            .iter()
+            .zip(predicted)
+            .map(|(m, p)| m - p)
+            .collect();
+        match self.quantities[c] {
+            Quantity::Velocity => derivative(&residual, dt),
+            Quantity::Displacement => derivative(&derivative(&residual, dt), dt),
+            _ => residual,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -404,15 +487,24 @@ impl Channels {
         self.names.iter().position(|n| n == name).unwrap_or(0)
     }
 
-    /// Per channel, from per-floor series (a physics run, a prediction): each channel's floor.
-    pub fn pick<T: Clone>(&self, per_floor: &[T]) -> Vec<T> {
-        self.floors.iter().map(|&f| per_floor[f].clone()).collect()
-    }
-
     /// NMSE per channel of `predicted` (per channel) over the samples `idx`.
     pub fn nmse_on(&self, predicted: &[Vec<f64>], idx: &[usize]) -> Vec<f64> {
         nmse_on(&self.measured, predicted, idx)
     }
+}
+
+/// The derivative of a sampled series by central differences, one-sided at the ends.
+fn derivative(x: &[f64], dt: f64) -> Vec<f64> {
+    let n = x.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            (x[b] - x[a]) / ((b - a) as f64 * dt)
+        })
+        .collect()
 }
 
 /// Run the physics component of `twin` with `extra` parameters (and `values` for `names`).
@@ -437,7 +529,7 @@ fn run_physics(
         .iter()
         .map(|n| fmu.value_reference(n))
         .collect::<Result<Vec<u32>, _>>()?;
-    let recorded: Vec<String> = ["acc", "drift", "vel"]
+    let recorded: Vec<String> = ["acc", "drift", "vel", "disp"]
         .iter()
         .flat_map(|q| (1..=storeys).map(move |i| format!("{q}{i}")))
         .collect();
@@ -448,12 +540,14 @@ fn run_physics(
     let mut sim = Simulator::for_record(&fmu, base, data, "diagnose")?;
     let mut out: Vec<Vec<f64>> = vec![Vec::new(); recorded.len()];
     sim.record(&vrs, values, &outputs, &mut out)?;
+    let displacement = out.split_off(3 * storeys);
     let velocity = out.split_off(2 * storeys);
     let drift = out.split_off(storeys);
     Ok(PhysicsRun {
         acc: out,
-        drift,
         velocity,
+        displacement,
+        drift,
     })
 }
 
@@ -647,7 +741,7 @@ fn fit(
     let run = run_physics(twin, data, &BTreeMap::new(), &parameters, &values)?;
     let after: Vec<usize> = (first..data.len()).collect();
     let channels = Channels::of(data, run.acc.len())?;
-    let predicted = channels.pick(&run.acc);
+    let predicted = channels.predicted(&run);
     Ok(Fitted {
         evidence: calibration.log_evidence - baseline_evidence,
         nmse_after: channels.nmse_on(&predicted, &after),
@@ -820,6 +914,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             ),
             None => none_reason,
         };
+        diagnosis.measure_visibility();
         diagnosis.seconds = started.elapsed().as_secs_f64();
         return Ok(diagnosis);
     }
@@ -859,6 +954,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
             diagnosis.series.after[c] = fault.apply(&predicted[c], &data.time);
             diagnosis.nmse_after[c] = fault.nmse_after;
             if !options.always_fit {
+                diagnosis.measure_visibility();
                 diagnosis.seconds = started.elapsed().as_secs_f64();
                 return Ok(diagnosis);
             }
@@ -1003,6 +1099,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         reals: &reals,
         scales: &scales,
         storeys,
+        dt: data.dt,
         before_worst,
         recal_worst,
     };
@@ -1024,6 +1121,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
         .into_iter()
         .map(|i| diagnosis.candidates[i].clone())
         .collect();
+    diagnosis.measure_visibility();
     diagnosis.seconds = started.elapsed().as_secs_f64();
     Ok(diagnosis)
 }
@@ -1051,7 +1149,7 @@ struct Baseline {
     candidates: Vec<Candidate>,
     /// The twin's physics alone.
     physics: Twin,
-    /// Its run on the record (accelerations, drifts, velocities).
+    /// Its run on the record (accelerations, velocities, displacements, drifts).
     base_run: PhysicsRun,
     /// The twin's prediction per channel.
     predicted: Vec<Vec<f64>>,
@@ -1196,7 +1294,7 @@ fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Resul
     let scales = prior_scales(&reals, &base_run, data, first)?;
 
     // Localisation from the residual of the twin as given.
-    let floor_force = missing_floor_force(&channels, &mass, &predicted, storeys, n);
+    let floor_force = missing_floor_force(&channels, &mass, &predicted, storeys, data.dt);
     let missing_shear = missing_shear(&floor_force);
     let localisation = localise(&missing_shear, &floor_force, &base_run, first);
 
@@ -1245,6 +1343,7 @@ fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Resul
         failed_candidates: Vec::new(),
         screened_out: Vec::new(),
         localisation,
+        sensing: channels.sensing(),
         modes,
         modes_error,
         gates: options.gates,
@@ -1336,8 +1435,6 @@ fn screened(
         ..
     } = *g;
     let fitted_idx: Vec<usize> = (0..data.len()).filter(|&k| mask[k]).collect();
-    let n = data.len();
-    let nc = channels.len();
     Ok(if options.candidates.is_none() {
         options.tell(&format!("screening {} candidates", candidates.len()));
         let values = |p: char| -> Result<Vec<f64>> {
@@ -1345,6 +1442,7 @@ fn screened(
                 .map(|i| reals.get(&format!("{p}{i}")))
                 .collect()
         };
+        let sensors = channels.sensors();
         let problem = discover::Problem {
             linear: discover::LinearPart {
                 mass: values('m')?,
@@ -1356,12 +1454,16 @@ fn screened(
                 velocity: &base_run.velocity,
                 acceleration: &base_run.acc,
             },
-            floors: &channels.floors,
-            residual: (0..nc)
-                .map(|c| {
-                    let f = channels.floors[c];
-                    (0..n)
-                        .map(|k| channels.measured[c][k] - base_run.acc[f][k])
+            sensors: &sensors,
+            residual: channels
+                .measured
+                .iter()
+                .zip(channels.predicted(base_run))
+                .map(|(measured, predicted)| {
+                    measured
+                        .iter()
+                        .zip(&predicted)
+                        .map(|(m, p)| m - p)
                         .collect()
                 })
                 .collect(),
@@ -1588,6 +1690,8 @@ struct Verdict<'a> {
     reals: &'a PhysicsReals,
     scales: &'a Scales,
     storeys: usize,
+    /// The record's sampling interval.
+    dt: f64,
     /// Worst-floor held-out NMSE of the twin as given, and after recalibration.
     before_worst: f64,
     recal_worst: f64,
@@ -1634,7 +1738,7 @@ impl Verdict<'_> {
             }
         );
         diagnosis.nmse_after = fitted.nmse_after.clone();
-        diagnosis.series.after = self.channels.pick(&fitted.run.acc);
+        diagnosis.series.after = self.channels.predicted(&fitted.run);
         // The evidence: along the fitted model's drift (which follows the structure), the
         // storey shear the linear part misses = the effect's force plus what is still missed.
         let c = &selection.chosen[0];
@@ -1671,7 +1775,7 @@ impl Verdict<'_> {
             top.join(", ")
         );
         diagnosis.nmse_after = recal.nmse_after.clone();
-        diagnosis.series.after = self.channels.pick(&recal.run.acc);
+        diagnosis.series.after = self.channels.predicted(&recal.run);
     }
 
     /// `add_physics` with the terms discovery found, on top of the selection's effects unless
@@ -1727,7 +1831,7 @@ impl Verdict<'_> {
             self.recal_worst / w
         );
         diagnosis.nmse_after = fitted.nmse_after.clone();
-        diagnosis.series.after = self.channels.pick(&fitted.run.acc);
+        diagnosis.series.after = self.channels.predicted(&fitted.run);
         // The evidence panel: at a storey, the discovered terms' storey force along the fitted
         // model's drift or drift rate, beside the shear the linear part still misses.
         if let Some((force, axis)) = discover::storey_force(terms, &fitted.run) {
@@ -1782,13 +1886,12 @@ impl Verdict<'_> {
         force: Vec<f64>,
     ) {
         diagnosis.series.drift = run.drift.clone();
-        let n = diagnosis.series.time.len();
         let still = missing_floor_force(
             self.channels,
             self.mass,
-            &self.channels.pick(&run.acc),
+            &self.channels.predicted(run),
             self.storeys,
-            n,
+            self.dt,
         );
         diagnosis.series.missing_shear[s] = storey_shear(&still, s)
             .iter()
@@ -1835,11 +1938,22 @@ fn sensor_decision(
         .filter(|&g| g != c)
         .map(|g| format!("{} {:.3} %", floor_of(&names[g]), before_held_out[g]))
         .collect();
+    let (sensor, unit, rate) = match Channel::parse(&s.channel) {
+        Some(Channel::Response {
+            quantity: Quantity::Velocity,
+            ..
+        }) => ("velocity sensor", "m/s", "m/s²"),
+        Some(Channel::Response {
+            quantity: Quantity::Displacement,
+            ..
+        }) => ("displacement sensor", "m", "m/s"),
+        _ => ("accelerometer", "m/s²", "m/s³"),
+    };
     Some((
         (*s).clone(),
         format!(
-            "the accelerometer on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} m/s², \
-             drift {:.5} ± {:.5} m/s³ of the twin's prediction: that cuts floor {}'s held-out \
+            "the {sensor} on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} {unit}, \
+             drift {:.5} ± {:.5} {rate} of the twin's prediction: that cuts floor {}'s held-out \
              NMSE from {:.3} % to {:.3} % ({:.1}×), while the other floors are already within \
              the noise or the tolerance ({}): a sensor fault, not physics",
             s.floor,
@@ -2007,19 +2121,34 @@ fn effect_force(
 }
 
 /// The force per floor the twin misses: each measured floor's mass times its residual
-/// acceleration; 0 on a floor without an accelerometer (what it misses there is not seen).
+/// acceleration ([`Channels::residual_acceleration`]: an accelerometer's as it is, a velocity
+/// or displacement sensor's differentiated; of a floor's sensors the one fewest
+/// differentiations away); 0 on a floor without a sensor (what it misses there is not seen).
 fn missing_floor_force(
     channels: &Channels,
     mass: &[f64],
     predicted: &[Vec<f64>],
     storeys: usize,
-    n: usize,
+    dt: f64,
 ) -> Vec<Vec<f64>> {
+    let n = channels.measured.first().map_or(0, Vec::len);
+    let order = |q: Quantity| match q {
+        Quantity::Acceleration => 0,
+        Quantity::Velocity => 1,
+        _ => 2,
+    };
     let mut force = vec![vec![0.0; n]; storeys];
+    let mut read_from: Vec<Option<Quantity>> = vec![None; storeys];
     for c in 0..channels.len() {
-        let f = channels.floors[c];
-        force[f] = (0..n)
-            .map(|k| mass[f] * (channels.measured[c][k] - predicted[c][k]))
+        let (f, q) = (channels.floors[c], channels.quantities[c]);
+        if read_from[f].is_some_and(|r| order(r) <= order(q)) {
+            continue;
+        }
+        read_from[f] = Some(q);
+        force[f] = channels
+            .residual_acceleration(c, &predicted[c], dt)
+            .into_iter()
+            .map(|a| mass[f] * a)
             .collect();
     }
     force
@@ -2115,6 +2244,48 @@ fn localise(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The localisation reads a velocity sensor's residual differentiated once and a
+    /// displacement sensor's twice (a residual sin(ωt) gives ω·cos and −ω²·sin within the
+    /// central differences' error at 100 samples per period, 0.07 % and 0.13 %; 0.2 % allowed),
+    /// and of a floor's sensors
+    /// the one fewest differentiations away: the accelerometer where there is one.
+    #[test]
+    fn each_sensor_enters_the_missing_force_as_an_acceleration() {
+        let dt = 0.01;
+        let n = 400;
+        let w = 2.0 * std::f64::consts::PI; // 1 Hz: 100 samples per period
+        let sine: Vec<f64> = (0..n).map(|k| (w * k as f64 * dt).sin()).collect();
+        let channels = Channels {
+            names: vec!["vel1".into(), "disp2".into(), "disp3".into(), "acc3".into()],
+            floors: vec![0, 1, 2, 2],
+            quantities: vec![
+                Quantity::Velocity,
+                Quantity::Displacement,
+                Quantity::Displacement,
+                Quantity::Acceleration,
+            ],
+            measured: vec![sine.clone(), sine.clone(), sine.clone(), sine.clone()],
+        };
+        let predicted = vec![vec![0.0; n]; 4];
+        let mass = [2.0, 3.0, 4.0];
+        let force = missing_floor_force(&channels, &mass, &predicted, 3, dt);
+        for k in 1..n - 1 {
+            let t = w * k as f64 * dt;
+            assert!(
+                (force[0][k] - 2.0 * w * t.cos()).abs() < 2e-3 * 2.0 * w,
+                "vel at {k}"
+            );
+            if k > 1 && k < n - 2 {
+                let expected = -3.0 * w * w * t.sin();
+                assert!(
+                    (force[1][k] - expected).abs() < 2e-3 * 3.0 * w * w,
+                    "disp at {k}"
+                );
+            }
+            assert_eq!(force[2][k], 4.0 * sine[k], "the accelerometer, as measured");
+        }
+    }
 
     /// A decisive screen (its best site at most SCREEN_DECISIVE of the residual) keeps every
     /// candidate at its SCREEN_SITES best sites, and only those; an undecided one keeps the

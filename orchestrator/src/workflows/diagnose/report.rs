@@ -6,6 +6,7 @@ use serde::Serialize;
 
 use super::{select, Action, Addition, Candidate, Found, Gates, Kind, SensorFit};
 use crate::evaluation::compare::FailingWindow;
+use crate::evaluation::stats::variance;
 
 /// An estimated parameter: its short name, value and posterior sd.
 #[derive(Clone, Debug, Serialize)]
@@ -169,6 +170,44 @@ pub struct Localisation {
     pub strongest: String,
 }
 
+/// How one channel enters the diagnosis, and how much of the answer it saw.
+#[derive(Clone, Debug, Serialize)]
+pub struct Sensing {
+    pub channel: String,
+    /// `acceleration`, `velocity` or `displacement`: the quantity its residual, noise, band and
+    /// the candidates' fits are in.
+    pub quantity: String,
+    /// How the localisation (forces: the residual times the floor mass) reads it: `as
+    /// measured` (an accelerometer), or its residual `differentiated once` (velocity) or
+    /// `differentiated twice` (displacement) by central differences.
+    pub localisation: String,
+    /// The RMS after the transient of what the verdict changes in this channel's prediction,
+    /// over the channel's noise sd (the twin's noise variance): how clearly this sensor sees
+    /// the answer (the identifiability it gives). None when the verdict changes nothing.
+    pub visibility: Option<f64>,
+}
+
+impl Diagnosis {
+    /// Fill each channel's [`Sensing::visibility`] from the series before and after the
+    /// verdict and the noise level.
+    pub(super) fn measure_visibility(&mut self) {
+        let first = self.series.first;
+        for (c, sensing) in self.sensing.iter_mut().enumerate() {
+            // noise_nmse is 100·σ²/var(measured) after the transient.
+            let noise_sd =
+                (self.noise_nmse[c] / 100.0 * variance(&self.series.measured[c][first..])).sqrt();
+            let after = &self.series.after[c][first..];
+            let change = after
+                .iter()
+                .zip(&self.series.before[c][first..])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / after.len().max(1) as f64;
+            sensing.visibility = (change > 0.0 && noise_sd > 0.0).then(|| change.sqrt() / noise_sd);
+        }
+    }
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct LatentVariance {
     pub max: Vec<f64>,
@@ -234,6 +273,9 @@ pub struct Diagnosis {
     /// ([`super::discover::screen`]); empty when every candidate was fitted.
     pub screened_out: Vec<(String, f64)>,
     pub localisation: Localisation,
+    /// Per channel: its quantity, how the localisation reads it, and how much of the verdict's
+    /// change it saw.
+    pub sensing: Vec<Sensing>,
     /// The record's modes beside the twin's (`workflows::modal::evidence`); None when the
     /// record could not be identified (`modes_error` says why).
     pub modes: Option<crate::workflows::modal::ModalEvidence>,
