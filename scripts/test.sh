@@ -74,7 +74,7 @@ else
 fi
 start=$SECONDS
 pytest_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-pytest.XXXXXX")
-.venv/bin/python -m pytest tests/python -q >"$pytest_log" 2>&1 &
+.venv/bin/python -m pytest tests/python -q --durations=15 >"$pytest_log" 2>&1 &
 pytest=$!
 rust_status=0
 "${rust_tests[@]}" || rust_status=$?

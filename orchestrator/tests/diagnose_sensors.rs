@@ -19,13 +19,13 @@ use orchestrator::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
 use orchestrator::data::Measurement;
 use orchestrator::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis, Kind};
 use orchestrator::synth::{
-    synth_record, EffectSpec, ForceWindow, NoiseLevel, Scenario, DEFAULT_MASS, DEFAULT_STIFFNESS,
+    synth_record, EffectSpec, NoiseLevel, Scenario, DEFAULT_MASS, DEFAULT_STIFFNESS,
 };
 use orchestrator::twin::Twin;
 use structure::channel::{Channel, Quantity, Unit};
 
 mod common;
-use common::fmu_dir;
+use common::{fmu_dir, hidden_change_record, worst};
 
 /// Which sensors the building has.
 #[derive(Clone, Copy)]
@@ -94,18 +94,14 @@ fn twin(sensors: Sensors) -> Twin {
     calibrated_twin(&twin, &cal).expect("calibrated twin")
 }
 
-/// A new record (seed 2, stronger shaking in 12–17 s) of `sensors` on the structure `change`
-/// makes.
+/// A new record (seed 2, stronger shaking in 12–17 s, as `tests/diagnose.rs`') of `sensors` on
+/// the structure `change` makes.
 fn record(sensors: Sensors, change: impl FnOnce(&mut Scenario)) -> Measurement {
-    let mut s = scenario(sensors, 2);
-    s.force.windows.push(ForceWindow {
-        start: 12.0,
-        end: 17.0,
-        gain: 3.0,
-        ramp: 0.5,
-    });
-    change(&mut s);
-    synth_record(&s).expect("synth").0.measurement
+    hidden_change_record(0.0, |s| {
+        s.channels = Some(sensors.channels());
+        s.noise.level = NoiseLevel::Sd(noise_sd(sensors));
+        change(s)
+    })
 }
 
 fn run(sensors: Sensors, change: impl FnOnce(&mut Scenario)) -> Diagnosis {
@@ -117,10 +113,6 @@ fn run(sensors: Sensors, change: impl FnOnce(&mut Scenario)) -> Diagnosis {
         "each channel diagnosed in its own quantity"
     );
     d
-}
-
-fn worst(x: &[f64]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// Every channel's NMSE after the verdict within 1.5× its noise level (measured: within 6 %).
