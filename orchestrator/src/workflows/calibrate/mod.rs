@@ -722,22 +722,15 @@ fn finish_start<'a>(
     mut start: Running,
     budget: usize,
 ) -> Option<StartResult> {
+    // The last outer iteration leaves the objective at the start's final (z, s): no run more.
     while !start.done {
         outer_iteration(sims, target, &mut start, budget)?;
     }
-    let mut buf: Vec<Vec<f64>> = Vec::new();
-    let r = raw_residuals(sims, target, &start.z, &mut buf)?;
-    let objective = neg_log_posterior(
-        target,
-        &sse_per_block(&r, &target.blocks()),
-        &start.s,
-        &start.z,
-    );
-    objective.is_finite().then_some(StartResult {
+    start.objective.is_finite().then_some(StartResult {
         z: start.z,
         s: start.s,
-        objective,
-        runs: start.runs + target.records.len(),
+        objective: start.objective,
+        runs: start.runs,
     })
 }
 
