@@ -711,18 +711,7 @@ pub(super) fn missing(
         };
         let channels = ctx.channels;
         let sensors = channels.sensors();
-        let mut residual: Vec<Vec<f64>> = channels
-            .measured
-            .iter()
-            .zip(channels.predicted(run))
-            .map(|(measured, predicted)| {
-                measured
-                    .iter()
-                    .zip(&predicted)
-                    .map(|(m, p)| m - p)
-                    .collect()
-            })
-            .collect();
+        let mut residual = channels.residuals(run);
         for t in terms {
             let share = term_response(&linear, &states, t, data.dt, &sensors);
             for (residual, share) in residual.iter_mut().zip(&share) {

@@ -460,6 +460,21 @@ impl Channels {
             .collect()
     }
 
+    /// Per channel, measured minus what the physics run `run` gives, in the channel's quantity.
+    fn residuals(&self, run: &PhysicsRun) -> Vec<Vec<f64>> {
+        self.measured
+            .iter()
+            .zip(self.predicted(run))
+            .map(|(measured, predicted)| {
+                measured
+                    .iter()
+                    .zip(&predicted)
+                    .map(|(m, p)| m - p)
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Channel `c`'s residual (measured − `predicted`) as an acceleration: as it is for an
     /// accelerometer, differentiated once (velocity) or twice (displacement) by central
     /// differences (one-sided at the ends) on the sampling interval `dt`. Differencing
@@ -1455,18 +1470,7 @@ fn screened(
                 acceleration: &base_run.acc,
             },
             sensors: &sensors,
-            residual: channels
-                .measured
-                .iter()
-                .zip(channels.predicted(base_run))
-                .map(|(measured, predicted)| {
-                    measured
-                        .iter()
-                        .zip(&predicted)
-                        .map(|(m, p)| m - p)
-                        .collect()
-                })
-                .collect(),
+            residual: channels.residuals(base_run),
             variance: channels
                 .measured
                 .iter()
