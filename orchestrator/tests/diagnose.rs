@@ -24,7 +24,7 @@ use orchestrator::synth::{
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{fmu_dir, workspace};
+use common::{assert_effect, assert_recalibrated, fmu_dir, workspace};
 
 const NOISE_SD: f64 = 0.003;
 
@@ -69,40 +69,6 @@ fn run(data: &Measurement) -> Diagnosis {
 
 fn worst(x: &[f64]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-}
-
-/// `add_physics` naming `kind` at `location`, the parameters within `tolerance` (relative) of
-/// the truth, and the worst-floor NMSE after at most a quarter of before.
-fn assert_effect(
-    d: &Diagnosis,
-    kind: Kind,
-    location: &[usize],
-    side: Option<&str>,
-    truth: &[(&str, f64)],
-    tolerance: f64,
-) {
-    assert_eq!(d.action, Action::AddPhysics, "{}", d.reason);
-    let e = d.effect.as_ref().expect("an effect");
-    assert_eq!(
-        (e.name.kind, e.name.location.as_slice()),
-        (kind.into(), location),
-        "{}",
-        d.reason
-    );
-    assert_eq!(e.name.side, side, "{}", d.reason);
-    for (name, value) in truth {
-        let got = e.parameters[*name];
-        assert!(
-            (got - value).abs() <= tolerance * value.abs(),
-            "{name}: {got} for {value} (±{tolerance})"
-        );
-    }
-    assert!(
-        worst(&d.nmse_after) <= worst(&d.nmse_before) / 4.0,
-        "NMSE {:?} → {:?}",
-        d.nmse_before,
-        d.nmse_after
-    );
 }
 
 // Contact: measured gap and stiffness within 0.3 % and 0.9 % (5 % allowed); NMSE after at the
@@ -211,23 +177,6 @@ fn friction_on_floor_3() {
         &[("force", 0.1), ("velocity_scale", 1e-3)],
         0.1,
     );
-}
-
-/// `recalibrate`, `name` the parameter that moved most, by `relative` (within 2 points:
-/// measured within 0.1).
-fn assert_recalibrated(d: &Diagnosis, name: &str, relative: f64) {
-    assert_eq!(d.action, Action::Recalibrate, "{}", d.reason);
-    assert!(d.effect.is_none());
-    let r = d.recalibration.as_ref().expect("recalibration");
-    let top = &r.parameters[0];
-    assert_eq!(top.name, name, "{}", d.reason);
-    assert!(
-        (top.relative_change - relative).abs() < 0.02,
-        "{name} moved by {} for {relative}",
-        top.relative_change
-    );
-    assert_eq!(d.nmse_after, r.nmse_after);
-    assert!(worst(&d.nmse_after) <= worst(&d.nmse_before) / 4.0);
 }
 
 #[test]
