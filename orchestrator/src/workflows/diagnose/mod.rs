@@ -876,269 +876,411 @@ impl Job {
 /// Diagnose `twin` on `data` (see the module documentation).
 pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
     let started = Instant::now();
-    let Baseline {
-        n,
-        first,
-        mask,
-        held_out,
-        after,
-        storeys,
-        channels,
-        nc,
-        candidates,
-        physics,
-        base_run,
-        predicted,
-        nmse_before,
-        nmse_before_held_out,
-        noise_nmse,
-        noise_nmse_held_out,
-        band_nmse,
-        explained_nmse,
-        tolerance,
-        reals,
-        mass,
-        scales,
-        mut diagnosis,
-    } = baseline(twin, data, options)?;
-
-    // 2. Significant, statistically and practically?
+    let (b, mut diagnosis) = baseline(twin, data, options)?;
     let gates = options.gates;
-    let statistically = (0..nc).any(|c| nmse_before[c] > gates.none_factor * explained_nmse[c]);
-    let practically = worst(&nmse_before) > tolerance.value;
-    diagnosis.statistically_significant = statistically;
-    diagnosis.practically_significant = practically;
-    let no_alarm = !(statistically && practically);
-    let none_reason = none_reason(
-        &nmse_before,
-        &noise_nmse,
-        &band_nmse,
-        gates.none_factor,
-        statistically,
-        &tolerance,
-    );
-    if no_alarm && !options.always_fit {
-        diagnosis.action = Action::None;
-        diagnosis.reason = match diagnosis.modes.as_ref().filter(|m| !m.shifted.is_empty()) {
-            Some(m) => format!(
-                "{none_reason}; but the record's modes ({}) moved beyond the twin's band: {} — a \
-                 change the time domain does not show yet, or an identification to check \
-                 (twin modal --data, twin watch --track-modes)",
-                m.method,
-                m.describe_shifts()
-            ),
-            None => none_reason,
-        };
-        diagnosis.measure_visibility();
-        diagnosis.seconds = started.elapsed().as_secs_f64();
-        return Ok(diagnosis);
+
+    // 2. Significant, statistically and practically? Unless both, nothing is fitted.
+    let alarm = significance(&b, &gates, &mut diagnosis);
+    if !alarm.raised && !options.always_fit {
+        none_without_fits(&mut diagnosis, alarm.none_reason);
+        return Ok(finished(diagnosis, started));
     }
 
-    // 3a. Faulty sensors: per floor, the channel as gain·ŷ + offset + drift·t of the twin's
-    // prediction, least squares on the fitted blocks, scored on the held-out ones.
-    let fitted_idx: Vec<usize> = (0..n).filter(|&k| mask[k]).collect();
-    diagnosis.sensor_candidates = (0..nc)
+    // 3a. Faulty sensors: one that explains the error is the verdict, nothing else fitted.
+    let sensor_fault = faulty_sensor(&b, data, &gates, &mut diagnosis);
+    if let Some((fault, reason)) = sensor_fault.as_ref().filter(|_| alarm.raised) {
+        report_sensor_fault(&b, data, &mut diagnosis, fault, reason);
+        if !options.always_fit {
+            return Ok(finished(diagnosis, started));
+        }
+    }
+
+    // 3–4. The alternatives, in parallel: the recalibration and every screened candidate.
+    let baseline_evidence = baseline_evidence(&b, data, options)?;
+    let ground = b.ground(data, options);
+    let candidates = screened(&ground, &mut diagnosis, b.candidates.clone())?;
+    let results = fit_round_one(&ground, &candidates, baseline_evidence)?;
+    let before_worst = worst(&b.nmse_before_held_out);
+    let round = report_round_one(&ground, &mut diagnosis, &candidates, results, before_worst)?;
+    let order = by_evidence(&diagnosis.candidates);
+
+    // 5. Forward selection (see `select`), while the error is still to be explained.
+    let ctx = b.selection_context(data, options, baseline_evidence, &candidates);
+    let explain = alarm.raised && sensor_fault.is_none();
+    let search = search_library(&ctx, &b, &mut diagnosis, &round, before_worst, explain)?;
+
+    // 7. Discovery (see `discover`): when nothing above explains the error, or the library's
+    // combination leaves more than the noise.
+    let discovery = discovery(&ctx, &b.base_run, &search, &mut diagnosis)?;
+
+    // 6. Decide: `none` and a sensor fault were decided above (the alternatives then fitted for
+    // the report only).
+    if !alarm.raised {
+        diagnosis.action = Action::None;
+        diagnosis.reason = alarm.none_reason;
+    } else if explain {
+        let verdict = b.verdict(data.dt, before_worst, round.recal_worst);
+        verdict.decide(&mut diagnosis, &round.recal, &search, &discovery, &order);
+    }
+    put_in_order(&mut diagnosis, order);
+    Ok(finished(diagnosis, started))
+}
+
+/// Whether the twin's error raises the alarm, and why not when it does not.
+struct Alarm {
+    /// Significant both statistically and practically.
+    raised: bool,
+    /// The reason a `none` gives.
+    none_reason: String,
+}
+
+/// Stage 2: the error is statistically significant when a channel's NMSE exceeds
+/// [`Gates::none_factor`] × its explained level, practically when the worst exceeds the
+/// tolerance; both go into the diagnosis. The alarm.
+fn significance(b: &Baseline, gates: &Gates, diagnosis: &mut Diagnosis) -> Alarm {
+    let statistically =
+        (0..b.nc).any(|c| b.nmse_before[c] > gates.none_factor * b.explained_nmse[c]);
+    let practically = worst(&b.nmse_before) > b.tolerance.value;
+    diagnosis.statistically_significant = statistically;
+    diagnosis.practically_significant = practically;
+    Alarm {
+        raised: statistically && practically,
+        none_reason: none_reason(
+            &b.nmse_before,
+            &b.noise_nmse,
+            &b.band_nmse,
+            gates.none_factor,
+            statistically,
+            &b.tolerance,
+        ),
+    }
+}
+
+/// `none` before any fit: its reason, and a word on the record's modes when they moved beyond
+/// the twin's band.
+fn none_without_fits(diagnosis: &mut Diagnosis, none_reason: String) {
+    diagnosis.action = Action::None;
+    diagnosis.reason = match diagnosis.modes.as_ref().filter(|m| !m.shifted.is_empty()) {
+        Some(m) => format!(
+            "{none_reason}; but the record's modes ({}) moved beyond the twin's band: {} — a \
+             change the time domain does not show yet, or an identification to check \
+             (twin modal --data, twin watch --track-modes)",
+            m.method,
+            m.describe_shifts()
+        ),
+        None => none_reason,
+    };
+}
+
+/// The diagnosis completed: each channel's visibility measured, the seconds it took.
+fn finished(mut diagnosis: Diagnosis, started: Instant) -> Diagnosis {
+    diagnosis.measure_visibility();
+    diagnosis.seconds = started.elapsed().as_secs_f64();
+    diagnosis
+}
+
+/// Stage 3a, faulty sensors: per channel, the measured as gain·ŷ + offset + drift·t of the
+/// twin's prediction, least squares on the fitted blocks, scored on the held-out ones, into the
+/// diagnosis's sensor candidates. The one fault that explains the error, with its reason.
+fn faulty_sensor(
+    b: &Baseline,
+    data: &Measurement,
+    gates: &Gates,
+    diagnosis: &mut Diagnosis,
+) -> Option<(SensorFit, String)> {
+    let fitted_idx: Vec<usize> = (0..b.n).filter(|&k| b.mask[k]).collect();
+    diagnosis.sensor_candidates = (0..b.nc)
         .filter_map(|c| {
             sensor::fit_channel(
-                &channels.names[c],
-                channels.floors[c] + 1,
-                &channels.measured[c],
-                &predicted[c],
+                &b.channels.names[c],
+                b.channels.floors[c] + 1,
+                &b.channels.measured[c],
+                &b.predicted[c],
                 &data.time,
                 &fitted_idx,
-                &held_out,
-                &after,
+                &b.held_out,
+                &b.after,
             )
         })
         .collect();
-    let sensor_fault = sensor_decision(
-        &channels.names,
+    sensor_decision(
+        &b.channels.names,
         &diagnosis.sensor_candidates,
-        &nmse_before_held_out,
-        &noise_nmse_held_out,
-        &band_nmse,
-        tolerance.value,
-        &gates,
-    );
-    if let Some((fault, reason)) = &sensor_fault {
-        if !no_alarm {
-            let c = channels.index(&fault.channel);
-            diagnosis.action = Action::SensorFault;
-            diagnosis.reason = reason.clone();
-            diagnosis.sensor = Some(fault.clone());
-            diagnosis.series.after[c] = fault.apply(&predicted[c], &data.time);
-            diagnosis.nmse_after[c] = fault.nmse_after;
-            if !options.always_fit {
-                diagnosis.measure_visibility();
-                diagnosis.seconds = started.elapsed().as_secs_f64();
-                return Ok(diagnosis);
-            }
-        }
-    }
+        &b.nmse_before_held_out,
+        &b.noise_nmse_held_out,
+        &b.band_nmse,
+        b.tolerance.value,
+        gates,
+    )
+}
 
-    // 3–4. The alternatives, in parallel.
+/// `sensor_fault`: its reason, and the faulty channel's prediction and NMSE read through the
+/// fault.
+fn report_sensor_fault(
+    b: &Baseline,
+    data: &Measurement,
+    diagnosis: &mut Diagnosis,
+    fault: &SensorFit,
+    reason: &str,
+) {
+    let c = b.channels.index(&fault.channel);
+    diagnosis.action = Action::SensorFault;
+    diagnosis.reason = reason.to_owned();
+    diagnosis.sensor = Some(fault.clone());
+    diagnosis.series.after[c] = fault.apply(&b.predicted[c], &data.time);
+    diagnosis.nmse_after[c] = fault.nmse_after;
+}
+
+/// The log evidence of the twin's physics as it is, on the fitted blocks: every alternative's
+/// evidence is a log Bayes factor against it.
+fn baseline_evidence(b: &Baseline, data: &Measurement, options: &DiagnoseOptions) -> Result<f64> {
     let evidence_setup = CalibrationSetup {
         transient: options.transient,
-        mask: Some(mask.clone()),
+        mask: Some(b.mask.clone()),
         ..CalibrationSetup::default()
     };
-    let baseline_evidence = fixed_log_evidence(&physics, data, &evidence_setup)?;
-    let ground = Ground {
-        data,
-        options,
-        physics: &physics,
-        storeys,
-        first,
-        mask: &mask,
-        held_out: &held_out,
-        channels: &channels,
-        reals: &reals,
-        scales: &scales,
-        base_run: &base_run,
-    };
-    let candidates = screened(&ground, &mut diagnosis, candidates)?;
-    let results = fit_round_one(&ground, &candidates, baseline_evidence)?;
-    let before_worst = worst(&nmse_before_held_out);
-    let RoundOne {
-        recal,
-        recal_worst,
-        fitted: fitted_candidates,
-    } = report_round_one(&ground, &mut diagnosis, &candidates, results, before_worst)?;
-    let mut order: Vec<usize> = (0..diagnosis.candidates.len()).collect();
-    order.sort_by(|&a, &b| {
-        diagnosis.candidates[b]
-            .evidence
-            .total_cmp(&diagnosis.candidates[a].evidence)
-    });
+    Ok(fixed_log_evidence(&b.physics, data, &evidence_setup)?)
+}
 
-    // 5. Forward selection: the best effect, refitted jointly with the physics, then the next
-    // while the error falls by the step gate (see `select`).
-    let recal_explains = recal_worst * gates.required_cut <= before_worst
-        && (0..nc).all(|c| {
-            recal.nmse_held_out[c] <= gates.recalibration_noise_factor * noise_nmse_held_out[c]
-        });
-    let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
-    let ctx = select::Context {
-        physics: &physics,
-        data,
-        options,
-        scales: &scales,
-        reals: &reals,
-        mask: &mask,
-        held_out: &held_out,
-        first,
-        baseline_evidence,
-        explained_held_out: (0..nc)
-            .map(|c| noise_nmse_held_out[c] + band_nmse[c])
-            .collect(),
-        channels: &channels,
-        candidates: &candidates,
-        tolerance: tolerance.value,
-    };
-    let selection = if no_alarm || sensor_fault.is_some() {
-        None
-    } else {
+/// The indices of the reported candidates, highest evidence first.
+fn by_evidence(candidates: &[CandidateReport]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..candidates.len()).collect();
+    order.sort_by(|&a, &b| candidates[b].evidence.total_cmp(&candidates[a].evidence));
+    order
+}
+
+/// The reported candidates in `order`.
+fn put_in_order(diagnosis: &mut Diagnosis, order: Vec<usize>) {
+    diagnosis.candidates = order
+        .into_iter()
+        .map(|i| diagnosis.candidates[i].clone())
+        .collect();
+}
+
+/// Whether the recalibration explains the error: it cuts the worst-floor held-out NMSE by
+/// [`Gates::required_cut`] and brings every channel within
+/// [`Gates::recalibration_noise_factor`] × its noise level.
+fn recalibration_explains(
+    b: &Baseline,
+    gates: &Gates,
+    round: &RoundOne,
+    before_worst: f64,
+) -> bool {
+    round.recal_worst * gates.required_cut <= before_worst
+        && (0..b.nc).all(|c| {
+            round.recal.nmse_held_out[c]
+                <= gates.recalibration_noise_factor * b.noise_nmse_held_out[c]
+        })
+}
+
+/// Stage 5: whether the recalibration explains the error, and, when the error is to be
+/// explained (`explain`), the forward selection (see [`select`]) from round 1's fits, the
+/// candidates that passed alone first; its steps go into the diagnosis.
+fn search_library(
+    ctx: &select::Context,
+    b: &Baseline,
+    diagnosis: &mut Diagnosis,
+    round: &RoundOne,
+    before_worst: f64,
+    explain: bool,
+) -> Result<Search> {
+    let gates = ctx.options.gates;
+    let recal_explains = recalibration_explains(b, &gates, round, before_worst);
+    let selection = if explain {
+        let passes: Vec<bool> = diagnosis.candidates.iter().map(|c| c.passes).collect();
         Some(select::forward(
-            &ctx,
-            &fitted_candidates,
+            ctx,
+            &round.fitted,
             &passes,
-            &recal,
+            &round.recal,
             before_worst,
-            &|what| options.tell(what),
+            &|what| ctx.options.tell(what),
         )?)
+    } else {
+        None
     };
-    let combination = selection.as_ref().and_then(|s| {
-        if s.chosen.is_empty() {
-            return None;
-        }
-        let fitted = s.fitted.as_ref()?;
-        let w = worst(&fitted.nmse_held_out);
-        (w * gates.required_cut <= before_worst && w * gates.beat_recalibration <= recal_worst)
-            .then_some((s, fitted, w))
-    });
     if let Some(s) = &selection {
         diagnosis.selection = s.steps.clone();
     }
+    Ok(Search {
+        selection,
+        gates,
+        recal_explains,
+        before_worst,
+        recal_worst: round.recal_worst,
+    })
+}
 
-    // 7. Discovery: when neither recalibration nor any combination of library effects explains
-    // the error, the missing force by sparse regression on top of the selection's model (see
-    // `discover`), refitted through FMI as the FMU's `discovered` effect and gated the same way.
-    // Also when the library's combination passes but leaves the model short of good enough:
-    // then discovery on the twin's own physics competes with it, and replaces it when its
-    // held-out error is lower by the step gate.
+/// The library's combination when it passes: the selection, its final fit and that fit's
+/// worst-floor held-out NMSE.
+type Combination<'s> = (&'s select::Selection, &'s Fitted, f64);
+
+/// The library's search after round 1: the forward selection, when it ran, and what discovery
+/// and the decision read beside it.
+struct Search {
+    selection: Option<select::Selection>,
+    gates: Gates,
+    /// The recalibration alone explains the error ([`recalibration_explains`]).
+    recal_explains: bool,
+    /// Worst-floor held-out NMSE of the twin as given, and after recalibration.
+    before_worst: f64,
+    recal_worst: f64,
+}
+
+impl Search {
+    /// The selection's model when it meets, as a whole, the gates a single effect meets: a cut
+    /// of [`Gates::required_cut`] and [`Gates::beat_recalibration`] against the recalibration.
+    fn combination(&self) -> Option<Combination<'_>> {
+        let gates = self.gates;
+        self.selection.as_ref().and_then(|s| {
+            if s.chosen.is_empty() {
+                return None;
+            }
+            let fitted = s.fitted.as_ref()?;
+            let w = worst(&fitted.nmse_held_out);
+            (w * gates.required_cut <= self.before_worst
+                && w * gates.beat_recalibration <= self.recal_worst)
+                .then_some((s, fitted, w))
+        })
+    }
+}
+
+/// What discovery gave, and the library's combination it leaves standing.
+struct Discovery<'s> {
+    /// What it found, and its terms and fit when they pass the gates; None when it did not
+    /// run.
+    found: Option<discover::Discovered>,
+    /// The library's combination, unless discovery's passing terms replace it.
+    combination: Option<Combination<'s>>,
+    /// The library's combination passed but left the model short of good enough.
+    combination_short: bool,
+}
+
+impl Discovery<'_> {
+    /// The discovered terms and their fit, when they pass the gates.
+    fn passes(&self) -> Option<&(Vec<Term>, Fitted)> {
+        self.found.as_ref().and_then(|d| d.1.as_ref())
+    }
+}
+
+/// Stage 7, discovery: when neither recalibration nor any combination of library effects
+/// explains the error, the missing force by sparse regression on top of the selection's model
+/// (see [`discover`]), refitted through FMI as the FMU's `discovered` effect and gated the same
+/// way. Also when the library's combination passes but leaves the model short of good enough:
+/// then discovery on the twin's own physics (`base_run`) competes with it, and replaces it when
+/// its held-out error is lower by the step gate. What it found goes into the diagnosis.
+fn discovery<'s>(
+    ctx: &select::Context,
+    base_run: &PhysicsRun,
+    search: &'s Search,
+    diagnosis: &mut Diagnosis,
+) -> Result<Discovery<'s>> {
+    let combination = search.combination();
     let combination_short =
         combination.is_some_and(|(_, fitted, _)| !ctx.good_enough(&fitted.nmse_held_out));
-    let discovered = match &selection {
-        Some(s) if combination.is_none() && !recal_explains => {
-            options.tell("discovering the missing force by sparse regression");
-            let run = s.fitted.as_ref().map(|f| &f.run).unwrap_or(&base_run);
+    let found = match &search.selection {
+        Some(s) if combination.is_none() && !search.recal_explains => {
+            ctx.options
+                .tell("discovering the missing force by sparse regression");
+            let run = s.fitted.as_ref().map(|f| &f.run).unwrap_or(base_run);
             Some(discover::missing(
-                &ctx,
+                ctx,
                 &s.chosen,
                 &s.values,
                 run,
-                before_worst,
-                recal_worst,
+                search.before_worst,
+                search.recal_worst,
             )?)
         }
         Some(_) if combination_short => {
-            options.tell("the library's answer leaves more than the noise: discovering");
+            ctx.options
+                .tell("the library's answer leaves more than the noise: discovering");
             let d = discover::missing(
-                &ctx,
+                ctx,
                 &[],
                 &BTreeMap::new(),
-                &base_run,
-                before_worst,
-                recal_worst,
+                base_run,
+                search.before_worst,
+                search.recal_worst,
             )?;
             let better = |(_, fitted): &(Vec<_>, Fitted)| {
-                combination
-                    .is_some_and(|(_, _, w)| worst(&fitted.nmse_held_out) * gates.step_cut <= w)
+                combination.is_some_and(|(_, _, w)| {
+                    worst(&fitted.nmse_held_out) * search.gates.step_cut <= w
+                })
             };
             Some((d.0, d.1.filter(better)))
         }
         _ => None,
     };
-    let combination = if discovered.as_ref().is_some_and(|d| d.1.is_some()) {
-        None
-    } else {
-        combination
-    };
-    let discovered_passes = discovered.as_ref().and_then(|d| d.1.as_ref());
-    diagnosis.discovery = discovered.as_ref().map(|d| d.0.clone());
+    let replaced = found.as_ref().is_some_and(|d| d.1.is_some());
+    diagnosis.discovery = found.as_ref().map(|d| d.0.clone());
+    Ok(Discovery {
+        combination: if replaced { None } else { combination },
+        found,
+        combination_short,
+    })
+}
 
-    // 6. Decide.
-    let verdict = Verdict {
-        channels: &channels,
-        mass: &mass,
-        reals: &reals,
-        scales: &scales,
-        storeys,
-        dt: data.dt,
-        before_worst,
-        recal_worst,
-    };
-    if no_alarm {
-        diagnosis.action = Action::None;
-        diagnosis.reason = none_reason;
-    } else if sensor_fault.is_some() {
-        // Decided above (the alternatives were fitted for the report only).
-    } else if let Some((selection, fitted, w)) = combination {
-        verdict.add_library(&mut diagnosis, selection, fitted, w);
-    } else if recal_explains {
-        verdict.recalibrate(&mut diagnosis, &recal, &gates);
-    } else if let (Some(s), Some((terms, fitted))) = (&selection, discovered_passes) {
-        verdict.add_discovered(&mut diagnosis, s, terms, fitted, combination_short);
-    } else {
-        verdict.update_data_model(&mut diagnosis, &order);
+/// The views the stages after the baseline read of it.
+impl Baseline {
+    /// What round 1's stages share, on `data` under `options`.
+    fn ground<'a>(&'a self, data: &'a Measurement, options: &'a DiagnoseOptions) -> Ground<'a> {
+        Ground {
+            data,
+            options,
+            physics: &self.physics,
+            storeys: self.storeys,
+            first: self.first,
+            mask: &self.mask,
+            held_out: &self.held_out,
+            channels: &self.channels,
+            reals: &self.reals,
+            scales: &self.scales,
+            base_run: &self.base_run,
+        }
     }
-    diagnosis.candidates = order
-        .into_iter()
-        .map(|i| diagnosis.candidates[i].clone())
-        .collect();
-    diagnosis.measure_visibility();
-    diagnosis.seconds = started.elapsed().as_secs_f64();
-    Ok(diagnosis)
+
+    /// What the forward selection and discovery read; a full round tries `candidates`.
+    fn selection_context<'a>(
+        &'a self,
+        data: &'a Measurement,
+        options: &'a DiagnoseOptions,
+        baseline_evidence: f64,
+        candidates: &'a [Candidate],
+    ) -> select::Context<'a> {
+        select::Context {
+            physics: &self.physics,
+            data,
+            options,
+            scales: &self.scales,
+            reals: &self.reals,
+            mask: &self.mask,
+            held_out: &self.held_out,
+            first: self.first,
+            baseline_evidence,
+            explained_held_out: (0..self.nc)
+                .map(|c| self.noise_nmse_held_out[c] + self.band_nmse[c])
+                .collect(),
+            channels: &self.channels,
+            candidates,
+            tolerance: self.tolerance.value,
+        }
+    }
+
+    /// The decision's stage on this record (sampled every `dt`), with the twin's and the
+    /// recalibration's worst-floor held-out NMSE.
+    fn verdict(&self, dt: f64, before_worst: f64, recal_worst: f64) -> Verdict<'_> {
+        Verdict {
+            channels: &self.channels,
+            mass: &self.mass,
+            reals: &self.reals,
+            scales: &self.scales,
+            storeys: self.storeys,
+            dt,
+            before_worst,
+            recal_worst,
+        }
+    }
 }
 
 /// The diagnosis's first stage: the record checked against the twin, the twin as given and its
@@ -1188,13 +1330,16 @@ struct Baseline {
     mass: Vec<f64>,
     /// What the candidates' priors are scaled by.
     scales: Scales,
-    /// The report so far: the scores above, the localisation and the modes, no verdict.
-    diagnosis: Diagnosis,
 }
 
 /// The first stage of [`diagnose`]: check the record and the options, run the twin and its
 /// physics on the record, score them, locate the residual and identify the record's modes.
-fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Baseline> {
+/// Also the report so far: the scores, the localisation and the modes, no verdict.
+fn baseline(
+    twin: &Twin,
+    data: &Measurement,
+    options: &DiagnoseOptions,
+) -> Result<(Baseline, Diagnosis)> {
     let noise = twin.noise_variance.clone().ok_or_else(|| {
         DiagnoseError::Setup(
             "the twin has no noise variances, so the noise level is unknown: diagnose a twin \
@@ -1377,7 +1522,7 @@ fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Resul
             evidence_axis: None,
         },
     };
-    Ok(Baseline {
+    let baseline = Baseline {
         n,
         first,
         mask,
@@ -1400,8 +1545,8 @@ fn baseline(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Resul
         reals,
         mass,
         scales,
-        diagnosis,
-    })
+    };
+    Ok((baseline, diagnosis))
 }
 
 /// What the stages after the baseline share: the record and its split into fitted and
@@ -1702,6 +1847,28 @@ struct Verdict<'a> {
 }
 
 impl Verdict<'_> {
+    /// Stage 6, when the error is to be explained and no sensor explains it: the library's
+    /// combination, else the recalibration `recal`, else discovery's terms, else
+    /// `update_data_model`. `order`: the candidates, best evidence first.
+    fn decide(
+        &self,
+        diagnosis: &mut Diagnosis,
+        recal: &Fitted,
+        search: &Search,
+        discovery: &Discovery,
+        order: &[usize],
+    ) {
+        if let Some((selection, fitted, w)) = discovery.combination {
+            self.add_library(diagnosis, selection, fitted, w);
+        } else if search.recal_explains {
+            self.recalibrate(diagnosis, recal, &search.gates);
+        } else if let (Some(s), Some((terms, fitted))) = (&search.selection, discovery.passes()) {
+            self.add_discovered(diagnosis, s, terms, fitted, discovery.combination_short);
+        } else {
+            self.update_data_model(diagnosis, order);
+        }
+    }
+
     /// `add_physics` with the library's effects the forward selection chose.
     fn add_library(
         &self,
