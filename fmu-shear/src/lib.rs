@@ -10,6 +10,7 @@
 //! library (`effects/`) at every site of the structure, every effect off by default; contacts
 //! alone step exactly (`piecewise` on the paper's rig, `piecewise_any` on any structure).
 
+pub mod batch;
 pub mod effects;
 pub mod integrate;
 pub mod kernels;

@@ -432,11 +432,17 @@ impl ShearModel {
             Some(path) if path.exists() => read_structure_resource(&path)?,
             _ => ShearParameters::default(),
         };
+        Ok(ShearModel::for_parameters(params))
+    }
+
+    /// An instance for `params` with every effect off, its variable table that of `params`'
+    /// structure: what `fmi2Instantiate` makes of the structure's resource.
+    pub fn for_parameters(params: ShearParameters) -> Self {
         let storeys = params.storeys();
         let mut model = ShearModel::new(params, Effects::new(storeys));
         model.table = Some(crate::variables::table(&model.params));
         model.origin = Some(model.params.clone());
-        Ok(model)
+        model
     }
 }
 

@@ -303,6 +303,23 @@ impl SensitivityMaps {
             derivative,
         }
     }
+
+    /// The derivative maps along `directions` (3N × d, each column a direction of the
+    /// parameters): row `i·d + a`, column `c` is `Σ_j ∂[Φ G]_ic/∂θ_j · directions[j][a]`
+    /// (2N·d rows of 2N + 4), for [`crate::batch`].
+    pub fn along(&self, directions: &DMatrix<f64>) -> DMatrix<f64> {
+        let n = self.params.storeys();
+        let (states, count, d) = (2 * n, 3 * n, directions.ncols());
+        let width = states + INPUT_COLUMNS;
+        DMatrix::from_fn(states * d, width, |row, c| {
+            let (i, a) = (row / d, row % d);
+            let run = &self.derivative[(i * width + c) * count..(i * width + c + 1) * count];
+            run.iter()
+                .zip(directions.column(a).iter())
+                .map(|(m, r)| m * r)
+                .sum()
+        })
+    }
 }
 
 /// `m^n` by repeated squaring, on pairs.

@@ -17,6 +17,7 @@
 pub use crate::record as data;
 pub mod embedded;
 pub mod guard;
+pub mod linear;
 pub mod noise;
 pub mod run;
 pub mod structure;

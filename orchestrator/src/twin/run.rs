@@ -484,8 +484,15 @@ pub fn parameter_variance(
         return Ok(None);
     }
     let sigma = nalgebra::DMatrix::from_fn(p, p, |a, b| cov.matrix[a][b]);
-    // From one run of the physics FMU with its forward sensitivities where it has them (the
-    // linear model), streamed; else `J` by finite differences, a run per parameter.
+    // The linear shear model's, in process over the whole record (the same step maps as its
+    // FMU's, in blocks of samples); else from one run of the physics FMU with its forward
+    // sensitivities where it has them, streamed; else `J` by finite differences, a run per
+    // parameter.
+    if let Some(band) =
+        super::linear::acceleration_band(twin, data, &cov.names, &covariance_root(&sigma))
+    {
+        return Ok(Some(band));
+    }
     if let Some(band) = sensitivity_band(twin, data, &cov.names, &sigma) {
         return Ok(Some(band));
     }
@@ -764,8 +771,8 @@ mod tests {
 
             // The streamed band (blocks of samples, the covariance's root) is `diag(J Σ Jᵀ)`
             // of these sensitivities, for a positive definite Σ (Cholesky) and for one of rank
-            // 2 (eigenvectors), on 513 samples (two blocks and a part). Rounding only: the bar
-            // is 1e-9 of the channel's largest variance.
+            // 2 (eigenvectors), on 513 samples (two blocks and a part), streamed through FMI
+            // and in process. Rounding only: the bar is 1e-9 of the channel's largest variance.
             let p = names.len();
             let scaled: Vec<f64> = values.iter().map(|v| 1e-2 * v).collect();
             let full = nalgebra::DMatrix::from_fn(p, p, |a, b| {
@@ -783,6 +790,14 @@ mod tests {
             });
             for sigma in [full, low] {
                 let band = sensitivity_band(&twin, &data, &names, &sigma).expect("band");
+                // The same from the linear model in process (blocks of 256 samples).
+                let in_process = crate::twin::linear::acceleration_band(
+                    &twin,
+                    &data,
+                    &names,
+                    &covariance_root(&sigma),
+                )
+                .expect("the twin is the linear shear model");
                 for c in 0..data.responses.len() {
                     let want: Vec<f64> = (0..data.len())
                         .map(|k| {
@@ -798,8 +813,10 @@ mod tests {
                     let top = want.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
                     assert_eq!(band[c].len(), want.len());
                     assert!(top > 0.0);
-                    for (got, want) in band[c].iter().zip(&want) {
+                    assert_eq!(in_process[c].len(), want.len());
+                    for ((got, linear), want) in band[c].iter().zip(&in_process[c]).zip(&want) {
                         assert!((got - want).abs() <= 1e-9 * top, "{got} vs {want}");
+                        assert!((linear - want).abs() <= 1e-9 * top, "{linear} vs {want}");
                     }
                 }
             }

@@ -1,0 +1,126 @@
+//! The twin's physics as the linear shear model it instantiates, run in process over a whole
+//! record (`fmu_shear::batch`): the same step maps as a run of its FMU through FMI, in blocks of
+//! samples. Used where only the linear model's derivatives are wanted over many samples (the
+//! band of `twin compare`), and only when the twin is exactly that model: its physics alone,
+//! every effect off, no control force, accelerometers.
+
+use std::io::Read;
+use std::path::Path;
+
+use ::structure::channel::{Channel, Quantity};
+use fmi2::CoSimModel;
+use fmu_shear::batch::{accelerations_along, LinearRecord};
+use fmu_shear::{ShearModel, ShearParameters, StructureResource};
+use nalgebra::DMatrix;
+
+use super::data::Measurement;
+use super::{ParameterValue, Twin, PHYSICS};
+
+/// The structure file inside the shear FMU.
+const RESOURCE: &str = "resources/structure.json";
+
+/// The shear parameters the twin's physics FMU runs with — its `resources/structure.json` (the
+/// paper's rig without one) with the twin's parameter values applied as `fmi2SetReal` would —
+/// when that is the linear model alone: None for a twin with other components, an FMU that is
+/// not the shear model, a value it refuses, or an effect switched on.
+pub fn linear_shear(twin: &Twin) -> Option<ShearParameters> {
+    if twin.components.len() != 1 {
+        return None;
+    }
+    let physics = twin.component(PHYSICS)?;
+    let params = structure_resource(&physics.fmu_path)?.parameters().ok()?;
+    let mut model = ShearModel::for_parameters(params);
+    let info = model.table();
+    for (name, value) in &physics.parameters {
+        let vr = info.by_name(name)?.vr;
+        match *value {
+            ParameterValue::Real(x) => model.set_real(vr, x).ok()?,
+            ParameterValue::Integer(i) => model.set_integer(vr, i).ok()?,
+            ParameterValue::Boolean(b) => model.set_boolean(vr, b).ok()?,
+        }
+    }
+    (!model.effects.any_enabled()).then_some(model.params)
+}
+
+/// `resources/structure.json` of a shear FMU archive; the paper's rig when it has none; None
+/// when the file cannot be read or is not a shear FMU's.
+fn structure_resource(fmu: &Path) -> Option<StructureResource> {
+    let mut archive = zip::ZipArchive::new(std::fs::File::open(fmu).ok()?).ok()?;
+    let mut text = String::new();
+    match archive.by_name(RESOURCE) {
+        Ok(mut entry) => entry.read_to_string(&mut text).ok()?,
+        Err(zip::result::ZipError::FileNotFound) => {
+            return Some(StructureResource {
+                structure: ::structure::Structure::default(),
+                control_floor: 1,
+            })
+        }
+        Err(_) => return None,
+    };
+    serde_json::from_str(&text).ok()
+}
+
+/// The index of `name` among `m1..mN, c1..cN, k1..kN` (the sensitivities' order).
+fn parameter_index(name: &str, storeys: usize) -> Option<usize> {
+    let group = ["m", "c", "k"].iter().position(|g| name.starts_with(g))?;
+    let floor: usize = name[1..].parse().ok()?;
+    (1..=storeys)
+        .contains(&floor)
+        .then_some(group * storeys + floor - 1)
+}
+
+/// The band's variance `diag(J Σ Jᵀ)` per measured channel (the record's order) and sample, `J`
+/// the accelerations' derivatives along the parameters `names` (Σ's order) taken in process
+/// along the rows of `root` (`Σ = Rᵀ R`, so the variance is `Σᵢ (J rᵢ)²`). None unless the twin
+/// is the linear shear model ([`linear_shear`]), the record has no control column and measures
+/// accelerations only, and every name is one of its `m`, `c`, `k`.
+pub fn acceleration_band(
+    twin: &Twin,
+    data: &Measurement,
+    names: &[String],
+    root: &DMatrix<f64>,
+) -> Option<Vec<Vec<f64>>> {
+    if data.extra.contains_key("control") {
+        return None;
+    }
+    let params = linear_shear(twin)?;
+    let n = params.storeys();
+    let floors: Vec<usize> = data
+        .responses
+        .iter()
+        .map(|s| match s.channel {
+            Channel::Response {
+                quantity: Quantity::Acceleration,
+                floor,
+            } if (1..=n).contains(&floor) => Some(floor - 1),
+            _ => None,
+        })
+        .collect::<Option<_>>()?;
+    let index: Vec<usize> = names
+        .iter()
+        .map(|name| parameter_index(name, n))
+        .collect::<Option<_>>()?;
+    // Direction r (a row of R) in the 3N parameters: R's row spread over the named ones.
+    let d = root.nrows();
+    let mut directions = DMatrix::zeros(3 * n, d);
+    for (a, &j) in index.iter().enumerate() {
+        for r in 0..d {
+            directions[(j, r)] += root[(r, a)];
+        }
+    }
+    let record = LinearRecord {
+        dt: data.dt,
+        excitation: &data.excitation.values,
+        floors: &floors,
+    };
+    let mut band: Vec<Vec<f64>> = vec![Vec::with_capacity(data.len()); floors.len()];
+    let mut finite = true;
+    accelerations_along(&params, &record, &directions, |_, _, derivatives| {
+        for (c, b) in band.iter_mut().enumerate() {
+            let v: f64 = derivatives[c * d..(c + 1) * d].iter().map(|x| x * x).sum();
+            finite &= v.is_finite();
+            b.push(v);
+        }
+    });
+    finite.then_some(band)
+}
