@@ -95,8 +95,10 @@ use structure::effects::{Law, Placement, Term};
 
 use crate::cosim::import::ImportError;
 use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
+use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
+use crate::twin::noise::NoiseVariances;
 use crate::twin::run::{run_and_compare_with, Compared, Tolerance};
 use crate::twin::TwinError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -900,7 +902,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     let ground = b.ground(data, options);
     let candidates = screened(&ground, &mut diagnosis, b.candidates.clone())?;
     let results = fit_round_one(&ground, &candidates, baseline_evidence)?;
-    let before_worst = worst(&b.nmse_before_held_out);
+    let before_worst = worst(&b.scores.nmse_before_held_out);
     let round = report_round_one(&ground, &mut diagnosis, &candidates, results, before_worst)?;
     let order = by_evidence(&diagnosis.candidates);
 
@@ -938,20 +940,21 @@ struct Alarm {
 /// [`Gates::none_factor`] × its explained level, practically when the worst exceeds the
 /// tolerance; both go into the diagnosis. The alarm.
 fn significance(b: &Baseline, gates: &Gates, diagnosis: &mut Diagnosis) -> Alarm {
+    let s = &b.scores;
     let statistically =
-        (0..b.nc).any(|c| b.nmse_before[c] > gates.none_factor * b.explained_nmse[c]);
-    let practically = worst(&b.nmse_before) > b.tolerance.value;
+        (0..b.nc).any(|c| s.nmse_before[c] > gates.none_factor * s.explained_nmse[c]);
+    let practically = worst(&s.nmse_before) > s.tolerance.value;
     diagnosis.statistically_significant = statistically;
     diagnosis.practically_significant = practically;
     Alarm {
         raised: statistically && practically,
         none_reason: none_reason(
-            &b.nmse_before,
-            &b.noise_nmse,
-            &b.band_nmse,
+            &s.nmse_before,
+            &s.noise_nmse,
+            &s.band_nmse,
             gates.none_factor,
             statistically,
-            &b.tolerance,
+            &s.tolerance,
         ),
     }
 }
@@ -988,28 +991,28 @@ fn faulty_sensor(
     gates: &Gates,
     diagnosis: &mut Diagnosis,
 ) -> Option<(SensorFit, String)> {
-    let fitted_idx: Vec<usize> = (0..b.n).filter(|&k| b.mask[k]).collect();
+    let fitted_idx: Vec<usize> = (0..b.samples.n).filter(|&k| b.samples.mask[k]).collect();
     diagnosis.sensor_candidates = (0..b.nc)
         .filter_map(|c| {
             sensor::fit_channel(
                 &b.channels.names[c],
                 b.channels.floors[c] + 1,
                 &b.channels.measured[c],
-                &b.predicted[c],
+                &b.scores.predicted[c],
                 &data.time,
                 &fitted_idx,
-                &b.held_out,
-                &b.after,
+                &b.samples.held_out,
+                &b.samples.after,
             )
         })
         .collect();
     sensor_decision(
         &b.channels.names,
         &diagnosis.sensor_candidates,
-        &b.nmse_before_held_out,
-        &b.noise_nmse_held_out,
-        &b.band_nmse,
-        b.tolerance.value,
+        &b.scores.nmse_before_held_out,
+        &b.scores.noise_nmse_held_out,
+        &b.scores.band_nmse,
+        b.scores.tolerance.value,
         gates,
     )
 }
@@ -1027,7 +1030,7 @@ fn report_sensor_fault(
     diagnosis.action = Action::SensorFault;
     diagnosis.reason = reason.to_owned();
     diagnosis.sensor = Some(fault.clone());
-    diagnosis.series.after[c] = fault.apply(&b.predicted[c], &data.time);
+    diagnosis.series.after[c] = fault.apply(&b.scores.predicted[c], &data.time);
     diagnosis.nmse_after[c] = fault.nmse_after;
 }
 
@@ -1036,7 +1039,7 @@ fn report_sensor_fault(
 fn baseline_evidence(b: &Baseline, data: &Measurement, options: &DiagnoseOptions) -> Result<f64> {
     let evidence_setup = CalibrationSetup {
         transient: options.transient,
-        mask: Some(b.mask.clone()),
+        mask: Some(b.samples.mask.clone()),
         ..CalibrationSetup::default()
     };
     Ok(fixed_log_evidence(&b.physics, data, &evidence_setup)?)
@@ -1069,7 +1072,7 @@ fn recalibration_explains(
     round.recal_worst * gates.required_cut <= before_worst
         && (0..b.nc).all(|c| {
             round.recal.nmse_held_out[c]
-                <= gates.recalibration_noise_factor * b.noise_nmse_held_out[c]
+                <= gates.recalibration_noise_factor * b.scores.noise_nmse_held_out[c]
         })
 }
 
@@ -1230,9 +1233,9 @@ impl Baseline {
             options,
             physics: &self.physics,
             storeys: self.storeys,
-            first: self.first,
-            mask: &self.mask,
-            held_out: &self.held_out,
+            first: self.samples.first,
+            mask: &self.samples.mask,
+            held_out: &self.samples.held_out,
             channels: &self.channels,
             reals: &self.reals,
             scales: &self.scales,
@@ -1254,16 +1257,16 @@ impl Baseline {
             options,
             scales: &self.scales,
             reals: &self.reals,
-            mask: &self.mask,
-            held_out: &self.held_out,
-            first: self.first,
+            mask: &self.samples.mask,
+            held_out: &self.samples.held_out,
+            first: self.samples.first,
             baseline_evidence,
             explained_held_out: (0..self.nc)
-                .map(|c| self.noise_nmse_held_out[c] + self.band_nmse[c])
+                .map(|c| self.scores.noise_nmse_held_out[c] + self.scores.band_nmse[c])
                 .collect(),
             channels: &self.channels,
             candidates,
-            tolerance: self.tolerance.value,
+            tolerance: self.scores.tolerance.value,
         }
     }
 
@@ -1286,16 +1289,8 @@ impl Baseline {
 /// The diagnosis's first stage: the record checked against the twin, the twin as given and its
 /// physics alone run on it, and the scores every later stage is measured against.
 struct Baseline {
-    /// Samples in the record.
-    n: usize,
-    /// The first sample after the transient.
-    first: usize,
-    /// The fitted blocks' samples.
-    mask: Vec<bool>,
-    /// The held-out blocks' samples.
-    held_out: Vec<usize>,
-    /// Every sample after the transient.
-    after: Vec<usize>,
+    /// The record's samples: after the transient, fitted and held out.
+    samples: Samples,
     /// The building's storeys.
     storeys: usize,
     /// The record's responses.
@@ -1308,6 +1303,33 @@ struct Baseline {
     physics: Twin,
     /// Its run on the record (accelerations, velocities, displacements, drifts).
     base_run: PhysicsRun,
+    /// The twin as given on the record.
+    scores: Scores,
+    /// The physics' parameter values.
+    reals: PhysicsReals,
+    /// Floor masses, floor 1 first.
+    mass: Vec<f64>,
+    /// What the candidates' priors are scaled by.
+    scales: Scales,
+}
+
+/// The record's samples and their split into fitted and held-out blocks.
+struct Samples {
+    /// Samples in the record.
+    n: usize,
+    /// The first sample after the transient.
+    first: usize,
+    /// The fitted blocks' samples.
+    mask: Vec<bool>,
+    /// The held-out blocks' samples.
+    held_out: Vec<usize>,
+    /// Every sample after the transient.
+    after: Vec<usize>,
+}
+
+/// The twin as given on the record: its prediction, its NMSE per channel and what noise and
+/// parameter uncertainty explain of it, and the practical bar.
+struct Scores {
     /// The twin's prediction per channel.
     predicted: Vec<Vec<f64>>,
     /// NMSE per channel after the transient (%).
@@ -1324,12 +1346,20 @@ struct Baseline {
     explained_nmse: Vec<f64>,
     /// The practical bar.
     tolerance: Tolerance,
-    /// The physics' parameter values.
-    reals: PhysicsReals,
-    /// Floor masses, floor 1 first.
-    mass: Vec<f64>,
-    /// What the candidates' priors are scaled by.
-    scales: Scales,
+}
+
+/// What the first report shows beside the scores.
+struct Shown {
+    /// The comparison's failing windows.
+    failing_windows: Vec<FailingWindow>,
+    /// The corrector's latent variance, when it has one.
+    latent_variance: Option<LatentVariance>,
+    /// The storey shear the twin misses, per storey, and where it points.
+    missing_shear: Vec<Vec<f64>>,
+    localisation: Localisation,
+    /// The record's modes beside the twin's, or why they could not be identified.
+    modes: Option<crate::workflows::modal::ModalEvidence>,
+    modes_error: Option<String>,
 }
 
 /// The first stage of [`diagnose`]: check the record and the options, run the twin and its
@@ -1347,6 +1377,45 @@ fn baseline(
                 .into(),
         )
     })?;
+    let samples = samples(data, options)?;
+    let storeys = storeys_of(twin)?;
+    let channels = Channels::of(data, storeys)?;
+    let noise_variance = channel_noise(&noise, &channels, twin, data)?;
+    let candidates = candidates_to_try(options, storeys)?;
+
+    // 1. The twin as given, and its physics alone with drifts and velocities.
+    let compared = compare_twin(twin, data, options)?;
+    let physics = physics_only(twin);
+    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
+    let scores = Scores::of(&compared, &channels, &noise_variance, &samples);
+
+    // Scales of the candidates' priors.
+    let reals = PhysicsReals::of(&physics)?;
+    let mass = (1..=storeys)
+        .map(|f| reals.get(&format!("m{f}")))
+        .collect::<Result<Vec<f64>>>()?;
+    let scales = prior_scales(&reals, &base_run, data, samples.first)?;
+    let baseline = Baseline {
+        samples,
+        storeys,
+        nc: channels.len(),
+        channels,
+        candidates,
+        physics,
+        base_run,
+        scores,
+        reals,
+        mass,
+        scales,
+    };
+    let shown = baseline.shown(twin, data, compared);
+    let diagnosis = baseline.report(twin, data, options, shown);
+    Ok((baseline, diagnosis))
+}
+
+/// The record's samples under `options`: the block length checked, enough samples after the
+/// transient, the fitted and held-out blocks.
+fn samples(data: &Measurement, options: &DiagnoseOptions) -> Result<Samples> {
     if !(options.block > 0.0 && options.block.is_finite()) {
         return Err(DiagnoseError::Setup(format!(
             "the block length must be a positive number of seconds, was {}",
@@ -1364,11 +1433,24 @@ fn baseline(
         )));
     }
     let (mask, held_out) = blocks(&data.time, first, options.block);
-    let after: Vec<usize> = (first..n).collect();
-    let storeys = storeys_of(twin)?;
-    let channels = Channels::of(data, storeys)?;
-    let nc = channels.len();
-    let noise_variance = channels
+    Ok(Samples {
+        n,
+        first,
+        mask,
+        held_out,
+        after: (first..n).collect(),
+    })
+}
+
+/// The twin's noise variance of each of the record's channels; Err names a channel it has none
+/// for.
+fn channel_noise(
+    noise: &NoiseVariances,
+    channels: &Channels,
+    twin: &Twin,
+    data: &Measurement,
+) -> Result<Vec<f64>> {
+    channels
         .names
         .iter()
         .map(|name| {
@@ -1383,170 +1465,190 @@ fn baseline(
                     ))
                 })
         })
-        .collect::<Result<Vec<f64>>>()?;
-    let candidates = match &options.candidates {
+        .collect()
+}
+
+/// The candidates given, checked against the building's `storeys`, else the whole library.
+fn candidates_to_try(options: &DiagnoseOptions, storeys: usize) -> Result<Vec<Candidate>> {
+    Ok(match &options.candidates {
         Some(given) => {
             check_sites(given, storeys).map_err(DiagnoseError::Setup)?;
             given.clone()
         }
         None => Candidate::library(storeys),
-    };
+    })
+}
 
-    // 1. The twin as given, and its physics alone with drifts and velocities.
-    // The twin's noise variances are known here, so the comparison's band is theirs.
-    let compared =
-        run_and_compare_with(twin, data, options.transient, options.tolerance, |_, _| {}).map_err(
-            |e| DiagnoseError::In {
-                context: format!("running the twin on {}", data.path.display()),
-                source: Box::new(e.into()),
-            },
-        )?;
-    let Compared {
-        prediction,
-        comparison,
-        band_nmse,
-        tolerance,
-        ..
-    } = compared;
-    let physics = physics_only(twin);
-    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
-    // The twin's results per channel: the comparison's are in the record's order, as
-    // `channels` (Channels::of reads the record's responses in order).
-    let predicted: Vec<Vec<f64>> = prediction
-        .channels
-        .iter()
-        .map(|c| c.values.clone())
-        .collect();
-    let nmse_before = comparison.nmse.clone();
-    let nmse_before_held_out = channels.nmse_on(&predicted, &held_out);
-    let noise_nmse_on = |idx: &[usize]| -> Vec<f64> {
-        (0..nc)
-            .map(|c| {
-                let y: Vec<f64> = idx.iter().map(|&k| channels.measured[c][k]).collect();
-                100.0 * noise_variance[c] / variance(&y)
-            })
-            .collect()
-    };
-    let noise_nmse = noise_nmse_on(&after);
-    let noise_nmse_held_out = noise_nmse_on(&held_out);
-    let explained_nmse: Vec<f64> = (0..nc).map(|c| noise_nmse[c] + band_nmse[c]).collect();
-    let latent_variance = prediction
-        .channels
-        .iter()
-        .map(|c| c.latent_var.as_ref())
-        .collect::<Option<Vec<&Vec<f64>>>>()
-        .map(|v| LatentVariance {
-            max: v
-                .iter()
-                .map(|v| v[first..].iter().copied().fold(0.0, f64::max))
+/// The twin as given run on the record and compared with it; its noise variances are known
+/// here, so the comparison's band is theirs.
+fn compare_twin(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Compared> {
+    run_and_compare_with(twin, data, options.transient, options.tolerance, |_, _| {}).map_err(|e| {
+        DiagnoseError::In {
+            context: format!("running the twin on {}", data.path.display()),
+            source: Box::new(e.into()),
+        }
+    })
+}
+
+impl Scores {
+    /// The scores of the twin's comparison `compared` with the record, each channel's noise's
+    /// share from its `noise_variance`.
+    fn of(
+        compared: &Compared,
+        channels: &Channels,
+        noise_variance: &[f64],
+        samples: &Samples,
+    ) -> Scores {
+        // The twin's results per channel: the comparison's are in the record's order, as
+        // `channels` (Channels::of reads the record's responses in order).
+        let predicted: Vec<Vec<f64>> = compared
+            .prediction
+            .channels
+            .iter()
+            .map(|c| c.values.clone())
+            .collect();
+        let noise_nmse_on = |idx: &[usize]| -> Vec<f64> {
+            (0..channels.len())
+                .map(|c| {
+                    let y: Vec<f64> = idx.iter().map(|&k| channels.measured[c][k]).collect();
+                    100.0 * noise_variance[c] / variance(&y)
+                })
+                .collect()
+        };
+        let noise_nmse = noise_nmse_on(&samples.after);
+        let band_nmse = compared.band_nmse.clone();
+        Scores {
+            nmse_before: compared.comparison.nmse.clone(),
+            nmse_before_held_out: channels.nmse_on(&predicted, &samples.held_out),
+            noise_nmse_held_out: noise_nmse_on(&samples.held_out),
+            explained_nmse: (0..channels.len())
+                .map(|c| noise_nmse[c] + band_nmse[c])
                 .collect(),
-            mean: v
-                .iter()
-                .map(|v| v[first..].iter().sum::<f64>() / (n - first) as f64)
-                .collect(),
-        });
+            predicted,
+            noise_nmse,
+            band_nmse,
+            tolerance: compared.tolerance.clone(),
+        }
+    }
+}
 
-    // Scales of the candidates' priors.
-    let reals = PhysicsReals::of(&physics)?;
-    let mass = (1..=storeys)
-        .map(|f| reals.get(&format!("m{f}")))
-        .collect::<Result<Vec<f64>>>()?;
-    let scales = prior_scales(&reals, &base_run, data, first)?;
-
-    // Localisation from the residual of the twin as given.
-    let floor_force = missing_floor_force(&channels, &mass, &predicted, storeys, data.dt);
-    let missing_shear = missing_shear(&floor_force);
-    let localisation = localise(&missing_shear, &floor_force, &base_run, first);
-
-    // The record's modes beside the twin's: shown with the verdict, and a `none` says so when
-    // they moved beyond the twin's band.
-    let (modes, modes_error) = match crate::workflows::modal::modal_evidence(
-        twin,
-        data,
-        crate::workflows::modal::ModalBand::default(),
-    ) {
-        Ok(e) => (Some(e), None),
-        Err(e) => (None, Some(e.to_string())),
-    };
-    let diagnosis = Diagnosis {
-        record: data.path.display().to_string(),
-        channels: channels.names.clone(),
-        twin: twin
-            .source
-            .as_ref()
-            .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "(default twin)".into()),
-        nmse_before: nmse_before.clone(),
-        noise_nmse: noise_nmse.clone(),
-        band_nmse: band_nmse.clone(),
-        explained_nmse: explained_nmse.clone(),
-        tolerance: tolerance.value,
-        tolerance_source: tolerance.source.clone(),
-        statistically_significant: false,
-        practically_significant: false,
-        nmse_before_held_out: nmse_before_held_out.clone(),
-        noise_nmse_held_out: noise_nmse_held_out.clone(),
-        failing_windows: comparison.failing_windows.clone(),
-        latent_variance,
-        action: Action::None,
-        reason: String::new(),
-        effect: None,
-        effects: Vec::new(),
-        physics_moved: Vec::new(),
-        selection: Vec::new(),
-        discovery: None,
-        sensor: None,
-        sensor_candidates: Vec::new(),
-        nmse_after: nmse_before.clone(),
-        recalibration: None,
-        candidates: Vec::new(),
-        failed_candidates: Vec::new(),
-        screened_out: Vec::new(),
-        localisation,
-        sensing: channels.sensing(),
-        modes,
-        modes_error,
-        gates: options.gates,
-        block_seconds: options.block,
-        seconds: 0.0,
-        series: Series {
-            time: data.time.clone(),
-            first,
-            floors: channels.floors.iter().map(|f| f + 1).collect(),
-            measured: channels.measured.clone(),
-            before: predicted.clone(),
-            after: predicted.clone(),
-            drift: base_run.drift.clone(),
+impl Baseline {
+    /// What the first report shows beside the scores: the comparison's failing windows and
+    /// the corrector's latent variance (of the twin's comparison `compared`), the missing storey
+    /// shear localised from the twin's residual, the record's modes beside the twin's.
+    fn shown(&self, twin: &Twin, data: &Measurement, compared: Compared) -> Shown {
+        let Samples { n, first, .. } = self.samples;
+        let latent_variance = compared
+            .prediction
+            .channels
+            .iter()
+            .map(|c| c.latent_var.as_ref())
+            .collect::<Option<Vec<&Vec<f64>>>>()
+            .map(|v| LatentVariance {
+                max: v
+                    .iter()
+                    .map(|v| v[first..].iter().copied().fold(0.0, f64::max))
+                    .collect(),
+                mean: v
+                    .iter()
+                    .map(|v| v[first..].iter().sum::<f64>() / (n - first) as f64)
+                    .collect(),
+            });
+        // Localisation from the residual of the twin as given.
+        let floor_force = missing_floor_force(
+            &self.channels,
+            &self.mass,
+            &self.scores.predicted,
+            self.storeys,
+            data.dt,
+        );
+        let missing_shear = missing_shear(&floor_force);
+        let localisation = localise(&missing_shear, &floor_force, &self.base_run, first);
+        // The record's modes beside the twin's: shown with the verdict, and a `none` says so
+        // when they moved beyond the twin's band.
+        let (modes, modes_error) = match crate::workflows::modal::modal_evidence(
+            twin,
+            data,
+            crate::workflows::modal::ModalBand::default(),
+        ) {
+            Ok(e) => (Some(e), None),
+            Err(e) => (None, Some(e.to_string())),
+        };
+        Shown {
+            failing_windows: compared.comparison.failing_windows,
+            latent_variance,
             missing_shear,
-            effect_force: None,
-            evidence_axis: None,
-        },
-    };
-    let baseline = Baseline {
-        n,
-        first,
-        mask,
-        held_out,
-        after,
-        storeys,
-        channels,
-        nc,
-        candidates,
-        physics,
-        base_run,
-        predicted,
-        nmse_before,
-        nmse_before_held_out,
-        noise_nmse,
-        noise_nmse_held_out,
-        band_nmse,
-        explained_nmse,
-        tolerance,
-        reals,
-        mass,
-        scales,
-    };
-    Ok((baseline, diagnosis))
+            localisation,
+            modes,
+            modes_error,
+        }
+    }
+
+    /// The report before any verdict: the record, the twin's scores and what `shown` has; the
+    /// twin's prediction stands as the prediction after.
+    fn report(
+        &self,
+        twin: &Twin,
+        data: &Measurement,
+        options: &DiagnoseOptions,
+        shown: Shown,
+    ) -> Diagnosis {
+        let s = &self.scores;
+        Diagnosis {
+            record: data.path.display().to_string(),
+            channels: self.channels.names.clone(),
+            twin: twin
+                .source
+                .as_ref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_else(|| "(default twin)".into()),
+            nmse_before: s.nmse_before.clone(),
+            noise_nmse: s.noise_nmse.clone(),
+            band_nmse: s.band_nmse.clone(),
+            explained_nmse: s.explained_nmse.clone(),
+            tolerance: s.tolerance.value,
+            tolerance_source: s.tolerance.source.clone(),
+            statistically_significant: false,
+            practically_significant: false,
+            nmse_before_held_out: s.nmse_before_held_out.clone(),
+            noise_nmse_held_out: s.noise_nmse_held_out.clone(),
+            failing_windows: shown.failing_windows,
+            latent_variance: shown.latent_variance,
+            action: Action::None,
+            reason: String::new(),
+            effect: None,
+            effects: Vec::new(),
+            physics_moved: Vec::new(),
+            selection: Vec::new(),
+            discovery: None,
+            sensor: None,
+            sensor_candidates: Vec::new(),
+            nmse_after: s.nmse_before.clone(),
+            recalibration: None,
+            candidates: Vec::new(),
+            failed_candidates: Vec::new(),
+            screened_out: Vec::new(),
+            localisation: shown.localisation,
+            sensing: self.channels.sensing(),
+            modes: shown.modes,
+            modes_error: shown.modes_error,
+            gates: options.gates,
+            block_seconds: options.block,
+            seconds: 0.0,
+            series: Series {
+                time: data.time.clone(),
+                first: self.samples.first,
+                floors: self.channels.floors.iter().map(|f| f + 1).collect(),
+                measured: self.channels.measured.clone(),
+                before: s.predicted.clone(),
+                after: s.predicted.clone(),
+                drift: self.base_run.drift.clone(),
+                missing_shear: shown.missing_shear,
+                effect_force: None,
+                evidence_axis: None,
+            },
+        }
+    }
 }
 
 /// What the stages after the baseline share: the record and its split into fitted and
