@@ -41,7 +41,7 @@ use ::structure::Structure;
 use crate::cosim::import::{Causality, Fmu, ScalarType};
 use crate::twin::data::Measurement;
 use crate::twin::noise::NoiseVariances;
-use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
+use crate::twin::{Component, ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{
     default_prior, priors_from_json, read_priors, structure_prior, Prior, PriorSpec, Space,
 };
@@ -1107,24 +1107,83 @@ pub fn calibrate_records(
         return Err(CalibrateError::Setup("no record to calibrate on".into()));
     }
     let structure = physics_structure(&component.fmu_path)?;
-    let twin_priors = match &twin.priors {
+    let twin_priors = twin_priors(twin)?;
+    check_setup(setup, &structure)?;
+    // Every record's channels checked against the structure before any work.
+    for input in inputs {
+        check_record(input.data, &structure, &fmu)?;
+    }
+    let (records, firsts) = record_targets(&fmu, inputs, setup)?;
+    let (vrs, priors) = parameter_priors(&fmu, component, &structure, setup, twin_priors.as_ref())?;
+    let target = Target::new(&fmu, component, setup, records, vrs, priors);
+
+    // The starts, screened or raced, and the best on to its end.
+    let p = setup.parameters.len();
+    let starts = starts(setup, &target.priors);
+    let threads = setup.threads.clamp(1, starts.len());
+    let (mut outcomes, simulations, best) = screened_starts(&target, &starts, p, threads)?;
+    outcomes.sort_by_key(|o| o.start);
+    let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
+
+    // The Laplace posterior at the best start's optimum, and every record's fit there.
+    let mut sims = simulators(&target, "laplace")?;
+    let (cov, laplace_runs) = laplace(&mut sims, &target, &best.z, &best.s).ok_or_else(|| {
+        CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
+    })?;
+    let values = target.values(&best.z);
+    let posterior = Posterior::at(&target, setup, &values, &cov, best.objective);
+    let fitted = record_fits(&mut sims, &target, &firsts, &values, &best.s, &cov)?;
+    let own = fitted[0].clone();
+    Ok(Calibration {
+        parameters: posterior.parameters,
+        correlation: posterior.correlation,
+        noise_variance: own.noise_variance,
+        noise_log_sd: own.noise_log_sd,
+        channels: own.channels,
+        neg_log_posterior: best.objective,
+        log_evidence: posterior.log_evidence,
+        samples_used: own.samples_used,
+        nmse: own.nmse,
+        records: fitted,
+        starts: outcomes,
+        simulations: simulations + laplace_runs + target.records.len(),
+        seconds: started.elapsed().as_secs_f64(),
+        storeys: structure.storeys(),
+    })
+}
+
+/// The priors the twin carries (`twin init --priors`), if any.
+fn twin_priors(twin: &Twin) -> Result<Option<PriorSpec>, CalibrateError> {
+    Ok(match &twin.priors {
         Some(text) => Some(
             priors_from_json(text, &format!("{} (its priors)", twin.describe()))
                 .map_err(CalibrateError::Setup)?,
         ),
         None => None,
-    };
+    })
+}
+
+/// Whether `setup` can calibrate a twin of `structure`: its priors file fits the structure, and
+/// it names a parameter.
+fn check_setup(setup: &CalibrationSetup, structure: &Structure) -> Result<(), CalibrateError> {
     if let Some(spec) = &setup.prior_spec {
-        spec.check(&structure, false)
+        spec.check(structure, false)
             .map_err(CalibrateError::Setup)?;
     }
     if setup.parameters.is_empty() {
         return Err(CalibrateError::Setup("no parameter to calibrate".into()));
     }
-    // Every record's channels checked against the structure before any work.
-    for input in inputs {
-        check_record(input.data, &structure, &fmu)?;
-    }
+    Ok(())
+}
+
+/// Every record as the likelihood reads it: the samples it uses, and each measured channel with
+/// the FMU output predicting it, its sensitivities and its noise prior. Also each record's first
+/// sample after the transient.
+fn record_targets<'a>(
+    fmu: &Fmu,
+    inputs: &[RecordInput<'a>],
+    setup: &CalibrationSetup,
+) -> Result<(Vec<RecordTarget<'a>>, Vec<usize>), CalibrateError> {
     let mut records = Vec::with_capacity(inputs.len());
     let mut firsts = Vec::with_capacity(inputs.len());
     for input in inputs {
@@ -1138,7 +1197,7 @@ pub fn calibrate_records(
                 let y: Vec<f64> = used.iter().map(|&k| signal.values[k]).collect();
                 Ok(ChannelTarget {
                     output: fmu.value_reference(&name).map_err(TwinError::from)?,
-                    sensitivities: channel_sensitivities(&fmu, &name, &setup.parameters),
+                    sensitivities: channel_sensitivities(fmu, &name, &setup.parameters),
                     noise_mean: (setup.noise_fraction * crate::evaluation::stats::variance(&y))
                         .ln(),
                     values: &signal.values,
@@ -1154,6 +1213,19 @@ pub fn calibrate_records(
             channels,
         });
     }
+    Ok((records, firsts))
+}
+
+/// Each calibrated parameter's value reference and prior: the setup's own, else the setup's
+/// priors file's or the twin's (`twin_priors`), else the structure's default or one around the
+/// parameter's current value. Err names a parameter the FMU has not as a real parameter.
+fn parameter_priors(
+    fmu: &Fmu,
+    component: &Component,
+    structure: &Structure,
+    setup: &CalibrationSetup,
+    twin_priors: Option<&PriorSpec>,
+) -> Result<(Vec<u32>, Vec<Prior>), CalibrateError> {
     let mut vrs = Vec::new();
     let mut priors = Vec::new();
     for name in &setup.parameters {
@@ -1176,11 +1248,11 @@ pub fn calibrate_records(
                 .unwrap_or(0.0),
         };
         let fallback =
-            structure_prior(&structure, name).unwrap_or_else(|| default_prior(name, current));
+            structure_prior(structure, name).unwrap_or_else(|| default_prior(name, current));
         let from_files = setup
             .prior_spec
             .iter()
-            .chain(&twin_priors)
+            .chain(twin_priors)
             .find_map(|spec| spec.prior_for(name, fallback))
             .transpose()
             .map_err(CalibrateError::Setup)?;
@@ -1193,32 +1265,52 @@ pub fn calibrate_records(
         vrs.push(var.value_reference);
         priors.push(prior);
     }
-    let mut base = component.parameters.clone();
-    for name in &setup.parameters {
-        base.remove(name);
-    }
-    let mut target = Target {
-        fmu: &fmu,
-        base,
-        records,
-        vrs,
-        priors,
-        noise_var: setup.noise_log_variance,
-        budget: setup.simulations_per_start.max(1),
-        sensitivity: Sensitivity::find(&fmu),
-    };
-    if !target.sensitive() {
-        target.sensitivity = None;
-    }
+    Ok((vrs, priors))
+}
 
-    // Starts: the prior mean, then draws from the prior widened ×3.
+impl<'a> Target<'a> {
+    /// The calibration's target: the records, the calibrated parameters (`vrs`, with their
+    /// `priors`), the component's other parameters as they are, and the FMU's sensitivities when
+    /// every channel has them.
+    fn new(
+        fmu: &'a Fmu,
+        component: &Component,
+        setup: &CalibrationSetup,
+        records: Vec<RecordTarget<'a>>,
+        vrs: Vec<u32>,
+        priors: Vec<Prior>,
+    ) -> Self {
+        let mut base = component.parameters.clone();
+        for name in &setup.parameters {
+            base.remove(name);
+        }
+        let mut target = Target {
+            fmu,
+            base,
+            records,
+            vrs,
+            priors,
+            noise_var: setup.noise_log_variance,
+            budget: setup.simulations_per_start.max(1),
+            sensitivity: Sensitivity::find(fmu),
+        };
+        if !target.sensitive() {
+            target.sensitivity = None;
+        }
+        target
+    }
+}
+
+/// The starts, in the priors' standardised coordinates: the prior mean (or `setup.initial`),
+/// then the values `setup.starts_at`, then draws from the prior widened ×3.
+fn starts(setup: &CalibrationSetup, priors: &[Prior]) -> Vec<Vec<f64>> {
     let mut rng = StdRng::seed_from_u64(setup.seed);
     let p = setup.parameters.len();
     let at = |given: &BTreeMap<String, f64>| -> Vec<f64> {
         setup
             .parameters
             .iter()
-            .zip(&target.priors)
+            .zip(priors)
             .map(|(name, prior)| match given.get(name) {
                 Some(&v) if prior.space == Space::Linear || v > 0.0 => {
                     (prior.coordinate(v) - prior.mean) / prior.sd()
@@ -1227,7 +1319,7 @@ pub fn calibrate_records(
             })
             .collect()
     };
-    let starts: Vec<Vec<f64>> = (0..setup.starts.max(1))
+    (0..setup.starts.max(1))
         .map(|i| {
             if i == 0 {
                 at(&setup.initial)
@@ -1239,61 +1331,92 @@ pub fn calibrate_records(
                     .collect()
             }
         })
-        .collect();
-    let threads = setup.threads.clamp(1, starts.len());
-    let (mut outcomes, simulations, best) = screened_starts(&target, &starts, p, threads)?;
-    outcomes.sort_by_key(|o| o.start);
-    let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
+        .collect()
+}
 
-    let mut sims = simulators(&target, "laplace")?;
-    let (cov, laplace_runs) = laplace(&mut sims, &target, &best.z, &best.s).ok_or_else(|| {
-        CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
-    })?;
-    let values = target.values(&best.z);
-    let parameters: Vec<ParameterEstimate> = (0..p)
-        .map(|j| {
-            let prior = target.priors[j];
-            let sd_coordinate = prior.sd() * cov[(j, j)].max(0.0).sqrt();
-            let sd = match prior.space {
-                Space::Linear => sd_coordinate,
-                Space::Log => values[j] * sd_coordinate,
-            };
-            ParameterEstimate {
-                name: setup.parameters[j].clone(),
-                value: values[j],
-                prior,
-                sd_coordinate,
-                sd,
+/// The Laplace posterior of the calibrated parameters.
+struct Posterior {
+    parameters: Vec<ParameterEstimate>,
+    correlation: Vec<Vec<f64>>,
+    log_evidence: f64,
+}
+
+impl Posterior {
+    /// The posterior at the optimum `values` (negative log posterior `objective` there), from
+    /// the covariance `cov` of the standardised parameters and the log noise variances: each
+    /// parameter's estimate and sd, their correlations, and the log evidence.
+    fn at(
+        target: &Target,
+        setup: &CalibrationSetup,
+        values: &[f64],
+        cov: &DMatrix<f64>,
+        objective: f64,
+    ) -> Posterior {
+        let p = setup.parameters.len();
+        let parameters = (0..p)
+            .map(|j| {
+                let prior = target.priors[j];
+                let sd_coordinate = prior.sd() * cov[(j, j)].max(0.0).sqrt();
+                let sd = match prior.space {
+                    Space::Linear => sd_coordinate,
+                    Space::Log => values[j] * sd_coordinate,
+                };
+                ParameterEstimate {
+                    name: setup.parameters[j].clone(),
+                    value: values[j],
+                    prior,
+                    sd_coordinate,
+                    sd,
+                }
+            })
+            .collect();
+        let correlation = (0..p)
+            .map(|a| {
+                (0..p)
+                    .map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt())
+                    .collect()
+            })
+            .collect();
+        let log_evidence = match cov.clone().cholesky() {
+            Some(chol) => {
+                let log_det: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
+                -objective + 0.5 * log_det
             }
-        })
-        .collect();
-    let correlation = (0..p)
-        .map(|a| {
-            (0..p)
-                .map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt())
-                .collect()
-        })
-        .collect();
-    let log_evidence = match cov.clone().cholesky() {
-        Some(chol) => {
-            let log_det: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
-            -best.objective + 0.5 * log_det
+            None => f64::NEG_INFINITY,
+        };
+        Posterior {
+            parameters,
+            correlation,
+            log_evidence,
         }
-        None => f64::NEG_INFINITY,
-    };
+    }
+}
+
+/// What the calibration found on each record at the optimum (`values`, the log noise
+/// variances `s`, covariance `cov`): its noise variances with their posterior sd, and the fit's
+/// NMSE per channel after the record's transient (`firsts`), one run per record.
+fn record_fits(
+    sims: &mut [Simulator],
+    target: &Target,
+    firsts: &[usize],
+    values: &[f64],
+    s: &[f64],
+    cov: &DMatrix<f64>,
+) -> Result<Vec<RecordCalibration>, CalibrateError> {
+    let p = target.priors.len();
     let mut buf: Vec<Vec<f64>> = Vec::new();
     let mut fitted = Vec::with_capacity(target.records.len());
     let mut block = 0;
-    for ((sim, record), &first) in sims.iter_mut().zip(&target.records).zip(&firsts) {
+    for ((sim, record), &first) in sims.iter_mut().zip(&target.records).zip(firsts) {
         buf.resize(record.channels.len(), Vec::new());
-        sim.record(&target.vrs, &values, &record.outputs(), &mut buf)?;
+        sim.record(&target.vrs, values, &record.outputs(), &mut buf)?;
         let q = record.channels.len();
         let blocks = block..block + q;
         block += q;
         fitted.push(RecordCalibration {
             record: record.data.path.display().to_string(),
             channels: record.channels.iter().map(|c| c.name.clone()).collect(),
-            noise_variance: blocks.clone().map(|b| best.s[b].exp()).collect(),
+            noise_variance: blocks.clone().map(|b| s[b].exp()).collect(),
             noise_log_sd: blocks
                 .map(|b| cov[(p + b, p + b)].max(0.0).sqrt())
                 .collect(),
@@ -1308,23 +1431,7 @@ pub fn calibrate_records(
                 .collect(),
         });
     }
-    let own = fitted[0].clone();
-    Ok(Calibration {
-        parameters,
-        correlation,
-        noise_variance: own.noise_variance,
-        noise_log_sd: own.noise_log_sd,
-        channels: own.channels,
-        neg_log_posterior: best.objective,
-        log_evidence,
-        samples_used: own.samples_used,
-        nmse: own.nmse,
-        records: fitted,
-        starts: outcomes,
-        simulations: simulations + laplace_runs + target.records.len(),
-        seconds: started.elapsed().as_secs_f64(),
-        storeys: structure.storeys(),
-    })
+    Ok(fitted)
 }
 
 /// The structure the twin's physics FMU was made for: its `resources/structure.json`
