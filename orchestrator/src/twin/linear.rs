@@ -1,9 +1,10 @@
 //! The twin's physics as the linear shear model it instantiates, run in process over a whole
 //! record (`fmu_shear::batch`): the same step maps as a run of its FMU through FMI, in blocks of
-//! samples. Used where only the linear model's derivatives are wanted over many samples (the
-//! band of `twin compare`), and only when the twin is exactly that model: its physics alone,
-//! every effect off, no control force, accelerometers.
+//! samples. Used where the linear model's derivatives are wanted over many samples (the band
+//! of `twin compare`, a calibration's Jacobian), and only when the twin is exactly that model:
+//! its physics alone, every effect off, no control force, accelerometers.
 
+use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
@@ -22,16 +23,30 @@ const RESOURCE: &str = "resources/structure.json";
 /// The shear parameters the twin's physics FMU runs with — its `resources/structure.json` (the
 /// paper's rig without one) with the twin's parameter values applied as `fmi2SetReal` would —
 /// when that is the linear model alone: None for a twin with other components, an FMU that is
-/// not the shear model, a value it refuses, or an effect switched on.
+/// not the shear model (its modelDescription's GUID not the shear model's for that structure),
+/// a value it refuses, or an effect switched on.
 pub fn linear_shear(twin: &Twin) -> Option<ShearParameters> {
     if twin.components.len() != 1 {
         return None;
     }
     let physics = twin.component(PHYSICS)?;
-    let params = structure_resource(&physics.fmu_path)?.parameters().ok()?;
+    linear_shear_of(&physics.fmu_path, &physics.parameters)
+}
+
+/// [`linear_shear`] of one FMU archive with its parameter values.
+fn linear_shear_of(
+    fmu: &Path,
+    parameters: &BTreeMap<String, ParameterValue>,
+) -> Option<ShearParameters> {
+    let (resource, description) = shear_archive(fmu)?;
+    let params = resource.parameters().ok()?;
     let mut model = ShearModel::for_parameters(params);
     let info = model.table();
-    for (name, value) in &physics.parameters {
+    // The shear model's own description of that structure, or another FMU.
+    if !description.contains(&format!("guid=\"{}\"", info.guid)) {
+        return None;
+    }
+    for (name, value) in parameters {
         let vr = info.by_name(name)?.vr;
         match *value {
             ParameterValue::Real(x) => model.set_real(vr, x).ok()?,
@@ -42,22 +57,113 @@ pub fn linear_shear(twin: &Twin) -> Option<ShearParameters> {
     (!model.effects.any_enabled()).then_some(model.params)
 }
 
-/// `resources/structure.json` of a shear FMU archive; the paper's rig when it has none; None
-/// when the file cannot be read or is not a shear FMU's.
-fn structure_resource(fmu: &Path) -> Option<StructureResource> {
-    let mut archive = zip::ZipArchive::new(std::fs::File::open(fmu).ok()?).ok()?;
-    let mut text = String::new();
-    match archive.by_name(RESOURCE) {
-        Ok(mut entry) => entry.read_to_string(&mut text).ok()?,
-        Err(zip::result::ZipError::FileNotFound) => {
-            return Some(StructureResource {
-                structure: ::structure::Structure::default(),
-                control_floor: 1,
-            })
+/// A calibration of the linear shear model's `m`, `c`, `k` on accelerometers, in process: the
+/// residuals' predictions and their Jacobian from one pass over each record (`fmu_shear::batch`,
+/// the FMU's own step and derivative maps), where through FMI a run steps and reads them one
+/// sample at a time.
+pub struct LinearFit {
+    params: ShearParameters,
+    /// Each calibrated parameter's place in `m1..mN, c1..cN, k1..kN`.
+    index: Vec<usize>,
+    /// The unit direction of each calibrated parameter (3N × p).
+    directions: DMatrix<f64>,
+}
+
+impl LinearFit {
+    /// For the FMU archive `fmu` with the twin's values `base`, calibrating `names`: None
+    /// unless that is the linear shear model ([`linear_shear`]) and every name one of its
+    /// `m`, `c`, `k`.
+    pub fn new(
+        fmu: &Path,
+        base: &BTreeMap<String, ParameterValue>,
+        names: &[String],
+    ) -> Option<LinearFit> {
+        let params = linear_shear_of(fmu, base)?;
+        let n = params.storeys();
+        let index: Vec<usize> = names
+            .iter()
+            .map(|name| parameter_index(name, n))
+            .collect::<Option<_>>()?;
+        let mut directions = DMatrix::zeros(3 * n, index.len());
+        for (a, &j) in index.iter().enumerate() {
+            directions[(j, a)] = 1.0;
         }
+        Some(LinearFit {
+            params,
+            index,
+            directions,
+        })
+    }
+
+    /// The floors (0-based) of `channels` (`acc<i>` names), None for any other channel or a
+    /// floor the structure lacks.
+    pub fn floors(&self, channels: &[&str]) -> Option<Vec<usize>> {
+        let n = self.params.storeys();
+        channels
+            .iter()
+            .map(|name| match Channel::parse(name)? {
+                Channel::Response {
+                    quantity: Quantity::Acceleration,
+                    floor,
+                } if (1..=n).contains(&floor) => Some(floor - 1),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Run the model with the calibrated parameters at `values` over `data`, measuring
+    /// `floors`: `each(k, predictions, derivatives)`, `derivatives[slot · p + j]` along
+    /// calibrated parameter j. None for a value the FMU's setters refuse.
+    pub fn run(
+        &self,
+        values: &[f64],
+        data: &Measurement,
+        floors: &[usize],
+        each: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Option<()> {
+        let n = self.params.storeys();
+        let mut params = self.params.clone();
+        for (&j, &v) in self.index.iter().zip(values) {
+            let (group, i) = (j / n, j % n);
+            // As the FMU's setters: a mass > 0, a damping or stiffness ≥ 0 (NaN neither).
+            if !(v > 0.0 || (group > 0 && v >= 0.0)) {
+                return None;
+            }
+            [&mut params.mass, &mut params.damping, &mut params.stiffness][group][i] = v;
+        }
+        let record = LinearRecord {
+            dt: data.dt,
+            excitation: &data.excitation.values,
+            floors,
+        };
+        accelerations_along(&params, &record, &self.directions, each);
+        Some(())
+    }
+}
+
+/// `resources/structure.json` of an FMU archive (the paper's rig when it has none) and its
+/// `modelDescription.xml`; None when either cannot be read.
+fn shear_archive(fmu: &Path) -> Option<(StructureResource, String)> {
+    let mut archive = zip::ZipArchive::new(std::fs::File::open(fmu).ok()?).ok()?;
+    let mut description = String::new();
+    archive
+        .by_name("modelDescription.xml")
+        .ok()?
+        .read_to_string(&mut description)
+        .ok()?;
+    let mut text = String::new();
+    let resource = match archive.by_name(RESOURCE) {
+        Ok(mut entry) => {
+            entry.read_to_string(&mut text).ok()?;
+            serde_json::from_str(&text).ok()?
+        }
+        Err(zip::result::ZipError::FileNotFound) => StructureResource {
+            structure: ::structure::Structure::default(),
+            control_floor: 1,
+        },
         Err(_) => return None,
     };
-    serde_json::from_str(&text).ok()
+    Some((resource, description))
 }
 
 /// The index of `name` among `m1..mN, c1..cN, k1..kN` (the sensitivities' order).

@@ -769,6 +769,46 @@ mod tests {
             }
             assert!(worst < 1e-3, "{excitation:?}: worst {worst:e}");
 
+            // A calibration's in process (`LinearFit`, the calibrated values set on the base):
+            // the same predictions and sensitivities as the FMU's run, to rounding (bar 1e-9
+            // of the channel's largest value).
+            let mut fixed = twin.component(PHYSICS).expect("physics").parameters.clone();
+            for name in &names {
+                fixed.remove(name);
+            }
+            let fit = crate::twin::linear::LinearFit::new(
+                &twin.component(PHYSICS).expect("physics").fmu_path,
+                &fixed,
+                &names,
+            )
+            .expect("the linear shear model");
+            let channel_names: Vec<String> =
+                data.responses.iter().map(|s| s.channel.name()).collect();
+            let floors = fit
+                .floors(&channel_names.iter().map(String::as_str).collect::<Vec<_>>())
+                .expect("accelerometers");
+            let (mut peak, mut peak_d, mut err, mut err_d) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            let p = names.len();
+            fit.run(&values, &data, &floors, |k, v, dv| {
+                for c in 0..floors.len() {
+                    peak = peak.max(base[c][k].abs());
+                    err = err.max((v[c] - base[c][k]).abs());
+                    for j in 0..p {
+                        peak_d = peak_d.max(exact[j][c][k].abs());
+                        err_d = err_d.max((dv[c * p + j] - exact[j][c][k]).abs());
+                    }
+                }
+            })
+            .expect("valid values");
+            assert!(
+                err <= 1e-9 * peak,
+                "{excitation:?}: predictions {err:e} of {peak:e}"
+            );
+            assert!(
+                err_d <= 1e-9 * peak_d,
+                "{excitation:?}: sensitivities {err_d:e} of {peak_d:e}"
+            );
+
             // The streamed band (blocks of samples, the covariance's root) is `diag(J Σ Jᵀ)`
             // of these sensitivities, for a positive definite Σ (Cholesky) and for one of rank
             // 2 (eigenvectors), on 513 samples (two blocks and a part), streamed through FMI

@@ -40,6 +40,7 @@ use ::structure::Structure;
 
 use crate::cosim::import::{Causality, Fmu, ScalarType};
 use crate::twin::data::Measurement;
+use crate::twin::linear::LinearFit;
 use crate::twin::noise::NoiseVariances;
 use crate::twin::{Component, ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{
@@ -265,6 +266,9 @@ struct Target<'a> {
     /// The FMU's forward sensitivities of the measured outputs to the calibrated parameters,
     /// when it offers them for all of them.
     sensitivity: Option<Sensitivity>,
+    /// The same in process, when the twin is the linear shear model and the calibrated
+    /// parameters its `m`, `c`, `k` ([`LinearFit`]).
+    linear: Option<LinearFit>,
 }
 
 /// Where an FMU gives `∂y/∂p` along a run: the Boolean parameter that switches them on (the
@@ -433,13 +437,26 @@ fn sensitivity_jacobian(
     let mut row0 = 0;
     for (sim, record) in sims.iter_mut().zip(&target.records) {
         let q = record.channels.len();
-        let mut outputs = record.outputs();
-        for c in &record.channels {
-            outputs.extend(c.sensitivities.as_ref()?);
-        }
-        let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
-        sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
-            .ok()?;
+        // The linear shear model in process where the twin is it (the FMU's own maps, a pass
+        // over the record), else the FMU's run with its sensitivities through FMI: the
+        // predictions, then each channel's derivatives.
+        let out = match target
+            .linear
+            .as_ref()
+            .and_then(|fit| linear_outputs(fit, record, &values))
+        {
+            Some(out) => out,
+            None => {
+                let mut outputs = record.outputs();
+                for c in &record.channels {
+                    outputs.extend(c.sensitivities.as_ref()?);
+                }
+                let mut out: Vec<Vec<f64>> = vec![Vec::new(); outputs.len()];
+                sim.record_switched(&target.vrs, &values, sensitivity.switch, &outputs, &mut out)
+                    .ok()?;
+                out
+            }
+        };
         let per = record.used.len();
         for (f, c) in record.channels.iter().enumerate() {
             r.extend(record.used.iter().map(|&k| c.values[k] - out[f][k]));
@@ -458,6 +475,30 @@ fn sensitivity_jacobian(
         return None;
     }
     Some((r, jac))
+}
+
+/// What the FMU's sensitivity run records for `record` (each channel's predictions, then its
+/// derivatives along the calibrated parameters), from the linear model in process; None when
+/// a channel is not an accelerometer or the FMU would refuse `values`.
+fn linear_outputs(fit: &LinearFit, record: &RecordTarget, values: &[f64]) -> Option<Vec<Vec<f64>>> {
+    let names: Vec<&str> = record.channels.iter().map(|c| c.name.as_str()).collect();
+    let floors = fit.floors(&names)?;
+    let (q, p) = (floors.len(), values.len());
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(record.data.len()); q * (p + 1)];
+    fit.run(
+        values,
+        record.data,
+        &floors,
+        |_, predictions, derivatives| {
+            for c in 0..q {
+                out[c].push(predictions[c]);
+                for j in 0..p {
+                    out[q + c * p + j].push(derivatives[c * p + j]);
+                }
+            }
+        },
+    )?;
+    Some(out)
 }
 
 /// The sum of squares of every block (record, floor) of `r`.
@@ -1284,6 +1325,7 @@ impl<'a> Target<'a> {
         for name in &setup.parameters {
             base.remove(name);
         }
+        let linear = LinearFit::new(&fmu.path, &base, &setup.parameters);
         let mut target = Target {
             fmu,
             base,
@@ -1293,6 +1335,7 @@ impl<'a> Target<'a> {
             noise_var: setup.noise_log_variance,
             budget: setup.simulations_per_start.max(1),
             sensitivity: Sensitivity::find(fmu),
+            linear,
         };
         if !target.sensitive() {
             target.sensitivity = None;
