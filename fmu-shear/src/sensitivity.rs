@@ -17,7 +17,7 @@
 //! The accelerations `a(x, u)` then give `∂a/∂θ = a_θ(x, u) + A_a s`, `A_a` the acceleration
 //! rows of `A`. With any effect on the model is not linear and the outputs are NaN.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DMatrixView};
 use serde::{Deserialize, Serialize};
 
 use crate::effects::Effects;
@@ -232,35 +232,95 @@ pub fn acceleration_derivative(
         .collect()
 }
 
-/// A matrix and its derivative along one parameter.
-struct Dual {
-    value: DMatrix<f64>,
-    tangent: DMatrix<f64>,
+/// The values of `R(δF)^n` as RK4's polynomial by Horner and repeated squaring compute it,
+/// kept at every stage: they are the same for every parameter, whose derivatives
+/// ([`ValueChain::tangent`]) follow the same stages (a stage's derivative is the product rule
+/// on its two factors), so each parameter costs two matrix products a stage instead of three.
+struct ValueChain {
+    hf: DMatrix<f64>,
+    /// `r` after each Horner stage, for divisors 4, 3, 2, 1.
+    horner: [DMatrix<f64>; 4],
+    /// The square's value at each bit of `n`, and whether that bit multiplies the result.
+    squares: Vec<(DMatrix<f64>, bool)>,
+    /// The result's value before each multiplication by a square (after the first).
+    results: Vec<DMatrix<f64>>,
 }
 
-impl Dual {
-    fn identity(size: usize) -> Dual {
-        Dual {
-            value: DMatrix::identity(size, size),
-            tangent: DMatrix::zeros(size, size),
+const HORNER: [f64; 4] = [4.0, 3.0, 2.0, 1.0];
+
+/// `m / k + I`.
+fn identity_plus(mut m: DMatrix<f64>, k: f64) -> DMatrix<f64> {
+    m /= k;
+    for i in 0..m.nrows() {
+        m[(i, i)] += 1.0;
+    }
+    m
+}
+
+impl ValueChain {
+    fn new(hf: DMatrix<f64>, mut n: u32) -> Self {
+        let mut r = identity_plus(hf.clone(), HORNER[0]);
+        let mut horner = vec![r.clone()];
+        for k in &HORNER[1..] {
+            r = identity_plus(&hf * &r, *k);
+            horner.push(r.clone());
+        }
+        let mut squares = Vec::new();
+        let mut results = Vec::new();
+        let mut result: Option<DMatrix<f64>> = None;
+        let mut square = r;
+        while n > 0 {
+            let bit = n & 1 == 1;
+            squares.push((square.clone(), bit));
+            if bit {
+                result = Some(match result {
+                    None => square.clone(),
+                    Some(value) => {
+                        let next = &value * &square;
+                        results.push(value);
+                        next
+                    }
+                });
+            }
+            n >>= 1;
+            if n > 0 {
+                square = &square * &square;
+            }
+        }
+        ValueChain {
+            hf,
+            horner: horner.try_into().expect("four Horner stages"),
+            squares,
+            results,
         }
     }
 
-    fn mul(&self, other: &Dual) -> Dual {
-        Dual {
-            value: &self.value * &other.value,
-            tangent: &self.tangent * &other.value + &self.value * &other.tangent,
+    /// The derivative of `R(δF)^n` along `hf_t`, the derivative of `δF`.
+    fn tangent(&self, hf_t: &DMatrix<f64>) -> DMatrix<f64> {
+        // Horner: r₀ = hf/4 + I, rₖ = hf rₖ₋₁ / k + I.
+        let mut t = hf_t / HORNER[0];
+        for (stage, k) in HORNER[1..].iter().enumerate() {
+            t = (hf_t * &self.horner[stage] + &self.hf * &t) / *k;
         }
-    }
-
-    /// `I + self / k`.
-    fn identity_plus(mut self, k: f64) -> Dual {
-        self.value /= k;
-        self.tangent /= k;
-        for i in 0..self.value.nrows() {
-            self.value[(i, i)] += 1.0;
+        // Repeated squaring: square' = s' s + s s'; result' = r' s + r s'.
+        let mut square_t = t;
+        let mut result_t: Option<DMatrix<f64>> = None;
+        let mut results = self.results.iter();
+        for (level, (square, bit)) in self.squares.iter().enumerate() {
+            if *bit {
+                result_t = Some(match result_t {
+                    None => square_t.clone(),
+                    Some(rt) => {
+                        let value = results.next().expect("a result value per product");
+                        &rt * square + value * &square_t
+                    }
+                });
+            }
+            if level + 1 < self.squares.len() {
+                square_t = &square_t * square + square * &square_t;
+            }
         }
-        self
+        result_t.unwrap_or_else(|| DMatrix::zeros(self.hf.nrows(), self.hf.ncols()))
     }
 }
 
@@ -268,32 +328,18 @@ impl SensitivityMaps {
     pub fn new(params: &ShearParameters, h: f64) -> Self {
         let n = params.storeys();
         let f = AccelerationRows::new(params).augmented(true);
-        let size = f.nrows();
         let substeps = params.substeps.max(1);
         let delta = h / f64::from(substeps);
         let width = 2 * n + INPUT_COLUMNS;
         let count = 3 * n;
         let mut derivative = vec![0.0; 2 * n * width * count];
+        let chain = ValueChain::new(&f * delta, substeps);
         for j in 0..count {
-            {
-                let hf = Dual {
-                    value: &f * delta,
-                    tangent: AccelerationRows::derivative(params, j).augmented(false) * delta,
-                };
-                // RK4's polynomial by Horner, as `linear::rk4_substep`.
-                let mut r = Dual {
-                    value: hf.value.clone(),
-                    tangent: hf.tangent.clone(),
-                }
-                .identity_plus(4.0);
-                for k in [3.0, 2.0, 1.0] {
-                    r = hf.mul(&r).identity_plus(k);
-                }
-                let p = power(&r, substeps, size);
-                for i in 0..2 * n {
-                    for c in 0..width {
-                        derivative[(i * width + c) * count + j] = p.tangent[(i, c)];
-                    }
+            let tangent =
+                chain.tangent(&(AccelerationRows::derivative(params, j).augmented(false) * delta));
+            for i in 0..2 * n {
+                for c in 0..width {
+                    derivative[(i * width + c) * count + j] = tangent[(i, c)];
                 }
             }
         }
@@ -311,34 +357,15 @@ impl SensitivityMaps {
         let n = self.params.storeys();
         let (states, count, d) = (2 * n, 3 * n, directions.ncols());
         let width = states + INPUT_COLUMNS;
+        // The maps are, column-major, p × (2N·(2N + 4)): one matrix product gives every entry
+        // along every direction, `R[(a, i·width + c)]`.
+        let maps = DMatrixView::from_slice(&self.derivative, count, states * width);
+        let r = directions.transpose() * maps;
         DMatrix::from_fn(states * d, width, |row, c| {
             let (i, a) = (row / d, row % d);
-            let run = &self.derivative[(i * width + c) * count..(i * width + c + 1) * count];
-            run.iter()
-                .zip(directions.column(a).iter())
-                .map(|(m, r)| m * r)
-                .sum()
+            r[(a, i * width + c)]
         })
     }
-}
-
-/// `m^n` by repeated squaring, on pairs.
-fn power(m: &Dual, mut n: u32, size: usize) -> Dual {
-    let mut result = Dual::identity(size);
-    let mut square = Dual {
-        value: m.value.clone(),
-        tangent: m.tangent.clone(),
-    };
-    while n > 0 {
-        if n & 1 == 1 {
-            result = result.mul(&square);
-        }
-        n >>= 1;
-        if n > 0 {
-            square = square.mul(&square);
-        }
-    }
-    result
 }
 
 #[cfg(test)]
