@@ -46,164 +46,197 @@ pub fn accelerations_along(
     directions: &DMatrix<f64>,
     mut each: impl FnMut(usize, &[f64], &[f64]),
 ) {
-    let n = params.storeys();
-    let (states, count, d) = (2 * n, 3 * n, directions.ncols());
+    let states = 2 * params.storeys();
+    let d = directions.ncols();
     assert_eq!(
         directions.nrows(),
-        count,
+        3 * params.storeys(),
         "a direction has one entry per parameter"
     );
-    let width = states + INPUT_COLUMNS;
     let map = LinearStepMap::new(params, record.dt);
     let along = SensitivityMaps::new(params, record.dt).along(directions);
-    let rows = AccelerationRows::new(params);
     let phi_t = DMatrix::from_fn(states, states, |c, i| map.phi(i, c));
-    // Each parameter's part of `∂a/∂θ` at a fixed state touches one or two floors; its
-    // direction row, to add `value · row` for each.
-    let direction_rows: Vec<Vec<f64>> = (0..count)
-        .map(|j| directions.row(j).iter().copied().collect())
-        .collect();
-    let base = matches!(params.excitation, Excitation::Base);
-    let force = !base;
-    let e = record.excitation;
-    let samples = e.len();
-    let floors = record.floors;
-    // Where each floor's outputs go (a floor measured twice gets both).
-    let mut slots: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (slot, &f) in floors.iter().enumerate() {
-        slots[f].push(slot);
-    }
-
-    // A_a's nonzero entries per floor (a floor's row touches its own and its neighbours').
-    let sparse: Vec<Vec<(usize, f64)>> = (0..n)
-        .map(|f| {
-            (0..states)
-                .filter_map(|c| Some((c, rows.a[(f, c)])).filter(|(_, a)| *a != 0.0))
-                .collect()
-        })
-        .collect();
-
-    let mut x = vec![0.0; states];
-    let mut next = vec![0.0; states];
+    let mut outputs = Outputs::new(params, record.floors, directions);
+    let samples = record.excitation.len();
     // T = Sᵀ (d × 2N, column-major: the derivatives of state c along every direction are
     // contiguous), at the start of a block; within it, column b of `forcing` becomes Tₖ₊₁.
     let size = states * d;
+    let mut x = vec![0.0; states];
     let mut t = vec![0.0; size];
-    let mut z = DMatrix::<f64>::zeros(width, BLOCK);
+    let mut z = DMatrix::<f64>::zeros(states + INPUT_COLUMNS, BLOCK);
     let mut forcing = DMatrix::<f64>::zeros(size, BLOCK);
-    let mut values = vec![0.0; floors.len()];
-    let mut derivatives = vec![0.0; floors.len() * d];
     let mut start = 0;
     while start < samples {
         let len = BLOCK.min(samples - start);
-        // The block's states: column b of `z` is [x_k, e_k, ė_k, 0, 0].
-        let mut xk = x.clone();
-        for b in 0..len {
-            let k = start + b;
-            let slope = if k + 1 < samples {
-                (e[k + 1] - e[k]) / record.dt
-            } else {
-                0.0
-            };
-            let mut column = z.column_mut(b);
-            column.rows_mut(0, states).copy_from_slice(&xk);
-            column[states] = e[k];
-            column[states + 1] = slope;
-            column[states + 2] = 0.0;
-            column[states + 3] = 0.0;
-            let inputs = StepInputs {
-                excitation: e[k],
-                excitation_slope: slope,
-                control: 0.0,
-                control_slope: 0.0,
-            };
-            map.apply_into(&xk, &inputs, &mut next);
-            std::mem::swap(&mut xk, &mut next);
-        }
+        x = step_block(&map, record, start, len, x, &mut z);
         // The maps' part of every step of the block at once: column b is Fₖ.
         forcing
             .columns_mut(0, len)
             .gemm(1.0, &along, &z.columns(0, len), 0.0);
         for b in 0..len {
-            let k = start + b;
-            let zk = z.column(b);
-            let ek = zk[states];
-            x.copy_from_slice(zk.rows(0, states).as_slice());
             let (head, tail) = forcing.as_mut_slice().split_at_mut(b * size);
             let tk: &[f64] = if b == 0 { &t } else { &head[(b - 1) * size..] };
-            // The outputs at sample k: A_a x + b_e e (+ e under ground motion), and along each
-            // direction A_a Tᵀ plus the direct derivative at the fixed state.
-            derivatives.iter_mut().for_each(|v| *v = 0.0);
-            for (f, slots) in slots.iter().enumerate() {
-                let Some(&first) = slots.first() else {
-                    continue;
-                };
-                let mut value = rows.b_excitation[f] * ek;
-                let along_f = &mut derivatives[first * d..(first + 1) * d];
-                for &(c, a) in &sparse[f] {
-                    value += a * x[c];
-                    axpy(a, &tk[c * d..(c + 1) * d], along_f);
-                }
-                let absolute = if base { value + ek } else { value };
-                for &slot in slots {
-                    values[slot] = absolute;
-                    if slot != first {
-                        derivatives.copy_within(first * d..(first + 1) * d, slot * d);
-                    }
-                }
-            }
-            let (y, v) = x.split_at(n);
-            let mut add = |floor: usize, j: usize, value: f64| {
-                for &slot in &slots[floor] {
-                    axpy(
-                        value,
-                        &direction_rows[j],
-                        &mut derivatives[slot * d..(slot + 1) * d],
-                    );
-                }
-            };
-            for i in 0..n {
-                if slots[i].is_empty() {
-                    continue;
-                }
-                // ∂a_i/∂m_i = −(row i's value)/m_i, the ground acceleration's −1 aside.
-                let mut row = if force {
-                    rows.b_excitation[i] * ek
-                } else {
-                    0.0
-                };
-                for &(c, a) in &sparse[i] {
-                    row += a * x[c];
-                }
-                add(i, i, -row / params.mass[i]);
-            }
-            for s in 0..n {
-                let below = |q: &[f64]| if s > 0 { q[s - 1] } else { 0.0 };
-                let (rate, drift) = (v[s] - below(v), y[s] - below(y));
-                for (j, value) in [(n + s, rate), (2 * n + s, drift)] {
-                    add(s, j, -value / params.mass[s]);
-                    if s > 0 {
-                        add(s - 1, j, value / params.mass[s - 1]);
-                    }
-                }
-            }
-            each(k, &values, &derivatives);
+            let (values, derivatives) = outputs.at(z.column(b).as_slice(), tk);
+            each(start + b, values, derivatives);
             // Tₖ₊₁ = Tₖ Φᵀ + Fₖ, in place of Fₖ.
             let mut next_t = DMatrixViewMut::from_slice(&mut tail[..size], d, states);
             next_t.gemm(1.0, &DMatrixView::from_slice(tk, d, states), &phi_t, 1.0);
         }
         t.copy_from_slice(forcing.column(len - 1).as_slice());
-        // The state after the block.
-        let last = z.column(len - 1);
+        start += len;
+    }
+}
+
+/// Step the state `x` (at sample `start`) through `len` samples, writing column b of `z` as
+/// `[x_k, e_k, ė_k, 0, 0]` (k = start + b: the state and the step's input ramp); the state
+/// after the block.
+fn step_block(
+    map: &LinearStepMap,
+    record: &LinearRecord,
+    start: usize,
+    len: usize,
+    mut x: Vec<f64>,
+    z: &mut DMatrix<f64>,
+) -> Vec<f64> {
+    let e = record.excitation;
+    let states = x.len();
+    let mut next = vec![0.0; states];
+    for b in 0..len {
+        let k = start + b;
+        let slope = match e.get(k + 1) {
+            Some(after) => (after - e[k]) / record.dt,
+            None => 0.0,
+        };
+        let mut column = z.column_mut(b);
+        column.rows_mut(0, states).copy_from_slice(&x);
+        column[states] = e[k];
+        column[states + 1] = slope;
+        column[states + 2] = 0.0;
+        column[states + 3] = 0.0;
         let inputs = StepInputs {
-            excitation: last[states],
-            excitation_slope: last[states + 1],
+            excitation: e[k],
+            excitation_slope: slope,
             control: 0.0,
             control_slope: 0.0,
         };
         map.apply_into(&x, &inputs, &mut next);
         std::mem::swap(&mut x, &mut next);
-        start += len;
+    }
+    x
+}
+
+/// The measured accelerations and their derivatives at one sample, from the state, the input
+/// and the sensitivities `T` there.
+struct Outputs {
+    rows: AccelerationRows,
+    mass: Vec<f64>,
+    base: bool,
+    d: usize,
+    /// A_a's nonzero entries per floor (a floor's row touches its own and its neighbours').
+    sparse: Vec<Vec<(usize, f64)>>,
+    /// Each parameter's direction row: its part of `∂a/∂θ` at a fixed state touches one or two
+    /// floors, each adding `value · row`.
+    direction_rows: Vec<Vec<f64>>,
+    /// Where each floor's outputs go (a floor measured twice gets both).
+    slots: Vec<Vec<usize>>,
+    values: Vec<f64>,
+    derivatives: Vec<f64>,
+}
+
+impl Outputs {
+    fn new(params: &ShearParameters, floors: &[usize], directions: &DMatrix<f64>) -> Self {
+        let n = params.storeys();
+        let d = directions.ncols();
+        let rows = AccelerationRows::new(params);
+        let sparse = (0..n)
+            .map(|f| {
+                (0..2 * n)
+                    .filter_map(|c| Some((c, rows.a[(f, c)])).filter(|(_, a)| *a != 0.0))
+                    .collect()
+            })
+            .collect();
+        let mut slots: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (slot, &f) in floors.iter().enumerate() {
+            slots[f].push(slot);
+        }
+        Outputs {
+            rows,
+            mass: params.mass.clone(),
+            base: matches!(params.excitation, Excitation::Base),
+            d,
+            sparse,
+            direction_rows: (0..3 * n)
+                .map(|j| directions.row(j).iter().copied().collect())
+                .collect(),
+            slots,
+            values: vec![0.0; floors.len()],
+            derivatives: vec![0.0; floors.len() * d],
+        }
+    }
+
+    /// At the sample whose `[x, e, …]` is `zk` and sensitivities `tk`: `A_a x + b_e e` (+ e
+    /// under ground motion) per measured floor, and along each direction `A_a Tᵀ` plus the
+    /// direct derivative at the fixed state.
+    fn at(&mut self, zk: &[f64], tk: &[f64]) -> (&[f64], &[f64]) {
+        let (n, d) = (self.mass.len(), self.d);
+        let (x, ek) = (&zk[..2 * n], zk[2 * n]);
+        self.derivatives.iter_mut().for_each(|v| *v = 0.0);
+        for (f, slots) in self.slots.iter().enumerate() {
+            let Some(&first) = slots.first() else {
+                continue;
+            };
+            let mut value = self.rows.b_excitation[f] * ek;
+            let along_f = &mut self.derivatives[first * d..(first + 1) * d];
+            for &(c, a) in &self.sparse[f] {
+                value += a * x[c];
+                axpy(a, &tk[c * d..(c + 1) * d], along_f);
+            }
+            for &slot in slots {
+                self.values[slot] = if self.base { value + ek } else { value };
+                if slot != first {
+                    self.derivatives
+                        .copy_within(first * d..(first + 1) * d, slot * d);
+                }
+            }
+        }
+        let (y, v) = x.split_at(n);
+        for i in 0..n {
+            // ∂a_i/∂m_i = −(row i's value)/m_i, the ground acceleration's −1 aside.
+            let mut row = if self.base {
+                0.0
+            } else {
+                self.rows.b_excitation[i] * ek
+            };
+            for &(c, a) in &self.sparse[i] {
+                row += a * x[c];
+            }
+            self.add(i, i, -row / self.mass[i]);
+        }
+        for s in 0..n {
+            // Storey s pushes floor s back and floor s − 1 forward: c_s by its drift rate,
+            // k_s by its drift.
+            let below = |q: &[f64]| if s > 0 { q[s - 1] } else { 0.0 };
+            let (rate, drift) = (v[s] - below(v), y[s] - below(y));
+            for (j, value) in [(n + s, rate), (2 * n + s, drift)] {
+                self.add(s, j, -value / self.mass[s]);
+                if s > 0 {
+                    self.add(s - 1, j, value / self.mass[s - 1]);
+                }
+            }
+        }
+        (&self.values, &self.derivatives)
+    }
+
+    /// Add `value` times parameter j's direction row to every output of `floor`.
+    fn add(&mut self, floor: usize, j: usize, value: f64) {
+        let d = self.d;
+        for &slot in &self.slots[floor] {
+            axpy(
+                value,
+                &self.direction_rows[j],
+                &mut self.derivatives[slot * d..(slot + 1) * d],
+            );
+        }
     }
 }
 
@@ -274,7 +307,7 @@ mod tests {
                     let want = model.get_real(acc[f]).expect("acc");
                     peak = peak.max(want.abs());
                     worst = worst.max((values[slot] - want).abs());
-                    for a in 0..3 {
+                    for a in 0..directions.ncols() {
                         let want: f64 = (0..3 * n)
                             .map(|j| {
                                 model.get_real(sensitivity_vr(f, j, n)).expect("d")
