@@ -162,6 +162,13 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         calibration.simulations,
         calibration.seconds
     );
+    if let Some((first, higher)) = calibration.heads.split_first() {
+        let then: String = higher.iter().map(|n| format!("{n}, ")).collect();
+        println!(
+            "long records: the starts screened on the first {first} samples of each, the best \
+             refined on the first {then}then on every sample"
+        );
+    }
     println!(
         "{:<10} {:>12} {:>12} {:>14}",
         "parameter", "MAP", "sd", "prior mean"

@@ -81,6 +81,29 @@ impl Measurement {
         self.dt * (self.len().saturating_sub(1)) as f64
     }
 
+    /// The record's first `n` samples (all of it when shorter), every column cut alike.
+    pub fn head(&self, n: usize) -> Measurement {
+        let n = n.min(self.len());
+        let cut = |s: &Signal| Signal {
+            channel: s.channel,
+            unit: s.unit,
+            values: s.values[..n].to_vec(),
+        };
+        Measurement {
+            path: self.path.clone(),
+            time: self.time[..n].to_vec(),
+            dt: self.dt,
+            excitation: cut(&self.excitation),
+            responses: self.responses.iter().map(cut).collect(),
+            extra: self
+                .extra
+                .iter()
+                .map(|(name, values)| (name.clone(), values[..n.min(values.len())].to_vec()))
+                .collect(),
+            header_line: self.header_line,
+        }
+    }
+
     /// The record in the paper's columns (`force`, `acc1..acc3`, SI), unchecked beyond equal
     /// lengths: for records the twin makes itself (synth, a stream's kept samples).
     pub fn paper_rig(

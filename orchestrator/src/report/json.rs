@@ -137,6 +137,7 @@ pub fn calibrate(
         "validation_nmse": calibrated.validation_nmse,
         "tolerance": Tolerance::resolve(calibrated, None),
         "starts": calibration.starts,
+        "heads": calibration.heads,
         "simulations": calibration.simulations,
         "seconds": calibration.seconds,
     });

@@ -20,6 +20,7 @@
 //! central-difference Jacobian; exact for the noise part and the cross terms), inverted.
 
 pub mod frf;
+pub mod ladder;
 pub mod lm;
 pub mod prior;
 pub mod simulator;
@@ -90,6 +91,10 @@ pub struct CalibrationSetup {
     /// Further starts by value (a parameter not named at its prior mean), after the first and
     /// before the random draws, within `starts` in all.
     pub starts_at: Vec<BTreeMap<String, f64>>,
+    /// Long records fitted along a ladder of their heads ([`ladder`]; default): the starts
+    /// screened on the first [`ladder::STRETCH`] samples, the best refined up to every sample.
+    /// Off, every start runs on every sample.
+    pub climb: bool,
 }
 
 impl Default for CalibrationSetup {
@@ -110,6 +115,7 @@ impl Default for CalibrationSetup {
             simulations_per_start: SIMULATIONS_PER_START,
             initial: BTreeMap::new(),
             starts_at: Vec::new(),
+            climb: true,
         }
     }
 }
@@ -171,6 +177,9 @@ pub struct Calibration {
     /// single-record calibration, the same as the fields above).
     pub records: Vec<RecordCalibration>,
     pub starts: Vec<StartOutcome>,
+    /// The heads (samples of every record) the starts were screened on and the best refined
+    /// on before every sample, shortest first ([`ladder`]); empty when they ran on every sample.
+    pub heads: Vec<usize>,
     pub simulations: usize,
     pub seconds: f64,
     /// The storeys of the calibrated twin's structure.
@@ -1158,11 +1167,16 @@ pub fn calibrate_records(
     let (vrs, priors) = parameter_priors(&fmu, component, &structure, setup, twin_priors.as_ref())?;
     let target = Target::new(&fmu, component, setup, records, vrs, priors);
 
-    // The starts, screened or raced, and the best on to its end.
-    let p = setup.parameters.len();
+    // The starts, screened or raced (on the records' heads when they are long), and the best
+    // on to its end on every sample.
     let starts = starts(setup, &target.priors);
     let threads = setup.threads.clamp(1, starts.len());
-    let (mut outcomes, simulations, best) = screened_starts(&target, &starts, p, threads)?;
+    let ladder::Climb {
+        mut outcomes,
+        simulations,
+        best,
+        heads,
+    } = ladder::climb(&fmu, component, setup, inputs, &target, &starts, threads)?;
     outcomes.sort_by_key(|o| o.start);
     let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
 
@@ -1187,6 +1201,7 @@ pub fn calibrate_records(
         nmse: own.nmse,
         records: fitted,
         starts: outcomes,
+        heads,
         simulations: simulations + laplace_runs + target.records.len(),
         seconds: started.elapsed().as_secs_f64(),
         storeys: structure.storeys(),

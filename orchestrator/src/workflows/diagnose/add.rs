@@ -227,6 +227,8 @@ pub fn refit_over_records(
         seed: options.seed,
         threads: options.threads,
         initial,
+        // An effect may engage only late in a record, where the ladder's head would not see it.
+        climb: false,
         ..CalibrationSetup::default()
     };
     options.tell(&format!(

@@ -748,6 +748,9 @@ fn fit(
         simulations_per_start,
         initial: initial.clone(),
         starts_at,
+        // Every start on every sample: an effect or a change may show only late in the record,
+        // where the ladder's head would not see it.
+        climb: false,
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
