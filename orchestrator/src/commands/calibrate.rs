@@ -163,10 +163,13 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         calibration.seconds
     );
     if let Some((first, higher)) = calibration.heads.split_first() {
-        let then: String = higher.iter().map(|n| format!("{n}, ")).collect();
+        let then: String = higher
+            .iter()
+            .map(|n| format!("on the first {n} samples, "))
+            .collect();
         println!(
             "long records: the starts screened on the first {first} samples of each, the best \
-             refined on the first {then}then on every sample"
+             refined {then}then on every sample"
         );
     }
     println!(

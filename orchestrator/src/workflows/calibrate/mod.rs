@@ -828,10 +828,10 @@ fn race(mut first: Vec<(usize, Running)>) -> (Vec<(usize, Running)>, Vec<(usize,
     (going, stopped)
 }
 
-/// Every start for a few iterations, then the best [`SCREEN_KEEP`] on to their end (the screen:
-/// more starts than that, and a budget above the screen's); with fewer starts, every start
-/// for its first outer iteration, then the [`race`]'s on to their end. Every start's outcome,
-/// the simulations spent, and the best start.
+/// Every start for a few iterations, then the best [`SCREEN_KEEP`] on (the screen: more starts
+/// than that, and a budget above the screen's); then every start still going for its first
+/// outer iteration, and the [`race`]'s on to their end. Every start's outcome, the simulations
+/// spent, and the best start.
 fn screened_starts(
     target: &Target,
     starts: &[Vec<f64>],
@@ -840,10 +840,9 @@ fn screened_starts(
 ) -> Result<(Vec<StartOutcome>, usize, Option<StartResult>), TwinError> {
     let screen_budget = SCREEN_EVALUATIONS_PER_PARAMETER * (p + 1);
     let screening = starts.len() > SCREEN_KEEP && target.budget > screen_budget;
-    let jobs: Vec<StartJob> = starts.iter().cloned().enumerate().collect();
+    let mut jobs: Vec<StartJob> = starts.iter().cloned().enumerate().collect();
     let mut outcomes = Vec::new();
     let mut simulations = 0;
-    let mut finished: Vec<(usize, StartResult)> = Vec::new();
     let mut stop = |i: usize, objective: f64, runs: usize| {
         simulations += runs;
         outcomes.push(StartOutcome {
@@ -853,6 +852,8 @@ fn screened_starts(
             screened_out: true,
         });
     };
+    let mut spent = BTreeMap::new();
+    let mut budget = target.budget;
     if screening {
         let mut first = run_starts(target, jobs, screen_budget, threads)?;
         first.sort_by(|a, b| match (&a.1, &b.1) {
@@ -867,8 +868,7 @@ fn screened_starts(
                 stop(i, res.objective, res.runs);
             }
         }
-        let mut spent = std::collections::BTreeMap::new();
-        let jobs: Vec<StartJob> = first
+        jobs = first
             .into_iter()
             .filter_map(|(i, res)| {
                 let res = res?;
@@ -879,38 +879,35 @@ fn screened_starts(
                 Some((i, res.z))
             })
             .collect();
-        let remaining = target.budget.saturating_sub(screen_budget);
-        for (i, res) in run_starts(target, jobs, remaining, threads)? {
-            if let Some(mut res) = res {
-                res.runs += spent.get(&i).copied().unwrap_or(0);
-                finished.push((i, res));
-            }
-        }
-    } else {
-        let budget = target.budget;
-        let first = on_threads(target, jobs, threads, |sims, (i, z0)| {
-            let mut start = new_start(target, z0);
-            (
-                i,
-                outer_iteration(sims, target, &mut start, budget).map(|()| start),
-            )
-        })?;
-        let (going, stopped) = race(
-            first
-                .into_iter()
-                .filter_map(|(i, s)| Some((i, s?)))
-                .collect(),
-        );
-        for (i, start) in stopped {
-            stop(i, start.objective, start.runs);
-        }
-        let done = on_threads(target, going, threads, |sims, (i, start)| {
-            (i, finish_start(sims, target, start, budget))
-        })?;
-        finished.extend(done.into_iter().filter_map(|(i, res)| Some((i, res?))));
+        budget = target.budget.saturating_sub(screen_budget);
     }
+    // The first outer iteration of every start still going, the race, the rest to the end: a
+    // start the screen kept can still be far behind (on two long roving runs one of the three
+    // kept wandered for its whole budget, ten times the winner's simulations).
+    let first = on_threads(target, jobs, threads, |sims, (i, z0)| {
+        let mut start = new_start(target, z0);
+        (
+            i,
+            outer_iteration(sims, target, &mut start, budget).map(|()| start),
+        )
+    })?;
+    let (going, stopped) = race(
+        first
+            .into_iter()
+            .filter_map(|(i, s)| Some((i, s?)))
+            .collect(),
+    );
+    let before = |i: usize| spent.get(&i).copied().unwrap_or(0);
+    for (i, start) in stopped {
+        stop(i, start.objective, start.runs + before(i));
+    }
+    let finished = on_threads(target, going, threads, |sims, (i, start)| {
+        (i, finish_start(sims, target, start, budget))
+    })?;
     let mut best: Option<StartResult> = None;
     for (i, res) in finished {
+        let Some(mut res) = res else { continue };
+        res.runs += before(i);
         simulations += res.runs;
         outcomes.push(StartOutcome {
             start: i,
