@@ -83,7 +83,14 @@ impl Exact for State {
             .as_ref()
             .is_some_and(|m| m.fits(model, h))
         {
-            model.contact_maps = Some(Box::new(ContactMaps::new(model, h)));
+            let maps = match model.contact_maps.take() {
+                Some(mut maps) => {
+                    maps.adapt(model, h);
+                    maps
+                }
+                None => Box::new(ContactMaps::new(model, h)),
+            };
+            model.contact_maps = Some(maps);
         }
         let maps = model.contact_maps.as_mut()?;
         maps.advance(x0, inputs.excitation, inputs.excitation_slope)
@@ -107,7 +114,14 @@ impl Exact for Vec<f64> {
             .as_ref()
             .is_some_and(|m| m.fits(model, h))
         {
-            model.any_contact_maps = Some(Box::new(AnyContactMaps::new(model, h)));
+            let maps = match model.any_contact_maps.take() {
+                Some(mut maps) => {
+                    maps.adapt(model, h);
+                    maps
+                }
+                None => Box::new(AnyContactMaps::new(model, h)),
+            };
+            model.any_contact_maps = Some(maps);
         }
         model.any_contact_maps.as_mut()?.advance(x0, inputs).ok()
     }

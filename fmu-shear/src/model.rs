@@ -524,6 +524,12 @@ impl CoSimModel for ShearModel {
             .table
             .or_else(|| Some(crate::variables::table(&origin)));
         model.origin = Some(origin);
+        // The maps built so far go on: each is checked against the parameters before it is used
+        // (`fits`), and a contact's regions whose system is unchanged keep their flows
+        // (`adapt`). A calibration resets between simulations of one structure.
+        model.step_map = self.step_map.take();
+        model.contact_maps = self.contact_maps.take();
+        model.any_contact_maps = self.any_contact_maps.take();
         *self = model;
         Ok(())
     }

@@ -40,6 +40,8 @@ type Flow = [[f64; 9]; 6];
 
 #[derive(Clone, Debug)]
 struct Region {
+    /// `M_r`, what the flows were built from.
+    matrix: Augmented,
     /// `levels[l]`: the flow over `h / 2^l`.
     levels: Vec<Flow>,
     /// Pieces between checks are `h / 2^check_level`.
@@ -114,6 +116,27 @@ impl ContactMaps {
 
     pub fn fits(&self, model: &ShearModel, step: f64) -> bool {
         self.key == key(model, step)
+    }
+
+    /// The regions whose flows are cached.
+    pub fn regions_cached(&self) -> usize {
+        self.regions.iter().flatten().count()
+    }
+
+    /// The maps for this model and step, keeping every cached region whose system matrix is
+    /// unchanged (with the same step its flows are the same to the bit): a fit of a contact's
+    /// gap and stiffness keeps the open region's flows from run to run.
+    pub fn adapt(&mut self, model: &ShearModel, step: f64) {
+        let same_step = self.key.step == step;
+        let old = std::mem::replace(self, ContactMaps::new(model, step));
+        if !same_step {
+            return;
+        }
+        for (code, region) in old.regions.into_iter().enumerate() {
+            if let Some(region) = region.filter(|r| r.matrix == self.augmented(code)) {
+                self.regions[code] = Some(region);
+            }
+        }
     }
 
     /// The region of a state: per location 0 open, 1 closed on the positive side, 2 on the
@@ -223,6 +246,7 @@ impl ContactMaps {
         };
         let rate_step = Self::rate_bound(&a) * self.key.step;
         Ok(Region {
+            matrix: a,
             levels,
             check_level,
             whole_step_error: rate_step.powi(4) / 384.0,

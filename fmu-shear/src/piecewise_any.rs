@@ -199,6 +199,36 @@ impl AnyContactMaps {
             && enabled_contacts(model).eq(self.key.contacts.iter().map(|(s, c)| (*s, c)))
     }
 
+    /// The maps for this model and step, keeping every cached region whose system matrix is
+    /// unchanged (with the same step its flows are the same to the bit): a fit of a contact's
+    /// gap and stiffness keeps the open region's flows, the one most visited, from run to run.
+    pub fn adapt(&mut self, model: &ShearModel, step: f64) {
+        let fresh = AnyContactMaps::new(model, step);
+        let kept = if fresh.n == self.n && self.key.step == step {
+            std::mem::take(&mut self.regions)
+        } else {
+            RegionMap::default()
+        };
+        *self = fresh;
+        self.regions = kept
+            .into_iter()
+            .filter(|(code, region)| {
+                self.region_exists(*code) && region.matrix == self.augmented(*code)
+            })
+            .collect();
+    }
+
+    /// The regions whose flows are cached.
+    pub fn regions_cached(&self) -> usize {
+        self.regions.len()
+    }
+
+    /// Whether `code` names a region of the enabled contacts (a digit per contact).
+    fn region_exists(&self, code: u64) -> bool {
+        let regions = 3u64.checked_pow(self.key.contacts.len() as u32);
+        regions.is_some_and(|r| code < r)
+    }
+
     /// The region of a state: per enabled contact (in storey order) 0 open, 1 closed on the
     /// positive side, 2 on the negative side (the strict inequalities of
     /// [`Contact::force_at`]), in base 3.

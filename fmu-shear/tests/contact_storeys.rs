@@ -382,3 +382,86 @@ fn too_many_contacts_step_error_controlled() {
     );
     assert!(value.is_nan());
 }
+
+/// A calibration runs one structure again and again with a contact's gap and stiffness
+/// changed: the maps adapted from the last run keep the regions whose system is unchanged (the
+/// open one, whatever the contact) and step exactly as maps built afresh, to the bit — on five
+/// storeys (`piecewise_any`) and on the paper's rig (`piecewise`, through the model). A change of
+/// the structure keeps none.
+#[test]
+fn adapted_maps_step_as_fresh_ones_to_the_bit() {
+    let (e, c) = inputs(Excitation::Force { floor: 1 });
+    let with_contact = |n: usize, gap: f64, stiffness: f64| {
+        let mut model = ShearModel::new(
+            params(n, Excitation::Force { floor: 1 }, n),
+            Effects::new(n),
+        );
+        model.effects.switch_on(
+            n - 1,
+            Law::Contact(Contact {
+                gap,
+                stiffness,
+                side: contact::SIDE_BOTH,
+            }),
+        );
+        model
+    };
+    let states = |maps: &mut AnyContactMaps, n: usize| -> Vec<Vec<f64>> {
+        let mut x = vec![0.0; 2 * n];
+        (0..STEPS)
+            .map(|k| {
+                x = maps.advance(&x, &step_inputs(&e, &c, k)).expect("finite");
+                x.clone()
+            })
+            .collect()
+    };
+    let n = 5;
+    let first = with_contact(n, 4e-4, 9000.0);
+    let mut maps = AnyContactMaps::new(&first, STEP);
+    states(&mut maps, n);
+    let visited = maps.regions_cached();
+    assert!(visited >= 2, "the run visits the open and a closed region");
+    // The gap and the stiffness a fit would try next.
+    let next = with_contact(n, 4.1e-4, 9500.0);
+    maps.adapt(&next, STEP);
+    assert_eq!(maps.regions_cached(), 1, "the open region alone is kept");
+    let mut fresh = AnyContactMaps::new(&next, STEP);
+    assert_eq!(states(&mut maps, n), states(&mut fresh, n));
+    // Another structure: nothing kept.
+    let mut stiffer = next.clone();
+    stiffer.params.stiffness[0] *= 1.01;
+    maps.adapt(&stiffer, STEP);
+    assert_eq!(maps.regions_cached(), 0);
+
+    // The rig, through the model: a reset keeps its maps for the next run.
+    let rig = |gap: f64, stiffness: f64| {
+        let mut model = with_contact(3, gap, stiffness);
+        model.params = ShearParameters::default();
+        model
+    };
+    let run = |mut model: ShearModel| -> (Vec<Vec<f64>>, ShearModel) {
+        let mut out = Vec::with_capacity(STEPS);
+        for k in 0..STEPS {
+            let u = step_inputs(&e, &c, k);
+            model.force.value = u.excitation;
+            model.force.slope = u.excitation_slope;
+            model.advance(STEP);
+            out.push(model.displacement.clone());
+        }
+        model.displacement = vec![0.0; 3];
+        model.velocity = vec![0.0; 3];
+        (out, model)
+    };
+    let (_, used) = run(rig(4e-4, 9000.0));
+    let visited = used.contact_maps.as_ref().map_or(0, |m| m.regions_cached());
+    assert!(
+        visited >= 2,
+        "the rig's run visits the open and a closed region"
+    );
+    let mut reused = rig(4.1e-4, 9500.0);
+    reused.contact_maps = used.contact_maps;
+    let (again, reused) = run(reused);
+    let (afresh, _) = run(rig(4.1e-4, 9500.0));
+    assert_eq!(again, afresh);
+    assert!(reused.contact_maps.is_some_and(|m| m.regions_cached() >= 2));
+}
