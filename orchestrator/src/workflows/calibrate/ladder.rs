@@ -63,17 +63,23 @@ pub(super) fn climb(
     starts: &[Vec<f64>],
     threads: usize,
 ) -> Result<Climb, CalibrateError> {
-    let p = full.priors.len();
     let longest = inputs.iter().map(|i| i.data.len()).max().unwrap_or(0);
     let heads = if setup.climb {
         rungs(longest)
     } else {
         Vec::new()
     };
-    if let Some(climbed) = on_heads(fmu, component, setup, inputs, full, starts, threads, &heads)? {
-        return Ok(climbed);
+    // The records' heads, rung by rung.
+    let cut: Vec<Vec<Measurement>> = heads
+        .iter()
+        .map(|&n| inputs.iter().map(|i| i.data.head(n)).collect())
+        .collect();
+    if let Some(targets) = head_targets(fmu, component, setup, inputs, full, &cut) {
+        if let Some(climbed) = up_the_ladder(&targets, full, starts, threads)? {
+            return Ok(Climb { heads, ..climbed });
+        }
     }
-    let (outcomes, simulations, best) = screened_starts(full, starts, p, threads)?;
+    let (outcomes, simulations, best) = screened_starts(full, starts, full.priors.len(), threads)?;
     Ok(Climb {
         outcomes,
         simulations,
@@ -82,52 +88,52 @@ pub(super) fn climb(
     })
 }
 
-/// The climb along `heads` (None when there is none, a head leaves a record too few samples,
-/// or a rung's fit failed).
-#[allow(clippy::too_many_arguments)]
-fn on_heads(
-    fmu: &Fmu,
+/// Each rung's target: the records' heads `cut` (with their masks cut alike) and the full
+/// target's parameters and priors. None when there is no rung or a head leaves a record too few
+/// samples after the transient and the mask.
+fn head_targets<'a>(
+    fmu: &'a Fmu,
     component: &Component,
     setup: &CalibrationSetup,
-    inputs: &[RecordInput],
+    inputs: &[RecordInput<'a>],
+    full: &Target,
+    cut: &'a [Vec<Measurement>],
+) -> Option<Vec<Target<'a>>> {
+    if cut.is_empty() {
+        return None;
+    }
+    cut.iter()
+        .map(|measurements| {
+            let head_inputs: Vec<RecordInput> = inputs
+                .iter()
+                .zip(measurements)
+                .map(|(i, data)| RecordInput {
+                    data,
+                    mask: i.mask.map(|m| &m[..data.len().min(m.len())]),
+                })
+                .collect();
+            let (records, _) = record_targets(fmu, &head_inputs, setup).ok()?;
+            Some(Target::new(
+                fmu,
+                component,
+                setup,
+                records,
+                full.vrs.clone(),
+                full.priors.clone(),
+            ))
+        })
+        .collect()
+}
+
+/// The starts screened and raced on the first rung, the best refined on each higher one and on
+/// `full` (None when no start finished, or a refinement failed). The heads are the caller's.
+fn up_the_ladder(
+    targets: &[Target],
     full: &Target,
     starts: &[Vec<f64>],
     threads: usize,
-    heads: &[usize],
 ) -> Result<Option<Climb>, CalibrateError> {
-    if heads.is_empty() {
-        return Ok(None);
-    }
     let p = full.priors.len();
-    // The records' heads, rung by rung; a head the transient or mask leaves too little of ends
-    // the climb before it starts.
-    let cut: Vec<Vec<Measurement>> = heads
-        .iter()
-        .map(|&n| inputs.iter().map(|i| i.data.head(n)).collect())
-        .collect();
-    let mut targets = Vec::with_capacity(heads.len());
-    for (measurements, &n) in cut.iter().zip(heads) {
-        let head_inputs: Vec<RecordInput> = inputs
-            .iter()
-            .zip(measurements)
-            .map(|(i, data)| RecordInput {
-                data,
-                mask: i.mask.map(|m| &m[..n.min(m.len())]),
-            })
-            .collect();
-        let Ok((records, _)) = record_targets(fmu, &head_inputs, setup) else {
-            return Ok(None);
-        };
-        targets.push(Target::new(
-            fmu,
-            component,
-            setup,
-            records,
-            full.vrs.clone(),
-            full.priors.clone(),
-        ));
-    }
-
     let (mut outcomes, mut simulations, best) = screened_starts(&targets[0], starts, p, threads)?;
     let Some(mut best) = best else {
         return Ok(None);
@@ -171,7 +177,7 @@ fn on_heads(
         outcomes,
         simulations,
         best: Some(best),
-        heads: heads.to_vec(),
+        heads: Vec::new(),
     }))
 }
 
