@@ -52,6 +52,15 @@ section "== twin calibrate on dataset1 (MAP, priors of the reference paper) =="
   --validate data/dataset2.csv data/dataset3.csv \
   --report "$out/calibrate-dataset1.json" --plot "$out/calibrate-dataset1.svg"
 
+echo
+section "== long records: two 4-minute runs (12,288 samples each) of a roving accelerometer, floor 1 then floor 3 =="
+echo "-- the starts are screened on each run's first 2,048 samples, the best refined on every sample --"
+"$twin" synth --seed 11 --duration 240 --channels acc1 --out "$out/roving-floor1.csv" >/dev/null
+"$twin" synth --seed 12 --duration 240 --channels acc3 --out "$out/roving-floor3.csv" >/dev/null
+"$twin" calibrate --data "$out/roving-floor1.csv" "$out/roving-floor3.csv" --out "$out/roving.ssp" \
+  --report "$out/calibrate-roving.json" > "$out/calibrate-roving.txt"
+head -4 "$out/calibrate-roving.txt"
+
 for n in 1 2 3; do
   echo
   section "== twin compare on dataset$n =="

@@ -165,11 +165,11 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     if let Some((first, higher)) = calibration.heads.split_first() {
         let then: String = higher
             .iter()
-            .map(|n| format!("on the first {n} samples, "))
+            .map(|n| format!("on the first {n} samples, then "))
             .collect();
         println!(
             "long records: the starts screened on the first {first} samples of each, the best \
-             refined {then}then on every sample"
+             refined {then}on every sample"
         );
     }
     println!(
