@@ -8,9 +8,9 @@ use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::run::Tolerance;
 use crate::twin::{RecordRef, RecordRole, Twin};
-use crate::workflows::calibrate::validated::check_plot;
+use crate::workflows::calibrate::validated::{check_plot, ChannelNmse};
 use crate::workflows::calibrate::{
-    calibrate_validated, default_parameters, read_priors, CalibrationSetup, Validated,
+    calibrate_validated, default_parameters, read_priors, Calibration, CalibrationSetup, Validated,
 };
 use crate::workflows::options::check_svg;
 
@@ -154,6 +154,21 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         crate::workflows::calibrate::validated::plot(&new_twin, data, args.transient, path)?;
     }
 
+    print_calibration(&runs, &calibration, &validated);
+    let tolerance = Tolerance::resolve(&new_twin, None);
+    println!(
+        "tolerance of compare and diagnose: {:.3} % NMSE ({})",
+        tolerance.value, tolerance.source
+    );
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// What `twin calibrate` prints of a calibration on `runs` (the first the report's record): the
+/// starts and the ladder, the MAP table, the noise, the strongest correlations, the NMSE on
+/// every run and on every validation record.
+fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated: &[ChannelNmse]) {
+    let data = runs[0];
     let names: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
     println!(
         "calibrated on {} ({} starts, {} simulations, {:.2} s)",
@@ -252,7 +267,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             );
         }
     }
-    for v in &validated {
+    for v in validated {
         let shown = if v.channels == ["acc1", "acc2", "acc3"] {
             format!("{:.3} / {:.3} / {:.3}", v.nmse[0], v.nmse[1], v.nmse[2])
         } else {
@@ -268,13 +283,6 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             }
         );
     }
-    let tolerance = Tolerance::resolve(&new_twin, None);
-    println!(
-        "tolerance of compare and diagnose: {:.3} % NMSE ({})",
-        tolerance.value, tolerance.source
-    );
-    println!("wrote {}", args.out.display());
-    Ok(())
 }
 
 /// `twin calibrate --frf FRF --out T.ssp`.
