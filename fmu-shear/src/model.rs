@@ -3,6 +3,7 @@
 use crate::integrate;
 use fmi2::{CoSimModel, InstantiateContext, ModelError, ModelInfo, VarType};
 use serde::{Deserialize, Serialize};
+use smallvec::SmallVec;
 use structure::{Excitation, Structure};
 
 use crate::effects::Effects;
@@ -169,7 +170,42 @@ pub struct ShearModel {
     /// That table (built at `instantiate`).
     #[serde(skip)]
     table: Option<&'static ModelInfo>,
+    /// The start values `disp{i}_start`, then `vel{i}_start`, as set (empty: every one 0).
+    #[serde(default)]
+    start: Vec<f64>,
+    /// The accelerations a host reads, computed once for a state and its inputs (see
+    /// [`ReadAccelerations`]).
+    #[serde(skip)]
+    read: ReadAccelerations,
 }
+
+/// What the accelerometers read at the state and inputs they were computed for. A master reads
+/// them after a step and again after it sets the next inputs, and the step checks them: one
+/// evaluation of the equations of motion serves every read until the state, an input or a
+/// parameter changes (on the rig's contact records the reads were a fifth of a run).
+#[derive(Clone, Debug, Default)]
+struct ReadAccelerations {
+    /// The displacements, velocities, force and control force they were computed at.
+    at: Vec<f64>,
+    values: Vec<f64>,
+    /// False once a parameter or an effect may have changed.
+    valid: bool,
+}
+
+impl ReadAccelerations {
+    fn holds(&self, model: &ShearModel) -> bool {
+        let n = model.storeys();
+        self.valid
+            && self.at.len() == 2 * n + 2
+            && self.at[..n] == model.displacement[..]
+            && self.at[n..2 * n] == model.velocity[..]
+            && self.at[2 * n].to_bits() == model.force.value.to_bits()
+            && self.at[2 * n + 1].to_bits() == model.control_force.value.to_bits()
+    }
+}
+
+/// Storeys up to which a step's state vectors live on the stack.
+const STATES_ON_STACK: usize = 20;
 
 impl ShearModel {
     /// A model of the structure `params` with the effects `effects`, the library laid out for
@@ -192,6 +228,8 @@ impl ShearModel {
             sensitivities: Default::default(),
             origin: None,
             table: None,
+            read: ReadAccelerations::default(),
+            start: Vec::new(),
         }
     }
 
@@ -281,19 +319,41 @@ impl ShearModel {
     /// acceleration under base excitation.
     pub fn absolute_acceleration(&self) -> Vec<f64> {
         let mut out = vec![0.0; self.storeys()];
+        self.absolute_acceleration_into(&mut out);
+        out
+    }
+
+    fn absolute_acceleration_into(&self, out: &mut [f64]) {
         self.accelerations_into(
             &self.displacement,
             &self.velocity,
             self.force.value,
             self.control_force.value,
-            &mut out,
+            out,
         );
         if self.params.excitation == Excitation::Base {
             for a in out.iter_mut() {
                 *a += self.force.value;
             }
         }
-        out
+    }
+
+    /// [`ShearModel::absolute_acceleration`], computed once for a state and its inputs (see
+    /// [`ReadAccelerations`]).
+    fn read_accelerations(&mut self) -> &[f64] {
+        if !self.read.holds(self) {
+            let mut read = std::mem::take(&mut self.read);
+            read.values.resize(self.storeys(), 0.0);
+            self.absolute_acceleration_into(&mut read.values);
+            read.at.clear();
+            read.at.extend_from_slice(&self.displacement);
+            read.at.extend_from_slice(&self.velocity);
+            read.at.push(self.force.value);
+            read.at.push(self.control_force.value);
+            read.valid = true;
+            self.read = read;
+        }
+        &self.read.values
     }
 
     fn step_inputs(&self) -> StepInputs {
@@ -308,7 +368,8 @@ impl ShearModel {
     /// Advance the state from `t` to `t + h` with the inputs as ramps (see `integrate`).
     pub fn advance(&mut self, h: f64) {
         let n = self.storeys();
-        let mut x0 = Vec::with_capacity(2 * n);
+        // On the stack for the usual buildings: a step of the linear model allocates nothing.
+        let mut x0: SmallVec<[f64; 2 * STATES_ON_STACK]> = SmallVec::with_capacity(2 * n);
         x0.extend_from_slice(&self.displacement);
         x0.extend_from_slice(&self.velocity);
         if self.effects.any_enabled() && self.params.is_paper_layout() {
@@ -331,7 +392,7 @@ impl ShearModel {
         } else if self.effects.any_enabled() {
             // Any other structure: the excitation and the control force each as its ramp.
             let inputs = self.step_inputs();
-            let x = self.advance_with_effects(&x0, &inputs, h);
+            let x = self.advance_with_effects(&x0.to_vec(), &inputs, h);
             self.displacement.copy_from_slice(&x[..n]);
             self.velocity.copy_from_slice(&x[n..]);
         } else {
@@ -348,7 +409,7 @@ impl ShearModel {
                     self.sensitivities
                         .advance(&self.params, map, &x0, &inputs, h);
                 }
-                let mut x = vec![0.0; 2 * n];
+                let mut x: SmallVec<[f64; 2 * STATES_ON_STACK]> = smallvec::smallvec![0.0; 2 * n];
                 map.apply_into(&x0, &inputs, &mut x);
                 self.displacement.copy_from_slice(&x[..n]);
                 self.velocity.copy_from_slice(&x[n..]);
@@ -419,6 +480,38 @@ impl ShearModel {
     }
 
     /// The index (0-based) of a floor or storey in the block of value references from `first`.
+    /// `disp{i}_start` (slots 0..N) and `vel{i}_start` (N..2N).
+    /// Whether a run starts at rest (every `disp{i}_start`, `vel{i}_start` 0).
+    pub fn starts_at_rest(&self) -> bool {
+        self.start.iter().all(|&x| x == 0.0)
+    }
+
+    fn start_slot(&self, vr: u32) -> Option<usize> {
+        let n = self.storeys();
+        self.index_in(vr, DISP_START)
+            .or_else(|| self.index_in(vr, VEL_START).map(|i| n + i))
+    }
+
+    /// A start value: the state the run starts from (set before it starts, as the model's
+    /// parameters are).
+    fn set_start(&mut self, slot: usize, name: &str, value: f64) -> Result<(), ModelError> {
+        if !value.is_finite() {
+            return Err(ModelError::InvalidValue {
+                name: name.into(),
+                reason: format!("{value} is not a finite number"),
+            });
+        }
+        let n = self.storeys();
+        self.start.resize(2 * n, 0.0);
+        self.start[slot] = value;
+        if slot < n {
+            self.displacement[slot] = value;
+        } else {
+            self.velocity[slot - n] = value;
+        }
+        Ok(())
+    }
+
     fn index_in(&self, vr: u32, first: u32) -> Option<usize> {
         vr.checked_sub(first)
             .map(|i| i as usize)
@@ -545,7 +638,7 @@ impl CoSimModel for ShearModel {
             CONTROL_FORCE => self.control_force.value,
             _ => {
                 if let Some(i) = self.index_in(vr, ACC) {
-                    self.absolute_acceleration()[i]
+                    self.read_accelerations()[i]
                 } else if let Some(i) = self.index_in(vr, DISP) {
                     self.displacement[i]
                 } else if let Some(i) = self.index_in(vr, VEL) {
@@ -563,6 +656,8 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i]
                 } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i]
+                } else if let Some(i) = self.start_slot(vr) {
+                    self.start.get(i).copied().unwrap_or(0.0)
                 } else {
                     return self
                         .effects
@@ -577,19 +672,18 @@ impl CoSimModel for ShearModel {
     /// Every floor's acceleration comes from one evaluation of the equations of motion (the
     /// effects' forces included): computed once for the call, not once per floor.
     fn get_reals(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), ModelError> {
-        let mut accelerations: Option<Vec<f64>> = None;
         for (slot, &vr) in out.iter_mut().zip(vrs) {
-            *slot = match self.index_in(vr, ACC) {
-                Some(i) if sensitivity_index(vr, self.storeys()).is_none() => {
-                    accelerations.get_or_insert_with(|| self.absolute_acceleration())[i]
-                }
-                _ => self.get_real(vr)?,
-            };
+            *slot = self.get_real(vr)?;
         }
         Ok(())
     }
 
     fn set_real(&mut self, vr: u32, value: f64) -> Result<(), ModelError> {
+        // A parameter or an effect may change the accelerations at the same state and inputs
+        // (the inputs themselves are part of what the reads are checked against).
+        if !matches!(vr, FORCE | GROUND_ACC | CONTROL_FORCE) {
+            self.read.valid = false;
+        }
         let table = self.table();
         let name = || {
             table
@@ -608,6 +702,8 @@ impl CoSimModel for ShearModel {
                     self.params.damping[i] = positive(&name(), value, false)?;
                 } else if let Some(i) = self.index_in(vr, STIFFNESS) {
                     self.params.stiffness[i] = positive(&name(), value, false)?;
+                } else if let Some(i) = self.start_slot(vr) {
+                    self.set_start(i, &name(), value)?;
                 } else {
                     return self
                         .effects
@@ -639,6 +735,7 @@ impl CoSimModel for ShearModel {
     }
 
     fn set_integer(&mut self, vr: u32, value: i32) -> Result<(), ModelError> {
+        self.read.valid = false;
         if vr == SUBSTEPS {
             if !(1..=10000).contains(&value) {
                 return Err(ModelError::InvalidValue {
@@ -687,6 +784,7 @@ impl CoSimModel for ShearModel {
     }
 
     fn set_boolean(&mut self, vr: u32, value: bool) -> Result<(), ModelError> {
+        self.read.valid = false;
         if vr == SENSITIVITIES {
             self.sensitivities.on = value;
             return Ok(());
@@ -719,13 +817,12 @@ impl CoSimModel for ShearModel {
     fn do_step(&mut self, time: f64, step_size: f64) -> Result<(), ModelError> {
         self.advance(step_size);
         // Accelerations overflow a step before the state does; check what the host will read.
-        let acc = self.absolute_acceleration();
-        let finite = self
-            .displacement
-            .iter()
-            .chain(&self.velocity)
-            .chain(&acc)
-            .all(|x| x.is_finite());
+        let finite = self.read_accelerations().iter().all(|x| x.is_finite())
+            && self
+                .displacement
+                .iter()
+                .chain(&self.velocity)
+                .all(|x| x.is_finite());
         if finite {
             Ok(())
         } else {
@@ -733,7 +830,7 @@ impl CoSimModel for ShearModel {
                 time: time + step_size,
                 what: format!(
                     "non-finite displacement {:?}, velocity {:?} or acceleration {:?}; check the parameters and the substeps",
-                    self.displacement, self.velocity, acc
+                    self.displacement, self.velocity, self.read.values
                 ),
             })
         }

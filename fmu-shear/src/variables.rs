@@ -26,6 +26,9 @@ pub const DRIFT: u32 = VEL + BLOCK;
 pub const MASS: u32 = DRIFT + BLOCK;
 pub const DAMPING: u32 = MASS + BLOCK;
 pub const STIFFNESS: u32 = DAMPING + BLOCK;
+/// The state a run starts from: `disp{i}_start`, `vel{i}_start` (0: at rest).
+pub const DISP_START: u32 = STIFFNESS + BLOCK;
+pub const VEL_START: u32 = DISP_START + BLOCK;
 /// `d_acc{f}_d_{p}` is `SENSITIVITY + 3·MAX_STOREYS·(f − 1) + MAX_STOREYS·g + i − 1` for the
 /// parameter `p` = `m_i` (g = 0), `c_i` (g = 1) or `k_i` (g = 2).
 pub const SENSITIVITY: u32 = 10_000;
@@ -217,6 +220,20 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             .describe(&format!("lateral stiffness of storey {k}")),
         );
     }
+    for (first, name, unit, what) in [
+        (DISP_START, "disp", "m", "displacement"),
+        (VEL_START, "vel", "m/s", "velocity"),
+    ] {
+        for i in 0..n {
+            let floor = i + 1;
+            v.push(
+                Variable::real_parameter(&format!("{name}{floor}_start"), first + i, unit, 0.0)
+                    .describe(&format!(
+                        "{what} of floor {floor} relative to the ground at the start time (a run that starts from a known state: 0, at rest)"
+                    )),
+            );
+        }
+    }
     v.push(
         Variable::integer_parameter("substeps", SUBSTEPS, p.substeps as i32)
             .min(1.0)
@@ -350,6 +367,10 @@ mod tests {
                 for i in 1..=storeys {
                     for name in ["acc", "disp", "vel", "drift", "m", "c", "k"] {
                         assert!(info.by_name(&format!("{name}{i}")).is_some(), "{name}{i}");
+                    }
+                    for name in ["disp", "vel"] {
+                        let start = format!("{name}{i}_start");
+                        assert!(info.by_name(&start).is_some(), "{start}");
                     }
                 }
                 for name in ["acc", "m", "k"] {

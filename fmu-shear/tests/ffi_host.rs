@@ -20,7 +20,8 @@ use fmu_shear::{
 use common::{instantiate_raw, Host, Slave};
 use fmi2::abi::*;
 use fmu_shear::variables::{
-    ACC, CONTROL_FORCE, DAMPING, DISP, DRIFT, FORCE, MASS, STIFFNESS, SUBSTEPS, VEL,
+    ACC, CONTROL_FORCE, DAMPING, DISP, DISP_START, DRIFT, FORCE, MASS, STIFFNESS, SUBSTEPS, VEL,
+    VEL_START,
 };
 
 /// contact23_enabled: a fixed Boolean parameter of the effect library.
@@ -394,6 +395,57 @@ fn fmu_states_restore_exactly_and_serialized_ones_continue_bit_identically() {
         assert_eq!(status, fmi2Error, "truncated to {cut} bytes");
         assert!(restored.is_null());
     }
+}
+
+/// A run started from the displacements and velocities another reached (`disp{i}_start`,
+/// `vel{i}_start`) continues it bit for bit, with a contact on; a non-finite start value is
+/// refused, and a reset starts at rest again.
+#[test]
+fn a_run_from_a_given_state_continues_the_run_that_reached_it() {
+    let first = Slave::new(guid());
+    assert_eq!(first.setup(0.0, None), fmi2OK);
+    assert_eq!(first.enter(), fmi2OK);
+    assert_eq!(
+        first.set_booleans(&[CONTACT23_ENABLED], &[fmi2True]),
+        fmi2OK
+    );
+    assert_eq!(first.exit(), fmi2OK);
+    shake(&first, 0, 200);
+    let state_vrs: Vec<u32> = (0..3)
+        .map(|i| DISP + i)
+        .chain((0..3).map(|i| VEL + i))
+        .collect();
+    let (status, state) = first.get_reals(&state_vrs);
+    assert_eq!(status, fmi2OK);
+    assert!(state.iter().any(|&x| x != 0.0));
+    let reference = shake(&first, 200, 300);
+
+    let second = Slave::new(guid());
+    assert_eq!(second.setup(200.0 * H, None), fmi2OK);
+    assert_eq!(second.enter(), fmi2OK);
+    assert_eq!(
+        second.set_booleans(&[CONTACT23_ENABLED], &[fmi2True]),
+        fmi2OK
+    );
+    let start_vrs: Vec<u32> = (0..3)
+        .map(|i| DISP_START + i)
+        .chain((0..3).map(|i| VEL_START + i))
+        .collect();
+    assert_refused(
+        &second,
+        second.set_reals(&[DISP_START], &[f64::NAN]),
+        &["disp1_start"],
+    );
+    assert_eq!(second.set_reals(&start_vrs, &state), fmi2OK);
+    assert_eq!(second.get_reals(&start_vrs).1, state);
+    assert_eq!(second.exit(), fmi2OK);
+    assert_eq!(shake(&second, 200, 300), reference);
+
+    assert_eq!(second.reset(), fmi2OK);
+    assert_eq!(second.setup(0.0, None), fmi2OK);
+    assert_eq!(second.enter(), fmi2OK);
+    assert_eq!(second.get_reals(&state_vrs).1, vec![0.0; 6]);
+    assert_eq!(second.get_reals(&start_vrs).1, vec![0.0; 6]);
 }
 
 #[test]

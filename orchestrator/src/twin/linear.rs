@@ -54,7 +54,8 @@ fn linear_shear_of(
             ParameterValue::Boolean(b) => model.set_boolean(vr, b).ok()?,
         }
     }
-    (!model.effects.any_enabled()).then_some(model.params)
+    // A run from a given state is the FMU's (the in-process pass starts at rest).
+    (!model.effects.any_enabled() && model.starts_at_rest()).then_some(model.params)
 }
 
 /// A calibration of the linear shear model's `m`, `c`, `k` on accelerometers, in process: the
