@@ -49,6 +49,11 @@ pub struct DiagnoseArgs {
     /// --validate`), else 0.5 %.
     #[arg(long)]
     pub tolerance: Option<f64>,
+    /// The structure changed at this time (s of the record): the twin holds before it, and
+    /// what came after is diagnosed on its own, every fit starting from the state the twin
+    /// reached there (no transient left out after it)
+    #[arg(long, value_name = "SECONDS")]
+    pub changed_at: Option<f64>,
 }
 
 pub(super) fn options(transient: f64, threads: Option<usize>) -> Result<DiagnoseOptions> {
@@ -73,6 +78,7 @@ impl DiagnoseArgs {
             block: self.block,
             always_fit: self.always_fit,
             tolerance: self.tolerance,
+            changed_at: self.changed_at,
             ..DiagnoseOptions::default()
         };
         if let Some(t) = self.threads {
@@ -228,6 +234,12 @@ pub fn summary(d: &Diagnosis) -> String {
     let mut s = String::new();
     s += &format!("record        {}\n", d.record);
     s += &format!("channels      {}\n", d.channels.join(" / "));
+    if let Some(at) = d.changed_at {
+        s += &format!(
+            "after change  the samples from {at:.3} s on, every fit from the state the twin \
+             reached there\n"
+        );
+    }
     s += &format!("NMSE before   {}\n", pct(&d.nmse_before));
     s += &format!("noise level   {}\n", pct(&d.noise_nmse));
     s += &format!(

@@ -83,22 +83,31 @@ impl Measurement {
 
     /// The record's first `n` samples (all of it when shorter), every column cut alike.
     pub fn head(&self, n: usize) -> Measurement {
-        let n = n.min(self.len());
+        self.samples(0..n)
+    }
+
+    /// The record's samples `range` (clipped to the record), every column cut alike.
+    pub fn samples(&self, range: std::ops::Range<usize>) -> Measurement {
+        let end = range.end.min(self.len());
+        let start = range.start.min(end);
         let cut = |s: &Signal| Signal {
             channel: s.channel,
             unit: s.unit,
-            values: s.values[..n].to_vec(),
+            values: s.values[start..end].to_vec(),
         };
         Measurement {
             path: self.path.clone(),
-            time: self.time[..n].to_vec(),
+            time: self.time[start..end].to_vec(),
             dt: self.dt,
             excitation: cut(&self.excitation),
             responses: self.responses.iter().map(cut).collect(),
             extra: self
                 .extra
                 .iter()
-                .map(|(name, values)| (name.clone(), values[..n.min(values.len())].to_vec()))
+                .map(|(name, values)| {
+                    let end = end.min(values.len());
+                    (name.clone(), values[start.min(end)..end].to_vec())
+                })
                 .collect(),
             header_line: self.header_line,
         }

@@ -76,6 +76,7 @@
 pub mod add;
 pub mod ambient;
 pub mod candidate;
+pub mod change;
 pub mod discover;
 mod options;
 pub mod report;
@@ -247,6 +248,10 @@ pub struct DiagnoseOptions {
     pub fit_substeps: Option<i32>,
     /// Told what the diagnosis is doing, stage by stage (a terminal's progress line).
     pub progress: Option<Progress>,
+    /// The time (s of the record) the structure changed at, when known (a located change):
+    /// the twin holds before it, and what came after is diagnosed from the state the twin
+    /// reached there ([`change`]).
+    pub changed_at: Option<f64>,
 }
 
 /// Where a diagnosis says what it is doing.
@@ -285,6 +290,7 @@ impl Default for DiagnoseOptions {
             tolerance: None,
             fit_substeps: Some(FIT_SUBSTEPS),
             progress: None,
+            changed_at: None,
         }
     }
 }
@@ -880,6 +886,11 @@ impl Job {
 
 /// Diagnose `twin` on `data` (see the module documentation).
 pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> Result<Diagnosis> {
+    if let Some(after) = change::after_the_change(twin, data, options)? {
+        let mut diagnosis = diagnose(&after.twin, &after.data, &after.options)?;
+        diagnosis.changed_at = Some(after.at);
+        return Ok(diagnosis);
+    }
     let started = Instant::now();
     let (b, mut diagnosis) = baseline(twin, data, options)?;
     let gates = options.gates;
@@ -1599,6 +1610,7 @@ impl Baseline {
         let s = &self.scores;
         Diagnosis {
             record: data.path.display().to_string(),
+            changed_at: None,
             channels: self.channels.names.clone(),
             twin: twin
                 .source

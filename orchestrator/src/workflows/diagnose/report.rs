@@ -217,6 +217,10 @@ pub struct LatentVariance {
 #[derive(Clone, Debug, Serialize)]
 pub struct Diagnosis {
     pub record: String,
+    /// The located change the record was diagnosed after (s of the record): every fit
+    /// started there, from the state the twin reached on the samples before it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub changed_at: Option<f64>,
     /// The measured channels, in the record's order: every per-channel list (`nmse_before`,
     /// `nmse_after`, …) is in this order.
     pub channels: Vec<String>,
