@@ -268,7 +268,8 @@ class Twin:
               tolerance: float | None = None, transient: float | None = None, rate: float | None = None,
               diagnosis: bool = True, diagnosis_record: float | None = None,
               diagnosis_after: float | None = None, query_threshold: float | None = None,
-              learning: bool = True, budget: int | None = None, refit_every: int | None = None) -> Report:
+              learning: bool = True, budget: int | None = None, refit_every: int | None = None,
+              diagnosis_wait: bool = False, adopt: bool = False) -> Report:
         """``twin watch``: the operational twin on a stream. ``source``: ``"-"`` (standard
         input, read to its end), ``"mqtt://HOST[:PORT]/TOPIC"`` (QoS 1, a persistent session
         with ``client_id``; alerts also published to TOPIC/alerts) or a CSV file (``follow``:
@@ -277,14 +278,17 @@ class Twin:
         ``acc1 (g)``; ``columns`` maps other names, as ``Record.read``'s). Alerts go to ``alerts`` as JSON
         lines; ``on_alert(alert)`` is called with each alert (a dict) as it is written — an
         exception it raises stops the watch and is raised here. ``diagnosis=False`` is
-        ``--no-diagnosis``, ``learning=False`` ``--no-learning``. Returns the ``end`` alert's
-        summary."""
+        ``--no-diagnosis``, ``learning=False`` ``--no-learning``, ``diagnosis_wait=True``
+        ``--diagnosis-wait`` (a recorded stream replayed at full speed), ``adopt=True``
+        ``--adopt`` (a firm recalibration swapped into the watch, its twin beside the alerts).
+        Returns the ``end`` alert's summary."""
         summary = self._native.watch(
             str(source), str(alerts), on_alert=on_alert, columns=columns, client_id=client_id, follow=follow, idle=idle,
             checkpoint=_path(checkpoint), checkpoint_every=checkpoint_every, window=window,
             tolerance=tolerance, transient=transient, rate=rate, diagnosis=diagnosis,
             diagnosis_record=diagnosis_record, diagnosis_after=diagnosis_after,
-            query_threshold=query_threshold, learning=learning, budget=budget, refit_every=refit_every)
+            query_threshold=query_threshold, learning=learning, budget=budget, refit_every=refit_every,
+            diagnosis_wait=diagnosis_wait, adopt=adopt)
         return Report(summary)
 
     def train(self, record: Record, *, lags: int | None = None, target: str | None = None,

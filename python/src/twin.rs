@@ -725,7 +725,7 @@ impl Twin {
                         tolerance = None, transient = None, rate = None, diagnosis = true,
                         diagnosis_record = None, diagnosis_after = None,
                         query_threshold = None, learning = true, budget = None,
-                        refit_every = None))]
+                        refit_every = None, diagnosis_wait = false, adopt = false))]
     #[allow(clippy::too_many_arguments)]
     fn watch<'py>(
         &self,
@@ -750,6 +750,8 @@ impl Twin {
         learning: bool,
         budget: Option<u32>,
         refit_every: Option<u32>,
+        diagnosis_wait: bool,
+        adopt: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let kind = Kind::Watch;
         let err = |e: WatchError| to_py(kind, e);
@@ -769,8 +771,10 @@ impl Twin {
             record: diagnosis_record.unwrap_or(d.record),
             after: diagnosis_after.unwrap_or(d.after),
             transient: options.transient,
+            wait: diagnosis_wait,
             ..d
         });
+        options.adopt = adopt;
         options.learning.threshold = query_threshold;
         options.learning.learn = learning;
         options.learning.budget = budget.unwrap_or(options.learning.budget);

@@ -88,6 +88,16 @@ pub struct WatchArgs {
     /// of the next ones while the window stays open (up to 30 s, until two agree).
     #[arg(long, default_value_t = DiagnosisOptions::default().post)]
     pub diagnosis_post: f64,
+    /// Wait for each background diagnosis before reading on: for a recorded stream replayed
+    /// at full speed, which would otherwise outrun its diagnoses (a live stream never waits).
+    #[arg(long, conflicts_with = "no_diagnosis")]
+    pub diagnosis_wait: bool,
+    /// Unattended operation: adopt a firm `recalibrate` verdict (two looks after a located
+    /// change agree) — the recalibrated twin written beside the alerts (ALERTS.twin-K.ssp) and
+    /// swapped into the running watch at once, going on from the old twin's state; an
+    /// `adopted` alert, and the checkpoint records which twin is live from when.
+    #[arg(long, conflicts_with = "no_diagnosis")]
+    pub adopt: bool,
     /// With a GP corrector: query where its latent variance V(f) exceeds this (m²/s⁴);
     /// default: the largest V(f) over the first 100 samples after the transient.
     #[arg(long)]
@@ -154,6 +164,7 @@ impl WatchArgs {
                 after: self.diagnosis_after,
                 post: self.diagnosis_post,
                 transient: self.transient,
+                wait: self.diagnosis_wait,
                 ..DiagnosisOptions::default()
             }),
             checkpoint: self.checkpoint.clone(),
@@ -162,6 +173,7 @@ impl WatchArgs {
             tolerance: self.tolerance,
             transient: self.transient,
             rate: self.rate,
+            adopt: self.adopt,
             modes: self.track_modes.then_some(TrackOptions {
                 window: self.modes_window,
                 every: self.modes_every,

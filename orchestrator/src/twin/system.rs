@@ -34,15 +34,17 @@ struct Loaded {
     parameters: BTreeMap<String, ParameterValue>,
 }
 
-/// The twin's FMUs, opened once; every system built from them gets fresh instances.
-pub struct SystemBuilder<'t> {
-    twin: &'t Twin,
+/// The twin's FMUs, opened once; every system built from them gets fresh instances. It holds
+/// its own copy of the twin (a duplicate shares the unpacked FMUs), so that what it builds can
+/// outlive the twin it was opened from (a watch that adopts another twin).
+pub struct SystemBuilder {
+    twin: Twin,
     components: Vec<Loaded>,
 }
 
-impl<'t> SystemBuilder<'t> {
+impl SystemBuilder {
     /// Open every component's FMU (an error names the twin and the component).
-    pub fn open(twin: &'t Twin) -> Result<Self, TwinError> {
+    pub fn open(twin: &Twin) -> Result<Self, TwinError> {
         let components = twin
             .components
             .iter()
@@ -62,11 +64,14 @@ impl<'t> SystemBuilder<'t> {
                 })
             })
             .collect::<Result<Vec<_>, TwinError>>()?;
-        Ok(SystemBuilder { twin, components })
+        Ok(SystemBuilder {
+            twin: twin.duplicate(),
+            components,
+        })
     }
 
-    pub fn twin(&self) -> &'t Twin {
-        self.twin
+    pub fn twin(&self) -> &Twin {
+        &self.twin
     }
 
     fn loaded(&self, component: &str) -> Option<&Loaded> {
@@ -168,7 +173,7 @@ impl<'t> SystemBuilder<'t> {
         start: f64,
         inputs: Vec<(&str, Vec<f64>)>,
     ) -> Result<TwinSystem, SystemError> {
-        let twin = self.twin;
+        let twin = &self.twin;
         let mut system = self.empty();
         for c in &self.components {
             // Ports: every connector the twin's connections use on this component.

@@ -9,9 +9,9 @@
 //! beside the alerts, ready for `twin add-physics --diagnosis`.
 //!
 //! A window whose opening located a change ([`super::online::locate_change`]) is diagnosed on
-//! what came after it instead: the samples from the change's time (less a warm-up of
-//! `warmup` s, which the diagnosis leaves out of its error measures, so that it scores only
-//! samples after the change) to now, once `post` seconds of them exist, and again with each
+//! what came after it instead: the samples from the change's time to now, every fit starting
+//! from the state the twin reached at the change on the `warmup` s before it
+//! (`diagnose::change`), once `post` seconds of them exist, and again with each
 //! further `post` seconds while the window stays open, up to [`MAX_POST`] s, until two in a
 //! row give the same verdict (the action and where: the parameter recalibration moves most,
 //! the effects, the faulty sensor) — then it is firm. The first look's `post` (10 s by
@@ -54,17 +54,22 @@ pub struct DiagnosisOptions {
     /// The comparison's transient (s).
     #[serde(default)]
     pub transient: f64,
-    /// Seconds before a located change that its diagnosis starts with, left out of its error
-    /// measures: the twin starts at rest, the structure does not, and with a few % damping
-    /// the difference takes seconds to die out (e^(−ζωt): 2 s leave about half of it on the
-    /// paper's building's first mode, 10 s a twentieth); what is left at the change is the
-    /// difference of two structures' forced responses, a small one.
+    /// Seconds before a located change that its diagnosis starts with: the twin as it is runs
+    /// on them from rest to the state it reached at the change, from which every fit starts
+    /// (`diagnose::change`). The structure does not start at rest, and with a few % damping
+    /// the difference takes seconds to die out (e^(−ζωt): 10 s leave about a twentieth of it
+    /// on the paper's building's first mode, 30 s a ten-thousandth). With a shear FMU that
+    /// has no start values, they are left out of the error measures instead.
     #[serde(default = "default_warmup")]
     pub warmup: f64,
+    /// Wait for each diagnosis before the next sample (a recorded stream replayed at full
+    /// speed, which would otherwise outrun its diagnoses; a live stream never waits).
+    #[serde(default)]
+    pub wait: bool,
 }
 
 fn default_warmup() -> f64 {
-    10.0
+    30.0
 }
 
 fn default_post() -> f64 {
@@ -79,6 +84,7 @@ impl Default for DiagnosisOptions {
             post: default_post(),
             transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
             warmup: default_warmup(),
+            wait: false,
         }
     }
 }
@@ -306,7 +312,16 @@ impl Background {
                 }
             }
         }
-        self.collect(false)
+        self.collect(self.options.wait)
+    }
+
+    /// The watch adopted `twin`: later diagnoses are of it, and the change it answers is not
+    /// looked at again.
+    pub fn adopted(&mut self, twin: &Twin) {
+        self.twin = twin.duplicate();
+        if let Some(e) = &mut self.saved.episode {
+            e.closed = true;
+        }
     }
 
     /// At the stream's end: start what is due and wait for what runs; each finished one. A
@@ -417,6 +432,7 @@ impl Background {
         if let Some(w) = job.warmup {
             options.transient = w;
         }
+        options.changed_at = job.change;
         std::thread::spawn(move || {
             let result =
                 record(&job).and_then(|m| diagnose(&twin, &m, &options).map_err(|e| e.to_string()));

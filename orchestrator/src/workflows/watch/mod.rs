@@ -24,6 +24,7 @@ use std::io::{BufRead, BufReader, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime};
 
+use crate::workflows::diagnose::Action;
 use ::structure::channel::Channel;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
@@ -126,6 +127,9 @@ pub struct WatchOptions {
     pub columns: ColumnMap,
     /// Frequency tracking on a sliding window (None: off).
     pub modes: Option<modes::TrackOptions>,
+    /// Adopt a firm `recalibrate` verdict: the recalibrated twin written beside the alerts and
+    /// swapped into the running watch ([`Adopted`]).
+    pub adopt: bool,
 }
 
 /// `--checkpoint-every`'s default, samples.
@@ -157,6 +161,7 @@ impl WatchOptions {
             learning: LearnOptions::default(),
             columns: ColumnMap::default(),
             modes: None,
+            adopt: false,
         }
     }
 
@@ -418,6 +423,19 @@ struct State {
     background: background::Saved,
     #[serde(default)]
     supervisor: Option<Supervisor>,
+    /// The twins the watch adopted, in order: the last is live.
+    #[serde(default)]
+    adopted: Vec<Adopted>,
+}
+
+/// A twin the watch adopted: live from `at` (s of the stream), written to `twin`, on the
+/// verdict of the diagnosis `report`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Adopted {
+    pub at: f64,
+    pub twin: PathBuf,
+    pub verdict: String,
+    pub report: PathBuf,
 }
 
 /// Lines of the stream: from standard input or a file (a partial last line of a growing file
@@ -710,7 +728,9 @@ struct Watcher<'a> {
     /// Told of every alert written (its JSON object); an error stops the watch.
     on_alert: &'a mut dyn FnMut(&Value) -> Result<(), String>,
     state: State,
-    stepper: Stepper<'a>,
+    stepper: Stepper,
+    /// The twin live now: the one watched, or the last adopted.
+    live: Twin,
     alerts: Alerts,
     reader: LineReader,
     /// A line read before the watch began (an MQTT stream's first), given out first.
@@ -1257,6 +1277,7 @@ impl Watcher<'_> {
         }
         let (from, to) = job.span();
         let width = job.columns.width();
+        let mut adoption = None;
         // The samples it used: all from `from` to `to`; after a located change, those from the
         // change on are the ones its error measures score.
         let mut body = json!({
@@ -1273,6 +1294,15 @@ impl Watcher<'_> {
             Ok(d) => {
                 let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
                 let path = background::report_path(&self.options.alerts, k);
+                if self.options.adopt && firm && d.action == Action::Recalibrate {
+                    let parameters = d.recalibration.as_ref().map(|r| {
+                        r.parameters
+                            .iter()
+                            .map(|p| (p.name.clone(), p.after))
+                            .collect::<Vec<_>>()
+                    });
+                    adoption = parameters.map(|p| (p, background::verdict(&d), path.clone()));
+                }
                 let text = serde_json::to_string_pretty(&d)
                     .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
                 write_text_atomically(&path, &text)?;
@@ -1289,6 +1319,11 @@ impl Watcher<'_> {
                     m.insert("channels".into(), json!(d.channels));
                     m.insert("nmse_before".into(), floats(&d.nmse_before));
                     m.insert("nmse_after".into(), floats(&d.nmse_after));
+                    if let Some(at) = d.changed_at {
+                        // Its fits started there, from the state the twin reached on the
+                        // samples before; those after are the ones it scored.
+                        m.insert("fitted_from".into(), json!(at));
+                    }
                     m.insert("report".into(), json!(path.display().to_string()));
                     m.insert(
                         "samples".into(),
@@ -1303,8 +1338,112 @@ impl Watcher<'_> {
             }
         }
         self.alerts.diagnosed.push((job.window_start, job.round));
-        self.send(&body)
+        self.send(&body)?;
+        match adoption {
+            Some((parameters, verdict, report)) => self.adopt(&parameters, verdict, report),
+            None => Ok(()),
+        }
     }
+
+    /// Adopt the recalibrated twin: written beside the alerts, swapped in at the current point
+    /// (its physics going on from the state the old one reached there, so no sample is lost),
+    /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it.
+    fn adopt(
+        &mut self,
+        parameters: &[(String, f64)],
+        verdict: String,
+        report: PathBuf,
+    ) -> Result<(), WatchError> {
+        let Some((time, excitation)) = self.stepper.last() else {
+            return Ok(());
+        };
+        let adopted = recalibrated(&self.live, parameters)?;
+        let path = adopted_path(&self.options.alerts, self.state.adopted.len() + 1);
+        adopted.write(&path)?;
+        let (mut stepper, _) = open_stepper(
+            &adopted,
+            self.state.excitation,
+            &self.state.channels,
+            &self.options.learning,
+        )?;
+        let state = self.stepper.physics_state()?;
+        match &state {
+            Some(state) => stepper.start_from(time, state)?,
+            None => stepper.start(time)?,
+        }
+        stepper.advance(time, excitation, &mut self.predicted)?;
+        self.stepper = stepper;
+        if let Some(b) = &mut self.background {
+            b.adopted(&adopted);
+        }
+        self.live = adopted;
+        self.state.adopted.push(Adopted {
+            at: time,
+            twin: path.clone(),
+            verdict: verdict.clone(),
+            report: report.clone(),
+        });
+        self.alert(
+            Some(time),
+            "adopted",
+            json!({"twin": path, "verdict": verdict, "report": report,
+                   "from": if state.is_some() { "the old twin's state" } else { "rest" },
+                   "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>()}),
+        )
+    }
+}
+
+/// The stepper of `twin` (wired to give out every one of `channels`), its corrector's learning
+/// parameters set; with the training-set budget when the corrector's FMU takes one.
+fn open_stepper(
+    twin: &Twin,
+    excitation: Channel,
+    channels: &[Channel],
+    learning: &LearnOptions,
+) -> Result<(Stepper, Option<u32>), WatchError> {
+    let wired = stepper::wired(twin, channels);
+    let mut stepper = Stepper::new(wired.as_ref().unwrap_or(twin), excitation, channels)?;
+    let mut budget = Some(learning.budget);
+    if stepper.has_learner() {
+        if !(1..=2048).contains(&learning.budget) {
+            return Err(WatchError::Options(format!(
+                "--budget must be between 1 and 2048 points, was {}",
+                learning.budget
+            )));
+        }
+        if !stepper.set_learner_parameter("budget", learning.budget as i32) {
+            budget = None;
+        }
+        stepper.set_learner_parameter("refit_every", learning.refit_every as i32);
+    }
+    Ok((stepper, budget))
+}
+
+/// The twin a firm `recalibrate` verdict names: `live` with the recalibrated physics
+/// parameters, its noise variances and posterior kept (the stream's noise did not change).
+fn recalibrated(live: &Twin, parameters: &[(String, f64)]) -> Result<Twin, WatchError> {
+    let mut twin = live.duplicate();
+    let physics = twin.component_mut(crate::twin::PHYSICS).ok_or_else(|| {
+        WatchError::Twin(TwinError::Message(format!(
+            "{} has no physics component",
+            live.describe()
+        )))
+    })?;
+    for (name, value) in parameters {
+        physics
+            .parameters
+            .insert(name.clone(), crate::twin::ParameterValue::Real(*value));
+    }
+    twin.source = None;
+    Ok(twin)
+}
+
+/// Where the `k`-th adopted twin goes: beside the alerts, `ALERTS.twin-k.ssp`.
+fn adopted_path(alerts: &Path, k: usize) -> PathBuf {
+    let stem = alerts
+        .file_stem()
+        .map_or_else(|| "alerts".into(), |s| s.to_string_lossy().into_owned());
+    alerts.with_file_name(format!("{stem}.twin-{k}.ssp"))
 }
 
 /// Watch the stream `options.source` with `twin`, alerts to `options.alerts`; `progress` gets
@@ -1392,6 +1531,12 @@ pub fn watch_observed(
         }
         _ => None,
     };
+    // A watch that adopted a twin goes on with the last one it adopted.
+    let resumed = match saved.as_ref().and_then(|s| s.adopted.last()) {
+        Some(a) => Some(Twin::load(Some(&a.twin))?),
+        None => None,
+    };
+    let twin = resumed.as_ref().unwrap_or(twin);
     let mut reader = LineReader::open(&options.source)?;
     let from_broker = matches!(reader, LineReader::Mqtt(_));
     // The header: a file or standard input starts with its own; an MQTT stream's is the one
@@ -1448,23 +1593,7 @@ pub fn watch_observed(
             },
             None => WatchError::Header(message),
         })?;
-    let wired = stepper::wired(twin, &channels);
-    let mut stepper = Stepper::new(wired.as_ref().unwrap_or(twin), excitation, &channels)?;
-    // The corrector's training-set budget, when its FMU takes one.
-    let mut budget = Some(options.learning.budget);
-    if stepper.has_learner() {
-        let l = &options.learning;
-        if !(1..=2048).contains(&l.budget) {
-            return Err(WatchError::Options(format!(
-                "--budget must be between 1 and 2048 points, was {}",
-                l.budget
-            )));
-        }
-        if !stepper.set_learner_parameter("budget", l.budget as i32) {
-            budget = None;
-        }
-        stepper.set_learner_parameter("refit_every", l.refit_every as i32);
-    }
+    let (mut stepper, budget) = open_stepper(twin, excitation, &channels, &options.learning)?;
     let resuming = saved.is_some();
     let mut state = match saved {
         Some(state) => {
@@ -1500,6 +1629,7 @@ pub fn watch_observed(
             fmu_last: None,
             background: background::Saved::default(),
             supervisor: None,
+            adopted: Vec::new(),
         },
     };
     if from_broker {
@@ -1549,6 +1679,7 @@ pub fn watch_observed(
         on_alert,
         state,
         stepper,
+        live: twin.duplicate(),
         alerts,
         reader,
         pushed_back,

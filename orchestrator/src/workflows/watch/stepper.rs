@@ -73,8 +73,8 @@ struct Running {
     learner: Option<NodeId>,
 }
 
-pub struct Stepper<'t> {
-    builder: SystemBuilder<'t>,
+pub struct Stepper {
+    builder: SystemBuilder,
     running: Option<Running>,
     learner: Option<Learner>,
     /// The driven input (`force` or `ground_acc`) and the predicted channels.
@@ -82,16 +82,12 @@ pub struct Stepper<'t> {
     channels: Vec<String>,
 }
 
-impl<'t> Stepper<'t> {
+impl Stepper {
     /// Open the twin's FMUs (`twin` gives out every one of `channels`: see [`wired`]); the
     /// system comes with [`Stepper::start`]. `excitation`: the stream's, driving the twin.
     /// A GP corrector that learns must take every measured channel (`measured_<name>`) and give
     /// its latent variance, and learn from no channel the stream lacks: refused otherwise.
-    pub fn new(
-        twin: &'t Twin,
-        excitation: Channel,
-        channels: &[Channel],
-    ) -> Result<Self, WatchError> {
+    pub fn new(twin: &Twin, excitation: Channel, channels: &[Channel]) -> Result<Self, WatchError> {
         let builder = SystemBuilder::open(twin)?;
         let mut learner = None;
         for c in &twin.components {
@@ -256,6 +252,57 @@ impl<'t> Stepper<'t> {
             l.pending = false;
         }
         Ok(())
+    }
+
+    /// The physics component's displacements and velocities at the current point, as the
+    /// start values of its shear FMU (`disp{i}_start`, `vel{i}_start`): what another twin of
+    /// the same building takes to go on from here. None when the FMU has no start values.
+    pub fn physics_state(&mut self) -> Result<Option<Vec<(String, f64)>>, WatchError> {
+        let Some(fmu) = self.builder.fmu(PHYSICS) else {
+            return Ok(None);
+        };
+        let mut reads = Vec::new();
+        let mut starts = Vec::new();
+        for q in ["disp", "vel"] {
+            for floor in 1.. {
+                let (Ok(read), Ok(_)) = (
+                    fmu.value_reference(&format!("{q}{floor}")),
+                    fmu.value_reference(&format!("{q}{floor}_start")),
+                ) else {
+                    break;
+                };
+                reads.push(read);
+                starts.push(format!("{q}{floor}_start"));
+            }
+        }
+        if starts.is_empty() {
+            return Ok(None);
+        }
+        let running = self.running()?;
+        let node = running.system.node(PHYSICS).ok_or(WatchError::NotStarted)?;
+        let slave = running
+            .system
+            .system
+            .slave_mut(node)
+            .ok_or(WatchError::NotStarted)?;
+        let mut values = vec![0.0; reads.len()];
+        slave.get_real(&reads, &mut values).map_err(master)?;
+        Ok(Some(starts.into_iter().zip(values).collect()))
+    }
+
+    /// [`Stepper::start`] with the physics starting from `state` ([`Stepper::physics_state`]
+    /// of another twin) instead of rest; a later start is at rest again.
+    pub fn start_from(&mut self, start: f64, state: &[(String, f64)]) -> Result<(), WatchError> {
+        let set = |builder: &mut SystemBuilder, zero: bool| {
+            for (name, value) in state {
+                let value = if zero { 0.0 } else { *value };
+                builder.set_parameter(PHYSICS, name, ParameterValue::Real(value));
+            }
+        };
+        set(&mut self.builder, false);
+        let started = self.start(start);
+        set(&mut self.builder, true);
+        started
     }
 
     /// Go to the point `time` with excitation `excitation` (the step from the last point,
