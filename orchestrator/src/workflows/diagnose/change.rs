@@ -59,19 +59,15 @@ pub fn after_the_change(
     if k0 == 0 {
         return Ok(None);
     }
-    let Some(starts) = start_values(twin)? else {
+    let Some(state) = reached_state(twin, &data.head(k0 + 1))? else {
         return Ok(None);
     };
-    let run = run_physics(twin, &data.head(k0 + 1), &BTreeMap::new(), &[], &[])?;
     let mut twin = twin.duplicate();
     let physics = twin
         .component_mut(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    let reached = run.displacement.iter().chain(&run.velocity);
-    for (name, series) in starts.iter().zip(reached) {
-        physics
-            .parameters
-            .insert(name.clone(), ParameterValue::Real(series[k0]));
+    for (name, value) in state {
+        physics.parameters.insert(name, ParameterValue::Real(value));
     }
     Ok(Some(AfterTheChange {
         at: data.time[k0],
@@ -83,6 +79,25 @@ pub fn after_the_change(
             ..options.clone()
         },
     }))
+}
+
+/// The state `twin`'s physics reaches at `data`'s last sample, run from rest at its first, as
+/// the start values another run takes to go on from there (`disp{i}_start`, `vel{i}_start`);
+/// None when its shear FMU has no start values.
+pub fn reached_state(twin: &Twin, data: &Measurement) -> Result<Option<Vec<(String, f64)>>> {
+    let Some(starts) = start_values(twin)? else {
+        return Ok(None);
+    };
+    let run = run_physics(twin, data, &BTreeMap::new(), &[], &[])?;
+    let last = data.len().saturating_sub(1);
+    let reached = run.displacement.iter().chain(&run.velocity);
+    Ok(Some(
+        starts
+            .into_iter()
+            .zip(reached)
+            .map(|(name, series)| (name, series.get(last).copied().unwrap_or(0.0)))
+            .collect(),
+    ))
 }
 
 /// The physics FMU's start values, `disp1_start..dispN_start` then `vel1_start..velN_start`;

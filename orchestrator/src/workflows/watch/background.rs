@@ -101,8 +101,11 @@ pub struct Episode {
     /// The last diagnosis's verdict, and whether the one before agreed.
     pub verdict: Option<String>,
     pub firm: bool,
-    /// Its window closed (back in band): no further rounds.
+    /// Its answer was adopted: no further rounds.
     pub closed: bool,
+    /// Windows that opened again while its looks went on: the change's too.
+    #[serde(default)]
+    pub windows: Vec<f64>,
 }
 
 /// The stream's columns as kept: the excitation and the measured channels; each sample kept
@@ -224,12 +227,27 @@ impl Background {
         kept.push_back(time);
         kept.push_back(excitation);
         kept.extend(&measured[..width - 2]);
-        while kept
-            .front()
-            .is_some_and(|&t| time - t > self.options.record)
-        {
+        // Enough for the last look after a change and its warm-up, and for a window's record.
+        let keep = self
+            .options
+            .record
+            .max(MAX_POST + self.options.warmup + self.options.post);
+        while kept.front().is_some_and(|&t| time - t > keep) {
             kept.drain(..width);
         }
+    }
+
+    /// Every sample kept (the current one last), as a record of the stream's channels.
+    pub fn kept(&self) -> Result<Measurement, String> {
+        record(&Job {
+            window_start: f64::NAN,
+            dt: self.dt,
+            columns: self.columns.clone(),
+            samples: self.saved.kept.iter().copied().collect(),
+            change: None,
+            round: 0,
+            warmup: None,
+        })
     }
 
     /// A gap: the next segment's twin starts anew, and so does what is kept.
@@ -237,8 +255,20 @@ impl Background {
         self.saved.kept.clear();
     }
 
-    /// A failing window opened at `time`; `change`: the change located behind it.
+    /// A failing window opened at `time`; `change`: the change located behind it. While the
+    /// looks at a change go on (not firm, not adopted, not past [`MAX_POST`]), a window that
+    /// opens again is that change's (a damping change, a contact, fails the band on and off):
+    /// its looks keep their schedule from the first change.
     pub fn opened(&mut self, window_start: f64, time: f64, change: Option<ChangePoint>) {
+        let live = self
+            .saved
+            .episode
+            .as_ref()
+            .is_some_and(|e| self.next_post(e).is_some());
+        if let (true, Some(e)) = (live, &mut self.saved.episode) {
+            e.windows.push(window_start);
+            return;
+        }
         if let Some(c) = change {
             // What came after the change is diagnosed, in rounds (`poll`).
             if self
@@ -256,6 +286,7 @@ impl Background {
                 verdict: None,
                 firm: false,
                 closed: false,
+                windows: Vec::new(),
             });
             return;
         }
@@ -273,18 +304,17 @@ impl Background {
         (post <= MAX_POST + 1e-9 || e.rounds == 0).then_some(post.min(MAX_POST))
     }
 
-    /// A window closed: its diagnosis starts now if it was failing, is dropped if not.
+    /// A window closed: its diagnosis starts now if it was failing, is dropped if not. A
+    /// located change's looks go on (back in band for now is not the structure back as it
+    /// was: a damping change or a contact fails the band on and off).
     pub fn closed(&mut self, window_start: f64, failing: bool) {
-        if let Some(e) = &mut self.saved.episode {
-            if e.window_start == window_start {
-                // Back in band: one look if none was taken, then no more.
-                let first = e.rounds == 0;
-                e.closed = true;
-                if first && failing {
-                    self.launch_episode(f64::INFINITY);
-                }
-                return;
-            }
+        if self
+            .saved
+            .episode
+            .as_ref()
+            .is_some_and(|e| e.window_start == window_start || e.windows.contains(&window_start))
+        {
+            return;
         }
         match self.saved.due {
             Some((start, _)) if start == window_start && !failing => self.saved.due = None,
@@ -375,11 +405,17 @@ impl Background {
         let Some((window_start, _)) = self.saved.due.take() else {
             return;
         };
+        let width = self.columns.width();
+        let kept = &self.saved.kept;
+        let last = kept.len().checked_sub(width).map_or(f64::NAN, |k| kept[k]);
+        let first = (0..kept.len() / width)
+            .find(|&k| last - kept[k * width] <= self.options.record + 1e-9)
+            .unwrap_or(0);
         let job = Job {
             window_start,
             dt: self.dt,
             columns: self.columns.clone(),
-            samples: self.saved.kept.iter().copied().collect(),
+            samples: kept.range(first * width..).copied().collect(),
             change: None,
             round: 1,
             warmup: None,

@@ -1345,9 +1345,11 @@ impl Watcher<'_> {
         }
     }
 
-    /// Adopt the recalibrated twin: written beside the alerts, swapped in at the current point
-    /// (its physics going on from the state the old one reached there, so no sample is lost),
-    /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it.
+    /// Adopt the recalibrated twin: written beside the alerts, swapped in at the current point,
+    /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it. Its
+    /// physics goes on from the state it reaches over the samples kept (from rest 70 s back
+    /// with the defaults: what is left of the start is e^(−ζωt), far below the noise), not from
+    /// the old twin's, which has been failing since the change; no sample is lost.
     fn adopt(
         &mut self,
         parameters: &[(String, f64)],
@@ -1366,7 +1368,11 @@ impl Watcher<'_> {
             &self.state.channels,
             &self.options.learning,
         )?;
-        let state = self.stepper.physics_state()?;
+        let state = match self.background.as_ref().map(Background::kept) {
+            Some(Ok(kept)) => crate::workflows::diagnose::change::reached_state(&adopted, &kept)
+                .map_err(|e| WatchError::Twin(TwinError::Message(e.to_string())))?,
+            _ => None,
+        };
         match &state {
             Some(state) => stepper.start_from(time, state)?,
             None => stepper.start(time)?,
@@ -1376,6 +1382,9 @@ impl Watcher<'_> {
         if let Some(b) = &mut self.background {
             b.adopted(&adopted);
         }
+        // The comparison starts anew with the adopted twin: the window the change opened is
+        // its answer's, and a further change opens a window (and an episode) of its own.
+        self.state.detector = None;
         self.live = adopted;
         self.state.adopted.push(Adopted {
             at: time,
@@ -1387,7 +1396,7 @@ impl Watcher<'_> {
             Some(time),
             "adopted",
             json!({"twin": path, "verdict": verdict, "report": report,
-                   "from": if state.is_some() { "the old twin's state" } else { "rest" },
+                   "from": if state.is_some() { "its state over the samples kept" } else { "rest" },
                    "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>()}),
         )
     }

@@ -254,44 +254,8 @@ impl Stepper {
         Ok(())
     }
 
-    /// The physics component's displacements and velocities at the current point, as the
-    /// start values of its shear FMU (`disp{i}_start`, `vel{i}_start`): what another twin of
-    /// the same building takes to go on from here. None when the FMU has no start values.
-    pub fn physics_state(&mut self) -> Result<Option<Vec<(String, f64)>>, WatchError> {
-        let Some(fmu) = self.builder.fmu(PHYSICS) else {
-            return Ok(None);
-        };
-        let mut reads = Vec::new();
-        let mut starts = Vec::new();
-        for q in ["disp", "vel"] {
-            for floor in 1.. {
-                let (Ok(read), Ok(_)) = (
-                    fmu.value_reference(&format!("{q}{floor}")),
-                    fmu.value_reference(&format!("{q}{floor}_start")),
-                ) else {
-                    break;
-                };
-                reads.push(read);
-                starts.push(format!("{q}{floor}_start"));
-            }
-        }
-        if starts.is_empty() {
-            return Ok(None);
-        }
-        let running = self.running()?;
-        let node = running.system.node(PHYSICS).ok_or(WatchError::NotStarted)?;
-        let slave = running
-            .system
-            .system
-            .slave_mut(node)
-            .ok_or(WatchError::NotStarted)?;
-        let mut values = vec![0.0; reads.len()];
-        slave.get_real(&reads, &mut values).map_err(master)?;
-        Ok(Some(starts.into_iter().zip(values).collect()))
-    }
-
-    /// [`Stepper::start`] with the physics starting from `state` ([`Stepper::physics_state`]
-    /// of another twin) instead of rest; a later start is at rest again.
+    /// [`Stepper::start`] with the physics starting from `state` (its shear FMU's start values,
+    /// `disp{i}_start`, `vel{i}_start`) instead of rest; a later start is at rest again.
     pub fn start_from(&mut self, start: f64, state: &[(String, f64)]) -> Result<(), WatchError> {
         let set = |builder: &mut SystemBuilder, zero: bool| {
             for (name, value) in state {
