@@ -1382,9 +1382,16 @@ impl Watcher<'_> {
         if let Some(b) = &mut self.background {
             b.adopted(&adopted);
         }
-        // The comparison starts anew with the adopted twin: the window the change opened is
-        // its answer's, and a further change opens a window (and an episode) of its own.
-        self.state.detector = None;
+        // The comparison starts anew with the adopted twin (a segment of its own, the stream's
+        // NMSE and window count going on): the windows open now are the change's, resolved
+        // by it, and a further change opens a window (and an episode) of its own.
+        let events = match &mut self.state.detector {
+            Some(d) => d.finish_segment(),
+            None => Vec::new(),
+        };
+        let open = self.cut_windows.len();
+        self.events(time, events)?;
+        let resolved = window_values(self.cut_windows.split_off(open));
         self.live = adopted;
         self.state.adopted.push(Adopted {
             at: time,
@@ -1395,7 +1402,7 @@ impl Watcher<'_> {
         self.alert(
             Some(time),
             "adopted",
-            json!({"twin": path, "verdict": verdict, "report": report,
+            json!({"twin": path, "verdict": verdict, "report": report, "resolves": resolved,
                    "from": if state.is_some() { "its state over the samples kept" } else { "rest" },
                    "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>()}),
         )
