@@ -7,18 +7,9 @@
 //! leave the stated margins.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 mod common;
-use common::{fmu_dir, workspace};
-
-fn twin(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .output()
-        .expect("twin runs")
-}
+use common::{twin, workspace, worst};
 
 fn ok(args: &[&str]) -> String {
     let out = twin(args);
@@ -50,10 +41,6 @@ fn s(p: &Path) -> &str {
 
 fn triple(v: &serde_json::Value) -> [f64; 3] {
     [0, 1, 2].map(|i| v[i].as_f64().expect("a number"))
-}
-
-fn worst(x: &[f64; 3]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 
 fn dataset(n: usize) -> PathBuf {

@@ -5,20 +5,12 @@
 //! record the structure cannot use refused before any work.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use serde_json::Value;
 
 mod common;
-use common::fmu_dir;
-
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .args(args)
-        .output()
-        .expect("twin runs")
-}
+use common::{fmu_dir, twin};
 
 fn ok(out: &Output) {
     assert!(

@@ -8,19 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 mod common;
-use common::{fmu_dir, workspace};
+use common::{fmu_dir, twin, workspace};
 
 /// The examples' sampling interval, 1/51.2 s = 5/256 s: exact in binary.
 const STEP: f64 = 1.0 / 51.2;
-
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .env_remove("TWIN_FMU_LOG")
-        .output()
-        .expect("the twin binary runs")
-}
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()

@@ -6,23 +6,14 @@
 //! Measured figures (printed with `--nocapture`) set the bounds: see each test.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use nalgebra::{DMatrix, Matrix6};
 use orchestrator::twin::{ParameterValue, Twin, PHYSICS};
 use serde_json::Value;
 
 mod common;
-use common::{fmu_dir, workspace};
-
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .env_remove("TWIN_FMU_LOG")
-        .output()
-        .expect("the twin binary runs")
-}
+use common::{fmu_dir, twin, workspace};
 
 fn ok(out: &Output, what: &str) -> String {
     assert!(

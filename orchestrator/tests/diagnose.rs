@@ -24,7 +24,7 @@ use orchestrator::synth::{
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{assert_effect, assert_recalibrated, fmu_dir, workspace};
+use common::{assert_effect, assert_recalibrated, fmu_dir, workspace, worst};
 
 const NOISE_SD: f64 = 0.003;
 
@@ -65,10 +65,6 @@ fn record(change: impl FnOnce(&mut Scenario)) -> Measurement {
 
 fn run(data: &Measurement) -> Diagnosis {
     diagnose(twin(), data, &DiagnoseOptions::default()).expect("diagnosis")
-}
-
-fn worst(x: &[f64]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 
 // Contact: measured gap and stiffness within 0.3 % and 0.9 % (5 % allowed); NMSE after at the

@@ -19,7 +19,7 @@ use orchestrator::synth::{synth_record, BetweenSamples, NoiseLevel, Scenario, DE
 use orchestrator::twin::Twin;
 
 mod common;
-use common::twin_calibrated_on_default_structure;
+use common::{twin_calibrated_on_default_structure, worst};
 
 const NOISE_SD: f64 = 0.003;
 const NOISE_FRACTION: f64 = 0.03;
@@ -39,10 +39,6 @@ fn record(gain: f64, noise: NoiseLevel, between: BetweenSamples) -> Measurement 
     s.force.between_samples = between;
     s.noise.level = noise;
     synth_record(&s).expect("synth").0.measurement
-}
-
-fn worst(x: &[f64]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// Diagnose and compare; `none`, no failing window; the figures printed.

@@ -7,13 +7,12 @@
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use orchestrator::import::{Fmu, ImportError, UnpackLimits};
 use zip::write::SimpleFileOptions;
 
 mod common;
-use common::{fmu_dir, workspace};
+use common::{fmu_dir, twin, workspace};
 
 fn shear_fmu() -> PathBuf {
     fmu_dir().join("fmu_shear.fmu")
@@ -371,15 +370,6 @@ fn malformed_model_descriptions_and_non_archives_are_refused() {
 
 // ---------------------------------------------------------------------------------------------
 // Through the CLI.
-
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .env_remove("TWIN_FMU_LOG")
-        .output()
-        .expect("the twin binary runs")
-}
 
 /// `twin init` into `dir`, then the entries for which `replace` returns bytes replaced.
 fn rewritten_twin(dir: &Path, name: &str, replace: impl Fn(&str) -> Option<Vec<u8>>) -> PathBuf {

@@ -6,18 +6,9 @@
 //! the release build on this project's machine; the assertions leave the stated margins.
 
 use std::path::Path;
-use std::process::Command;
 
 mod common;
-use common::{fmu_dir, workspace};
-
-fn twin(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .output()
-        .expect("twin runs")
-}
+use common::{twin, workspace};
 
 fn ok(args: &[&str]) -> String {
     let out = twin(args);

@@ -15,16 +15,10 @@ use orchestrator::workflows::modal::{modal_evidence, twin::structure_modes, Moda
 use structure::{Excitation, Structure};
 
 mod common;
-use common::fmu_dir;
+use common::twin_cmd;
 
 fn building() -> Structure {
     Structure::uniform(5, 5.2, 3.0, 4021.0, Excitation::Base)
-}
-
-fn twin_cmd() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
-    cmd.env("TWIN_FMU_DIR", fmu_dir());
-    cmd
 }
 
 fn run(cmd: &mut Command) -> String {

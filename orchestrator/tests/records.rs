@@ -5,21 +5,12 @@
 //! Needs the shear FMU: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use orchestrator::record::{format_g9, Measurement};
 
 mod common;
-use common::{fmu_dir, workspace};
-
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .env_remove("TWIN_FMU_LOG")
-        .output()
-        .expect("the twin binary runs")
-}
+use common::{twin, workspace};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -13,7 +13,7 @@ use orchestrator::synth::{csv_text, EffectSpec};
 use serde_json::Value;
 
 mod common;
-use common::{fmu_dir, hidden_change_record, hidden_change_twin, HIDDEN_CHANGE_NOISE_SD};
+use common::{fmu_dir, hidden_change_record, hidden_change_twin, twin_cmd, HIDDEN_CHANGE_NOISE_SD};
 
 /// The hidden-change twin without its parameter covariance, so `twin compare`'s band is the
 /// noise band `twin watch` uses; written once per test binary.
@@ -46,12 +46,6 @@ fn contact_record() -> String {
         csv_text(&m)
     })
     .clone()
-}
-
-fn twin_cmd() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
-    cmd.env("TWIN_FMU_DIR", fmu_dir());
-    cmd
 }
 
 fn read_alerts(path: &Path) -> Vec<Value> {

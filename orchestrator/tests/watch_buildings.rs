@@ -13,16 +13,10 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 mod common;
-use common::fmu_dir;
+use common::twin_cmd;
 
 /// The stiffness step of the changed streams, s.
 const CHANGE_AT: f64 = 30.0;
-
-fn twin_cmd() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
-    cmd.env("TWIN_FMU_DIR", fmu_dir());
-    cmd
-}
 
 fn run(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().expect("twin runs");

@@ -12,15 +12,9 @@ use serde_json::Value;
 use structure::{Excitation, Structure};
 
 mod common;
-use common::fmu_dir;
+use common::twin_cmd;
 
 const CHANGE_AT: f64 = 150.0;
-
-fn twin_cmd() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
-    cmd.env("TWIN_FMU_DIR", fmu_dir());
-    cmd
-}
 
 fn run(cmd: &mut Command) {
     let out = cmd.output().expect("twin runs");

@@ -79,6 +79,22 @@ pub fn hidden_change_twin() -> &'static orchestrator::twin::Twin {
 /// Sensor noise sd (m/s²) of the hidden-change records and their twin.
 pub const HIDDEN_CHANGE_NOISE_SD: f64 = 0.003;
 
+/// The `twin` binary of this build, on this build's FMUs (`TWIN_FMU_DIR`), without an FMU log.
+pub fn twin_cmd() -> std::process::Command {
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_twin"));
+    cmd.env("TWIN_FMU_DIR", fmu_dir())
+        .env_remove("TWIN_FMU_LOG");
+    cmd
+}
+
+/// `twin ARGS`, run to its end: its output.
+pub fn twin(args: &[&str]) -> std::process::Output {
+    twin_cmd()
+        .args(args)
+        .output()
+        .expect("the twin binary runs")
+}
+
 /// The worst floor's value.
 pub fn worst(x: &[f64]) -> f64 {
     x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
