@@ -1072,11 +1072,13 @@ fn a_change_is_located_and_a_stream_that_ends_failing_is_not_recovered() {
     assert_eq!(alerts[0]["still_failing"], serde_json::json!([]));
 }
 
-/// A stream whose structure changes at `changes` (parameter, time, factor), 51.2 Hz, as CSV.
-fn stream_with(seed: u64, duration: f64, changes: &[(&str, f64, f64)]) -> String {
-    use orchestrator::synth::{
-        synth_record, Change, ChangeHow, GroundMotion, NoiseLevel, ParamName, Scenario,
-    };
+/// A stream of the hidden-change twin's structure (its sensor noise, 51.2 Hz), `edit`ed, as CSV.
+fn stream_of(
+    seed: u64,
+    duration: f64,
+    edit: impl FnOnce(&mut orchestrator::synth::Scenario),
+) -> String {
+    use orchestrator::synth::{synth_record, GroundMotion, NoiseLevel, Scenario};
     let mut s = Scenario {
         seed,
         duration,
@@ -1084,14 +1086,22 @@ fn stream_with(seed: u64, duration: f64, changes: &[(&str, f64, f64)]) -> String
         ..Scenario::default()
     };
     s.noise.level = NoiseLevel::Sd(vec![HIDDEN_CHANGE_NOISE_SD; 3]);
-    for &(parameter, at, factor) in changes {
-        s.changes.push(Change {
-            at,
-            parameter: ParamName::parse(parameter).expect("a parameter"),
-            how: ChangeHow::Factor(factor),
-        });
-    }
+    edit(&mut s);
     csv_text(&synth_record(&s).expect("synth").0.measurement)
+}
+
+/// A stream whose structure changes at `changes` (parameter, time, factor), as CSV.
+fn stream_with(seed: u64, duration: f64, changes: &[(&str, f64, f64)]) -> String {
+    use orchestrator::synth::{Change, ChangeHow, ParamName};
+    stream_of(seed, duration, |s| {
+        for &(parameter, at, factor) in changes {
+            s.changes.push(Change {
+                at,
+                parameter: ParamName::parse(parameter).expect("a parameter"),
+                how: ChangeHow::Factor(factor),
+            });
+        }
+    })
 }
 
 /// `twin watch` of `csv` with `extra` flags, alerts to `NAME.jsonl`, a checkpoint beside.
@@ -1249,4 +1259,63 @@ fn a_change_that_fails_on_and_off_is_one_change_looked_at_to_its_answer() {
     let adopted = of_kind(&all, "adopted");
     assert_eq!(adopted.len(), 1, "{all:?}");
     assert_eq!(adopted[0]["verdict"], "recalibrate:c2", "{all:?}");
+}
+
+/// A contact that starts: from a random time the force triples and floors 2 and 3 begin to
+/// touch (a bumper of 0.5 mm, 9000 N/m). The watch's firm `add_physics` verdict is adopted —
+/// the contact switched on in the twin with its jointly fitted gap and stiffness — and no
+/// window fails after it.
+#[test]
+fn a_contact_that_starts_is_added_and_adopted() {
+    use orchestrator::synth::ForceWindow;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let at = random_time(204, 10.0, 20.0);
+    let csv = dir.path().join("record.csv");
+    let text = stream_of(9, at + 40.0, |s| {
+        s.force.windows.push(ForceWindow {
+            start: at,
+            end: at + 40.0,
+            gain: 3.0,
+            ramp: 0.5,
+        });
+        s.effects.push(EffectSpec::Contact {
+            lower: 2,
+            gap: 5e-4,
+            stiffness: 9000.0,
+            side: 0,
+        });
+    });
+    std::fs::write(&csv, text).expect("write");
+    let all = watch_named(
+        dir.path(),
+        "contact",
+        &csv,
+        &["--diagnosis-wait", "--adopt"],
+    );
+    let adopted = of_kind(&all, "adopted");
+    assert_eq!(adopted.len(), 1, "{all:?}");
+    let a = adopted[0];
+    eprintln!("contact from {at:.3} s: {a}");
+    assert_eq!(a["verdict"], "add_physics:contact@2-3:both", "{a}");
+    let twin = PathBuf::from(a["twin"].as_str().expect("the twin's path"));
+    let gap = parameter_of(&twin, "contact23_gap");
+    let stiffness = parameter_of(&twin, "contact23_stiffness");
+    eprintln!("gap {gap:.4e} m, stiffness {stiffness:.0} N/m");
+    assert!((gap / 5e-4 - 1.0).abs() < 0.05, "gap {gap}");
+    assert!(
+        (stiffness / 9000.0 - 1.0).abs() < 0.2,
+        "stiffness {stiffness}"
+    );
+    let swapped = a["time"].as_f64().expect("time");
+    assert!(
+        of_kind(&all, "failing")
+            .iter()
+            .all(|f| f["time"].as_f64().is_some_and(|t| t < swapped)),
+        "{all:?}"
+    );
+    assert_eq!(
+        of_kind(&all, "end")[0]["still_failing"],
+        serde_json::json!([]),
+        "{all:?}"
+    );
 }

@@ -280,7 +280,8 @@ class Twin:
         exception it raises stops the watch and is raised here. ``diagnosis=False`` is
         ``--no-diagnosis``, ``learning=False`` ``--no-learning``, ``diagnosis_wait=True``
         ``--diagnosis-wait`` (a recorded stream replayed at full speed), ``adopt=True``
-        ``--adopt`` (a firm recalibration swapped into the watch, its twin beside the alerts).
+        ``--adopt`` (a firm recalibration or added effect swapped into the watch, its twin beside the
+        alerts).
         Returns the ``end`` alert's summary."""
         summary = self._native.watch(
             str(source), str(alerts), on_alert=on_alert, columns=columns, client_id=client_id, follow=follow, idle=idle,

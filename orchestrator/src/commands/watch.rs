@@ -92,10 +92,11 @@ pub struct WatchArgs {
     /// at full speed, which would otherwise outrun its diagnoses (a live stream never waits).
     #[arg(long, conflicts_with = "no_diagnosis")]
     pub diagnosis_wait: bool,
-    /// Unattended operation: adopt a firm `recalibrate` verdict (two looks after a located
-    /// change agree) — the recalibrated twin written beside the alerts (ALERTS.twin-K.ssp) and
-    /// swapped into the running watch at once, going on from the old twin's state; an
-    /// `adopted` alert, and the checkpoint records which twin is live from when.
+    /// Unattended operation: adopt a firm `recalibrate` or `add_physics` verdict (two looks
+    /// after a located change agree; library effects) — the twin it names written beside the
+    /// alerts (ALERTS.twin-K.ssp) and swapped into the running watch at once, going on from
+    /// its own state over the samples kept; an `adopted` alert, and the checkpoint records
+    /// which twin is live from when.
     #[arg(long, conflicts_with = "no_diagnosis")]
     pub adopt: bool,
     /// With a GP corrector: query where its latent variance V(f) exceeds this (m²/s⁴);

@@ -133,6 +133,17 @@ impl Candidate {
         out
     }
 
+    /// The estimated parameters' FMU names and short names (a report's keys), in the
+    /// library's order.
+    pub fn parameter_names(&self) -> Vec<(String, &'static str)> {
+        let p = self.prefix();
+        self.kind
+            .real_params()
+            .iter()
+            .map(|param| (format!("{p}_{}", param.suffix), param.suffix))
+            .collect()
+    }
+
     /// The estimated parameters (FMU names, short names) and their priors.
     ///
     /// - contact: gap, log-normal around 0.7 × the storey's drift RMS (contact needs a gap the
@@ -143,7 +154,6 @@ impl Candidate {
     /// - friction: force, log-normal around 5 % of the force RMS, a factor e² per sd; velocity
     ///   scale, log-normal around 10 % of the floor's velocity RMS, a factor e per sd.
     pub fn parameters(&self, scales: &Scales) -> Vec<(String, &'static str, Prior)> {
-        let p = self.prefix();
         let i = self.at - 1;
         let positive = |x: f64| if x > 0.0 && x.is_finite() { x } else { 1.0 };
         // In the order of the library's parameter list.
@@ -161,11 +171,10 @@ impl Candidate {
                 Prior::log((0.1 * positive(scales.velocity_rms[i])).ln(), 1.0),
             ],
         };
-        self.kind
-            .real_params()
-            .iter()
+        self.parameter_names()
+            .into_iter()
             .zip(priors)
-            .map(|(param, prior)| (format!("{p}_{}", param.suffix), param.suffix, prior))
+            .map(|((name, short), prior)| (name, short, prior))
             .collect()
     }
 }

@@ -35,7 +35,7 @@ use crate::fsutil::{write_text_atomically, WriteError};
 use crate::record::{default_header, ColumnMap, LineLayout};
 pub use crate::record::{nominal_step, DEFAULT_HEADER};
 use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
-use crate::twin::{Twin, TwinError};
+use crate::twin::{ParameterValue, Twin, TwinError};
 use background::{Background, Columns, DiagnosisOptions, Finished};
 use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
 use online::{names_and_floors, Detector, Event, Options};
@@ -127,8 +127,8 @@ pub struct WatchOptions {
     pub columns: ColumnMap,
     /// Frequency tracking on a sliding window (None: off).
     pub modes: Option<modes::TrackOptions>,
-    /// Adopt a firm `recalibrate` verdict: the recalibrated twin written beside the alerts and
-    /// swapped into the running watch ([`Adopted`]).
+    /// Adopt a firm `recalibrate` or `add_physics` verdict: the twin it names written beside
+    /// the alerts and swapped into the running watch ([`Adopted`]).
     pub adopt: bool,
 }
 
@@ -1294,14 +1294,8 @@ impl Watcher<'_> {
             Ok(d) => {
                 let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
                 let path = background::report_path(&self.options.alerts, k);
-                if self.options.adopt && firm && d.action == Action::Recalibrate {
-                    let parameters = d.recalibration.as_ref().map(|r| {
-                        r.parameters
-                            .iter()
-                            .map(|p| (p.name.clone(), p.after))
-                            .collect::<Vec<_>>()
-                    });
-                    adoption = parameters.map(|p| (p, background::verdict(&d), path.clone()));
+                if self.options.adopt && firm {
+                    adoption = answer(&d).map(|p| (p, background::verdict(&d), path.clone()));
                 }
                 let text = serde_json::to_string_pretty(&d)
                     .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
@@ -1345,21 +1339,22 @@ impl Watcher<'_> {
         }
     }
 
-    /// Adopt the recalibrated twin: written beside the alerts, swapped in at the current point,
+    /// Adopt the twin a firm verdict names ([`answer`]): written beside the alerts, swapped in
+    /// at the current point,
     /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it. Its
     /// physics goes on from the state it reaches over the samples kept (from rest 70 s back
     /// with the defaults: what is left of the start is e^(−ζωt), far below the noise), not from
     /// the old twin's, which has been failing since the change; no sample is lost.
     fn adopt(
         &mut self,
-        parameters: &[(String, f64)],
+        parameters: &[(String, ParameterValue)],
         verdict: String,
         report: PathBuf,
     ) -> Result<(), WatchError> {
         let Some((time, excitation)) = self.stepper.last() else {
             return Ok(());
         };
-        let adopted = recalibrated(&self.live, parameters)?;
+        let adopted = answered(&self.live, parameters)?;
         let path = adopted_path(&self.options.alerts, self.state.adopted.len() + 1);
         adopted.write(&path)?;
         let (mut stepper, _) = open_stepper(
@@ -1404,7 +1399,11 @@ impl Watcher<'_> {
             "adopted",
             json!({"twin": path, "verdict": verdict, "report": report, "resolves": resolved,
                    "from": if state.is_some() { "its state over the samples kept" } else { "rest" },
-                   "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>()}),
+                   "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": match v {
+                       ParameterValue::Real(x) => json!(x),
+                       ParameterValue::Integer(i) => json!(i),
+                       ParameterValue::Boolean(b) => json!(b),
+                   }})).collect::<Vec<_>>()}),
         )
     }
 }
@@ -1435,9 +1434,45 @@ fn open_stepper(
     Ok((stepper, budget))
 }
 
-/// The twin a firm `recalibrate` verdict names: `live` with the recalibrated physics
-/// parameters, its noise variances and posterior kept (the stream's noise did not change).
-fn recalibrated(live: &Twin, parameters: &[(String, f64)]) -> Result<Twin, WatchError> {
+/// The physics parameters a firm verdict sets: a recalibration's every parameter; the
+/// library effects `add_physics` names, switched on with their jointly fitted values, and the
+/// physics that moved with them. None for any other verdict, and for a discovered effect (its
+/// twin comes from `twin add-physics`, which refits its terms).
+fn answer(d: &crate::workflows::diagnose::Diagnosis) -> Option<Vec<(String, ParameterValue)>> {
+    use crate::workflows::diagnose::Candidate;
+    let real = |(name, value): (String, f64)| (name, ParameterValue::Real(value));
+    match d.action {
+        Action::Recalibrate => Some(
+            d.recalibration
+                .as_ref()?
+                .parameters
+                .iter()
+                .map(|p| real((p.name.clone(), p.after)))
+                .collect(),
+        ),
+        Action::AddPhysics if !d.effects.is_empty() => {
+            let mut set = Vec::new();
+            for e in &d.effects {
+                let c = Candidate::parse(&e.name.label, structure::MAX_STOREYS).ok()?;
+                set.extend(c.switches());
+                for (name, short) in c.parameter_names() {
+                    set.push(real((name, *e.parameters.get(short)?)));
+                }
+            }
+            set.extend(
+                d.physics_moved
+                    .iter()
+                    .map(|p| real((p.name.clone(), p.after))),
+            );
+            Some(set)
+        }
+        _ => None,
+    }
+}
+
+/// The twin a firm verdict names ([`answer`]): `live` with those physics parameters, its noise
+/// variances and posterior kept (the stream's noise did not change).
+fn answered(live: &Twin, parameters: &[(String, ParameterValue)]) -> Result<Twin, WatchError> {
     let mut twin = live.duplicate();
     let physics = twin.component_mut(crate::twin::PHYSICS).ok_or_else(|| {
         WatchError::Twin(TwinError::Message(format!(
@@ -1446,9 +1481,7 @@ fn recalibrated(live: &Twin, parameters: &[(String, f64)]) -> Result<Twin, Watch
         )))
     })?;
     for (name, value) in parameters {
-        physics
-            .parameters
-            .insert(name.clone(), crate::twin::ParameterValue::Real(*value));
+        physics.parameters.insert(name.clone(), value.clone());
     }
     twin.source = None;
     Ok(twin)
