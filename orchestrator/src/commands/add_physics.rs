@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::diagnose::options;
+use super::diagnose::{options, pct};
 use super::write_json;
 use crate::twin::data::Measurement;
 use crate::twin::{RecordRef, RecordRole, Twin};
@@ -100,10 +100,6 @@ fn fitted_records(paths: &[PathBuf]) -> Result<Vec<RecordRef>> {
 
 fn print_records(text: &mut String, records: &[RecordNmse]) {
     use std::fmt::Write;
-    let pct = |x: &[f64]| {
-        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
-        format!("{} %", values.join(" / "))
-    };
     let _ = writeln!(text, "NMSE per record and channel, before → after:");
     for r in records {
         let _ = writeln!(
@@ -204,10 +200,6 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
-    let pct = |x: &[f64]| {
-        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
-        format!("{} %", values.join(" / "))
-    };
     for effect in &report.effects {
         let _ = writeln!(text, "effect        {}", effect.name.label);
         for t in &effect.terms {

@@ -225,12 +225,19 @@ fn sensing_lines(d: &Diagnosis) -> String {
     s
 }
 
-/// What `twin diagnose` prints.
+/// What `twin diagnose` prints: the error, the fits, the answer.
 pub fn summary(d: &Diagnosis) -> String {
-    let pct = |x: &[f64]| {
-        let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
-        format!("{} %", values.join(" / "))
-    };
+    the_error(d) + &the_fits(d) + &the_answer(d)
+}
+
+/// Per-channel NMSEs, `a / b / c %`.
+pub(super) fn pct(x: &[f64]) -> String {
+    let values: Vec<String> = x.iter().map(|v| format!("{v:.3}")).collect();
+    format!("{} %", values.join(" / "))
+}
+
+/// The record, the twin's error on it and whether it is significant.
+fn the_error(d: &Diagnosis) -> String {
     let mut s = String::new();
     s += &format!("record        {}\n", d.record);
     s += &format!("channels      {}\n", d.channels.join(" / "));
@@ -270,6 +277,12 @@ pub fn summary(d: &Diagnosis) -> String {
             .collect();
         s += &format!("failing       {}\n", w.join(", "));
     }
+    s
+}
+
+/// The recalibration, the candidates and the forward selection's rounds.
+fn the_fits(d: &Diagnosis) -> String {
+    let mut s = String::new();
     if let Some(r) = &d.recalibration {
         s += &format!(
             "recalibration {} (held out {}), evidence {:.1}\n",
@@ -310,6 +323,12 @@ pub fn summary(d: &Diagnosis) -> String {
             if step.joint_kept { "" } else { ", not kept" }
         );
     }
+    s
+}
+
+/// The action, what it adds or moves, the NMSE after, the modes and why.
+fn the_answer(d: &Diagnosis) -> String {
+    let mut s = String::new();
     s += &format!("action        {}\n", d.action.name());
     for e in &d.effects {
         let params: Vec<String> = e
