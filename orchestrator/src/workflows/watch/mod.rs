@@ -1526,24 +1526,7 @@ pub fn watch_observed(
     observer: Option<&mut dyn Observer>,
 ) -> Result<Summary, WatchError> {
     let structure = twin.structure()?;
-    if !(options.window > 0.0 && options.window.is_finite()) {
-        return Err(WatchError::Options(format!(
-            "--window must be a positive number of seconds, was {}",
-            options.window
-        )));
-    }
-    if options.checkpoint_every == 0 {
-        return Err(WatchError::Options(
-            "--checkpoint-every must be at least 1".into(),
-        ));
-    }
-    if let Some(r) = options.rate {
-        if !(r > 0.0 && r.is_finite()) {
-            return Err(WatchError::Options(format!(
-                "--rate must be positive, was {r}"
-            )));
-        }
-    }
+    check_options(options)?;
     let tolerance = Tolerance::resolve(twin, options.tolerance);
     let detector_options = Options::new(
         CompareOptions {
@@ -1553,31 +1536,8 @@ pub fn watch_observed(
         },
         options.window,
     );
-    let saved: Option<State> = match &options.checkpoint {
-        Some(path) if path.exists() => {
-            let bad = |message: String| WatchError::BadCheckpoint {
-                path: path.clone(),
-                message,
-            };
-            let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-            let version = serde_json::from_str::<Value>(&text)
-                .ok()
-                .and_then(|v| v.get("version").and_then(Value::as_u64));
-            if version != Some(u64::from(CHECKPOINT_VERSION)) {
-                return Err(bad(format!(
-                    "format version {}, this twin writes {CHECKPOINT_VERSION}",
-                    version.map_or("unknown".into(), |v| v.to_string())
-                )));
-            }
-            let state: State = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
-            if state.options != detector_options {
-                return Err(bad(format!(
-                    "made with other comparison options ({:?}) than these ({:?})",
-                    state.options, detector_options
-                )));
-            }
-            Some(state)
-        }
+    let saved = match &options.checkpoint {
+        Some(path) if path.exists() => Some(read_checkpoint(path, detector_options)?),
         _ => None,
     };
     // A watch that adopted a twin goes on with the last one it adopted.
@@ -1652,34 +1612,7 @@ pub fn watch_observed(
             }
             state
         }
-        None => State {
-            version: CHECKPOINT_VERSION,
-            options: detector_options,
-            dt: None,
-            lines: 0,
-            samples: 0,
-            last_time: None,
-            segment_start: None,
-            segment_count: 0,
-            excitation,
-            channels: channels.clone(),
-            header: None,
-            noise_variance: None,
-            reference: Welford::default(),
-            held: Vec::new(),
-            detector: None,
-            bad_lines: 0,
-            duplicates: 0,
-            gaps: 0,
-            missing_samples: 0,
-            seq: 0,
-            alerts: BTreeMap::new(),
-            fmu: Vec::new(),
-            fmu_last: None,
-            background: background::Saved::default(),
-            supervisor: None,
-            adopted: Vec::new(),
-        },
+        None => State::fresh(detector_options, excitation, channels.clone()),
     };
     if from_broker {
         state.header = Some(header_line.clone());
@@ -1709,19 +1642,7 @@ pub fn watch_observed(
         .map(|&c| twin.noise_variance_of(c))
         .collect();
     let twin_modes = match &options.modes {
-        Some(track) => {
-            track.validate().map_err(WatchError::Options)?;
-            Some(
-                crate::workflows::modal::twin_modes(
-                    twin,
-                    &crate::workflows::modal::ModalOptions {
-                        samples: 0,
-                        ..Default::default()
-                    },
-                )
-                .map_err(|e| WatchError::Options(format!("the twin's modes: {e}")))?,
-            )
-        }
+        Some(track) => Some(modes_to_track(twin, track)?),
         None => None,
     };
     let mut w = Watcher {
@@ -1928,6 +1849,106 @@ pub fn watch_observed(
         m.close(Duration::from_secs(5));
     }
     Ok(summary)
+}
+
+/// The options `watch_observed` checks itself: the window, the checkpoint interval, the rate.
+fn check_options(options: &WatchOptions) -> Result<(), WatchError> {
+    if !(options.window > 0.0 && options.window.is_finite()) {
+        return Err(WatchError::Options(format!(
+            "--window must be a positive number of seconds, was {}",
+            options.window
+        )));
+    }
+    if options.checkpoint_every == 0 {
+        return Err(WatchError::Options(
+            "--checkpoint-every must be at least 1".into(),
+        ));
+    }
+    if let Some(r) = options.rate {
+        if !(r > 0.0 && r.is_finite()) {
+            return Err(WatchError::Options(format!(
+                "--rate must be positive, was {r}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// A checkpoint's state, refused (naming the file) when it is of another format version or
+/// was made with other comparison options.
+fn read_checkpoint(path: &Path, detector_options: Options) -> Result<State, WatchError> {
+    let bad = |message: String| WatchError::BadCheckpoint {
+        path: path.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let version = serde_json::from_str::<Value>(&text)
+        .ok()
+        .and_then(|v| v.get("version").and_then(Value::as_u64));
+    if version != Some(u64::from(CHECKPOINT_VERSION)) {
+        return Err(bad(format!(
+            "format version {}, this twin writes {CHECKPOINT_VERSION}",
+            version.map_or("unknown".into(), |v| v.to_string())
+        )));
+    }
+    let state: State = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    if state.options != detector_options {
+        return Err(bad(format!(
+            "made with other comparison options ({:?}) than these ({:?})",
+            state.options, detector_options
+        )));
+    }
+    Ok(state)
+}
+
+/// The twin's modes for `--track-modes` (its options checked first).
+fn modes_to_track(
+    twin: &Twin,
+    track: &modes::TrackOptions,
+) -> Result<crate::workflows::modal::TwinModes, WatchError> {
+    track.validate().map_err(WatchError::Options)?;
+    crate::workflows::modal::twin_modes(
+        twin,
+        &crate::workflows::modal::ModalOptions {
+            samples: 0,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| WatchError::Options(format!("the twin's modes: {e}")))
+}
+
+impl State {
+    /// A new watch's state: nothing read yet.
+    fn fresh(options: Options, excitation: Channel, channels: Vec<Channel>) -> Self {
+        State {
+            version: CHECKPOINT_VERSION,
+            options,
+            dt: None,
+            lines: 0,
+            samples: 0,
+            last_time: None,
+            segment_start: None,
+            segment_count: 0,
+            excitation,
+            channels,
+            header: None,
+            noise_variance: None,
+            reference: Welford::default(),
+            held: Vec::new(),
+            detector: None,
+            bad_lines: 0,
+            duplicates: 0,
+            gaps: 0,
+            missing_samples: 0,
+            seq: 0,
+            alerts: BTreeMap::new(),
+            fmu: Vec::new(),
+            fmu_last: None,
+            background: background::Saved::default(),
+            supervisor: None,
+            adopted: Vec::new(),
+        }
+    }
 }
 
 /// Whether a line of an MQTT stream is a header (it starts with a letter, as a column name
