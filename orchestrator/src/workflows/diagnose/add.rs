@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::{
     effect_report, estimates, fit, fitting_twin, prior_scales, run_physics, Action,
     AddPhysicsReport, Addition, Candidate, DiagnoseError, DiagnoseOptions, EffectReport, Estimate,
-    PhysicsReals, RecordNmse, Result,
+    PhysicsReals, RecordNmse, Result, Split,
 };
 use crate::evaluation::stats::first_after_transient;
 use crate::twin::data::Measurement;
@@ -103,9 +103,13 @@ pub fn add_physics(
         data,
         names.clone(),
         priors.clone(),
-        &mask,
-        &after,
-        first,
+        // Every start on every sample: add-physics is not told where the effect shows.
+        Split {
+            mask: &mask,
+            held_out: &after,
+            first,
+            climb: false,
+        },
         options.starts.max(8),
         options.simulations_per_start * candidates.len(),
         options,

@@ -684,7 +684,7 @@ pub(super) fn missing(
     let gates = ctx.options.gates;
     let data = ctx.data;
     let n = data.len();
-    let fitted_idx: Vec<usize> = (0..n).filter(|&k| ctx.mask[k]).collect();
+    let fitted_idx: Vec<usize> = (0..n).filter(|&k| ctx.split.mask[k]).collect();
     // The regression problem around the run of the model at `values`, with `terms` (their
     // linearised response) added back to the residual.
     let problem = |values: &Estimates, run: &PhysicsRun, terms: &[Term]| -> Result<Found> {
@@ -728,12 +728,12 @@ pub(super) fn missing(
             variance: channels
                 .measured
                 .iter()
-                .map(|m| variance(&m[ctx.first..]))
+                .map(|m| variance(&m[ctx.split.first..]))
                 .collect(),
             dt: data.dt,
             fitted: &fitted_idx,
-            held_out: ctx.held_out,
-            first: ctx.first,
+            held_out: ctx.split.held_out,
+            first: ctx.split.first,
         };
         regress(&problem, gates.step_cut)
             .ok_or_else(|| DiagnoseError::Setup("no sparse model cuts the residual".into()))

@@ -725,17 +725,43 @@ fn fitting_twin(twin: &Twin, substeps: i32) -> Result<Twin> {
     Ok(coarse)
 }
 
-/// Fit `parameters` (with `priors`) of `twin`'s physics on the masked samples and score the
-/// fit on the whole record and on the held-out samples.
+/// The samples a fit uses: the fitted ones (`mask`), the held-out ones it is scored on, the
+/// first after the transient, and whether its starts climb the ladder of the record's heads
+/// (`calibrate::ladder`; see [`climbs`]).
+#[derive(Clone, Copy)]
+pub(super) struct Split<'a> {
+    pub mask: &'a [bool],
+    pub held_out: &'a [usize],
+    pub first: usize,
+    pub climb: bool,
+}
+
+/// Whether a diagnosis's fits on a record of `n` samples climb the ladder of its heads: when
+/// the record is long enough to have one (`ladder::rungs`) and the twin's error shows on its
+/// first rung (a failing window starts there), so that an effect or a change the fits are to
+/// find is in the samples the starts are screened on. An effect that shows only late in the
+/// record is fitted on every sample from every start.
+fn climbs(n: usize, time: &[f64], failing: &[FailingWindow]) -> bool {
+    let rungs = crate::workflows::calibrate::ladder::rungs(n);
+    let Some(&head) = rungs.first() else {
+        return false;
+    };
+    let head_end = time
+        .get(head.saturating_sub(1))
+        .copied()
+        .unwrap_or(f64::NEG_INFINITY);
+    failing.iter().any(|w| w.start < head_end)
+}
+
+/// Fit `parameters` (with `priors`) of `twin`'s physics on the `split`'s fitted samples and
+/// score the fit on the whole record and on the held-out samples.
 #[allow(clippy::too_many_arguments)]
 fn fit(
     twin: &Twin,
     data: &Measurement,
     parameters: Vec<String>,
     priors: BTreeMap<String, Prior>,
-    mask: &[bool],
-    held_out: &[usize],
-    first: usize,
+    split: Split,
     starts: usize,
     simulations_per_start: usize,
     options: &DiagnoseOptions,
@@ -750,13 +776,11 @@ fn fit(
         starts,
         seed: options.seed,
         threads: 1,
-        mask: Some(mask.to_vec()),
+        mask: Some(split.mask.to_vec()),
         simulations_per_start,
         initial: initial.clone(),
         starts_at,
-        // Every start on every sample: an effect or a change may show only late in the record,
-        // where the ladder's head would not see it.
-        climb: false,
+        climb: split.climb,
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
@@ -765,13 +789,13 @@ fn fit(
     };
     let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
     let run = run_physics(twin, data, &BTreeMap::new(), &parameters, &values)?;
-    let after: Vec<usize> = (first..data.len()).collect();
+    let after: Vec<usize> = (split.first..data.len()).collect();
     let channels = Channels::of(data, run.acc.len())?;
     let predicted = channels.predicted(&run);
     Ok(Fitted {
         evidence: calibration.log_evidence - baseline_evidence,
         nmse_after: channels.nmse_on(&predicted, &after),
-        nmse_held_out: channels.nmse_on(&predicted, held_out),
+        nmse_held_out: channels.nmse_on(&predicted, split.held_out),
         run,
         calibration,
     })
@@ -1241,15 +1265,23 @@ fn discovery<'s>(
 /// The views the stages after the baseline read of it.
 impl Baseline {
     /// What round 1's stages share, on `data` under `options`.
+    /// The record's fitted and held-out samples as the fits take them.
+    fn split(&self) -> Split<'_> {
+        Split {
+            mask: &self.samples.mask,
+            held_out: &self.samples.held_out,
+            first: self.samples.first,
+            climb: self.climb,
+        }
+    }
+
     fn ground<'a>(&'a self, data: &'a Measurement, options: &'a DiagnoseOptions) -> Ground<'a> {
         Ground {
             data,
             options,
             physics: &self.physics,
             storeys: self.storeys,
-            first: self.samples.first,
-            mask: &self.samples.mask,
-            held_out: &self.samples.held_out,
+            split: self.split(),
             channels: &self.channels,
             reals: &self.reals,
             scales: &self.scales,
@@ -1271,9 +1303,7 @@ impl Baseline {
             options,
             scales: &self.scales,
             reals: &self.reals,
-            mask: &self.samples.mask,
-            held_out: &self.samples.held_out,
-            first: self.samples.first,
+            split: self.split(),
             baseline_evidence,
             explained_held_out: (0..self.nc)
                 .map(|c| self.scores.noise_nmse_held_out[c] + self.scores.band_nmse[c])
@@ -1325,6 +1355,8 @@ struct Baseline {
     mass: Vec<f64>,
     /// What the candidates' priors are scaled by.
     scales: Scales,
+    /// Whether the fits climb the ladder of the record's heads (see [`climbs`]).
+    climb: bool,
 }
 
 /// The record's samples and their split into fitted and held-out blocks.
@@ -1409,7 +1441,7 @@ fn baseline(
         .map(|f| reals.get(&format!("m{f}")))
         .collect::<Result<Vec<f64>>>()?;
     let scales = prior_scales(&reals, &base_run, data, samples.first)?;
-    let baseline = Baseline {
+    let mut baseline = Baseline {
         samples,
         storeys,
         nc: channels.len(),
@@ -1421,8 +1453,10 @@ fn baseline(
         reals,
         mass,
         scales,
+        climb: false,
     };
     let shown = baseline.shown(twin, data, compared);
+    baseline.climb = climbs(data.len(), &data.time, &shown.failing_windows);
     let diagnosis = baseline.report(twin, data, options, shown);
     Ok((baseline, diagnosis))
 }
@@ -1674,9 +1708,7 @@ struct Ground<'a> {
     options: &'a DiagnoseOptions,
     physics: &'a Twin,
     storeys: usize,
-    first: usize,
-    mask: &'a [bool],
-    held_out: &'a [usize],
+    split: Split<'a>,
     channels: &'a Channels,
     reals: &'a PhysicsReals,
     scales: &'a Scales,
@@ -1703,9 +1735,13 @@ fn screened(
         data,
         options,
         storeys,
-        first,
-        mask,
-        held_out,
+        split:
+            Split {
+                first,
+                mask,
+                held_out,
+                ..
+            },
         channels,
         reals,
         base_run,
@@ -1740,7 +1776,7 @@ fn screened(
                 .collect(),
             dt: data.dt,
             fitted: &fitted_idx,
-            held_out: &held_out,
+            held_out,
             first,
         };
         let scores = discover::screen(&problem, &candidates);
@@ -1764,9 +1800,7 @@ fn fit_round_one(
         options,
         physics,
         storeys,
-        first,
-        mask,
-        held_out,
+        split,
         reals,
         scales,
         ..
@@ -1809,9 +1843,7 @@ fn fit_round_one(
                     data,
                     parameter_names(storeys),
                     BTreeMap::new(),
-                    &mask,
-                    &held_out,
-                    first,
+                    split,
                     options.recalibration_starts + 1,
                     crate::workflows::calibrate::SIMULATIONS_PER_START,
                     options,
@@ -1827,9 +1859,7 @@ fn fit_round_one(
                         data,
                         params.iter().map(|p| p.0.clone()).collect(),
                         params.iter().map(|p| (p.0.clone(), p.2)).collect(),
-                        &mask,
-                        &held_out,
-                        first,
+                        split,
                         options.starts,
                         options.simulations_per_start,
                         options,
@@ -2532,6 +2562,38 @@ fn localise(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fits climb only on records long enough for a ladder, and only when the error shows
+    /// on its first rung: a window failing from the start of the record, not one that opens
+    /// after the head the starts are screened on.
+    #[test]
+    fn the_fits_climb_only_where_the_error_shows_on_the_first_rung() {
+        let dt = 0.01;
+        let time = |n: usize| (0..n).map(|k| k as f64 * dt).collect::<Vec<f64>>();
+        let window = |start: f64, end: f64| FailingWindow {
+            start,
+            end,
+            channels: vec!["acc1".into()],
+            floors: vec![1],
+            nmse: vec![10.0],
+        };
+        let head_end = (crate::workflows::calibrate::ladder::STRETCH - 1) as f64 * dt;
+        let long = 3 * crate::workflows::calibrate::ladder::STRETCH;
+        assert!(climbs(long, &time(long), &[window(2.0, 5.0)]));
+        assert!(climbs(
+            long,
+            &time(long),
+            &[window(head_end - 0.5, head_end + 9.0)]
+        ));
+        assert!(!climbs(
+            long,
+            &time(long),
+            &[window(head_end + 0.5, head_end + 9.0)]
+        ));
+        assert!(!climbs(long, &time(long), &[]));
+        let short = 2 * crate::workflows::calibrate::ladder::STRETCH;
+        assert!(!climbs(short, &time(short), &[window(2.0, 5.0)]));
+    }
 
     /// The localisation reads a velocity sensor's residual differentiated once and a
     /// displacement sensor's twice (a residual sin(ωt) gives ω·cos and −ω²·sin within the
