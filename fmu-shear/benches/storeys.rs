@@ -12,18 +12,24 @@
 //! other structures took before), and `exact_rig/3` the paper's rig (force at floor 1) on its
 //! fixed-array path (`piecewise`).
 //!
+//! Group "smooth": the same record with friction on floor 1 (0.1 N, 1 mm/s) or a cubic spring in
+//! storey 1 (1e9 N/m³) at N = 4, 10, stepped as a diagnosis's fits step them (RK4, 8 fixed
+//! sub-steps a sample, `Integrator::ExactContactsElseFixed`).
+//!
 //! `cargo bench -p fmu-shear --bench storeys`. Ids in group "storeys": `record/N`,
 //! `record_sensitivities/N`, `step_map/N`, `sensitivity_maps/N`; in group "contacts":
-//! `exact/N`, `exact_cold/N`, `error_controlled/N`, `exact_rig/3`.
+//! `exact/N`, `exact_cold/N`, `error_controlled/N`, `exact_rig/3`; in group "smooth":
+//! `friction_fixed8/N`, `cubic_fixed8/N`.
 
 use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use fmu_shear::effects::{contact, Contact, Effects, Law};
+use fmu_shear::effects::{contact, Contact, Cubic, Effects, Friction, Law};
 use fmu_shear::integrate::dopri5_with_events;
 use fmu_shear::linear::LinearStepMap;
 use fmu_shear::linear::StepInputs;
+use fmu_shear::model::Integrator;
 use fmu_shear::sensitivity::SensitivityMaps;
 use fmu_shear::{ShearModel, ShearParameters};
 use structure::{Excitation, Structure};
@@ -191,5 +197,40 @@ fn contacts(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, contacts);
+fn smooth(c: &mut Criterion) {
+    let mut group = c.benchmark_group("smooth");
+    group.measurement_time(Duration::from_secs(3));
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(STEPS as u64));
+    let force = force();
+    let laws = [
+        (
+            "friction_fixed8",
+            0,
+            Law::Friction(Friction {
+                force: 0.1,
+                velocity_scale: 1e-3,
+            }),
+        ),
+        ("cubic_fixed8", 0, Law::Cubic(Cubic { stiffness: 1e9 })),
+    ];
+    for storeys in [4usize, 10] {
+        for (id, site, law) in &laws {
+            let mut model = ShearModel::new(params(storeys), Effects::new(storeys));
+            model.effects.switch_on(*site, law.clone());
+            model.integrator = Integrator::ExactContactsElseFixed;
+            model.params.substeps = 8;
+            group.bench_with_input(BenchmarkId::new(*id, storeys), &model, |b, m| {
+                let mut model = m.clone();
+                b.iter(|| {
+                    rest(&mut model);
+                    black_box(record(&mut model, &force))
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, contacts, smooth);
 criterion_main!(benches);

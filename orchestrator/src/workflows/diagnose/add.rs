@@ -243,8 +243,10 @@ pub fn refit_over_records(
         .iter()
         .map(|&data| RecordInput { data, mask: None })
         .collect();
+    // The sub-steps for the most coarsely sampled of the records.
+    let coarsest = records.iter().map(|r| r.dt).fold(0.0, f64::max);
     let calibration = match options.fit_substeps {
-        Some(substeps) => calibrate_records(&fitting_twin(switched, substeps)?, &inputs, &setup)?,
+        Some(most) => calibrate_records(&fitting_twin(switched, most, coarsest)?, &inputs, &setup)?,
         None => calibrate_records(switched, &inputs, &setup)?,
     };
     let mut chosen = switched.duplicate();

@@ -95,7 +95,7 @@ use structure::channel::{Channel, Quantity};
 use structure::effects::{Law, Placement, Term};
 
 use crate::cosim::import::ImportError;
-use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
+use crate::cosim::import::{Fmu, ModelDescription};
 use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
@@ -222,6 +222,25 @@ pub const SCREEN_DECISIVE: f64 = 0.5;
 /// every candidate's NMSE after its fit within 2e-3 % of the fit at 16 sub-steps, the same
 /// decision, 30 % less CPU. The fitted parameters are then scored with the twin's own integrator.
 pub const FIT_SUBSTEPS: i32 = 8;
+
+/// The largest phase (radians) of the structure's fastest mode over one RK4 sub-step of a fit.
+/// The paper's rig at its prior means (fastest mode 7.97 Hz) sampled at 51.2 Hz takes 0.98 rad
+/// a sample, so [`FIT_SUBSTEPS`] there (0.12 rad each, whose error is measured above). A record
+/// sampled far above its structure's modes needs fewer for the same error per period: the
+/// 4-storey frame at 322.58 Hz (fastest mode 8.4 Hz) takes 2. Below the rig's 0.12 so
+/// that its records and every slower-sampled one keep the full [`FIT_SUBSTEPS`].
+pub const FIT_STEP_PHASE: f64 = 0.1;
+
+/// The RK4 sub-steps a sample of the fits take: as many as keep the structure's fastest mode
+/// (`fastest_hz`) within [`FIT_STEP_PHASE`] a sub-step at the sampling step `dt`, at most
+/// `most`, at least one.
+pub fn fit_substeps(most: i32, fastest_hz: f64, dt: f64) -> i32 {
+    let phase = 2.0 * std::f64::consts::PI * fastest_hz * dt;
+    if !(phase.is_finite() && phase > 0.0) {
+        return most;
+    }
+    ((phase / FIT_STEP_PHASE).ceil() as i32).clamp(1, most.max(1))
+}
 
 #[derive(Clone, Debug)]
 pub struct DiagnoseOptions {
@@ -598,6 +617,26 @@ impl PhysicsReals {
         })
     }
 
+    /// The structure's fastest undamped mode (Hz) at these values.
+    fn fastest_mode_hz(&self) -> Result<f64> {
+        let per_storey = |p: char| -> Result<Vec<f64>> {
+            (1..=self.storeys)
+                .map(|i| self.get(&format!("{p}{i}")))
+                .collect()
+        };
+        let structure = ::structure::building::Structure {
+            mass: per_storey('m')?,
+            damping: per_storey('c')?,
+            stiffness: per_storey('k')?,
+            excitation: Default::default(),
+        };
+        Ok(structure
+            .natural_frequencies()
+            .last()
+            .copied()
+            .unwrap_or(f64::NAN))
+    }
+
     fn get(&self, name: &str) -> Result<f64> {
         if let Some(ParameterValue::Real(x)) = self.given.get(name) {
             return Ok(*x);
@@ -701,19 +740,33 @@ fn with_switches(physics: &Twin, candidate: Option<&Candidate>) -> Result<Twin> 
     Ok(out)
 }
 
-/// The twin a candidate is fitted with: the shear FMU at `substeps` RK4 sub-steps, and, where
-/// the FMU has the choice (`integrator` = 2), contacts alone still stepped exactly (they are
-/// cheaper so than by sub-steps) while every other effect takes the fixed sub-steps instead of
-/// the error-controlled path, whose tolerance the scoring run keeps.
-fn fitting_twin(twin: &Twin, substeps: i32) -> Result<Twin> {
+/// The twin a candidate is fitted with on a record sampled every `dt`: the shear FMU at
+/// `most` RK4 sub-steps, fewer when every effect switched on is a contact or a cubic spring
+/// (the structure's fastest mode sets them, [`fit_substeps`]; friction and discovered terms
+/// keep `most`, as their force laws have time scales of their own — a friction fitted at two
+/// sub-steps a sample on the 4-storey contact record went to a sharp law the finer scoring run
+/// rejected), and, where the FMU has the choice (`integrator` = 2), contacts alone still
+/// stepped exactly (they are cheaper so than by sub-steps) while every other effect takes the
+/// fixed sub-steps instead of the error-controlled path, whose tolerance the scoring run keeps.
+fn fitting_twin(twin: &Twin, most: i32, dt: f64) -> Result<Twin> {
     let mut coarse = twin.duplicate();
+    let reals = PhysicsReals::of(&coarse)?;
     let component = coarse
         .component_mut(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    let chooses = UnpackedFmu::open(&component.fmu_path)?
-        .model_description
-        .variable("integrator")
-        .is_some();
+    let polynomial = component
+        .parameters
+        .iter()
+        .filter(|(name, value)| {
+            name.ends_with("_enabled") && **value == ParameterValue::Boolean(true)
+        })
+        .all(|(name, _)| name.starts_with("cubic") || name.starts_with("contact"));
+    let substeps = if polynomial {
+        fit_substeps(most, reals.fastest_mode_hz()?, dt)
+    } else {
+        most
+    };
+    let chooses = reals.model_description.variable("integrator").is_some();
     component
         .parameters
         .insert("substeps".into(), ParameterValue::Integer(substeps));
@@ -784,7 +837,7 @@ fn fit(
         ..CalibrationSetup::default()
     };
     let calibration = match options.fit_substeps {
-        Some(substeps) => calibrate(&fitting_twin(twin, substeps)?, data, &setup)?,
+        Some(most) => calibrate(&fitting_twin(twin, most, data.dt)?, data, &setup)?,
         None => calibrate(twin, data, &setup)?,
     };
     let values: Vec<f64> = calibration.parameters.iter().map(|p| p.value).collect();
@@ -2562,6 +2615,24 @@ fn localise(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fits' sub-steps follow the structure's fastest mode: the rig at 51.2 Hz keeps all
+    /// eight, the 4-storey frame sampled at 322.58 Hz takes two, a building whose fastest mode
+    /// is unknown keeps all, and none takes fewer than one or more than asked.
+    #[test]
+    fn the_fits_sub_steps_follow_the_fastest_mode() {
+        let rig = ::structure::building::Structure::default().natural_frequencies();
+        let fastest = *rig.last().unwrap();
+        assert!((fastest - 7.97).abs() < 0.01, "{fastest}");
+        assert_eq!(
+            fit_substeps(FIT_SUBSTEPS, fastest, 1.0 / 51.2),
+            FIT_SUBSTEPS
+        );
+        assert_eq!(fit_substeps(FIT_SUBSTEPS, 8.4, 1.0 / 322.58), 2);
+        assert_eq!(fit_substeps(FIT_SUBSTEPS, f64::NAN, 0.01), FIT_SUBSTEPS);
+        assert_eq!(fit_substeps(FIT_SUBSTEPS, 0.01, 0.001), 1);
+        assert_eq!(fit_substeps(4, 100.0, 0.01), 4);
+    }
 
     /// The fits climb only on records long enough for a ladder, and only when the error shows
     /// on its first rung: a window failing from the start of the record, not one that opens
