@@ -1548,43 +1548,11 @@ pub fn watch_observed(
     let twin = resumed.as_ref().unwrap_or(twin);
     let mut reader = LineReader::open(&options.source)?;
     let from_broker = matches!(reader, LineReader::Mqtt(_));
-    // The header: a file or standard input starts with its own; an MQTT stream's is the one
-    // its last run saw, else its first line if that is a header, else time, the excitation
-    // and an accelerometer on every floor (the paper rig's `time,force,acc1,acc2,acc3`).
-    let mut early_events = Vec::new();
-    let mut pushed_back = None;
-    let header_line = if from_broker {
-        match saved.as_ref().and_then(|s| s.header.clone()) {
-            Some(h) => h,
-            None => loop {
-                match reader.next()? {
-                    None => {
-                        break default_header(structure_excitation(&structure), structure.storeys())
-                    }
-                    Some(line) if line.trim().is_empty() => {
-                        if let Some(m) = reader.mqtt() {
-                            early_events.extend(m.take_events());
-                        }
-                    }
-                    Some(line) => {
-                        let header = is_header(&line).then(|| line.clone());
-                        pushed_back = Some(line);
-                        break header.unwrap_or_else(|| {
-                            default_header(structure_excitation(&structure), structure.storeys())
-                        });
-                    }
-                }
-            },
-        }
-    } else {
-        loop {
-            match reader.next()? {
-                None => return Err(WatchError::Header("the stream is empty".into())),
-                Some(line) if line.trim().is_empty() => continue,
-                Some(line) => break line,
-            }
-        }
-    };
+    let Opening {
+        header_line,
+        early_events,
+        pushed_back,
+    } = opening(&mut reader, saved.as_ref(), &structure)?;
     let describe = twin.describe();
     let header = Header::parse(&header_line, &options.columns, &structure, &describe)
         .map_err(WatchError::Header)?;
@@ -1671,9 +1639,119 @@ pub fn watch_observed(
     let names: Vec<String> = channels.iter().map(Channel::name).collect();
     w.observe(|o| o.start(&names, tolerance.value, options.window));
     w.report_connection(early_events)?;
+    let stream = Stream {
+        structure: &structure,
+        describe: &describe,
+        excitation,
+        channels: &channels,
+        from_broker,
+        live: from_broker || matches!(options.source, StreamSource::File { follow: true, .. }),
+    };
+    let run = read_stream(&mut w, &stream, &mut header, &mut progress)?;
+    end(&mut w, &run, &channels, &tolerance, budget, &mut progress)
+}
+
+/// The stream's opening: its header line, the broker's connection events before it, and a
+/// first line read past it (an MQTT stream's first sample).
+struct Opening {
+    header_line: String,
+    early_events: Vec<ConnectionEvent>,
+    pushed_back: Option<String>,
+}
+
+/// The header: a file or standard input starts with its own; an MQTT stream's is the one its
+/// last run saw (`saved`), else its first line if that is a header, else time, the excitation
+/// and an accelerometer on every floor (the paper rig's `time,force,acc1,acc2,acc3`).
+fn opening(
+    reader: &mut LineReader,
+    saved: Option<&State>,
+    structure: &::structure::Structure,
+) -> Result<Opening, WatchError> {
+    let mut early_events = Vec::new();
+    let mut pushed_back = None;
+    let header_line = if matches!(reader, LineReader::Mqtt(_)) {
+        match saved.and_then(|s| s.header.clone()) {
+            Some(h) => h,
+            None => loop {
+                match reader.next()? {
+                    None => {
+                        break default_header(structure_excitation(structure), structure.storeys())
+                    }
+                    Some(line) if line.trim().is_empty() => {
+                        if let Some(m) = reader.mqtt() {
+                            early_events.extend(m.take_events());
+                        }
+                    }
+                    Some(line) => {
+                        let header = is_header(&line).then(|| line.clone());
+                        pushed_back = Some(line);
+                        break header.unwrap_or_else(|| {
+                            default_header(structure_excitation(structure), structure.storeys())
+                        });
+                    }
+                }
+            },
+        }
+    } else {
+        loop {
+            match reader.next()? {
+                None => return Err(WatchError::Header("the stream is empty".into())),
+                Some(line) if line.trim().is_empty() => continue,
+                Some(line) => break line,
+            }
+        }
+    };
+    Ok(Opening {
+        header_line,
+        early_events,
+        pushed_back,
+    })
+}
+
+/// What the stream is read against: the structure and twin its headers are checked with, its
+/// channels, and where it comes from.
+struct Stream<'s> {
+    structure: &'s ::structure::Structure,
+    describe: &'s str,
+    excitation: Channel,
+    channels: &'s [Channel],
+    from_broker: bool,
+    /// A followed file or a broker: the time spent waiting for it is left out of the speed.
+    live: bool,
+}
+
+/// What reading the stream measured: this run's samples and their latencies, when it began
+/// and how long it waited for a live source.
+struct Run {
+    samples: u64,
+    latency: Latency,
+    started: Instant,
+    waited: Duration,
+}
+
+impl Run {
+    /// Seconds spent on the samples, the waits for a live source left out.
+    fn seconds(&self) -> f64 {
+        self.started
+            .elapsed()
+            .saturating_sub(self.waited)
+            .as_secs_f64()
+    }
+}
+
+/// The stream read to its end: each line a header (a broker's), a bad sample or a sample
+/// watched; the checkpoint saved every `checkpoint_every` samples, `progress` and the live view
+/// told five times a second.
+fn read_stream(
+    w: &mut Watcher,
+    stream: &Stream,
+    header: &mut Header,
+    progress: &mut impl FnMut(&Status),
+) -> Result<Run, WatchError> {
+    let options = w.options;
     // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:
     // there only the samples' times tell what was seen).
-    let skip_lines = if from_broker { 0 } else { w.state.lines };
+    let skip_lines = if stream.from_broker { 0 } else { w.state.lines };
     let skip_until = w.state.last_time;
     let mut line_number: u64 = 0;
     let mut latency = Latency::new();
@@ -1682,31 +1760,30 @@ pub fn watch_observed(
     let mut since_save: u64 = 0;
     let mut last_status = Instant::now();
     // Time spent waiting for a live source (a followed file, a broker), left out of the speed.
-    let live = from_broker || matches!(options.source, StreamSource::File { follow: true, .. });
     let mut waited = Duration::ZERO;
     loop {
         let asked = Instant::now();
         let Some(line) = w.next_line()? else {
             break;
         };
-        if live {
+        if stream.live {
             waited += asked.elapsed();
         }
         if line.trim().is_empty() {
             // A file's blank line still counts for the line numbers; a broker's empty line is
             // only a connection change.
-            if !from_broker {
+            if !stream.from_broker {
                 line_number += 1;
             }
             continue;
         }
         line_number += 1;
-        if from_broker && is_header(&line) {
-            match Header::parse(&line, &options.columns, &structure, &describe)
-                .and_then(|h| h.for_stream(excitation, &channels))
+        if stream.from_broker && is_header(&line) {
+            match Header::parse(&line, &options.columns, stream.structure, stream.describe)
+                .and_then(|h| h.for_stream(stream.excitation, stream.channels))
             {
                 Ok(h) => {
-                    header = h;
+                    *header = h;
                     w.state.header = Some(line);
                     continue;
                 }
@@ -1734,7 +1811,7 @@ pub fn watch_observed(
             }
         }
         w.state.lines = line_number;
-        if let (true, Ok((t, ..)), Some(last)) = (from_broker, &sample, w.state.last_time) {
+        if let (true, Ok((t, ..)), Some(last)) = (stream.from_broker, &sample, w.state.last_time) {
             if *t <= last {
                 w.state.duplicates += 1;
                 continue;
@@ -1752,7 +1829,7 @@ pub fn watch_observed(
                 let time = w.state.last_time;
                 // A file's line numbers count the header as line 1; a broker's count the lines
                 // of its messages from 1.
-                let line = if from_broker {
+                let line = if stream.from_broker {
                     line_number
                 } else {
                     line_number + 1
@@ -1778,16 +1855,36 @@ pub fn watch_observed(
             }
         }
     }
+    Ok(Run {
+        samples: this_run,
+        latency,
+        started,
+        waited,
+    })
+}
+
+/// The stream's end: the checkpoint saved, the open segment finished, the diagnoses still
+/// running awaited, and the `end` alert with the run's summary.
+fn end(
+    w: &mut Watcher,
+    run: &Run,
+    channels: &[Channel],
+    tolerance: &Tolerance,
+    budget: Option<u32>,
+    progress: &mut impl FnMut(&Status),
+) -> Result<Summary, WatchError> {
+    let options = w.options;
     // Saved before the stream's end is judged: a watcher restarted on a source that grew goes
     // on from here.
     w.save()?;
-    let elapsed = started.elapsed().saturating_sub(waited).as_secs_f64();
+    let elapsed = run.seconds();
+    let this_run = run.samples;
     let last = w.state.last_time;
     if let Some(d) = &mut w.state.detector {
         let events = d.finish_segment();
         w.events(last.unwrap_or(0.0), events)?;
     }
-    progress(&status(&w, this_run, started));
+    progress(&status(w, this_run, run.started));
     let finished = w.background.as_mut().map(Background::finish);
     for f in finished.into_iter().flatten() {
         w.diagnosed(f)?;
@@ -1828,8 +1925,8 @@ pub fn watch_observed(
         noise_source: w.noise_source(),
         samples_per_second: rate,
         real_time_factor: real_time,
-        latency_median_us: 1e6 * latency.quantile(0.5),
-        latency_p99_us: 1e6 * latency.quantile(0.99),
+        latency_median_us: 1e6 * run.latency.quantile(0.5),
+        latency_p99_us: 1e6 * run.latency.quantile(0.99),
         tolerance: tolerance.value,
         still_failing: std::mem::take(&mut w.cut_windows),
     };
