@@ -53,7 +53,7 @@ for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseErr
 
 __all__ = [
     "Twin", "Record", "Report", "Comparison", "Control", "RunResult", "synth", "run", "pack_fmu",
-    "export_fmus", "init", "record_from_frame",
+    "export_fmus", "init", "record_from_frame", "read_frf",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",
     "ControlError", "WatchError", "SynthError", "TrainError", "RunError", "HybridError",
 ]
@@ -165,17 +165,37 @@ class Twin:
                                    modes=modes)
         return Comparison(out["report"], out["predictions"])
 
-    def calibrate(self, record: Record | Sequence[Record], *, parameters: list[str] | None = None,
+    def calibrate(self, record: Record | Sequence[Record] | None = None, *,
+                  parameters: list[str] | None = None,
                   priors: dict[str, dict[str, Any]] | None = None, starts: int | None = None,
                   seed: int | None = None, transient: float | None = None,
                   validate: Sequence[Record] = (), threads: int | None = None,
-                  plot: str | os.PathLike | None = None) -> tuple["Twin", Report]:
+                  plot: str | os.PathLike | None = None, frf: str | os.PathLike | None = None,
+                  band: tuple[float, float] | None = None,
+                  gain_offset: bool = False) -> tuple["Twin", Report]:
         """``twin calibrate``: MAP calibration of ``parameters`` (default every floor's mass and
         storey's damping and stiffness of the twin's structure) and a noise variance per measured
         channel, on one record or on several runs (one MAP over all, each run its own channels);
         ``priors`` as the CLI's ``--priors`` file's JSON; the ``validate`` records' worst NMSE
         sets the new twin's tolerance. Defaults (None): 12 starts, seed 1, transient 2 s, all
-        cores. Returns the calibrated twin and the report (``runs``: NMSE by channel per run)."""
+        cores. Returns the calibrated twin and the report (``runs``: NMSE by channel per run).
+
+        ``frf`` instead of a record (``twin calibrate --frf``): a measured FRF file (CSV
+        ``frequency,acc1_re,acc1_im,…`` or a universal file's dataset 58; see ``read_frf``),
+        fitted over ``band`` (Hz, ``(lo, hi)``; default every line above 0 Hz), ``gain_offset``
+        a dB offset when the file's dB reference is unknown; 4 starts by default."""
+        if frf is not None:
+            if record is not None or tuple(validate) or transient is not None or threads is not None \
+                    or plot is not None:
+                raise TypeError("calibrate(frf=...) takes no record, validate, transient, threads or plot")
+            twin, report = self._native.calibrate_frf(_os.fspath(frf), parameters=parameters, priors=priors,
+                                                      band=None if band is None else tuple(band),
+                                                      gain_offset=gain_offset, starts=starts, seed=seed)
+            return Twin(twin), Report(report)
+        if band is not None or gain_offset:
+            raise TypeError("band and gain_offset go with frf=")
+        if record is None:
+            raise TypeError("calibrate: give a record (or runs), or frf=")
         if not isinstance(record, Record):
             record = list(record)
         twin, report = self._native.calibrate(record, parameters=parameters, priors=priors, starts=starts,
@@ -214,19 +234,23 @@ class Twin:
         shapes along the height."""
         return Report(self._native.modes(samples=samples, plot=_path(plot)))
 
-    def add_physics(self, record: Record, *, effects: list[str] | None = None,
-                    diagnosis: Report | dict[str, Any] | None = None, refine: bool = False,
+    def add_physics(self, record: Record | None = None, *, effects: list[str] | None = None,
+                    diagnosis: Report | dict[str, Any] | None = None,
+                    hybrid: str | os.PathLike | None = None, refine: bool = False,
                     transient: float | None = None, threads: int | None = None,
                     records: Sequence[Record] | None = None) -> tuple["Twin", Report]:
         """``twin add-physics``: switch effects on (``effects``, or all of a ``diagnosis``
         report's), estimate them on the record, then refit them jointly with the structure over
         the record and ``records`` (default: those the twin remembers from its calibration;
-        ``--records``). ``refine`` is accepted and ignored, as in the CLI. Returns the new twin
-        and the report (NMSE per record before and after)."""
+        ``--records``). ``hybrid`` (``--hybrid``): the contact law a ``twin hybrid run``
+        report (its path) identified at its interface, held as identified, the structure
+        refitted over ``record`` (optional) and ``records``. ``refine`` is accepted and ignored,
+        as in the CLI. Returns the new twin and the report (NMSE per record before and after)."""
         if isinstance(diagnosis, Report):
             diagnosis = diagnosis.to_dict()
         twin, report = self._native.add_physics(record, effects=effects, diagnosis=diagnosis,
-                                                refine=refine, transient=transient, threads=threads,
+                                                hybrid=_path(hybrid), refine=refine, transient=transient,
+                                                threads=threads,
                                                 records=None if records is None else list(records))
         return Twin(twin), Report(report)
 
@@ -462,6 +486,14 @@ def pack_fmu(model_description: str | os.PathLike, library: str | os.PathLike, o
     archive. Returns the modelIdentifier."""
     return _native.pack_fmu(_os.fspath(model_description), _os.fspath(library), _os.fspath(out),
                             documentation=_path(documentation), resources=_path(resources))
+
+
+def read_frf(path: str | os.PathLike) -> dict[str, Any]:
+    """A measured FRF as ``twin calibrate --frf`` reads it (CSV ``frequency`` and per channel
+    ``<channel>_re``/``_im`` or ``_db``, units in brackets; or a universal file's dataset 58):
+    ``{"path", "frequency": array (Hz), "channels": {"acc1": array, ...}}``, each channel
+    complex (SI per unit excitation) or, for a magnitude-only file, in dB."""
+    return _native.read_frf(_os.fspath(path))
 
 
 def export_fmus(out: str | os.PathLike) -> list[str]:

@@ -182,5 +182,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::run, m)?)?;
     m.add_function(wrap_pyfunction!(run::pack_fmu, m)?)?;
     m.add_function(wrap_pyfunction!(run::export_fmus, m)?)?;
+    m.add_function(wrap_pyfunction!(twin::read_frf, m)?)?;
     Ok(())
 }

@@ -5,6 +5,9 @@ use std::path::PathBuf;
 
 use numpy::PyArray1;
 use orchestrator::cosim::import::Fmu;
+use orchestrator::record::frf::{FrfValues, MeasuredFrf};
+use orchestrator::record::ColumnMap;
+use orchestrator::record::DataError;
 use orchestrator::report::control_plot::plot_control;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, RecordRef, RecordRole, Twin as CoreTwin};
@@ -19,7 +22,8 @@ use orchestrator::workflows::control::{
     VarianceTrigger,
 };
 use orchestrator::workflows::diagnose::{
-    add_physics, diagnose, effects_from_report, parse_additions, parse_candidates, DiagnoseOptions,
+    add_hybrid_contact, add_physics, diagnose, effects_from_report, parse_additions,
+    parse_candidates, with_record, DiagnoseOptions,
 };
 use orchestrator::workflows::learn::{
     chosen_modes, learned_twin, prepare, run_modes, LearnOptions,
@@ -54,6 +58,70 @@ impl Twin {
         }
         Ok(Twin { twin })
     }
+}
+
+impl Twin {
+    /// `add_physics(hybrid=…)`: the contact law a `twin hybrid run` report identified at its
+    /// interface, held as identified, and the structure refitted over `record` (when given) and
+    /// `others`, as `twin add-physics --hybrid`.
+    fn add_hybrid<'py>(
+        &self,
+        py: Python<'py>,
+        record: Option<&Record>,
+        others: &[Measurement],
+        report: &std::path::Path,
+        options: &DiagnoseOptions,
+    ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
+        let kind = Kind::Diagnose;
+        let data = record.map(|r| r.for_twin(&self.twin)).transpose()?;
+        let all: Vec<&Measurement> = match data {
+            Some(d) => with_record(d, others).0,
+            None => others.iter().collect(),
+        };
+        if all.is_empty() {
+            return Err(invalid(
+                kind,
+                "no record to refit the structure over: the twin remembers none; give record \
+                 or records",
+            ));
+        }
+        let (new_twin, report) = detached(py, || {
+            let (new_twin, report) = add_hybrid_contact(&self.twin, report, &all, options)
+                .map_err(|e| to_py(kind, e))?;
+            let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
+            Ok((
+                Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
+                report,
+            ))
+        })?;
+        Ok((new_twin, to_object(py, &report)?))
+    }
+}
+
+/// A measured FRF file as the CLI reads it (`twin calibrate --frf`, `twin modal --frf`).
+pub(crate) fn read_measured_frf(path: &std::path::Path) -> Result<MeasuredFrf, DataError> {
+    MeasuredFrf::read(path, &ColumnMap::default())
+}
+
+/// A measured FRF: `{"path", "frequency": array (Hz), "channels": {name: array}}`, each
+/// channel's values complex (SI per unit excitation) or, for a magnitude-only file, its dB.
+#[pyfunction]
+pub fn read_frf<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let frf = read_measured_frf(&path).map_err(|e| to_py(Kind::Data, e))?;
+    let out = PyDict::new(py);
+    out.set_item("path", frf.path.display().to_string())?;
+    out.set_item("frequency", floats(py, &frf.frequency))?;
+    let channels = PyDict::new(py);
+    for c in &frf.channels {
+        match &c.values {
+            FrfValues::Complex(h) => {
+                channels.set_item(c.channel.name(), PyArray1::from_slice(py, h))?
+            }
+            FrfValues::Db(db) => channels.set_item(c.channel.name(), floats(py, db))?,
+        }
+    }
+    out.set_item("channels", channels)?;
+    Ok(out)
 }
 
 fn floats<'py>(py: Python<'py>, values: &[f64]) -> Bound<'py, PyAny> {
@@ -497,15 +565,16 @@ impl Twin {
     /// structure over the record and `records` (default: the records the twin remembers from
     /// `twin calibrate`). `refine` is accepted and ignored, as in the CLI. Returns the new twin
     /// and the report (NMSE per record before and after).
-    #[pyo3(signature = (record, *, effects = None, diagnosis = None, refine = false,
-                        transient = None, threads = None, records = None))]
+    #[pyo3(signature = (record = None, *, effects = None, diagnosis = None, hybrid = None,
+                        refine = false, transient = None, threads = None, records = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_physics<'py>(
         &self,
         py: Python<'py>,
-        record: &Record,
+        record: Option<&Record>,
         effects: Option<Vec<String>>,
         diagnosis: Option<&Bound<'py, PyAny>>,
+        hybrid: Option<PathBuf>,
         refine: bool,
         transient: Option<f64>,
         threads: Option<usize>,
@@ -523,6 +592,22 @@ impl Twin {
                 .map(|r| r.for_twin(&self.twin).cloned())
                 .collect::<PyResult<_>>()?,
             None => self.twin.load_records().map_err(|e| to_py(kind, e))?,
+        };
+        if let Some(report) = hybrid {
+            if effects.is_some() || diagnosis.is_some() {
+                return Err(invalid(
+                    kind,
+                    "hybrid: the contact law comes from the hybrid test's report; give no \
+                     effects or diagnosis with it",
+                ));
+            }
+            return self.add_hybrid(py, record, &others, &report, &o);
+        }
+        let Some(record) = record else {
+            return Err(invalid(
+                kind,
+                "record: the new record the effects are estimated on",
+            ));
         };
         let candidates = match (effects, diagnosis) {
             (Some(_), Some(_)) => {
@@ -558,6 +643,68 @@ impl Twin {
             let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
                 .map_err(|e| to_py(kind, e))?;
             let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
+            Ok((
+                Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
+                report,
+            ))
+        })?;
+        Ok((new_twin, to_object(py, &report)?))
+    }
+
+    /// `twin calibrate --frf`: MAP calibration on a measured FRF (a CSV `frequency,
+    /// acc1_re, acc1_im, …` or a universal file's dataset 58), of `parameters` (default every
+    /// floor's mass and storey's damping and stiffness) under `priors` (as `calibrate`'s), over
+    /// the `band` (Hz, `(lo, hi)`; default every line above 0 Hz); `gain_offset` fits a dB
+    /// offset when the file's dB reference is unknown. Returns the calibrated twin and the
+    /// CLI's report.
+    #[pyo3(signature = (frf, *, parameters = None, priors = None, band = None,
+                        gain_offset = false, starts = None, seed = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn calibrate_frf<'py>(
+        &self,
+        py: Python<'py>,
+        frf: PathBuf,
+        parameters: Option<Vec<String>>,
+        priors: Option<&Bound<'py, PyAny>>,
+        band: Option<(f64, f64)>,
+        gain_offset: bool,
+        starts: Option<usize>,
+        seed: Option<u64>,
+    ) -> PyResult<(Twin, Bound<'py, PyAny>)> {
+        use orchestrator::workflows::calibrate::frf::{calibrate_frf, FrfSetup};
+        let kind = Kind::Calibrate;
+        let measured = read_measured_frf(&frf).map_err(|e| to_py(kind, e))?;
+        if let Some((lo, hi)) = band {
+            if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+                return Err(invalid(
+                    kind,
+                    format!("band: ({lo}, {hi}) is not 0 <= lo < hi Hz"),
+                ));
+            }
+        }
+        let defaults = FrfSetup::default();
+        let setup = FrfSetup {
+            parameters: parameters.unwrap_or(defaults.parameters),
+            prior_spec: match priors {
+                Some(priors) => {
+                    let value: serde_json::Value =
+                        pythonize::depythonize(priors).map_err(|e| invalid(kind, e.to_string()))?;
+                    Some(
+                        priors_from_json(&value.to_string(), "priors")
+                            .map_err(|m| invalid(kind, m))?,
+                    )
+                }
+                None => None,
+            },
+            band,
+            gain_offset,
+            starts: starts.unwrap_or(defaults.starts),
+            seed: seed.unwrap_or(defaults.seed),
+        };
+        let (new_twin, report) = detached(py, || {
+            let (new_twin, calibration) =
+                calibrate_frf(&self.twin, &measured, &setup).map_err(|e| to_py(kind, e))?;
+            let report = serde_json::to_value(&calibration).map_err(|e| to_py(kind, e))?;
             Ok((
                 Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
                 report,

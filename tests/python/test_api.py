@@ -552,3 +552,52 @@ def test_hybrid_threshold_and_run_are_the_cli_reports(tmp_path):
     assert other.split == "specimen-floor-3"
     with pytest.raises(st.HybridError, match="unknown split 'floor-9'"):
         twin.hybrid_threshold(split="floor-9")
+
+
+def test_a_measured_frf_is_read_and_calibrated_on_as_the_cli_does(tmp_path):
+    """`read_frf` reads the laboratory frame's FRF as `twin calibrate --frf` does (its dB
+    columns, every line), and `calibrate(frf=...)` is that calibration: the same estimates."""
+    frf = DATA / "frf" / "swansea-3storey-frf.csv"
+    read = st.read_frf(frf)
+    table = pd.read_csv(frf)
+    assert sorted(read["channels"]) == ["acc1", "acc2", "acc3"]
+    assert np.array_equal(read["frequency"], table["frequency"].to_numpy())
+    assert np.allclose(read["channels"]["acc2"], table["acc2_db"].to_numpy(), rtol=0, atol=1e-12)
+    drawings = tmp_path / "drawings.ssp"
+    done = cli("init", "--nominal", str(DATA / "frf" / "nominal.json"), "--out", str(drawings))
+    assert done.returncode == 0, done.stderr
+    done = cli("calibrate", "--twin", str(drawings), "--frf", str(frf), "--band", "3:40", "--gain-offset",
+               "--out", str(tmp_path / "cli.ssp"), "--report", str(tmp_path / "cli.json"))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads((tmp_path / "cli.json").read_text())
+    twin, report = st.Twin.open(drawings).calibrate(frf=frf, band=(3.0, 40.0), gain_offset=True)
+    assert [p["name"] for p in report.parameters] == [p["name"] for p in expected["parameters"]]
+    for ours, cli_p in zip(report.parameters, expected["parameters"]):
+        assert ours["value"] == pytest.approx(cli_p["value"], rel=1e-9), ours["name"]
+    assert twin.parameters["physics"]["k1"] == pytest.approx(report.parameters[
+        [p["name"] for p in report.parameters].index("k1")]["value"], rel=1e-12)
+    with pytest.raises(TypeError, match="band and gain_offset go with frf="):
+        st.Twin.open(drawings).calibrate(st.Record.read(str(DATA / "dataset1.csv")), band=(3.0, 40.0))
+    with pytest.raises(st.DataError, match="nowhere.csv"):
+        st.read_frf(tmp_path / "nowhere.csv")
+
+
+def test_add_physics_takes_the_hybrid_tests_contact_as_the_cli_does(calibrated, tmp_path):
+    """`add_physics(hybrid=...)` is `twin add-physics --hybrid`: the hybrid test's contact law
+    held, the structure refitted over the twin's records; the same report."""
+    saved = tmp_path / "cal.ssp"
+    calibrated.save(str(saved))
+    hybrid = tmp_path / "h.json"
+    done = cli("hybrid", "run", "--twin", str(saved), "--peak", "5", "--a-err", "0", "--report", str(hybrid))
+    assert done.returncode == 0, done.stderr
+    done = cli("add-physics", "--twin", str(saved), "--hybrid", str(hybrid), "--out", str(tmp_path / "a.ssp"),
+               "--report", str(tmp_path / "a.json"))
+    assert done.returncode == 0, done.stderr
+    expected = json.loads((tmp_path / "a.json").read_text())
+    twin, report = st.Twin.open(saved).add_physics(hybrid=hybrid)
+    drop = {"seconds", "out"}
+    assert {k: v for k, v in report.to_dict().items() if k not in drop} == \
+        {k: v for k, v in expected.items() if k not in drop}
+    assert twin.parameters["physics"]["contact23_enabled"] is True
+    with pytest.raises(st.DiagnoseError, match="give no effects or diagnosis"):
+        calibrated.add_physics(hybrid=hybrid, effects=["cubic@1"])
