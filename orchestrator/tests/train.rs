@@ -258,3 +258,71 @@ fn lags_are_chosen_by_the_lowest_negative_log_marginal_likelihood() {
         "{stdout}"
     );
 }
+
+/// A building measured by velocity sensors: the corrector trained on them writes, with
+/// `twin compare --predictions`, each corrected channel's latent variance and sd under the
+/// names its outputs have (`latent_var_vel1`, `sd_vel1`, …), every value finite and the
+/// variance positive, as the accelerometers' `latent_var<i>`, `sd<i>` are.
+#[test]
+fn a_velocity_channel_s_band_is_written_with_its_predictions() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    twin(&[
+        "synth",
+        "--channels",
+        "vel1,vel2",
+        "--seed",
+        "1",
+        "--out",
+        &p("vel.csv"),
+    ]);
+    twin(&[
+        "calibrate",
+        "--data",
+        &p("vel.csv"),
+        "--out",
+        &p("cal.ssp"),
+        "--starts",
+        "2",
+    ]);
+    twin(&[
+        "train",
+        "--twin",
+        &p("cal.ssp"),
+        "--data",
+        &p("vel.csv"),
+        "--out",
+        &p("gp.ssp"),
+        "--lags",
+        "2",
+        "--stride",
+        "4",
+    ]);
+    twin(&[
+        "compare",
+        "--twin",
+        &p("gp.ssp"),
+        "--data",
+        &p("vel.csv"),
+        "--predictions",
+        &p("pred.csv"),
+    ]);
+    let (header, rows) = read_csv(&dir.path().join("pred.csv"));
+    assert_eq!(
+        header,
+        [
+            "time",
+            "vel1",
+            "vel2",
+            "latent_var_vel1",
+            "latent_var_vel2",
+            "sd_vel1",
+            "sd_vel2"
+        ],
+        "{header:?}"
+    );
+    for row in &rows {
+        assert!(row.iter().all(|x| x.is_finite()), "{row:?}");
+        assert!(row[3] > 0.0 && row[4] > 0.0 && row[5] > 0.0, "{row:?}");
+    }
+}

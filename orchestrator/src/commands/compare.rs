@@ -188,7 +188,8 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 }
 
 /// `time` and every predicted channel by name (`acc1,acc2,acc3` on the paper's rig), in SI;
-/// then the corrector's `latent_var<i>` and `sd<i>` of the channels it corrects.
+/// then the corrector's latent variance and sd of each channel it corrects, named as its
+/// outputs are (`latent_var<i>`, `sd<i>` for `acc<i>`; `latent_var_vel2`, `sd_vel2` …).
 fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(f);
     let mut header: Vec<String> = vec!["time".to_owned()];
@@ -200,8 +201,8 @@ fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<(
     for prefix in ["latent_var", "sd"] {
         for c in &p.channels {
             let band = if prefix == "sd" { &c.sd } else { &c.latent_var };
-            if let (Some(values), Some(floor)) = (band, c.channel.name().strip_prefix("acc")) {
-                header.push(format!("{prefix}{floor}"));
+            if let Some(values) = band {
+                header.push(fmu_gp_corrector::layout::band_name(prefix, &c.channel));
                 columns.push(values);
             }
         }

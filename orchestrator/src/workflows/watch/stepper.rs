@@ -5,7 +5,7 @@
 //! prediction from the same stepping code. A channel the twin does not give out under its name
 //! is read from its physics component, as `run_twin` reads it ([`wired`]).
 
-use ::structure::channel::{Channel, Quantity};
+use ::structure::channel::Channel;
 
 use crate::cosim::import::StepEnd;
 use crate::cosim::master::{MasterError, NodeId, Port, SavedNode, SavedState};
@@ -37,18 +37,6 @@ pub fn wired(twin: &Twin, channels: &[Channel]) -> Option<Twin> {
         });
     }
     Some(copy)
-}
-
-/// The name of the corrector's latent variance of `channel`: `latent_var<i>` for `acc<i>` (the
-/// paper rig's names), `latent_var_<name>` for another channel.
-fn latent_name(channel: &Channel) -> String {
-    match channel {
-        Channel::Response {
-            quantity: Quantity::Acceleration,
-            floor,
-        } => format!("latent_var{floor}"),
-        other => format!("latent_var_{}", other.name()),
-    }
 }
 
 /// The GP corrector's learning interface: the measured values and the learn flag it takes,
@@ -115,7 +103,7 @@ impl Stepper {
                         "takes no 'measured_{name}' to learn the stream's '{name}'"
                     ))
                 })?);
-                let band = latent_name(channel);
+                let band = fmu_gp_corrector::layout::band_name("latent_var", channel);
                 latent.push(vr(&band).ok_or_else(|| {
                     refuse(format!("gives no '{band}' for the stream's '{name}'"))
                 })?);
