@@ -12,6 +12,7 @@
 //! record. A measured FRF ([`frf`]) is a CSV of `frequency` and `<ch>_re,<ch>_im` or `<ch>_db`
 //! columns, or a universal file's FRFs.
 
+pub mod excitation;
 pub mod frf;
 pub mod grid;
 mod read;

@@ -358,58 +358,6 @@ pub fn runs(
     Ok(out)
 }
 
-/// A `time,force` CSV (a header, then one sample a line at a constant step): the force and
-/// the step. Errors name the file and the line.
-pub fn read_excitation(path: &std::path::Path) -> Result<(Vec<f64>, f64)> {
-    let bad = |what: String| HybridError::Setup(format!("{}: {what}", path.display()));
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    let mut lines = text.lines().enumerate();
-    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
-    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
-    if columns.len() < 2 || columns[0] != "time" || columns[1] != "force" {
-        return Err(bad(format!(
-            "line 1: the header must start with time,force, was '{header}'"
-        )));
-    }
-    let (mut time, mut force) = (Vec::new(), Vec::new());
-    for (i, line) in lines {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let mut fields = line.split(',').map(str::trim);
-        let mut number = |name: &str| -> Result<f64> {
-            let field = fields.next().unwrap_or("");
-            field
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    bad(format!(
-                        "line {}: {name} '{field}' is not a finite number",
-                        i + 1
-                    ))
-                })
-        };
-        time.push(number("time")?);
-        force.push(number("force")?);
-    }
-    if time.len() < 2 {
-        return Err(bad("fewer than two samples".into()));
-    }
-    let dt = (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64;
-    if !(dt > 0.0) {
-        return Err(bad("the time column does not increase".into()));
-    }
-    if let Some(k) = (1..time.len()).find(|&k| ((time[k] - time[k - 1]) - dt).abs() > 1e-6 * dt) {
-        return Err(bad(format!(
-            "line {}: the step {} s differs from the mean step {dt} s: resample it first",
-            k + 2,
-            time[k] - time[k - 1]
-        )));
-    }
-    Ok((force, dt))
-}
-
 /// The contact law a `twin hybrid run` report identified (from the measured interface of its
 /// run with the smallest |a_err|), switched on in `twin`'s physics as the library's contact
 /// between floors 2 and 3 — closing when floor 2 runs ahead of floor 3 by the gap, i.e. on the

@@ -10,8 +10,8 @@ use numerics::excitation::ExcitationSpec;
 use serde::Serialize;
 
 use super::experiment::{
-    read_excitation, runs, threshold_curve, Coupling, InterfaceNoise, RunOutcome, RunSummary,
-    Setup, ThresholdCurve, ThresholdPoint,
+    runs, threshold_curve, Coupling, InterfaceNoise, RunOutcome, RunSummary, Setup, ThresholdCurve,
+    ThresholdPoint,
 };
 use super::{unit_peak, Cut, HybridError, Split};
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
@@ -202,7 +202,8 @@ impl HybridOptions {
         }
         let (signal, dt, source) = match &c.excitation {
             Some(path) => {
-                let (force, dt) = read_excitation(path)?;
+                let (force, dt) = crate::record::excitation::read_excitation(path)
+                    .map_err(|e| HybridError::Setup(e.to_string()))?;
                 (force, dt, path.display().to_string())
             }
             None => {
