@@ -85,17 +85,28 @@ impl Twin {
                  or records",
             ));
         }
-        let (new_twin, report) = detached(py, || {
-            let (new_twin, report) = add_hybrid_contact(&self.twin, report, &all, options)
-                .map_err(|e| to_py(kind, e))?;
-            let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
-            Ok((
-                Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
-                report,
-            ))
-        })?;
-        Ok((new_twin, to_object(py, &report)?))
+        new_twin_and_report(py, kind, || {
+            add_hybrid_contact(&self.twin, report, &all, options)
+        })
     }
+}
+
+/// `work` run with the GIL released, its new twin holding its FMUs and its report as a
+/// Python object (the CLI's JSON); its error as `kind`'s exception.
+fn new_twin_and_report<'py, R: serde::Serialize, E: Into<anyhow::Error>>(
+    py: Python<'py>,
+    kind: Kind,
+    work: impl FnOnce() -> Result<(CoreTwin, R), E> + Send,
+) -> PyResult<(Twin, Bound<'py, PyAny>)> {
+    let (new_twin, report) = detached(py, || {
+        let (new_twin, report) = work().map_err(|e| to_py(kind, e))?;
+        let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
+        Ok((
+            Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
+            report,
+        ))
+    })?;
+    Ok((new_twin, to_object(py, &report)?))
 }
 
 /// A measured FRF file as the CLI reads it (`twin calibrate --frf`, `twin modal --frf`).
@@ -639,16 +650,9 @@ impl Twin {
             (None, None) => return Err(invalid(kind, "give effects or a diagnosis")),
         };
         let data = record.for_twin(&self.twin)?;
-        let (new_twin, report) = detached(py, || {
-            let (new_twin, report) = add_physics(&self.twin, data, &others, &candidates, &o)
-                .map_err(|e| to_py(kind, e))?;
-            let report = serde_json::to_value(&report).map_err(|e| to_py(kind, e))?;
-            Ok((
-                Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
-                report,
-            ))
-        })?;
-        Ok((new_twin, to_object(py, &report)?))
+        new_twin_and_report(py, kind, || {
+            add_physics(&self.twin, data, &others, &candidates, &o)
+        })
     }
 
     /// `twin calibrate --frf`: MAP calibration on a measured FRF (a CSV `frequency,
@@ -701,16 +705,7 @@ impl Twin {
             starts: starts.unwrap_or(defaults.starts),
             seed: seed.unwrap_or(defaults.seed),
         };
-        let (new_twin, report) = detached(py, || {
-            let (new_twin, calibration) =
-                calibrate_frf(&self.twin, &measured, &setup).map_err(|e| to_py(kind, e))?;
-            let report = serde_json::to_value(&calibration).map_err(|e| to_py(kind, e))?;
-            Ok((
-                Twin::holding_fmus(new_twin).map_err(|e| to_py(kind, e))?,
-                report,
-            ))
-        })?;
-        Ok((new_twin, to_object(py, &report)?))
+        new_twin_and_report(py, kind, || calibrate_frf(&self.twin, &measured, &setup))
     }
 
     /// `twin control`: LQR designs (one per `q`) on the twin's structure, run in the loop on
