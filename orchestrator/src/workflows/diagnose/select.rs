@@ -273,6 +273,78 @@ fn screen(results: &[(Candidate, Fitted)], current: f64) -> Vec<Candidate> {
     cut.sort_by(|a, b| a.1.total_cmp(&b.1));
     cut.into_iter().map(|(c, _)| c).collect()
 }
+/// What a round's step records beside its pick: the round, the worst-floor held-out NMSE
+/// before it, the candidates it tried, and when it began.
+struct Step {
+    round: usize,
+    worst_before: f64,
+    tried: Vec<(String, f64)>,
+    started: Instant,
+}
+
+/// The round's pick `c` (fitted alone: `alone`) added to `selection`: refitted jointly with the
+/// effects chosen before (and the physics when `physics_moved`), the better of the two kept,
+/// its step recorded. The new worst-floor held-out NMSE, and whether the selection is done
+/// (good enough, or the most effects chosen).
+fn add_picked(
+    ctx: &Context,
+    selection: &mut Selection,
+    c: Candidate,
+    alone: &Fitted,
+    physics_moved: bool,
+    step: Step,
+    progress: &dyn Fn(&str),
+) -> (f64, bool) {
+    let Step {
+        round,
+        worst_before,
+        tried,
+        started,
+    } = step;
+    selection.chosen.push(c);
+    let mut values = selection.values.clone();
+    values.extend(estimates(&alone.calibration));
+    let mut kept = alone.clone();
+    let mut refit_held_out = alone.nmse_held_out.clone();
+    let mut refit_kept = false;
+    // On recalibrated physics (fitted while the effect was missing) the physics is refitted
+    // with the effects; else the effects alone, when there are several.
+    if selection.chosen.len() > 1 || physics_moved {
+        progress(&format!(
+            "round {round}: {} chosen; refitting jointly",
+            c.label()
+        ));
+        match ctx.joint(&selection.chosen, &values, physics_moved) {
+            Ok(joint) => {
+                refit_held_out = joint.nmse_held_out.clone();
+                if worst(&joint.nmse_held_out) < worst(&alone.nmse_held_out) {
+                    values.extend(estimates(&joint.calibration));
+                    kept = joint;
+                    refit_kept = true;
+                }
+            }
+            Err(e) => progress(&format!("the joint refit failed ({e})")),
+        }
+    }
+    selection.steps.push(SelectionStep {
+        round,
+        added: c.label(),
+        worst_before,
+        nmse_held_out_effect: alone.nmse_held_out.clone(),
+        nmse_held_out_joint: refit_held_out,
+        joint_kept: refit_kept,
+        tried,
+        seconds: started.elapsed().as_secs_f64(),
+    });
+    let current = worst(&kept.nmse_held_out);
+    selection.values = values;
+    let good = ctx.good_enough(&kept.nmse_held_out);
+    selection.fitted = Some(kept);
+    (
+        current,
+        good || selection.chosen.len() >= ctx.options.gates.max_effects,
+    )
+}
 
 /// Forward selection from the first round's fits (`first_round`, with which of them passed the
 /// single-effect gates, and the recalibration `recalibrated`). `before` is the twin's
@@ -344,63 +416,30 @@ pub(super) fn forward(
                 selection.not_added = tried;
                 break;
             };
-            let (c, alone) = (*c, alone.clone());
-            selection.chosen.push(c);
-            let mut values = selection.values.clone();
-            values.extend(estimates(&alone.calibration));
-            let mut kept = alone.clone();
-            let mut refit_held_out = alone.nmse_held_out.clone();
-            let mut refit_kept = false;
-            // On recalibrated physics (fitted while the effect was missing) the physics is
-            // refitted with the effects; else the effects alone, when there are several.
-            if selection.chosen.len() > 1 || physics_moved {
-                progress(&format!(
-                    "round {round}: {} chosen; refitting jointly",
-                    c.label()
-                ));
-                match ctx.joint(&selection.chosen, &values, physics_moved) {
-                    Ok(joint) => {
-                        refit_held_out = joint.nmse_held_out.clone();
-                        if worst(&joint.nmse_held_out) < worst(&alone.nmse_held_out) {
-                            values.extend(estimates(&joint.calibration));
-                            kept = joint;
-                            refit_kept = true;
-                        }
-                    }
-                    Err(e) => progress(&format!("the joint refit failed ({e})")),
-                }
-            }
-            selection.steps.push(SelectionStep {
+            let step = Step {
                 round,
-                added: c.label(),
                 worst_before: current,
-                nmse_held_out_effect: alone.nmse_held_out.clone(),
-                nmse_held_out_joint: refit_held_out,
-                joint_kept: refit_kept,
                 tried: std::mem::take(&mut tried),
-                seconds: started.elapsed().as_secs_f64(),
-            });
-            current = worst(&kept.nmse_held_out);
-            selection.values = values;
-            let good = ctx.good_enough(&kept.nmse_held_out);
-            selection.fitted = Some(kept);
-            if good || selection.chosen.len() >= gates.max_effects {
+                started,
+            };
+            let (worst_now, done) = add_picked(
+                ctx,
+                &mut selection,
+                *c,
+                alone,
+                physics_moved,
+                step,
+                progress,
+            );
+            current = worst_now;
+            if done {
                 break;
             }
         }
         // The next round, at locations not yet chosen: the whole library on recalibrated
         // physics, else the last full round's screened candidates.
-        let taken: Vec<String> = selection.chosen.iter().map(|c| c.prefix()).collect();
         let full = std::mem::take(&mut full_round_next);
-        let next: Vec<Candidate> = if full {
-            ctx.candidates.to_vec()
-        } else {
-            screened.clone()
-        }
-        .into_iter()
-        .filter(|c| !taken.contains(&c.prefix()))
-        .take(if full { usize::MAX } else { SCREENED })
-        .collect();
+        let next = next_candidates(ctx, &selection.chosen, &screened, full);
         if next.is_empty() {
             break;
         }
@@ -431,24 +470,47 @@ pub(super) fn forward(
             screened = screen(&results, current);
         }
     }
-    // The final polish: every chosen effect and the physics jointly, kept when it lowers the
-    // held-out error.
-    if !selection.chosen.is_empty() {
-        progress("refitting the effects jointly with the physics");
-        if let Ok(joint) = ctx.joint(&selection.chosen, &selection.values, true) {
-            let better = selection
-                .fitted
-                .as_ref()
-                .is_none_or(|f| worst(&joint.nmse_held_out) < worst(&f.nmse_held_out));
-            if better {
-                selection.values.extend(estimates(&joint.calibration));
-                if let Some(last) = selection.steps.last_mut() {
-                    last.nmse_held_out_joint = joint.nmse_held_out.clone();
-                    last.joint_kept = true;
-                }
-                selection.fitted = Some(joint);
+    polish(ctx, &mut selection, progress);
+    Ok(selection)
+}
+
+/// The next round's candidates, at locations not yet `chosen`: the whole library when the round
+/// is `full` (on recalibrated physics), else the first [`SCREENED`] of the last full round's
+/// `screened`.
+fn next_candidates(
+    ctx: &Context,
+    chosen: &[Candidate],
+    screened: &[Candidate],
+    full: bool,
+) -> Vec<Candidate> {
+    let taken: Vec<String> = chosen.iter().map(|c| c.prefix()).collect();
+    let from = if full { ctx.candidates } else { screened };
+    from.iter()
+        .copied()
+        .filter(|c| !taken.contains(&c.prefix()))
+        .take(if full { usize::MAX } else { SCREENED })
+        .collect()
+}
+
+/// The final polish: every chosen effect and the physics jointly, kept when it lowers the
+/// held-out error.
+fn polish(ctx: &Context, selection: &mut Selection, progress: &dyn Fn(&str)) {
+    if selection.chosen.is_empty() {
+        return;
+    }
+    progress("refitting the effects jointly with the physics");
+    if let Ok(joint) = ctx.joint(&selection.chosen, &selection.values, true) {
+        let better = selection
+            .fitted
+            .as_ref()
+            .is_none_or(|f| worst(&joint.nmse_held_out) < worst(&f.nmse_held_out));
+        if better {
+            selection.values.extend(estimates(&joint.calibration));
+            if let Some(last) = selection.steps.last_mut() {
+                last.nmse_held_out_joint = joint.nmse_held_out.clone();
+                last.joint_kept = true;
             }
+            selection.fitted = Some(joint);
         }
     }
-    Ok(selection)
 }
