@@ -95,7 +95,7 @@ use structure::channel::{Channel, Quantity};
 use structure::effects::{Law, Placement, Term};
 
 use crate::cosim::import::ImportError;
-use crate::cosim::import::{Fmu, ModelDescription};
+use crate::cosim::import::{Fmu, ModelDescription, UnpackedFmu};
 use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
@@ -608,7 +608,8 @@ impl PhysicsReals {
         let component = twin.component(PHYSICS).ok_or_else(|| {
             DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component"))
         })?;
-        let model_description = Fmu::open(&component.fmu_path)?.model_description;
+        // The model description alone: nothing here runs the FMU.
+        let model_description = UnpackedFmu::open(&component.fmu_path)?.model_description;
         Ok(PhysicsReals {
             storeys: storeys_in(&model_description, &component.fmu_name)?,
             given: component.parameters.clone(),
