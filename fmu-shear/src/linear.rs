@@ -184,6 +184,8 @@ pub struct LinearStepMap {
     states: usize,
     /// `[Φ G]`, row-major, 2N rows of 2N + 4.
     rows: Vec<f64>,
+    /// The same, column-major, for the step's product ([`product_by_columns`]).
+    columns: Vec<f64>,
 }
 
 impl LinearStepMap {
@@ -199,11 +201,16 @@ impl LinearStepMap {
                 rows.push(p[(r, c)]);
             }
         }
+        let columns = (0..width)
+            .flat_map(|c| (0..2 * n).map(move |r| (r, c)))
+            .map(|(r, c)| p[(r, c)])
+            .collect();
         LinearStepMap {
             step,
             params: params.clone(),
             states: 2 * n,
             rows,
+            columns,
         }
     }
 
@@ -227,25 +234,45 @@ impl LinearStepMap {
     /// The state after the step from `x` (2N) under `inputs`, written to `out`.
     #[inline]
     pub fn apply_into(&self, x: &[f64], inputs: &StepInputs, out: &mut [f64]) {
-        let width = self.states + INPUT_COLUMNS;
-        let u = inputs.as_array();
-        for (r, slot) in out.iter_mut().enumerate().take(self.states) {
-            let row = &self.rows[r * width..(r + 1) * width];
-            let mut sum = 0.0;
-            for (a, b) in row[..self.states].iter().zip(x) {
-                sum += a * b;
-            }
-            for (a, b) in row[self.states..].iter().zip(&u) {
-                sum += a * b;
-            }
-            *slot = sum;
-        }
+        let n = self.states;
+        product_by_columns(&self.columns, &x[..n], &inputs.as_array(), &mut out[..n]);
     }
 
     pub fn apply(&self, x: &[f64], inputs: &StepInputs) -> Vec<f64> {
         let mut out = vec![0.0; self.states];
         self.apply_into(x, inputs, &mut out);
         out
+    }
+}
+
+/// `out = A [x; extra]` for `A` stored column-major (`out.len()` rows, one column per entry
+/// of `x` then of `extra`). Four rows at a time, their sums in a register while the columns
+/// go by (a column-major product otherwise reads and writes `out` once per column, which costs
+/// more than the row-major dot products at the rig's six states); each row's terms are added
+/// in column order, as a row-major dot product adds them, so the result is the same to the bit.
+#[inline]
+pub(crate) fn product_by_columns(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64]) {
+    const LANES: usize = 4;
+    let rows = out.len();
+    let weights = || x.iter().chain(extra).copied();
+    let mut start = 0;
+    while start + LANES <= rows {
+        let mut sums = [0.0f64; LANES];
+        for (column, w) in columns.chunks_exact(rows).zip(weights()) {
+            let block = &column[start..start + LANES];
+            for (s, a) in sums.iter_mut().zip(block) {
+                *s += a * w;
+            }
+        }
+        out[start..start + LANES].copy_from_slice(&sums);
+        start += LANES;
+    }
+    for (r, slot) in out.iter_mut().enumerate().skip(start) {
+        let mut sum = 0.0;
+        for (column, w) in columns.chunks_exact(rows).zip(weights()) {
+            sum += column[r] * w;
+        }
+        *slot = sum;
     }
 }
 

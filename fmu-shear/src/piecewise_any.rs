@@ -70,7 +70,7 @@ use smallvec::SmallVec;
 
 use crate::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
 use crate::effects::Contact;
-use crate::linear::{same_step, AccelerationRows, StepInputs};
+use crate::linear::{product_by_columns, same_step, AccelerationRows, StepInputs};
 use crate::model::{ShearModel, ShearParameters};
 use crate::piecewise::{hermite_crosses, hermite_distance, hermite_root, ExactError, DEPTH};
 
@@ -112,7 +112,8 @@ type RegionMap = HashMap<u64, Region, BuildHasherDefault<CodeHasher>>;
 struct Region {
     /// `M_r`, 2N + 5 square.
     matrix: DMatrix<f64>,
-    /// `levels[l]`: the first 2N rows of `exp(M_r h / 2^l)`, row-major, built when first used.
+    /// `levels[l]`: the first 2N rows of `exp(M_r h / 2^l)`, column-major, built when first
+    /// used.
     levels: Vec<Option<Box<[f64]>>>,
     /// Pieces between checks are `h / 2^check_level`.
     check_level: u32,
@@ -364,12 +365,11 @@ impl AnyContactMaps {
                     "the flow over {delta} s of region {code}"
                 )));
             }
+            // Column-major, the first 2N rows of each column (see `product_by_columns`).
             let width = 2 * n + EXTRA;
             let mut flow = Vec::with_capacity(2 * n * width);
-            for r in 0..2 * n {
-                for c in 0..width {
-                    flow.push(e[(r, c)]);
-                }
+            for c in 0..width {
+                flow.extend(e.column(c).iter().take(2 * n));
             }
             region.levels[level] = Some(flow.into_boxed_slice());
         }
@@ -383,20 +383,9 @@ impl AnyContactMaps {
             inputs.control_slope,
             1.0,
         ];
-        let width = 2 * n + EXTRA;
-        Ok(flow
-            .chunks_exact(width)
-            .map(|row| {
-                let mut sum = 0.0;
-                for (a, b) in row[..2 * n].iter().zip(x) {
-                    sum += a * b;
-                }
-                for (a, b) in row[2 * n..].iter().zip(&extra) {
-                    sum += a * b;
-                }
-                sum
-            })
-            .collect())
+        let mut out: X = SmallVec::from_elem(0.0, 2 * n);
+        product_by_columns(flow, &x[..2 * n], &extra, &mut out);
+        Ok(out)
     }
 
     /// Whether the piece from `a` to `b` (of `dt` seconds, in `region`) may hold a crossing: the
