@@ -414,8 +414,8 @@ fn raw_residuals(
 
 /// The residuals `y − ŷ` for parameters `z` and their Jacobian `∂(y − ŷ)/∂z` (rows as the
 /// residuals), from one run per record with the FMU's sensitivities; None when the FMU has none
-/// for these parameters, refused them, or gave non-finite ones (then never again for this
-/// calibration).
+/// for these parameters, refused them, or gave non-finite ones (an FMU's: then never again for
+/// this calibration).
 fn sensitivity_jacobian(
     sims: &mut [Simulator],
     target: &Target,
@@ -444,6 +444,7 @@ fn sensitivity_jacobian(
         })
         .collect();
     let mut row0 = 0;
+    let mut through_fmi = false;
     for (sim, record) in sims.iter_mut().zip(&target.records) {
         let q = record.channels.len();
         // The linear shear model in process where the twin is it (the FMU's own maps, a pass
@@ -456,6 +457,7 @@ fn sensitivity_jacobian(
         {
             Some(out) => out,
             None => {
+                through_fmi = true;
                 let mut outputs = record.outputs();
                 for c in &record.channels {
                     outputs.extend(c.sensitivities.as_ref()?);
@@ -480,7 +482,14 @@ fn sensitivity_jacobian(
         row0 += q * per;
     }
     if jac.iter().any(|d| !d.is_finite()) {
-        sensitivity.failed.store(true, Ordering::Relaxed);
+        // An FMU whose sensitivities are not finite (NaN with an effect on) is asked no more;
+        // the linear model in process gives non-finite ones only where the parameters blow
+        // the run up (a start's wide draw), which says nothing of the other trials: before,
+        // one such trial sent every start of a 10-storey calibration to finite differences
+        // through FMI (5,235 of its runs, 6.2 s).
+        if through_fmi {
+            sensitivity.failed.store(true, Ordering::Relaxed);
+        }
         return None;
     }
     Some((r, jac))
