@@ -230,7 +230,8 @@ class Bench:
                     peers.append(t)
                     info = got
             self.log(f"{label} {i + 1}/{self.reps}: ours {fmt_runs(ours, ours_over, self.cap)}"
-                     + (f", peer {fmt_runs(peers, peer_over, self.cap)}" if peer is not None else ""))
+                     + (f", peer {'failed' if peer_failed and not peers else fmt_runs(peers, peer_over, self.cap)}"
+                        if peer is not None else ""))
             if (ours_over or not ours) and (peer is None or peer_over):
                 break
         return {"ours": None if not ours else float(np.median(ours)), "ours_runs": ours, "ours_over": ours_over and not ours,

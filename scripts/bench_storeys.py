@@ -294,6 +294,10 @@ class Map:
             if sse is None:
                 break
             s_new = self.noise(sse, s)
+            if not np.all(np.isfinite(s_new)):
+                # A start whose fit blew up (an SSE that overflows the noise's Newton solve)
+                # ends where it is, as a start of ours that the FMU refuses.
+                break
             moved = np.max(np.abs(s_new - s))
             s = s_new
             if moved < 1e-3:

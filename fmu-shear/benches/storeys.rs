@@ -232,5 +232,39 @@ fn smooth(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, contacts, smooth);
+/// The in-process pass of a linear twin's calibration and of compare's band
+/// (`batch::accelerations_along`): every floor measured, the derivatives along all 3N
+/// parameters, 4,096 samples.
+fn batch(c: &mut Criterion) {
+    const SAMPLES: usize = 4096;
+    let mut group = c.benchmark_group("batch");
+    group.measurement_time(Duration::from_secs(3));
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(SAMPLES as u64));
+    let excitation: Vec<f64> = (0..SAMPLES)
+        .map(|n| (0.37 * n as f64).sin() + 0.5 * (1.3 * n as f64).cos())
+        .collect();
+    for storeys in [3usize, 10, 20] {
+        let p = params(storeys);
+        let floors: Vec<usize> = (0..storeys).collect();
+        let directions = nalgebra::DMatrix::<f64>::identity(3 * storeys, 3 * storeys);
+        let record = fmu_shear::batch::LinearRecord {
+            dt: STEP,
+            excitation: &excitation,
+            floors: &floors,
+        };
+        group.bench_with_input(BenchmarkId::new("along", storeys), &p, |b, p| {
+            b.iter(|| {
+                let mut sum = 0.0;
+                fmu_shear::batch::accelerations_along(p, &record, &directions, |_, v, d| {
+                    sum += v[0] + d[0];
+                });
+                black_box(sum)
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, contacts, smooth, batch);
 criterion_main!(benches);

@@ -16,13 +16,25 @@
 //! outputs before stepping); step `k` takes the input as the ramp from `e_k` to `e_{k+1}`
 //! (first-order hold, as a master that interpolates its inputs gives it), the control force 0.
 
-use nalgebra::{DMatrix, DMatrixView, DMatrixViewMut};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use nalgebra::DMatrix;
 use structure::Excitation;
 
 use crate::kernels::axpy;
 use crate::linear::{AccelerationRows, LinearStepMap, StepInputs, INPUT_COLUMNS};
 use crate::model::ShearParameters;
 use crate::sensitivity::SensitivityMaps;
+
+/// A column-major slice as faer's matrix (its products: nano-gemm's small kernels, where
+/// nalgebra's `gemm` packs every 60 × 40 by 40 × 40 product of a 20-storey recursion).
+fn faer_ref(slice: &[f64], rows: usize, cols: usize) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(slice, rows, cols)
+}
+
+fn faer_mut(slice: &mut [f64], rows: usize, cols: usize) -> MatMut<'_, f64> {
+    MatMut::from_column_major_slice_mut(slice, rows, cols)
+}
 
 /// Samples stepped ahead of their sensitivities: the maps' product is one matrix product over
 /// this many columns.
@@ -70,17 +82,32 @@ pub fn accelerations_along(
         let len = BLOCK.min(samples - start);
         x = step_block(&map, record, start, len, x, &mut z);
         // The maps' part of every step of the block at once: column b is Fₖ.
-        forcing
-            .columns_mut(0, len)
-            .gemm(1.0, &along, &z.columns(0, len), 0.0);
+        matmul(
+            faer_mut(&mut forcing.as_mut_slice()[..size * len], size, len),
+            Accum::Replace,
+            faer_ref(along.as_slice(), size, states + INPUT_COLUMNS),
+            faer_ref(
+                &z.as_slice()[..(states + INPUT_COLUMNS) * len],
+                states + INPUT_COLUMNS,
+                len,
+            ),
+            1.0,
+            Par::Seq,
+        );
         for b in 0..len {
             let (head, tail) = forcing.as_mut_slice().split_at_mut(b * size);
             let tk: &[f64] = if b == 0 { &t } else { &head[(b - 1) * size..] };
             let (values, derivatives) = outputs.at(z.column(b).as_slice(), tk);
             each(start + b, values, derivatives);
             // Tₖ₊₁ = Tₖ Φᵀ + Fₖ, in place of Fₖ.
-            let mut next_t = DMatrixViewMut::from_slice(&mut tail[..size], d, states);
-            next_t.gemm(1.0, &DMatrixView::from_slice(tk, d, states), &phi_t, 1.0);
+            matmul(
+                faer_mut(&mut tail[..size], d, states),
+                Accum::Add,
+                faer_ref(&tk[..size], d, states),
+                faer_ref(phi_t.as_slice(), states, states),
+                1.0,
+                Par::Seq,
+            );
         }
         t.copy_from_slice(forcing.column(len - 1).as_slice());
         start += len;
