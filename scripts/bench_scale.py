@@ -292,13 +292,14 @@ class Bench:
                 r.pop("peer_info", None)
                 self.rows["calibrate"].append({"storeys": n, "samples": samples, "starts": starts, **r})
         if "diagnose" not in skip:
-            r = self.diagnose(label, cal_ssp, b["diag"], n, d, recal_peer=True)
+            r = self.diagnose(label, cal_ssp, b["diag"], n, d, recal_peer=True, priors=cal_priors)
             self.rows["diagnose"].append({"storeys": n, "samples": samples, **r})
         if "watch" not in skip:
             r = self.watch(label, cal_ssp, b["diag"], d, samples, samples / RATE)
             self.rows["watch"].append({"storeys": n, "samples": samples, **r})
 
-    def diagnose(self, label, cal_ssp: Path, data: Path, n: int, d: Path, recal_peer: bool) -> dict:
+    def diagnose(self, label, cal_ssp: Path, data: Path, n: int, d: Path, recal_peer: bool,
+                 priors: list[dict] | None = None) -> dict:
         state = {}
 
         def ours():
@@ -309,13 +310,11 @@ class Bench:
             return t
 
         def peer():
+            # The recalibration's priors are the twin's calibration's (the diagnosis reports the
+            # moves, not the priors): the grid point's setup calibration gives them.
             dg = state.get("report")
-            if dg is None or dg.get("recalibration") is None:
-                return None, None
-            params = dg["recalibration"]["parameters"]
-            priors = [q["prior"] for q in params] if "prior" in params[0] else None
-            if priors is None:
-                return None, None
+            if dg is None or dg.get("recalibration") is None or priors is None:
+                raise PeerFailed("no recalibration or no priors to run the peer with")
             got = peer_job({"kind": "calibrate", "data": str(data), "storeys": n, "priors": priors, "samples": "fitted",
                             "starts": bs.RECALIBRATION_STARTS, "workers": 1}, self.work, self.cap)
             return (None, None) if got is None else (got["seconds"], got)
