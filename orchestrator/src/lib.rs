@@ -18,6 +18,7 @@ pub mod commands;
 pub mod cosim;
 pub mod evaluation;
 pub mod fsutil;
+pub mod parallel;
 pub mod record;
 pub mod report;
 pub mod serve;

@@ -635,32 +635,11 @@ fn finite_difference_columns(
             })
             .collect())
     };
-    let threads = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-        .clamp(1, p.max(1));
-    let results: Vec<Vec<(usize, Result<Vec<Vec<f64>>, RunError>)>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..threads)
-            .map(|t| {
-                let sensitivity = &sensitivity;
-                scope.spawn(move || {
-                    (t..p)
-                        .step_by(threads)
-                        .map(|j| (j, sensitivity(j)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().expect("a sensitivity thread panicked"))
-            .collect()
-    });
-    let mut jac: Vec<Option<Vec<Vec<f64>>>> = (0..p).map(|_| None).collect();
-    for (j, r) in results.into_iter().flatten() {
-        jac[j] = Some(r?);
-    }
-    Ok(jac.into_iter().map(|j| j.expect("every run")).collect())
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let parameters: Vec<usize> = (0..p).collect();
+    crate::parallel::on_threads(&parameters, threads, |&j| sensitivity(j))
+        .into_iter()
+        .collect()
 }
 
 /// The physics component's `∂y/∂θ` at each sample, from one run of its FMU with the forward

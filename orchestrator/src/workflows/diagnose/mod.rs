@@ -86,7 +86,6 @@ pub mod sensor;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use serde::Serialize;
@@ -890,32 +889,6 @@ fn screen_sites(
         kept.into_iter().map(|(_, (c, _))| c).collect(),
         dropped.into_iter().map(|(_, cs)| cs).collect(),
     )
-}
-
-/// Run `jobs` on `threads` worker threads, results in job order.
-fn parallel<T: Send, J: Sync>(jobs: &[J], threads: usize, work: impl Fn(&J) -> T + Sync) -> Vec<T> {
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
-    std::thread::scope(|scope| {
-        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= jobs.len() {
-                    break;
-                }
-                let r = work(&jobs[i]);
-                if let Ok(mut all) = results.lock() {
-                    all[i] = Some(r);
-                }
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .map(|r| r.expect("every job ran"))
-        .collect()
 }
 
 /// Calls its closure when dropped: a fit counts as done however it ended.
@@ -1876,7 +1849,7 @@ fn fit_round_one(
     // 0.9–1.0 s, a cubic 0.4–0.5 s, the recalibration 0.5 s, a contact 0.1–0.7 s).
     let mut ordered: Vec<(usize, Job)> = jobs.iter().copied().enumerate().collect();
     ordered.sort_by_key(|(_, job)| job.cost_rank());
-    let results = parallel(
+    let results = crate::parallel::on_threads(
         &ordered,
         options.threads,
         |&(_, job)| -> Result<(Fitted, f64)> {

@@ -39,9 +39,10 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::{
-    estimates, fit, parallel, with_switches, worst, Addition, Candidate, Channels, DiagnoseError,
+    estimates, fit, with_switches, worst, Addition, Candidate, Channels, DiagnoseError,
     DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
 };
+use crate::parallel::on_threads;
 use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 use structure::building::parameter_names;
@@ -135,7 +136,7 @@ impl Context<'_> {
     /// Each of `candidates` fitted alone on `base` (its parameters only).
     fn round(&self, base: &Twin, candidates: &[Candidate]) -> Vec<(Candidate, Result<Fitted>)> {
         let o = self.options;
-        let results = parallel(candidates, o.threads, |c| {
+        let results = on_threads(candidates, o.threads, |c| {
             let twin = with_switches(base, Some(c))?;
             let params = c.parameters(self.scales);
             fit(
