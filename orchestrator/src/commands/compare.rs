@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::{progress_bar, write_atomically, write_json, Compared};
+use super::{progress_bar, write_json, write_text_atomically, Compared};
 use crate::evaluation::compare::Comparison;
 use crate::twin::data::Measurement;
 use crate::twin::run::Prediction;
@@ -139,7 +139,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
-        write_atomically(path, |f| write_predictions(f, prediction))?;
+        write_text_atomically(path, &predictions_csv(prediction))?;
     }
     if let Some(path) = &args.report {
         write_json(path, &report)?;
@@ -190,31 +190,24 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 /// `time` and every predicted channel by name (`acc1,acc2,acc3` on the paper's rig), in SI;
 /// then the corrector's latent variance and sd of each channel it corrects, named as its
 /// outputs are (`latent_var<i>`, `sd<i>` for `acc<i>`; `latent_var_vel2`, `sd_vel2` …).
-fn write_predictions(f: &mut std::fs::File, p: &Prediction) -> std::io::Result<()> {
-    let mut w = csv::Writer::from_writer(f);
-    let mut header: Vec<String> = vec!["time".to_owned()];
-    let mut columns: Vec<&Vec<f64>> = Vec::new();
-    for c in &p.channels {
-        header.push(c.channel.name());
-        columns.push(&c.values);
-    }
+fn predictions_csv(p: &Prediction) -> String {
+    let mut columns: Vec<(String, &[f64])> = p
+        .channels
+        .iter()
+        .map(|c| (c.channel.name(), c.values.as_slice()))
+        .collect();
     for prefix in ["latent_var", "sd"] {
         for c in &p.channels {
             let band = if prefix == "sd" { &c.sd } else { &c.latent_var };
             if let Some(values) = band {
-                header.push(fmu_gp_corrector::layout::band_name(prefix, &c.channel));
-                columns.push(values);
+                columns.push((
+                    fmu_gp_corrector::layout::band_name(prefix, &c.channel),
+                    values.as_slice(),
+                ));
             }
         }
     }
-    w.write_record(&header)?;
-    for k in 0..p.time.len() {
-        let mut row = vec![format!("{}", p.time[k])];
-        row.extend(columns.iter().map(|c| format!("{:e}", c[k])));
-        w.write_record(&row)?;
-    }
-    w.flush()?;
-    Ok(())
+    crate::record::columns_csv(&p.time, &columns)
 }
 
 /// The record's modes beside the twin's, one line per paired mode.

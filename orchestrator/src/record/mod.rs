@@ -27,7 +27,7 @@ use ::structure::channel::{split_unit, Channel};
 
 pub use read::{AmbientRecord, DataError, Measurement, ReadOptions, Signal, EXTRA_COLUMNS};
 pub use stream::{default_header, nominal_step, LineLayout, DEFAULT_HEADER};
-pub use write::{csv_text, format_g9};
+pub use write::{columns_csv, csv_text, format_g9};
 
 // Which reader a file goes to, here above the readers: a universal file (`.uff`, `.unv`) to
 // `uff`, anything else to the CSV readers of `read` and `frf`.

@@ -1,5 +1,5 @@
-//! Writing a record as the measurement CSV `data/` has: times to 1 µs, values to 9 significant
-//! digits.
+//! Writing a record as the measurement CSV `data/` has (times to 1 µs, values to 9 significant
+//! digits), and a prediction's columns (every value to its shortest round-trip form).
 
 use super::Measurement;
 
@@ -79,6 +79,29 @@ pub fn csv_text(m: &Measurement) -> String {
         if let Some(c) = control {
             text.push(',');
             text.push_str(&format_g9(c[k]));
+        }
+        text.push('\n');
+    }
+    text
+}
+
+/// Named columns as CSV text: `time` (its shortest round-trip form) then each column's value at
+/// that sample in the shortest exponent form that reads back to the same `f64` (`{:e}`): what
+/// `twin compare --predictions` writes. Every column as long as `time`.
+pub fn columns_csv(time: &[f64], columns: &[(String, &[f64])]) -> String {
+    use std::fmt::Write;
+    let mut text = String::with_capacity(24 * (columns.len() + 1) * (time.len() + 1));
+    text.push_str("time");
+    for (name, _) in columns {
+        text.push(',');
+        text.push_str(name);
+    }
+    text.push('\n');
+    for (k, t) in time.iter().enumerate() {
+        // Writing into a String cannot fail.
+        let _ = write!(text, "{t}");
+        for (_, values) in columns {
+            let _ = write!(text, ",{:e}", values[k]);
         }
         text.push('\n');
     }
