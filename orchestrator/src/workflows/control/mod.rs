@@ -11,7 +11,7 @@ pub mod design;
 pub mod options;
 pub mod ssp;
 
-use numerics::lqr::{Estimator, Schedule};
+use numerics::lqr::{Estimator, Schedule, StateSpace};
 use serde::Serialize;
 use structure::channel::{Channel, Quantity};
 use structure::Structure;
@@ -388,6 +388,17 @@ impl Runner<'_> {
         }
     }
 
+    /// The attenuation of `r` at each resonance against the passive run, and its mean.
+    fn attenuation_of(&self, r: &Response) -> (Vec<Attenuation>, f64) {
+        let peaks = resonance_peaks(
+            &self.data.excitation.values,
+            r,
+            self.data.dt,
+            &self.resonances,
+        );
+        attenuation(&self.passive_peaks, &peaks, &self.resonances)
+    }
+
     fn design_run(
         &mut self,
         design: Design,
@@ -397,13 +408,7 @@ impl Runner<'_> {
         let outcome = self.run_law(Gains::Fixed(design.gain.clone()), state)?;
         Ok(match outcome {
             Ok(r) => {
-                let peaks = resonance_peaks(
-                    &self.data.excitation.values,
-                    &r,
-                    self.data.dt,
-                    &self.resonances,
-                );
-                let (att, mean) = attenuation(&self.passive_peaks, &peaks, &self.resonances);
+                let (att, mean) = self.attenuation_of(&r);
                 (
                     DesignRun {
                         design,
@@ -556,6 +561,123 @@ pub fn run_control(
     options: &ControlOptions,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ControlOutcome, ControlError> {
+    check_options(options)?;
+    let basis = control_basis(twin, data, options)?;
+    let set = design_set(&basis.plant, data, options)?;
+    let plan = loop_plan(&basis, data, options)?;
+    let mut runner = runner(&basis, data, options, &set, &plan, progress);
+    let passive = runner.run(None)?;
+    runner.passive_peaks =
+        resonance_peaks(&data.excitation.values, &passive, data.dt, &plan.resonances);
+    let mut designs = run_designs(&mut runner, set.designs)?;
+    let retune = match &options.retune {
+        None => None,
+        Some(rt) => Some(run_retune(
+            &mut runner,
+            rt,
+            set.retune,
+            set.qs[0],
+            &mut designs,
+        )?),
+    };
+    let schedule = match &options.schedule {
+        None => None,
+        Some(so) => Some(run_schedule(
+            &mut runner,
+            so,
+            &basis,
+            &plan.gaps,
+            &designs.runs,
+            retune.as_ref(),
+            &set.qs,
+        )?),
+    };
+    let estimator_costs = if options.estimator_costs {
+        let choices = estimator_choices(&basis, options, plan.noise_sd.as_deref(), data);
+        run_estimator_costs(&mut runner, &designs.runs[0], choices)?
+    } else {
+        Vec::new()
+    };
+    let runs = Runs {
+        passive,
+        designs,
+        retune,
+        schedule,
+        estimator_costs,
+    };
+    Ok(control_outcome(
+        &basis,
+        data,
+        options,
+        set.substeps,
+        plan,
+        runs,
+    ))
+}
+
+/// What the control is designed on, all checked before any run: the twin's structure, the
+/// channels the record measures, the plant the designs are made on, and the twin with its
+/// actuator at the chosen floor.
+struct ControlBasis {
+    structure: Structure,
+    measured: Vec<Channel>,
+    plant: StateSpace,
+    /// The twin with the actuator at `--actuator-floor`: the one every run drives.
+    twin: Twin,
+}
+
+/// The designs to run: the requested weights (sorted, without repeats) and their designs, the
+/// retune grid's designs (empty without `--retune`), and the controller samples per record
+/// sample they fix.
+struct DesignSet {
+    qs: Vec<f64>,
+    designs: Vec<Design>,
+    retune: Vec<Design>,
+    substeps: usize,
+}
+
+/// What every run of the loop shares besides the plant: the sensor noise the controller reads
+/// (None: none), the gaps watched, the estimator and the structure's resonances.
+struct LoopPlan {
+    noise_sd: Option<Vec<f64>>,
+    gaps: Vec<Gap>,
+    estimator: Estimator,
+    resonances: Vec<f64>,
+}
+
+/// The design runs so far, in the report's order, each with its response (None when the loop
+/// went unstable).
+#[derive(Default)]
+struct DesignRuns {
+    runs: Vec<DesignRun>,
+    responses: Vec<Option<Response>>,
+}
+
+impl DesignRuns {
+    fn push(&mut self, run: DesignRun, response: Option<Response>) {
+        self.runs.push(run);
+        self.responses.push(response);
+    }
+}
+
+/// The gain schedule's run: its report and its response.
+struct ScheduledRun {
+    report: ScheduleReport,
+    response: Response,
+}
+
+/// Everything the runs gave, for the report.
+struct Runs {
+    passive: Response,
+    designs: DesignRuns,
+    retune: Option<RetuneReport>,
+    schedule: Option<ScheduledRun>,
+    estimator_costs: Vec<EstimatorCost>,
+}
+
+/// The options that need nothing else to be checked: at least one q, and a positive corner
+/// for the drift removal.
+fn check_options(options: &ControlOptions) -> Result<(), ControlError> {
     if options.qs.is_empty() {
         return Err(ControlError::Options("give at least one --q".into()));
     }
@@ -565,6 +687,17 @@ pub fn run_control(
             options.highpass_hz
         )));
     }
+    Ok(())
+}
+
+/// The twin's structure with the actuator on one of its floors, the record able to drive it,
+/// the plant on the record's channels (the estimator able to run on them), and the twin with
+/// its actuator at that floor.
+fn control_basis(
+    twin: &Twin,
+    data: &Measurement,
+    options: &ControlOptions,
+) -> Result<ControlBasis, ControlError> {
     let structure: Structure = structure_of(twin)?;
     design::check_actuator_floor(options.actuator_floor, &structure)?;
     check_record(data, &structure)?;
@@ -577,25 +710,38 @@ pub fn run_control(
     )?;
     check_estimator(options.estimator, &structure, &plant, &measured)?;
     let controlled = with_actuator_at(twin, options.actuator_floor)?;
-    let twin = &controlled;
-    let floors = structure.storeys();
-    let channels = measured.len();
+    Ok(ControlBasis {
+        structure,
+        measured,
+        plant,
+        twin: controlled,
+    })
+}
+
+/// The LQR designs of the requested weights and of the retune grid (multiples of the smallest
+/// q), and the controller's rate: `--substeps`, or from the fastest closed-loop pole of them
+/// all (all runs share it).
+fn design_set(
+    plant: &StateSpace,
+    data: &Measurement,
+    options: &ControlOptions,
+) -> Result<DesignSet, ControlError> {
     let mut qs = options.qs.clone();
     qs.sort_by(f64::total_cmp);
     qs.dedup();
     let designs = qs
         .iter()
-        .map(|&q| design(&plant, q, options.r))
+        .map(|&q| design(plant, q, options.r))
         .collect::<Result<Vec<_>, _>>()?;
     // The retune grid's designs fix the controller's rate too (all runs share it).
-    let retune_designs = match &options.retune {
+    let retune = match &options.retune {
         Some(_) => RETUNE_GRID
             .iter()
-            .map(|m| design(&plant, qs[0] * m, options.r))
+            .map(|m| design(plant, qs[0] * m, options.r))
             .collect::<Result<Vec<_>, _>>()?,
         None => Vec::new(),
     };
-    let all: Vec<Design> = designs.iter().chain(&retune_designs).cloned().collect();
+    let all: Vec<Design> = designs.iter().chain(&retune).cloned().collect();
     let substeps = match options.substeps {
         Some(n) if n >= 1 => n,
         Some(n) => {
@@ -605,6 +751,25 @@ pub fn run_control(
         }
         None => substeps_for(&all, data.dt),
     };
+    Ok(DesignSet {
+        qs,
+        designs,
+        retune,
+        substeps,
+    })
+}
+
+/// The sensor noise (`--sensor-noise`, one value or one per measured channel, else the
+/// controlled twin's calibrated noise when it has one for every channel read), the gaps watched
+/// (the twin's contacts, then `--gap`'s on other storeys), the estimator and the resonances.
+fn loop_plan(
+    basis: &ControlBasis,
+    data: &Measurement,
+    options: &ControlOptions,
+) -> Result<LoopPlan, ControlError> {
+    let twin = &basis.twin;
+    let measured = &basis.measured;
+    let channels = measured.len();
     let noise_sd: Option<Vec<f64>> = match &options.sensor_noise {
         Some(sd) if sd.len() == 1 => Some(vec![sd[0]; channels]),
         Some(sd) if sd.len() == channels => Some(sd.clone()),
@@ -613,7 +778,7 @@ pub fn run_control(
                 "the sensor noise has {} values: give one, or one per measured channel \
                  ({channels}: {})",
                 sd.len(),
-                names(&measured)
+                names(measured)
             )))
         }
         // The twin's calibrated noise, when it has one for every channel read.
@@ -628,328 +793,419 @@ pub fn run_control(
             gaps.push(g.clone());
         }
     }
-    let setup = LoopSetup {
-        plant: plant.clone(),
-        measured: measured.clone(),
-        substeps,
-        noise: noise_sd.clone().map(|sd| SensorNoise {
-            sd,
-            seed: options.seed,
-        }),
-        gaps: gaps.clone(),
-        force_limit: force_limit(&structure, data),
-        corrector: false,
-    };
     let estimator = estimator_of(
         options.estimator,
         options,
         noise_sd.as_deref(),
         data,
-        &measured,
+        measured,
     );
-    let resonances = structure.natural_frequencies();
+    Ok(LoopPlan {
+        noise_sd,
+        gaps,
+        estimator,
+        resonances: basis.structure.natural_frequencies(),
+    })
+}
+
+/// The runner of every run: the loop's settings on the controlled twin, and the number of runs
+/// the options ask for (the progress counts them).
+fn runner<'a>(
+    basis: &'a ControlBasis,
+    data: &'a Measurement,
+    options: &ControlOptions,
+    set: &DesignSet,
+    plan: &LoopPlan,
+    progress: &'a mut dyn FnMut(u64, u64),
+) -> Runner<'a> {
+    let setup = LoopSetup {
+        plant: basis.plant.clone(),
+        measured: basis.measured.clone(),
+        substeps: set.substeps,
+        noise: plan.noise_sd.clone().map(|sd| SensorNoise {
+            sd,
+            seed: options.seed,
+        }),
+        gaps: plan.gaps.clone(),
+        force_limit: force_limit(&basis.structure, data),
+        corrector: false,
+    };
     let runs_total = 1
-        + designs.len()
-        + retune_designs.len()
+        + set.designs.len()
+        + set.retune.len()
         + usize::from(options.schedule.is_some())
         + if options.estimator_costs { 2 } else { 0 };
-    let mut runner = Runner {
-        twin,
+    Runner {
+        twin: &basis.twin,
         data,
         setup,
-        estimator: estimator.clone(),
-        resonances: resonances.clone(),
+        estimator: plan.estimator.clone(),
+        resonances: plan.resonances.clone(),
         passive_peaks: Vec::new(),
         progress,
         runs_done: 0,
         runs_total: runs_total as u64,
-    };
-    let passive = runner.run(None)?;
-    runner.passive_peaks = resonance_peaks(&data.excitation.values, &passive, data.dt, &resonances);
+    }
+}
 
-    let mut design_runs = Vec::new();
-    let mut responses = Vec::new();
+/// Run each requested design, in the order of q.
+fn run_designs(runner: &mut Runner, designs: Vec<Design>) -> Result<DesignRuns, ControlError> {
+    let mut runs = DesignRuns::default();
     for d in designs {
         let (run, response) = runner.design_run(d, "requested")?;
-        design_runs.push(run);
-        responses.push(response);
+        runs.push(run, response);
     }
+    Ok(runs)
+}
 
-    let retune = match &options.retune {
-        None => None,
-        Some(rt) => {
-            let mut grid = Vec::new();
-            let mut chosen: Option<(DesignRun, Option<Response>)> = None;
-            for d in retune_designs {
-                let (run, response) = runner.design_run(d, "retuned")?;
-                grid.push(RetuneRow {
-                    q: run.design.q,
-                    contacts: run.unstable.is_none().then_some(run.contacts),
-                    control_rms: run.unstable.is_none().then_some(run.control_rms),
-                    control_peak: run.unstable.is_none().then_some(run.control_peak),
-                    mean_attenuation_db: run.unstable.is_none().then_some(run.mean_attenuation_db),
-                    unstable: run.unstable.clone(),
-                });
-                let ok = run.unstable.is_none()
-                    && run.contacts <= rt.target
-                    && rt.max_force.is_none_or(|m| run.control_peak <= m);
-                if ok && chosen.is_none() {
-                    chosen = Some((run, response));
-                }
-            }
-            let verdict = match &chosen {
-                Some((run, _)) => format!(
-                    "q = {} is the smallest on the grid with at most {} contact initiations ({}){}",
-                    run.design.q,
-                    rt.target,
-                    run.contacts,
-                    rt.max_force
-                        .map(|m| format!(
-                            " and a peak control force within {m} N ({:.3} N)",
-                            run.control_peak
-                        ))
-                        .unwrap_or_default()
-                ),
-                None => format!(
-                    "no q on the grid ({} … {}) keeps the contact initiations at or below {}{}",
-                    qs[0] * RETUNE_GRID[0],
-                    qs[0] * RETUNE_GRID[RETUNE_GRID.len() - 1],
-                    rt.target,
-                    rt.max_force
-                        .map(|m| format!(" within {m} N"))
-                        .unwrap_or_default()
-                ),
-            };
-            let chosen_q = chosen.as_ref().map(|(r, _)| r.design.q);
-            if let Some((run, response)) = chosen {
-                if !design_runs.iter().any(|d| d.design.q == run.design.q) {
-                    design_runs.push(run);
-                    responses.push(response);
-                }
-            }
-            Some(RetuneReport {
-                target_contacts: rt.target,
-                max_force: rt.max_force,
-                grid,
-                chosen_q,
-                verdict,
-            })
+/// `--retune`: run the grid's designs (multiples of `q0`, the smallest q) in order and choose
+/// the first that meets the target; the chosen run joins `designs` unless its q is there.
+fn run_retune(
+    runner: &mut Runner,
+    rt: &Retune,
+    grid_designs: Vec<Design>,
+    q0: f64,
+    designs: &mut DesignRuns,
+) -> Result<RetuneReport, ControlError> {
+    let mut grid = Vec::new();
+    let mut chosen: Option<(DesignRun, Option<Response>)> = None;
+    for d in grid_designs {
+        let (run, response) = runner.design_run(d, "retuned")?;
+        grid.push(RetuneRow {
+            q: run.design.q,
+            contacts: run.unstable.is_none().then_some(run.contacts),
+            control_rms: run.unstable.is_none().then_some(run.control_rms),
+            control_peak: run.unstable.is_none().then_some(run.control_peak),
+            mean_attenuation_db: run.unstable.is_none().then_some(run.mean_attenuation_db),
+            unstable: run.unstable.clone(),
+        });
+        let ok = run.unstable.is_none()
+            && run.contacts <= rt.target
+            && rt.max_force.is_none_or(|m| run.control_peak <= m);
+        if ok && chosen.is_none() {
+            chosen = Some((run, response));
         }
-    };
+    }
+    let verdict = retune_verdict(rt, chosen.as_ref().map(|(run, _)| run), q0);
+    let chosen_q = chosen.as_ref().map(|(r, _)| r.design.q);
+    if let Some((run, response)) = chosen {
+        if !designs.runs.iter().any(|d| d.design.q == run.design.q) {
+            designs.push(run, response);
+        }
+    }
+    Ok(RetuneReport {
+        target_contacts: rt.target,
+        max_force: rt.max_force,
+        grid,
+        chosen_q,
+        verdict,
+    })
+}
 
-    let mut scheduled_response = None;
-    let schedule = match &options.schedule {
-        None => None,
-        Some(so) => {
-            let gap = gaps.first().cloned().ok_or_else(|| {
-                ControlError::Options(
-                    "--schedule needs a gap to watch: the twin has no contact; give --gap".into(),
-                )
-            })?;
-            let low = design_runs
-                .iter()
-                .filter(|d| d.unstable.is_none())
-                .min_by(|a, b| a.design.q.total_cmp(&b.design.q))
-                .cloned();
-            let high_q = retune
-                .as_ref()
-                .and_then(|r| r.chosen_q)
-                .unwrap_or_else(|| qs[qs.len() - 1]);
-            let high = design_runs
-                .iter()
-                .find(|d| d.design.q == high_q && d.unstable.is_none())
-                .cloned();
-            let (Some(low), Some(high)) = (low, high) else {
-                return Err(ControlError::Options(
-                    "--schedule needs two stable designs (two --q, or --retune)".into(),
-                ));
-            };
-            if low.design.q == high.design.q {
-                return Err(ControlError::Options(
-                    "--schedule needs a higher q than the lowest: give two --q or --retune".into(),
-                ));
+/// The retune's verdict in words: the chosen q and what it keeps, or that no q on the grid
+/// (multiples of `q0`) does.
+fn retune_verdict(rt: &Retune, chosen: Option<&DesignRun>, q0: f64) -> String {
+    match chosen {
+        Some(run) => format!(
+            "q = {} is the smallest on the grid with at most {} contact initiations ({}){}",
+            run.design.q,
+            rt.target,
+            run.contacts,
+            rt.max_force
+                .map(|m| format!(
+                    " and a peak control force within {m} N ({:.3} N)",
+                    run.control_peak
+                ))
+                .unwrap_or_default()
+        ),
+        None => format!(
+            "no q on the grid ({} … {}) keeps the contact initiations at or below {}{}",
+            q0 * RETUNE_GRID[0],
+            q0 * RETUNE_GRID[RETUNE_GRID.len() - 1],
+            rt.target,
+            rt.max_force
+                .map(|m| format!(" within {m} N"))
+                .unwrap_or_default()
+        ),
+    }
+}
+
+/// `--schedule`: run the gain schedule between the smallest stable design and the highest (the
+/// retuned one, else the largest q), watching the first gap, with the corrector beside the
+/// physics when the latent variance triggers too.
+fn run_schedule(
+    runner: &mut Runner,
+    so: &ScheduleOptions,
+    basis: &ControlBasis,
+    gaps: &[Gap],
+    designs: &[DesignRun],
+    retune: Option<&RetuneReport>,
+    qs: &[f64],
+) -> Result<ScheduledRun, ControlError> {
+    let gap = gaps.first().cloned().ok_or_else(|| {
+        ControlError::Options(
+            "--schedule needs a gap to watch: the twin has no contact; give --gap".into(),
+        )
+    })?;
+    let (low, high) = schedule_designs(designs, retune, qs)?;
+    let floors = basis.structure.storeys();
+    let variance_threshold = variance_threshold(so.variance, &basis.twin, runner.data, floors)?;
+    let schedule = Schedule {
+        storey: gap.storey,
+        gap: gap.gap(),
+        side: gap.side(),
+        margin: so.margin,
+        lookahead: so.lookahead,
+        dwell: so.dwell,
+        variance_threshold: variance_threshold.clone(),
+    };
+    let gains = Gains::Scheduled {
+        low: low.design.gain.clone(),
+        high: high.design.gain.clone(),
+        schedule,
+    };
+    let state = StateSource::Estimated(runner.estimator.clone());
+    runner.setup.corrector = variance_threshold.is_some();
+    let r = runner.run_law(gains, state);
+    runner.setup.corrector = false;
+    let r = r?.map_err(ControlError::Unstable)?;
+    let (att, mean) = runner.attenuation_of(&r);
+    let report = ScheduleReport {
+        q_low: low.design.q,
+        q_high: high.design.q,
+        storey: gap.label(),
+        gap: gap.gap(),
+        margin: so.margin,
+        lookahead: so.lookahead,
+        dwell: so.dwell,
+        switches: r
+            .switches
+            .iter()
+            .map(|&(time, high)| Switch {
+                time,
+                to: if high { "high" } else { "low" }.into(),
+            })
+            .collect(),
+        high_fraction: r.high_fraction,
+        variance_threshold,
+        drift_trigger_fraction: r.drift_trigger_fraction,
+        variance_trigger_fraction: r.variance_trigger_fraction,
+        contacts: r.contacts.len(),
+        contact_times: r.contacts.iter().map(|c| c.time).collect(),
+        attenuation_db: att,
+        mean_attenuation_db: mean,
+        control_rms: r.control_rms,
+        control_peak: r.control_peak,
+        acc_rms: acc_rms(&r),
+    };
+    Ok(ScheduledRun {
+        report,
+        response: r,
+    })
+}
+
+/// The schedule's two designs: the stable one of smallest q, and the stable one of the
+/// retuned q (else the largest requested); refused unless both exist and differ.
+fn schedule_designs(
+    designs: &[DesignRun],
+    retune: Option<&RetuneReport>,
+    qs: &[f64],
+) -> Result<(DesignRun, DesignRun), ControlError> {
+    let low = designs
+        .iter()
+        .filter(|d| d.unstable.is_none())
+        .min_by(|a, b| a.design.q.total_cmp(&b.design.q))
+        .cloned();
+    let high_q = retune
+        .and_then(|r| r.chosen_q)
+        .unwrap_or_else(|| qs[qs.len() - 1]);
+    let high = designs
+        .iter()
+        .find(|d| d.design.q == high_q && d.unstable.is_none())
+        .cloned();
+    let (Some(low), Some(high)) = (low, high) else {
+        return Err(ControlError::Options(
+            "--schedule needs two stable designs (two --q, or --retune)".into(),
+        ));
+    };
+    if low.design.q == high.design.q {
+        return Err(ControlError::Options(
+            "--schedule needs a higher q than the lowest: give two --q or --retune".into(),
+        ));
+    }
+    Ok((low, high))
+}
+
+/// The corrector's latent variance above which the schedule switches to the high gain, per
+/// floor (None: off, or `auto` on a twin without a corrector); refused when a threshold is
+/// given to a twin without one.
+fn variance_threshold(
+    trigger: VarianceTrigger,
+    twin: &Twin,
+    data: &Measurement,
+    floors: usize,
+) -> Result<Option<Vec<f64>>, ControlError> {
+    let has_corrector = twin.component(crate::workflows::train::CORRECTOR).is_some();
+    Ok(match trigger {
+        VarianceTrigger::Off => None,
+        VarianceTrigger::Value(v) => {
+            if !has_corrector {
+                return Err(ControlError::Options(format!(
+                    "--variance-threshold {v}: {} has no corrector to give a latent \
+                     variance (train one with `twin train`)",
+                    twin.describe()
+                )));
             }
-            let has_corrector = twin.component(crate::workflows::train::CORRECTOR).is_some();
-            let variance_threshold = match so.variance {
-                VarianceTrigger::Off => None,
-                VarianceTrigger::Value(v) => {
-                    if !has_corrector {
-                        return Err(ControlError::Options(format!(
-                            "--variance-threshold {v}: {} has no corrector to give a latent \
-                             variance (train one with `twin train`)",
-                            twin.describe()
-                        )));
-                    }
-                    Some(vec![v; floors])
-                }
-                VarianceTrigger::Auto if has_corrector => Some(
-                    match twin.noise_variance.as_ref().and_then(|v| v.floors(floors)) {
-                        Some(v) => v,
-                        None => (0..floors)
-                            .map(|f| {
-                                crate::workflows::learn::PAPER_THRESHOLD
-                                    * crate::evaluation::stats::variance(
-                                        data.channel(Channel::Response {
-                                            quantity: Quantity::Acceleration,
-                                            floor: f + 1,
-                                        })
-                                        .unwrap_or(&[]),
-                                    )
-                            })
-                            .collect(),
-                    },
-                ),
-                VarianceTrigger::Auto => None,
-            };
-            let schedule = Schedule {
-                storey: gap.storey,
-                gap: gap.gap(),
-                side: gap.side(),
-                margin: so.margin,
-                lookahead: so.lookahead,
-                dwell: so.dwell,
-                variance_threshold: variance_threshold.clone(),
-            };
-            let gains = Gains::Scheduled {
-                low: low.design.gain.clone(),
-                high: high.design.gain.clone(),
-                schedule,
-            };
-            let state = StateSource::Estimated(estimator.clone());
-            runner.setup.corrector = variance_threshold.is_some();
-            let r = runner.run_law(gains, state);
-            runner.setup.corrector = false;
-            let r = r?.map_err(ControlError::Unstable)?;
-            let peaks = resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
-            let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
-            let report = ScheduleReport {
-                q_low: low.design.q,
-                q_high: high.design.q,
-                storey: gap.label(),
-                gap: gap.gap(),
-                margin: so.margin,
-                lookahead: so.lookahead,
-                dwell: so.dwell,
-                switches: r
-                    .switches
-                    .iter()
-                    .map(|&(time, high)| Switch {
-                        time,
-                        to: if high { "high" } else { "low" }.into(),
+            Some(vec![v; floors])
+        }
+        VarianceTrigger::Auto if has_corrector => Some(
+            match twin.noise_variance.as_ref().and_then(|v| v.floors(floors)) {
+                Some(v) => v,
+                None => (0..floors)
+                    .map(|f| {
+                        crate::workflows::learn::PAPER_THRESHOLD
+                            * crate::evaluation::stats::variance(
+                                data.channel(Channel::Response {
+                                    quantity: Quantity::Acceleration,
+                                    floor: f + 1,
+                                })
+                                .unwrap_or(&[]),
+                            )
                     })
                     .collect(),
-                high_fraction: r.high_fraction,
-                variance_threshold,
-                drift_trigger_fraction: r.drift_trigger_fraction,
-                variance_trigger_fraction: r.variance_trigger_fraction,
-                contacts: r.contacts.len(),
-                contact_times: r.contacts.iter().map(|c| c.time).collect(),
-                attenuation_db: att,
-                mean_attenuation_db: mean,
-                control_rms: r.control_rms,
-                control_peak: r.control_peak,
-                acc_rms: acc_rms(&r),
-            };
-            scheduled_response = Some(r);
-            Some(report)
-        }
-    };
+            },
+        ),
+        VarianceTrigger::Auto => None,
+    })
+}
 
-    let mut estimator_costs = Vec::new();
-    if options.estimator_costs {
-        let first = design_runs[0].clone();
-        let mut choices = vec![("exact", StateSource::Exact)];
-        // The integrating estimator needs every floor's acceleration.
-        if check_estimator(EstimatorChoice::Integrate, &structure, &plant, &measured).is_ok() {
-            choices.push((
-                "integrate",
-                StateSource::Estimated(estimator_of(
-                    EstimatorChoice::Integrate,
-                    options,
-                    noise_sd.as_deref(),
-                    data,
-                    &measured,
-                )),
-            ));
-        }
-        if check_estimator(EstimatorChoice::Kalman, &structure, &plant, &measured).is_ok() {
-            choices.push((
-                "kalman",
-                StateSource::Estimated(estimator_of(
-                    EstimatorChoice::Kalman,
-                    options,
-                    noise_sd.as_deref(),
-                    data,
-                    &measured,
-                )),
-            ));
-        }
-        for (name, state) in choices {
-            // The chosen estimator's run is the design's own.
-            let same = matches!(&state, StateSource::Estimated(e) if *e == estimator);
-            let (att, mean, rms_u, contacts) = if same {
-                (
-                    first.attenuation_db.clone(),
-                    first.mean_attenuation_db,
-                    first.control_rms,
-                    first.contacts,
-                )
-            } else {
-                match runner.run_law(Gains::Fixed(first.design.gain.clone()), state)? {
-                    Ok(r) => {
-                        let peaks =
-                            resonance_peaks(&data.excitation.values, &r, data.dt, &resonances);
-                        let (att, mean) = attenuation(&runner.passive_peaks, &peaks, &resonances);
-                        (att, mean, r.control_rms, r.contacts.len())
-                    }
-                    Err(message) => {
-                        return Err(ControlError::Unstable(format!(
-                            "with the {name} state: {message}"
-                        )))
-                    }
-                }
-            };
-            estimator_costs.push(EstimatorCost {
-                estimator: name.into(),
-                mean_attenuation_db: mean,
-                attenuation_db: att,
-                control_rms: rms_u,
-                contacts,
-            });
-        }
+/// The states `--estimator-costs` compares: the exact one, and each estimator that can run on
+/// the record's channels (the integrating one needs every floor's acceleration).
+fn estimator_choices(
+    basis: &ControlBasis,
+    options: &ControlOptions,
+    noise_sd: Option<&[f64]>,
+    data: &Measurement,
+) -> Vec<(&'static str, StateSource)> {
+    let (structure, plant, measured) = (&basis.structure, &basis.plant, &basis.measured);
+    let mut choices = vec![("exact", StateSource::Exact)];
+    // The integrating estimator needs every floor's acceleration.
+    if check_estimator(EstimatorChoice::Integrate, structure, plant, measured).is_ok() {
+        choices.push((
+            "integrate",
+            StateSource::Estimated(estimator_of(
+                EstimatorChoice::Integrate,
+                options,
+                noise_sd,
+                data,
+                measured,
+            )),
+        ));
     }
+    if check_estimator(EstimatorChoice::Kalman, structure, plant, measured).is_ok() {
+        choices.push((
+            "kalman",
+            StateSource::Estimated(estimator_of(
+                EstimatorChoice::Kalman,
+                options,
+                noise_sd,
+                data,
+                measured,
+            )),
+        ));
+    }
+    choices
+}
 
+/// The first design's cost under each state in `choices`: the chosen estimator's is the
+/// design's own run, the others are run; an unstable loop fails, naming the state.
+fn run_estimator_costs(
+    runner: &mut Runner,
+    first: &DesignRun,
+    choices: Vec<(&'static str, StateSource)>,
+) -> Result<Vec<EstimatorCost>, ControlError> {
+    let mut estimator_costs = Vec::new();
+    for (name, state) in choices {
+        // The chosen estimator's run is the design's own.
+        let same = matches!(&state, StateSource::Estimated(e) if *e == runner.estimator);
+        let (att, mean, rms_u, contacts) = if same {
+            (
+                first.attenuation_db.clone(),
+                first.mean_attenuation_db,
+                first.control_rms,
+                first.contacts,
+            )
+        } else {
+            match runner.run_law(Gains::Fixed(first.design.gain.clone()), state)? {
+                Ok(r) => {
+                    let (att, mean) = runner.attenuation_of(&r);
+                    (att, mean, r.control_rms, r.contacts.len())
+                }
+                Err(message) => {
+                    return Err(ControlError::Unstable(format!(
+                        "with the {name} state: {message}"
+                    )))
+                }
+            }
+        };
+        estimator_costs.push(EstimatorCost {
+            estimator: name.into(),
+            mean_attenuation_db: mean,
+            attenuation_db: att,
+            control_rms: rms_u,
+            contacts,
+        });
+    }
+    Ok(estimator_costs)
+}
+
+/// The report and the time histories of the runs.
+fn control_outcome(
+    basis: &ControlBasis,
+    data: &Measurement,
+    options: &ControlOptions,
+    substeps: usize,
+    plan: LoopPlan,
+    runs: Runs,
+) -> ControlOutcome {
+    let (structure, plant) = (&basis.structure, &basis.plant);
     let units_note = match options.unit {
         StateUnit::M => "state in m and m/s; q weighs (m/s)², R weighs N²".to_owned(),
         StateUnit::Mm => "state in mm and mm/s; q weighs (mm/s)², R weighs N²".to_owned(),
     };
+    let passive = runs.passive;
     let passive_report = Passive {
         contacts: passive.contacts.len(),
         contact_times: passive.contacts.iter().map(|c| c.time).collect(),
         contact_events: passive.contacts.clone(),
         acc_rms: acc_rms(&passive),
     };
+    let (schedule, scheduled) = match runs.schedule {
+        Some(s) => (Some(s.report), Some(s.response)),
+        None => (None, None),
+    };
     let report = ControlReport {
-        twin: twin.describe(),
+        twin: basis.twin.describe(),
         data: data.path.display().to_string(),
-        parameters: design::parameter_map(&structure),
+        parameters: design::parameter_map(structure),
         excitation: structure.excitation.name(),
         actuator_floor: options.actuator_floor,
-        measured: measured.iter().map(Channel::name).collect(),
+        measured: basis.measured.iter().map(Channel::name).collect(),
         a: design::rows(&plant.a),
         b: plant.b.iter().copied().collect(),
         r: options.r,
         state_scale: plant.state_scale,
         state_unit: options.unit.name().into(),
         units_note,
-        estimator: estimator.name().into(),
-        estimator_settings: estimator.clone(),
+        estimator: plan.estimator.name().into(),
+        estimator_settings: plan.estimator.clone(),
         highpass_hz: options.highpass_hz,
         substeps,
         control_rate_hz: substeps as f64 / data.dt,
-        sensor_noise_sd: noise_sd,
-        resonances_hz: resonances,
-        gaps: gaps
+        sensor_noise_sd: plan.noise_sd,
+        resonances_hz: plan.resonances,
+        gaps: plan
+            .gaps
             .iter()
             .map(|g| GapReport {
                 storey: g.label(),
@@ -958,19 +1214,19 @@ pub fn run_control(
             })
             .collect(),
         passive: passive_report,
-        designs: design_runs,
-        retune,
+        designs: runs.designs.runs,
+        retune: runs.retune,
         schedule,
-        estimator_costs,
+        estimator_costs: runs.estimator_costs,
     };
-    Ok(ControlOutcome {
+    ControlOutcome {
         report,
         passive,
-        designs: responses,
-        scheduled: scheduled_response,
+        designs: runs.designs.responses,
+        scheduled,
         force: data.excitation.values.clone(),
         dt: data.dt,
-    })
+    }
 }
 
 /// The record can drive the structure: its excitation is the structure's (a force, or a ground
