@@ -383,21 +383,55 @@ pub fn synth_controlled(
             s.excitation.describe()
         )));
     }
-    let n = s.samples();
-    let os = s.oversample as usize;
-    let dt = s.dt();
-    let hf = dt / os as f64;
-    let storeys = s.storeys();
-    let base = s.excitation == Excitation::Base;
-    let (fine_force, bins) = if base {
+    let grid = FineGrid::of(s);
+    let (fine_force, bins) = if s.excitation == Excitation::Base {
         ground_motion(s)?
     } else {
         band_limited_force(s)?
     };
     let channels = s.response_channels();
+    let run = Integration::new(s, grid, &fine_force, &channels, control)?.run()?;
+    let levels = NoiseLevels::of(s, &run);
+    let measurement = noisy_measurement(s, grid, &channels, &run, &levels);
+    let truth = truth_of(s, grid, &channels, bins, levels, &run);
+    let record = SynthRecord {
+        measurement,
+        clean_acc: run.clean_acc,
+        clean_force: run.clean_force,
+        fine_force,
+        fine_step: grid.hf,
+        hysteresis: run.traces,
+    };
+    Ok((record, truth))
+}
 
-    // The structure.
-    let mut effects = Effects::new(storeys);
+/// The record's grid: `n` samples `dt` apart, each interval `os` fine steps of `hf`.
+#[derive(Clone, Copy)]
+struct FineGrid {
+    n: usize,
+    os: usize,
+    dt: f64,
+    hf: f64,
+}
+
+impl FineGrid {
+    fn of(s: &Scenario) -> FineGrid {
+        let n = s.samples();
+        let os = s.oversample as usize;
+        let dt = s.dt();
+        FineGrid {
+            n,
+            os,
+            dt,
+            hf: dt / os as f64,
+        }
+    }
+}
+
+/// The structure as the record starts: the model with the library's effects (its own step
+/// is the fine step), and beside it the effects the library lacks (see `Hysteretic`).
+fn structure_model(s: &Scenario) -> (ShearModel, Hysteretic) {
+    let mut effects = Effects::new(s.storeys());
     for e in &s.effects {
         // Hysteresis and quadratic damping are not in the library: integrated here, beside the
         // model (see `Hysteretic`).
@@ -410,21 +444,46 @@ pub fn synth_controlled(
         substeps: 1,
         ..ShearParameters::from_structure(&s.structure())
     };
-    let mut model = ShearModel::new(params, effects);
+    (ShearModel::new(params, effects), hysteretic)
+}
 
-    // Changes in time order (stable: equal times keep the scenario's order).
-    let mut changes: Vec<&Change> = s.changes.iter().collect();
-    changes.sort_by(|a, b| a.at.total_cmp(&b.at));
-    let mut change_truth = Vec::new();
-    let mut next_change = 0;
-    let mut apply = |model: &mut ShearModel, c: &Change| {
+/// The scenario's parameter changes in time order (stable: equal times keep the scenario's
+/// order), the next one to apply, and what each applied did.
+struct Changes<'a> {
+    list: Vec<&'a Change>,
+    next: usize,
+    truth: Vec<ChangeTruth>,
+}
+
+impl<'a> Changes<'a> {
+    fn of(s: &'a Scenario) -> Changes<'a> {
+        let mut list: Vec<&Change> = s.changes.iter().collect();
+        list.sort_by(|a, b| a.at.total_cmp(&b.at));
+        Changes {
+            list,
+            next: 0,
+            truth: Vec::new(),
+        }
+    }
+
+    /// The time of the next change, when it is due by `t`.
+    fn due(&self, t: f64) -> Option<f64> {
+        match self.list.get(self.next) {
+            Some(c) if c.at <= t => Some(c.at),
+            _ => None,
+        }
+    }
+
+    /// Apply the next change to the model's parameters and keep what it did.
+    fn apply_next(&mut self, model: &mut ShearModel) {
+        let c = self.list[self.next];
         let slot = c.parameter.slot(&mut model.params);
         let before = *slot;
         *slot = match c.how {
             ChangeHow::Factor(f) => before * f,
             ChangeHow::Value(x) => x,
         };
-        change_truth.push(ChangeTruth {
+        self.truth.push(ChangeTruth {
             at: c.at,
             parameter: c.parameter.name(),
             factor: match c.how {
@@ -434,161 +493,322 @@ pub fn synth_controlled(
             before,
             after: *slot,
         });
-    };
+        self.next += 1;
+    }
+}
 
-    let mut stats = Stats::new(&s.effects, storeys);
-    let mut clean_acc = vec![vec![0.0; n]; channels.len()];
-    let mut clean_force = vec![0.0; n];
-    let mut hysteretic = hysteretic;
-    let mut traces: Vec<HysteresisTrace> = hysteretic
-        .laws
-        .iter()
-        .map(|law| HysteresisTrace {
-            effect: law.effect,
-            storey: law.storey + 1,
-            z: Vec::with_capacity(n),
-            drift: Vec::with_capacity(n),
-            work: Vec::with_capacity(n),
+/// The controller in the loop as the integration runs it: it reads every `period` fine steps
+/// (its sensors' noise drawn from `rng`), and `at_samples` keeps its force at each sample.
+struct ControlLoop {
+    controller: numerics::lqr::Controller,
+    sensor_sd: Vec<f64>,
+    period: usize,
+    rng: ChaCha8Rng,
+    at_samples: Vec<f64>,
+}
+
+impl ControlLoop {
+    /// The controller built for its reading interval (a whole number of fine steps); refused
+    /// when the interval is not positive or the controller cannot be built.
+    fn of(control: Option<InLoopController>, grid: FineGrid) -> Result<Option<ControlLoop>> {
+        let Some(c) = control else {
+            return Ok(None);
+        };
+        if !(c.interval.is_finite() && c.interval > 0.0) {
+            return Err(SynthError::Record(format!(
+                "the controller's interval must be positive, got {} s",
+                c.interval
+            )));
+        }
+        // The controller reads every `period` fine steps.
+        let period = ((c.interval / grid.hf).round() as usize).max(1);
+        let controller = (c.make)(period as f64 * grid.hf).map_err(SynthError::Record)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(c.seed);
+        rng.set_stream(CONTROL_SENSOR_STREAM);
+        Ok(Some(ControlLoop {
+            controller,
+            sensor_sd: c.sensor_sd,
+            period,
+            rng,
+            at_samples: vec![0.0; grid.n],
+        }))
+    }
+
+    /// A reading at `time` under the excitation `force`, with the sensors' noise: the
+    /// controller's new force acts until the next reading; a controller that fails or gives a
+    /// non-finite force stops the record.
+    fn read(
+        &mut self,
+        model: &mut ShearModel,
+        hysteretic: &Hysteretic,
+        force: f64,
+        time: f64,
+    ) -> Result<()> {
+        // The sensors read the structure as it is, under the force held so far.
+        let a = hysteretic.acceleration(model, force - model.control_force.value);
+        let measured: Vec<f64> = a
+            .iter()
+            .zip(self.sensor_sd.iter())
+            .map(|(a, sd)| {
+                let z: f64 = StandardNormal.sample(&mut self.rng);
+                a + sd * z
+            })
+            .collect();
+        self.controller.step(&measured, force).map_err(|e| {
+            SynthError::Record(format!(
+                "the controller in the loop at t = {time:.6} s: {e}"
+            ))
+        })?;
+        let u = self.controller.acting();
+        if !u.is_finite() {
+            return Err(SynthError::Record(format!(
+                "the controller in the loop gave a non-finite force at t = {time:.6} s"
+            )));
+        }
+        model.control_force.value = u;
+        model.control_force.slope = 0.0;
+        Ok(())
+    }
+}
+
+/// The integration of the structure over the record, sample by sample, each sample interval
+/// in fine steps, with the changes at their times and the controller (if any) in the loop.
+struct Integration<'a> {
+    s: &'a Scenario,
+    grid: FineGrid,
+    fine_force: &'a [f64],
+    channels: &'a [(Channel, Unit)],
+    model: ShearModel,
+    hysteretic: Hysteretic,
+    changes: Changes<'a>,
+    control: Option<ControlLoop>,
+    stats: Stats,
+    clean_acc: Vec<Vec<f64>>,
+    clean_force: Vec<f64>,
+    traces: Vec<HysteresisTrace>,
+}
+
+/// What the integration gave: the noise-free samples and hysteresis traces, the structure as
+/// it ended (and the effects beside it), what the fine grid saw, the changes applied, and the
+/// control force at each sample (with a controller in the loop).
+struct Integrated {
+    clean_acc: Vec<Vec<f64>>,
+    clean_force: Vec<f64>,
+    traces: Vec<HysteresisTrace>,
+    model: ShearModel,
+    hysteretic: Hysteretic,
+    stats: Stats,
+    changes: Vec<ChangeTruth>,
+    control: Option<Vec<f64>>,
+}
+
+impl<'a> Integration<'a> {
+    /// The structure at rest at the record's start, the changes and the controller ready.
+    fn new(
+        s: &'a Scenario,
+        grid: FineGrid,
+        fine_force: &'a [f64],
+        channels: &'a [(Channel, Unit)],
+        control: Option<InLoopController>,
+    ) -> Result<Integration<'a>> {
+        let n = grid.n;
+        let (model, hysteretic) = structure_model(s);
+        let traces: Vec<HysteresisTrace> = hysteretic
+            .laws
+            .iter()
+            .map(|law| HysteresisTrace {
+                effect: law.effect,
+                storey: law.storey + 1,
+                z: Vec::with_capacity(n),
+                drift: Vec::with_capacity(n),
+                work: Vec::with_capacity(n),
+            })
+            .collect();
+        let changes = Changes::of(s);
+        let stats = Stats::new(&s.effects, s.storeys());
+        let control = ControlLoop::of(control, grid)?;
+        Ok(Integration {
+            s,
+            grid,
+            fine_force,
+            channels,
+            model,
+            hysteretic,
+            changes,
+            control,
+            stats,
+            clean_acc: vec![vec![0.0; n]; channels.len()],
+            clean_force: vec![0.0; n],
+            traces,
         })
-        .collect();
-    // The controller reads every `period` fine steps.
-    let (period, seed) = match &control {
-        Some(c) => {
-            if !(c.interval.is_finite() && c.interval > 0.0) {
-                return Err(SynthError::Record(format!(
-                    "the controller's interval must be positive, got {} s",
-                    c.interval
-                )));
+    }
+
+    /// Integrate over the record: at each sample the changes due, then the sample, then (but
+    /// after the last) the interval's fine steps.
+    fn run(mut self) -> Result<Integrated> {
+        let FineGrid { n, os, hf, .. } = self.grid;
+        for k in 0..n {
+            let j0 = k * os;
+            while self.changes.due(j0 as f64 * hf).is_some() {
+                self.changes.apply_next(&mut self.model);
             }
-            (((c.interval / hf).round() as usize).max(1), c.seed)
+            self.sample(k, j0);
+            if k + 1 == n {
+                break;
+            }
+            for j in j0..j0 + os {
+                self.fine_step(k, j0, j)?;
+            }
         }
-        None => (usize::MAX, 0),
-    };
-    let mut control = match control {
-        Some(c) => {
-            let controller = (c.make)(period as f64 * hf).map_err(SynthError::Record)?;
-            Some((controller, c.sensor_sd))
-        }
-        None => None,
-    };
-    let mut sensor_rng = ChaCha8Rng::seed_from_u64(seed);
-    sensor_rng.set_stream(CONTROL_SENSOR_STREAM);
-    let mut control_at_samples = control.as_ref().map(|_| vec![0.0; n]);
-    for k in 0..n {
-        let j0 = k * os;
-        while next_change < changes.len() && changes[next_change].at <= j0 as f64 * hf {
-            apply(&mut model, changes[next_change]);
-            next_change += 1;
-        }
-        let a = floor_accelerations(s, &hysteretic, &model, fine_force[j0]);
+        Ok(self.finish())
+    }
+
+    /// Sample `k` (fine point `j0`): the response channels, the hysteresis traces and the
+    /// excitation, noise-free, and the largest floor accelerations so far.
+    fn sample(&mut self, k: usize, j0: usize) {
+        let (model, hysteretic) = (&self.model, &self.hysteretic);
+        let a = floor_accelerations(self.s, hysteretic, model, self.fine_force[j0]);
         for (f, a) in a.iter().enumerate() {
-            stats.max_acc[f] = stats.max_acc[f].max(a.abs());
+            self.stats.max_acc[f] = self.stats.max_acc[f].max(a.abs());
         }
-        for (c, (channel, _)) in channels.iter().enumerate() {
+        for (c, (channel, _)) in self.channels.iter().enumerate() {
             if let Channel::Response { quantity, floor } = *channel {
-                clean_acc[c][k] = match quantity {
+                self.clean_acc[c][k] = match quantity {
                     Quantity::Velocity => model.velocity[floor - 1],
                     Quantity::Displacement => model.displacement[floor - 1],
                     _ => a[floor - 1],
                 };
             }
         }
-        for (i, trace) in traces.iter_mut().enumerate() {
+        for (i, trace) in self.traces.iter_mut().enumerate() {
             trace.z.push(hysteretic.z[i]);
             trace
                 .drift
                 .push(drift(&model.displacement, trace.storey - 1));
             trace.work.push(hysteretic.work[i]);
         }
-        clean_force[k] = fine_force[j0];
-        if k + 1 == n {
-            break;
-        }
-        for j in j0..j0 + os {
-            let (t0, t1) = (j as f64 * hf, (j + 1) as f64 * hf);
-            let next = if j + 1 < fine_force.len() {
-                fine_force[j + 1]
-            } else {
-                fine_force[0]
-            };
-            if let Some((controller, sensor_sd)) = &mut control {
-                if j % period == 0 {
-                    // The sensors read the structure as it is, under the force held so far.
-                    let a =
-                        hysteretic.acceleration(&model, fine_force[j] - model.control_force.value);
-                    let measured: Vec<f64> = a
-                        .iter()
-                        .zip(sensor_sd.iter())
-                        .map(|(a, sd)| {
-                            let z: f64 = StandardNormal.sample(&mut sensor_rng);
-                            a + sd * z
-                        })
-                        .collect();
-                    controller.step(&measured, fine_force[j]).map_err(|e| {
-                        SynthError::Record(format!(
-                            "the controller in the loop at t = {:.6} s: {e}",
-                            j as f64 * hf
-                        ))
-                    })?;
-                    let u = controller.acting();
-                    if !u.is_finite() {
-                        return Err(SynthError::Record(format!(
-                            "the controller in the loop gave a non-finite force at t = {:.6} s",
-                            j as f64 * hf
-                        )));
-                    }
-                    model.control_force.value = u;
-                    model.control_force.slope = 0.0;
-                }
-                if j == j0 {
-                    if let Some(cs) = &mut control_at_samples {
-                        cs[k] = model.control_force.value;
-                    }
-                }
-            }
-            model.force.value = fine_force[j];
-            model.force.slope = (next - fine_force[j]) / hf;
-            let mut t = t0;
-            while next_change < changes.len() && changes[next_change].at <= t1 {
-                let at = changes[next_change].at;
-                if at > t {
-                    hysteretic.advance(&mut model, at - t);
-                    t = at;
-                }
-                apply(&mut model, changes[next_change]);
-                next_change += 1;
-            }
-            if t1 > t {
-                hysteretic.advance(&mut model, t1 - t);
-            }
-            let finite = model
-                .displacement
-                .iter()
-                .chain(&model.velocity)
-                .chain(&hysteretic.z)
-                .all(|x| x.is_finite());
-            if !finite {
-                return Err(SynthError::Record(format!(
-                    "the synthetic structure diverged at t = {t1:.6} s (non-finite state); check the parameters and effects, or raise oversample (now {})",
-                    s.oversample
-                )));
-            }
-            stats.observe(&model, t1, hf);
-            hysteretic.observe(&model);
-        }
+        self.clean_force[k] = self.fine_force[j0];
     }
 
-    // Noise.
-    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    let response_rms: Vec<f64> = clean_acc.iter().map(|c| rms(c)).collect();
-    let acc_sd: Vec<f64> = (0..channels.len())
-        .map(|c| match &s.noise.level {
-            NoiseLevel::Fraction(_) => s.noise.level.at(c) * response_rms[c],
-            NoiseLevel::Sd(_) => s.noise.level.at(c),
-        })
-        .collect();
-    let force_rms = rms(&clean_force);
-    let force_sd = s.noise.force_fraction * force_rms;
+    /// Fine step `j` of sample interval `k` (which starts at fine point `j0`): the controller's
+    /// reading when one is due, the force linear over the step, the step split at each change
+    /// due in it; a non-finite state stops the record.
+    fn fine_step(&mut self, k: usize, j0: usize, j: usize) -> Result<()> {
+        let (fine_force, hf) = (self.fine_force, self.grid.hf);
+        let model = &mut self.model;
+        let (t0, t1) = (j as f64 * hf, (j + 1) as f64 * hf);
+        let next = if j + 1 < fine_force.len() {
+            fine_force[j + 1]
+        } else {
+            fine_force[0]
+        };
+        if let Some(control) = &mut self.control {
+            if j % control.period == 0 {
+                control.read(model, &self.hysteretic, fine_force[j], j as f64 * hf)?;
+            }
+            if j == j0 {
+                control.at_samples[k] = model.control_force.value;
+            }
+        }
+        model.force.value = fine_force[j];
+        model.force.slope = (next - fine_force[j]) / hf;
+        let mut t = t0;
+        while let Some(at) = self.changes.due(t1) {
+            if at > t {
+                self.hysteretic.advance(model, at - t);
+                t = at;
+            }
+            self.changes.apply_next(model);
+        }
+        if t1 > t {
+            self.hysteretic.advance(model, t1 - t);
+        }
+        let finite = model
+            .displacement
+            .iter()
+            .chain(&model.velocity)
+            .chain(&self.hysteretic.z)
+            .all(|x| x.is_finite());
+        if !finite {
+            return Err(SynthError::Record(format!(
+                "the synthetic structure diverged at t = {t1:.6} s (non-finite state); check the parameters and effects, or raise oversample (now {})",
+                self.s.oversample
+            )));
+        }
+        self.stats.observe(model, t1, hf);
+        self.hysteretic.observe(model);
+        Ok(())
+    }
+
+    /// What the integration gave; the last sample's control force is as the controller left
+    /// it.
+    fn finish(self) -> Integrated {
+        let n = self.grid.n;
+        let model = self.model;
+        let control = self.control.map(|c| {
+            let mut cs = c.at_samples;
+            if n > 0 {
+                cs[n - 1] = model.control_force.value;
+            }
+            cs
+        });
+        Integrated {
+            clean_acc: self.clean_acc,
+            clean_force: self.clean_force,
+            traces: self.traces,
+            model,
+            hysteretic: self.hysteretic,
+            stats: self.stats,
+            changes: self.changes.truth,
+            control,
+        }
+    }
+}
+
+/// Root mean square.
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+/// The record's noise: each response channel's noise-free RMS and the sd added to it (a
+/// fraction of that RMS, or absolute), the force's RMS and its noise sd.
+struct NoiseLevels {
+    response_rms: Vec<f64>,
+    acc_sd: Vec<f64>,
+    force_rms: f64,
+    force_sd: f64,
+}
+
+impl NoiseLevels {
+    fn of(s: &Scenario, run: &Integrated) -> NoiseLevels {
+        let response_rms: Vec<f64> = run.clean_acc.iter().map(|c| rms(c)).collect();
+        let acc_sd: Vec<f64> = (0..run.clean_acc.len())
+            .map(|c| match &s.noise.level {
+                NoiseLevel::Fraction(_) => s.noise.level.at(c) * response_rms[c],
+                NoiseLevel::Sd(_) => s.noise.level.at(c),
+            })
+            .collect();
+        let force_rms = rms(&run.clean_force);
+        NoiseLevels {
+            response_rms,
+            acc_sd,
+            force_rms,
+            force_sd: s.noise.force_fraction * force_rms,
+        }
+    }
+}
+
+/// The measurement as the CSV holds it: the noisy responses and excitation, each value rounded
+/// as the CSV writes it in its channel's unit, the times, and the control force (if any).
+fn noisy_measurement(
+    s: &Scenario,
+    grid: FineGrid,
+    channels: &[(Channel, Unit)],
+    run: &Integrated,
+    levels: &NoiseLevels,
+) -> Measurement {
+    let (n, dt) = (grid.n, grid.dt);
+    let base = s.excitation == Excitation::Base;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(NOISE_STREAM);
     let mut gauss = || -> f64 { StandardNormal.sample(&mut rng) };
@@ -605,26 +825,26 @@ pub fn synth_controlled(
     let mut acc: Vec<Vec<f64>> = Vec::with_capacity(channels.len());
     for (c, (_, unit)) in channels.iter().enumerate() {
         acc.push(
-            clean_acc[c]
+            run.clean_acc[c]
                 .iter()
-                .map(|a| written(a + acc_sd[c] * gauss(), *unit))
+                .map(|a| written(a + levels.acc_sd[c] * gauss(), *unit))
                 .collect(),
         );
     }
-    let force: Vec<f64> = clean_force
+    let force: Vec<f64> = run
+        .clean_force
         .iter()
-        .map(|x| round9(x + force_sd * gauss()))
+        .map(|x| round9(x + levels.force_sd * gauss()))
         .collect();
     let time: Vec<f64> = (0..n).map(|k| round_time(k as f64 * dt)).collect();
     let mut extra = HashMap::new();
-    if let Some(mut cs) = control_at_samples {
-        // The last sample's control force: as the controller left it.
-        if n > 0 {
-            cs[n - 1] = model.control_force.value;
-        }
-        extra.insert("control".to_owned(), cs.into_iter().map(round9).collect());
+    if let Some(cs) = &run.control {
+        extra.insert(
+            "control".to_owned(),
+            cs.iter().copied().map(round9).collect(),
+        );
     }
-    let measurement = Measurement {
+    Measurement {
         path: PathBuf::from("<synthetic>"),
         time,
         dt,
@@ -652,9 +872,142 @@ pub fn synth_controlled(
             .collect(),
         extra,
         header_line: None,
-    };
+    }
+}
 
-    // The truth.
+/// The truth: everything about how the record was made.
+fn truth_of(
+    s: &Scenario,
+    grid: FineGrid,
+    channels: &[(Channel, Unit)],
+    bins: usize,
+    levels: NoiseLevels,
+    run: &Integrated,
+) -> Truth {
+    Truth {
+        generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
+        scenario: s.to_json(),
+        record: record_truth(s, grid, channels, &run.hysteretic),
+        structure: structure_truth(s, &run.model),
+        effects: effect_truths(s, run),
+        changes: run.changes.clone(),
+        force: force_truth(s, grid, bins, &levels, &run.clean_force),
+        noise: NoiseTruth {
+            kind: match s.noise.level {
+                NoiseLevel::Fraction(_) => "Gaussian, sd = fraction × the floor's noise-free RMS".into(),
+                NoiseLevel::Sd(_) => "Gaussian, absolute sd".into(),
+            },
+            acc_sd: levels.acc_sd,
+            force_sd: levels.force_sd,
+            response_rms: levels.response_rms,
+        },
+        response: ResponseTruth {
+            max_abs_drift: run.stats.max_drift.clone(),
+            max_abs_displacement: run.stats.max_disp.clone(),
+            max_abs_acceleration: run.stats.max_acc.clone(),
+        },
+        random_numbers: format!(
+            "rand_chacha ChaCha8Rng::seed_from_u64({}), stream {FORCE_STREAM} force, stream {NOISE_STREAM} noise; rand_distr StandardNormal",
+            s.seed
+        ),
+    }
+}
+
+/// The record's columns, sampling and integrator.
+fn record_truth(
+    s: &Scenario,
+    grid: FineGrid,
+    channels: &[(Channel, Unit)],
+    hysteretic: &Hysteretic,
+) -> RecordTruth {
+    let (n, dt) = (grid.n, grid.dt);
+    let mut integrator = String::from(
+        "fmu_shear::ShearModel, classical RK4 at the fine step, force linear between fine samples",
+    );
+    if !hysteretic.laws.is_empty() {
+        integrator.push_str(
+            "; with each hysteresis effect's Bouc–Wen z (and its work) in the same RK4 state, steps split where a storey's drift rate × z or a contact's gap changes sign",
+        );
+    }
+    if !hysteretic.dampers.is_empty() {
+        integrator.push_str(
+            "; with each quadratic damper's force c₂·v|v| in the accelerations and its dissipated energy ∫ c₂|v|³ dt in the same RK4 state (smooth: no step splitting)",
+        );
+    }
+    RecordTruth {
+        columns: std::iter::once("time".to_owned())
+            .chain(std::iter::once(s.excitation.input_name().to_owned()))
+            .chain(channels.iter().map(|&(c, u)| header_field(c, u)))
+            .collect(),
+        samples: n,
+        sample_rate: s.sample_rate,
+        sample_interval: dt,
+        first_time: 0.0,
+        last_time: (n - 1) as f64 * dt,
+        fine_step: grid.hf,
+        oversample: s.oversample,
+        integrator,
+        initial_state: "at rest (zero displacements and velocities)".into(),
+        sampling: "point samples of the force and of ÿ at each sample time (no anti-aliasing filter); 6-decimal times, 9 significant digits".into(),
+    }
+}
+
+/// The structure's model and its parameters at the start and (after the changes) at the end.
+fn structure_truth(s: &Scenario, model: &ShearModel) -> StructureTruth {
+    let storeys = s.storeys();
+    let base = s.excitation == Excitation::Base;
+    StructureTruth {
+        model: format!(
+            "{storeys}-DOF shear frame of eq. (1){}: m = floor masses (kg), c = storey damping (N s/m), k = storey stiffness (N/m)",
+            if base {
+                " under ground acceleration, in coordinates relative to the ground (accelerometers read the absolute acceleration)"
+            } else {
+                ""
+            }
+        ),
+        excitation: (s.excitation != Excitation::default()).then(|| s.excitation.name()),
+        m: s.mass.clone(),
+        c: s.damping.clone(),
+        k: s.stiffness.clone(),
+        final_m: model.params.mass.clone(),
+        final_c: model.params.damping.clone(),
+        final_k: model.params.stiffness.clone(),
+    }
+}
+
+/// Each effect's truth: what the fine grid saw of it, with a hysteresis effect's saturation,
+/// largest |z| and work, and a quadratic damper's largest |u| and dissipated energy.
+fn effect_truths(s: &Scenario, run: &Integrated) -> Vec<EffectTruth> {
+    let hysteretic = &run.hysteretic;
+    s.effects
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let mut truth = run.stats.effect_truth(i, e);
+            if let Some(h) = hysteretic.laws.iter().position(|law| law.effect == i) {
+                truth.z_saturation = Some(hysteretic.laws[h].saturation());
+                truth.max_abs_z = Some(hysteretic.max_abs_z[h]);
+                truth.hysteretic_work = Some(hysteretic.work[h]);
+            }
+            if let Some(d) = hysteretic.dampers.iter().position(|d| d.effect == i) {
+                truth.max_drift_or_velocity = hysteretic.max_abs_velocity[d];
+                truth.dissipated_energy = Some(hysteretic.dissipated[d]);
+            }
+            truth
+        })
+        .collect()
+}
+
+/// The force (or ground acceleration): how it was made, its band and windows, and its RMS
+/// over the record and inside each window's plateau.
+fn force_truth(
+    s: &Scenario,
+    grid: FineGrid,
+    bins: usize,
+    levels: &NoiseLevels,
+    clean_force: &[f64],
+) -> ForceTruth {
+    let (n, dt) = (grid.n, grid.dt);
     let period = n as f64 / s.sample_rate;
     let rms_in_windows = s
         .force
@@ -671,118 +1024,22 @@ pub fn synth_controlled(
             (!inside.is_empty()).then(|| rms(&inside))
         })
         .collect();
-    let effects = s
-        .effects
-        .iter()
-        .enumerate()
-        .map(|(i, e)| {
-            let mut truth = stats.effect_truth(i, e);
-            if let Some(h) = hysteretic.laws.iter().position(|law| law.effect == i) {
-                truth.z_saturation = Some(hysteretic.laws[h].saturation());
-                truth.max_abs_z = Some(hysteretic.max_abs_z[h]);
-                truth.hysteretic_work = Some(hysteretic.work[h]);
-            }
-            if let Some(d) = hysteretic.dampers.iter().position(|d| d.effect == i) {
-                truth.max_drift_or_velocity = hysteretic.max_abs_velocity[d];
-                truth.dissipated_energy = Some(hysteretic.dissipated[d]);
-            }
-            truth
-        })
-        .collect();
-    let mut integrator = String::from(
-        "fmu_shear::ShearModel, classical RK4 at the fine step, force linear between fine samples",
-    );
-    if !hysteretic.laws.is_empty() {
-        integrator.push_str(
-            "; with each hysteresis effect's Bouc–Wen z (and its work) in the same RK4 state, steps split where a storey's drift rate × z or a contact's gap changes sign",
-        );
+    ForceTruth {
+        kind: if s.excitation == Excitation::Base {
+            format!(
+                "ground acceleration (m/s²): white Gaussian noise, FFT band mask × Kanai–Tajimi gain (f_g {} Hz, ζ_g {}), scaled to rms_requested when stationary, × Jennings–Housner–Tsai envelope (rise to {} s, strong to {} s, decay {} /s)",
+                s.ground.soil_hz, s.ground.soil_damping, s.ground.rise_end, s.ground.strong_end, s.ground.decay
+            )
+        } else {
+            "white Gaussian noise × amplitude envelope, FFT band mask, periodic over the record"
+                .into()
+        },
+        rms_requested: s.force.rms,
+        rms_record: levels.force_rms,
+        band_hz: [s.force.low_hz, s.band_hz()],
+        frequency_resolution: 1.0 / period,
+        bins,
+        windows: s.force.windows.clone(),
+        rms_in_windows,
     }
-    if !hysteretic.dampers.is_empty() {
-        integrator.push_str(
-            "; with each quadratic damper's force c₂·v|v| in the accelerations and its dissipated energy ∫ c₂|v|³ dt in the same RK4 state (smooth: no step splitting)",
-        );
-    }
-    let truth = Truth {
-        generator: format!("twin synth (shear-twin orchestrator {})", env!("CARGO_PKG_VERSION")),
-        scenario: s.to_json(),
-        record: RecordTruth {
-            columns: std::iter::once("time".to_owned())
-                .chain(std::iter::once(s.excitation.input_name().to_owned()))
-                .chain(channels.iter().map(|&(c, u)| header_field(c, u)))
-                .collect(),
-            samples: n,
-            sample_rate: s.sample_rate,
-            sample_interval: dt,
-            first_time: 0.0,
-            last_time: (n - 1) as f64 * dt,
-            fine_step: hf,
-            oversample: s.oversample,
-            integrator,
-            initial_state: "at rest (zero displacements and velocities)".into(),
-            sampling: "point samples of the force and of ÿ at each sample time (no anti-aliasing filter); 6-decimal times, 9 significant digits".into(),
-        },
-        structure: StructureTruth {
-            model: format!(
-                "{storeys}-DOF shear frame of eq. (1){}: m = floor masses (kg), c = storey damping (N s/m), k = storey stiffness (N/m)",
-                if base {
-                    " under ground acceleration, in coordinates relative to the ground (accelerometers read the absolute acceleration)"
-                } else {
-                    ""
-                }
-            ),
-            excitation: (s.excitation != Excitation::default()).then(|| s.excitation.name()),
-            m: s.mass.clone(),
-            c: s.damping.clone(),
-            k: s.stiffness.clone(),
-            final_m: model.params.mass.clone(),
-            final_c: model.params.damping.clone(),
-            final_k: model.params.stiffness.clone(),
-        },
-        effects,
-        changes: change_truth,
-        force: ForceTruth {
-            kind: if base {
-                format!(
-                    "ground acceleration (m/s²): white Gaussian noise, FFT band mask × Kanai–Tajimi gain (f_g {} Hz, ζ_g {}), scaled to rms_requested when stationary, × Jennings–Housner–Tsai envelope (rise to {} s, strong to {} s, decay {} /s)",
-                    s.ground.soil_hz, s.ground.soil_damping, s.ground.rise_end, s.ground.strong_end, s.ground.decay
-                )
-            } else {
-                "white Gaussian noise × amplitude envelope, FFT band mask, periodic over the record".into()
-            },
-            rms_requested: s.force.rms,
-            rms_record: force_rms,
-            band_hz: [s.force.low_hz, s.band_hz()],
-            frequency_resolution: 1.0 / period,
-            bins,
-            windows: s.force.windows.clone(),
-            rms_in_windows,
-        },
-        noise: NoiseTruth {
-            kind: match s.noise.level {
-                NoiseLevel::Fraction(_) => "Gaussian, sd = fraction × the floor's noise-free RMS".into(),
-                NoiseLevel::Sd(_) => "Gaussian, absolute sd".into(),
-            },
-            acc_sd,
-            force_sd,
-            response_rms,
-        },
-        response: ResponseTruth {
-            max_abs_drift: stats.max_drift,
-            max_abs_displacement: stats.max_disp,
-            max_abs_acceleration: stats.max_acc,
-        },
-        random_numbers: format!(
-            "rand_chacha ChaCha8Rng::seed_from_u64({}), stream {FORCE_STREAM} force, stream {NOISE_STREAM} noise; rand_distr StandardNormal",
-            s.seed
-        ),
-    };
-    let record = SynthRecord {
-        measurement,
-        clean_acc,
-        clean_force,
-        fine_force,
-        fine_step: hf,
-        hysteresis: traces,
-    };
-    Ok((record, truth))
 }
