@@ -836,17 +836,20 @@ impl Scenario {
             origin,
             path: String::new(),
         };
-        let positive = |loc: Loc, x: f64, strictly: bool| -> Result<()> {
-            let ok = x.is_finite() && if strictly { x > 0.0 } else { x >= 0.0 };
-            if ok {
-                Ok(())
-            } else {
-                Err(loc.error(format!(
-                    "{x} must be a finite number {} 0",
-                    if strictly { ">" } else { "≥" }
-                )))
-            }
-        };
+        let n = self.check_sampling(&at)?;
+        let n_storeys = self.check_structure(&at)?;
+        let channels = self.check_channels(&at, n_storeys)?;
+        self.check_layout(&at, n_storeys)?;
+        self.check_force(&at, n)?;
+        self.check_noise(&at, channels)?;
+        self.check_effects(&at, n_storeys)?;
+        self.check_changes(&at, n, n_storeys)
+    }
+
+    /// The sampling: a positive rate and duration, an oversampling in range, and a record of at
+    /// least 2 samples that is not too long for the force's or the structure's fine grid.
+    /// Returns the number of samples.
+    fn check_sampling(&self, at: &Loc) -> Result<usize> {
         positive(at.field("sample_rate"), self.sample_rate, true)?;
         positive(at.field("duration"), self.duration, true)?;
         if !(1..=MAX_OVERSAMPLE).contains(&self.oversample) {
@@ -876,6 +879,13 @@ impl Scenario {
                 self.oversample
             )));
         }
+        Ok(n)
+    }
+
+    /// The structure: 1 to [`MAX_STOREYS`] floors with a value of each parameter per storey in
+    /// range, a forced floor the structure has, and under ground motion a valid spectrum and
+    /// envelope. Returns the number of storeys.
+    fn check_structure(&self, at: &Loc) -> Result<usize> {
         let p = at.field("parameters");
         let n_storeys = self.storeys();
         if !(1..=MAX_STOREYS).contains(&n_storeys) {
@@ -918,6 +928,12 @@ impl Scenario {
                 )));
             }
         }
+        Ok(n_storeys)
+    }
+
+    /// The response channels: at least one, each a response of a floor the structure has, in a
+    /// unit of its quantity, none twice. Returns how many there are.
+    fn check_channels(&self, at: &Loc, n_storeys: usize) -> Result<usize> {
         let channels = self.response_channels();
         if channels.is_empty() {
             return Err(at
@@ -953,6 +969,12 @@ impl Scenario {
                 return Err(at.error(format!("'{}' is given twice", channel.name())));
             }
         }
+        Ok(channels.len())
+    }
+
+    /// Outside the paper's layout, only the library's effects (hysteresis and quadratic damping
+    /// are written for that layout).
+    fn check_layout(&self, at: &Loc, n_storeys: usize) -> Result<()> {
         if !self.is_paper_layout() {
             if let Some(i) = self.effects.iter().position(|e| !e.in_library()) {
                 return Err(at.field("effects").index(i).error(format!(
@@ -963,6 +985,12 @@ impl Scenario {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The force: its level, a band below the Nyquist frequency that holds at least one of the
+    /// `n`-sample record's frequencies, and its windows.
+    fn check_force(&self, at: &Loc, n: usize) -> Result<()> {
         let f = at.field("force");
         positive(f.field("rms"), self.force.rms, false)?;
         positive(f.field("low_hz"), self.force.low_hz, false)?;
@@ -987,42 +1015,24 @@ impl Scenario {
             )));
         }
         for (i, w) in self.force.windows.iter().enumerate() {
-            let at = f.field("windows").index(i);
-            for (name, x) in [
-                ("start", w.start),
-                ("end", w.end),
-                ("gain", w.gain),
-                ("ramp", w.ramp),
-            ] {
-                if !x.is_finite() {
-                    return Err(at.field(name).error(format!("{x} is not a finite number")));
-                }
-            }
-            if w.end <= w.start {
-                return Err(at
-                    .field("end")
-                    .error(format!("{} must be after start {}", w.end, w.start)));
-            }
-            positive(at.field("gain"), w.gain, false)?;
-            positive(at.field("ramp"), w.ramp, false)?;
-            if w.ramp > w.end - w.start {
-                return Err(at.field("ramp").error(format!(
-                    "{} s is longer than the window ({} s); the ramps are centred on its edges",
-                    w.ramp,
-                    w.end - w.start
-                )));
-            }
+            check_window(f.field("windows").index(i), w)?;
         }
+        Ok(())
+    }
+
+    /// The noise: one level or one per response channel (`channels` of them), each in range,
+    /// and the force's fraction.
+    fn check_noise(&self, at: &Loc, channels: usize) -> Result<()> {
         let noise = at.field("noise");
         let (name, levels) = match &self.noise.level {
             NoiseLevel::Fraction(x) => ("fraction", x),
             NoiseLevel::Sd(x) => ("sd", x),
         };
-        if levels.len() != 1 && levels.len() != channels.len() {
+        if levels.len() != 1 && levels.len() != channels {
             return Err(noise.field(name).error(format!(
                 "{} values for {} response channels; give one value or one per channel",
                 levels.len(),
-                channels.len()
+                channels
             )));
         }
         for (i, &x) in levels.iter().enumerate() {
@@ -1032,102 +1042,16 @@ impl Scenario {
             noise.field("force_fraction"),
             self.noise.force_fraction,
             false,
-        )?;
+        )
+    }
+
+    /// The effects: each at a site of the structure, its parameters in range, and at most one of
+    /// a kind per location.
+    fn check_effects(&self, at: &Loc, n_storeys: usize) -> Result<()> {
         for (i, e) in self.effects.iter().enumerate() {
             let at = at.field("effects").index(i);
-            match *e {
-                EffectSpec::Contact { lower, side, .. } => {
-                    if lower >= n_storeys {
-                        return Err(at.field("location").error(format!(
-                            "[{lower}, {}] is not a storey of the {n_storeys}-storey structure",
-                            lower + 1
-                        )));
-                    }
-                    if Side::from_code(side).is_none() {
-                        return Err(at.field("side").error(format!("{side} is not -1, 0 or 1")));
-                    }
-                }
-                EffectSpec::Cubic { storey, .. } => {
-                    if !(1..=n_storeys).contains(&storey) {
-                        return Err(at
-                            .field("location")
-                            .error(format!("storey {storey} is not one of 1..{n_storeys}")));
-                    }
-                }
-                EffectSpec::Friction { floor, .. } => {
-                    if !(1..=n_storeys).contains(&floor) {
-                        return Err(at
-                            .field("location")
-                            .error(format!("floor {floor} is not one of 1..{n_storeys}")));
-                    }
-                }
-                EffectSpec::Hysteresis {
-                    storey,
-                    stiffness,
-                    yield_drift,
-                    beta,
-                    gamma,
-                    exponent,
-                } => {
-                    if !(1..=3).contains(&storey) {
-                        return Err(at
-                            .field("location")
-                            .error(format!("storey {storey} is not 1, 2 or 3")));
-                    }
-                    positive(at.field("stiffness"), stiffness, true)?;
-                    positive(at.field("yield"), yield_drift, true)?;
-                    for (name, x) in [("beta", beta), ("gamma", gamma)] {
-                        if !x.is_finite() {
-                            return Err(at
-                                .field(name)
-                                .error(format!("{x} is not a finite number")));
-                        }
-                    }
-                    if beta + gamma <= 0.0 {
-                        return Err(at.field("gamma").error(format!(
-                            "beta + gamma = {beta} + {gamma} must be > 0 (|z| saturates at yield · (1/(beta + gamma))^(1/exponent))"
-                        )));
-                    }
-                    if !(exponent.is_finite() && exponent >= 1.0) {
-                        return Err(at
-                            .field("exponent")
-                            .error(format!("{exponent} must be a finite number ≥ 1")));
-                    }
-                }
-                EffectSpec::QuadraticDamping { site, coefficient } => {
-                    match site {
-                        DampingSite::Storey(s) if !(1..=3).contains(&s) => {
-                            return Err(at
-                                .field("location")
-                                .error(format!("storey {s} is not 1, 2 or 3")))
-                        }
-                        DampingSite::Floor(f) if !(1..=3).contains(&f) => {
-                            return Err(at
-                                .field("floor")
-                                .error(format!("floor {f} is not 1, 2 or 3")))
-                        }
-                        _ => {}
-                    }
-                    positive(at.field("coefficient"), coefficient, true)?;
-                }
-            }
-            // A library effect's parameters: the ranges the FMU accepts.
-            if let Some((kind, _, law)) = e.library() {
-                for (p, x) in kind.real_params().iter().zip(law.reals()) {
-                    let at = at.field(p.suffix);
-                    if p.min == 0.0 {
-                        positive(at, x, p.strictly)?;
-                    } else if !x.is_finite() {
-                        return Err(at.error(format!("{x} is not a finite number")));
-                    } else if x < p.min || (p.strictly && x == p.min) {
-                        return Err(at.error(format!(
-                            "{x} must be {} {}",
-                            if p.strictly { ">" } else { "≥" },
-                            p.min
-                        )));
-                    }
-                }
-            }
+            check_effect(&at, e, n_storeys)?;
+            check_library_parameters(&at, e)?;
             if let Some(j) = self.effects[..i].iter().position(|o| o.same_place(e)) {
                 return Err(at.error(format!(
                     "{} {} is already given as effects[{j}]; one effect of a kind per location",
@@ -1136,6 +1060,12 @@ impl Scenario {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The changes: each of a parameter the structure has, inside the `n`-sample record, by a
+    /// factor or to a value in range.
+    fn check_changes(&self, at: &Loc, n: usize, n_storeys: usize) -> Result<()> {
         let last = (n - 1) as f64 / self.sample_rate;
         for (i, c) in self.changes.iter().enumerate() {
             let at = at.field("changes").index(i);
@@ -1158,6 +1088,159 @@ impl Scenario {
         }
         Ok(())
     }
+}
+
+/// `x` is finite and > 0 (`strictly`) or ≥ 0; refused at `loc` otherwise.
+fn positive(loc: Loc, x: f64, strictly: bool) -> Result<()> {
+    let ok = x.is_finite() && if strictly { x > 0.0 } else { x >= 0.0 };
+    if ok {
+        Ok(())
+    } else {
+        Err(loc.error(format!(
+            "{x} must be a finite number {} 0",
+            if strictly { ">" } else { "≥" }
+        )))
+    }
+}
+
+/// A force window (at `at`): finite numbers, an end after its start, a gain and a ramp in
+/// range, the ramp no longer than the window.
+fn check_window(at: Loc, w: &ForceWindow) -> Result<()> {
+    for (name, x) in [
+        ("start", w.start),
+        ("end", w.end),
+        ("gain", w.gain),
+        ("ramp", w.ramp),
+    ] {
+        if !x.is_finite() {
+            return Err(at.field(name).error(format!("{x} is not a finite number")));
+        }
+    }
+    if w.end <= w.start {
+        return Err(at
+            .field("end")
+            .error(format!("{} must be after start {}", w.end, w.start)));
+    }
+    positive(at.field("gain"), w.gain, false)?;
+    positive(at.field("ramp"), w.ramp, false)?;
+    if w.ramp > w.end - w.start {
+        return Err(at.field("ramp").error(format!(
+            "{} s is longer than the window ({} s); the ramps are centred on its edges",
+            w.ramp,
+            w.end - w.start
+        )));
+    }
+    Ok(())
+}
+
+/// An effect (at `at`) where the `n_storeys`-storey structure has a site for its kind, with a
+/// valid side (contact) or parameters (hysteresis, quadratic damping).
+fn check_effect(at: &Loc, e: &EffectSpec, n_storeys: usize) -> Result<()> {
+    match *e {
+        EffectSpec::Contact { lower, side, .. } => {
+            if lower >= n_storeys {
+                return Err(at.field("location").error(format!(
+                    "[{lower}, {}] is not a storey of the {n_storeys}-storey structure",
+                    lower + 1
+                )));
+            }
+            if Side::from_code(side).is_none() {
+                return Err(at.field("side").error(format!("{side} is not -1, 0 or 1")));
+            }
+        }
+        EffectSpec::Cubic { storey, .. } => {
+            if !(1..=n_storeys).contains(&storey) {
+                return Err(at
+                    .field("location")
+                    .error(format!("storey {storey} is not one of 1..{n_storeys}")));
+            }
+        }
+        EffectSpec::Friction { floor, .. } => {
+            if !(1..=n_storeys).contains(&floor) {
+                return Err(at
+                    .field("location")
+                    .error(format!("floor {floor} is not one of 1..{n_storeys}")));
+            }
+        }
+        EffectSpec::Hysteresis { .. } => check_hysteresis(at, e)?,
+        EffectSpec::QuadraticDamping { site, coefficient } => {
+            match site {
+                DampingSite::Storey(s) if !(1..=3).contains(&s) => {
+                    return Err(at
+                        .field("location")
+                        .error(format!("storey {s} is not 1, 2 or 3")))
+                }
+                DampingSite::Floor(f) if !(1..=3).contains(&f) => {
+                    return Err(at
+                        .field("floor")
+                        .error(format!("floor {f} is not 1, 2 or 3")))
+                }
+                _ => {}
+            }
+            positive(at.field("coefficient"), coefficient, true)?;
+        }
+    }
+    Ok(())
+}
+
+/// A hysteresis effect (at `at`): storey 1, 2 or 3, positive stiffness and yield drift, finite
+/// β and γ with β + γ > 0, an exponent ≥ 1.
+fn check_hysteresis(at: &Loc, e: &EffectSpec) -> Result<()> {
+    let EffectSpec::Hysteresis {
+        storey,
+        stiffness,
+        yield_drift,
+        beta,
+        gamma,
+        exponent,
+    } = *e
+    else {
+        return Ok(());
+    };
+    if !(1..=3).contains(&storey) {
+        return Err(at
+            .field("location")
+            .error(format!("storey {storey} is not 1, 2 or 3")));
+    }
+    positive(at.field("stiffness"), stiffness, true)?;
+    positive(at.field("yield"), yield_drift, true)?;
+    for (name, x) in [("beta", beta), ("gamma", gamma)] {
+        if !x.is_finite() {
+            return Err(at.field(name).error(format!("{x} is not a finite number")));
+        }
+    }
+    if beta + gamma <= 0.0 {
+        return Err(at.field("gamma").error(format!(
+            "beta + gamma = {beta} + {gamma} must be > 0 (|z| saturates at yield · (1/(beta + gamma))^(1/exponent))"
+        )));
+    }
+    if !(exponent.is_finite() && exponent >= 1.0) {
+        return Err(at
+            .field("exponent")
+            .error(format!("{exponent} must be a finite number ≥ 1")));
+    }
+    Ok(())
+}
+
+/// A library effect's parameters (at `at`): the ranges the FMU accepts.
+fn check_library_parameters(at: &Loc, e: &EffectSpec) -> Result<()> {
+    if let Some((kind, _, law)) = e.library() {
+        for (p, x) in kind.real_params().iter().zip(law.reals()) {
+            let at = at.field(p.suffix);
+            if p.min == 0.0 {
+                positive(at, x, p.strictly)?;
+            } else if !x.is_finite() {
+                return Err(at.error(format!("{x} is not a finite number")));
+            } else if x < p.min || (p.strictly && x == p.min) {
+                return Err(at.error(format!(
+                    "{x} must be {} {}",
+                    if p.strictly { ">" } else { "≥" },
+                    p.min
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// One effect of the scenario's `effects` list (also what `--effect` becomes). The library's
