@@ -12,7 +12,7 @@ use super::ControlError;
 use crate::blocks::lqr::{trigger_code, LqrBlock, Scheduled, SensorNoise};
 use crate::cosim::master::{Clock, NodeId, Observer, Port, Recording};
 use crate::twin::data::Measurement;
-use crate::twin::system::{SystemBuilder, SystemError};
+use crate::twin::system::{SystemBuilder, SystemError, TwinSystem};
 use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 use crate::workflows::train::CORRECTOR;
 
@@ -333,17 +333,7 @@ pub fn simulate(
     law: Option<&LoopLaw>,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Response, ControlError> {
-    let substeps = setup.substeps.max(1);
-    let floors = setup.plant.floors();
-    let measured = setup.measured.len();
-    if measured != setup.plant.c.nrows() {
-        return Err(ControlError::Options(format!(
-            "the controller reads {} channels but its model measures {}",
-            measured,
-            setup.plant.c.nrows()
-        )));
-    }
-    let start = data.time[0];
+    let grid = LoopGrid::of(data, setup)?;
     let builder = SystemBuilder::open(twin)?;
     if builder.fmu(PHYSICS).is_none() {
         return Err(ControlError::Twin(format!(
@@ -352,6 +342,76 @@ pub fn simulate(
         )));
     }
     let mut running = builder.empty();
+    let physics = add_physics(&builder, &mut running, data, setup, &grid)?;
+    let latent = add_corrector(&builder, &mut running, twin, setup, physics, &grid)?;
+    let controller = match law {
+        None => None,
+        Some(law) => Some(add_controller(
+            &mut running,
+            setup,
+            law,
+            physics,
+            latent,
+            &grid,
+        )?),
+    };
+    let mut observer = LoopObserver::new(&mut running, data, setup, physics, controller, &grid);
+    run_loop(running, &mut observer, data, &grid, progress)?;
+    Ok(observer.finish())
+}
+
+/// The loop's sizes and times: controller samples per record sample, the controller's step,
+/// the record's first time, the floors and the channels the controller reads.
+struct LoopGrid {
+    substeps: usize,
+    dt: f64,
+    start: f64,
+    floors: usize,
+    measured: usize,
+}
+
+impl LoopGrid {
+    /// The grid of `setup` on `data`; refused when the controller reads other channels than
+    /// its model measures.
+    fn of(data: &Measurement, setup: &LoopSetup) -> Result<LoopGrid, ControlError> {
+        let substeps = setup.substeps.max(1);
+        let floors = setup.plant.floors();
+        let measured = setup.measured.len();
+        if measured != setup.plant.c.nrows() {
+            return Err(ControlError::Options(format!(
+                "the controller reads {} channels but its model measures {}",
+                measured,
+                setup.plant.c.nrows()
+            )));
+        }
+        Ok(LoopGrid {
+            substeps,
+            dt: data.dt / substeps as f64,
+            start: data.time[0],
+            floors,
+            measured,
+        })
+    }
+}
+
+/// The physics in the system: its node (outputs `acc1..N, disp1..N, vel1..N`, then one drift
+/// per gap; inputs the excitation and the control force) and the excitation's signal.
+#[derive(Clone, Copy)]
+struct PhysicsNode {
+    node: NodeId,
+    force: Port,
+}
+
+/// Add the physics FMU, driven by the record's excitation at the controller's rate (linear
+/// between the record's samples), and set the system to record as the sensors read.
+fn add_physics(
+    builder: &SystemBuilder,
+    running: &mut TwinSystem,
+    data: &Measurement,
+    setup: &LoopSetup,
+    grid: &LoopGrid,
+) -> Result<PhysicsNode, ControlError> {
+    let floors = grid.floors;
     // Observed as the sensors read the structure: at each point before the controller's new
     // force acts (floor 1's acceleration jumps with it), which is what a record holds.
     running.system.recording = Recording::BeforeInputs;
@@ -367,39 +427,55 @@ pub fn simulate(
     let excitation = data.excitation.channel.name();
     let plant = builder
         .add_component(
-            &mut running,
+            running,
             PHYSICS,
-            start,
+            grid.start,
             vec![excitation.clone(), "control_force".into()],
             outputs,
             None,
         )
         .map_err(system_error)?;
-    let force = running
-        .system
-        .add_signal(&excitation, upsample(&data.excitation.values, substeps));
+    let force = running.system.add_signal(
+        &excitation,
+        upsample(&data.excitation.values, grid.substeps),
+    );
     running.system.connect(force, plant, 0)?;
-    let dt = data.dt / substeps as f64;
+    Ok(PhysicsNode { node: plant, force })
+}
+
+/// With `setup.corrector`, add the twin's GP corrector beside the physics, reading the physics'
+/// accelerations and the force; refused when the twin has none. Returns its node.
+fn add_corrector(
+    builder: &SystemBuilder,
+    running: &mut TwinSystem,
+    twin: &Twin,
+    setup: &LoopSetup,
+    physics: PhysicsNode,
+    grid: &LoopGrid,
+) -> Result<Option<NodeId>, ControlError> {
+    let floors = grid.floors;
     // The corrector keeps the record's rate (its lags are the record's samples).
-    let latent = match builder.fmu(CORRECTOR) {
+    Ok(match builder.fmu(CORRECTOR) {
         Some(_) if setup.corrector => {
             let mut inputs: Vec<String> = (1..=floors).map(|f| format!("physics_acc{f}")).collect();
             inputs.push("force".into());
             let outputs = (1..=floors).map(|f| format!("latent_var{f}")).collect();
             let node = builder
                 .add_component(
-                    &mut running,
+                    running,
                     CORRECTOR,
-                    start,
+                    grid.start,
                     inputs,
                     outputs,
-                    Some(substeps),
+                    Some(grid.substeps),
                 )
                 .map_err(system_error)?;
             for f in 0..floors {
-                running.system.connect(Port::Output(plant, f), node, f)?;
+                running
+                    .system
+                    .connect(Port::Output(physics.node, f), node, f)?;
             }
-            running.system.connect(force, node, floors)?;
+            running.system.connect(physics.force, node, floors)?;
             Some(node)
         }
         None if setup.corrector => {
@@ -410,135 +486,193 @@ pub fn simulate(
             )))
         }
         _ => None,
-    };
-    let controller: Option<NodeId> = match law {
-        None => None,
-        Some(law) => {
-            let block: Box<dyn crate::cosim::master::Block> = match &law.state {
-                StateSource::Estimated(estimator) => {
-                    let (first, scheduled) = match &law.gains {
-                        Gains::Fixed(g) => (g, None),
-                        Gains::Scheduled {
-                            low,
-                            high,
-                            schedule,
-                        } => (
-                            low,
-                            Some(Scheduled {
-                                scheduler: Scheduler::new(schedule.clone(), floors)?,
-                                low: low.clone(),
-                                high: high.clone(),
-                            }),
-                        ),
-                    };
-                    let controller = Controller::new(&setup.plant, first, estimator, dt)?;
-                    Box::new(LqrBlock::new(
-                        controller,
-                        scheduled,
-                        setup.noise.clone(),
-                        setup.force_limit,
-                        latent.map(|_| floors),
-                    ))
-                }
-                StateSource::Exact => {
-                    let scheduler = match &law.gains {
-                        Gains::Scheduled { schedule, .. } => {
-                            Some(Scheduler::new(schedule.clone(), floors)?)
-                        }
-                        Gains::Fixed(_) => None,
-                    };
-                    Box::new(ExactStateBlock {
-                        floors,
-                        latent_at: LqrBlock::inputs(measured),
-                        state_at: LqrBlock::inputs(measured)
-                            + if latent.is_some() { floors } else { 0 },
-                        latent: latent.is_some(),
-                        gains: law.gains.clone(),
-                        scheduler,
-                        scale: setup.plant.state_scale,
-                        force_limit: setup.force_limit,
-                        pending: 0.0,
-                        last_time: f64::NAN,
-                        acting: 0.0,
-                    })
-                }
-            };
-            let exact = matches!(law.state, StateSource::Exact);
-            let latent_inputs = if latent.is_some() { floors } else { 0 };
-            let state_at = LqrBlock::inputs(measured) + latent_inputs;
-            let n_inputs = state_at + if exact { 2 * floors } else { 0 };
-            let node = running
-                .system
-                .add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
-            for (i, channel) in setup.measured.iter().enumerate() {
-                running.system.connect_sampled(
-                    Port::Output(plant, output_of(channel, floors)?),
-                    node,
-                    i,
-                )?;
-            }
-            running.system.connect(force, node, measured)?;
-            if let Some(c) = latent {
-                for f in 0..floors {
-                    running.system.connect_sampled(
-                        Port::Output(c, f),
-                        node,
-                        LqrBlock::inputs(measured) + f,
-                    )?;
-                }
-            }
-            if exact {
-                for s in 0..2 * floors {
-                    running.system.connect_sampled(
-                        Port::Output(plant, floors + s),
-                        node,
-                        state_at + s,
-                    )?;
-                }
-            }
-            running.system.connect(Port::Output(node, 0), plant, 1)?;
-            Some(node)
-        }
-    };
-    // Passive: the control force stays at the FMU's own 0, and the observer reads zeros.
-    let zero = running
+    })
+}
+
+/// Add the controller's block: its inputs are the measured channels (sampled), the force, the
+/// corrector's latent variances (when it runs) and, on the exact state, the structure's
+/// displacements and velocities; its force drives the physics. Returns its node.
+fn add_controller(
+    running: &mut TwinSystem,
+    setup: &LoopSetup,
+    law: &LoopLaw,
+    physics: PhysicsNode,
+    latent: Option<NodeId>,
+    grid: &LoopGrid,
+) -> Result<NodeId, ControlError> {
+    let (floors, measured) = (grid.floors, grid.measured);
+    let (plant, force) = (physics.node, physics.force);
+    let block = controller_block(setup, law, latent.is_some(), grid)?;
+    let exact = matches!(law.state, StateSource::Exact);
+    let latent_inputs = if latent.is_some() { floors } else { 0 };
+    let state_at = LqrBlock::inputs(measured) + latent_inputs;
+    let n_inputs = state_at + if exact { 2 * floors } else { 0 };
+    let node = running
         .system
-        .add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
-    let mut ports: Vec<Port> = (0..floors).map(|f| Port::Output(plant, f)).collect();
-    match controller {
-        Some(node) => ports.extend([
-            Port::Output(node, 0),
-            Port::Output(node, 1),
-            Port::Output(node, 2),
-        ]),
-        None => ports.extend([zero, zero, zero]),
+        .add_block("lqr", block, n_inputs, LqrBlock::OUTPUTS);
+    for (i, channel) in setup.measured.iter().enumerate() {
+        running.system.connect_sampled(
+            Port::Output(plant, output_of(channel, floors)?),
+            node,
+            i,
+        )?;
     }
-    for (i, _) in setup.gaps.iter().enumerate() {
-        ports.push(Port::Output(plant, 3 * floors + i));
+    running.system.connect(force, node, measured)?;
+    if let Some(c) = latent {
+        for f in 0..floors {
+            running.system.connect_sampled(
+                Port::Output(c, f),
+                node,
+                LqrBlock::inputs(measured) + f,
+            )?;
+        }
     }
-    let mut observer = LoopObserver {
-        floors,
-        ports,
-        substeps,
-        gaps: setup.gaps.clone(),
-        closed: vec![false; setup.gaps.len()],
-        k: 0,
-        response: Response {
-            acc: vec![Vec::new(); floors],
-            ..Response::default()
-        },
-        sum_sq: 0.0,
-        points: 0,
-        high_points: 0,
-        drift_points: 0,
-        variance_points: 0,
-        high: false,
-    };
-    let steps = ((data.len() - 1) * substeps) as u64;
-    let clock = Clock::new(start, dt, steps);
+    if exact {
+        for s in 0..2 * floors {
+            running
+                .system
+                .connect_sampled(Port::Output(plant, floors + s), node, state_at + s)?;
+        }
+    }
+    running.system.connect(Port::Output(node, 0), plant, 1)?;
+    Ok(node)
+}
+
+/// The block that computes the control force: the LQR block on the estimated state, or the
+/// law on the structure's exact state; `latent` when the corrector's variances are among its
+/// inputs.
+fn controller_block(
+    setup: &LoopSetup,
+    law: &LoopLaw,
+    latent: bool,
+    grid: &LoopGrid,
+) -> Result<Box<dyn crate::cosim::master::Block>, ControlError> {
+    let (floors, measured) = (grid.floors, grid.measured);
+    Ok(match &law.state {
+        StateSource::Estimated(estimator) => {
+            let (first, scheduled) = match &law.gains {
+                Gains::Fixed(g) => (g, None),
+                Gains::Scheduled {
+                    low,
+                    high,
+                    schedule,
+                } => (
+                    low,
+                    Some(Scheduled {
+                        scheduler: Scheduler::new(schedule.clone(), floors)?,
+                        low: low.clone(),
+                        high: high.clone(),
+                    }),
+                ),
+            };
+            let controller = Controller::new(&setup.plant, first, estimator, grid.dt)?;
+            Box::new(LqrBlock::new(
+                controller,
+                scheduled,
+                setup.noise.clone(),
+                setup.force_limit,
+                latent.then_some(floors),
+            ))
+        }
+        StateSource::Exact => {
+            let scheduler = match &law.gains {
+                Gains::Scheduled { schedule, .. } => {
+                    Some(Scheduler::new(schedule.clone(), floors)?)
+                }
+                Gains::Fixed(_) => None,
+            };
+            Box::new(ExactStateBlock {
+                floors,
+                latent_at: LqrBlock::inputs(measured),
+                state_at: LqrBlock::inputs(measured) + if latent { floors } else { 0 },
+                latent,
+                gains: law.gains.clone(),
+                scheduler,
+                scale: setup.plant.state_scale,
+                force_limit: setup.force_limit,
+                pending: 0.0,
+                last_time: f64::NAN,
+                acting: 0.0,
+            })
+        }
+    })
+}
+
+impl LoopObserver {
+    /// The observer of a run: the physics' accelerations, the controller's force, gain flag and
+    /// triggers (passive: a signal of zeros, added here) and each gap's drift.
+    fn new(
+        running: &mut TwinSystem,
+        data: &Measurement,
+        setup: &LoopSetup,
+        physics: PhysicsNode,
+        controller: Option<NodeId>,
+        grid: &LoopGrid,
+    ) -> LoopObserver {
+        let (floors, substeps, plant) = (grid.floors, grid.substeps, physics.node);
+        // Passive: the control force stays at the FMU's own 0, and the observer reads zeros.
+        let zero = running
+            .system
+            .add_signal("zero", vec![0.0; (data.len() - 1) * substeps + 1]);
+        let mut ports: Vec<Port> = (0..floors).map(|f| Port::Output(plant, f)).collect();
+        match controller {
+            Some(node) => ports.extend([
+                Port::Output(node, 0),
+                Port::Output(node, 1),
+                Port::Output(node, 2),
+            ]),
+            None => ports.extend([zero, zero, zero]),
+        }
+        for (i, _) in setup.gaps.iter().enumerate() {
+            ports.push(Port::Output(plant, 3 * floors + i));
+        }
+        LoopObserver {
+            floors,
+            ports,
+            substeps,
+            gaps: setup.gaps.clone(),
+            closed: vec![false; setup.gaps.len()],
+            k: 0,
+            response: Response {
+                acc: vec![Vec::new(); floors],
+                ..Response::default()
+            },
+            sum_sq: 0.0,
+            points: 0,
+            high_points: 0,
+            drift_points: 0,
+            variance_points: 0,
+            high: false,
+        }
+    }
+
+    /// The run's response, with the control force's RMS and the fractions of the time on the
+    /// high gain and under each trigger.
+    fn finish(self) -> Response {
+        let mut response = self.response;
+        let points = self.points.max(1) as f64;
+        response.control_rms = (self.sum_sq / points).sqrt();
+        response.high_fraction = self.high_points as f64 / points;
+        response.drift_trigger_fraction = self.drift_points as f64 / points;
+        response.variance_trigger_fraction = self.variance_points as f64 / points;
+        response
+    }
+}
+
+/// Run the system over the record at the controller's step, `observer` watching; a run the
+/// control force stopped is unstable. The system is dropped at the end.
+fn run_loop(
+    mut running: TwinSystem,
+    observer: &mut LoopObserver,
+    data: &Measurement,
+    grid: &LoopGrid,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<(), ControlError> {
+    let steps = ((data.len() - 1) * grid.substeps) as u64;
+    let clock = Clock::new(grid.start, grid.dt, steps);
     running
         .system
-        .run(clock, &mut [&mut observer], progress)
+        .run(clock, &mut [observer], progress)
         .map_err(|e| {
             let text = e.to_string();
             if text.contains("closed loop unstable") {
@@ -547,14 +681,7 @@ pub fn simulate(
                 ControlError::Master(e)
             }
         })?;
-    drop(running);
-    let mut response = observer.response;
-    let points = observer.points.max(1) as f64;
-    response.control_rms = (observer.sum_sq / points).sqrt();
-    response.high_fraction = observer.high_points as f64 / points;
-    response.drift_trigger_fraction = observer.drift_points as f64 / points;
-    response.variance_trigger_fraction = observer.variance_points as f64 / points;
-    Ok(response)
+    Ok(())
 }
 
 /// A variable the FMU lacks is the twin's fault (as before the builder); an FMU that cannot be
