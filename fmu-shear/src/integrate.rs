@@ -136,9 +136,18 @@ pub fn rk4_with_events<S: OdeState>(
     h: f64,
     substeps: u32,
 ) -> S {
+    // Without a kink (cubic stiffness, friction) the switches are empty at every sub-step:
+    // not asked for (a tenth of a smooth effect's step went to building them), the same steps.
+    let switching = model.effects.any_switching();
     ode::rk4_with_events(
         |tau, x: &S| rhs_at(model, x, inputs, tau),
-        |x: &S| switches(model, x),
+        |x: &S| {
+            if switching {
+                switches(model, x)
+            } else {
+                Switches::default()
+            }
+        },
         x,
         h,
         substeps,

@@ -365,6 +365,16 @@ impl Effects {
             || self.discovered.any_enabled()
     }
 
+    /// Whether any enabled effect has a kink (a contact, or a discovered term with a switch
+    /// function): without one, [`Effects::switches`] is always empty.
+    pub fn any_switching(&self) -> bool {
+        self.contact.any_enabled()
+            || self
+                .discovered
+                .enabled_terms()
+                .any(|t| t.function.switch(0.0, t.scale).is_some())
+    }
+
     /// The switch functions of the enabled effects: values whose sign change marks a kink in
     /// `g` (a contact gap opening or closing, a discovered ramp's `x ∓ s` crossing zero).
     /// Smooth effects have none.
