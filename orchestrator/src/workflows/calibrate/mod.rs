@@ -278,6 +278,9 @@ struct Target<'a> {
     /// The same in process, when the twin is the linear shear model and the calibrated
     /// parameters its `m`, `c`, `k` ([`LinearFit`]).
     linear: Option<LinearFit>,
+    /// Threads one start's finite-difference columns may use: the cores the starts leave idle
+    /// (a single start on two cores: two).
+    columns_threads: usize,
 }
 
 /// Where an FMU gives `∂y/∂p` along a run: the Boolean parameter that switches them on (the
@@ -559,15 +562,93 @@ impl Problem<'_, '_> {
             }
             None => raw_residuals(&mut sims, self.target, z, &mut self.buf.borrow_mut())?,
         };
-        let mut out = DVector::zeros(r.len() + z.len());
-        for (i, (x, w)) in r.iter().zip(&self.weights).enumerate() {
-            out[i] = x * w;
-        }
-        for (j, zj) in z.iter().enumerate() {
-            out[r.len() + j] = *zj;
-        }
-        Some(out)
+        Some(with_prior_rows(&r, &self.weights, z))
     }
+
+    /// The forward-difference Jacobian at `z` (`base` its residuals), one run per parameter:
+    /// on this thread, or, where the FMU gives no sensitivities (so a trial is one plain run)
+    /// and the starts leave cores idle, over [`Target::columns_threads`] threads, each
+    /// column on a simulator of its thread's own. The same columns either way.
+    fn forward_differences(&self, z: &[f64], base: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let plain = self
+            .target
+            .sensitivity
+            .as_ref()
+            .is_none_or(|s| s.failed.load(Ordering::Relaxed));
+        let threads = self.target.columns_threads.min(z.len());
+        let column = |j: usize, weighted: &mut dyn FnMut(&[f64]) -> Option<DVector<f64>>| {
+            let h = 1e-6 * z[j].abs().max(1.0);
+            let mut shifted_z = z.to_vec();
+            shifted_z[j] += h;
+            Some((weighted(&shifted_z)? - base) / h)
+        };
+        let mut jac = DMatrix::zeros(base.len(), z.len());
+        if !plain || threads <= 1 {
+            for j in 0..z.len() {
+                jac.set_column(j, &column(j, &mut |z| self.weighted(z))?);
+            }
+            return Some(jac);
+        }
+        *self.evaluations.borrow_mut() += z.len();
+        *self.runs.borrow_mut() += z.len() * self.target.records.len();
+        let target = self.target;
+        let weights = &self.weights;
+        // Column j on thread j mod threads; thread 0 is this one, with its simulators.
+        let columns: Vec<Option<Vec<(usize, DVector<f64>)>>> = std::thread::scope(|scope| {
+            let others: Vec<_> = (1..threads)
+                .map(|t| {
+                    scope.spawn(move || {
+                        let mut sims = simulators(target, "differences").ok()?;
+                        let mut buf = Vec::new();
+                        (t..z.len())
+                            .step_by(threads)
+                            .map(|j| {
+                                let mut run = |z: &[f64]| {
+                                    let r = raw_residuals(&mut sims, target, z, &mut buf)?;
+                                    Some(with_prior_rows(&r, weights, z))
+                                };
+                                Some((j, column(j, &mut run)?))
+                            })
+                            .collect()
+                    })
+                })
+                .collect();
+            let mut sims = self.sims.borrow_mut();
+            let mut buf = self.buf.borrow_mut();
+            let mine = (0..z.len())
+                .step_by(threads)
+                .map(|j| {
+                    let mut run = |z: &[f64]| {
+                        let r = raw_residuals(&mut sims, target, z, &mut buf)?;
+                        Some(with_prior_rows(&r, weights, z))
+                    };
+                    Some((j, column(j, &mut run)?))
+                })
+                .collect();
+            std::iter::once(mine)
+                .chain(others.into_iter().map(|h| h.join().ok().flatten()))
+                .collect()
+        });
+        for part in columns {
+            for (j, c) in part? {
+                jac.set_column(j, &c);
+            }
+        }
+        Some(jac)
+    }
+}
+
+/// The weighted residuals `r ∘ w` followed by the prior's rows `z` (the standardised
+/// parameters): the least-squares vector of a trial.
+fn with_prior_rows(r: &[f64], weights: &[f64], z: &[f64]) -> DVector<f64> {
+    let mut out = DVector::zeros(r.len() + z.len());
+    for (i, (x, w)) in r.iter().zip(weights).enumerate() {
+        out[i] = x * w;
+    }
+    for (j, zj) in z.iter().enumerate() {
+        out[r.len() + j] = *zj;
+    }
+    out
 }
 
 /// Simulations one start may use by default. Starts that reach the optimum need 350–800 on the examples
@@ -608,15 +689,7 @@ impl lm::LeastSquares for Problem<'_, '_> {
             }
             return Some(jac);
         }
-        let mut jac = DMatrix::zeros(base.len(), z.len());
-        for j in 0..z.len() {
-            let h = 1e-6 * z[j].abs().max(1.0);
-            let mut shifted_z = z.to_vec();
-            shifted_z[j] += h;
-            let shifted = self.weighted(&shifted_z)?;
-            jac.set_column(j, &((shifted - base) / h));
-        }
-        Some(jac)
+        self.forward_differences(z, base)
     }
 }
 
@@ -1171,12 +1244,13 @@ pub fn calibrate_records(
     }
     let (records, firsts) = record_targets(&fmu, inputs, setup)?;
     let (vrs, priors) = parameter_priors(&fmu, component, &structure, setup, twin_priors.as_ref())?;
-    let target = Target::new(&fmu, component, setup, records, vrs, priors);
+    let mut target = Target::new(&fmu, component, setup, records, vrs, priors);
 
     // The starts, screened or raced (on the records' heads when they are long), and the best
     // on to its end on every sample.
     let starts = starts(setup, &target.priors);
     let threads = setup.threads.clamp(1, starts.len());
+    target.columns_threads = (setup.threads / threads).max(1);
     let ladder::Climb {
         mut outcomes,
         simulations,
@@ -1357,6 +1431,7 @@ impl<'a> Target<'a> {
             budget: setup.simulations_per_start.max(1),
             sensitivity: Sensitivity::find(fmu),
             linear,
+            columns_threads: 1,
         };
         if !target.sensitive() {
             target.sensitivity = None;

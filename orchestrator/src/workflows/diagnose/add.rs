@@ -111,6 +111,7 @@ pub fn add_physics(
             climb: false,
         },
         options.starts.max(8),
+        options.threads,
         options.simulations_per_start * candidates.len(),
         options,
         baseline,

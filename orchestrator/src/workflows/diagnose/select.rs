@@ -146,6 +146,7 @@ impl Context<'_> {
                 params.iter().map(|p| (p.0.clone(), p.2)).collect(),
                 self.split,
                 o.starts,
+                1,
                 o.simulations_per_start,
                 o,
                 self.baseline_evidence,
@@ -193,6 +194,8 @@ impl Context<'_> {
             params.iter().map(|p| (p.0.clone(), p.2)).collect(),
             self.split,
             1,
+            // One start alone: its finite differences over the cores.
+            self.options.threads,
             JOINT_SIMULATIONS,
             self.options,
             self.baseline_evidence,
@@ -231,6 +234,8 @@ impl Context<'_> {
             priors,
             self.split,
             1,
+            // One start alone: its finite differences over the cores.
+            self.options.threads,
             JOINT_SIMULATIONS,
             self.options,
             self.baseline_evidence,
