@@ -930,25 +930,71 @@ pub fn run_mode(
     options: &LearnOptions,
 ) -> Result<ModeResult> {
     let started = std::time::Instant::now();
-    let Some(first) = streams.first() else {
-        return Err(LearnError::Setup("no record to learn from".into()));
-    };
-    let mut floors = initial.clone();
-    let m = floors.gps.len();
-    let mut timing = Timing::default();
-    let mut refits = Vec::new();
-    let mut schedule = RefitSchedule::new(options, floors.len());
-    let initial_end = first.first + options.initial;
-    let clock = std::time::Instant::now();
-    let mut tracked = track(&floors, first)?;
-    let adaptive = matches!(mode, Mode::Adaptive(_));
-    let mut reference = Reference::new(&floors, streams)?;
-    for j in 0..options.initial {
-        reference.learned(0, j, false, 0);
+    let mut run = ModeRun::start(streams, initial, mode, fixed, options)?;
+    let mut records = Vec::new();
+    let mut total = 0;
+    for (r, stream) in streams.iter().enumerate() {
+        let record = run.record(r, stream)?;
+        total += record.queries;
+        records.push(record);
     }
-    timing.tracking_setup += clock.elapsed().as_secs_f64();
-    timing.rebuilds += m;
-    let initial_threshold: Vec<f64> = match mode {
+    run.finish(started, fixed, total, records)
+}
+
+/// One mode's run over the records: the GPs and what is kept up to date with them (the tracked
+/// points, the reference set, the supervisor, the refit schedule), the refits made and where
+/// the time went.
+struct ModeRun<'a> {
+    streams: &'a [Stream],
+    options: &'a LearnOptions,
+    mode: Mode,
+    adaptive: bool,
+    /// Channels, one GP each.
+    m: usize,
+    /// The first record's first streamed sample (after the initial set).
+    initial_end: usize,
+    floors: Floors,
+    /// The current record's tracked points.
+    tracked: Vec<TrackedPoints>,
+    reference: Reference,
+    initial_threshold: Vec<f64>,
+    supervisor: Supervisor,
+    schedule: RefitSchedule,
+    timing: Timing,
+    refits: Vec<RefitRecord>,
+}
+
+/// What one record gathers as it is streamed: its first streamed sample, its scores before
+/// any query, its queries, the NMSE after updates and the trace.
+struct RecordProgress {
+    start: usize,
+    nmse_physics: Vec<f64>,
+    nmse_before: Vec<f64>,
+    /// Queried samples.
+    query_indices: Vec<usize>,
+    nmse_after: Vec<NmsePoint>,
+    trace: Trace,
+    /// The supervisor's outputs: the learn flag, then a threshold per channel.
+    outputs: Vec<f64>,
+}
+
+/// The corrected prediction's NMSE over a whole record from the tracked means.
+fn nmse_now(stream: &Stream, tracked: &[TrackedPoints], target: TargetForm) -> Vec<f64> {
+    stream.nmse(&corrected_from_means(stream, tracked, target))
+}
+
+/// The mode's threshold before the stream: the fixed mode's own, the largest latent variance
+/// over the `initial` points that follow the initial set (adaptive), or none (uniform).
+fn initial_threshold(
+    mode: Mode,
+    fixed: Option<&FixedThreshold>,
+    tracked: &[TrackedPoints],
+    first: &Stream,
+    initial_end: usize,
+    options: &LearnOptions,
+) -> Result<Vec<f64>> {
+    let m = tracked.len();
+    Ok(match mode {
         Mode::Fixed => match fixed {
             Some(fixed) => fixed.values.clone(),
             None => {
@@ -971,152 +1017,282 @@ pub fn run_mode(
                 .collect()
         }
         Mode::Uniform => vec![f64::INFINITY; m],
-    };
-    let mut supervisor = Supervisor::new(mode, initial_threshold.clone(), options.uniform_every);
-    let mut records = Vec::new();
-    let mut total = 0;
-    for (r, stream) in streams.iter().enumerate() {
-        supervisor.start_record();
+    })
+}
+
+impl<'a> ModeRun<'a> {
+    /// The initial GPs tracked on the first record, with the initial set in the training set,
+    /// and the supervisor from the mode's initial threshold.
+    fn start(
+        streams: &'a [Stream],
+        initial: &Floors,
+        mode: Mode,
+        fixed: Option<&FixedThreshold>,
+        options: &'a LearnOptions,
+    ) -> Result<Self> {
+        let Some(first) = streams.first() else {
+            return Err(LearnError::Setup("no record to learn from".into()));
+        };
+        let floors = initial.clone();
+        let m = floors.gps.len();
+        let mut timing = Timing::default();
+        let schedule = RefitSchedule::new(options, floors.len());
+        let initial_end = first.first + options.initial;
+        let clock = std::time::Instant::now();
+        let tracked = track(&floors, first)?;
+        let adaptive = matches!(mode, Mode::Adaptive(_));
+        let mut reference = Reference::new(&floors, streams)?;
+        for j in 0..options.initial {
+            reference.learned(0, j, false, 0);
+        }
+        timing.tracking_setup += clock.elapsed().as_secs_f64();
+        timing.rebuilds += m;
+        let initial_threshold =
+            initial_threshold(mode, fixed, &tracked, first, initial_end, options)?;
+        let supervisor = Supervisor::new(mode, initial_threshold.clone(), options.uniform_every);
+        Ok(ModeRun {
+            streams,
+            options,
+            mode,
+            adaptive,
+            m,
+            initial_end,
+            floors,
+            tracked,
+            reference,
+            initial_threshold,
+            supervisor,
+            schedule,
+            timing,
+            refits: Vec::new(),
+        })
+    }
+
+    /// Record `r` streamed sample by sample (a decision at each, a query where it says so),
+    /// then its end-of-record refit, its points outside the training set carried to the
+    /// reference set, and its result.
+    fn record(&mut self, r: usize, stream: &Stream) -> Result<RecordResult> {
+        let mut progress = self.begin_record(r, stream)?;
+        for t in progress.start..stream.len() {
+            if !self.passes(stream, t, &mut progress)? {
+                self.query(r, stream, t, &mut progress)?;
+            }
+        }
+        if self.options.refit_every > 0 && self.schedule.since > 0 {
+            self.end_of_record_refit(r, stream, progress.query_indices.len())?;
+        }
+        if self.adaptive && r + 1 < self.streams.len() {
+            self.carry_outside(r, stream)?;
+        }
+        Ok(self.record_result(stream, progress))
+    }
+
+    /// The supervisor told a new record starts, the record tracked (the first one is already),
+    /// and its scores before any query in it.
+    fn begin_record(&mut self, r: usize, stream: &Stream) -> Result<RecordProgress> {
+        self.supervisor.start_record();
         // Tracked index j is sample stream.first + j.
-        let seen_from = stream.first;
-        let start = if r == 0 { initial_end } else { stream.first };
+        let start = if r == 0 {
+            self.initial_end
+        } else {
+            stream.first
+        };
         if r > 0 {
             let clock = std::time::Instant::now();
-            tracked = track(&floors, stream)?;
-            timing.rebuilds += m;
-            timing.tracking_setup += clock.elapsed().as_secs_f64();
+            self.tracked = track(&self.floors, stream)?;
+            self.timing.rebuilds += self.m;
+            self.timing.tracking_setup += clock.elapsed().as_secs_f64();
         }
-        let nmse_now = |tracked: &[TrackedPoints]| {
-            stream.nmse(&corrected_from_means(stream, tracked, options.target))
-        };
         let nmse_physics = stream.nmse(&stream.physics);
-        let nmse_before = nmse_now(&tracked);
-        let mut nmse_after = vec![NmsePoint {
+        let nmse_before = nmse_now(stream, &self.tracked, self.options.target);
+        let nmse_after = vec![NmsePoint {
             update: 0,
             time: stream.time[start.min(stream.len() - 1)],
             nmse: nmse_before.clone(),
         }];
-        let mut query_indices = Vec::new();
-        let mut trace = Trace {
-            channels: stream.layout.names(),
-            latent: vec![Vec::new(); m],
-            threshold: vec![Vec::new(); m],
-            ..Trace::default()
-        };
-        let mut outputs = vec![0.0; m + 1];
-        for t in start..stream.len() {
-            let j = t - seen_from;
-            let latent: Vec<f64> = (0..m).map(|f| tracked[f].latent_variance(j)).collect();
-            supervisor.evaluate(stream.time[t], &latent, &mut outputs)?;
-            trace.time.push(stream.time[t]);
-            for f in 0..m {
-                trace.latent[f].push(latent[f]);
-                trace.threshold[f].push(outputs[1 + f]);
-            }
-            if outputs[0] < 0.5 {
-                continue;
-            }
-            // Query: learn the point on every channel; refit on the schedule.
-            let clock = std::time::Instant::now();
-            let before = floors.len();
-            floors
-                .learn(
-                    &stream.inputs[t],
-                    &stream.targets[t],
-                    0,
-                    MAX_TRAINING_POINTS,
-                )
+        Ok(RecordProgress {
+            start,
+            nmse_physics,
+            nmse_before,
+            query_indices: Vec::new(),
+            nmse_after,
+            trace: Trace {
+                channels: stream.layout.names(),
+                latent: vec![Vec::new(); self.m],
+                threshold: vec![Vec::new(); self.m],
+                ..Trace::default()
+            },
+            outputs: vec![0.0; self.m + 1],
+        })
+    }
+
+    /// The supervisor's decision at sample `t` from the latent variances there, traced; whether
+    /// the point passes without a query.
+    fn passes(&mut self, stream: &Stream, t: usize, progress: &mut RecordProgress) -> Result<bool> {
+        let (j, m) = (t - stream.first, self.m);
+        let latent: Vec<f64> = (0..m).map(|f| self.tracked[f].latent_variance(j)).collect();
+        self.supervisor
+            .evaluate(stream.time[t], &latent, &mut progress.outputs)?;
+        let trace = &mut progress.trace;
+        trace.time.push(stream.time[t]);
+        for (f, &v) in latent.iter().enumerate() {
+            trace.latent[f].push(v);
+            trace.threshold[f].push(progress.outputs[1 + f]);
+        }
+        Ok(progress.outputs[0] < 0.5)
+    }
+
+    /// A query at sample `t`: the point learned on every channel and a refit on the schedule,
+    /// the tracked values brought up to date, the adaptive threshold updated and the NMSE
+    /// scored every `nmse_every` queries.
+    fn query(
+        &mut self,
+        r: usize,
+        stream: &Stream,
+        t: usize,
+        progress: &mut RecordProgress,
+    ) -> Result<()> {
+        let j = t - stream.first;
+        let clock = std::time::Instant::now();
+        let before = self.floors.len();
+        self.floors
+            .learn(
+                &stream.inputs[t],
+                &stream.targets[t],
+                0,
+                MAX_TRAINING_POINTS,
+            )
+            .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
+        progress.query_indices.push(t);
+        let dropped = self.reference.learned(r, j, self.floors.len() == before, r);
+        self.timing.learning += clock.elapsed().as_secs_f64();
+        let refit_due = self.schedule.query();
+        if refit_due {
+            let queries = progress.query_indices.len();
+            let refit = refit_floors(&mut self.floors, self.options, r, queries, false)
                 .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
-            query_indices.push(t);
-            let dropped = reference.learned(r, j, floors.len() == before, r);
-            timing.learning += clock.elapsed().as_secs_f64();
-            let refit_due = schedule.query();
-            if refit_due {
-                let refit = refit_floors(&mut floors, options, r, query_indices.len(), false)
-                    .map_err(|e| LearnError::Gp(format!("t = {} s: {e}", stream.time[t])))?;
-                schedule.refitted(floors.len());
-                timing.refits += refit.seconds;
-                refits.push(refit);
-            }
-            let clock = std::time::Instant::now();
-            // Parallel floors when the work outweighs starting two threads.
-            let parallel = refit_due || floors.len() * tracked[0].len() >= PARALLEL_TRACKING;
-            timing.rebuilds += sync(&mut tracked, &floors, parallel)?;
-            if adaptive {
-                let parallel =
-                    refit_due || floors.len() * reference.earlier[0].len() >= PARALLEL_TRACKING;
-                timing.rebuilds += sync(&mut reference.earlier, &floors, parallel)?;
-                if let Some((r0, j0)) = dropped {
-                    for f in 0..m {
-                        let at = streams[r0].first + j0;
-                        let x =
-                            Inputs::from_rows(&streams[r0].channel_inputs(&floors, f, at..at + 1))
-                                .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
-                        reference.earlier[f]
-                            .extend(trained(&floors.gps[f])?, &x)
-                            .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
-                    }
-                }
-            }
-            timing.tracking += clock.elapsed().as_secs_f64();
-            if adaptive {
-                // Line 12: the largest latent variance, under the updated GPs, over the
-                // reference set; an empty one leaves the threshold as it is.
-                let old = supervisor.threshold();
-                let max = reference.max(&tracked, r, j);
-                supervisor
-                    .update_threshold((0..m).map(|f| max[f].unwrap_or(old[f])).collect::<Vec<_>>());
-            }
-            if query_indices.len() % options.nmse_every.max(1) == 0 {
-                nmse_after.push(NmsePoint {
-                    update: query_indices.len(),
-                    time: stream.time[t],
-                    nmse: nmse_now(&tracked),
-                });
-            }
+            self.refitted(refit);
         }
-        if options.refit_every > 0 && schedule.since > 0 {
-            // The record's final GPs get hyperparameters fitted to all that was learned in it
-            // (Algorithm 1 refits after every query; the schedule thins that out, and the end
-            // of a record is where its final NMSE and the carried-over GPs are taken).
-            let refit = refit_floors(&mut floors, options, r, query_indices.len(), true)
-                .map_err(|e| LearnError::Gp(format!("{}: end of record: {e}", stream.name)))?;
-            schedule.refitted(floors.len());
-            timing.refits += refit.seconds;
-            refits.push(refit);
-            let clock = std::time::Instant::now();
-            timing.rebuilds += sync(&mut tracked, &floors, true)?;
-            if adaptive {
-                timing.rebuilds += sync(&mut reference.earlier, &floors, true)?;
-                let old = supervisor.threshold();
-                let max = reference.max(&tracked, r, stream.len() - 1 - seen_from);
-                supervisor
-                    .update_threshold((0..m).map(|f| max[f].unwrap_or(old[f])).collect::<Vec<_>>());
-            }
-            timing.tracking += clock.elapsed().as_secs_f64();
+        self.sync_after_query(refit_due, dropped)?;
+        if self.adaptive {
+            self.update_threshold(r, j);
         }
-        if adaptive && r + 1 < streams.len() {
-            // The record's points outside the training set join the earlier ones.
-            let clock = std::time::Instant::now();
-            let outside: Vec<usize> = (0..stream.len() - seen_from)
-                .filter(|&i| !reference.inside[r][i])
-                .collect();
-            if !outside.is_empty() {
-                for f in 0..m {
-                    let rows: Vec<Vec<f64>> = outside
-                        .iter()
-                        .map(|&i| floors.input_of(f, &stream.inputs[seen_from + i]))
-                        .collect();
-                    let x = Inputs::from_rows(&rows)
-                        .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
-                    reference.earlier[f]
-                        .extend(trained(&floors.gps[f])?, &x)
+        let (queries, options) = (progress.query_indices.len(), self.options);
+        if queries % options.nmse_every.max(1) == 0 {
+            progress.nmse_after.push(NmsePoint {
+                update: queries,
+                time: stream.time[t],
+                nmse: nmse_now(stream, &self.tracked, self.options.target),
+            });
+        }
+        Ok(())
+    }
+
+    /// A refit recorded, and the schedule restarted from it.
+    fn refitted(&mut self, refit: RefitRecord) {
+        self.schedule.refitted(self.floors.len());
+        self.timing.refits += refit.seconds;
+        self.refits.push(refit);
+    }
+
+    /// The tracked points and (adaptive) the reference set's earlier points brought to the GPs
+    /// after a query; `dropped`, an earlier record's point the size limit took out of the
+    /// training set, is tracked apart from now on.
+    fn sync_after_query(&mut self, refit_due: bool, dropped: Option<(usize, usize)>) -> Result<()> {
+        let clock = std::time::Instant::now();
+        // Parallel floors when the work outweighs starting two threads.
+        let parallel = refit_due || self.floors.len() * self.tracked[0].len() >= PARALLEL_TRACKING;
+        self.timing.rebuilds += sync(&mut self.tracked, &self.floors, parallel)?;
+        if self.adaptive {
+            let parallel = refit_due
+                || self.floors.len() * self.reference.earlier[0].len() >= PARALLEL_TRACKING;
+            self.timing.rebuilds += sync(&mut self.reference.earlier, &self.floors, parallel)?;
+            if let Some((r0, j0)) = dropped {
+                for f in 0..self.m {
+                    let at = self.streams[r0].first + j0;
+                    let x = Inputs::from_rows(&self.streams[r0].channel_inputs(
+                        &self.floors,
+                        f,
+                        at..at + 1,
+                    ))
+                    .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
+                    self.reference.earlier[f]
+                        .extend(trained(&self.floors.gps[f])?, &x)
                         .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
                 }
             }
-            timing.tracking_setup += clock.elapsed().as_secs_f64();
         }
-        let final_prediction = corrected_from_means(stream, &tracked, options.target);
+        self.timing.tracking += clock.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Line 12: the largest latent variance, under the updated GPs, over the reference set
+    /// (record `r`'s points up to tracked index `j`, and the earlier ones); an empty one leaves
+    /// the threshold as it is.
+    fn update_threshold(&mut self, r: usize, j: usize) {
+        let old = self.supervisor.threshold();
+        let max = self.reference.max(&self.tracked, r, j);
+        self.supervisor.update_threshold(
+            (0..self.m)
+                .map(|f| max[f].unwrap_or(old[f]))
+                .collect::<Vec<_>>(),
+        );
+    }
+
+    /// The record's final GPs get hyperparameters fitted to all that was learned in it
+    /// (Algorithm 1 refits after every query; the schedule thins that out, and the end of a
+    /// record is where its final NMSE and the carried-over GPs are taken).
+    fn end_of_record_refit(&mut self, r: usize, stream: &Stream, queries: usize) -> Result<()> {
+        let refit = refit_floors(&mut self.floors, self.options, r, queries, true)
+            .map_err(|e| LearnError::Gp(format!("{}: end of record: {e}", stream.name)))?;
+        self.refitted(refit);
+        let clock = std::time::Instant::now();
+        self.timing.rebuilds += sync(&mut self.tracked, &self.floors, true)?;
+        if self.adaptive {
+            self.timing.rebuilds += sync(&mut self.reference.earlier, &self.floors, true)?;
+            self.update_threshold(r, stream.len() - 1 - stream.first);
+        }
+        self.timing.tracking += clock.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Record `r`'s points outside the training set join the earlier ones in the reference set.
+    fn carry_outside(&mut self, r: usize, stream: &Stream) -> Result<()> {
+        let seen_from = stream.first;
+        let clock = std::time::Instant::now();
+        let outside: Vec<usize> = (0..stream.len() - seen_from)
+            .filter(|&i| !self.reference.inside[r][i])
+            .collect();
+        if !outside.is_empty() {
+            for f in 0..self.m {
+                let rows: Vec<Vec<f64>> = outside
+                    .iter()
+                    .map(|&i| self.floors.input_of(f, &stream.inputs[seen_from + i]))
+                    .collect();
+                let x = Inputs::from_rows(&rows)
+                    .map_err(|e| LearnError::Gp(format!("GP inputs: {e}")))?;
+                self.reference.earlier[f]
+                    .extend(trained(&self.floors.gps[f])?, &x)
+                    .map_err(|e| LearnError::Gp(format!("tracking the GP: {e}")))?;
+            }
+        }
+        self.timing.tracking_setup += clock.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// The record's result: the corrected prediction and NMSE of its final GPs (the last NMSE
+    /// point), its queries and the runs of them that suggest a change.
+    fn record_result(&self, stream: &Stream, progress: RecordProgress) -> RecordResult {
+        let RecordProgress {
+            start,
+            nmse_physics,
+            nmse_before,
+            query_indices,
+            mut nmse_after,
+            mut trace,
+            ..
+        } = progress;
+        let final_prediction = corrected_from_means(stream, &self.tracked, self.options.target);
         let final_nmse = stream.nmse(&final_prediction);
         // The last point is the record's final GPs (after an end-of-record refit).
         match nmse_after.last_mut() {
@@ -1132,8 +1308,7 @@ pub fn run_mode(
         }
         trace.corrected = final_prediction;
         trace.measured = stream.measured.clone();
-        total += query_indices.len();
-        records.push(RecordResult {
+        RecordResult {
             record: stream.name.clone(),
             queries: query_indices.len(),
             query_times: query_indices.iter().map(|&t| stream.time[t]).collect(),
@@ -1141,39 +1316,60 @@ pub fn run_mode(
             nmse_before,
             nmse_after_updates: nmse_after,
             final_nmse,
-            training_points_at_end: floors.len(),
+            training_points_at_end: self.floors.len(),
             structure_may_have_changed: change_flags(
                 &query_indices,
                 &stream.time,
-                options.change_run,
+                self.options.change_run,
             ),
-            threshold_at_end: supervisor.threshold(),
+            threshold_at_end: self.supervisor.threshold(),
             trace,
-        });
+        }
     }
-    let seconds = started.elapsed().as_secs_f64();
-    timing.other =
-        seconds - timing.tracking_setup - timing.learning - timing.refits - timing.tracking;
-    Ok(ModeResult {
-        mode: mode.name(),
-        forgetting_factor: match mode {
-            Mode::Adaptive(f) => Some(f),
-            _ => None,
-        },
-        initial_threshold,
-        fixed_threshold: fixed.filter(|_| mode == Mode::Fixed).cloned(),
-        total_queries: total,
-        records,
-        refits,
-        timing,
-        seconds,
-        initial_fit_seconds: 0.0,
-        final_gps_nmse: streams
-            .iter()
-            .map(|stream| Ok(stream.nmse(&corrected(&floors, stream, options.target)?)))
-            .collect::<Result<_>>()?,
-        final_gps: floors,
-    })
+
+    /// The mode's result: its records, refits and time split, and the final GPs scored on every
+    /// record.
+    fn finish(
+        self,
+        started: std::time::Instant,
+        fixed: Option<&FixedThreshold>,
+        total: usize,
+        records: Vec<RecordResult>,
+    ) -> Result<ModeResult> {
+        let ModeRun {
+            streams,
+            options,
+            mode,
+            floors,
+            initial_threshold,
+            mut timing,
+            refits,
+            ..
+        } = self;
+        let seconds = started.elapsed().as_secs_f64();
+        timing.other =
+            seconds - timing.tracking_setup - timing.learning - timing.refits - timing.tracking;
+        Ok(ModeResult {
+            mode: mode.name(),
+            forgetting_factor: match mode {
+                Mode::Adaptive(f) => Some(f),
+                _ => None,
+            },
+            initial_threshold,
+            fixed_threshold: fixed.filter(|_| mode == Mode::Fixed).cloned(),
+            total_queries: total,
+            records,
+            refits,
+            timing,
+            seconds,
+            initial_fit_seconds: 0.0,
+            final_gps_nmse: streams
+                .iter()
+                .map(|stream| Ok(stream.nmse(&corrected(&floors, stream, options.target)?)))
+                .collect::<Result<_>>()?,
+            final_gps: floors,
+        })
+    }
 }
 
 /// Runs of at least `run` consecutive sample indices in `queries` (sorted).
