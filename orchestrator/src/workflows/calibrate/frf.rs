@@ -37,7 +37,7 @@ use super::{
     ParameterEstimate, Prior, PriorSpec, Space,
 };
 use crate::evaluation::frf::{peaks, structure_frf, structure_modes};
-use crate::record::frf::{db, MeasuredFrf};
+use crate::record::frf::{db, FrfChannel, MeasuredFrf};
 use crate::twin::{ParameterCovariance, ParameterValue, Twin, PHYSICS};
 
 /// The largest weight a resonance's lines get over the median line.
@@ -435,12 +435,44 @@ pub fn calibrate_frf(
     setup: &FrfSetup,
 ) -> Result<(Twin, FrfCalibration), CalibrateError> {
     let started = Instant::now();
-    let setup_error = |m: String| CalibrateError::Setup(format!("{}: {m}", frf.path.display()));
     let structure = twin.structure()?;
+    let nominal = nominal_structure(twin)?;
+    let names = parameter_names(&structure, setup)?;
+    check_band(setup.band)?;
+    let priors = parameter_priors(twin, setup, &structure, &nominal, &names)?;
+    let unknowns = names.len() + usize::from(setup.gain_offset);
+    let lines = lines_for(frf, setup.band, unknowns)?;
+    let frequency: Vec<f64> = lines.iter().map(|&k| frf.frequency[k]).collect();
+    let channels = checked_channels(frf, &structure)?;
+    let blocks: Vec<Block> = frf.channels.iter().map(|c| Block::of(c, &lines)).collect();
+    let mut problem = Problem {
+        structure: structure.clone(),
+        names: &names,
+        priors: &priors,
+        channels,
+        frequency: frequency.clone(),
+        sigma: vec![(3.0, 0.3); blocks.len()],
+        blocks,
+        gain: setup.gain_offset,
+    };
+    let starts = best_of_starts(&mut problem, unknowns, setup, frf)?;
+    let cov = posterior_covariance(&mut problem, &starts.best)?;
+    let posterior = Posterior::of(&problem, &starts.best, &cov);
+    let report = calibration_report(&problem, frf, &frequency, starts, posterior, started)?;
+    calibrated_twin(twin, report)
+}
+
+/// The nominal structure of the twin's physics FMU.
+fn nominal_structure(twin: &Twin) -> Result<Structure, CalibrateError> {
     let component = twin
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    let nominal = physics_structure(&component.fmu_path)?;
+    physics_structure(&component.fmu_path)
+}
+
+/// The parameters calibrated: those asked for, or all of the structure's; each must be one of
+/// the structure's.
+fn parameter_names(structure: &Structure, setup: &FrfSetup) -> Result<Vec<String>, CalibrateError> {
     let names: Vec<String> = if setup.parameters.is_empty() {
         structure.parameter_names()
     } else {
@@ -455,13 +487,30 @@ pub fn calibrate_frf(
             )));
         }
     }
-    if let Some((lo, hi)) = setup.band {
+    Ok(names)
+}
+
+/// Refuses a band that is not an interval of non-negative frequencies.
+fn check_band(band: Option<(f64, f64)>) -> Result<(), CalibrateError> {
+    if let Some((lo, hi)) = band {
         if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
             return Err(CalibrateError::Setup(format!(
                 "the band {lo}–{hi} Hz is not an interval of non-negative frequencies"
             )));
         }
     }
+    Ok(())
+}
+
+/// Each parameter's prior: the priors file's, else the twin's own priors', else the nominal
+/// structure's default.
+fn parameter_priors(
+    twin: &Twin,
+    setup: &FrfSetup,
+    structure: &Structure,
+    nominal: &Structure,
+    names: &[String],
+) -> Result<Vec<Prior>, CalibrateError> {
     let twin_priors = match &twin.priors {
         Some(text) => Some(
             priors_from_json(text, &format!("{} (its priors)", twin.describe()))
@@ -470,14 +519,14 @@ pub fn calibrate_frf(
         None => None,
     };
     if let Some(spec) = &setup.prior_spec {
-        spec.check(&nominal, false).map_err(CalibrateError::Setup)?;
+        spec.check(nominal, false).map_err(CalibrateError::Setup)?;
     }
-    let priors: Vec<Prior> = names
+    names
         .iter()
         .map(|name| {
             let current = structure.get(name).unwrap_or(0.0);
             let fallback =
-                structure_prior(&nominal, name).unwrap_or_else(|| default_prior(name, current));
+                structure_prior(nominal, name).unwrap_or_else(|| default_prior(name, current));
             let from_files = setup
                 .prior_spec
                 .iter()
@@ -487,58 +536,84 @@ pub fn calibrate_frf(
                 .map_err(CalibrateError::Setup)?;
             Ok(from_files.unwrap_or(fallback))
         })
-        .collect::<Result<_, CalibrateError>>()?;
+        .collect::<Result<_, CalibrateError>>()
+}
 
-    let lines = band_lines(frf, setup.band);
-    let unknowns = names.len() + usize::from(setup.gain_offset);
+/// An error about the FRF file, naming it.
+fn frf_error(frf: &MeasuredFrf, m: String) -> CalibrateError {
+    CalibrateError::Setup(format!("{}: {m}", frf.path.display()))
+}
+
+/// The lines of `frf` in the band, at least two more than the unknowns.
+fn lines_for(
+    frf: &MeasuredFrf,
+    band: Option<(f64, f64)>,
+    unknowns: usize,
+) -> Result<Vec<usize>, CalibrateError> {
+    let lines = band_lines(frf, band);
     if lines.len() < unknowns + 2 {
-        return Err(setup_error(format!(
-            "{} frequency lines in the band, too few for {unknowns} unknowns",
-            lines.len()
-        )));
+        return Err(frf_error(
+            frf,
+            format!(
+                "{} frequency lines in the band, too few for {unknowns} unknowns",
+                lines.len()
+            ),
+        ));
     }
-    let frequency: Vec<f64> = lines.iter().map(|&k| frf.frequency[k]).collect();
+    Ok(lines)
+}
+
+/// The file's channels, each checked against the structure.
+fn checked_channels(
+    frf: &MeasuredFrf,
+    structure: &Structure,
+) -> Result<Vec<::structure::channel::Channel>, CalibrateError> {
     let channels: Vec<_> = frf.channels.iter().map(|c| c.channel).collect();
     for c in &channels {
-        c.check(&c.name(), &structure)
-            .map_err(|e| setup_error(e.to_string()))?;
+        c.check(&c.name(), structure)
+            .map_err(|e| frf_error(frf, e.to_string()))?;
     }
-    let blocks: Vec<Block> = frf
-        .channels
-        .iter()
-        .map(|c| {
-            let all_db = c.values.magnitude_db();
-            let magnitude_db: Vec<f64> = lines.iter().map(|&k| all_db[k]).collect();
-            let phase = c
-                .values
-                .phase()
-                .map(|p| lines.iter().map(|&k| p[k]).collect::<Vec<f64>>());
-            let linear: Vec<f64> = magnitude_db.iter().map(|m| 10f64.powf(m / 20.0)).collect();
-            let mut sorted = linear.clone();
-            sorted.sort_by(f64::total_cmp);
-            let median = sorted[sorted.len() / 2].max(f64::MIN_POSITIVE);
-            let sqrt_weight = linear
-                .iter()
-                .map(|m| (m / median).clamp(1.0, RESONANCE_WEIGHT_CAP).sqrt())
-                .collect();
-            Block {
-                magnitude_db,
-                phase,
-                sqrt_weight,
-            }
-        })
-        .collect();
-    let mut problem = Problem {
-        structure: structure.clone(),
-        names: &names,
-        priors: &priors,
-        channels,
-        frequency: frequency.clone(),
-        sigma: vec![(3.0, 0.3); blocks.len()],
-        blocks,
-        gain: setup.gain_offset,
-    };
-    // Starts: the prior mean, then draws from the prior.
+    Ok(channels)
+}
+
+impl Block {
+    /// A channel's data on `lines`, its lines weighted by their magnitude over the median.
+    fn of(c: &FrfChannel, lines: &[usize]) -> Block {
+        let all_db = c.values.magnitude_db();
+        let magnitude_db: Vec<f64> = lines.iter().map(|&k| all_db[k]).collect();
+        let phase = c
+            .values
+            .phase()
+            .map(|p| lines.iter().map(|&k| p[k]).collect::<Vec<f64>>());
+        let linear: Vec<f64> = magnitude_db.iter().map(|m| 10f64.powf(m / 20.0)).collect();
+        let mut sorted = linear.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2].max(f64::MIN_POSITIVE);
+        let sqrt_weight = linear
+            .iter()
+            .map(|m| (m / median).clamp(1.0, RESONANCE_WEIGHT_CAP).sqrt())
+            .collect();
+        Block {
+            magnitude_db,
+            phase,
+            sqrt_weight,
+        }
+    }
+}
+
+/// The starts' outcome: the best fit, and each start's objective (None where it failed).
+struct Starts {
+    best: Fit,
+    outcomes: Vec<Option<f64>>,
+}
+
+/// The fits from every start (the prior mean, then draws from the prior); the best one wins.
+fn best_of_starts(
+    problem: &mut Problem,
+    unknowns: usize,
+    setup: &FrfSetup,
+    frf: &MeasuredFrf,
+) -> Result<Starts, CalibrateError> {
     let mut rng = StdRng::seed_from_u64(setup.seed);
     let mut best: Option<Fit> = None;
     let mut outcomes = Vec::new();
@@ -553,7 +628,7 @@ pub fn calibrate_frf(
             })
             .collect();
         problem.sigma = vec![(3.0, 0.3); problem.blocks.len()];
-        let fit = run_start(&mut problem, z0);
+        let fit = run_start(problem, z0);
         outcomes.push(fit.as_ref().map(|f| f.objective));
         if let Some(fit) = fit {
             if best.as_ref().is_none_or(|b| fit.objective < b.objective) {
@@ -568,66 +643,113 @@ pub fn calibrate_frf(
             frf.path.display()
         ))
     })?;
+    Ok(Starts { best, outcomes })
+}
+
+/// The Laplace posterior's covariance of the standardised unknowns at the MAP: the inverse of
+/// the Gauss–Newton Hessian, the blocks' sds held at the MAP's.
+fn posterior_covariance(problem: &mut Problem, best: &Fit) -> Result<DMatrix<f64>, CalibrateError> {
     problem.sigma = best.sigma.clone();
-    let r = lm::LeastSquares::residuals(&mut problem, &best.z)
+    let r = lm::LeastSquares::residuals(problem, &best.z)
         .ok_or_else(|| CalibrateError::Failed("the MAP's FRF cannot be evaluated".into()))?;
-    let jac = lm::LeastSquares::jacobian(&mut problem, &best.z, &r)
+    let jac = lm::LeastSquares::jacobian(problem, &best.z, &r)
         .ok_or_else(|| CalibrateError::Failed("no Jacobian at the MAP".into()))?;
-    let cov = (jac.transpose() * &jac).try_inverse().ok_or_else(|| {
+    (jac.transpose() * &jac).try_inverse().ok_or_else(|| {
         CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
-    })?;
-    let p = names.len();
-    let values = problem.values(&best.z);
-    let parameters: Vec<ParameterEstimate> = (0..p)
-        .map(|j| {
-            let prior = priors[j];
-            let sd_coordinate = prior.sd() * cov[(j, j)].max(0.0).sqrt();
-            let sd = match prior.space {
-                Space::Linear => sd_coordinate,
-                Space::Log => values[j] * sd_coordinate,
-            };
-            ParameterEstimate {
-                name: names[j].clone(),
-                value: values[j],
-                prior,
-                sd_coordinate,
-                sd,
-            }
-        })
-        .collect();
-    let correlation: Vec<Vec<f64>> = (0..p)
-        .map(|a| {
-            (0..p)
-                .map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt())
-                .collect()
-        })
-        .collect();
-    let gain_offset_db = setup.gain_offset.then(|| Estimate {
-        value: problem.gain_db(&best.z),
-        sd: GAIN_PRIOR_SD_DB * cov[(p, p)].max(0.0).sqrt(),
-    });
-    let covariance = ParameterCovariance {
-        names: names.clone(),
-        matrix: (0..p)
+    })
+}
+
+/// The posterior in the parameters' own units: each one's value and sd, their correlations,
+/// the gain offset, and the covariance stored in the twin.
+struct Posterior {
+    parameters: Vec<ParameterEstimate>,
+    correlation: Vec<Vec<f64>>,
+    gain_offset_db: Option<Estimate>,
+    covariance: ParameterCovariance,
+}
+
+impl Posterior {
+    /// The posterior at the MAP `best` from the standardised unknowns' covariance `cov`.
+    fn of(problem: &Problem, best: &Fit, cov: &DMatrix<f64>) -> Posterior {
+        let (names, priors) = (problem.names, problem.priors);
+        let p = names.len();
+        let values = problem.values(&best.z);
+        let parameters: Vec<ParameterEstimate> = (0..p)
+            .map(|j| {
+                let prior = priors[j];
+                let sd_coordinate = prior.sd() * cov[(j, j)].max(0.0).sqrt();
+                let sd = match prior.space {
+                    Space::Linear => sd_coordinate,
+                    Space::Log => values[j] * sd_coordinate,
+                };
+                ParameterEstimate {
+                    name: names[j].clone(),
+                    value: values[j],
+                    prior,
+                    sd_coordinate,
+                    sd,
+                }
+            })
+            .collect();
+        let correlation: Vec<Vec<f64>> = (0..p)
             .map(|a| {
                 (0..p)
-                    .map(|b| {
-                        let r = if a == b {
-                            1.0
-                        } else {
-                            0.5 * (correlation[a][b] + correlation[b][a])
-                        };
-                        let c = r * parameters[a].sd * parameters[b].sd;
-                        if c.is_finite() {
-                            c
-                        } else {
-                            0.0
-                        }
-                    })
+                    .map(|b| cov[(a, b)] / (cov[(a, a)] * cov[(b, b)]).sqrt())
                     .collect()
             })
-            .collect(),
-    };
+            .collect();
+        let gain_offset_db = problem.gain.then(|| Estimate {
+            value: problem.gain_db(&best.z),
+            sd: GAIN_PRIOR_SD_DB * cov[(p, p)].max(0.0).sqrt(),
+        });
+        let covariance = ParameterCovariance {
+            names: names.to_vec(),
+            matrix: (0..p)
+                .map(|a| {
+                    (0..p)
+                        .map(|b| {
+                            let r = if a == b {
+                                1.0
+                            } else {
+                                0.5 * (correlation[a][b] + correlation[b][a])
+                            };
+                            let c = r * parameters[a].sd * parameters[b].sd;
+                            if c.is_finite() {
+                                c
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect()
+                })
+                .collect(),
+        };
+        Posterior {
+            parameters,
+            correlation,
+            gain_offset_db,
+            covariance,
+        }
+    }
+}
+
+/// The calibration's report: the posterior, the fit's errors and sds per channel, the
+/// calibrated structure's modes beside the measured peaks, and the starts.
+fn calibration_report(
+    problem: &Problem,
+    frf: &MeasuredFrf,
+    frequency: &[f64],
+    starts: Starts,
+    posterior: Posterior,
+    started: Instant,
+) -> Result<(FrfCalibration, ParameterCovariance), CalibrateError> {
+    let Starts { best, outcomes } = starts;
+    let Posterior {
+        parameters,
+        correlation,
+        gain_offset_db,
+        covariance,
+    } = posterior;
     let calibrated = problem
         .structure_at(&best.z)
         .ok_or_else(|| CalibrateError::Failed("the MAP is not a valid structure".into()))?;
@@ -659,12 +781,21 @@ pub fn calibrate_frf(
             .collect(),
         rms_error_db,
         twin_modes: twin_modes(&calibrated, Some(&covariance)),
-        measured_peaks: measured_peaks(&frequency, &magnitudes),
+        measured_peaks: measured_peaks(frequency, &magnitudes),
         neg_log_posterior: best.objective,
         starts: outcomes,
         seconds: started.elapsed().as_secs_f64(),
         parameters,
     };
+    Ok((calibration, covariance))
+}
+
+/// The calibrated twin: the MAP's values in its physics component and the posterior covariance
+/// stored, its noise variances, validation and records left unset.
+fn calibrated_twin(
+    twin: &Twin,
+    (calibration, covariance): (FrfCalibration, ParameterCovariance),
+) -> Result<(Twin, FrfCalibration), CalibrateError> {
     let mut out = twin.duplicate();
     let physics = out
         .component_mut(PHYSICS)
