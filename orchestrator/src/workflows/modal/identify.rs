@@ -10,11 +10,11 @@ use structure::channel::{Channel, Quantity};
 use super::pair::ObservedMode;
 use crate::record::{AmbientRecord, Measurement, Signal};
 use numerics::modal::lscf::{lscf, LscfOptions, Weighting};
-use numerics::modal::spectral::{Run, Welch, MIN_SEGMENT};
+use numerics::modal::spectral::{Frf, Run, Welch, MIN_SEGMENT};
 use numerics::modal::ssi::{ssi_cov, SsiOptions};
 use numerics::modal::stabilisation::{
-    screen_modes, select_modes, IdentifiedMode, RejectedMode, ScreenOptions, SelectionOptions,
-    StabilisationDiagram, StabilityTolerances,
+    screen_modes, select_modes, IdentifiedMode, ModelOrder, RejectedMode, ScreenOptions,
+    SelectionOptions, StabilisationDiagram, StabilityTolerances,
 };
 use numerics::modal::{Complex, IdentificationError};
 
@@ -328,6 +328,8 @@ pub fn identify_ambient(
     identify_runs(&views, options)
 }
 
+/// Identifies the modes of `runs` (one test): their total spectrum, SSI-COV's modes, and with
+/// a measured excitation the FRF and the input–output method's modes.
 fn identify_runs(
     runs: &[RunView<'_>],
     options: &IdentifyOptions,
@@ -335,58 +337,150 @@ fn identify_runs(
     options.validate()?;
     let roving = check_runs(runs)?;
     let first = &runs[0];
-    let records: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
-    let names = records.join(", ");
-    let dt = first.dt;
-    let nyquist = 0.5 / dt;
-    let shortest = runs.iter().map(RunView::len).min().unwrap_or(0);
-    let segment_length = match options.segment_length {
-        Some(s) => s,
-        None => default_segment(shortest),
+    let sampling = Sampling::of(runs, options)?;
+    let everywhere = all_channels(runs);
+    let signals = Signals::of(runs, &everywhere);
+    let estimation = Estimation {
+        welch: Welch::new(sampling.dt, sampling.segment_length)
+            .map_err(sampling.method_err("the spectra"))?,
+        spectral_runs: signals.runs(runs),
+        per_channel: signals.per_channel(runs, &everywhere),
+        roving,
+        options,
+        sampling,
     };
-    if segment_length > shortest {
-        return Err(IdentifyError::Options(format!(
-            "--segment {segment_length}: longer than the shortest run ({shortest} samples)"
-        )));
-    }
-    if let Some((_, high)) = options.band {
-        if high > nyquist {
+    let spectrum = estimation.total_spectrum()?;
+    let channels: Vec<Channel> = everywhere.iter().map(|(c, _)| *c).collect();
+    let floors = shape_floors(&channels);
+    let force_psd = estimation.force_spectrum(runs)?;
+    let screen = screen_options(force_psd.as_deref(), &spectrum.frequencies, options);
+    let ssi = estimation.output_only(first, &floors, &screen)?;
+    let (frf, input_output) = match &force_psd {
+        Some(force_psd) => {
+            let (report, input_output) =
+                estimation.with_force(force_psd, first, &channels, &floors, &screen)?;
+            (Some(report), input_output)
+        }
+        None => (None, None),
+    };
+
+    Ok(RecordModes {
+        records: estimation.sampling.records,
+        dt: estimation.sampling.dt,
+        samples: runs.iter().map(RunView::len).collect(),
+        excitation: first
+            .excitation
+            .map_or_else(|| "none (ambient)".to_owned(), |e| e.channel.name()),
+        channels: channels.iter().map(|c| c.name()).collect(),
+        floors: floors.iter().map(|(floor, _)| *floor).collect(),
+        frf,
+        spectrum,
+        ssi,
+        input_output,
+        options: options.clone(),
+    })
+}
+
+/// The runs' files, sampling interval and Welch segment length, checked against the options.
+struct Sampling {
+    records: Vec<String>,
+    /// The files joined, for messages.
+    names: String,
+    dt: f64,
+    nyquist: f64,
+    segment_length: usize,
+}
+
+impl Sampling {
+    /// The sampling of `runs`; refuses a segment longer than the shortest run and a band
+    /// above Nyquist.
+    fn of(runs: &[RunView<'_>], options: &IdentifyOptions) -> Result<Sampling, IdentifyError> {
+        let records: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
+        let names = records.join(", ");
+        let dt = runs[0].dt;
+        let nyquist = 0.5 / dt;
+        let shortest = runs.iter().map(RunView::len).min().unwrap_or(0);
+        let segment_length = match options.segment_length {
+            Some(s) => s,
+            None => default_segment(shortest),
+        };
+        if segment_length > shortest {
             return Err(IdentifyError::Options(format!(
-                "--band up to {high} Hz: above the record's Nyquist frequency, {nyquist} Hz"
+                "--segment {segment_length}: longer than the shortest run ({shortest} samples)"
             )));
         }
+        if let Some((_, high)) = options.band {
+            if high > nyquist {
+                return Err(IdentifyError::Options(format!(
+                    "--band up to {high} Hz: above the record's Nyquist frequency, {nyquist} Hz"
+                )));
+            }
+        }
+        Ok(Sampling {
+            records,
+            names,
+            dt,
+            nyquist,
+            segment_length,
+        })
     }
-    let method_err = |method: &'static str| {
-        let records = names.clone();
+
+    /// A method's failure on these records.
+    fn method_err(
+        &self,
+        method: &'static str,
+    ) -> impl FnOnce(IdentificationError) -> IdentifyError {
+        let records = self.names.clone();
         move |source| IdentifyError::Method {
             method,
             records,
             source,
         }
-    };
-    let outputs: Vec<Vec<&[f64]>> = runs
-        .iter()
-        .map(|r| r.responses.iter().map(|s| s.values.as_slice()).collect())
-        .collect();
-    let spectral_runs: Vec<Run<'_>> = runs
-        .iter()
-        .zip(&outputs)
-        .map(|(r, o)| Run {
-            input: r.excitation.map(|s| s.values.as_slice()),
-            outputs: o,
-        })
-        .collect();
-    let welch = Welch::new(dt, segment_length).map_err(method_err("the spectra"))?;
-    // A roving test: each channel's spectra and FRF from the runs that measured it (the
-    // measured force is the common reference, so FRFs of different runs share one scale and
-    // phase and join into one FRF matrix).
-    let everywhere = all_channels(runs);
-    let single: Vec<[&[f64]; 1]> = everywhere
-        .iter()
-        .flat_map(|(_, at)| at.iter())
-        .map(|(r, i)| [runs[*r].responses[*i].values.as_slice()])
-        .collect();
-    let per_channel: Vec<Vec<Run<'_>>> = {
+    }
+}
+
+/// The runs' responses as the spectral estimators take them: every run's together, and each
+/// one alone (a channel of a roving test, from each run that measured it).
+struct Signals<'a> {
+    outputs: Vec<Vec<&'a [f64]>>,
+    single: Vec<[&'a [f64]; 1]>,
+}
+
+impl<'a> Signals<'a> {
+    /// The responses of `runs`, alone in the order of `everywhere` (each channel, the runs and
+    /// responses that measured it).
+    fn of(runs: &[RunView<'a>], everywhere: &[(Channel, Vec<(usize, usize)>)]) -> Self {
+        let outputs = runs
+            .iter()
+            .map(|r| r.responses.iter().map(|s| s.values.as_slice()).collect())
+            .collect();
+        let single = everywhere
+            .iter()
+            .flat_map(|(_, at)| at.iter())
+            .map(|(r, i)| [runs[*r].responses[*i].values.as_slice()])
+            .collect();
+        Signals { outputs, single }
+    }
+
+    /// Every run: its excitation and all its responses.
+    fn runs(&self, runs: &[RunView<'a>]) -> Vec<Run<'_>> {
+        runs.iter()
+            .zip(&self.outputs)
+            .map(|(r, o)| Run {
+                input: r.excitation.map(|s| s.values.as_slice()),
+                outputs: o,
+            })
+            .collect()
+    }
+
+    /// A roving test: each channel's runs, each with its excitation and that channel alone
+    /// (the measured force is the common reference, so FRFs of different runs share one scale
+    /// and phase and join into one FRF matrix).
+    fn per_channel(
+        &self,
+        runs: &[RunView<'a>],
+        everywhere: &[(Channel, Vec<(usize, usize)>)],
+    ) -> Vec<Vec<Run<'_>>> {
         let mut next = 0;
         everywhere
             .iter()
@@ -395,7 +489,7 @@ fn identify_runs(
                     .map(|(r, _)| {
                         let run = Run {
                             input: runs[*r].excitation.map(|s| s.values.as_slice()),
-                            outputs: &single[next],
+                            outputs: &self.single[next],
                         };
                         next += 1;
                         run
@@ -403,55 +497,58 @@ fn identify_runs(
                     .collect()
             })
             .collect()
-    };
-    let (frequencies, total) = if roving {
-        let mut total = vec![0.0; segment_length / 2 + 1];
-        for runs in &per_channel {
-            let spectra = welch
-                .output_spectra(runs)
-                .map_err(method_err("the spectra"))?;
-            for (t, v) in total.iter_mut().zip(spectra.auto(0)) {
-                *t += v;
-            }
-        }
-        (welch.frequencies(), total)
-    } else {
-        let spectra = welch
-            .output_spectra(&spectral_runs)
-            .map_err(method_err("the spectra"))?;
-        (spectra.frequencies.clone(), spectra.total())
-    };
-    let channels: Vec<Channel> = everywhere.iter().map(|(c, _)| *c).collect();
-    let floors = shape_floors(&channels);
-    // SSI-COV needs every run to measure the same channels: on a roving test it reads the
-    // first run alone, and its shapes are that run's.
-    let ssi_runs = if roving {
-        &spectral_runs[..1]
-    } else {
-        &spectral_runs[..]
-    };
-    let ssi_floors = if roving {
-        shape_floors(
-            &first
-                .responses
-                .iter()
-                .map(|s| s.channel)
-                .collect::<Vec<_>>(),
-        )
-    } else {
-        floors.clone()
-    };
+    }
+}
 
-    let diagram = |orders| {
-        StabilisationDiagram::new(orders, options.stability).map_err(method_err("the diagram"))
-    };
-    let excited = runs.iter().filter_map(|r| r.excitation).any(|e| {
-        let v = &e.values;
-        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
-        v.iter().any(|x| (x - mean).abs() > 0.0)
-    });
-    // The force's spectrum (every run's): where it excites the structure.
-    let force_psd = if excited {
+/// What the spectra and both methods are estimated with: the options, the runs' sampling, the
+/// Welch estimator and the runs as it takes them.
+struct Estimation<'s> {
+    options: &'s IdentifyOptions,
+    sampling: Sampling,
+    roving: bool,
+    welch: Welch,
+    spectral_runs: Vec<Run<'s>>,
+    per_channel: Vec<Vec<Run<'s>>>,
+}
+
+impl Estimation<'_> {
+    /// The responses' total spectrum (on a roving test, each channel's from the runs that
+    /// measured it, summed).
+    fn total_spectrum(&self) -> Result<SpectrumReport, IdentifyError> {
+        let method_err = |method| self.sampling.method_err(method);
+        let (frequencies, total) = if self.roving {
+            let mut total = vec![0.0; self.sampling.segment_length / 2 + 1];
+            for runs in &self.per_channel {
+                let spectra = self
+                    .welch
+                    .output_spectra(runs)
+                    .map_err(method_err("the spectra"))?;
+                for (t, v) in total.iter_mut().zip(spectra.auto(0)) {
+                    *t += v;
+                }
+            }
+            (self.welch.frequencies(), total)
+        } else {
+            let spectra = self
+                .welch
+                .output_spectra(&self.spectral_runs)
+                .map_err(method_err("the spectra"))?;
+            (spectra.frequencies.clone(), spectra.total())
+        };
+        Ok(SpectrumReport { total, frequencies })
+    }
+
+    /// The force's spectrum (every run's), when it was measured and varies: where it excites
+    /// the structure.
+    fn force_spectrum(&self, runs: &[RunView<'_>]) -> Result<Option<Vec<f64>>, IdentifyError> {
+        let excited = runs.iter().filter_map(|r| r.excitation).any(|e| {
+            let v = &e.values;
+            let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            v.iter().any(|x| (x - mean).abs() > 0.0)
+        });
+        if !excited {
+            return Ok(None);
+        }
         let forces: Vec<[&[f64]; 1]> = runs
             .iter()
             .filter_map(|r| r.excitation.map(|e| [e.values.as_slice()]))
@@ -463,114 +560,163 @@ fn identify_runs(
                 outputs: f,
             })
             .collect();
-        let force = welch
+        let force = self
+            .welch
             .output_spectra(&force_runs)
-            .map_err(method_err("the force's spectrum"))?;
-        Some(force.auto(0))
-    } else {
-        None
-    };
-    let excitation = force_psd
-        .as_deref()
-        .and_then(|psd| excited_band(&frequencies, psd));
-    let screen = ScreenOptions {
-        excited: excitation.map(|e| e.0),
-        edges: excitation.map_or((false, false), |e| e.1),
-        ..options.screen
-    };
-    let ssi_orders = ssi_cov(ssi_runs, dt, &options.ssi()).map_err(method_err("SSI-COV"))?;
-    let ssi_diagram = diagram(ssi_orders)?;
-    let ssi_modes =
-        select_modes(&ssi_diagram, &options.selection).map_err(method_err("SSI-COV"))?;
-    let (ssi_modes, ssi_rejected) = screen_modes(ssi_modes, &screen);
-    let ssi = MethodModes {
-        method: "SSI-COV",
-        band: None,
-        modes: record_modes(ssi_modes, &ssi_floors),
-        rejected: ssi_rejected,
-        diagram: ssi_diagram,
-    };
+            .map_err(self.sampling.method_err("the force's spectrum"))?;
+        Ok(Some(force.auto(0)))
+    }
 
-    let (frf, input_output) = if let Some(force_psd) = &force_psd {
-        let frf = if roving {
-            let mut joined: Option<numerics::modal::spectral::Frf> = None;
-            for runs in &per_channel {
-                let one = welch.h1(runs).map_err(method_err("the FRF"))?;
-                match joined.as_mut() {
-                    None => joined = Some(one),
-                    Some(j) => {
-                        j.response.extend(one.response);
-                        j.coherence.extend(one.coherence);
-                        j.segments = j.segments.min(one.segments);
-                    }
-                }
-            }
-            joined.ok_or(IdentifyError::Options("no response channel".into()))?
+    /// SSI-COV's modes. It needs every run to measure the same channels: on a roving test it
+    /// reads the first run alone, and its shapes are that run's.
+    fn output_only(
+        &self,
+        first: &RunView<'_>,
+        floors: &[(usize, (usize, i32))],
+        screen: &ScreenOptions,
+    ) -> Result<MethodModes, IdentifyError> {
+        let ssi_runs = if self.roving {
+            &self.spectral_runs[..1]
         } else {
-            welch.h1(&spectral_runs).map_err(method_err("the FRF"))?
+            &self.spectral_runs[..]
         };
-        let band = match options.band {
+        let ssi_floors = if self.roving {
+            shape_floors(
+                &first
+                    .responses
+                    .iter()
+                    .map(|s| s.channel)
+                    .collect::<Vec<_>>(),
+            )
+        } else {
+            floors.to_vec()
+        };
+        let ssi_orders = ssi_cov(ssi_runs, self.sampling.dt, &self.options.ssi())
+            .map_err(self.sampling.method_err("SSI-COV"))?;
+        self.chosen_modes("SSI-COV", None, ssi_orders, screen, &ssi_floors)
+    }
+
+    /// A method's stabilisation diagram over its model orders and the physical modes chosen
+    /// from it, screened.
+    fn chosen_modes(
+        &self,
+        method: &'static str,
+        band: Option<(f64, f64)>,
+        orders: Vec<ModelOrder>,
+        screen: &ScreenOptions,
+        floors: &[(usize, (usize, i32))],
+    ) -> Result<MethodModes, IdentifyError> {
+        let diagram = StabilisationDiagram::new(orders, self.options.stability)
+            .map_err(self.sampling.method_err("the diagram"))?;
+        let modes = select_modes(&diagram, &self.options.selection)
+            .map_err(self.sampling.method_err(method))?;
+        let (modes, rejected) = screen_modes(modes, screen);
+        Ok(MethodModes {
+            method,
+            band,
+            modes: record_modes(modes, floors),
+            rejected,
+            diagram,
+        })
+    }
+
+    /// With a measured force: the FRF's report, and the input–output method's modes over the
+    /// band asked for or the one the force excites (when that method is asked for).
+    fn with_force(
+        &self,
+        force_psd: &[f64],
+        first: &RunView<'_>,
+        channels: &[Channel],
+        floors: &[(usize, (usize, i32))],
+        screen: &ScreenOptions,
+    ) -> Result<(FrfReport, Option<MethodModes>), IdentifyError> {
+        let frf = self.measured_frf()?;
+        let band = match self.options.band {
             Some(band) => band,
-            None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * nyquist),
+            None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * self.sampling.nyquist),
         };
-        let input_output = if options.input_output {
+        let input_output = if self.options.input_output {
             let lscf_options = LscfOptions {
-                max_order: options.max_order,
-                weighting: options.weighting,
+                max_order: self.options.max_order,
+                weighting: self.options.weighting,
                 ..LscfOptions::over(band)
             };
-            let orders = lscf(&frf, &lscf_options).map_err(method_err("LSCF"))?;
-            let d = diagram(orders)?;
-            let modes = select_modes(&d, &options.selection).map_err(method_err("LSCF"))?;
-            let (modes, rejected) = screen_modes(modes, &screen);
-            Some(MethodModes {
-                method: "LSCF",
-                band: Some(band),
-                modes: record_modes(modes, &floors),
-                rejected,
-                diagram: d,
-            })
+            let orders = lscf(&frf, &lscf_options).map_err(self.sampling.method_err("LSCF"))?;
+            Some(self.chosen_modes("LSCF", Some(band), orders, screen, floors)?)
         } else {
             None
         };
-        let excitation_unit = first
-            .excitation
-            .map_or("?", |e| e.channel.quantity().si().symbol());
-        let report = FrfReport {
-            segment_length,
-            segments: frf.segments,
-            channels: channels
-                .iter()
-                .zip(frf.response.iter().zip(&frf.coherence))
-                .map(|(channel, (h, c))| ChannelFrf {
-                    channel: channel.name(),
-                    unit: format!("({})/{excitation_unit}", channel.quantity().si().symbol()),
-                    response: h.clone(),
-                    coherence: c.clone(),
-                })
-                .collect(),
-            frequencies: frf.frequencies,
-        };
-        (Some(report), input_output)
-    } else {
-        (None, None)
-    };
+        let report = frf_report(frf, channels, first, self.sampling.segment_length);
+        Ok((report, input_output))
+    }
 
-    Ok(RecordModes {
-        records,
-        dt,
-        samples: runs.iter().map(RunView::len).collect(),
-        excitation: first
-            .excitation
-            .map_or_else(|| "none (ambient)".to_owned(), |e| e.channel.name()),
-        channels: channels.iter().map(|c| c.name()).collect(),
-        floors: floors.iter().map(|(floor, _)| *floor).collect(),
-        frf,
-        spectrum: SpectrumReport { total, frequencies },
-        ssi,
-        input_output,
-        options: options.clone(),
-    })
+    /// The H1 FRF of every response channel (on a roving test, each channel's from the runs
+    /// that measured it, joined).
+    fn measured_frf(&self) -> Result<Frf, IdentifyError> {
+        if !self.roving {
+            return self
+                .welch
+                .h1(&self.spectral_runs)
+                .map_err(self.sampling.method_err("the FRF"));
+        }
+        let mut joined: Option<Frf> = None;
+        for runs in &self.per_channel {
+            let one = self
+                .welch
+                .h1(runs)
+                .map_err(self.sampling.method_err("the FRF"))?;
+            match joined.as_mut() {
+                None => joined = Some(one),
+                Some(j) => {
+                    j.response.extend(one.response);
+                    j.coherence.extend(one.coherence);
+                    j.segments = j.segments.min(one.segments);
+                }
+            }
+        }
+        joined.ok_or(IdentifyError::Options("no response channel".into()))
+    }
+}
+
+/// What sets an identified mode aside, with the band the force excites (when it was measured).
+fn screen_options(
+    force_psd: Option<&[f64]>,
+    frequencies: &[f64],
+    options: &IdentifyOptions,
+) -> ScreenOptions {
+    let excitation = force_psd.and_then(|psd| excited_band(frequencies, psd));
+    ScreenOptions {
+        excited: excitation.map(|e| e.0),
+        edges: excitation.map_or((false, false), |e| e.1),
+        ..options.screen
+    }
+}
+
+/// The FRF's report: each channel's response and coherence, in its unit per the excitation's.
+fn frf_report(
+    frf: Frf,
+    channels: &[Channel],
+    first: &RunView<'_>,
+    segment_length: usize,
+) -> FrfReport {
+    let excitation_unit = first
+        .excitation
+        .map_or("?", |e| e.channel.quantity().si().symbol());
+    FrfReport {
+        segment_length,
+        segments: frf.segments,
+        channels: channels
+            .iter()
+            .zip(frf.response.iter().zip(&frf.coherence))
+            .map(|(channel, (h, c))| ChannelFrf {
+                channel: channel.name(),
+                unit: format!("({})/{excitation_unit}", channel.quantity().si().symbol()),
+                response: h.clone(),
+                coherence: c.clone(),
+            })
+            .collect(),
+        frequencies: frf.frequencies,
+    }
 }
 
 /// The largest power of two (at least the shortest segment accepted) giving
