@@ -154,64 +154,81 @@ pub fn read_priors(path: &Path) -> Result<PriorSpec, String> {
 /// Priors from JSON text ([`read_priors`]' format); `origin` names it in errors, each error
 /// naming its key.
 pub fn priors_from_json(text: &str, origin: &str) -> Result<PriorSpec, String> {
-    let raw: BTreeMap<String, serde_json::Value> = serde_json::from_str(text).map_err(|e| {
-        format!(
-            "{origin}: {e}; expected an object of priors by family (m, c, k) or parameter, \
-             e.g. {{\"k\": {{\"relative_sd\": 0.25}}}}"
-        )
-    })?;
+    let raw = priors_object(text, origin)?;
     let mut entries = BTreeMap::new();
     for (key, value) in raw {
-        let bad = |message: String| format!("{origin}: key '{key}': {message}");
-        let entry: PriorEntry = serde_json::from_value(value).map_err(|e| {
-            bad(format!(
-                "{e} (fields: space, value, mean, sd, variance, relative_sd)"
-            ))
-        })?;
-        let widths = [entry.sd, entry.variance, entry.relative_sd];
-        match widths.iter().flatten().count() {
-            1 => {}
-            0 => return Err(bad("no width: give one of sd, variance, relative_sd".into())),
-            _ => {
-                return Err(bad(
-                    "more than one width: give one of sd, variance, relative_sd".into(),
-                ))
-            }
-        }
-        if let Some(w) = widths.iter().flatten().next() {
-            if !(w.is_finite() && *w > 0.0) {
-                return Err(bad(format!("the width {w} is not finite and positive")));
-            }
-        }
-        if entry.value.is_some() && entry.mean.is_some() {
-            return Err(bad("both value and mean: give the centre once".into()));
-        }
-        if let Some(m) = entry.value.or(entry.mean) {
-            if !m.is_finite() {
-                return Err(bad(format!("the centre {m} is not finite")));
-            }
-        }
-        if let Some(v) = entry.value {
-            if entry.space == Some(Space::Log) && v <= 0.0 {
-                return Err(bad(format!(
-                    "value {v}: a log-space prior needs a positive value"
-                )));
-            }
-        }
-        let is_family = matches!(key.as_str(), "m" | "c" | "k");
-        if is_family && (entry.value.is_some() || entry.mean.is_some()) {
-            return Err(bad(
-                "a family's priors are centred on each parameter's nominal; give a centre per \
-                 parameter (e.g. 'k2')"
-                    .into(),
-            ));
-        }
+        let entry = prior_entry(&key, value)
+            .map_err(|message| format!("{origin}: key '{key}': {message}"))?;
         entries.insert(key, entry);
     }
     Ok(PriorSpec {
         origin: origin.to_owned(),
         entries,
     })
+}
+
+/// The priors file's object: each key with its entry, still as JSON.
+fn priors_object(text: &str, origin: &str) -> Result<BTreeMap<String, serde_json::Value>, String> {
+    serde_json::from_str(text).map_err(|e| {
+        format!(
+            "{origin}: {e}; expected an object of priors by family (m, c, k) or parameter, \
+             e.g. {{\"k\": {{\"relative_sd\": 0.25}}}}"
+        )
+    })
+}
+
+/// The entry of `key`, checked: its width, its centre, and no centre for a family (the error
+/// without the key).
+fn prior_entry(key: &str, value: serde_json::Value) -> Result<PriorEntry, String> {
+    let entry: PriorEntry = serde_json::from_value(value)
+        .map_err(|e| format!("{e} (fields: space, value, mean, sd, variance, relative_sd)"))?;
+    check_width(&entry)?;
+    check_centre(&entry)?;
+    let is_family = matches!(key, "m" | "c" | "k");
+    if is_family && (entry.value.is_some() || entry.mean.is_some()) {
+        return Err(
+            "a family's priors are centred on each parameter's nominal; give a centre per \
+             parameter (e.g. 'k2')"
+                .into(),
+        );
+    }
+    Ok(entry)
+}
+
+/// Exactly one width, finite and positive.
+fn check_width(entry: &PriorEntry) -> Result<(), String> {
+    let widths = [entry.sd, entry.variance, entry.relative_sd];
+    match widths.iter().flatten().count() {
+        1 => {}
+        0 => return Err("no width: give one of sd, variance, relative_sd".into()),
+        _ => return Err("more than one width: give one of sd, variance, relative_sd".into()),
+    }
+    if let Some(w) = widths.iter().flatten().next() {
+        if !(w.is_finite() && *w > 0.0) {
+            return Err(format!("the width {w} is not finite and positive"));
+        }
+    }
+    Ok(())
+}
+
+/// At most one centre, finite; a value positive for a log-space prior.
+fn check_centre(entry: &PriorEntry) -> Result<(), String> {
+    if entry.value.is_some() && entry.mean.is_some() {
+        return Err("both value and mean: give the centre once".into());
+    }
+    if let Some(m) = entry.value.or(entry.mean) {
+        if !m.is_finite() {
+            return Err(format!("the centre {m} is not finite"));
+        }
+    }
+    if let Some(v) = entry.value {
+        if entry.space == Some(Space::Log) && v <= 0.0 {
+            return Err(format!(
+                "value {v}: a log-space prior needs a positive value"
+            ));
+        }
+    }
+    Ok(())
 }
 
 impl PriorSpec {
