@@ -575,67 +575,82 @@ impl Problem<'_, '_> {
             .sensitivity
             .as_ref()
             .is_none_or(|s| s.failed.load(Ordering::Relaxed));
-        let threads = self.target.columns_threads.min(z.len());
-        let column = |j: usize, weighted: &mut dyn FnMut(&[f64]) -> Option<DVector<f64>>| {
-            let h = 1e-6 * z[j].abs().max(1.0);
-            let mut shifted_z = z.to_vec();
-            shifted_z[j] += h;
-            Some((weighted(&shifted_z)? - base) / h)
-        };
         let mut jac = DMatrix::zeros(base.len(), z.len());
-        if !plain || threads <= 1 {
+        if !plain || self.target.columns_threads <= 1 {
             for j in 0..z.len() {
-                jac.set_column(j, &column(j, &mut |z| self.weighted(z))?);
+                let h = 1e-6 * z[j].abs().max(1.0);
+                let mut shifted = z.to_vec();
+                shifted[j] += h;
+                jac.set_column(j, &((self.weighted(&shifted)? - base) / h));
             }
             return Some(jac);
         }
         *self.evaluations.borrow_mut() += z.len();
         *self.runs.borrow_mut() += z.len() * self.target.records.len();
-        let target = self.target;
-        let weights = &self.weights;
-        // Column j on thread j mod threads; thread 0 is this one, with its simulators.
-        let columns: Vec<Option<Vec<(usize, DVector<f64>)>>> = std::thread::scope(|scope| {
-            let others: Vec<_> = (1..threads)
-                .map(|t| {
-                    scope.spawn(move || {
-                        let mut sims = simulators(target, "differences").ok()?;
-                        let mut buf = Vec::new();
-                        (t..z.len())
-                            .step_by(threads)
-                            .map(|j| {
-                                let mut run = |z: &[f64]| {
-                                    let r = raw_residuals(&mut sims, target, z, &mut buf)?;
-                                    Some(with_prior_rows(&r, weights, z))
-                                };
-                                Some((j, column(j, &mut run)?))
-                            })
-                            .collect()
-                    })
-                })
-                .collect();
-            let mut sims = self.sims.borrow_mut();
-            let mut buf = self.buf.borrow_mut();
-            let mine = (0..z.len())
-                .step_by(threads)
-                .map(|j| {
-                    let mut run = |z: &[f64]| {
-                        let r = raw_residuals(&mut sims, target, z, &mut buf)?;
-                        Some(with_prior_rows(&r, weights, z))
-                    };
-                    Some((j, column(j, &mut run)?))
-                })
-                .collect();
-            std::iter::once(mine)
-                .chain(others.into_iter().map(|h| h.join().ok().flatten()))
-                .collect()
-        });
-        for part in columns {
-            for (j, c) in part? {
-                jac.set_column(j, &c);
-            }
+        let (target, weights) = (self.target, &self.weights);
+        let columns = over_columns(
+            &mut self.sims.borrow_mut(),
+            &mut self.buf.borrow_mut(),
+            target,
+            z.len(),
+            |sims, buf, j| {
+                let h = 1e-6 * z[j].abs().max(1.0);
+                let mut shifted = z.to_vec();
+                shifted[j] += h;
+                let r = raw_residuals(sims, target, &shifted, buf)?;
+                Some((with_prior_rows(&r, weights, &shifted) - base) / h)
+            },
+        )?;
+        for (j, c) in columns.iter().enumerate() {
+            jac.set_column(j, c);
         }
         Some(jac)
     }
+}
+
+/// `column(sims, buf, j)` for every `j` in `0..count`, in order: column j on thread
+/// `j mod t`, `t` the target's [`Target::columns_threads`] (at most `count`), thread 0 this one
+/// with `sims`, each other with simulators of its own. None when any column is.
+fn over_columns<'a, T: Send>(
+    sims: &mut [Simulator<'a>],
+    buf: &mut Vec<Vec<f64>>,
+    target: &Target<'a>,
+    count: usize,
+    column: impl Fn(&mut [Simulator<'a>], &mut Vec<Vec<f64>>, usize) -> Option<T> + Sync,
+) -> Option<Vec<T>> {
+    let threads = target.columns_threads.clamp(1, count.max(1));
+    if threads == 1 {
+        return (0..count).map(|j| column(sims, buf, j)).collect();
+    }
+    let column = &column;
+    let parts: Vec<Option<Vec<(usize, T)>>> = std::thread::scope(|scope| {
+        let others: Vec<_> = (1..threads)
+            .map(|t| {
+                scope.spawn(move || {
+                    let mut sims = simulators(target, "differences").ok()?;
+                    let mut buf = Vec::new();
+                    (t..count)
+                        .step_by(threads)
+                        .map(|j| Some((j, column(&mut sims, &mut buf, j)?)))
+                        .collect()
+                })
+            })
+            .collect();
+        let mine = (0..count)
+            .step_by(threads)
+            .map(|j| Some((j, column(sims, buf, j)?)))
+            .collect();
+        std::iter::once(mine)
+            .chain(others.into_iter().map(|h| h.join().ok().flatten()))
+            .collect()
+    });
+    let mut out: Vec<Option<T>> = (0..count).map(|_| None).collect();
+    for part in parts {
+        for (j, c) in part? {
+            out[j] = Some(c);
+        }
+    }
+    out.into_iter().collect()
 }
 
 /// The weighted residuals `r ∘ w` followed by the prior's rows `z` (the standardised
@@ -1065,33 +1080,39 @@ fn on_threads<'a, J: Send, T: Send>(
 }
 
 /// The residuals at `z` and their Jacobian by central differences (2p runs per record).
-fn central_differences(
-    sims: &mut [Simulator],
-    target: &Target,
+fn central_differences<'a>(
+    sims: &mut [Simulator<'a>],
+    target: &Target<'a>,
     z: &[f64],
 ) -> Option<(Vec<f64>, DMatrix<f64>)> {
     let mut buf: Vec<Vec<f64>> = Vec::new();
     let r0 = raw_residuals(sims, target, z, &mut buf)?;
     let mut jac = DMatrix::zeros(r0.len(), z.len());
-    for j in 0..z.len() {
+    let columns = over_columns(sims, &mut buf, target, z.len(), |sims, buf, j| {
         let h = 1e-4 * z[j].abs().max(1.0);
         let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
         zp[j] += h;
         zm[j] -= h;
-        let rp = raw_residuals(sims, target, &zp, &mut buf)?;
-        let rm = raw_residuals(sims, target, &zm, &mut buf)?;
-        for i in 0..r0.len() {
-            jac[(i, j)] = (rp[i] - rm[i]) / (2.0 * h);
-        }
+        let rp = raw_residuals(sims, target, &zp, buf)?;
+        let rm = raw_residuals(sims, target, &zm, buf)?;
+        Some(
+            rp.iter()
+                .zip(&rm)
+                .map(|(p, m)| (p - m) / (2.0 * h))
+                .collect::<Vec<f64>>(),
+        )
+    })?;
+    for (j, c) in columns.iter().enumerate() {
+        jac.column_mut(j).copy_from_slice(c);
     }
     Some((r0, jac))
 }
 
 /// The Laplace approximation at (z, s): covariance of (z, s), `s` every block's log σ² after
 /// the parameters. Also the FMU runs it made.
-fn laplace(
-    sims: &mut [Simulator],
-    target: &Target,
+fn laplace<'a>(
+    sims: &mut [Simulator<'a>],
+    target: &Target<'a>,
     z: &[f64],
     s: &[f64],
 ) -> Option<(DMatrix<f64>, usize)> {
@@ -1261,6 +1282,8 @@ pub fn calibrate_records(
     let best = best.ok_or_else(|| CalibrateError::Failed(format!("{} starts", starts.len())))?;
 
     // The Laplace posterior at the best start's optimum, and every record's fit there.
+    // The starts are done: the Laplace approximation's differences have every thread.
+    target.columns_threads = setup.threads.max(1);
     let mut sims = simulators(&target, "laplace")?;
     let (cov, laplace_runs) = laplace(&mut sims, &target, &best.z, &best.s).ok_or_else(|| {
         CalibrateError::Failed("the posterior Hessian at the optimum is singular".into())
