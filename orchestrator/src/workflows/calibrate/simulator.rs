@@ -11,7 +11,7 @@ use crate::cosim::import::{Fmu, Instance, StepEnd};
 use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
 use crate::twin::data::Measurement;
 use crate::twin::system::initialise;
-use crate::twin::{ParameterValue, TwinError, OUTPUTS};
+use crate::twin::{ParameterValue, TwinError};
 
 /// One FMU instance run on the master, the record's excitation replayed into the input of its
 /// name (`force` or `ground_acc`). Between runs the simulator resets the instance and sets its
@@ -25,33 +25,13 @@ pub struct Simulator<'a> {
     /// The excitation's input and its values.
     force_vr: u32,
     force: &'a [f64],
-    /// `acc1..acc3` (the paper's rig, [`Simulator::new`]).
-    acc_vrs: [u32; 3],
     start: f64,
     dt: f64,
 }
 
 impl<'a> Simulator<'a> {
-    /// The paper's rig: the record's force into `force`, `acc1..acc3` for [`Simulator::simulate`].
-    pub fn new(
-        fmu: &'a Fmu,
-        base: BTreeMap<String, ParameterValue>,
-        force: &'a [f64],
-        start: f64,
-        dt: f64,
-        name: &str,
-    ) -> Result<Self, TwinError> {
-        let mut sim = Self::driven(fmu, base, "force", force, start, dt, name)?;
-        sim.acc_vrs = [
-            fmu.value_reference(OUTPUTS[0])?,
-            fmu.value_reference(OUTPUTS[1])?,
-            fmu.value_reference(OUTPUTS[2])?,
-        ];
-        Ok(sim)
-    }
-
-    /// Any structure: `excitation` replayed into the FMU's input `input` (`force` or
-    /// `ground_acc`); the outputs are the caller's ([`Simulator::record`]).
+    /// `excitation` replayed into the FMU's input `input` (`force` or `ground_acc`); the
+    /// outputs are the caller's ([`Simulator::record`]).
     pub fn driven(
         fmu: &'a Fmu,
         base: BTreeMap<String, ParameterValue>,
@@ -64,30 +44,16 @@ impl<'a> Simulator<'a> {
         let instance = Rc::new(RefCell::new(fmu.instantiate(name)?));
         let force_vr = fmu.value_reference(input)?;
         let force = excitation;
-        let acc_vrs = [0; 3];
         Ok(Simulator {
             fmu,
             instance,
             name: name.to_owned(),
             base,
             force_vr,
-            acc_vrs,
             force,
             start,
             dt,
         })
-    }
-
-    /// Simulate with the real parameters `vrs` set to `values`; `out[f][k]` is floor f's
-    /// acceleration at sample k.
-    pub fn simulate(
-        &mut self,
-        vrs: &[u32],
-        values: &[f64],
-        out: &mut [Vec<f64>; 3],
-    ) -> Result<(), TwinError> {
-        let acc_vrs = self.acc_vrs;
-        self.record(vrs, values, &acc_vrs, out)
     }
 
     /// The physics with `base` driven by `data`'s excitation (`force` or `ground_acc`) from its
@@ -132,11 +98,6 @@ impl<'a> Simulator<'a> {
         out: &mut [Vec<f64>],
     ) -> Result<(), TwinError> {
         self.run(vrs, values, Some(switch), outputs, out)
-    }
-
-    /// Floor f's acceleration `acc_vrs()[f]`.
-    pub fn acc_vrs(&self) -> [u32; 3] {
-        self.acc_vrs
     }
 
     /// Like [`Simulator::record_switched`], but each sample's values of `outputs` go to `each`
