@@ -54,7 +54,7 @@ pub fn plot_mode(result: &ModeResult) -> Result<String, String> {
             .first()
             .map(|r| r.trace.channels.clone())
             .unwrap_or_default();
-        let rig = channels.is_empty() || channels == ["acc1", "acc2", "acc3"];
+        let rig = channels.is_empty() || ::structure::building::is_paper_channels(&channels);
         let labels: Vec<String> = if rig {
             (1..=3).map(|f| format!("floor {f}")).collect()
         } else {

@@ -45,10 +45,6 @@ pub const SHEAR_FMU: &str = "fmu_shear.fmu";
 /// System inputs of the paper rig's twin (a twin of another structure takes `ground_acc` for
 /// ground motion, see [`Twin::for_structure`]).
 pub const INPUTS: [&str; 2] = ["force", "control_force"];
-/// The paper rig's accelerations, for the workflows still written for it; a twin's outputs are
-/// its structure's (`Twin::for_structure`), and `run::run_twin` predicts whatever channels a
-/// record measures.
-pub const OUTPUTS: [&str; 3] = ["acc1", "acc2", "acc3"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum TwinError {
