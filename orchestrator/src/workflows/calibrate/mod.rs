@@ -29,7 +29,7 @@ pub mod validated;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use nalgebra::{DMatrix, DVector};
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -608,9 +608,16 @@ impl Problem<'_, '_> {
     }
 }
 
-/// `column(sims, buf, j)` for every `j` in `0..count`, in order: column j on thread
-/// `j mod t`, `t` the target's [`Target::columns_threads`] (at most `count`), thread 0 this one
-/// with `sims`, each other with simulators of its own. None when any column is.
+/// Below this much work left after the first column (its time × the columns left), the rest
+/// run on this thread: another thread's simulators (an FMU instance per record) and its start
+/// cost a few milliseconds, more than a three-storey record's few columns take.
+const COLUMNS_WORTH_THREADS: Duration = Duration::from_millis(40);
+
+/// `column(sims, buf, j)` for every `j` in `0..count`, in order. Column 0 on this thread,
+/// timed; when the rest is worth it ([`COLUMNS_WORTH_THREADS`]), column j on thread
+/// `(j − 1) mod t`, `t` the target's [`Target::columns_threads`], thread 0 this one with `sims`,
+/// each other with simulators of its own; else the rest here too. The same columns either way.
+/// None when any column is.
 fn over_columns<'a, T: Send>(
     sims: &mut [Simulator<'a>],
     buf: &mut Vec<Vec<f64>>,
@@ -618,9 +625,17 @@ fn over_columns<'a, T: Send>(
     count: usize,
     column: impl Fn(&mut [Simulator<'a>], &mut Vec<Vec<f64>>, usize) -> Option<T> + Sync,
 ) -> Option<Vec<T>> {
-    let threads = target.columns_threads.clamp(1, count.max(1));
-    if threads == 1 {
-        return (0..count).map(|j| column(sims, buf, j)).collect();
+    if count == 0 {
+        return Some(Vec::new());
+    }
+    let timed = Instant::now();
+    let first = column(sims, buf, 0)?;
+    let rest = timed.elapsed() * (count - 1) as u32;
+    let threads = target.columns_threads.min(count - 1).max(1);
+    if threads == 1 || rest < COLUMNS_WORTH_THREADS {
+        return std::iter::once(Some(first))
+            .chain((1..count).map(|j| column(sims, buf, j)))
+            .collect();
     }
     let column = &column;
     let parts: Vec<Option<Vec<(usize, T)>>> = std::thread::scope(|scope| {
@@ -629,14 +644,14 @@ fn over_columns<'a, T: Send>(
                 scope.spawn(move || {
                     let mut sims = simulators(target, "differences").ok()?;
                     let mut buf = Vec::new();
-                    (t..count)
+                    (1 + t..count)
                         .step_by(threads)
                         .map(|j| Some((j, column(&mut sims, &mut buf, j)?)))
                         .collect()
                 })
             })
             .collect();
-        let mine = (0..count)
+        let mine = (1..count)
             .step_by(threads)
             .map(|j| Some((j, column(sims, buf, j)?)))
             .collect();
@@ -644,7 +659,9 @@ fn over_columns<'a, T: Send>(
             .chain(others.into_iter().map(|h| h.join().ok().flatten()))
             .collect()
     });
-    let mut out: Vec<Option<T>> = (0..count).map(|_| None).collect();
+    let mut out: Vec<Option<T>> = std::iter::once(Some(first))
+        .chain((1..count).map(|_| None))
+        .collect();
     for part in parts {
         for (j, c) in part? {
             out[j] = Some(c);
