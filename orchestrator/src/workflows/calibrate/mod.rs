@@ -566,9 +566,9 @@ impl Problem<'_, '_> {
     }
 
     /// The forward-difference Jacobian at `z` (`base` its residuals), one run per parameter:
-    /// on this thread, or, where the FMU gives no sensitivities (so a trial is one plain run)
-    /// and the starts leave cores idle, over [`Target::columns_threads`] threads, each
-    /// column on a simulator of its thread's own. The same columns either way.
+    /// through [`Problem::weighted`] while the FMU's sensitivities are on, else as plain runs
+    /// by [`over_columns`] (over the cores the starts leave idle, when worth it). The same
+    /// columns either way.
     fn forward_differences(&self, z: &[f64], base: &DVector<f64>) -> Option<DMatrix<f64>> {
         let plain = self
             .target
@@ -576,7 +576,7 @@ impl Problem<'_, '_> {
             .as_ref()
             .is_none_or(|s| s.failed.load(Ordering::Relaxed));
         let mut jac = DMatrix::zeros(base.len(), z.len());
-        if !plain || self.target.columns_threads <= 1 {
+        if !plain {
             for j in 0..z.len() {
                 let h = 1e-6 * z[j].abs().max(1.0);
                 let mut shifted = z.to_vec();
