@@ -237,6 +237,16 @@ impl ShearModel {
         self.params.storeys()
     }
 
+    /// `out` minus the effects' forces at `y`, `v` (`g`: `n` zeros to hold them).
+    #[inline]
+    fn subtract_effects(&self, y: &[f64], v: &[f64], g: &mut [f64], out: &mut [f64]) {
+        let n = g.len();
+        self.effects.add_forces(&y[..n], &v[..n], g);
+        for (o, g) in out.iter_mut().zip(g.iter()) {
+            *o -= g;
+        }
+    }
+
     /// The relative floor accelerations `ÿ` for a state, an excitation input and a control
     /// force, written to `out`: eq. (1) solved for ÿ. Under ground acceleration an
     /// accelerometer reads `ÿ + a_g` ([`ShearModel::absolute_acceleration`]).
@@ -282,18 +292,16 @@ impl ShearModel {
         }
         if self.effects.any_enabled() {
             // The effects' forces in a buffer on the stack for the usual buildings (zeroing
-            // one of MAX_STOREYS for three floors was a tenth of a nonlinear step's cost).
-            const ON_STACK: usize = 16;
-            let (mut small, mut large) = ([0.0; ON_STACK], Vec::new());
-            let g: &mut [f64] = if n <= ON_STACK {
-                &mut small[..n]
+            // one of MAX_STOREYS for three floors was a tenth of a nonlinear step's cost; a
+            // buffer on the heap for twenty storeys, a tenth of a fit's time in malloc/free).
+            const SMALL: usize = 16;
+            const LARGE: usize = 64;
+            if n <= SMALL {
+                self.subtract_effects(y, v, &mut [0.0; SMALL][..n], out);
+            } else if n <= LARGE {
+                self.subtract_effects(y, v, &mut [0.0; LARGE][..n], out);
             } else {
-                large.resize(n, 0.0);
-                &mut large
-            };
-            self.effects.add_forces(&y[..n], &v[..n], g);
-            for (o, g) in out.iter_mut().zip(g.iter()) {
-                *o -= g;
+                self.subtract_effects(y, v, &mut vec![0.0; n], out);
             }
         }
         for i in 0..n {
