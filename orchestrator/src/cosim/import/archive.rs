@@ -42,26 +42,34 @@ pub struct Unpacked {
 #[derive(Debug)]
 enum Place {
     Temporary(tempfile::TempDir),
-    Cached { dir: PathBuf, key: String },
+    Cached {
+        dir: PathBuf,
+        key: String,
+    },
+    /// A private directory with the archive's resources and links to a cache entry's files.
+    Linked {
+        dir: tempfile::TempDir,
+        key: String,
+    },
 }
 
 impl Unpacked {
     pub fn path(&self) -> &Path {
         match &self.place {
-            Place::Temporary(dir) => dir.path(),
+            Place::Temporary(dir) | Place::Linked { dir, .. } => dir.path(),
             Place::Cached { dir, .. } => dir,
         }
     }
 
-    /// Whether this is a directory of the FMU cache.
+    /// Whether this is a directory of the FMU cache, or links into one.
     pub fn is_cached(&self) -> bool {
-        matches!(self.place, Place::Cached { .. })
+        matches!(self.place, Place::Cached { .. } | Place::Linked { .. })
     }
 }
 
 impl Drop for Unpacked {
     fn drop(&mut self) {
-        if let Place::Cached { key, .. } = &self.place {
+        if let Place::Cached { key, .. } | Place::Linked { key, .. } = &self.place {
             cache_keys_in_use().remove(key);
         }
     }
@@ -101,15 +109,18 @@ pub fn fmu_cache_root() -> Option<PathBuf> {
 }
 
 /// An FMU unpacked once per version and then reused: a `twin` process otherwise spends most of
-/// its start copying the FMU's library out of the archive and removing it at exit.
+/// its start inflating the FMU's library out of the archive and removing it at exit.
 ///
-/// The cache holds FMUs without a `resources/` folder only (an FMU may keep state there, so
-/// each open of one with resources gets its own copy). The key is a 64-bit FNV-1a hash of the
+/// The cache holds an FMU's files outside `resources/` (an FMU may keep state there, so each
+/// open gets its own copy of those, unpacked from the archive into a private directory beside
+/// links to the cache's files). The key is a 64-bit FNV-1a hash of those entries of the
 /// archive's central directory: every entry's name, CRC-32, sizes and kind, so a rebuilt FMU is
 /// a new entry; an entry is unpacked into a temporary directory beside the others and renamed
 /// into place, so a reader never sees half of one, and two processes filling the same entry
-/// both succeed. Anything that goes wrong with the cache falls back to [`unpack`], which also
-/// gives refusals of hostile archives their usual message.
+/// both succeed. A second open of the same FMU while the first is loaded gets a private
+/// directory with the cache's files copied (its own copy of the library, see
+/// [`cache_keys_in_use`]). Anything that goes wrong with the cache falls back to [`unpack`],
+/// which also gives refusals of hostile archives their usual message.
 pub fn unpack_fmu(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportError> {
     if let Some(root) = fmu_cache_root() {
         if let Some(unpacked) = unpack_cached(archive, &root, limits) {
@@ -119,30 +130,45 @@ pub fn unpack_fmu(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, Impo
     unpack(archive, limits)
 }
 
-fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Unpacked> {
-    let file = File::open(archive).ok()?;
-    let mut zip = zip::ZipArchive::new(file).ok()?;
+/// Is this entry of an FMU in its `resources/` folder?
+fn is_resource(name: &str) -> bool {
+    name == "resources" || name.starts_with("resources/")
+}
+
+/// What the cache needs of an archive: its key, and whether it has resources.
+struct CacheKey {
+    key: String,
+    resources: bool,
+    declared: u64,
+}
+
+fn cache_key(
+    archive: &Path,
+    zip: &mut zip::ZipArchive<File>,
+    limits: UnpackLimits,
+) -> Option<CacheKey> {
     if zip.len() > limits.max_entries {
         return None;
     }
     let mut hash = Fnv1a::new();
     let mut declared: u64 = 0;
+    let mut resources = false;
     for index in 0..zip.len() {
         let entry = zip.by_index_raw(index).ok()?;
         let name = entry.name();
-        if safe_relative_path(name).is_none()
-            || entry.is_symlink()
-            || name == "resources"
-            || name.starts_with("resources/")
-        {
+        if safe_relative_path(name).is_none() || entry.is_symlink() {
             return None;
+        }
+        declared = declared.saturating_add(entry.size());
+        if is_resource(name) {
+            resources = true;
+            continue;
         }
         hash.write(name.as_bytes());
         hash.write(&[0, u8::from(entry.is_dir())]);
         hash.write(&entry.crc32().to_le_bytes());
         hash.write(&entry.size().to_le_bytes());
         hash.write(&entry.compressed_size().to_le_bytes());
-        declared = declared.saturating_add(entry.size());
     }
     if declared > limits.max_total_bytes {
         return None;
@@ -159,11 +185,22 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
         })
         .take(64)
         .collect();
-    let key = format!("{stem}-{:016x}", hash.finish());
+    Some(CacheKey {
+        key: format!("{stem}-{:016x}", hash.finish()),
+        resources,
+        declared,
+    })
+}
+
+fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Unpacked> {
+    let file = File::open(archive).ok()?;
+    let mut zip = zip::ZipArchive::new(file).ok()?;
+    let CacheKey {
+        key,
+        resources,
+        declared,
+    } = cache_key(archive, &mut zip, limits)?;
     let mut in_use = cache_keys_in_use();
-    if in_use.contains(&key) {
-        return None;
-    }
     let dir = root.join(&key);
     // A hit marks the entry as used now: eviction spares entries used within IDLE_BEFORE_EVICTION.
     let touched = File::open(&dir)
@@ -171,7 +208,9 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
         .is_ok();
     if !touched || !dir.join("modelDescription.xml").is_file() {
         create_private_dir(root).ok()?;
-        let fresh = unpack_into(&mut zip, root, archive, limits).ok()?.keep();
+        let fresh = unpack_into(&mut zip, root, archive, limits, |n| !is_resource(n))
+            .ok()?
+            .keep();
         if std::fs::rename(&fresh, &dir).is_err() {
             // Another process put it there first (or the rename failed): ours goes.
             let _ = std::fs::remove_dir_all(&fresh);
@@ -182,10 +221,47 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
             evict(root, &key, &in_use);
         }
     }
-    in_use.insert(key.clone());
+    let first = !in_use.contains(&key);
+    if first && !resources {
+        in_use.insert(key.clone());
+        return Some(Unpacked {
+            place: Place::Cached { dir, key },
+        });
+    }
+    // A directory of this open's own: the resources from the archive, the rest linked to the
+    // entry (the first open) or copied from it (a second one in this process).
+    let own_root = memory_root(declared).unwrap_or_else(std::env::temp_dir);
+    let own = unpack_into(&mut zip, &own_root, archive, limits, is_resource).ok()?;
+    link_or_copy(&dir, own.path(), first).ok()?;
     Some(Unpacked {
-        place: Place::Cached { dir, key },
+        place: if first {
+            in_use.insert(key.clone());
+            Place::Linked { dir: own, key }
+        } else {
+            Place::Temporary(own)
+        },
     })
+}
+
+/// Every file under `from` into the same place under `to`: a symbolic link to it (`link`), or
+/// a copy.
+fn link_or_copy(from: &Path, to: &Path, link: bool) -> io::Result<()> {
+    for entry in std::fs::read_dir(from)? {
+        let entry = entry?;
+        let (source, target) = (entry.path(), to.join(entry.file_name()));
+        if entry.file_type()?.is_dir() {
+            std::fs::create_dir_all(&target)?;
+            link_or_copy(&source, &target, link)?;
+        } else if link {
+            #[cfg(unix)]
+            std::os::unix::fs::symlink(&source, &target)?;
+            #[cfg(not(unix))]
+            std::fs::copy(&source, &target)?;
+        } else {
+            std::fs::copy(&source, &target)?;
+        }
+    }
+    Ok(())
 }
 
 /// `dir` and its parents, `dir` itself readable by its owner only.
@@ -294,13 +370,13 @@ pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportEr
             max_total_bytes: limits.max_total_bytes.min(declared),
             ..limits
         };
-        if let Ok(dir) = unpack_into(&mut zip, &root, archive, in_memory) {
+        if let Ok(dir) = unpack_into(&mut zip, &root, archive, in_memory, |_| true) {
             return Ok(Unpacked {
                 place: Place::Temporary(dir),
             });
         }
     }
-    let dir = unpack_into(&mut zip, &std::env::temp_dir(), archive, limits)?;
+    let dir = unpack_into(&mut zip, &std::env::temp_dir(), archive, limits, |_| true)?;
     Ok(Unpacked {
         place: Place::Temporary(dir),
     })
@@ -343,11 +419,13 @@ fn memory_root(declared: u64) -> Option<PathBuf> {
     }
 }
 
+/// The entries of `zip` whose names `wanted` takes, into a new temporary directory under `root`.
 fn unpack_into(
     zip: &mut zip::ZipArchive<File>,
     root: &Path,
     archive: &Path,
     limits: UnpackLimits,
+    wanted: impl Fn(&str) -> bool,
 ) -> Result<tempfile::TempDir, ImportError> {
     let bad = |message: String| ImportError::Archive {
         path: archive.to_owned(),
@@ -363,6 +441,9 @@ fn unpack_into(
             .by_index(index)
             .map_err(|e| bad(format!("entry {index}: {e}")))?;
         let name = entry.name().to_owned();
+        if !wanted(&name) {
+            continue;
+        }
         let Some(relative) = safe_relative_path(&name) else {
             return Err(bad(format!(
                 "entry '{name}' has an absolute path or a '..' component (zip-slip); refused"
@@ -434,7 +515,8 @@ mod tests {
     }
 
     /// The cache: filled once, reused after; a second open while the first is alive gets a
-    /// private copy; another version is another entry; FMUs with resources and hostile
+    /// private copy (from the cache); another version is another entry; an FMU with resources
+    /// gets them fresh in a directory of its own, the rest linked to the cache; hostile
     /// archives are not cached; the oldest entries go beyond the limit.
     #[test]
     fn the_fmu_cache_reuses_an_entry_and_isolates_concurrent_opens() {
@@ -450,12 +532,19 @@ mod tests {
             std::fs::read(first.path().join("binaries/linux64/a.so")).expect("so"),
             b"one"
         );
+        let second = unpack_cached(v1.path(), root.path(), limits).expect("a copy");
+        let library = |u: &Unpacked| u.path().join("binaries/linux64/a.so");
         assert!(
-            unpack_cached(v1.path(), root.path(), limits).is_none(),
+            !second.path().starts_with(root.path())
+                && !std::fs::symlink_metadata(library(&second))
+                    .expect("so")
+                    .is_symlink()
+                && std::fs::read(library(&second)).expect("so") == b"one",
             "a second open while the first is loaded must get its own copy"
         );
         let dir = first.path().to_owned();
         drop(first);
+        drop(second);
         assert!(dir.is_dir(), "a cache entry outlives its user");
         let again = unpack_cached(v1.path(), root.path(), limits).expect("cached");
         assert_eq!(again.path(), dir);
@@ -473,9 +562,44 @@ mod tests {
 
         let with_resources = write_zip(&[
             ("modelDescription.xml", b"<x/>"),
+            ("binaries/linux64/r.so", b"code"),
             ("resources/t.json", b"{}"),
         ]);
-        assert!(unpack_cached(with_resources.path(), root.path(), limits).is_none());
+        let linked = unpack_cached(with_resources.path(), root.path(), limits).expect("linked");
+        let so = linked.path().join("binaries/linux64/r.so");
+        assert!(linked.is_cached() && !linked.path().starts_with(root.path()));
+        assert!(std::fs::symlink_metadata(&so).expect("so").is_symlink());
+        assert_eq!(std::fs::read(&so).expect("so"), b"code");
+        assert!(std::fs::canonicalize(&so)
+            .expect("target")
+            .starts_with(std::fs::canonicalize(root.path()).expect("root")));
+        // The resources are this open's own: a change there is not seen by the next open.
+        let resource = linked.path().join("resources/t.json");
+        std::fs::write(&resource, b"changed").expect("write");
+        let copied = unpack_cached(with_resources.path(), root.path(), limits).expect("copy");
+        assert_eq!(
+            std::fs::read(copied.path().join("resources/t.json")).expect("t"),
+            b"{}"
+        );
+        assert!(
+            !std::fs::symlink_metadata(copied.path().join("binaries/linux64/r.so"))
+                .expect("so")
+                .is_symlink()
+        );
+        let linked_dir = linked.path().to_owned();
+        drop(linked);
+        drop(copied);
+        assert!(
+            !linked_dir.exists(),
+            "a linked open's directory goes with it"
+        );
+        assert!(
+            std::fs::read_dir(root.path())
+                .expect("root")
+                .flatten()
+                .all(|e| !e.path().join("resources").exists()),
+            "the cache holds no resources"
+        );
         let hostile = write_zip(&[("../evil", b"x")]);
         assert!(unpack_cached(hostile.path(), root.path(), limits).is_none());
         assert!(unpack_fmu(hostile.path(), limits)
@@ -483,8 +607,9 @@ mod tests {
             .to_string()
             .contains("zip-slip"));
 
+        // v1, v2 and the FMU with resources.
         let entries = || std::fs::read_dir(root.path()).expect("list").count();
-        assert_eq!(entries(), 2);
+        assert_eq!(entries(), 3);
         drop((again, other));
         let fill = |from: usize, to: usize| -> Vec<tempfile::NamedTempFile> {
             (from..to)
@@ -500,7 +625,7 @@ mod tests {
         };
         // Entries in recent use are never evicted, however many.
         let recent = fill(0, CACHE_ENTRIES + 3);
-        assert_eq!(entries(), CACHE_ENTRIES + 5);
+        assert_eq!(entries(), CACHE_ENTRIES + 6);
         // Once idle for a day, the oldest go beyond the limit.
         let day_ago = std::time::SystemTime::now() - IDLE_BEFORE_EVICTION;
         for entry in std::fs::read_dir(root.path()).expect("list").flatten() {

@@ -481,7 +481,15 @@ impl Shared {
             let p = columns.len();
             let mut gram = DMatrix::zeros(p, p);
             let mut rhs = DVector::zeros(p);
-            fill(&mut gram, &mut rhs, base, columns, &problem.residual, w, rows);
+            fill(
+                &mut gram,
+                &mut rhs,
+                base,
+                columns,
+                &problem.residual,
+                w,
+                rows,
+            );
             Normal {
                 gram,
                 rhs,
