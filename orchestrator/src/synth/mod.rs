@@ -122,6 +122,8 @@
 //!   floor. Its `fmu_prefix` (`quadratic_damping2`, `quadratic_damping_floor1`) names no FMU
 //!   variable; the truth reports `in_library: false`, `dissipated_energy` (`∫ c₂|u|³ dt` over
 //!   the record, J) and the largest |u| as `max_drift_or_velocity`.
+//! * `effects_from` (s, default 0): the library's effects (contact, cubic, friction) act from the
+//!   first sample at or after it — an effect that appears; hysteresis and dampers act throughout.
 //! * `changes`: `parameter` one of `m1..m3`, `c1..c3`, `k1..k3`; either `factor` (multiplies the
 //!   value in force at that time) or `value`; `at` in s, inside the record. Changes apply in time
 //!   order.
@@ -582,6 +584,8 @@ struct Integration<'a> {
     hysteretic: Hysteretic,
     changes: Changes<'a>,
     control: Option<ControlLoop>,
+    /// The library's effects held back until their start (`Scenario::effects_from`).
+    dormant: Option<Effects>,
     stats: Stats,
     clean_acc: Vec<Vec<f64>>,
     clean_force: Vec<f64>,
@@ -612,7 +616,9 @@ impl<'a> Integration<'a> {
         control: Option<InLoopController>,
     ) -> Result<Integration<'a>> {
         let n = grid.n;
-        let (model, hysteretic) = structure_model(s);
+        let (mut model, hysteretic) = structure_model(s);
+        let dormant = (s.effects_from > 0.0)
+            .then(|| std::mem::replace(&mut model.effects, Effects::new(s.storeys())));
         let traces: Vec<HysteresisTrace> = hysteretic
             .laws
             .iter()
@@ -636,6 +642,7 @@ impl<'a> Integration<'a> {
             hysteretic,
             changes,
             control,
+            dormant,
             stats,
             clean_acc: vec![vec![0.0; n]; channels.len()],
             clean_force: vec![0.0; n],
@@ -649,6 +656,12 @@ impl<'a> Integration<'a> {
         let FineGrid { n, os, hf, .. } = self.grid;
         for k in 0..n {
             let j0 = k * os;
+            if self.dormant.is_some() && j0 as f64 * hf >= self.s.effects_from - 1e-9 {
+                // The effects start: the model's caches were for the linear structure.
+                self.model.effects = self.dormant.take().expect("dormant effects");
+                self.model.contact_maps = None;
+                self.model.any_contact_maps = None;
+            }
             while self.changes.due(j0 as f64 * hf).is_some() {
                 self.changes.apply_next(&mut self.model);
             }

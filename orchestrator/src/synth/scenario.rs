@@ -53,6 +53,10 @@ pub struct Scenario {
     pub channels: Option<Vec<(Channel, Unit)>>,
     pub noise: NoiseSpec,
     pub effects: Vec<EffectSpec>,
+    /// The library's effects (contact, cubic stiffness, friction) act from this time (s) on:
+    /// the first sample at or after it; before, the structure is linear. 0: from the start.
+    /// Hysteresis and quadratic dampers act throughout.
+    pub effects_from: f64,
     pub changes: Vec<Change>,
 }
 
@@ -290,6 +294,7 @@ impl Default for Scenario {
             channels: None,
             noise: NoiseSpec::default(),
             effects: Vec::new(),
+            effects_from: 0.0,
             changes: Vec::new(),
         }
     }
@@ -701,6 +706,12 @@ impl Scenario {
             s.effects
                 .push(parse_effect(&effects.index(i), e, s.storeys())?);
         }
+        s.effects_from = file.effects_from.unwrap_or(0.0);
+        if !(s.effects_from.is_finite() && s.effects_from >= 0.0) {
+            return Err(at
+                .field("effects_from")
+                .error("the effects' start must be a time ≥ 0 s".into()));
+        }
         let changes = at.field("changes");
         for (i, c) in file.changes.unwrap_or_default().into_iter().enumerate() {
             let at = changes.index(i);
@@ -759,6 +770,10 @@ impl Scenario {
         // scenarios read as they always have).
         if self.storeys() != PAPER_STOREYS {
             v["storeys"] = json!(self.storeys());
+        }
+        // Effects that start later (written only then: earlier scenarios read as they did).
+        if self.effects_from > 0.0 {
+            v["effects_from"] = json!(self.effects_from);
         }
         if self.excitation != Excitation::default() {
             v["excitation"] = json!(self.excitation.name());
@@ -1374,6 +1389,7 @@ struct ScenarioFile {
     noise: Option<NoiseFile>,
     /// Read one by one by [`parse_effect`], whose fields depend on the kind.
     effects: Option<Vec<Value>>,
+    effects_from: Option<f64>,
     changes: Option<Vec<ChangeFile>>,
 }
 

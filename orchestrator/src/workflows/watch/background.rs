@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use ::structure::channel::Channel;
 
-use super::online::ChangePoint;
+use super::online::{ChangePoint, CHANGE_LOOKBACK};
 use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
 use crate::workflows::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
@@ -106,6 +106,24 @@ pub struct Episode {
     /// Windows that opened again while its looks went on: the change's too.
     #[serde(default)]
     pub windows: Vec<f64>,
+    /// The end of its last window that closed (s of the stream).
+    #[serde(default)]
+    pub last_closed: Option<f64>,
+}
+
+impl Episode {
+    /// Whether a window opening at `window_start` is this change's: while its looks go on, and
+    /// after them, while its answer is not adopted, unless the residual has been back in band
+    /// for [`CHANGE_LOOKBACK`] s — as long as a new change's location looks back. A structure
+    /// left changed (no `--adopt`) or a faulty sensor fails the band on and off: one change,
+    /// looked at until firm, not a new change at each window.
+    fn owns(&self, window_start: f64, looking: bool) -> bool {
+        !self.closed
+            && (looking
+                || self
+                    .last_closed
+                    .is_none_or(|end| window_start - end < CHANGE_LOOKBACK))
+    }
 }
 
 /// The stream's columns as kept: the excitation and the measured channels; each sample kept
@@ -264,7 +282,7 @@ impl Background {
             .saved
             .episode
             .as_ref()
-            .is_some_and(|e| self.next_post(e).is_some());
+            .is_some_and(|e| e.owns(window_start, self.next_post(e).is_some()));
         if let (true, Some(e)) = (live, &mut self.saved.episode) {
             e.windows.push(window_start);
             return;
@@ -287,6 +305,7 @@ impl Background {
                 firm: false,
                 closed: false,
                 windows: Vec::new(),
+                last_closed: None,
             });
             return;
         }
@@ -304,16 +323,17 @@ impl Background {
         (post <= MAX_POST + 1e-9 || e.rounds == 0).then_some(post.min(MAX_POST))
     }
 
-    /// A window closed: its diagnosis starts now if it was failing, is dropped if not. A
-    /// located change's looks go on (back in band for now is not the structure back as it
-    /// was: a damping change or a contact fails the band on and off).
-    pub fn closed(&mut self, window_start: f64, failing: bool) {
-        if self
+    /// A window (from `window_start` to `end`) closed: its diagnosis starts now if it was
+    /// failing, is dropped if not. A located change's looks go on (back in band for now is not
+    /// the structure back as it was: a damping change or a contact fails the band on and off).
+    pub fn closed(&mut self, window_start: f64, end: f64, failing: bool) {
+        if let Some(e) = self
             .saved
             .episode
-            .as_ref()
-            .is_some_and(|e| e.window_start == window_start || e.windows.contains(&window_start))
+            .as_mut()
+            .filter(|e| e.window_start == window_start || e.windows.contains(&window_start))
         {
+            e.last_closed = Some(end);
             return;
         }
         match self.saved.due {

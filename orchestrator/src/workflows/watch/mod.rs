@@ -948,7 +948,7 @@ impl Watcher<'_> {
                     cut,
                 } => {
                     if let Some(b) = &mut self.background {
-                        b.closed(window.start, failing);
+                        b.closed(window.start, window.end, failing);
                     }
                     if failing && !was_opened {
                         self.alert(
@@ -1880,6 +1880,12 @@ fn end(
     let elapsed = run.seconds();
     let this_run = run.samples;
     let last = w.state.last_time;
+    // The NMSE over the last window at the end (after an adoption: the live twin's).
+    let rolling = w
+        .state
+        .detector
+        .as_ref()
+        .map_or_else(|| w.nan(), Detector::rolling_nmse);
     if let Some(d) = &mut w.state.detector {
         let events = d.finish_segment();
         w.events(last.unwrap_or(0.0), events)?;
@@ -1934,6 +1940,7 @@ fn end(
         serde_json::to_value(&summary).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
     if let Value::Object(map) = &mut body {
         map.insert("nmse".into(), floats(&summary.nmse));
+        map.insert("rolling_nmse".into(), floats(&rolling));
         map.insert("tolerance_source".into(), json!(tolerance.source));
         map.insert(
             "still_failing".into(),
