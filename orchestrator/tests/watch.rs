@@ -1566,3 +1566,129 @@ fn every_kind_of_change_is_located_diagnosed_after_it_and_adopted_when_structura
         );
     }
 }
+
+/// Two hours of the unchanged structure, watched as in operation (the diagnosis on, `--adopt`):
+/// no alert but the end — no failing window, no located change, no diagnosis, nothing adopted.
+#[test]
+fn two_hours_without_a_change_raise_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("record.csv");
+    std::fs::write(&csv, stream_with(41, 7200.0, &[])).expect("write");
+    let all = watch_named(dir.path(), "hours", &csv, &["--diagnosis-wait", "--adopt"]);
+    let end = all.last().expect("an end alert");
+    eprintln!("two hours unchanged: NMSE {} %", end["nmse"]);
+    assert_eq!(all.len(), 1, "{all:?}");
+    assert_eq!(end["kind"], "end");
+    assert_eq!(end["samples"], 7200 * 512 / 10, "{end}");
+    assert_eq!(end["failing_windows"], 0, "{end}");
+    assert_eq!(end["still_failing"], serde_json::json!([]), "{end}");
+}
+
+/// Alerts without what depends on the machine (speeds, latencies, a diagnosis's wall time, this
+/// run's count) and with the files beside the alerts named relative to their directory.
+fn comparable_in(alerts: &[Value], dir: &Path) -> Vec<Value> {
+    let prefix = format!("{}/", dir.display());
+    comparable(alerts)
+        .into_iter()
+        .map(|mut a| {
+            if let Value::Object(m) = &mut a {
+                m.remove("seconds");
+                for value in m.values_mut() {
+                    if let Some(path) = value.as_str().and_then(|s| s.strip_prefix(&prefix)) {
+                        *value = Value::String(path.to_owned());
+                    }
+                }
+            }
+            a
+        })
+        .collect()
+}
+
+/// `twin watch` gives the same alerts with a live page as without one: a stream with a change
+/// (its failing window, change location, diagnoses and adoption) watched from a file, and
+/// piped into a watch serving its page on a loopback port with a client reading the page's
+/// event stream from the middle of the stream on.
+#[test]
+fn a_watch_with_a_page_gives_the_alerts_of_one_without() {
+    use std::io::{BufRead, BufReader, Read};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let at = random_time(305, 10.0, 20.0);
+    let text = stream_with(35, at + 35.0, &[("k2", at, 0.85)]);
+    let plain_dir = dir.path().join("plain");
+    let paged_dir = dir.path().join("paged");
+    for d in [&plain_dir, &paged_dir] {
+        std::fs::create_dir(d).expect("mkdir");
+    }
+    let csv = plain_dir.join("record.csv");
+    std::fs::write(&csv, &text).expect("write");
+    let flags = ["--diagnosis-wait", "--adopt"];
+    let plain = watch_named(&plain_dir, "alerts", &csv, &flags);
+
+    let mut child = twin_cmd()
+        .args(["watch", "--twin"])
+        .arg(twin_path())
+        .args(flags)
+        .args(["--serve", "127.0.0.1:0", "--source", "-", "--alerts"])
+        .arg(paged_dir.join("alerts.jsonl"))
+        .arg("--checkpoint")
+        .arg(paged_dir.join("alerts.checkpoint.json"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn twin watch --serve");
+    let mut stderr = BufReader::new(child.stderr.take().expect("stderr"));
+    let mut line = String::new();
+    stderr.read_line(&mut line).expect("the serving line");
+    let addr = line
+        .trim()
+        .strip_prefix("serving http://")
+        .and_then(|s| s.strip_suffix('/'))
+        .unwrap_or_else(|| panic!("no serving line: {line:?}"))
+        .to_owned();
+    let drain = std::thread::spawn(move || {
+        let mut rest = String::new();
+        let _ = stderr.read_to_string(&mut rest);
+        rest
+    });
+    let lines: Vec<&str> = text.lines().collect();
+    let half = lines.len() / 2;
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin
+        .write_all((lines[..half].join("\n") + "\n").as_bytes())
+        .expect("the first half");
+    let client = std::thread::spawn(move || {
+        let mut stream = std::net::TcpStream::connect(&addr).expect("connect to the page");
+        stream
+            .set_read_timeout(Some(Duration::from_secs(120)))
+            .expect("timeout");
+        write!(
+            stream,
+            "GET /events HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
+        )
+        .expect("request");
+        let mut seen = String::new();
+        let _ = stream.read_to_string(&mut seen);
+        seen
+    });
+    // The client is connected before the rest of the stream comes.
+    std::thread::sleep(Duration::from_millis(500));
+    stdin
+        .write_all((lines[half..].join("\n") + "\n").as_bytes())
+        .expect("the second half");
+    drop(stdin);
+    let status = child.wait().expect("twin watch --serve");
+    let errors = drain.join().expect("stderr");
+    assert!(status.success(), "{errors}");
+    let seen = client.join().expect("the page's client");
+    let paged = read_alerts(&paged_dir.join("alerts.jsonl"));
+    assert!(
+        seen.contains("adopted"),
+        "the page saw the adoption: {seen:.2000}"
+    );
+    assert!(!of_kind(&plain, "adopted").is_empty(), "{plain:?}");
+    assert_eq!(
+        comparable_in(&plain, &plain_dir),
+        comparable_in(&paged, &paged_dir)
+    );
+}
