@@ -138,83 +138,102 @@ impl Problem<'_> {
 /// gets the storey's score, so a sign convention cannot drop the right side); cubic as `x^3`;
 /// friction on a floor as `sign(v)` or `tanh(v/s)` (`s` 5 % and 20 % of its velocity RMS).
 /// 1 means the candidate explains nothing the parameters do not; the lowest are worth fitting.
-pub fn screen(problem: &Problem, candidates: &[Candidate]) -> Vec<f64> {
+pub fn screen(problem: &Problem, candidates: &[Candidate], threads: usize) -> Vec<f64> {
     let w = problem.weights();
     let nuisance = problem.nuisance();
     let shared = Shared::new(problem, &nuisance, &w);
-    let q = nuisance.len();
-    let base: Vec<usize> = (0..q).collect();
-    let mut by_site: Vec<((Kind, usize), f64)> = Vec::new();
+    // Every kind at every site once (the sides of a contact share their storey's score), the
+    // sites over the threads.
+    let mut sites: Vec<(Kind, usize, Placement)> = Vec::new();
+    for c in candidates {
+        if !sites.iter().any(|&(k, at, _)| (k, at) == (c.kind, c.at)) {
+            sites.push((c.kind, c.at, c.placement()));
+        }
+    }
+    let scores = crate::parallel::on_threads(&sites, threads, |&(kind, at, placement)| {
+        site_score(problem, &shared, &nuisance, &w, kind, at, placement)
+    });
     candidates
         .iter()
         .map(|c| {
-            let key = (c.kind, c.at);
-            if let Some((_, score)) = by_site.iter().find(|(k, _)| *k == key) {
-                return *score;
-            }
-            let site = match c.placement() {
-                Placement::Storey => Site::Storey(c.at),
-                Placement::Floor => Site::Floor(c.at),
-            };
-            let (x, v) = site_states(&problem.states, site);
-            let after_x = &x[problem.first..];
-            let after_v = &v[problem.first..];
-            let v_rms =
-                (after_v.iter().map(|a| a * a).sum::<f64>() / after_v.len().max(1) as f64).sqrt();
-            let shapes: Vec<Vec<(Function, f64)>> = match c.kind {
-                Kind::Cubic => vec![vec![(Function::X3, 1.0)]],
-                Kind::Friction => vec![
-                    vec![(Function::SignV, 1.0)],
-                    vec![(Function::TanhV, 0.05 * v_rms)],
-                    vec![(Function::TanhV, 0.2 * v_rms)],
-                ],
-                Kind::Contact => [0.8, 0.9, 0.95]
-                    .iter()
-                    .flat_map(|&p| {
-                        let gap = quantile(after_x, p);
-                        [
-                            vec![(Function::RampUp, gap)],
-                            vec![(Function::RampDown, gap)],
-                            vec![(Function::RampUp, gap), (Function::RampDown, gap)],
-                        ]
-                    })
-                    .collect(),
-            };
-            let mut columns = nuisance.clone();
-            let mut sets = Vec::new();
-            for shape in &shapes {
-                let mut set = base.clone();
-                for &(function, scale) in shape {
-                    let phi: Vec<f64> = x
-                        .iter()
-                        .zip(&v)
-                        .map(|(&a, &b)| function.eval(a, b, scale))
-                        .collect();
-                    set.push(columns.len());
-                    columns.push(sensitivity(
-                        &problem.linear,
-                        site,
-                        &phi,
-                        problem.dt,
-                        problem.sensors,
-                    ));
-                }
-                sets.push(set);
-            }
-            let (fit, held) = shared.extended(problem, &columns, &w);
-            let reference = solve(&fit, &base)
-                .map(|theta| left(&held, &base, &theta))
-                .unwrap_or(held.energy);
-            let score = sets
+            let i = sites
                 .iter()
-                .filter_map(|set| solve(&fit, set).map(|theta| left(&held, set, &theta)))
-                .map(|e| e / reference)
-                .filter(|x| x.is_finite())
-                .fold(1.0, f64::min);
-            by_site.push((key, score));
-            score
+                .position(|&(k, at, _)| (k, at) == (c.kind, c.at))
+                .expect("every candidate's site is scored");
+            scores[i]
         })
         .collect()
+}
+
+/// The screen's score of `kind` at a site (see [`screen`]).
+fn site_score(
+    problem: &Problem,
+    shared: &Shared,
+    nuisance: &[Vec<Vec<f64>>],
+    w: &[f64],
+    kind: Kind,
+    at: usize,
+    placement: Placement,
+) -> f64 {
+    let q = nuisance.len();
+    let base: Vec<usize> = (0..q).collect();
+    let site = match placement {
+        Placement::Storey => Site::Storey(at),
+        Placement::Floor => Site::Floor(at),
+    };
+    let (x, v) = site_states(&problem.states, site);
+    let after_x = &x[problem.first..];
+    let after_v = &v[problem.first..];
+    let v_rms = (after_v.iter().map(|a| a * a).sum::<f64>() / after_v.len().max(1) as f64).sqrt();
+    let shapes: Vec<Vec<(Function, f64)>> = match kind {
+        Kind::Cubic => vec![vec![(Function::X3, 1.0)]],
+        Kind::Friction => vec![
+            vec![(Function::SignV, 1.0)],
+            vec![(Function::TanhV, 0.05 * v_rms)],
+            vec![(Function::TanhV, 0.2 * v_rms)],
+        ],
+        Kind::Contact => [0.8, 0.9, 0.95]
+            .iter()
+            .flat_map(|&p| {
+                let gap = quantile(after_x, p);
+                [
+                    vec![(Function::RampUp, gap)],
+                    vec![(Function::RampDown, gap)],
+                    vec![(Function::RampUp, gap), (Function::RampDown, gap)],
+                ]
+            })
+            .collect(),
+    };
+    let mut columns = nuisance.to_vec();
+    let mut sets = Vec::new();
+    for shape in &shapes {
+        let mut set = base.clone();
+        for &(function, scale) in shape {
+            let phi: Vec<f64> = x
+                .iter()
+                .zip(&v)
+                .map(|(&a, &b)| function.eval(a, b, scale))
+                .collect();
+            set.push(columns.len());
+            columns.push(sensitivity(
+                &problem.linear,
+                site,
+                &phi,
+                problem.dt,
+                problem.sensors,
+            ));
+        }
+        sets.push(set);
+    }
+    let (fit, held) = shared.extended(problem, &columns, w);
+    let reference = solve(&fit, &base)
+        .map(|theta| left(&held, &base, &theta))
+        .unwrap_or(held.energy);
+    sets.iter()
+        .filter_map(|set| solve(&fit, set).map(|theta| left(&held, set, &theta)))
+        .map(|e| e / reference)
+        .filter(|x| x.is_finite())
+        .fold(1.0, f64::min)
 }
 
 /// One site's sparse model.
@@ -1223,6 +1242,7 @@ mod tests {
                 first,
             },
             &library,
+            2,
         );
         let best = (0..library.len())
             .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))

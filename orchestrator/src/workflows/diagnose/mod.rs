@@ -1807,7 +1807,7 @@ fn screened(
             held_out,
             first,
         };
-        let scores = discover::screen(&problem, &candidates);
+        let scores = discover::screen(&problem, &candidates, options.threads);
         let (kept, dropped) = screen_sites(candidates, scores);
         diagnosis.screened_out = dropped.iter().map(|(c, s)| (c.label(), *s)).collect();
         kept
