@@ -232,6 +232,11 @@ fn velocities_friction_on_floor_3() {
         &[("force", 0.1), ("velocity_scale", 1e-3)],
         0.1,
     );
+    // The plot's residual rows in each channel's own unit.
+    let svg = orchestrator::report::diagnose_plot::draw_diagnosis(&d).expect("plot");
+    for unit in ["residual (m/s²)", "residual (m/s)", "residual (m)"] {
+        assert_eq!(svg.matches(unit).count(), 1, "{unit} once in the plot");
+    }
 }
 
 // vel: 6.6 / 3.9 / 4.4 % → 0.030 / 0.060 / 0.045 %; gap 5.007e-4, stiffness 8966 for 9000.

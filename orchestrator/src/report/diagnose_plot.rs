@@ -110,7 +110,7 @@ fn draw_residuals(area: &Area, d: &Diagnosis, f: usize) -> Result<()> {
     chart
         .configure_mesh()
         .x_desc("time (s)")
-        .y_desc("residual (m/s²)")
+        .y_desc(format!("residual ({})", si_unit(d, channel)))
         .light_line_style(WHITE)
         .draw()
         .map_err(|e| err(&e))?;
@@ -151,6 +151,15 @@ fn draw_residuals(area: &Area, d: &Diagnosis, f: usize) -> Result<()> {
             .map_err(|e| err(&e))?;
     }
     Ok(())
+}
+
+/// The SI unit of `channel`'s quantity (the record's values are read into SI units).
+fn si_unit(d: &Diagnosis, channel: &str) -> &'static str {
+    match d.sensing.iter().find(|x| x.channel == channel) {
+        Some(x) if x.quantity == "velocity" => "m/s",
+        Some(x) if x.quantity == "displacement" => "m",
+        _ => "m/s²",
+    }
 }
 
 /// The evidence panel's storey and kind: the winning effect's storey (or floor), else the
