@@ -1692,3 +1692,77 @@ fn a_watch_with_a_page_gives_the_alerts_of_one_without() {
         comparable_in(&paged, &paged_dir)
     );
 }
+
+/// A second change in the middle of the looks at a first — in what would otherwise be the
+/// first's diagnosis window: storey 2 loses 15 % of its stiffness at a random time, and floor 3
+/// gains 20 % of mass 13–17 s later, after the first look (10 s) and before the second (20 s),
+/// whose samples would mix the two structures (a mixed window answered `update_data_model`,
+/// firm, and the stream ended failing). The second look finds the second change in the
+/// residuals of the first look's answer and answers on the samples before it (k2, firm,
+/// adopted); the second change is then looked at on its own (m3, firm, adopted). Nothing
+/// fails after. Measured: the second change found at 31.895 s for 31.895 s, k2 × 0.855 and
+/// m3 × 1.212 adopted; the NMSE over the last 20 s 0.17 / 0.76 / 1.53 % — above the 0.5 %
+/// tolerance (not failing: within the band): the second look starts from the state the first
+/// adopted twin reaches from 30 s before the second change, over samples that precede the
+/// first, which biases its fit. The bound below is twice the measured worst floor.
+#[test]
+fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_own() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let first = random_time(206, 10.0, 20.0);
+    let second = first + random_time(207, 13.0, 17.0);
+    let csv = dir.path().join("record.csv");
+    let changes = [("k2", first, 0.85), ("m3", second, 1.2)];
+    std::fs::write(&csv, stream_with(26, second + 45.0, &changes)).expect("write");
+    let all = watch_named(
+        dir.path(),
+        "middle",
+        &csv,
+        &["--diagnosis-wait", "--adopt", "--window", "20"],
+    );
+    assert_diagnosed_after(&all, &[first, second]);
+    let cut: Vec<&Value> = of_kind(&all, "diagnosis")
+        .into_iter()
+        .filter(|d| !d["second_change"].is_null())
+        .collect();
+    assert_eq!(cut.len(), 1, "{all:?}");
+    let found = cut[0]["second_change"]["time"].as_f64().expect("a time");
+    eprintln!(
+        "changes at {first:.3} and {second:.3} s: the second found at {found:.3} s by look {}",
+        cut[0]["round"]
+    );
+    assert!((found - second).abs() <= 1.0, "{}", cut[0]);
+    assert!(cut[0]["to"].as_f64().expect("to") < second, "{}", cut[0]);
+    let adopted = of_kind(&all, "adopted");
+    assert_eq!(adopted.len(), 2, "{all:?}");
+    assert_eq!(adopted[0]["verdict"], "recalibrate:k2", "{all:?}");
+    assert_eq!(adopted[1]["verdict"], "recalibrate:m3", "{all:?}");
+    let twin = |a: &Value| PathBuf::from(a["twin"].as_str().expect("the twin's path"));
+    let before = |name: &str| parameter_of(twin_path(), name);
+    let (k2, m3) = (
+        parameter_of(&twin(adopted[1]), "k2") / before("k2"),
+        parameter_of(&twin(adopted[1]), "m3") / before("m3"),
+    );
+    let end = of_kind(&all, "end")[0];
+    eprintln!(
+        "k2 × {k2:.4}, m3 × {m3:.4}; NMSE over the last 20 s {} %",
+        end["rolling_nmse"]
+    );
+    assert!((k2 - 0.85).abs() < 0.02, "k2 × {k2}");
+    assert!((m3 - 1.2).abs() < 0.03, "m3 × {m3}");
+    let last = adopted[1]["time"].as_f64().expect("time");
+    assert!(
+        of_kind(&all, "failing")
+            .iter()
+            .all(|f| f["time"].as_f64().is_some_and(|t| t < last)),
+        "{all:?}"
+    );
+    assert_eq!(end["still_failing"], serde_json::json!([]), "{end}");
+    assert!(
+        end["rolling_nmse"]
+            .as_array()
+            .expect("nmse")
+            .iter()
+            .all(|x| x.as_f64().is_some_and(|x| x < 3.0)),
+        "{end}"
+    );
+}

@@ -81,6 +81,49 @@ pub fn after_the_change(
     }))
 }
 
+/// The times of the samples from a change on, and per response channel its residuals there.
+pub type Residuals = (Vec<f64>, Vec<Vec<f64>>);
+
+/// The residuals of `candidate` (physics parameters set on `twin`) after the change at `at`,
+/// run from the state `twin` as it is reached there on the samples before — the hypothesis a
+/// diagnosis after the change fits: per response channel of `data`, the measured minus the
+/// predicted from the change on, with those samples' times. None as for [`after_the_change`].
+pub fn residuals_after(
+    twin: &Twin,
+    candidate: &[(String, ParameterValue)],
+    data: &Measurement,
+    at: f64,
+) -> Result<Option<Residuals>> {
+    let options = DiagnoseOptions {
+        changed_at: Some(at),
+        ..DiagnoseOptions::default()
+    };
+    let Some(after) = after_the_change(twin, data, &options)? else {
+        return Ok(None);
+    };
+    let mut twin = after.twin;
+    if let Some(physics) = twin.component_mut(PHYSICS) {
+        physics.parameters.extend(candidate.iter().cloned());
+    }
+    let run = run_physics(&twin, &after.data, &BTreeMap::new(), &[], &[])?;
+    let mut residuals = Vec::with_capacity(after.data.responses.len());
+    for signal in &after.data.responses {
+        let ::structure::channel::Channel::Response { quantity, floor } = signal.channel else {
+            return Ok(None);
+        };
+        let predicted = run.at(floor - 1, quantity);
+        residuals.push(
+            signal
+                .values
+                .iter()
+                .zip(predicted)
+                .map(|(y, p)| y - p)
+                .collect(),
+        );
+    }
+    Ok(Some((after.data.time, residuals)))
+}
+
 /// The state `twin`'s physics reaches at `data`'s last sample, run from rest at its first, as
 /// the start values another run takes to go on from there (`disp{i}_start`, `vel{i}_start`);
 /// None when its shear FMU has no start values.

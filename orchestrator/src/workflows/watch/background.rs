@@ -31,7 +31,10 @@ use serde::{Deserialize, Serialize};
 
 use ::structure::channel::Channel;
 
+use serde_json::Value;
+
 use super::online::{ChangePoint, CHANGE_LOOKBACK};
+use super::second;
 use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
 use crate::workflows::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
@@ -109,6 +112,10 @@ pub struct Episode {
     /// The end of its last window that closed (s of the stream).
     #[serde(default)]
     pub last_closed: Option<f64>,
+    /// The last look's structural answer (its parameters) and the last sample it answered on:
+    /// the next look checks its samples for a second change against it ([`second_change`]).
+    #[serde(default)]
+    pub answer: Option<(Vec<(String, Value)>, f64)>,
 }
 
 impl Episode {
@@ -161,6 +168,9 @@ pub struct Job {
     /// the comparison's transient).
     #[serde(default)]
     pub warmup: Option<f64>,
+    /// The last look's answer on the same change ([`Episode::answer`]).
+    #[serde(default)]
+    pub answer: Option<(Vec<(String, Value)>, f64)>,
 }
 
 impl Job {
@@ -193,6 +203,9 @@ pub struct Saved {
     pub episode: Option<Episode>,
 }
 
+/// What a diagnosis's thread sends back: its result, and a second change it cut at.
+type Outcome = (Result<Diagnosis, String>, Option<ChangePoint>);
+
 /// A finished diagnosis.
 pub struct Finished {
     pub job: Job,
@@ -201,6 +214,9 @@ pub struct Finished {
     pub seconds: f64,
     /// Its verdict is the one before's on the same change: firm.
     pub firm: bool,
+    /// A second change found after the samples the last look answered on: this look answered
+    /// on the samples before it.
+    pub second: Option<ChangePoint>,
 }
 
 pub struct Background {
@@ -211,7 +227,7 @@ pub struct Background {
     diagnose: DiagnoseOptions,
     dt: f64,
     /// The running diagnosis's thread.
-    worker: Option<(Receiver<Result<Diagnosis, String>>, Instant)>,
+    worker: Option<(Receiver<Outcome>, Instant)>,
 }
 
 impl Background {
@@ -265,6 +281,7 @@ impl Background {
             change: None,
             round: 0,
             warmup: None,
+            answer: None,
         })
     }
 
@@ -306,6 +323,7 @@ impl Background {
                 closed: false,
                 windows: Vec::new(),
                 last_closed: None,
+                answer: None,
             });
             return;
         }
@@ -408,6 +426,23 @@ impl Background {
         }
     }
 
+    /// Look at a second change ([`Finished::second`]) on its own, now that the answer to the
+    /// first is adopted: an episode of its own from its time, its windows to come its.
+    pub fn second(&mut self, c: &ChangePoint) {
+        self.saved.episode = Some(Episode {
+            window_start: c.time,
+            change: c.time,
+            change_high: c.high,
+            rounds: 0,
+            verdict: None,
+            firm: false,
+            closed: false,
+            windows: Vec::new(),
+            last_closed: None,
+            answer: None,
+        });
+    }
+
     /// Whether a diagnosis is running.
     pub fn busy(&self) -> bool {
         self.worker.is_some()
@@ -439,6 +474,7 @@ impl Background {
             change: None,
             round: 1,
             warmup: None,
+            answer: None,
         };
         self.saved.running = Some(job.clone());
         self.saved.launched = Some(window_start);
@@ -456,6 +492,7 @@ impl Background {
         };
         e.rounds += 1;
         let (window_start, change, round) = (e.window_start, e.change, e.rounds);
+        let answer = e.answer.clone();
         let until = e.change_high + post;
         let from = change - self.options.warmup;
         let width = self.columns.width();
@@ -475,6 +512,7 @@ impl Background {
             change: Some(change),
             round,
             warmup: Some((change - start).max(self.options.transient)),
+            answer,
         };
         self.saved.running = Some(job.clone());
         self.saved.launched = Some(window_start);
@@ -490,30 +528,52 @@ impl Background {
         }
         options.changed_at = job.change;
         std::thread::spawn(move || {
-            let result =
-                record(&job).and_then(|m| diagnose(&twin, &m, &options).map_err(|e| e.to_string()));
+            let mut second = None;
+            let result = record(&job).and_then(|m| {
+                let m = match (job.change, &job.answer) {
+                    (Some(change), Some((answer, until))) => {
+                        let answer = second::from_json(answer);
+                        second = second::second_change(&twin, &answer, &m, change, *until);
+                        match &second {
+                            Some(c) => before(&m, c.low),
+                            None => m,
+                        }
+                    }
+                    _ => m,
+                };
+                diagnose(&twin, &m, &options).map_err(|e| e.to_string())
+            });
             // The watcher may have stopped waiting; nothing to do then.
-            let _ = send.send(result);
+            let _ = send.send((result, second));
         });
         self.worker = Some((receive, Instant::now()));
     }
 
     fn collect(&mut self, wait: bool) -> Option<Finished> {
         let (receive, started) = self.worker.as_ref()?;
-        let result = if wait {
-            receive
-                .recv()
-                .unwrap_or_else(|_| Err("the diagnosis thread stopped".into()))
+        let stopped = || (Err("the diagnosis thread stopped".into()), None);
+        let (result, second) = if wait {
+            receive.recv().unwrap_or_else(|_| stopped())
         } else {
             match receive.try_recv() {
                 Ok(r) => r,
                 Err(TryRecvError::Empty) => return None,
-                Err(TryRecvError::Disconnected) => Err("the diagnosis thread stopped".into()),
+                Err(TryRecvError::Disconnected) => stopped(),
             }
         };
         let seconds = started.elapsed().as_secs_f64();
         self.worker = None;
-        let job = self.saved.running.take()?;
+        let mut job = self.saved.running.take()?;
+        if let Some(c) = &second {
+            // It answered on the samples before the second change.
+            let width = job.columns.width();
+            let keep = job
+                .samples
+                .chunks(width)
+                .take_while(|s| s[0] < c.low)
+                .count();
+            job.samples.truncate(keep * width);
+        }
         self.saved.reported += 1;
         let mut firm = false;
         if let (Some(e), Some(_)) = (&mut self.saved.episode, job.change) {
@@ -522,6 +582,11 @@ impl Background {
                 e.firm = now.is_some() && now == e.verdict;
                 e.verdict = now;
                 firm = e.firm;
+                e.answer = result
+                    .as_ref()
+                    .ok()
+                    .and_then(super::answer)
+                    .map(|a| (second::to_json(&a), job.span().1));
             }
         }
         Some(Finished {
@@ -529,6 +594,7 @@ impl Background {
             result,
             seconds,
             firm,
+            second,
         })
     }
 }
@@ -557,6 +623,12 @@ pub fn verdict(d: &Diagnosis) -> String {
         _ => String::new(),
     };
     format!("{}:{site}", d.action.name())
+}
+
+/// `m`'s samples before `time`.
+fn before(m: &Measurement, time: f64) -> Measurement {
+    let n = m.time.iter().take_while(|&&t| t < time).count();
+    m.head(n)
 }
 
 /// A job's samples as a record of the stream's channels (SI) for `diagnose`.

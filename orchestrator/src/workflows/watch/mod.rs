@@ -15,6 +15,7 @@ pub mod background;
 pub mod modes;
 pub mod mqtt;
 pub mod online;
+mod second;
 pub mod stepper;
 pub mod supervise;
 
@@ -1265,6 +1266,7 @@ impl Watcher<'_> {
             result,
             seconds,
             firm,
+            second,
         } = finished;
         *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
         if self
@@ -1289,6 +1291,13 @@ impl Watcher<'_> {
             m.insert("change_time".into(), json!(change));
             m.insert("post_change_seconds".into(), json!(to - change));
             m.insert("firm".into(), json!(firm));
+            if let Some(c) = &second {
+                // It answered on the samples before a second change found in them.
+                m.insert(
+                    "second_change".into(),
+                    json!({"time": c.time, "low": c.low, "high": c.high}),
+                );
+            }
         }
         match result {
             Ok(d) => {
@@ -1333,10 +1342,14 @@ impl Watcher<'_> {
         }
         self.alerts.diagnosed.push((job.window_start, job.round));
         self.send(&body)?;
-        match adoption {
-            Some((parameters, verdict, report)) => self.adopt(&parameters, verdict, report),
-            None => Ok(()),
+        let Some((parameters, verdict, report)) = adoption else {
+            return Ok(());
+        };
+        self.adopt(&parameters, verdict, report)?;
+        if let (Some(c), Some(b)) = (&second, &mut self.background) {
+            b.second(c);
         }
+        Ok(())
     }
 
     /// Adopt the twin a firm verdict names ([`answer`]): written beside the alerts, swapped in
