@@ -168,7 +168,7 @@ mod records {
     use structure::channel::{Channel, Quantity, Unit};
     use structure::Excitation;
 
-    /// A record of a uniform building (`mass` kg, `stiffness` N/m, `damping` N s/m per storey)
+    /// A record of a building (`mass` kg per floor, `stiffness` N/m, `damping` N s/m per storey)
     /// under a force at `floor`, band-limited to `band` Hz, measured at `floors` by
     /// accelerometers with white noise of 2 % of each channel's RMS plus coloured noise (a
     /// first-order low-pass of white noise, pole 0.98 per sample: most of its power below
@@ -176,7 +176,7 @@ mod records {
     #[allow(clippy::too_many_arguments)]
     fn record(
         storeys: usize,
-        (mass, stiffness, damping): (f64, f64, f64),
+        (mass, stiffness, damping): (&[f64], &[f64], &[f64]),
         floor: usize,
         (rate, duration): (f64, f64),
         band: (f64, f64),
@@ -186,9 +186,9 @@ mod records {
     ) -> (Measurement, Vec<Mode>) {
         let mut s = Scenario::default();
         s.set_storeys(storeys);
-        s.mass = vec![mass; storeys];
-        s.stiffness = vec![stiffness; storeys];
-        s.damping = vec![damping; storeys];
+        s.mass = mass.to_vec();
+        s.stiffness = stiffness.to_vec();
+        s.damping = damping.to_vec();
         s.excitation = Excitation::Force { floor };
         s.seed = seed;
         s.sample_rate = rate;
@@ -283,7 +283,7 @@ mod records {
     fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
         let (data, exact) = record(
             5,
-            (5.2, 64_000.0, 14.0),
+            (&[5.2; 5], &[64_000.0; 5], &[14.0; 5]),
             2,
             (200.0, 300.0),
             (0.5, 40.0),
@@ -342,7 +342,7 @@ mod records {
             .map(|floor| {
                 record(
                     3,
-                    (5.201, 52_460.0, 10.0),
+                    (&[5.201; 3], &[52_460.0; 3], &[10.0; 3]),
                     1,
                     (500.0, 30.0),
                     (1.0, 100.0),
@@ -402,6 +402,64 @@ mod records {
             );
             assert!(error.abs() < 0.01, "{} Hz: {error}", e.frequency);
             assert!(shape >= 0.95, "{} Hz: MAC {shape}", e.frequency);
+        }
+    }
+
+    /// The lab frame of the issue: three storeys of 5.201 kg, storey stiffnesses 9562, 11806
+    /// and 11332 N/m (modes at 3.170, 9.030 and 13.430 Hz, the peaks of its FRF), storey
+    /// dampers of 4 N s/m (0.39, 1.05 and 1.48 %), a shaker at floor 1 band-limited to
+    /// 1–60 Hz, 500 Hz for 30 s per run, one accelerometer per run (floors 1, 2, 3), 2 % white
+    /// and 5 % coloured noise.
+    fn lab_frame_runs() -> Vec<(Measurement, Vec<Mode>)> {
+        (1..=3)
+            .map(|floor| {
+                record(
+                    3,
+                    (&[5.201; 3], &[9562.0, 11806.0, 11332.0], &[4.0; 3]),
+                    1,
+                    (500.0, 30.0),
+                    (1.0, 60.0),
+                    &[floor],
+                    0.05,
+                    40 + floor as u64,
+                )
+            })
+            .collect()
+    }
+
+    /// Each run alone: the default `twin modal` finds the three peaks within 1 % and no mode
+    /// the frame lacks. Before the fit's damping was freed from order-to-order stability, the
+    /// four-segment default and the peak screen, LSCF found 2, 3 and 2 modes (mode 1 missed
+    /// in runs 1 and 3; a 13.3 Hz double in run 3). Measured now: see the printout (bars 1 %,
+    /// no spurious mode).
+    #[test]
+    fn every_peak_of_a_lab_frames_runs_is_found_and_nothing_else() {
+        let runs = lab_frame_runs();
+        let exact = runs[0].1.clone();
+        for e in &exact {
+            println!("exact {:.4} Hz ζ {:.3} %", e.frequency, 100.0 * e.damping);
+        }
+        for (data, _) in &runs {
+            let found = identify(std::slice::from_ref(data), &IdentifyOptions::default())
+                .expect("identified");
+            let frequencies = lscf_frequencies(&found);
+            let (nearest, spurious) = matched(&frequencies, &exact);
+            println!(
+                "{}: LSCF {:+.3?} % over {:?}; SSI-COV {:.4?}",
+                data.responses[0].channel.name(),
+                nearest.iter().map(|(_, e)| 100.0 * e).collect::<Vec<_>>(),
+                found.input_output.as_ref().and_then(|m| m.band),
+                found
+                    .ssi
+                    .modes
+                    .iter()
+                    .map(|m| m.identified.frequency)
+                    .collect::<Vec<_>>()
+            );
+            for ((_, error), e) in nearest.iter().zip(&exact) {
+                assert!(error.abs() < 0.01, "{} Hz: {error}", e.frequency);
+            }
+            assert!(spurious.is_empty(), "spurious {spurious:?}");
         }
     }
 }

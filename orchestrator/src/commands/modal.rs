@@ -37,7 +37,7 @@ pub struct ModalArgs {
     /// over the spectrum and P-frf.svg the FRFs.
     #[arg(long, value_name = "D.csv")]
     pub data: Vec<PathBuf>,
-    /// Samples per Welch segment (FRF, spectrum); default: a power of two giving 12 segments.
+    /// Samples per Welch segment (FRF, spectrum); default: a power of two giving 4 segments.
     #[arg(long)]
     pub segment: Option<usize>,
     /// The band LSCF fits, LOW:HIGH Hz; default: where the force has power and the coherence
