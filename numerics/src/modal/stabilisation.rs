@@ -340,6 +340,8 @@ pub enum Rejection {
     /// No measured curve (an FRF's magnitude, or the responses' spectrum) peaks at its
     /// frequency ([`peak_supported`]): a pole the fit made of noise.
     NoPeak,
+    /// Found in fewer than half of a roving test's runs (each run fitted alone).
+    FewRuns,
 }
 
 impl Rejection {
@@ -350,6 +352,7 @@ impl Rejection {
             Rejection::OneChannel => "its shape is one channel",
             Rejection::Unresolved => "within the record's resolution of a stronger mode",
             Rejection::NoPeak => "no peak of the measured FRF or spectrum there",
+            Rejection::FewRuns => "found in fewer than half of the roving runs",
         }
     }
 }

@@ -33,8 +33,8 @@ pub struct ModalArgs {
     pub samples: usize,
     /// A record (CSV) to identify the modes of; repeat for several runs of one test (the same
     /// channels, or — a roving test — each with the measured force and its own response
-    /// channels: their FRFs join into one). With --plot, P.svg is the stabilisation diagram
-    /// over the spectrum and P-frf.svg the FRFs.
+    /// channels: each run fitted alone, the modes merged through the force). With --plot,
+    /// P.svg is the stabilisation diagram over the spectrum and P-frf.svg the FRFs.
     #[arg(long, value_name = "D.csv")]
     pub data: Vec<PathBuf>,
     /// Samples per Welch segment (FRF, spectrum); default: a power of two giving 4 segments.

@@ -4,6 +4,8 @@
 //! (SSI-COV) always, each with its stabilisation diagram and the automatically chosen physical
 //! modes. Any channels, units and excitation; several runs of one test average together.
 
+mod roving;
+
 use serde::Serialize;
 use structure::channel::{Channel, Quantity};
 
@@ -298,6 +300,26 @@ fn all_channels(runs: &[RunView<'_>]) -> Vec<(Channel, Vec<(usize, usize)>)> {
     all
 }
 
+/// Per run, per response, the index of its channel in `everywhere`.
+fn run_channels(
+    runs: &[RunView<'_>],
+    everywhere: &[(Channel, Vec<(usize, usize)>)],
+) -> Vec<Vec<usize>> {
+    runs.iter()
+        .map(|run| {
+            run.responses
+                .iter()
+                .map(|s| {
+                    everywhere
+                        .iter()
+                        .position(|(c, _)| *c == s.channel)
+                        .unwrap_or(0)
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// Identifies the modes of `runs` (one record, or several runs of one test).
 pub fn identify(
     runs: &[Measurement],
@@ -349,6 +371,7 @@ fn identify_runs(
             .map_err(sampling.method_err("the spectra"))?,
         spectral_runs: signals.runs(runs),
         per_channel: signals.per_channel(runs, &everywhere),
+        run_channels: run_channels(runs, &everywhere),
         roving,
         options,
         sampling,
@@ -513,6 +536,8 @@ struct Estimation<'s> {
     welch: Welch,
     spectral_runs: Vec<Run<'s>>,
     per_channel: Vec<Vec<Run<'s>>>,
+    /// Per run, per response, its channel's index among every run's channels.
+    run_channels: Vec<Vec<usize>>,
 }
 
 impl Estimation<'_> {
@@ -646,7 +671,9 @@ impl Estimation<'_> {
             Some(band) => band,
             None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * self.sampling.nyquist),
         };
-        let input_output = if self.options.input_output {
+        let input_output = if self.options.input_output && self.roving {
+            Some(self.roving_modes(force_psd, floors, screen)?)
+        } else if self.options.input_output {
             let lscf_options = LscfOptions {
                 max_order: self.options.max_order,
                 weighting: self.options.weighting,
