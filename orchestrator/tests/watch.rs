@@ -1292,6 +1292,23 @@ fn a_contact_that_starts_is_added_and_adopted() {
         &csv,
         &["--diagnosis-wait", "--adopt"],
     );
+    for f in of_kind(&all, "failing") {
+        eprintln!(
+            "contact from {at:.3} s: failing {} {}",
+            f["start"], f["change"]
+        );
+    }
+    for d in of_kind(&all, "diagnosis") {
+        eprintln!(
+            "contact from {at:.3} s: look {} from the change at {}, {} s after it: {} {}, firm {}",
+            d["round"],
+            d["change_time"],
+            d["post_change_seconds"],
+            d["action"],
+            d["effects"],
+            d["firm"]
+        );
+    }
     let adopted = of_kind(&all, "adopted");
     assert_eq!(adopted.len(), 1, "{all:?}");
     let a = adopted[0];
