@@ -276,7 +276,7 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
         println!(
             "NMSE % on {}: {shown}{}",
             v.data,
-            if crate::report::json::accepted_for_validation(&v.nmse) {
+            if crate::twin::run::accepted_for_validation(&v.nmse) {
                 ""
             } else {
                 " (above the cap: not taken as the twin's validation level)"

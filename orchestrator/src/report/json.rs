@@ -6,7 +6,7 @@ use std::path::Path;
 use serde_json::{json, Value};
 
 use crate::twin::data::Measurement;
-use crate::twin::run::{Compared, Tolerance, VALIDATION_CAP};
+use crate::twin::run::{accepted_for_validation, Compared, Tolerance};
 use crate::twin::Twin;
 use crate::workflows::calibrate::validated::ChannelNmse;
 use crate::workflows::calibrate::Calibration;
@@ -62,26 +62,6 @@ pub fn compare(
         object.insert("modes".to_owned(), value);
     }
     report
-}
-
-/// Whether a validation record's NMSE (per floor or channel, %) counts as the twin's validation level.
-pub fn accepted_for_validation(nmse: &[f64]) -> bool {
-    worst_floor(nmse) <= VALIDATION_CAP
-}
-
-/// The twin's validation NMSE from its validation records (name, NMSE per floor): the worst
-/// floor of the worst record under [`VALIDATION_CAP`]; records above it show something the
-/// twin does not know and are no measure of its fidelity.
-pub fn validation_nmse<N: AsRef<[f64]>>(validated: &[(String, N)]) -> Option<f64> {
-    validated
-        .iter()
-        .filter(|(_, n)| accepted_for_validation(n.as_ref()))
-        .map(|(_, n)| worst_floor(n.as_ref()))
-        .reduce(f64::max)
-}
-
-fn worst_floor(n: &[f64]) -> f64 {
-    n.iter().copied().fold(0.0, f64::max)
 }
 
 /// `twin calibrate --report`: `twin` calibrated on `data` (the first of its runs) into

@@ -233,6 +233,26 @@ pub const VALIDATION_MARGIN: f64 = 2.0;
 /// by `twin calibrate`: they show something the twin does not know (dataset3's contact).
 pub const VALIDATION_CAP: f64 = 1.0;
 
+/// Whether a validation record's NMSE (per floor or channel, %) counts as the twin's validation level.
+pub fn accepted_for_validation(nmse: &[f64]) -> bool {
+    worst_floor(nmse) <= VALIDATION_CAP
+}
+
+/// The twin's validation NMSE from its validation records (name, NMSE per floor): the worst
+/// floor of the worst record under [`VALIDATION_CAP`]; records above it show something the
+/// twin does not know and are no measure of its fidelity.
+pub fn validation_nmse<N: AsRef<[f64]>>(validated: &[(String, N)]) -> Option<f64> {
+    validated
+        .iter()
+        .filter(|(_, n)| accepted_for_validation(n.as_ref()))
+        .map(|(_, n)| worst_floor(n.as_ref()))
+        .reduce(f64::max)
+}
+
+fn worst_floor(n: &[f64]) -> f64 {
+    n.iter().copied().fold(0.0, f64::max)
+}
+
 /// Practical significance: below this NMSE (%) nothing is reported as failing.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Tolerance {

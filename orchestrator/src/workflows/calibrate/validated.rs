@@ -133,7 +133,7 @@ pub fn calibrate_validated(
         validated.push(channel_nmse(&new_twin, v, setup.transient)?);
     }
     // The worst validation NMSE sets the default tolerance of compare and diagnose.
-    new_twin.validation_nmse = crate::report::json::validation_nmse(
+    new_twin.validation_nmse = crate::twin::run::validation_nmse(
         &validated
             .iter()
             .map(|v| (v.data.clone(), v.nmse.clone()))

@@ -204,7 +204,7 @@ pub struct Refit {
 /// record, and the first is the one the fit explains best; a louder record's variance also
 /// holds what the model still misses there, which would widen the band on every record); its
 /// validation NMSE is the worst floor of the worst record it was fitted on
-/// ([`crate::report::json::validation_nmse`]), so the default tolerance of `twin compare` is
+/// ([`crate::twin::run::validation_nmse`]), so the default tolerance of `twin compare` is
 /// what the twin achieves on its own records. `original` is run for the NMSE before.
 pub fn refit_over_records(
     original: &Twin,
@@ -275,7 +275,7 @@ pub fn refit_over_records(
             noise_variance: fitted.noise_variance.to_vec(),
         });
     }
-    chosen.validation_nmse = crate::report::json::validation_nmse(&validated);
+    chosen.validation_nmse = crate::twin::run::validation_nmse(&validated);
     Ok(Refit {
         twin: chosen,
         calibration,
