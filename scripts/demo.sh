@@ -62,6 +62,10 @@ echo "-- the starts are screened on each run's first 2,048 samples, the best ref
 "$twin" calibrate --data "$out/roving-floor1.csv" "$out/roving-floor3.csv" --out "$out/roving.ssp" \
   --report "$out/calibrate-roving.json" > "$out/calibrate-roving.txt"
 head -4 "$out/calibrate-roving.txt"
+echo "-- a third run on floor 2, and the three runs' modes merged through the measured force: every floor's shape --"
+"$twin" synth --seed 13 --duration 240 --channels acc2 --out "$out/roving-floor2.csv" >/dev/null
+"$twin" modal --data "$out/roving-floor1.csv" --data "$out/roving-floor2.csv" \
+  --data "$out/roving-floor3.csv" --report "$out/modal-roving.json" | head -5
 
 for n in 1 2 3; do
   echo
