@@ -232,11 +232,6 @@ fn velocities_friction_on_floor_3() {
         &[("force", 0.1), ("velocity_scale", 1e-3)],
         0.1,
     );
-    // The plot's residual rows in each channel's own unit.
-    let svg = orchestrator::report::diagnose_plot::draw_diagnosis(&d).expect("plot");
-    for unit in ["residual (m/s²)", "residual (m/s)", "residual (m)"] {
-        assert_eq!(svg.matches(unit).count(), 1, "{unit} once in the plot");
-    }
 }
 
 // vel: 6.6 / 3.9 / 4.4 % → 0.030 / 0.060 / 0.045 %; gap 5.007e-4, stiffness 8966 for 9000.
@@ -296,6 +291,11 @@ fn mixed_sensors_friction_on_floor_1() {
         &[("force", 0.1), ("velocity_scale", 1e-3)],
         0.1,
     );
+    // The plot's residual rows in each channel's own unit.
+    let svg = orchestrator::report::diagnose_plot::draw_diagnosis(&d).expect("plot");
+    for unit in ["residual (m/s²)", "residual (m/s)", "residual (m)"] {
+        assert_eq!(svg.matches(unit).count(), 1, "{unit} once in the plot");
+    }
 }
 
 // acc1, vel2, disp3: 24.8 / 79.5 / 85.5 % → 0.028 / 0.095 / 0.134 %; k2 moved −15.1 %.
