@@ -119,6 +119,22 @@ pub struct Episode {
 }
 
 impl Episode {
+    /// A change located at `c`, its first window opening at `window_start`, not looked at yet.
+    fn new(window_start: f64, c: &ChangePoint) -> Self {
+        Episode {
+            window_start,
+            change: c.time,
+            change_high: c.high,
+            rounds: 0,
+            verdict: None,
+            firm: false,
+            closed: false,
+            windows: Vec::new(),
+            last_closed: None,
+            answer: None,
+        }
+    }
+
     /// Whether a window opening at `window_start` is this change's: while its looks go on, and
     /// after them, while its answer is not adopted, unless the residual has been back in band
     /// for [`CHANGE_LOOKBACK`] s — as long as a new change's location looks back. A structure
@@ -313,18 +329,7 @@ impl Background {
             {
                 self.saved.due = None;
             }
-            self.saved.episode = Some(Episode {
-                window_start,
-                change: c.time,
-                change_high: c.high,
-                rounds: 0,
-                verdict: None,
-                firm: false,
-                closed: false,
-                windows: Vec::new(),
-                last_closed: None,
-                answer: None,
-            });
+            self.saved.episode = Some(Episode::new(window_start, &c));
             return;
         }
         if self.saved.due.is_none() && self.saved.launched != Some(window_start) {
@@ -429,18 +434,7 @@ impl Background {
     /// Look at a second change ([`Finished::second`]) on its own, now that the answer to the
     /// first is adopted: an episode of its own from its time, its windows to come its.
     pub fn second(&mut self, c: &ChangePoint) {
-        self.saved.episode = Some(Episode {
-            window_start: c.time,
-            change: c.time,
-            change_high: c.high,
-            rounds: 0,
-            verdict: None,
-            firm: false,
-            closed: false,
-            windows: Vec::new(),
-            last_closed: None,
-            answer: None,
-        });
+        self.saved.episode = Some(Episode::new(c.time, c));
     }
 
     /// Whether a diagnosis is running.
