@@ -27,6 +27,11 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 type Area<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
 
 fn err(e: &dyn std::fmt::Display) -> DiagnoseError {
     DiagnoseError::Plot(format!("drawing the diagnosis plot: {e}"))
@@ -143,12 +148,7 @@ fn draw_residuals(area: &Area, d: &Diagnosis, f: usize) -> Result<()> {
         .label(after_label)
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], AFTER));
     if f == 0 {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
+        legend(&mut chart)?;
     }
     Ok(())
 }
@@ -291,6 +291,11 @@ fn draw_evidence(bottom: &Area, d: &Diagnosis) -> Result<()> {
             }
         }
     }
+    legend(&mut chart)
+}
+
+/// The series' labels in a box on white.
+fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> Result<()> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))

@@ -190,18 +190,17 @@ fn draw_trace(
     let (t0, t1) = time_span(trace);
     let n = trace.corrected[f].len();
     let offset = n - trace.time.len();
-    let measured: Vec<(f64, f64)> = trace
-        .time
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| (t, trace.measured[f][offset + i]))
-        .collect();
-    let predicted: Vec<(f64, f64)> = trace
-        .time
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| (t, trace.corrected[f][offset + i]))
-        .collect();
+    // A channel's series over the streamed part, against its time.
+    let streamed = |series: &[f64]| -> Vec<(f64, f64)> {
+        trace
+            .time
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| (t, series[offset + i]))
+            .collect()
+    };
+    let measured = streamed(&trace.measured[f]);
+    let predicted = streamed(&trace.corrected[f]);
     let (lo, hi) = measured
         .iter()
         .chain(&predicted)
