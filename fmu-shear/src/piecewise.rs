@@ -73,6 +73,8 @@ pub struct ContactMaps {
 pub enum ExactError {
     #[error("the region's system matrix is not finite (parameters {0})")]
     NotFinite(String),
+    #[error("{0} contacts enabled: the exact path steps at most {max}", max = crate::piecewise_any::MAX_EXACT_CONTACTS)]
+    TooManyContacts(usize),
 }
 
 fn key(model: &ShearModel, step: f64) -> Key {
