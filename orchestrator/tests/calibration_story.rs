@@ -9,23 +9,16 @@
 //! 4 and 56 N/m), c2 3.65 → 0.009 N s/m. Thresholds below leave a margin of 3× or more.
 
 use std::path::Path;
-use std::process::Command;
 
 use serde_json::Value;
 
 mod common;
-use common::workspace;
+use common::{numbers, twin_cmd, workspace, worst};
 
 fn calibrate(data: &str, validate: &[&str], dir: &Path) -> Value {
-    let fmu_dir = workspace().join("target/fmu");
-    assert!(
-        fmu_dir.join("fmu_shear.fmu").is_file(),
-        "run scripts/build-fmus.sh first"
-    );
     let report = dir.join(format!("{data}.json"));
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twin"));
-    cmd.env("TWIN_FMU_DIR", &fmu_dir)
-        .arg("calibrate")
+    let mut cmd = twin_cmd();
+    cmd.arg("calibrate")
         .arg("--data")
         .arg(workspace().join(format!("data/{data}.csv")))
         .arg("--out")
@@ -51,14 +44,6 @@ fn calibrate(data: &str, validate: &[&str], dir: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON")
 }
 
-fn worst(nmse: &Value) -> f64 {
-    nmse.as_array()
-        .expect("three NMSEs")
-        .iter()
-        .map(|x| x.as_f64().expect("number"))
-        .fold(0.0, f64::max)
-}
-
 fn validation(report: &Value, data: &str) -> f64 {
     let entry = report["validation"]
         .as_array()
@@ -70,7 +55,7 @@ fn validation(report: &Value, data: &str) -> f64 {
                 .is_some_and(|p| p.ends_with(&format!("{data}.csv")))
         })
         .unwrap_or_else(|| panic!("no validation on {data}"));
-    worst(&entry["nmse"])
+    worst(&numbers(&entry["nmse"]))
 }
 
 fn parameter(report: &Value, name: &str) -> (f64, f64) {
@@ -91,7 +76,7 @@ fn calibration_on_dataset1_generalises_to_dataset2_and_fails_on_dataset3_and_rec
 ) {
     let dir = tempfile::tempdir().expect("temp dir");
     let d1 = calibrate("dataset1", &["dataset2", "dataset3"], dir.path());
-    let on1 = worst(&d1["nmse"]);
+    let on1 = worst(&numbers(&d1["nmse"]));
     let on2 = validation(&d1, "dataset2");
     let on3 = validation(&d1, "dataset3");
     println!("calibrated on dataset1: worst NMSE % on 1: {on1:.3}, 2: {on2:.3}, 3: {on3:.1}");
@@ -128,7 +113,7 @@ fn calibration_on_dataset1_generalises_to_dataset2_and_fails_on_dataset3_and_rec
     let back2 = validation(&d3, "dataset2");
     println!(
         "calibrated on dataset3: worst NMSE % on 3: {:.2}, 1: {back1:.2}, 2: {back2:.2}",
-        worst(&d3["nmse"])
+        worst(&numbers(&d3["nmse"]))
     );
     assert!(
         back1 > 10.0 * on1 && back1 > 5.0,
@@ -160,16 +145,14 @@ fn calibration_on_dataset1_generalises_to_dataset2_and_fails_on_dataset3_and_rec
 fn the_input_twin_is_kept() {
     let dir = tempfile::tempdir().expect("temp dir");
     let twin = dir.path().join("t.ssp");
-    let init = Command::new(env!("CARGO_BIN_EXE_twin"))
-        .env("TWIN_FMU_DIR", workspace().join("target/fmu"))
+    let init = twin_cmd()
         .args(["init", "--out"])
         .arg(&twin)
         .output()
         .expect("runs");
     assert!(init.status.success());
     let before = std::fs::read(&twin).expect("twin");
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
-        .env("TWIN_FMU_DIR", workspace().join("target/fmu"))
+    let out = twin_cmd()
         .arg("calibrate")
         .arg("--data")
         .arg(workspace().join("data/dataset1.csv"))

@@ -5,10 +5,10 @@
 //! Needs the shear FMU: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 mod common;
-use common::{fmu_dir, twin, workspace};
+use common::{twin, twin_cmd, workspace};
 
 /// The examples' sampling interval, 1/51.2 s = 5/256 s: exact in binary.
 const STEP: f64 = 1.0 / 51.2;
@@ -660,9 +660,8 @@ fn a_closed_pipe_ends_a_command_quietly() {
     use std::os::unix::process::ExitStatusExt;
     let (reader, writer) = std::io::pipe().expect("a pipe");
     drop(reader);
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let out = twin_cmd()
         .args(["modal", "--samples", "200"])
-        .env("TWIN_FMU_DIR", fmu_dir())
         .stdout(writer)
         .output()
         .expect("the twin binary runs");

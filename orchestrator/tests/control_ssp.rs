@@ -20,9 +20,9 @@
 //!   sample, and its q = 1e3 loop diverges.
 
 mod common;
+use common::twin_ok;
 
 use std::path::Path;
-use std::process::Command;
 
 use orchestrator::cosim::import::Fmu;
 use orchestrator::twin::data::Measurement;
@@ -36,21 +36,6 @@ const FORCE: f64 = 2.0;
 /// only small gains stable).
 const SUBSTEPS: usize = 4;
 const CONTROL_STEP: f64 = STEP / SUBSTEPS as f64;
-
-fn twin_cmd(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", common::fmu_dir())
-        .output()
-        .expect("twin runs");
-    assert!(
-        out.status.success(),
-        "twin {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
 
 fn write_force(path: &Path, force: impl Fn(usize) -> f64, with_acc: bool) {
     let mut text = String::from(if with_acc {
@@ -131,7 +116,7 @@ fn the_controlled_system_as_ssp_is_the_masters_closed_loop() {
     for estimator in ["integrate", "kalman"] {
         let report = dir.path().join(format!("{estimator}.json"));
         let ssp = dir.path().join(format!("{estimator}.ssp"));
-        twin_cmd(&[
+        twin_ok(&[
             "control",
             "--data",
             design_record.to_str().expect("utf-8"),
@@ -189,7 +174,7 @@ fn the_controlled_system_as_ssp_is_the_masters_closed_loop() {
         // (b) The master's loop (the block) on the constant force…
         let data = Measurement::read(&record).expect("the record");
         let default = dir.path().join("default.ssp");
-        twin_cmd(&["init", "--out", default.to_str().expect("utf-8")]);
+        twin_ok(&["init", "--out", default.to_str().expect("utf-8")]);
         let twin = Twin::read(&default).expect("the default twin");
         let block =
             predict_controlled(&twin, &data, &spec, Some(1e3), &mut |_, _| {}).expect("the loop");
@@ -198,7 +183,7 @@ fn the_controlled_system_as_ssp_is_the_masters_closed_loop() {
         write_force(&force, |_| FORCE, false);
         let run = |algorithm: &str| {
             let out = dir.path().join(format!("{estimator}-{algorithm}.csv"));
-            twin_cmd(&[
+            twin_ok(&[
                 "run",
                 ssp.to_str().expect("utf-8"),
                 "--input",

@@ -12,7 +12,6 @@
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
 use std::path::Path;
-use std::process::Command;
 use std::sync::OnceLock;
 
 use orchestrator::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
@@ -24,7 +23,7 @@ use orchestrator::synth::{
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{assert_effect, assert_recalibrated, fmu_dir, workspace, worst};
+use common::{assert_effect, assert_recalibrated, fmu_dir, twin_cmd, workspace, worst};
 
 const NOISE_SD: f64 = 0.003;
 
@@ -227,12 +226,11 @@ fn a_record_without_change_needs_nothing_and_no_candidate_passes() {
 
 /// Run `twin` with the arguments in order; its stdout.
 fn cli(a: &[&str], b: &[&Path], c: &[&str], d: &[&Path]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let out = twin_cmd()
         .args(a)
         .args(b)
         .args(c)
         .args(d)
-        .env("TWIN_FMU_DIR", fmu_dir())
         .output()
         .expect("twin runs");
     assert!(
@@ -317,11 +315,7 @@ fn dataset3_contact_between_floors_2_and_3_is_found_and_added_through_the_cli() 
 
 /// Run `twin` expecting failure; its stderr.
 fn cli_fails(args: &[&std::ffi::OsStr]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .output()
-        .expect("twin runs");
+    let out = twin_cmd().args(args).output().expect("twin runs");
     assert!(!out.status.success(), "twin {args:?} succeeded");
     String::from_utf8_lossy(&out.stderr).into_owned()
 }

@@ -16,7 +16,7 @@ use std::process::Output;
 use serde_json::Value;
 
 mod common;
-use common::twin;
+use common::{numbers, twin, worst};
 
 fn ok(out: &Output) -> String {
     assert!(
@@ -41,18 +41,6 @@ fn list(x: &[f64]) -> String {
         .map(|v| v.to_string())
         .collect::<Vec<_>>()
         .join(",")
-}
-
-fn numbers(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .expect("an array")
-        .iter()
-        .map(|x| x.as_f64().expect("a number"))
-        .collect()
-}
-
-fn worst(v: &Value) -> f64 {
-    numbers(v).into_iter().fold(0.0, f64::max)
 }
 
 /// A building of the test: its truth, how it is shaken and what it measures.
@@ -197,7 +185,10 @@ fn diagnoses_of(building: &Building, cubic_at: u64, weak: usize) {
         serde_json::json!([cubic_at]),
         "{effects:?}"
     );
-    let (before, after) = (worst(&r["nmse_before"]), worst(&r["nmse_after"]));
+    let (before, after) = (
+        worst(&numbers(&r["nmse_before"])),
+        worst(&numbers(&r["nmse_after"])),
+    );
     println!("hidden cubic: worst NMSE {before:.3} % → {after:.3} %");
     assert!(before > 5.0, "the hidden effect shows: {before}");
     assert!(after < 0.5, "the effect explains it: {after}");
@@ -220,7 +211,7 @@ fn diagnoses_of(building: &Building, cubic_at: u64, weak: usize) {
         "compare", "--twin", &added, "--data", &hidden, "--report", &compared,
     ]));
     let c = json(&compared);
-    let nmse = worst(&c["nmse"]);
+    let nmse = worst(&numbers(&c["nmse"]));
     println!("after add-physics: worst NMSE {nmse:.3} %");
     assert!(nmse < 0.5, "{nmse}");
 

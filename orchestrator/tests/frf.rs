@@ -7,7 +7,7 @@
 //! Needs the shear FMU: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use orchestrator::calibrate::frf::{calibrate_frf, FrfSetup};
 use orchestrator::evaluation::frf::{structure_frf, structure_modes};
@@ -21,7 +21,7 @@ use structure::channel::Channel;
 use structure::{Excitation, Structure};
 
 mod common;
-use common::{fmu_dir, workspace};
+use common::{fmu_dir, twin, workspace};
 
 fn twin_of(structure: &Structure) -> Twin {
     std::env::set_var("TWIN_FMU_DIR", fmu_dir());
@@ -214,15 +214,6 @@ fn the_measured_frf_calibration_lands_on_the_measured_peaks() {
     );
 }
 
-fn twin_cli(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .env("TWIN_FMU_DIR", fmu_dir())
-        .env_remove("TWIN_FMU_LOG")
-        .output()
-        .expect("the twin binary runs")
-}
-
 fn succeeded(output: &Output, what: &str) -> String {
     let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
     assert!(
@@ -245,7 +236,7 @@ fn calibrate_and_compare_on_the_measured_frf_through_the_cli() {
     let frf = data.join("swansea-3storey-frf.csv");
     let drawings = d.join("drawings.ssp");
     succeeded(
-        &twin_cli(&[
+        &twin(&[
             "init",
             "--nominal",
             s(&data.join("nominal.json")),
@@ -256,7 +247,7 @@ fn calibrate_and_compare_on_the_measured_frf_through_the_cli() {
     );
     let calibrated = d.join("rig.ssp");
     let out = succeeded(
-        &twin_cli(&[
+        &twin(&[
             "calibrate",
             "--twin",
             s(&drawings),
@@ -281,7 +272,7 @@ fn calibrate_and_compare_on_the_measured_frf_through_the_cli() {
             .expect("json");
     assert_eq!(report["twin_modes"].as_array().map(Vec::len), Some(3));
     let out = succeeded(
-        &twin_cli(&[
+        &twin(&[
             "compare",
             "--twin",
             s(&calibrated),
@@ -314,7 +305,7 @@ fn calibrate_and_compare_on_the_measured_frf_through_the_cli() {
     );
     // `--frf` alone keeps its old meaning with a time record.
     succeeded(
-        &twin_cli(&[
+        &twin(&[
             "compare",
             "--data",
             s(&workspace().join("data/dataset1.csv")),
@@ -328,7 +319,7 @@ fn calibrate_and_compare_on_the_measured_frf_through_the_cli() {
     // A bad FRF file is refused naming the file and the line, nothing written.
     let bad = d.join("bad.csv");
     std::fs::write(&bad, "frequency,acc1_db\n1,2\n2,oops\n").expect("write");
-    let output = twin_cli(&[
+    let output = twin(&[
         "calibrate",
         "--twin",
         s(&drawings),

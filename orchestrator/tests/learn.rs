@@ -9,7 +9,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 use fmu_gp_corrector::TargetForm;
@@ -21,7 +20,7 @@ use orchestrator::learn::{
 use orchestrator::master::Block;
 use orchestrator::twin::Twin;
 
-use common::{fmu_dir, workspace};
+use common::{fmu_dir, twin_cmd, workspace};
 
 /// NMSE % per floor after the default transient of a twin's prediction on a record.
 fn records_nmse(prediction: &orchestrator::run::Prediction, record: &Path) -> [f64; 3] {
@@ -42,12 +41,11 @@ fn calibrated() -> &'static Path {
         std::env::set_var("TWIN_FMU_DIR", fmu_dir());
         let dir = tempfile::tempdir().expect("temporary directory");
         let out = dir.path().join("cal.ssp");
-        let status = Command::new(env!("CARGO_BIN_EXE_twin"))
+        let status = twin_cmd()
             .args(["calibrate", "--starts", "2", "--data"])
             .arg(workspace().join("data/dataset1.csv"))
             .arg("--out")
             .arg(&out)
-            .env("TWIN_FMU_DIR", fmu_dir())
             .output()
             .expect("twin runs");
         assert!(
@@ -347,7 +345,7 @@ fn runs_of_consecutive_queries_are_flagged() {
 fn the_cli_writes_the_report_and_a_plot_per_mode() {
     let dir = tempfile::tempdir().expect("temporary directory");
     let data = workspace().join("data");
-    let output = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let output = twin_cmd()
         .args(["learn", "--mode", "uniform", "--lags", "2", "--twin"])
         .arg(calibrated())
         .arg("--data")
@@ -357,7 +355,6 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
         .arg(dir.path())
         .arg("--out")
         .arg(dir.path().join("learned.ssp"))
-        .env("TWIN_FMU_DIR", fmu_dir())
         .output()
         .expect("twin runs");
     let stdout = String::from_utf8_lossy(&output.stdout);
@@ -405,18 +402,17 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
             streams[f]
         );
     }
-    let refused = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let refused = twin_cmd()
         .args(["learn", "--modes", "all", "--out"])
         .arg(dir.path().join("x.ssp"))
         .arg("--data")
         .arg(data.join("dataset1.csv"))
-        .env("TWIN_FMU_DIR", fmu_dir())
         .output()
         .expect("twin runs");
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--out"));
 
-    let bad = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let bad = twin_cmd()
         .args([
             "learn",
             "--mode",
@@ -426,7 +422,6 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
             "--data",
         ])
         .arg(data.join("dataset1.csv"))
-        .env("TWIN_FMU_DIR", fmu_dir())
         .output()
         .expect("twin runs");
     assert!(!bad.status.success());

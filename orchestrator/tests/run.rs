@@ -14,7 +14,7 @@ use orchestrator::cosim::run::{run, RunOptions};
 use orchestrator::import::{Fmu, ImportError};
 
 mod common;
-use common::workspace;
+use common::{twin, twin_cmd, workspace};
 
 fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
@@ -42,12 +42,8 @@ fn python() -> PathBuf {
     path
 }
 
-fn twin(args: &[&str]) -> Output {
-    twin_with_env(args, &[])
-}
-
 fn twin_with_env(args: &[&str], env: &[(String, String)]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
+    twin_cmd()
         .args(args)
         .envs(env.iter().map(|(k, v)| (k, v)))
         .output()
@@ -643,7 +639,7 @@ fn resources_are_found_under_paths_that_need_percent_encoding() {
     // The FMU is unpacked into a temporary directory; run it from one whose name needs every
     // escape too, by pointing TMPDIR there in a child process.
     let out = odd.join("out.csv");
-    let output = Command::new(env!("CARGO_BIN_EXE_twin"))
+    let output = twin_cmd()
         .env("TMPDIR", &odd)
         .args([
             "run",
@@ -1054,8 +1050,7 @@ fn the_shear_fmu_held_is_fmpys_to_the_bit_and_with_slopes_is_twin_compares() {
     let sloped = run_to("sloped.csv", &[]);
     let init = dir.path().join("default.ssp");
     ok(
-        Command::new(env!("CARGO_BIN_EXE_twin"))
-            .env("TWIN_FMU_DIR", common::fmu_dir())
+        twin_cmd()
             .args(["init", "--out", init.to_str().expect("utf-8")])
             .output()
             .expect("twin init"),

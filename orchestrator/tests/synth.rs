@@ -8,7 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use fmu_shear::{effects::Effects, ShearModel, ShearParameters};
 use orchestrator::data::Measurement;
@@ -20,12 +20,8 @@ use orchestrator::synth::{
 use rustfft::{num_complex::Complex, FftPlanner};
 use serde_json::Value;
 
-fn twin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twin"))
-        .args(args)
-        .output()
-        .expect("twin runs")
-}
+mod common;
+use common::twin;
 
 fn ok(out: &Output) {
     assert!(

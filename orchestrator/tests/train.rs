@@ -6,29 +6,9 @@
 //! test; the measured figures are in the comments at the assertions.
 
 use std::path::Path;
-use std::process::Command;
 
 mod common;
-use common::workspace;
-
-fn twin(args: &[&str]) -> String {
-    let fmu_dir = workspace().join("target/fmu");
-    assert!(
-        fmu_dir.join("fmu_gp_corrector.fmu").is_file(),
-        "run scripts/build-fmus.sh first"
-    );
-    let out = Command::new(env!("CARGO_BIN_EXE_twin"))
-        .env("TWIN_FMU_DIR", &fmu_dir)
-        .args(args)
-        .output()
-        .expect("twin runs");
-    assert!(
-        out.status.success(),
-        "twin {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
+use common::{fmu_dir, twin_ok, workspace};
 
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let mut reader = csv::Reader::from_path(path).expect("csv");
@@ -50,6 +30,14 @@ fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     (header, rows)
 }
 
+/// The GP corrector's FMU is there (`twin train` writes a twin that names it).
+fn corrector_built() {
+    assert!(
+        fmu_dir().join("fmu_gp_corrector.fmu").is_file(),
+        "run scripts/build-fmus.sh first"
+    );
+}
+
 fn report_nmse(path: &Path) -> [f64; 3] {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("json");
@@ -58,6 +46,7 @@ fn report_nmse(path: &Path) -> [f64; 3] {
 
 #[test]
 fn the_corrector_helps_on_new_data_and_flags_the_contact() {
+    corrector_built();
     let dir = tempfile::tempdir().expect("temp dir");
     let p = |name: &str| dir.path().join(name).display().to_string();
     let data = |n: u32| {
@@ -66,7 +55,7 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
             .display()
             .to_string()
     };
-    twin(&[
+    twin_ok(&[
         "calibrate",
         "--data",
         &data(1),
@@ -75,7 +64,7 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         "--starts",
         "4",
     ]);
-    twin(&[
+    twin_ok(&[
         "train",
         "--twin",
         &p("cal.ssp"),
@@ -89,7 +78,7 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         "3",
     ]);
 
-    twin(&[
+    twin_ok(&[
         "compare",
         "--twin",
         &p("cal.ssp"),
@@ -98,7 +87,7 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         "--report",
         &p("phys2.json"),
     ]);
-    twin(&[
+    twin_ok(&[
         "compare",
         "--twin",
         &p("gp.ssp"),
@@ -111,7 +100,7 @@ fn the_corrector_helps_on_new_data_and_flags_the_contact() {
         "--plot",
         &p("gp2.svg"),
     ]);
-    twin(&[
+    twin_ok(&[
         "compare",
         "--twin",
         &p("gp.ssp"),
@@ -211,10 +200,11 @@ fn lags_are_chosen_by_the_lowest_negative_log_marginal_likelihood() {
     // targets, only the inputs differ. Measured: q = 4 at −1645.0 against −1637.1 for q = 1
     // (with all 9 parameters calibrated by 12 starts); the table, its order and the choice are
     // what is checked.
+    corrector_built();
     let dir = tempfile::tempdir().expect("temporary directory");
     let p = |name: &str| dir.path().join(name).display().to_string();
     let data = workspace().join("data/dataset1.csv").display().to_string();
-    twin(&[
+    twin_ok(&[
         "calibrate",
         "--starts",
         "2",
@@ -223,7 +213,7 @@ fn lags_are_chosen_by_the_lowest_negative_log_marginal_likelihood() {
         "--out",
         &p("cal.ssp"),
     ]);
-    let stdout = twin(&[
+    let out = twin_ok(&[
         "train",
         "--twin",
         &p("cal.ssp"),
@@ -240,6 +230,7 @@ fn lags_are_chosen_by_the_lowest_negative_log_marginal_likelihood() {
         "--report",
         &p("train.json"),
     ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(p("train.json")).expect("report"))
             .expect("JSON");
@@ -265,9 +256,10 @@ fn lags_are_chosen_by_the_lowest_negative_log_marginal_likelihood() {
 /// variance positive, as the accelerometers' `latent_var<i>`, `sd<i>` are.
 #[test]
 fn a_velocity_channel_s_band_is_written_with_its_predictions() {
+    corrector_built();
     let dir = tempfile::tempdir().expect("temp dir");
     let p = |name: &str| dir.path().join(name).display().to_string();
-    twin(&[
+    twin_ok(&[
         "synth",
         "--channels",
         "vel1,vel2",
@@ -276,7 +268,7 @@ fn a_velocity_channel_s_band_is_written_with_its_predictions() {
         "--out",
         &p("vel.csv"),
     ]);
-    twin(&[
+    twin_ok(&[
         "calibrate",
         "--data",
         &p("vel.csv"),
@@ -285,7 +277,7 @@ fn a_velocity_channel_s_band_is_written_with_its_predictions() {
         "--starts",
         "2",
     ]);
-    twin(&[
+    twin_ok(&[
         "train",
         "--twin",
         &p("cal.ssp"),
@@ -298,7 +290,7 @@ fn a_velocity_channel_s_band_is_written_with_its_predictions() {
         "--stride",
         "4",
     ]);
-    twin(&[
+    twin_ok(&[
         "compare",
         "--twin",
         &p("gp.ssp"),

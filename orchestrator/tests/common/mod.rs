@@ -95,9 +95,34 @@ pub fn twin(args: &[&str]) -> std::process::Output {
         .expect("the twin binary runs")
 }
 
-/// The worst floor's value.
+/// `twin ARGS`, which must succeed: its output (a failure shows the arguments and `twin`'s
+/// stderr).
+pub fn twin_ok(args: &[&str]) -> std::process::Output {
+    let out = twin(args);
+    assert!(
+        out.status.success(),
+        "twin {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// The worst floor's value (the largest; a figure per floor, at least one floor).
 pub fn worst(x: &[f64]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    x.iter()
+        .copied()
+        .reduce(f64::max)
+        .expect("a figure for at least one floor")
+}
+
+/// A report's JSON array of numbers (a figure per floor), as numbers.
+pub fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
 }
 
 /// `add_physics` naming `kind` at `location`, the parameters within `tolerance` (relative) of
