@@ -1127,6 +1127,19 @@ fn watch_named(dir: &Path, name: &str, csv: &Path, extra: &[&str]) -> Vec<Value>
     read_alerts(&alerts)
 }
 
+/// The `end` alert's NMSE over the last window (after an adoption, the adopted twin's), and
+/// the tolerance.
+fn rolling_at_end(all: &[Value]) -> (Vec<f64>, f64) {
+    let end = of_kind(all, "end")[0];
+    let rolling = end["rolling_nmse"]
+        .as_array()
+        .expect("rolling_nmse")
+        .iter()
+        .map(|x| x.as_f64().unwrap_or(f64::NAN))
+        .collect();
+    (rolling, end["tolerance"].as_f64().expect("tolerance"))
+}
+
 /// A physics parameter of a twin written at `path`.
 fn parameter_of(path: &Path, name: &str) -> f64 {
     let twin = orchestrator::twin::Twin::load(Some(path)).expect("the twin loads");
@@ -1167,7 +1180,8 @@ fn assert_diagnosed_after(all: &[Value], truth: &[f64]) {
 /// reached there), and once two looks agree (firm) the recalibrated twin is written beside the
 /// alerts and swapped in at that sample; the comparison starts anew with it, the second change
 /// opens a window of its own, and its answer is adopted on top of the first. No window fails
-/// after, the stream ends with none failing, and the checkpoint lists both twins. Watched
+/// after, the stream ends with none failing, the NMSE over its last 20 s is under the
+/// tolerance, and the checkpoint lists both twins. Watched
 /// without its diagnoses, the same stream ends failing.
 #[test]
 fn changes_in_a_row_are_each_diagnosed_after_they_happened_and_adopted() {
@@ -1176,8 +1190,15 @@ fn changes_in_a_row_are_each_diagnosed_after_they_happened_and_adopted() {
     let second = first + random_time(202, 23.0, 25.0);
     let csv = dir.path().join("record.csv");
     let changes = [("k2", first, 0.85), ("m3", second, 1.2)];
-    std::fs::write(&csv, stream_with(21, second + 25.0, &changes)).expect("write");
-    let all = watch_named(dir.path(), "adopt", &csv, &["--diagnosis-wait", "--adopt"]);
+    // The stream goes on 20 s after the second answer's adoption (at most 31 s after it),
+    // the NMSE over the last 20 s the adopted twin's.
+    std::fs::write(&csv, stream_with(21, second + 51.0, &changes)).expect("write");
+    let all = watch_named(
+        dir.path(),
+        "adopt",
+        &csv,
+        &["--diagnosis-wait", "--adopt", "--window", "20"],
+    );
     assert_diagnosed_after(&all, &[first, second]);
     let adopted = of_kind(&all, "adopted");
     for a in &adopted {
@@ -1212,6 +1233,10 @@ fn changes_in_a_row_are_each_diagnosed_after_they_happened_and_adopted() {
         serde_json::json!([]),
         "{all:?}"
     );
+    let (rolling, tolerance) = rolling_at_end(&all);
+    // Measured 0.071 / 0.163 / 0.220 % against the 0.5 % tolerance.
+    eprintln!("two changes in a row: NMSE over the last 20 s at the end {rolling:.3?} %");
+    assert!(rolling.iter().all(|&x| x < tolerance), "{rolling:?}");
     let checkpoint: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("adopt.checkpoint.json")).expect("checkpoint"),
     )
@@ -1259,6 +1284,10 @@ fn a_change_that_fails_on_and_off_is_one_change_looked_at_to_its_answer() {
     let adopted = of_kind(&all, "adopted");
     assert_eq!(adopted.len(), 1, "{all:?}");
     assert_eq!(adopted[0]["verdict"], "recalibrate:c2", "{all:?}");
+    let (rolling, tolerance) = rolling_at_end(&all);
+    // Measured 0.078 / 0.440 / 0.327 % against the 0.5 % tolerance.
+    eprintln!("damping: NMSE over the last window at the end {rolling:.3?} %");
+    assert!(rolling.iter().all(|&x| x < tolerance), "{rolling:?}");
 }
 
 /// A contact that starts: from a random time the force triples and floors 2 and 3 begin to
@@ -1335,6 +1364,10 @@ fn a_contact_that_starts_is_added_and_adopted() {
         serde_json::json!([]),
         "{all:?}"
     );
+    let (rolling, tolerance) = rolling_at_end(&all);
+    // Measured 0.009 / 0.015 / 0.023 % against the 0.5 % tolerance.
+    eprintln!("contact: NMSE over the last window at the end {rolling:.3?} %");
+    assert!(rolling.iter().all(|&x| x < tolerance), "{rolling:?}");
 }
 
 /// A kind of change at a random time: how the stream is made, and what the watch should answer.
@@ -1491,6 +1524,8 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
             "{label}: {all:?}"
         );
         assert_eq!(end["still_failing"], serde_json::json!([]), "{label}");
+        // Measured (%): k2 0.060 / 0.163 / 0.141, m2 0.072 / 0.158 / 0.131, friction 0.128 /
+        // 0.323 / 0.334 — the 0.5 % tolerance is the bar.
         let tolerance = end["tolerance"].as_f64().expect("tolerance");
         assert!(
             rolling_at_end.iter().all(|&x| x < tolerance),
@@ -1717,11 +1752,12 @@ fn a_watch_with_a_page_gives_the_alerts_of_one_without() {
 /// firm, and the stream ended failing). The second look finds the second change in the
 /// residuals of the first look's answer and answers on the samples before it (k2, firm,
 /// adopted); the second change is then looked at on its own (m3, firm, adopted). Nothing
-/// fails after. Measured: the second change found at 31.895 s for 31.895 s, k2 × 0.855 and
-/// m3 × 1.212 adopted; the NMSE over the last 20 s 0.17 / 0.76 / 1.53 % — above the 0.5 %
-/// tolerance (not failing: within the band): the second look starts from the state the first
-/// adopted twin reaches from 30 s before the second change, over samples that precede the
-/// first, which biases its fit. The bound below is twice the measured worst floor.
+/// fails after, and the NMSE over the last 20 s is back under the tolerance. Measured: the
+/// second change found at 31.895 s for 31.895 s, k2 × 0.8514 and m3 × 1.2038 adopted, the NMSE
+/// over the last 20 s 0.084 / 0.147 / 0.233 % (tolerance 0.5 %). The second change's look and
+/// the adoptions start from the state the twins live then reach — the old twin up to the first
+/// change, the first answer from there; with the first answer run from rest over samples of
+/// the old structure instead, m3 came out × 1.212 and the NMSE 0.17 / 0.76 / 1.53 %.
 #[test]
 fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_own() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -1764,8 +1800,9 @@ fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_
         "k2 × {k2:.4}, m3 × {m3:.4}; NMSE over the last 20 s {} %",
         end["rolling_nmse"]
     );
-    assert!((k2 - 0.85).abs() < 0.02, "k2 × {k2}");
-    assert!((m3 - 1.2).abs() < 0.03, "m3 × {m3}");
+    // Measured errors 0.0014 and 0.0038: bars about three times those.
+    assert!((k2 - 0.85).abs() < 0.005, "k2 × {k2}");
+    assert!((m3 - 1.2).abs() < 0.012, "m3 × {m3}");
     let last = adopted[1]["time"].as_f64().expect("time");
     assert!(
         of_kind(&all, "failing")
@@ -1774,12 +1811,14 @@ fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_
         "{all:?}"
     );
     assert_eq!(end["still_failing"], serde_json::json!([]), "{end}");
+    // Under the tolerance on every floor (measured worst 0.233 % against 0.5 %).
+    let tolerance = end["tolerance"].as_f64().expect("tolerance");
     assert!(
         end["rolling_nmse"]
             .as_array()
             .expect("nmse")
             .iter()
-            .all(|x| x.as_f64().is_some_and(|x| x < 3.0)),
+            .all(|x| x.as_f64().is_some_and(|x| x < tolerance)),
         "{end}"
     );
 }

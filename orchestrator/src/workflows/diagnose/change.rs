@@ -62,16 +62,9 @@ pub fn after_the_change(
     let Some(state) = reached_state(twin, &data.head(k0 + 1))? else {
         return Ok(None);
     };
-    let mut twin = twin.duplicate();
-    let physics = twin
-        .component_mut(PHYSICS)
-        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    for (name, value) in state {
-        physics.parameters.insert(name, ParameterValue::Real(value));
-    }
     Ok(Some(AfterTheChange {
         at: data.time[k0],
-        twin,
+        twin: starting_from(twin, &state)?,
         data: data.samples(k0..data.len()),
         options: DiagnoseOptions {
             transient: 0.0,
@@ -141,6 +134,62 @@ pub fn reached_state(twin: &Twin, data: &Measurement) -> Result<Option<Vec<(Stri
             .map(|(name, series)| (name, series.get(last).copied().unwrap_or(0.0)))
             .collect(),
     ))
+}
+
+/// `twin` with its physics starting from `state` (start values, as [`reached_state`] gives).
+pub fn starting_from(twin: &Twin, state: &[(String, f64)]) -> Result<Twin> {
+    let mut twin = twin.duplicate();
+    let physics = twin
+        .component_mut(PHYSICS)
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    for (name, value) in state {
+        physics
+            .parameters
+            .insert(name.clone(), ParameterValue::Real(*value));
+    }
+    Ok(twin)
+}
+
+/// Twins each live from a time on: the structure the stream had, as the answers to its
+/// changes found it — `(since, twin)` in time order, the first live from the record's start.
+pub type History<'a> = [(f64, &'a Twin)];
+
+/// The state the chain of twins `history` reaches at `data`'s last sample: the first runs from
+/// rest at `data`'s first sample, each next from the state the one before reached at the first
+/// sample at or after its `since` (the structure's history rather than today's twin run over
+/// samples of a structure it no longer is). None when a shear FMU has no start values.
+pub fn chained_state(
+    history: &History<'_>,
+    data: &Measurement,
+) -> Result<Option<Vec<(String, f64)>>> {
+    let n = data.len();
+    let first = |since: f64| data.time.iter().position(|&t| t >= since - 1e-9 * data.dt);
+    // The twins live over some of the samples, each from its first sample there.
+    let mut segments: Vec<(usize, &Twin)> = Vec::new();
+    for &(since, twin) in history {
+        let k = first(since).unwrap_or(n);
+        match segments.last_mut() {
+            // Live from the same sample as the one before, or from before the record: it alone.
+            Some(last) if k <= last.0 => last.1 = twin,
+            None => segments.push((0, twin)),
+            Some(_) if k + 1 < n => segments.push((k, twin)),
+            // Live only from the record's last sample on: the state there is the last one's.
+            Some(_) => {}
+        }
+    }
+    let mut state: Option<Vec<(String, f64)>> = None;
+    for (i, &(from, twin)) in segments.iter().enumerate() {
+        let to = segments.get(i + 1).map_or(n, |s| s.0 + 1);
+        let twin = match &state {
+            Some(s) => starting_from(twin, s)?,
+            None => twin.duplicate(),
+        };
+        match reached_state(&twin, &data.samples(from..to))? {
+            Some(s) => state = Some(s),
+            None => return Ok(None),
+        }
+    }
+    Ok(state)
 }
 
 /// The physics FMU's start values, `disp1_start..dispN_start` then `vel1_start..velN_start`;

@@ -37,6 +37,7 @@ use super::online::{ChangePoint, CHANGE_LOOKBACK};
 use super::second;
 use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
+use crate::workflows::diagnose::change::{chained_state, starting_from};
 use crate::workflows::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
 
 /// The most post-change seconds a diagnosis waits for.
@@ -239,7 +240,9 @@ pub struct Background {
     pub saved: Saved,
     columns: Columns,
     options: DiagnosisOptions,
-    twin: Twin,
+    /// The twins live so far, each from the change its answer was to (the first from the
+    /// start): the last is diagnosed, the ones before give the state it starts from.
+    history: Vec<(f64, Twin)>,
     diagnose: DiagnoseOptions,
     dt: f64,
     /// The running diagnosis's thread.
@@ -258,7 +261,7 @@ impl Background {
             saved,
             columns,
             options,
-            twin: twin.duplicate(),
+            history: vec![(f64::NEG_INFINITY, twin.duplicate())],
             diagnose,
             dt: f64::NAN,
             worker: None,
@@ -389,12 +392,43 @@ impl Background {
     }
 
     /// The watch adopted `twin`: later diagnoses are of it, and the change it answers is not
-    /// looked at again.
+    /// looked at again. It is the structure from that change on; the twins before it, before.
     pub fn adopted(&mut self, twin: &Twin) {
-        self.twin = twin.duplicate();
+        let since = self.answered_change();
+        self.history.retain(|(t, _)| *t < since);
+        self.history.push((since, twin.duplicate()));
         if let Some(e) = &mut self.saved.episode {
             e.closed = true;
         }
+    }
+
+    /// The change an answer adopted now is to: the episode's (none: the whole record's, a
+    /// window's diagnosis fitted over all of it).
+    fn answered_change(&self) -> f64 {
+        self.saved
+            .episode
+            .as_ref()
+            .filter(|e| !e.closed)
+            .map_or(f64::NEG_INFINITY, |e| e.change)
+    }
+
+    /// The state `twin`, adopted now, reaches at the last of the samples `kept`: the twins
+    /// live before the change it answers run up to it, `twin` from there (None: a shear FMU
+    /// without start values).
+    pub fn reached(
+        &self,
+        twin: &Twin,
+        kept: &Measurement,
+    ) -> crate::workflows::diagnose::Result<Option<Vec<(String, f64)>>> {
+        let since = self.answered_change();
+        let mut history: Vec<(f64, &Twin)> = self
+            .history
+            .iter()
+            .filter(|(t, _)| *t < since)
+            .map(|(t, twin)| (*t, twin))
+            .collect();
+        history.push((since, twin));
+        chained_state(&history, kept)
     }
 
     /// At the stream's end: start what is due and wait for what runs; each finished one. A
@@ -515,7 +549,11 @@ impl Background {
 
     fn start(&mut self, job: Job) {
         let (send, receive) = std::sync::mpsc::channel();
-        let twin = self.twin.duplicate();
+        let history: Vec<(f64, Twin)> = self
+            .history
+            .iter()
+            .map(|(t, twin)| (*t, twin.duplicate()))
+            .collect();
         let mut options = self.diagnose.clone();
         if let Some(w) = job.warmup {
             options.transient = w;
@@ -524,6 +562,7 @@ impl Background {
         std::thread::spawn(move || {
             let mut second = None;
             let result = record(&job).and_then(|m| {
+                let (twin, m) = continued(&history, m, job.change).map_err(|e| e.to_string())?;
                 let m = match (job.change, &job.answer) {
                     (Some(change), Some((answer, until))) => {
                         let answer = second::from_json(answer);
@@ -617,6 +656,39 @@ pub fn verdict(d: &Diagnosis) -> String {
         _ => String::new(),
     };
     format!("{}:{site}", d.action.name())
+}
+
+/// The live twin and the samples it is diagnosed on, for a look at what came after `change`
+/// in `m`: when an earlier answer was adopted within `m` (the last twin is live from a change
+/// after `m`'s start), the twins before run up to that change, and the live twin starts from
+/// the state they reached there, on the samples from there on — rather than run from rest at
+/// `m`'s start over samples of a structure it was not yet. Otherwise the live twin on `m`.
+fn continued(
+    history: &[(f64, Twin)],
+    m: Measurement,
+    change: Option<f64>,
+) -> crate::workflows::diagnose::Result<(Twin, Measurement)> {
+    let Some((since, live)) = history.last().map(|(t, twin)| (*t, twin)) else {
+        return Err(crate::workflows::diagnose::DiagnoseError::Setup(
+            "no live twin to diagnose".into(),
+        ));
+    };
+    let at = |t: f64| m.time.iter().position(|&s| s >= t - 1e-9 * m.dt);
+    let (Some(change), Some(k)) = (change, at(since)) else {
+        return Ok((live.duplicate(), m));
+    };
+    // The live twin's start and the change each need a sample of their own before them.
+    if k == 0 || at(change).is_none_or(|k0| k + 1 >= k0) {
+        return Ok((live.duplicate(), m));
+    }
+    let before: Vec<(f64, &Twin)> = history[..history.len() - 1]
+        .iter()
+        .map(|(t, twin)| (*t, twin))
+        .collect();
+    match chained_state(&before, &m.head(k + 1))? {
+        Some(state) => Ok((starting_from(live, &state)?, m.samples(k..m.len()))),
+        None => Ok((live.duplicate(), m)),
+    }
 }
 
 /// `m`'s samples before `time`.

@@ -1357,7 +1357,9 @@ impl Watcher<'_> {
     /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it. Its
     /// physics goes on from the state it reaches over the samples kept (from rest 70 s back
     /// with the defaults: what is left of the start is e^(−ζωt), far below the noise), not from
-    /// the old twin's, which has been failing since the change; no sample is lost.
+    /// the old twin's, which has been failing since the change; over the kept samples before
+    /// that change the twins live then run instead ([`Background::reached`]: a structure that
+    /// changed twice is not the second answer's before the first change). No sample is lost.
     fn adopt(
         &mut self,
         parameters: &[(String, ParameterValue)],
@@ -1376,8 +1378,9 @@ impl Watcher<'_> {
             &self.state.channels,
             &self.options.learning,
         )?;
-        let state = match self.background.as_ref().map(Background::kept) {
-            Some(Ok(kept)) => crate::workflows::diagnose::change::reached_state(&adopted, &kept)
+        let state = match self.background.as_ref().map(|b| (b, b.kept())) {
+            Some((b, Ok(kept))) => b
+                .reached(&adopted, &kept)
                 .map_err(|e| WatchError::Twin(TwinError::Message(e.to_string())))?,
             _ => None,
         };
