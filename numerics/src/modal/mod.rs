@@ -11,6 +11,7 @@ pub mod lscf;
 pub mod spectral;
 pub mod ssi;
 pub mod stabilisation;
+pub mod time_fit;
 
 pub use eigen::{modes, ModalError, Mode};
 pub use error::IdentificationError;
