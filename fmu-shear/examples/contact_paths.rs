@@ -3,11 +3,13 @@
 //! (1024 steps of 1/51.2 s) repeated, by each path of the same run: `fixed` (`piecewise`, the
 //! rig's fixed arrays), `generic` (`piecewise_any` on the rig's `[f64; 6]`), `inline`
 //! (`piecewise_any` on its inline vector, the path of every other structure). Prints steps per
-//! second of each and the largest difference of the generic paths' states from the fixed one's,
+//! second of each, the median over interleaved rounds of the generic paths' rates to the fixed
+//! one's, and the largest difference of the generic paths' states from the fixed one's,
 //! relative to the largest |state| component.
 //!
 //! `cargo run --release -p fmu-shear --example contact_paths -- [all|fixed|generic|inline] [RECORDS]`
-//! (one path alone is for `perf stat -e instructions`).
+//! One path alone is for counting instructions, robust to the load of a shared machine: the
+//! difference of `valgrind --tool=callgrind` totals at 13 and 3 records, over 10 × 1024 steps.
 
 use std::time::Instant;
 
@@ -20,6 +22,8 @@ use structure::{Excitation, Structure};
 
 const STEP: f64 = 1.0 / 51.2;
 const STEPS: usize = 1024;
+/// Interleaved rounds of the three paths (`all`).
+const ROUNDS: usize = 9;
 
 fn force() -> Vec<f64> {
     (0..=STEPS)
@@ -115,6 +119,39 @@ fn main() {
             std::array::from_fn(|j| y[j])
         });
         results.push(("inline", r));
+    }
+    if which == "all" {
+        // Interleaved rounds, the rate ratio of each round (robust to a load that changes).
+        let mut ratios: Vec<[f64; 2]> = (0..ROUNDS)
+            .map(|_| {
+                let f = run(records, &force, |x, i| {
+                    fixed
+                        .advance(x, i.excitation, i.excitation_slope)
+                        .expect("finite")
+                })
+                .1;
+                let g = run(records, &force, |x, i| {
+                    generic.advance_in(x, i).expect("finite")
+                })
+                .1;
+                let v = run(records, &force, |x, i| {
+                    let x: Inline = Inline::from_slice(x);
+                    let y = inline.advance_in(&x, i).expect("finite");
+                    std::array::from_fn(|j| y[j])
+                })
+                .1;
+                [g / f, v / f]
+            })
+            .collect();
+        for (k, name) in ["generic", "inline"].iter().enumerate() {
+            ratios.sort_by(|a, b| a[k].total_cmp(&b[k]));
+            let r: Vec<String> = ratios.iter().map(|r| format!("{:.2}", r[k])).collect();
+            println!(
+                "{name} / fixed over {ROUNDS} interleaved rounds: median {:.2} (sorted: {})",
+                ratios[ROUNDS / 2][k],
+                r.join(" ")
+            );
+        }
     }
     let reference = results[0].1 .0.clone();
     let scale = reference

@@ -9,8 +9,9 @@
 //! closed on the positive side, closed on the negative side). With both inputs ramps over the
 //! communication step, `e(τ) = e₀ + ė τ` (the force at floor K or the ground acceleration) and
 //! `c(τ) = c₀ + ċ τ` (the control force), the state augmented with `(e, ė, c, ċ, 1)` obeys an
-//! autonomous linear system `ż = M_r z` (2N + 5 square: the storeys' springs and dampers, each
-//! closed bumper's stiffness added to its storey and its `∓k_c·gap` in the constant column,
+//! autonomous linear system `ż = M_r z` (2N + 5 square, 2N + 3 with the control force folded
+//! in, see **Speed**: the storeys' springs and dampers, each closed bumper's stiffness added to
+//! its storey and its `∓k_c·gap` in the constant column,
 //! `b_e = M⁻¹e_K` or `−1`, `b_c = −M⁻¹e_cf`, the ramps' `ė`, `ċ` integrating into `e`, `c`).
 //! Its flow over δ is `exp(M_r δ)` (nalgebra's Padé approximant with scaling and squaring,
 //! accurate to rounding for these norms). A region's flows over `h / 2^l`, `l = 0..=DEPTH`, are
@@ -63,19 +64,23 @@
 //! 100 × 105 numbers).
 //!
 //! **Speed.** A step allocates nothing: the state is a [`Buffer`] on the stack (a fixed array
-//! when the length is known when compiling, the flow's product then unrolled; else inline up to
-//! [`INLINE_STOREYS`] storeys), and a region's flows are one index away. On the rig's
-//! `[f64; 6]` it steps at 0.77–0.90 of `piecewise`'s rate, on the inline vector at 0.3–0.56
-//! (`examples/contact_paths.rs`, one run each, a loaded machine), and the two differ by
-//! 1.3e-10 of the largest state (a crossing's tick located one apart: the 2N + 5 augmented
-//! exponential rounds otherwise than the rig's 9-square one) — so the rig keeps `piecewise`.
+//! when its length is known when compiling, the flow's product then unrolled; else inline up to
+//! [`INLINE_STOREYS`] storeys), and a region's flows are one index away. A control force on the
+//! floor the force excites is folded into one net input there (`u = e − c`: three extra columns,
+//! not five), and `M_r` is built in the same sums as `piecewise` builds the rig's. On the rig's
+//! `[f64; 6]` a step costs 5,384 instructions against `piecewise`'s 4,602 (1.17×; on the inline
+//! vector 14,489, 3.1×; `examples/contact_paths.rs` under callgrind); the two paths' states
+//! differ by 1.05e-10 of the largest (nalgebra's exponential rounds a dynamic 9-square matrix
+//! otherwise than a static one, ~1e-15, and a crossing's tick then lands one apart) — so the
+//! rig keeps `piecewise`.
 
 use nalgebra::DMatrix;
 use smallvec::SmallVec;
+use structure::Excitation;
 
 use crate::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
 use crate::effects::Contact;
-use crate::linear::{product_by_columns, same_step, AccelerationRows, StepInputs};
+use crate::linear::{product_by_columns, same_step, StepInputs};
 use crate::model::{ShearModel, ShearParameters};
 use crate::piecewise::{hermite_crosses, hermite_distance, hermite_root, ExactError, DEPTH};
 
@@ -86,7 +91,8 @@ pub const MAX_EXACT_CONTACTS: usize = 8;
 pub const MAX_CACHED_REGIONS: usize = 64;
 /// A piece between checks covers at most this much of the fastest mode's phase (radians).
 const CHECK_PHASE: f64 = 0.25;
-/// Columns of the augmented system after the 2N states: `e, ė, c, ċ, 1`.
+/// Columns of the augmented system after the 2N states: `e, ė, c, ċ, 1`, or `u, u̇, 1` when the
+/// control force acts on the floor the force excites (`u = e − c`, the net force there).
 const EXTRA: usize = 5;
 
 /// A state `[y, ẏ]` inside a step, on the stack: a fixed array when the storey count is known
@@ -97,12 +103,30 @@ pub trait Buffer: Clone + AsRef<[f64]> + AsMut<[f64]> {
     fn zeros(len: usize) -> Self;
 
     /// `flow · (x, extra)`: a flow's first 2N rows, column-major, times the augmented state.
-    fn flowed(flow: &[f64], x: &Self, extra: &[f64; EXTRA]) -> Self {
+    fn flowed(flow: &[f64], x: &Self, extra: &[f64]) -> Self {
         let n2 = x.as_ref().len();
         let mut out = Self::zeros(n2);
         product_by_columns(flow, x.as_ref(), extra, out.as_mut());
         out
     }
+}
+
+/// `flow · (x, extra)` for a state of `L` values and `E` extra columns: column by column, each
+/// row's sum in column order.
+#[inline]
+fn flowed_fixed<const L: usize, const E: usize>(
+    flow: &[f64],
+    x: &[f64; L],
+    extra: &[f64; E],
+) -> [f64; L] {
+    let flow = &flow[..L * (L + E)];
+    let mut out = [0.0; L];
+    for (c, w) in x.iter().chain(extra).enumerate() {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o += flow[c * L + i] * w;
+        }
+    }
+    out
 }
 
 /// Storeys whose states [`Inline`] holds without allocating.
@@ -123,24 +147,21 @@ impl<const L: usize> Buffer for [f64; L] {
         [0.0; L]
     }
 
-    /// The same sums in the same order as [`product_by_columns`], the length known when
+    /// The same sums in the same order as [`product_by_columns`], the lengths known when
     /// compiling (the loops unrolled).
     #[inline]
-    fn flowed(flow: &[f64], x: &Self, extra: &[f64; EXTRA]) -> Self {
-        let mut out = [0.0; L];
-        let mut columns = flow[..L * (L + EXTRA)].chunks_exact(L);
-        for (column, w) in columns.by_ref().zip(x.iter().chain(extra)) {
-            for (o, a) in out.iter_mut().zip(column) {
-                *o += a * w;
-            }
+    fn flowed(flow: &[f64], x: &Self, extra: &[f64]) -> Self {
+        match *extra {
+            [u, slope, one] => flowed_fixed(flow, x, &[u, slope, one]),
+            [e, de, c, dc, one] => flowed_fixed(flow, x, &[e, de, c, dc, one]),
+            _ => unreachable!("3 or 5 extra columns"),
         }
-        out
     }
 }
 
 #[derive(Clone, Debug)]
 struct Region {
-    /// `M_r`, 2N + 5 square.
+    /// `M_r`, 2N + 5 square (2N + 3 folded).
     matrix: DMatrix<f64>,
     /// `levels[l]`: the first 2N rows of `exp(M_r h / 2^l)`, column-major, built when first
     /// used.
@@ -167,6 +188,9 @@ pub struct AnyContactMaps {
     key: Key,
     /// Storeys.
     n: usize,
+    /// The control force acts on the floor the force excites: one net input there (three
+    /// extra columns, not five).
+    folded: bool,
     /// Indexed by the region's code (3^m slots for m contacts, at most 3^8): a region's flows
     /// are one index away, as on a fixed table.
     regions: Vec<Option<Box<Region>>>,
@@ -223,6 +247,10 @@ impl AnyContactMaps {
                     .collect(),
             },
             n: model.storeys(),
+            folded: model.params.excitation
+                == Excitation::Force {
+                    floor: model.params.control_floor,
+                },
             regions: vec![None; region_count(enabled_contacts(model).count())],
             cached: 0,
         }
@@ -283,45 +311,73 @@ impl AnyContactMaps {
         region
     }
 
-    /// `M_r` of the augmented system `z = (y, ẏ, e, ė, c, ċ, 1)`.
-    fn augmented(&self, code: u64) -> DMatrix<f64> {
-        let n = self.n;
-        let p = &self.key.params;
-        let mut rows = AccelerationRows::new(p);
-        let mut constant = vec![0.0; n];
+    /// Columns after the 2N states: 5 (`e, ė, c, ċ, 1`), or 3 (`u, u̇, 1`) when folded.
+    fn extra_columns(&self) -> usize {
+        if self.folded {
+            3
+        } else {
+            EXTRA
+        }
+    }
+
+    /// Per storey, the stiffness with a closed bumper's added and the bumper's constant force
+    /// `−(±k_c gap)`, in region `code`.
+    fn closed_storeys(&self, code: u64) -> (Vec<f64>, Vec<f64>) {
+        let mut stiffness = self.key.params.stiffness.clone();
+        let mut constant = vec![0.0; self.n];
         let mut rest = code;
         for (s, c) in &self.key.contacts {
             let state = rest % 3;
             rest /= 3;
-            if state == 0 {
-                continue;
-            }
-            // Closed: the force k_c (d ∓ gap) on storey s, its stiffness added to the storey's
-            // and its constant −(±k_c gap) pushing floor s back and floor s − 1 forward.
-            crate::linear::add_storey(&mut rows.a, n, *s, c.stiffness, 0.0, &p.mass);
-            let sign = if state == 1 { 1.0 } else { -1.0 };
-            let force = -c.stiffness * sign * c.gap;
-            constant[*s] -= force / p.mass[*s];
-            if *s > 0 {
-                constant[*s - 1] += force / p.mass[*s - 1];
+            if state != 0 {
+                stiffness[*s] += c.stiffness;
+                let sign = if state == 1 { 1.0 } else { -1.0 };
+                constant[*s] = -c.stiffness * sign * c.gap;
             }
         }
-        let size = 2 * n + EXTRA;
-        let mut f = DMatrix::zeros(size, size);
+        (stiffness, constant)
+    }
+
+    /// `M_r` of the augmented system `z = (y, ẏ, e, ė, c, ċ, 1)` (or `(y, ẏ, u, u̇, 1)`).
+    fn augmented(&self, code: u64) -> DMatrix<f64> {
+        let n = self.n;
+        let p = &self.key.params;
+        let (kt, f0) = self.closed_storeys(code);
+        let size = 2 * n + self.extra_columns();
+        let one = size - 1;
+        let mut a = DMatrix::zeros(size, size);
         for i in 0..n {
-            f[(i, n + i)] = 1.0;
+            a[(i, n + i)] = 1.0;
         }
-        for r in 0..n {
-            for col in 0..2 * n {
-                f[(n + r, col)] = rows.a[(r, col)];
+        // d_s = y_s − y_{s−1}; storey s pushes floor s by −force and floor s − 1 by +force.
+        for s in 0..n {
+            for (floor, sign) in [(s, -1.0), (s.wrapping_sub(1), 1.0)] {
+                if floor >= n {
+                    continue;
+                }
+                let row = n + floor;
+                let scale = sign / p.mass[floor];
+                a[(row, s)] += scale * kt[s];
+                a[(row, n + s)] += scale * p.damping[s];
+                if s > 0 {
+                    a[(row, s - 1)] -= scale * kt[s];
+                    a[(row, n + s - 1)] -= scale * p.damping[s];
+                }
+                a[(row, one)] += scale * f0[s];
             }
-            f[(n + r, 2 * n)] = rows.b_excitation[r];
-            f[(n + r, 2 * n + 2)] = rows.b_control[r];
-            f[(n + r, 2 * n + 4)] = constant[r];
         }
-        f[(2 * n, 2 * n + 1)] = 1.0;
-        f[(2 * n + 2, 2 * n + 3)] = 1.0;
-        f
+        let e = 2 * n;
+        match p.excitation {
+            Excitation::Force { floor } => a[(n + floor - 1, e)] = 1.0 / p.mass[floor - 1],
+            Excitation::Base => (0..n).for_each(|r| a[(n + r, e)] = -1.0),
+        }
+        a[(e, e + 1)] = 1.0;
+        if !self.folded {
+            let (c, floor) = (e + 2, p.control_floor);
+            a[(n + floor - 1, c)] = -1.0 / p.mass[floor - 1];
+            a[(c, c + 1)] = 1.0;
+        }
+        a
     }
 
     /// An upper bound of the region's fastest rate |λ|: Gershgorin bounds of M⁻¹C and M⁻¹K_r
@@ -395,6 +451,22 @@ impl AnyContactMaps {
     ) -> Result<B, ExactError> {
         let n = self.n;
         let step = self.key.step;
+        let self_extra = self.extra_columns();
+        let extra = if self.folded {
+            let (u, slope) = (
+                inputs.excitation - inputs.control,
+                inputs.excitation_slope - inputs.control_slope,
+            );
+            [u + slope * tau, slope, 1.0, 0.0, 0.0]
+        } else {
+            [
+                inputs.excitation + inputs.excitation_slope * tau,
+                inputs.excitation_slope,
+                inputs.control + inputs.control_slope * tau,
+                inputs.control_slope,
+                1.0,
+            ]
+        };
         let level = (DEPTH - size.trailing_zeros()) as usize;
         let region = self.region(code)?;
         if region.levels[level].is_none() {
@@ -406,7 +478,7 @@ impl AnyContactMaps {
                 )));
             }
             // Column-major, the first 2N rows of each column (see `product_by_columns`).
-            let width = 2 * n + EXTRA;
+            let width = 2 * n + self_extra;
             let mut flow = Vec::with_capacity(2 * n * width);
             for c in 0..width {
                 flow.extend(e.column(c).iter().take(2 * n));
@@ -416,15 +488,8 @@ impl AnyContactMaps {
         let Some(flow) = region.levels[level].as_deref() else {
             unreachable!("built above")
         };
-        let extra = [
-            inputs.excitation + inputs.excitation_slope * tau,
-            inputs.excitation_slope,
-            inputs.control + inputs.control_slope * tau,
-            inputs.control_slope,
-            1.0,
-        ];
         debug_assert_eq!(x.as_ref().len(), 2 * n);
-        Ok(B::flowed(flow, x, &extra))
+        Ok(B::flowed(flow, x, &extra[..self_extra]))
     }
 
     /// Whether the piece from `a` to `b` (of `dt` seconds, in `region`) may hold a crossing: the
@@ -451,14 +516,16 @@ impl AnyContactMaps {
         let n = self.n;
         let p = &self.key.params;
         let mut e = 0.0;
+        let mut contacts = self.key.contacts.iter().peekable();
         for s in 0..n {
             let (d, _) = drift(x, n, s);
             e += 0.5 * p.mass[s] * x[n + s] * x[n + s] + 0.5 * p.stiffness[s] * d * d;
-        }
-        for (s, c) in &self.key.contacts {
-            let f = c.force_at(drift(x, n, *s).0);
-            if c.stiffness > 0.0 {
-                e += 0.5 * f * f / c.stiffness;
+            // The storey's bumper, if any (the contacts are in storey order).
+            if let Some((_, c)) = contacts.next_if(|(site, _)| *site == s) {
+                let f = c.force_at(d);
+                if c.stiffness > 0.0 {
+                    e += 0.5 * f * f / c.stiffness;
+                }
             }
         }
         e
