@@ -279,6 +279,8 @@ pub struct ModelInfo {
     /// Per type, value reference → index into `variables` (dense: `NONE` where there is no
     /// variable). Looked up on every get/set, so no hashing.
     lookup: [Vec<u32>; 4],
+    /// Name → index into `variables`: hosts look variables up by name.
+    names: HashMap<String, usize>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -308,7 +310,12 @@ impl ModelInfo {
     ) -> Result<Self, String> {
         const MAX_DENSE_VR: u32 = 1 << 20;
         let mut lookup: [Vec<u32>; 4] = Default::default();
-        let mut names = HashMap::new();
+        let mut names = HashMap::with_capacity(variables.len());
+        let inputs: std::collections::HashSet<u32> = variables
+            .iter()
+            .filter(|v| v.causality == Causality::Input)
+            .map(|v| v.vr)
+            .collect();
         for (index, v) in variables.iter().enumerate() {
             if names.insert(v.name.clone(), index).is_some() {
                 return Err(format!("variable name '{}' appears twice", v.name));
@@ -344,10 +351,7 @@ impl ModelInfo {
                 }
             }
             for dep in &v.depends_on {
-                let ok = variables
-                    .iter()
-                    .any(|i| i.vr == *dep && i.causality == Causality::Input);
-                if !ok {
+                if !inputs.contains(dep) {
                     return Err(format!(
                         "'{}' depends on value reference {dep}, which is no input",
                         v.name
@@ -366,6 +370,7 @@ impl ModelInfo {
             can_interpolate_inputs,
             default_experiment,
             lookup,
+            names,
         };
         info.guid = guid_of(&info.render_xml());
         Ok(info)
@@ -379,7 +384,7 @@ impl ModelInfo {
     }
 
     pub fn by_name(&self, name: &str) -> Option<&Variable> {
-        self.variables.iter().find(|v| v.name == name)
+        self.names.get(name).map(|&i| &self.variables[i])
     }
 
     /// The complete modelDescription.xml.
@@ -549,6 +554,13 @@ impl ModelInfo {
         let outputs: Vec<usize> = (0..self.variables.len())
             .filter(|&i| self.variables[i].causality == Causality::Output)
             .collect();
+        // Each input's value reference → its index (the first, as FMI counts from 1).
+        let mut input_index: HashMap<u32, usize> = HashMap::new();
+        for (i, x) in self.variables.iter().enumerate() {
+            if x.causality == Causality::Input {
+                input_index.entry(x.vr).or_insert(i);
+            }
+        }
         if !outputs.is_empty() {
             w.write_event(Event::Start(BytesStart::new("Outputs")))
                 .expect(ok);
@@ -559,11 +571,7 @@ impl ModelInfo {
                 let deps: Vec<String> = v
                     .depends_on
                     .iter()
-                    .filter_map(|vr| {
-                        self.variables
-                            .iter()
-                            .position(|x| x.vr == *vr && x.causality == Causality::Input)
-                    })
+                    .filter_map(|vr| input_index.get(vr).copied())
                     .map(|p| (p + 1).to_string())
                     .collect();
                 u.push_attribute(("dependencies", deps.join(" ").as_str()));
@@ -612,13 +620,19 @@ fn fmt_real(x: f64) -> String {
 /// A GUID from the content of the description: FNV-1a, two 64-bit lanes with different offsets.
 /// Not cryptographic; it only has to change whenever the variable table does.
 fn guid_of(text: &str) -> String {
-    let lane = |offset: u64| {
-        text.bytes().fold(offset, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        })
-    };
-    let a = lane(0xcbf2_9ce4_8422_2325);
-    let b = lane(0x6c62_272e_07bb_0142);
+    // Both lanes in one pass: two independent chains of multiplies, the same values as one
+    // lane after the other.
+    const PRIME: u64 = 0x0100_0000_01b3;
+    let (a, b) = text.bytes().fold(
+        (0xcbf2_9ce4_8422_2325_u64, 0x6c62_272e_07bb_0142_u64),
+        |(a, b), byte| {
+            let byte = u64::from(byte);
+            (
+                (a ^ byte).wrapping_mul(PRIME),
+                (b ^ byte).wrapping_mul(PRIME),
+            )
+        },
+    );
     let mut s = String::with_capacity(38);
     let _ = write!(
         s,
