@@ -47,9 +47,9 @@ const _: () = assert!(SENSOR_SD >= DISP + BLOCK);
 pub const MODEL_IDENTIFIER: &str = "fmu_lqr";
 
 /// The shear FMU's defaults (the reference paper's prior means), checked against it by a test.
-pub const DEFAULT_MASS: f64 = 5.2;
+pub const DEFAULT_MASS: f64 = structure::paper::MASS;
 pub const DEFAULT_DAMPING: f64 = 0.010_001_702_004_705_479; // exp(−4.605)
-pub const DEFAULT_STIFFNESS: f64 = 4021.0;
+pub const DEFAULT_STIFFNESS: f64 = structure::paper::STIFFNESS;
 pub const DEFAULT_HIGHPASS_HZ: f64 = 0.5;
 pub const DEFAULT_PROCESS_SD: f64 = 0.1;
 pub const DEFAULT_SENSOR_SD: f64 = 0.01;
@@ -102,14 +102,14 @@ impl Default for Layout {
     fn default() -> Self {
         Layout {
             structure: Structure::uniform(
-                structure::building::PAPER_STOREYS,
+                structure::paper::STOREYS,
                 DEFAULT_MASS,
                 DEFAULT_DAMPING,
                 DEFAULT_STIFFNESS,
                 Excitation::Force { floor: 1 },
             ),
             actuator_floor: DEFAULT_ACTUATOR_FLOOR,
-            measured: every_acceleration(structure::building::PAPER_STOREYS),
+            measured: every_acceleration(structure::paper::STOREYS),
         }
     }
 }

@@ -99,9 +99,10 @@ impl ShearParameters {
     /// Its steps with effects keep their fixed arrays (`piecewise` for contacts, to the bit as
     /// before); every other layout steps vectors (`piecewise_any` for contacts).
     pub fn is_paper_layout(&self) -> bool {
-        self.storeys() == structure::building::PAPER_STOREYS
-            && self.excitation == Excitation::Force { floor: 1 }
-            && self.control_floor == 1
+        structure::paper::is_layout(self.storeys(), self.excitation)
+            && Excitation::Force {
+                floor: self.control_floor,
+            } == structure::paper::EXCITATION
     }
 }
 

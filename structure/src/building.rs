@@ -20,7 +20,7 @@ pub enum Excitation {
 impl Default for Excitation {
     /// The reference paper's shaker on floor 1.
     fn default() -> Self {
-        Excitation::Force { floor: 1 }
+        crate::paper::EXCITATION
     }
 }
 
@@ -102,34 +102,10 @@ pub struct Structure {
     pub excitation: Excitation,
 }
 
-/// The reference paper's prior means (Table 1): the default floor and storey.
-pub const PAPER_MASS: f64 = 5.2;
-pub const PAPER_LOG_DAMPING: f64 = -4.605;
-pub const PAPER_STIFFNESS: f64 = 4021.0;
-pub const PAPER_STOREYS: usize = 3;
-/// The paper rig's channels: an accelerometer on each of its floors, in floor order.
-pub const PAPER_CHANNELS: [&str; PAPER_STOREYS] = ["acc1", "acc2", "acc3"];
-
-/// Whether `channels` are the paper rig's, in its order: the one test of "is this the rig's
-/// record?" (its reports then show the floors side by side, as the paper does).
-pub fn is_paper_channels<S: AsRef<str>>(channels: &[S]) -> bool {
-    channels.len() == PAPER_CHANNELS.len()
-        && channels
-            .iter()
-            .zip(PAPER_CHANNELS)
-            .all(|(c, p)| c.as_ref() == p)
-}
-
 impl Default for Structure {
     /// The reference paper's three-storey frame at its prior means, shaken at floor 1.
     fn default() -> Self {
-        Structure::uniform(
-            PAPER_STOREYS,
-            PAPER_MASS,
-            PAPER_LOG_DAMPING.exp(),
-            PAPER_STIFFNESS,
-            Excitation::default(),
-        )
+        crate::paper::structure()
     }
 }
 

@@ -18,6 +18,7 @@
 pub mod building;
 pub mod channel;
 pub mod effects;
+pub mod paper;
 
 pub use building::{Excitation, StateSpace, Structure, StructureError, MAX_STOREYS};
 pub use channel::{Channel, ChannelError, Quantity, Unit};

@@ -13,7 +13,8 @@ pub mod discovered;
 use fmi2::{ModelError, Variable};
 use serde::{Deserialize, Serialize};
 use smallvec::SmallVec;
-use structure::building::{MAX_STOREYS, PAPER_STOREYS};
+use structure::building::MAX_STOREYS;
+use structure::paper::STOREYS as PAPER_STOREYS;
 
 pub use discovered::{Discovered, MAX_TERMS};
 pub use structure::effects::{

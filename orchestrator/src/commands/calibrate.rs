@@ -268,7 +268,7 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
         }
     }
     for v in validated {
-        let shown = if ::structure::building::is_paper_channels(&v.channels) {
+        let shown = if ::structure::paper::is_channels(&v.channels) {
             format!("{:.3} / {:.3} / {:.3}", v.nmse[0], v.nmse[1], v.nmse[2])
         } else {
             per_channel(&v.channels, &v.nmse)

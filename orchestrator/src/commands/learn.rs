@@ -170,7 +170,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
             _ => String::new(),
         };
         let channels = streams[0].layout.names();
-        if ::structure::building::is_paper_channels(&channels) {
+        if ::structure::paper::is_channels(&channels) {
             println!(
                 "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
                 fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]

@@ -68,7 +68,7 @@ fn acc_channel(floor: usize) -> Channel {
 }
 
 /// The paper's rig has an accelerometer on each of its three floors.
-const PAPER_FLOORS: usize = 3;
+const PAPER_FLOORS: usize = ::structure::paper::STOREYS;
 
 impl Measurement {
     pub fn len(&self) -> usize {

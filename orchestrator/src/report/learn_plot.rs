@@ -53,8 +53,8 @@ impl Channels {
             .map(|r| r.trace.channels.clone())
             .unwrap_or_default();
         let labels: Vec<String> =
-            if channels.is_empty() || ::structure::building::is_paper_channels(&channels) {
-                (1..=::structure::building::PAPER_STOREYS)
+            if channels.is_empty() || ::structure::paper::is_channels(&channels) {
+                (1..=::structure::paper::STOREYS)
                     .map(|f| format!("floor {f}"))
                     .collect()
             } else {

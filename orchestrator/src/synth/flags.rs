@@ -2,8 +2,8 @@
 //! change (`--change k2@8:0.85`), read into the scenario's types.
 
 use super::{Result, SynthError};
-use ::structure::building::PAPER_STOREYS;
 use ::structure::effects::{Kind, Label, Location};
+use ::structure::paper::STOREYS as PAPER_STOREYS;
 use serde_json::{Map, Value};
 
 use super::scenario::{parse_effect, Change, ChangeHow, EffectSpec, Loc, ParamName};

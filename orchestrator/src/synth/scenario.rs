@@ -3,9 +3,9 @@
 use std::path::Path;
 
 use super::{Result, SynthError};
-use ::structure::building::PAPER_STOREYS;
 use ::structure::channel::{parse_header_field, Channel, Quantity, Unit};
 use ::structure::effects::{Contact, Cubic, Friction, Kind, Law, Location, Side};
+use ::structure::paper::STOREYS as PAPER_STOREYS;
 use ::structure::{Excitation, Structure, MAX_STOREYS};
 use fmu_shear::ShearParameters;
 use serde::de::DeserializeOwned;
@@ -191,9 +191,9 @@ pub const DEFAULT_SOIL_DAMPING: f64 = 0.6;
 /// A storey of a building other than the default 3 when the scenario gives no parameters:
 /// the paper's prior means for mass and stiffness, and a damping of about 1 % of critical in
 /// the first mode of a 5-storey frame.
-pub const DEFAULT_FLOOR_MASS: f64 = 5.2;
+pub const DEFAULT_FLOOR_MASS: f64 = ::structure::paper::MASS;
 pub const DEFAULT_STOREY_DAMPING: f64 = 3.0;
-pub const DEFAULT_STOREY_STIFFNESS: f64 = 4021.0;
+pub const DEFAULT_STOREY_STIFFNESS: f64 = ::structure::paper::STIFFNESS;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoiseSpec {
@@ -842,7 +842,7 @@ impl Scenario {
     /// Whether this is the paper's layout (3 storeys, a force at floor 1), which the hysteresis,
     /// the quadratic damping and a controller in the loop are written for.
     pub fn is_paper_layout(&self) -> bool {
-        self.storeys() == PAPER_STOREYS && self.excitation == Excitation::default()
+        ::structure::paper::is_layout(self.storeys(), self.excitation)
     }
 
     /// Check the ranges; `origin` names the source (a file, or "scenario") in the errors.

@@ -343,7 +343,7 @@ mod tests {
                 .build(clock.start, vec![("force", Vec::new())])
                 .expect("builds");
             let force = running.signal("force").expect("the force is driven");
-            let acc: Vec<Port> = ::structure::building::PAPER_CHANNELS
+            let acc: Vec<Port> = ::structure::paper::CHANNELS
                 .iter()
                 .map(|o| running.system_output(&twin, o).expect("an output"))
                 .collect();

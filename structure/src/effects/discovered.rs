@@ -465,7 +465,7 @@ pub fn check_scale(index: usize, value: f64) -> Result<(), InvalidParameter> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::building::PAPER_STOREYS;
+    use crate::paper::STOREYS as PAPER_STOREYS;
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()))

@@ -63,12 +63,13 @@ pub fn default_prior(name: &str, current: f64) -> Prior {
     let storey = |prefix: char| {
         name.len() == 2 && name.starts_with(prefix) && matches!(name.as_bytes()[1], b'1'..=b'3')
     };
+    use ::structure::paper;
     if storey('m') {
-        Prior::linear(5.2, 0.5)
+        Prior::linear(paper::MASS, 0.5)
     } else if storey('c') {
-        Prior::log(-4.605, 1.0)
+        Prior::log(paper::LOG_DAMPING, 1.0)
     } else if storey('k') {
-        Prior::linear(4021.0, 10_000.0)
+        Prior::linear(paper::STIFFNESS, 10_000.0)
     } else if current > 0.0 {
         // A factor of e (≈ 2.7) either way is one standard deviation.
         Prior::log(current.ln(), 1.0)
@@ -91,7 +92,7 @@ pub const NOMINAL_STIFFNESS_LOG_SD: f64 = 0.25;
 /// the widths above.
 pub fn structure_prior(structure: &Structure, name: &str) -> Option<Prior> {
     let nominal = structure.get(name)?;
-    if *structure == Structure::default() {
+    if ::structure::paper::is_paper_rig(structure) {
         return Some(default_prior(name, nominal));
     }
     Some(match family(name)? {

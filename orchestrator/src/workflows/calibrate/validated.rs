@@ -57,7 +57,7 @@ fn paper_rig(twin: &Twin, data: &Measurement) -> Result<bool, CalibrateError> {
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     Ok(
-        physics_structure(&physics.fmu_path)? == ::structure::Structure::default()
+        ::structure::paper::is_paper_rig(&physics_structure(&physics.fmu_path)?)
             && data.require_paper_rig().is_ok(),
     )
 }

@@ -286,7 +286,7 @@ impl Addition {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use structure::building::PAPER_STOREYS;
+    use structure::paper::STOREYS as PAPER_STOREYS;
 
     #[test]
     fn labels_parse_back() {

@@ -1,0 +1,62 @@
+//! The reference paper's rig, the one place that says what it is: a three-storey frame shaken by
+//! a force at floor 1 (a shaker), the control force on that floor too, an accelerometer on each
+//! floor (`acc1..acc3`), and the paper's prior means (its Table 1) for every floor and storey.
+//! Every "is this the rig?" asks [`is_layout`], [`is_channels`] or [`is_paper_rig`].
+
+use crate::building::{Excitation, Structure};
+
+/// Storeys of the rig.
+pub const STOREYS: usize = 3;
+/// The prior mean of a floor's mass (kg).
+pub const MASS: f64 = 5.2;
+/// The prior mean of a storey's log damping (ln N s/m).
+pub const LOG_DAMPING: f64 = -4.605;
+/// The prior mean of a storey's stiffness (N/m).
+pub const STIFFNESS: f64 = 4021.0;
+/// The rig's shaker: a force at floor 1 (also where its control force acts).
+pub const EXCITATION: Excitation = Excitation::Force { floor: 1 };
+/// The rig's channels: an accelerometer on each of its floors, in floor order.
+pub const CHANNELS: [&str; STOREYS] = ["acc1", "acc2", "acc3"];
+
+/// The rig at its prior means.
+pub fn structure() -> Structure {
+    Structure::uniform(STOREYS, MASS, LOG_DAMPING.exp(), STIFFNESS, EXCITATION)
+}
+
+/// Whether a building of `storeys` storeys under `excitation` is laid out as the rig (three
+/// storeys, the shaker at floor 1), whatever its masses, dampings and stiffnesses.
+pub fn is_layout(storeys: usize, excitation: Excitation) -> bool {
+    storeys == STOREYS && excitation == EXCITATION
+}
+
+/// Whether `channels` are the rig's, in its order: the one test of "is this the rig's record?"
+/// (its reports then show the floors side by side, as the paper does).
+pub fn is_channels<S: AsRef<str>>(channels: &[S]) -> bool {
+    channels.len() == CHANNELS.len() && channels.iter().zip(CHANNELS).all(|(c, p)| c.as_ref() == p)
+}
+
+/// Whether `structure` is the rig at its prior means (what a twin made by `twin init` holds).
+pub fn is_paper_rig(structure: &Structure) -> bool {
+    *structure == self::structure()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rig_is_the_default_structure_and_its_layout() {
+        assert_eq!(structure(), Structure::default());
+        assert!(is_paper_rig(&Structure::default()));
+        assert!(is_layout(STOREYS, Excitation::default()));
+        assert!(!is_layout(STOREYS, Excitation::Base));
+        assert!(!is_layout(4, EXCITATION));
+        let mut stiffer = structure();
+        stiffer.stiffness[0] *= 1.01;
+        assert!(!is_paper_rig(&stiffer));
+        assert!(is_layout(stiffer.mass.len(), stiffer.excitation));
+        assert!(is_channels(&CHANNELS));
+        assert!(!is_channels(&["acc1", "acc3", "acc2"]));
+        assert!(!is_channels(&["acc1", "acc2"]));
+    }
+}
