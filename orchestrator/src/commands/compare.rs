@@ -107,8 +107,16 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     }
     let options = args.options();
     options.validate()?;
-    let data = args.columns.read_any(data_path)?;
-    let twin = Twin::load(args.twin.as_deref())?;
+    // The record read while the twin's archive is opened.
+    let (data, twin) = std::thread::scope(|scope| {
+        let data = scope.spawn(|| args.columns.read_any(data_path));
+        let twin = Twin::load(args.twin.as_deref());
+        let data = data
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (data, twin)
+    });
+    let (data, twin) = (data?, twin?);
     guard::check_record(&twin, &data)?;
     options.validate_for(&data)?;
     let spec = args

@@ -323,9 +323,20 @@ pub fn run_and_compare_with(
     tolerance: Option<f64>,
     progress: impl FnMut(u64, u64),
 ) -> Result<Compared, RunError> {
-    let prediction = run_twin(twin, data, progress)?;
+    // The linear model's band needs no prediction: on a second core while the twin runs.
+    let (prediction, linear) = std::thread::scope(|scope| {
+        let band = scope.spawn(|| linear_parameter_variance(twin, data));
+        let prediction = run_twin(twin, data, progress);
+        let band = band
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (prediction, band)
+    });
+    let prediction = prediction?;
     let parameter_variance = if prediction.has_sd() {
         None
+    } else if let Some(band) = linear {
+        Some(band)
     } else {
         parameter_variance(twin, data, &prediction)?
     };
@@ -486,6 +497,9 @@ pub fn parameter_variance(
     data: &Measurement,
     prediction: &Prediction,
 ) -> Result<Option<Vec<Vec<f64>>>, RunError> {
+    if let Some(band) = linear_parameter_variance(twin, data) {
+        return Ok(Some(band));
+    }
     let Some(cov) = &twin.parameter_covariance else {
         return Ok(None);
     };
@@ -504,15 +518,9 @@ pub fn parameter_variance(
         return Ok(None);
     }
     let sigma = nalgebra::DMatrix::from_fn(p, p, |a, b| cov.matrix[a][b]);
-    // The linear shear model's, in process over the whole record (the same step maps as its
-    // FMU's, in blocks of samples); else from one run of the physics FMU with its forward
+    // Not the linear model alone: from one run of the physics FMU with its forward
     // sensitivities where it has them, streamed; else `J` by finite differences, a run per
     // parameter.
-    if let Some(band) =
-        super::linear::acceleration_band(twin, data, &cov.names, &covariance_root(&sigma))
-    {
-        return Ok(Some(band));
-    }
     if let Some(band) = sensitivity_band(twin, data, &cov.names, &sigma) {
         return Ok(Some(band));
     }
@@ -535,6 +543,25 @@ pub fn parameter_variance(
             })
             .collect(),
     ))
+}
+
+/// [`parameter_variance`] where the twin is the linear shear model alone, which needs no
+/// prediction: computed in process over the whole record (the same step maps as its FMU's, in
+/// blocks of samples). None for another twin, or one without a posterior covariance.
+fn linear_parameter_variance(twin: &Twin, data: &Measurement) -> Option<Vec<Vec<f64>>> {
+    let cov = twin.parameter_covariance.as_ref()?;
+    if cov.names.is_empty() || twin.components.len() != 1 {
+        return None;
+    }
+    let physics = twin.component(PHYSICS)?;
+    let real =
+        |name: &String| matches!(physics.parameters.get(name), Some(ParameterValue::Real(_)));
+    if !cov.names.iter().all(real) {
+        return None;
+    }
+    let sigma =
+        nalgebra::DMatrix::from_fn(cov.names.len(), cov.names.len(), |a, b| cov.matrix[a][b]);
+    super::linear::acceleration_band(twin, data, &cov.names, &covariance_root(&sigma))
 }
 
 /// A square root `R` of the covariance, `Σ = Rᵀ R`: the Cholesky factor's transpose, or for a
