@@ -278,7 +278,8 @@ echo
 section "== the operational twin meets changes: a 65 s stream of twin synth's structure, storey 2 15 % softer"
 echo "   from 17.3 s, floor 3 20 % heavier from 40.1 s, replayed at full speed (--diagnosis-wait) with"
 echo "   --adopt: each change located, diagnosed on what came after it from the state the twin reached"
-echo "   there, and once two looks agree the recalibrated twin adopted without losing a sample =="
+echo "   there, and once a look's verdict is firm (by its own evidence, or two looks agreeing) the"
+echo "   recalibrated twin adopted without losing a sample =="
 "$twin" synth --seed 5 --noise-sd 0.003 --duration 65 --change k2@17.3:0.85 --change m3@40.1:1.2 \
   --out "$out/stream-two-changes.csv" >/dev/null
 rm -f "$out"/watch-two-changes*  # a fresh stream, not a resume
@@ -296,11 +297,14 @@ for line in open(sys.argv[1]):
         print(f"  {a['time']:6.2f} s  diagnosis look {a['round']}, fitted from {a['fitted_from']:.2f} s"
               f" ({a['post_change_seconds']:.0f} s after it): {a['action']}, worst-floor NMSE"
               f" {max(a['nmse_before']):.1f} % -> {max(a['nmse_after']):.3f} %{', firm' if a['firm'] else ''}")
+        if a.get("waited"):
+            print(f"           waited {a['waited']}")
     elif a["kind"] == "adopted":
         moved = ", ".join(f"{p['name']} = {p['value']:.4g}" for p in a["parameters"][:1])
         print(f"  {a['time']:6.2f} s  adopted {a['twin']} ({a['verdict']}: {moved})")
     elif a["kind"] == "end":
-        print(f"  {a['time']:6.2f} s  end: {len(a['still_failing'])} window(s) still failing")
+        print(f"  {a['time']:6.2f} s  end: {len(a['still_failing'])} window(s) still failing,"
+              f" NMSE over the last window {' / '.join(f'{x:.2f}' for x in a['rolling_nmse'])} %")
 PY
 
 echo

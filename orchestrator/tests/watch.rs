@@ -1177,8 +1177,8 @@ fn assert_diagnosed_after(all: &[Value], truth: &[f64]) {
 /// Unattended operation, two changes in a row at random times: storey 2 loses 15 % of its
 /// stiffness, and 23–25 s later floor 3 gains 20 % of mass. Replayed with `--diagnosis-wait
 /// --adopt`, each change is located, diagnosed on what came after it (from the state the twin
-/// reached there), and once two looks agree (firm) the recalibrated twin is written beside the
-/// alerts and swapped in at that sample; the comparison starts anew with it, the second change
+/// reached there), and once a look is firm (by its evidence, or two agreeing) the recalibrated
+/// twin is written beside the alerts and swapped in at that sample; the comparison starts anew with it, the second change
 /// opens a window of its own, and its answer is adopted on top of the first. No window fails
 /// after, the stream ends with none failing, the NMSE over its last 20 s is under the
 /// tolerance, and the checkpoint lists both twins. Watched
@@ -1321,6 +1321,7 @@ fn a_contact_that_starts_is_added_and_adopted() {
         &csv,
         &["--diagnosis-wait", "--adopt"],
     );
+    print_looks("contact", &all);
     for f in of_kind(&all, "failing") {
         eprintln!(
             "contact from {at:.3} s: failing {} {}",
@@ -1461,7 +1462,7 @@ fn kinds() -> Vec<Kind> {
 
 /// One kind's stream watched with `--diagnosis-wait --adopt`; its figures, after the checks
 /// every kind shares: the first failing alert locates the change within a second, every look
-/// is at what came after it and none answers `update_data_model`, two looks agree (firm) on
+/// is at what came after it and none answers `update_data_model`, a look is firm on
 /// the right action and site within [`MAX_POST`] s of post-change data; the answer is adopted
 /// when it is structural, after which nothing fails and the NMSE over the last window is under
 /// the tolerance; a sensor's fault is never adopted, and its channel ends over the tolerance.
@@ -1478,6 +1479,7 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
         &["--diagnosis-wait", "--adopt", "--window", "20"],
     );
     let label = format!("{} at {at:.3} s", kind.name);
+    print_looks(&label, &all);
     let failing = of_kind(&all, "failing");
     assert!(!failing.is_empty(), "{label}: {all:?}");
     let located = failing[0]["change"]["time"].as_f64().expect("located");
@@ -1490,6 +1492,12 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
         .unwrap_or_else(|| panic!("{label}: no firm verdict in {diagnoses:?}"));
     let firm_after = firm["post_change_seconds"].as_f64().expect("seconds");
     assert!(firm_after <= MAX_POST + 1.0, "{label}: {firm}");
+    // The alert says how long it waited and why that was enough.
+    let waited = firm["waited"].as_str().expect("waited");
+    assert!(
+        waited.starts_with(&format!("{firm_after:.1} s of post-change data, because ")),
+        "{label}: {firm}"
+    );
     let verdict = background_verdict(firm);
     let first_look = background_verdict(diagnoses[0]);
     assert_eq!(verdict, kind.verdict, "{label}: {firm}");
@@ -1524,8 +1532,9 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
             "{label}: {all:?}"
         );
         assert_eq!(end["still_failing"], serde_json::json!([]), "{label}");
-        // Measured (%): k2 0.060 / 0.163 / 0.141, m2 0.072 / 0.158 / 0.131, friction 0.128 /
-        // 0.323 / 0.334 — the 0.5 % tolerance is the bar.
+        // Measured (%): k2 0.060 / 0.163 / 0.142, m2 0.080 / 0.188 / 0.158, friction 0.129 /
+        // 0.324 / 0.338 (each adopted after 10 s of post-change data) — the 0.5 % tolerance
+        // is the bar.
         let tolerance = end["tolerance"].as_f64().expect("tolerance");
         assert!(
             rolling_at_end.iter().all(|&x| x < tolerance),
@@ -1548,6 +1557,22 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
         nmse_before: floats(&firm["nmse_before"]),
         nmse_after: floats(&firm["nmse_after"]),
         rolling_at_end,
+    }
+}
+
+/// Each look's amount of post-change data, evidence and why it was firm, printed.
+fn print_looks(label: &str, all: &[Value]) {
+    for d in of_kind(all, "diagnosis") {
+        eprintln!(
+            "{label}: look {} after {:.1} s: {} {}, evidence {}, firm {} ({})",
+            d["round"],
+            d["post_change_seconds"].as_f64().unwrap_or(f64::NAN),
+            d["action"],
+            d["effects"].as_array().map_or(0, Vec::len),
+            d["evidence"],
+            d["firm"],
+            d["waited"]
+        );
     }
 }
 
@@ -1634,6 +1659,54 @@ fn two_hours_without_a_change_raise_nothing() {
     assert_eq!(end["samples"], 7200 * 512 / 10, "{end}");
     assert_eq!(end["failing_windows"], 0, "{end}");
     assert_eq!(end["still_failing"], serde_json::json!([]), "{end}");
+}
+
+/// Half an hour of the unchanged structure under each of two coloured forces, watched as in
+/// operation (the diagnosis on, `--adopt`): a band-limited force (1–20 Hz) and a low-passed
+/// one (below 5 Hz: most of its power at the first mode), each held linear between the samples
+/// as the twin holds it. No alert but the end: no failing window, no diagnosis, nothing
+/// adopted. (The same band-limited force smooth between the samples, as a shaker's is, opened a
+/// window at 209.7 s, acc2 at 1.3 % NMSE: this twin was calibrated on a force held linear, and
+/// the hold's error is outside its noise band. A twin calibrated on the stream's own first
+/// minutes, as at commissioning, is not tested here.)
+#[test]
+fn half_hours_of_coloured_forces_without_a_change_raise_nothing() {
+    use orchestrator::synth::BetweenSamples;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let forces: [(&str, f64, Option<f64>, BetweenSamples); 2] = [
+        (
+            "band-limited 1-20 Hz",
+            1.0,
+            Some(20.0),
+            BetweenSamples::Linear,
+        ),
+        ("low-passed 0-5 Hz", 0.0, Some(5.0), BetweenSamples::Linear),
+    ];
+    std::thread::scope(|scope| {
+        for (k, (name, low, band, between)) in forces.into_iter().enumerate() {
+            let dir = dir.path();
+            scope.spawn(move || {
+                let csv = dir.join(format!("coloured{k}.csv"));
+                let text = stream_of(42 + k as u64, 1800.0, |s| {
+                    s.force.low_hz = low;
+                    s.force.band_hz = band;
+                    s.force.between_samples = between;
+                });
+                std::fs::write(&csv, text).expect("write");
+                let all = watch_named(
+                    dir,
+                    &format!("coloured{k}"),
+                    &csv,
+                    &["--diagnosis-wait", "--adopt"],
+                );
+                let end = all.last().expect("an end alert");
+                eprintln!("{name}, half an hour unchanged: NMSE {} %", end["nmse"]);
+                assert_eq!(all.len(), 1, "{name}: {all:?}");
+                assert_eq!(end["kind"], "end", "{name}");
+                assert_eq!(end["failing_windows"], 0, "{name}: {end}");
+            });
+        }
+    });
 }
 
 /// Alerts without what depends on the machine (speeds, latencies, a diagnosis's wall time, this
@@ -1749,15 +1822,18 @@ fn a_watch_with_a_page_gives_the_alerts_of_one_without() {
 /// first's diagnosis window: storey 2 loses 15 % of its stiffness at a random time, and floor 3
 /// gains 20 % of mass 13–17 s later, after the first look (10 s) and before the second (20 s),
 /// whose samples would mix the two structures (a mixed window answered `update_data_model`,
-/// firm, and the stream ended failing). The second look finds the second change in the
-/// residuals of the first look's answer and answers on the samples before it (k2, firm,
-/// adopted); the second change is then looked at on its own (m3, firm, adopted). Nothing
-/// fails after, and the NMSE over the last 20 s is back under the tolerance. Measured: the
-/// second change found at 31.895 s for 31.895 s, k2 × 0.8514 and m3 × 1.2038 adopted, the NMSE
-/// over the last 20 s 0.084 / 0.147 / 0.233 % (tolerance 0.5 %). The second change's look and
-/// the adoptions start from the state the twins live then reach — the old twin up to the first
-/// change, the first answer from there; with the first answer run from rest over samples of
-/// the old structure instead, m3 came out × 1.212 and the NMSE 0.17 / 0.76 / 1.53 %.
+/// firm, and the stream ended failing). Either the first look is firm by its own evidence and
+/// its answer adopted before the second change, which is then located as a change of its own;
+/// or the second look finds the second change in the residuals of the first look's answer and
+/// answers on the samples before it, and the second change is looked at on its own once the
+/// first answer is adopted. Both answers adopted, nothing fails after, and the NMSE over the
+/// last 20 s is back under the tolerance. Measured: the first look, at 10 s, firm on k2 (its
+/// log evidence 1334 over the best effect's, k2 moved 71.5 posterior sd, 61× any other, its sd
+/// 0.24 %), adopted at 28.301 s; the second change located at 31.895 s for 31.895 s, m3 firm
+/// at its first look; k2 × 0.8523, m3 × 1.2090, the NMSE over the last 20 s 0.082 / 0.135 /
+/// 0.216 % (tolerance 0.5 %). (With two agreeing looks required, the second look had found the
+/// second change at 31.895 s; with the first answer run from rest over samples of the old
+/// structure, m3 had come out × 1.212 and the NMSE 0.17 / 0.76 / 1.53 %.)
 #[test]
 fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_own() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -1772,20 +1848,37 @@ fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_
         &csv,
         &["--diagnosis-wait", "--adopt", "--window", "20"],
     );
+    print_looks("middle", &all);
     assert_diagnosed_after(&all, &[first, second]);
     let cut: Vec<&Value> = of_kind(&all, "diagnosis")
         .into_iter()
         .filter(|d| !d["second_change"].is_null())
         .collect();
-    assert_eq!(cut.len(), 1, "{all:?}");
-    let found = cut[0]["second_change"]["time"].as_f64().expect("a time");
-    eprintln!(
-        "changes at {first:.3} and {second:.3} s: the second found at {found:.3} s by look {}",
-        cut[0]["round"]
-    );
-    assert!((found - second).abs() <= 1.0, "{}", cut[0]);
-    assert!(cut[0]["to"].as_f64().expect("to") < second, "{}", cut[0]);
     let adopted = of_kind(&all, "adopted");
+    assert!(cut.len() <= 1, "{all:?}");
+    if let Some(cut) = cut.first() {
+        // Found inside the looks at the first.
+        let found = cut["second_change"]["time"].as_f64().expect("a time");
+        eprintln!(
+            "changes at {first:.3} and {second:.3} s: the second found at {found:.3} s by look {}",
+            cut["round"]
+        );
+        assert!((found - second).abs() <= 1.0, "{cut}");
+        assert!(cut["to"].as_f64().expect("to") < second, "{cut}");
+    } else {
+        // The first answer was firm and adopted before it: located as a change of its own.
+        let swapped = adopted[0]["time"].as_f64().expect("time");
+        assert!(swapped < second, "{all:?}");
+        let located: Vec<f64> = of_kind(&all, "failing")
+            .iter()
+            .filter_map(|f| f["change"]["time"].as_f64())
+            .collect();
+        eprintln!(
+            "changes at {first:.3} and {second:.3} s: the first adopted at {swapped:.3} s, \
+             changes located at {located:.3?} s"
+        );
+        assert!(located.iter().any(|t| (t - second).abs() <= 1.0), "{all:?}");
+    }
     assert_eq!(adopted.len(), 2, "{all:?}");
     assert_eq!(adopted[0]["verdict"], "recalibrate:k2", "{all:?}");
     assert_eq!(adopted[1]["verdict"], "recalibrate:m3", "{all:?}");
@@ -1800,9 +1893,9 @@ fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_
         "k2 × {k2:.4}, m3 × {m3:.4}; NMSE over the last 20 s {} %",
         end["rolling_nmse"]
     );
-    // Measured errors 0.0014 and 0.0038: bars about three times those.
+    // Measured errors 0.0023 and 0.0090: bars about twice those.
     assert!((k2 - 0.85).abs() < 0.005, "k2 × {k2}");
-    assert!((m3 - 1.2).abs() < 0.012, "m3 × {m3}");
+    assert!((m3 - 1.2).abs() < 0.02, "m3 × {m3}");
     let last = adopted[1]["time"].as_f64().expect("time");
     assert!(
         of_kind(&all, "failing")
@@ -1811,7 +1904,7 @@ fn a_change_in_the_middle_of_the_looks_at_another_is_found_and_looked_at_on_its_
         "{all:?}"
     );
     assert_eq!(end["still_failing"], serde_json::json!([]), "{end}");
-    // Under the tolerance on every floor (measured worst 0.233 % against 0.5 %).
+    // Under the tolerance on every floor (measured worst 0.216 % against 0.5 %).
     let tolerance = end["tolerance"].as_f64().expect("tolerance");
     assert!(
         end["rolling_nmse"]

@@ -12,12 +12,12 @@
 //! what came after it instead: the samples from the change's time to now, every fit starting
 //! from the state the twin reached at the change on the `warmup` s before it
 //! (`diagnose::change`), once `post` seconds of them exist, and again with each
-//! further `post` seconds while the window stays open, up to [`MAX_POST`] s, until two in a
-//! row give the same verdict (the action and where: the parameter recalibration moves most,
-//! the effects, the faulty sensor) — then it is firm. The first look's `post` (10 s by
-//! default, about 20 periods of the paper's building's first mode) is the least that the
-//! candidates' fits need; the repeat is what makes the answer the evidence's rather than the
-//! window's.
+//! further `post` seconds while the window stays open, up to [`MAX_POST`] s, until a verdict
+//! (the action and where: the parameter recalibration moves most, the effects, the faulty
+//! sensor) is firm: by its own evidence ([`super::firm`]: the candidates told apart, the
+//! answer's posterior narrow), or because two looks in a row gave it. The first look's `post`
+//! (10 s by default, about 20 periods of the paper's building's first mode) is the least that
+//! the candidates' fits need; how much more it waits is the evidence's.
 //!
 //! What a checkpoint needs is here too: the kept samples, the due diagnosis, and the running
 //! one's samples, so a restarted watcher runs again what its predecessor had not reported.
@@ -33,6 +33,7 @@ use ::structure::channel::Channel;
 
 use serde_json::Value;
 
+use super::firm::{weigh, Weight};
 use super::online::{ChangePoint, CHANGE_LOOKBACK};
 use super::second;
 use crate::twin::data::{Measurement, Signal};
@@ -234,6 +235,10 @@ pub struct Finished {
     /// A second change found after the samples the last look answered on: this look answered
     /// on the samples before it.
     pub second: Option<ChangePoint>,
+    /// What its evidence says of its verdict (a look at a change that answered).
+    pub weight: Option<Weight>,
+    /// Why it is firm: its own evidence, or the look before's same verdict.
+    pub because: Option<String>,
 }
 
 pub struct Background {
@@ -609,10 +614,26 @@ impl Background {
         }
         self.saved.reported += 1;
         let mut firm = false;
+        let (mut weight, mut because) = (None, None);
         if let (Some(e), Some(_)) = (&mut self.saved.episode, job.change) {
             if e.window_start == job.window_start {
                 let now = result.as_ref().ok().map(verdict);
-                e.firm = now.is_some() && now == e.verdict;
+                let w = result.as_ref().ok().map(weigh);
+                because = match (&w, &now) {
+                    (
+                        Some(Weight {
+                            decisive: Some(why),
+                            ..
+                        }),
+                        _,
+                    ) => Some(why.clone()),
+                    (_, Some(v)) if now == e.verdict => {
+                        Some(format!("the look before gave the same verdict, {v}"))
+                    }
+                    _ => None,
+                };
+                weight = w;
+                e.firm = because.is_some();
                 e.verdict = now;
                 firm = e.firm;
                 e.answer = result
@@ -628,6 +649,8 @@ impl Background {
             seconds,
             firm,
             second,
+            weight,
+            because,
         })
     }
 }

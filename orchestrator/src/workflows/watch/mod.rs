@@ -12,6 +12,7 @@
 //! resume exactly where the last one saved.
 
 pub mod background;
+pub mod firm;
 pub mod modes;
 pub mod mqtt;
 pub mod online;
@@ -1267,6 +1268,8 @@ impl Watcher<'_> {
             seconds,
             firm,
             second,
+            weight,
+            because,
         } = finished;
         *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
         if self
@@ -1291,6 +1294,19 @@ impl Watcher<'_> {
             m.insert("change_time".into(), json!(change));
             m.insert("post_change_seconds".into(), json!(to - change));
             m.insert("firm".into(), json!(firm));
+            if let Some(w) = &weight {
+                m.insert("evidence".into(), json!(w));
+            }
+            if let Some(why) = &because {
+                // How much post-change data it waited for, and why that was enough.
+                m.insert(
+                    "waited".into(),
+                    json!(format!(
+                        "{:.1} s of post-change data, because {why}",
+                        to - change
+                    )),
+                );
+            }
             if let Some(c) = &second {
                 // It answered on the samples before a second change found in them.
                 m.insert(
