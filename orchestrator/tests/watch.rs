@@ -1339,6 +1339,14 @@ fn a_contact_that_starts_is_added_and_adopted() {
             d["firm"]
         );
     }
+    // The contact was there all along (the bumper did not appear: the force tripled): the
+    // firm look says it fits the samples before the change as well as the twin does.
+    let firm = of_kind(&all, "diagnosis")
+        .into_iter()
+        .find(|d| d["firm"] == true)
+        .expect("a firm look");
+    eprintln!("contact: before the change {}", firm["before_the_change"]);
+    assert_eq!(firm["before_the_change"]["consistent"], true, "{firm}");
     let adopted = of_kind(&all, "adopted");
     assert_eq!(adopted.len(), 1, "{all:?}");
     let a = adopted[0];
@@ -1382,6 +1390,8 @@ struct Kind {
     verdict: &'static str,
     /// Whether `--adopt` swaps its answer in (a sensor's fault is no structural change).
     adopted: bool,
+    /// An effect that appears at the change (not there before).
+    appears: bool,
 }
 
 /// Figures of one kind's stream, as measured.
@@ -1426,6 +1436,7 @@ fn kinds() -> Vec<Kind> {
             stream: |at| stream_with(31, at + AFTER_CHANGE, &[("k2", at, 0.85)]),
             verdict: "recalibrate:k2",
             adopted: true,
+            appears: false,
         },
         Kind {
             name: "added mass (m2 × 1.2)",
@@ -1433,6 +1444,7 @@ fn kinds() -> Vec<Kind> {
             stream: |at| stream_with(32, at + AFTER_CHANGE, &[("m2", at, 1.2)]),
             verdict: "recalibrate:m2",
             adopted: true,
+            appears: false,
         },
         Kind {
             name: "sensor gain drop (acc3 × 0.8)",
@@ -1440,6 +1452,7 @@ fn kinds() -> Vec<Kind> {
             stream: |at| gain_drop_stream(33, at + AFTER_CHANGE, 3, at, 0.8),
             verdict: "sensor_fault:acc3",
             adopted: false,
+            appears: false,
         },
         Kind {
             name: "friction appears (floor 1, 0.05 N)",
@@ -1456,6 +1469,7 @@ fn kinds() -> Vec<Kind> {
             },
             verdict: "add_physics:friction@1",
             adopted: true,
+            appears: true,
         },
     ]
 }
@@ -1500,6 +1514,14 @@ fn watch_a_kind(dir: &Path, kind: &Kind) -> Figures {
     );
     let verdict = background_verdict(firm);
     let first_look = background_verdict(diagnoses[0]);
+    if kind.appears {
+        // An effect that appeared at the change does not fit the samples before it.
+        eprintln!("{label}: before the change {}", firm["before_the_change"]);
+        assert_eq!(
+            firm["before_the_change"]["consistent"], false,
+            "{label}: {firm}"
+        );
+    }
     assert_eq!(verdict, kind.verdict, "{label}: {firm}");
     let adopted = of_kind(&all, "adopted");
     let end = of_kind(&all, "end")[0];

@@ -117,6 +117,60 @@ pub fn residuals_after(
     Ok(Some((after.data.time, residuals)))
 }
 
+/// How `candidate` (physics parameters set on `twin`: an effect switched on) fits the samples
+/// of `data` before a change at `at` — the hypothesis that it was there all along against the
+/// twin as it is: per response channel, the twin's and the candidate's residual sums of
+/// squares there, both run from `twin`'s start (rest, or its start values), the samples of the
+/// first `skip` s left out. None when fewer than two samples precede the change or a channel
+/// is no floor's response.
+pub fn before_the_change(
+    twin: &Twin,
+    candidate: &[(String, ParameterValue)],
+    data: &Measurement,
+    at: f64,
+    skip: f64,
+) -> Result<Option<(Vec<f64>, Vec<f64>)>> {
+    let k0 = data
+        .time
+        .iter()
+        .position(|&t| t >= at - 1e-9 * data.dt)
+        .unwrap_or(data.len());
+    if k0 < 2 {
+        return Ok(None);
+    }
+    let before = data.head(k0);
+    let mut with = twin.duplicate();
+    if let Some(physics) = with.component_mut(PHYSICS) {
+        physics.parameters.extend(candidate.iter().cloned());
+    }
+    let runs = [
+        run_physics(twin, &before, &BTreeMap::new(), &[], &[])?,
+        run_physics(&with, &before, &BTreeMap::new(), &[], &[])?,
+    ];
+    let from = before.time[0] + skip.min(0.5 * (before.time[k0 - 1] - before.time[0]));
+    let mut rss = [Vec::new(), Vec::new()];
+    for signal in &before.responses {
+        let ::structure::channel::Channel::Response { quantity, floor } = signal.channel else {
+            return Ok(None);
+        };
+        for (run, sums) in runs.iter().zip(&mut rss) {
+            let predicted = run.at(floor - 1, quantity);
+            sums.push(
+                signal
+                    .values
+                    .iter()
+                    .zip(predicted)
+                    .zip(&before.time)
+                    .filter(|(_, &t)| t >= from)
+                    .map(|((y, p), _)| (y - p) * (y - p))
+                    .sum(),
+            );
+        }
+    }
+    let [old, new] = rss;
+    Ok(Some((old, new)))
+}
+
 /// The state `twin`'s physics reaches at `data`'s last sample, run from rest at its first, as
 /// the start values another run takes to go on from there (`disp{i}_start`, `vel{i}_start`);
 /// None when its shear FMU has no start values.

@@ -33,12 +33,12 @@ use ::structure::channel::Channel;
 
 use serde_json::Value;
 
-use super::firm::{weigh, Weight};
+use super::firm::{weigh, Before, Weight};
 use super::online::{ChangePoint, CHANGE_LOOKBACK};
 use super::second;
 use crate::twin::data::{Measurement, Signal};
 use crate::twin::Twin;
-use crate::workflows::diagnose::change::{chained_state, starting_from};
+use crate::workflows::diagnose::change::{before_the_change, chained_state, starting_from};
 use crate::workflows::diagnose::{diagnose, Action, DiagnoseOptions, Diagnosis};
 
 /// The most post-change seconds a diagnosis waits for.
@@ -221,8 +221,13 @@ pub struct Saved {
     pub episode: Option<Episode>,
 }
 
-/// What a diagnosis's thread sends back: its result, and a second change it cut at.
-type Outcome = (Result<Diagnosis, String>, Option<ChangePoint>);
+/// What a diagnosis's thread sends back: its result, a second change it cut at, and how its
+/// effects fit the samples before its change.
+type Outcome = (
+    Result<Diagnosis, String>,
+    Option<ChangePoint>,
+    Option<Before>,
+);
 
 /// A finished diagnosis.
 pub struct Finished {
@@ -239,6 +244,8 @@ pub struct Finished {
     pub weight: Option<Weight>,
     /// Why it is firm: its own evidence, or the look before's same verdict.
     pub because: Option<String>,
+    /// An `add_physics` answer after a change: whether its effects were there before.
+    pub before: Option<Before>,
 }
 
 pub struct Background {
@@ -565,7 +572,7 @@ impl Background {
         }
         options.changed_at = job.change;
         std::thread::spawn(move || {
-            let mut second = None;
+            let (mut second, mut prior) = (None, None);
             let result = record(&job).and_then(|m| {
                 let (twin, m) = continued(&history, m, job.change).map_err(|e| e.to_string())?;
                 let m = match (job.change, &job.answer) {
@@ -579,18 +586,20 @@ impl Background {
                     }
                     _ => m,
                 };
-                diagnose(&twin, &m, &options).map_err(|e| e.to_string())
+                let d = diagnose(&twin, &m, &options).map_err(|e| e.to_string())?;
+                prior = job.change.and_then(|at| effect_before(&twin, &d, &m, at));
+                Ok(d)
             });
             // The watcher may have stopped waiting; nothing to do then.
-            let _ = send.send((result, second));
+            let _ = send.send((result, second, prior));
         });
         self.worker = Some((receive, Instant::now()));
     }
 
     fn collect(&mut self, wait: bool) -> Option<Finished> {
         let (receive, started) = self.worker.as_ref()?;
-        let stopped = || (Err("the diagnosis thread stopped".into()), None);
-        let (result, second) = if wait {
+        let stopped = || (Err("the diagnosis thread stopped".into()), None, None);
+        let (result, second, before) = if wait {
             receive.recv().unwrap_or_else(|_| stopped())
         } else {
             match receive.try_recv() {
@@ -651,6 +660,7 @@ impl Background {
             second,
             weight,
             because,
+            before,
         })
     }
 }
@@ -712,6 +722,27 @@ fn continued(
         Some(state) => Ok((starting_from(live, &state)?, m.samples(k..m.len()))),
         None => Ok((live.duplicate(), m)),
     }
+}
+
+/// Seconds of the samples before a change that [`effect_before`] leaves out: both twins run
+/// from rest there.
+const BEFORE_SKIP: f64 = 10.0;
+
+/// For an `add_physics` answer `d` after the change at `at`: how its effects fit the samples
+/// of `m` before the change ([`super::firm::before`]); None for any other answer.
+fn effect_before(twin: &Twin, d: &Diagnosis, m: &Measurement, at: f64) -> Option<Before> {
+    if d.action != Action::AddPhysics {
+        return None;
+    }
+    let answer = super::answer(d)?;
+    let (old, new) = before_the_change(twin, &answer, m, at, BEFORE_SKIP).ok()??;
+    let label = d
+        .effects
+        .iter()
+        .map(|e| e.name.label.clone())
+        .collect::<Vec<_>>()
+        .join("+");
+    Some(super::firm::before(&old, &new, &label, at))
 }
 
 /// `m`'s samples before `time`.

@@ -125,3 +125,59 @@ pub fn weigh(d: &Diagnosis) -> Weight {
     }
     w
 }
+
+/// The residual ratio within which an effect fits the samples before a change as well as the
+/// twin does (every channel's residual sum of squares at most 5 % larger).
+pub const AS_WELL: f64 = 1.05;
+
+/// The ratio below which it already acted there (some channel's residual cut by 5 %).
+pub const ACTED: f64 = 0.95;
+
+/// "The structure changed at t₀" against "an effect that was always there": how the effect a
+/// look added fits the samples before the change it was fitted after.
+#[derive(Debug, Clone, Serialize)]
+pub struct Before {
+    /// Per channel, the residual sum of squares before the change with the effect over
+    /// without.
+    pub ratio: Vec<f64>,
+    /// It fits them as well as the twin does: it may have been there all along.
+    pub consistent: bool,
+    /// It already acted there.
+    pub acting: bool,
+    /// What the verdict says of the change.
+    pub says: String,
+}
+
+/// [`Before`] from the residual sums of squares before the change at `at` without (`old`)
+/// and with (`new`) the effect `label`.
+pub fn before(old: &[f64], new: &[f64], label: &str, at: f64) -> Before {
+    let ratio: Vec<f64> = old.iter().zip(new).map(|(o, n)| n / o).collect();
+    let consistent = ratio.iter().all(|&r| r <= AS_WELL);
+    let acting = consistent && ratio.iter().any(|&r| r <= ACTED);
+    let best = ratio.iter().copied().fold(f64::INFINITY, f64::min);
+    let worst = ratio.iter().copied().fold(0.0, f64::max);
+    let says = if acting {
+        format!(
+            "{label} already acted before the change at {at:.3} s (it cuts the residual there \
+             to {best:.2} of the twin's): it was there before, and the change at {at:.3} s is \
+             something else"
+        )
+    } else if consistent {
+        format!(
+            "{label} fits the samples before the change at {at:.3} s as well as the twin does \
+             (it does not act there): it may have been there all along, the change at {at:.3} s \
+             being what made it act (a larger force, a drift) rather than its appearing"
+        )
+    } else {
+        format!(
+            "{label} does not fit the samples before the change at {at:.3} s (their residual × \
+             {worst:.2} with it): it appeared at the change"
+        )
+    };
+    Before {
+        ratio,
+        consistent,
+        acting,
+        says,
+    }
+}

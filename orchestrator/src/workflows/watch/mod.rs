@@ -1270,6 +1270,7 @@ impl Watcher<'_> {
             second,
             weight,
             because,
+            before,
         } = finished;
         *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
         if self
@@ -1296,6 +1297,10 @@ impl Watcher<'_> {
             m.insert("firm".into(), json!(firm));
             if let Some(w) = &weight {
                 m.insert("evidence".into(), json!(w));
+            }
+            if let Some(b) = &before {
+                // Its effects against the samples before the change: there all along?
+                m.insert("before_the_change".into(), json!(b));
             }
             if let Some(why) = &because {
                 // How much post-change data it waited for, and why that was enough.
