@@ -66,7 +66,7 @@ pub fn weigh(d: &Diagnosis) -> Weight {
             let Some(r) = &d.recalibration else {
                 return w;
             };
-            w.lead = best_effect.is_finite().then(|| r.evidence - best_effect);
+            w.lead = best_effect.is_finite().then_some(r.evidence - best_effect);
             let mut moves: Vec<_> = r.parameters.iter().collect();
             moves.sort_by(|a, b| b.change_in_sd.abs().total_cmp(&a.change_in_sd.abs()));
             let Some(site) = moves.first() else {
@@ -103,7 +103,7 @@ pub fn weigh(d: &Diagnosis) -> Weight {
                 .map(|c| c.evidence)
                 .chain(d.recalibration.as_ref().map(|r| r.evidence))
                 .fold(f64::NEG_INFINITY, f64::max);
-            w.lead = others.is_finite().then(|| chosen.evidence - others);
+            w.lead = others.is_finite().then_some(chosen.evidence - others);
             // The fitted parameters (a contact's side is chosen, not fitted: it has no sd).
             let width = e
                 .parameters
