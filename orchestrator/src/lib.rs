@@ -10,11 +10,14 @@
 //! - `blocks`: zero-time blocks of the master (the LQR, the active-learning supervisor);
 //! - `synth`: the synthetic structure that makes records with known truth;
 //! - `report`: JSON and SVG plots;
-//! - `commands`: the `twin` CLI (clap, anyhow, printing) over all of the above;
+//! - `choice`: the options with a closed set of values, by name;
 //! - `fsutil`: the one atomic file write.
+//!
+//! The `twin` command line (clap, anyhow, progress bars, printing) is the binary's own
+//! (`src/commands`, a module of `main.rs`): the library computes and returns data.
 
 pub mod blocks;
-pub mod commands;
+pub mod choice;
 pub mod cosim;
 pub mod evaluation;
 pub mod fsutil;

@@ -4,9 +4,16 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+mod commands;
+
+// The library's modules at the binary's root: the commands name them `crate::…`.
+use orchestrator::{
+    choice, cosim, evaluation, fsutil, record, report, serve, synth, twin, workflows,
+};
+
 fn main() -> ExitCode {
     restore_sigpipe();
-    match orchestrator::commands::run(orchestrator::commands::Cli::parse()) {
+    match commands::run(commands::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("twin: error: {err:#}");

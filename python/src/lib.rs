@@ -122,16 +122,15 @@ pub(crate) fn invalid(kind: Kind, message: impl Into<String>) -> PyErr {
 
 /// A keyword argument naming one of a CLI flag's values (`estimator="kalman"`), read as the
 /// CLI reads `--FLAG VALUE`.
-pub(crate) fn choice<T: clap::ValueEnum>(kind: Kind, flag: &str, text: &str) -> PyResult<T> {
-    T::from_str(text, false).map_err(|_| {
-        let names: Vec<String> = T::value_variants()
-            .iter()
-            .filter_map(|v| v.to_possible_value())
-            .map(|p| p.get_name().to_string())
-            .collect();
+pub(crate) fn choice<T: orchestrator::choice::Choice>(
+    kind: Kind,
+    flag: &str,
+    text: &str,
+) -> PyResult<T> {
+    T::from_name(text).ok_or_else(|| {
         invalid(
             kind,
-            format!("--{flag} {text}: expected one of {}", names.join(", ")),
+            format!("--{flag} {text}: expected one of {}", T::names().join(", ")),
         )
     })
 }

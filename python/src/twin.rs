@@ -972,7 +972,7 @@ impl Twin {
         let options = TrainOptions {
             lags: lags.unwrap_or(d.lags),
             target: match target {
-                Some(t) => choice::<orchestrator::commands::Target>(kind, "target", t)?.into(),
+                Some(t) => choice::<fmu_gp_corrector::TargetForm>(kind, "target", t)?,
                 None => d.target,
             },
             transient: transient.unwrap_or(d.transient),
@@ -1040,7 +1040,7 @@ impl Twin {
         let options = LearnOptions {
             lags: lags.unwrap_or(d.lags),
             target: match target {
-                Some(t) => choice::<orchestrator::commands::Target>(kind, "target", t)?.into(),
+                Some(t) => choice::<fmu_gp_corrector::TargetForm>(kind, "target", t)?,
                 None => d.target,
             },
             transient: transient.unwrap_or(d.transient),

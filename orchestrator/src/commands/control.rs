@@ -33,10 +33,10 @@ pub struct ControlArgs {
     #[arg(long = "r", default_value_t = ControlOptions::default().r)]
     pub r: f64,
     /// Unit of the designed state: q and R mean something only with it.
-    #[arg(long, value_enum, default_value_t = ControlOptions::default().unit)]
+    #[arg(long, value_parser = super::choice::<StateUnit>(), default_value_t = ControlOptions::default().unit)]
     pub state_unit: StateUnit,
     /// How the controller estimates the state from the measured accelerations.
-    #[arg(long, value_enum, default_value_t = ControlOptions::default().estimator)]
+    #[arg(long, value_parser = super::choice::<EstimatorChoice>(), default_value_t = ControlOptions::default().estimator)]
     pub estimator: EstimatorChoice,
     /// Corner (Hz) of the integrating estimator's drift removal.
     #[arg(long, default_value_t = ControlOptions::default().highpass_hz)]

@@ -82,7 +82,7 @@ pub struct Common {
     pub split: Option<Cut>,
     /// How the substructures are coupled: auto (one ODE for an actuator without dynamics, as
     /// the paper's simplified simulation; the stepped loop otherwise), monolithic or stepped.
-    #[arg(long, value_enum, default_value_t = HybridOptions::default().coupling)]
+    #[arg(long, value_parser = super::choice::<Coupling>(), default_value_t = HybridOptions::default().coupling)]
     pub coupling: Coupling,
     /// JSON report.
     #[arg(long)]

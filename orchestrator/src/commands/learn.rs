@@ -11,6 +11,7 @@ use crate::workflows::learn::{
     chosen_modes, learned_twin, prepare, run_modes, table, write_plots, LearnOptions, Mode,
     Stretch, FORGETTING,
 };
+use fmu_gp_corrector::TargetForm;
 
 /// `--mode`: the query decision (the adaptive mode's forgetting factor is `--forgetting`).
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -65,8 +66,8 @@ pub struct LearnArgs {
     pub threshold: Option<f64>,
     #[arg(long, default_value_t = LearnOptions::default().lags)]
     pub lags: usize,
-    #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
-    pub target: super::Target,
+    #[arg(long, value_parser = super::choice::<TargetForm>(), default_value = "discrepancy")]
+    pub target: TargetForm,
     /// Seconds at the start of each record neither streamed nor scored.
     #[arg(long, default_value_t = LearnOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,

@@ -2,6 +2,7 @@
 //! One file per subcommand; everything that parses arguments, prints or writes a report lives
 //! here, and the library underneath returns typed errors.
 
+use crate::choice::Choice;
 use std::io::Write;
 use std::path::Path;
 
@@ -119,20 +120,16 @@ pub(crate) fn transient_seconds(text: &str) -> Result<f64, String> {
     }
 }
 
-/// `--target`: what the GP corrector models (`twin train`, `twin learn`).
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-pub enum Target {
-    Discrepancy,
-    Measured,
-}
-
-impl From<Target> for fmu_gp_corrector::TargetForm {
-    fn from(target: Target) -> Self {
-        match target {
-            Target::Discrepancy => fmu_gp_corrector::TargetForm::Discrepancy,
-            Target::Measured => fmu_gp_corrector::TargetForm::Measured,
-        }
-    }
+/// The parser of an option whose values the library names ([`Choice`]): each name with its
+/// line of help in `--help`, the value itself parsed.
+pub(crate) fn choice<T: Choice + Send + Sync>() -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(
+        T::CHOICES
+            .iter()
+            .map(|&(name, help, _)| PossibleValue::new(name).help(help)),
+    )
+    .map(|name| T::from_name(&name).expect("clap accepts the listed names only"))
 }
 
 pub(crate) use crate::fsutil::{write_atomically, write_text_atomically};

@@ -42,7 +42,7 @@ pub struct RunArgs {
     /// (each component sees what the ones before it produced at this point, until nothing
     /// changes) or jacobi (every component reads the outputs as the last step left them, as
     /// fmpy's simulate_ssp does).
-    #[arg(long, value_enum, default_value_t = RunOptions::default().algorithm)]
+    #[arg(long, value_parser = super::choice::<Algorithm>(), default_value_t = RunOptions::default().algorithm)]
     pub algorithm: Algorithm,
     /// Plot (.svg) of every recorded numeric column against time.
     #[arg(long)]

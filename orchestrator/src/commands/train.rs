@@ -7,6 +7,7 @@ use anyhow::{bail, Result};
 use super::write_json;
 use crate::twin::Twin;
 use crate::workflows::train::{train_selected, LagSelection, TrainOptions, SELECTION_STRIDE};
+use fmu_gp_corrector::TargetForm;
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -27,8 +28,8 @@ pub struct TrainArgs {
     pub lags: usize,
     /// What the GP models: the discrepancy measured − physics (default), or the measured
     /// acceleration itself (the reference paper's zero-mean form).
-    #[arg(long, value_enum, default_value_t = super::Target::Discrepancy)]
-    pub target: super::Target,
+    #[arg(long, value_parser = super::choice::<TargetForm>(), default_value = "discrepancy")]
+    pub target: TargetForm,
     /// Seconds at the start of the record not used for training.
     #[arg(long, default_value_t = TrainOptions::default().transient, value_parser = super::transient_seconds)]
     pub transient: f64,

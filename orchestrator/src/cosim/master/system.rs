@@ -191,12 +191,30 @@ pub enum Port {
     Signal(usize),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+/// How the master steps the slaves within a communication step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Algorithm {
     #[default]
     GaussSeidel,
     Jacobi,
 }
+
+impl crate::choice::Choice for Algorithm {
+    const CHOICES: &'static [(&'static str, &'static str, Self)] = &[
+        (
+            "gauss-seidel",
+            "each component sees what the ones before it produced at this point",
+            Algorithm::GaussSeidel,
+        ),
+        (
+            "jacobi",
+            "every component reads the outputs as the last step left them",
+            Algorithm::Jacobi,
+        ),
+    ];
+}
+
+crate::choice::display_by_name!(Algorithm);
 
 /// When observers see a communication point `t_k` (k ≥ 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -15,7 +15,7 @@ use super::ControlError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 
 /// The unit the state is designed in: the weights q and R mean something only with it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum StateUnit {
     /// Metres and metres per second (the SI units the twin's parameters are in).
@@ -23,6 +23,19 @@ pub enum StateUnit {
     /// Millimetres and millimetres per second.
     Mm,
 }
+
+impl crate::choice::Choice for StateUnit {
+    const CHOICES: &'static [(&'static str, &'static str, Self)] = &[
+        ("m", "metres and metres per second", StateUnit::M),
+        (
+            "mm",
+            "millimetres and millimetres per second",
+            StateUnit::Mm,
+        ),
+    ];
+}
+
+crate::choice::display_by_name!(StateUnit);
 
 impl StateUnit {
     /// Metres per state unit.

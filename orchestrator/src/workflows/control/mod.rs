@@ -107,7 +107,7 @@ pub struct ControlOptions {
     pub actuator_floor: usize,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EstimatorChoice {
     /// Integrate the measured accelerations twice with drift removal (the paper's).
@@ -115,6 +115,23 @@ pub enum EstimatorChoice {
     /// A steady-state Kalman observer on the twin's linear model.
     Kalman,
 }
+
+impl crate::choice::Choice for EstimatorChoice {
+    const CHOICES: &'static [(&'static str, &'static str, Self)] = &[
+        (
+            "integrate",
+            "integrate the measured accelerations twice with drift removal",
+            EstimatorChoice::Integrate,
+        ),
+        (
+            "kalman",
+            "a steady-state Kalman observer on the twin's linear model",
+            EstimatorChoice::Kalman,
+        ),
+    ];
+}
+
+crate::choice::display_by_name!(EstimatorChoice);
 
 /// Attenuation at one resonance: passive peak over controlled peak, per floor, dB.
 #[derive(Clone, Debug, Serialize)]

@@ -34,7 +34,7 @@ pub struct Setup {
 }
 
 /// How the substructures are coupled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Coupling {
     /// One ODE when the actuator has no dynamics (no delay, lag or compensation: the paper's
@@ -45,6 +45,28 @@ pub enum Coupling {
     /// The substructures stepped at the control rate with the actuator between, as a real test.
     Stepped,
 }
+
+impl crate::choice::Choice for Coupling {
+    const CHOICES: &'static [(&'static str, &'static str, Self)] = &[
+        (
+            "auto",
+            "one ODE when the actuator has no dynamics, the stepped loop otherwise",
+            Coupling::Auto,
+        ),
+        (
+            "monolithic",
+            "the assembly as one ODE (an actuator without dynamics only)",
+            Coupling::Monolithic,
+        ),
+        (
+            "stepped",
+            "the substructures stepped at the control rate with the actuator between",
+            Coupling::Stepped,
+        ),
+    ];
+}
+
+crate::choice::display_by_name!(Coupling);
 
 impl Setup {
     /// What the specimen holds, in words.
