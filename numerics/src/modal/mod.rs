@@ -6,6 +6,7 @@
 
 pub mod eigen;
 pub mod error;
+pub mod fdd;
 pub mod indicators;
 pub mod lscf;
 pub mod spectral;

@@ -106,6 +106,11 @@ impl Welch {
         })
     }
 
+    /// The window's samples (periodic Hann).
+    pub fn window(&self) -> &[f64] {
+        &self.window
+    }
+
     pub fn segment_length(&self) -> usize {
         self.segment_length
     }

@@ -10,7 +10,8 @@ use anyhow::{bail, Result};
 use super::write_json;
 use crate::record::{has_excitation_column, AmbientRecord, Measurement, ReadOptions};
 use crate::twin::Twin;
-use crate::workflows::modal::identify::{MethodModes, RecordModes};
+use crate::workflows::modal::identify::{FddModes, MethodModes, RecordModes};
+use crate::workflows::modal::ModeVerdict;
 use crate::workflows::modal::{
     identify, identify_ambient, pair_modes, twin_modes, IdentifyOptions, ModalOptions,
     ModeComparison, TwinModes,
@@ -307,6 +308,69 @@ pub(crate) fn print_record_modes(record: &RecordModes) {
         print_method(io);
     }
     print_method(&record.ssi);
+    print_fdd(&record.fdd);
+    print_verdicts(&record.verdicts);
+}
+
+fn print_fdd(fdd: &FddModes) {
+    println!(
+        "  {} (band {:.3}..{:.3} Hz): {} modes",
+        fdd.method,
+        fdd.band.0,
+        fdd.band.1,
+        fdd.modes.len()
+    );
+    for (i, m) in fdd.modes.iter().enumerate() {
+        let id = &m.identified;
+        println!(
+            "    mode {}: {:.4} ± {:.4} Hz  ζ {:.4} ± {:.4} %  MPC {:.3}",
+            i + 1,
+            id.frequency,
+            id.frequency_sd,
+            100.0 * id.damping,
+            100.0 * id.damping_sd,
+            id.mpc
+        );
+    }
+}
+
+/// The methods' verdicts, one line per mode: who found it, where, its damping, the MACs.
+fn print_verdicts(verdicts: &[ModeVerdict]) {
+    println!("  the methods side by side:");
+    for v in verdicts {
+        let found: Vec<String> = v
+            .found_by
+            .iter()
+            .map(|m| {
+                format!(
+                    "{} {:.4} Hz ζ {:.3} %",
+                    m.method,
+                    m.frequency,
+                    100.0 * m.damping
+                )
+            })
+            .collect();
+        let macs: Vec<String> = v
+            .macs
+            .iter()
+            .map(|a| format!("MAC {}–{} {:.3}", a.methods.0, a.methods.1, a.mac))
+            .collect();
+        println!(
+            "    {:.4} Hz: {}{}{}",
+            v.frequency,
+            found.join(", "),
+            if macs.is_empty() {
+                String::new()
+            } else {
+                format!("; {}", macs.join(", "))
+            },
+            if v.one_method_only {
+                "  [one method only]"
+            } else {
+                ""
+            }
+        );
+    }
 }
 
 fn print_comparison(record: &RecordModes, comparison: &ModeComparison) {

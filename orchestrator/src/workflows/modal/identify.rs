@@ -11,6 +11,7 @@ use structure::channel::{Channel, Quantity};
 
 use super::pair::ObservedMode;
 use crate::record::{AmbientRecord, Measurement, Signal};
+use numerics::modal::fdd::{fdd, FddOptions};
 use numerics::modal::lscf::{lscf, LscfOptions, Weighting};
 use numerics::modal::spectral::{Frf, Run, Welch, MIN_SEGMENT};
 use numerics::modal::ssi::{ssi_cov, SsiOptions};
@@ -177,6 +178,20 @@ pub struct MethodModes {
     pub rejected: Vec<RejectedMode>,
 }
 
+/// The non-parametric method's modes (FDD's peaks, EFDD's frequencies and damping), a
+/// cross-check of the parametric ones.
+#[derive(Debug, Clone, Serialize)]
+pub struct FddModes {
+    /// `FDD/EFDD`.
+    pub method: &'static str,
+    /// Hz, the band peaks were picked in.
+    pub band: (f64, f64),
+    /// The first singular value of the outputs' spectral matrix, at the spectrum's frequencies.
+    pub first_singular: Vec<f64>,
+    pub modes: Vec<RecordMode>,
+    pub rejected: Vec<RejectedMode>,
+}
+
 /// Everything identified from a record.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordModes {
@@ -195,6 +210,9 @@ pub struct RecordModes {
     pub spectrum: SpectrumReport,
     pub ssi: MethodModes,
     pub input_output: Option<MethodModes>,
+    pub fdd: FddModes,
+    /// Every method's modes side by side.
+    pub verdicts: Vec<super::verdicts::ModeVerdict>,
     pub options: IdentifyOptions,
 }
 
@@ -390,6 +408,21 @@ fn identify_runs(
         }
         None => (None, None),
     };
+    let fdd_band = input_output.as_ref().and_then(|m| m.band).unwrap_or((
+        spectrum.frequencies.get(1).copied().unwrap_or(0.0),
+        DEFAULT_BAND_TOP * estimation.sampling.nyquist,
+    ));
+    let fdd = estimation.non_parametric(first, &floors, &screen, fdd_band)?;
+    let verdicts = super::verdicts::verdicts(
+        &input_output
+            .iter()
+            .map(|m| (m.method, m.modes.as_slice()))
+            .chain([
+                (ssi.method, ssi.modes.as_slice()),
+                (fdd.method, fdd.modes.as_slice()),
+            ])
+            .collect::<Vec<_>>(),
+    );
 
     Ok(RecordModes {
         records: estimation.sampling.records,
@@ -404,6 +437,8 @@ fn identify_runs(
         spectrum,
         ssi,
         input_output,
+        fdd,
+        verdicts,
         options: options.clone(),
     })
 }
@@ -624,6 +659,36 @@ impl Estimation<'_> {
         let ssi_orders = ssi_cov(ssi_runs, self.sampling.dt, &self.options.ssi())
             .map_err(self.sampling.method_err("SSI-COV"))?;
         self.chosen_modes("SSI-COV", None, ssi_orders, screen, &ssi_floors, evidence)
+    }
+
+    /// FDD/EFDD's modes over `band`, screened as the others' (on a roving test, the first
+    /// run's, like SSI-COV).
+    fn non_parametric(
+        &self,
+        first: &RunView<'_>,
+        floors: &[(usize, (usize, i32))],
+        screen: &ScreenOptions,
+        band: (f64, f64),
+    ) -> Result<FddModes, IdentifyError> {
+        let (runs, floors) = if self.roving {
+            let channels: Vec<Channel> = first.responses.iter().map(|s| s.channel).collect();
+            (&self.spectral_runs[..1], shape_floors(&channels))
+        } else {
+            (&self.spectral_runs[..], floors.to_vec())
+        };
+        let spectra = self
+            .welch
+            .output_spectra(runs)
+            .map_err(self.sampling.method_err("FDD's spectra"))?;
+        let found = fdd(&spectra, self.welch.window(), &FddOptions::over(band));
+        let (modes, rejected) = screen_modes(found.modes, screen);
+        Ok(FddModes {
+            method: "FDD/EFDD",
+            band,
+            first_singular: found.first_singular,
+            modes: record_modes(modes, &floors),
+            rejected,
+        })
     }
 
     /// A method's stabilisation diagram over its model orders and the physical modes chosen

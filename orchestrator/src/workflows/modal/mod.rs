@@ -9,12 +9,14 @@ pub mod explain;
 pub mod identify;
 pub mod pair;
 pub mod twin;
+pub mod verdicts;
 
 pub use evidence::{evidence_of, modal_evidence, ModalBand, ModalEvidence, ModeShift};
 pub use explain::{explain_shifts, Explanation};
 pub use identify::{identify, identify_ambient, IdentifyError, IdentifyOptions, RecordModes};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
 pub use twin::{twin_modes, ModalOptions, TwinMode, TwinModes};
+pub use verdicts::{verdicts, ModeVerdict};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModalError {

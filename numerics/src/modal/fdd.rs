@@ -1,0 +1,248 @@
+//! Frequency-domain decomposition (FDD) and its enhanced form (EFDD), output-only and
+//! non-parametric: the first singular value of the outputs' spectral matrix at every bin, its
+//! peaks the modes (their singular vectors the shapes), each mode's damping and frequency from
+//! its SDOF bell — the bins round the peak whose singular vectors stay within a MAC of the
+//! peak's — taken back to the time domain (an inverse FFT: the mode's correlation function),
+//! its zero crossings giving the frequency and its extremes' decay the damping (from 0.9 of
+//! the first down to 0.2: the bell's truncation leaves a tail that no longer decays).
+
+use nalgebra::DMatrix;
+use rustfft::FftPlanner;
+
+use super::spectral::OutputSpectra;
+use super::stabilisation::{normalised, IdentifiedMode};
+use super::{mac, mpc, mpd, Complex};
+
+/// How FDD picks its peaks and EFDD its bells.
+#[derive(Debug, Clone, Copy)]
+pub struct FddOptions {
+    /// Hz, the band peaks are picked in.
+    pub band: (f64, f64),
+    /// A peak is the largest first singular value within this fraction of its frequency
+    /// either side, and at least `prominence` × the lowest value there on each side.
+    pub window: f64,
+    pub prominence: f64,
+    /// A bin is in a mode's bell while its singular vector's MAC with the peak's is at least
+    /// this (and the first singular value keeps falling away from the peak).
+    pub bell_mac: f64,
+    /// … and its first singular value at least this fraction of the peak's.
+    pub bell_floor: f64,
+}
+
+impl FddOptions {
+    pub fn over(band: (f64, f64)) -> FddOptions {
+        FddOptions {
+            band,
+            window: 0.1,
+            prominence: 2.0,
+            bell_mac: 0.8,
+            bell_floor: 0.05,
+        }
+    }
+}
+
+/// The first singular value at every bin and the modes of its peaks.
+#[derive(Debug, Clone)]
+pub struct Fdd {
+    pub first_singular: Vec<f64>,
+    pub modes: Vec<IdentifiedMode>,
+}
+
+/// FDD with EFDD's frequencies and damping on the spectra of a Welch estimate whose window
+/// is `window` (its samples: the lags the correlation is read over).
+pub fn fdd(spectra: &OutputSpectra, window: &[f64], options: &FddOptions) -> Fdd {
+    let n = spectra.outputs;
+    let (values, vectors): (Vec<f64>, Vec<Vec<Complex>>) = spectra
+        .cross
+        .iter()
+        .map(|g| {
+            let matrix = DMatrix::from_fn(n, n, |i, j| g[i * n + j]);
+            let svd = matrix.svd(true, false);
+            let (k, s) = svd
+                .singular_values
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .map_or((0, 0.0), |(k, s)| (k, *s));
+            let u = svd
+                .u
+                .map_or_else(Vec::new, |u| u.column(k).iter().copied().collect());
+            (s, u)
+        })
+        .unzip();
+    let modes = peaks(&spectra.frequencies, &values, options)
+        .into_iter()
+        .filter_map(|peak| {
+            efdd(
+                &spectra.frequencies,
+                &values,
+                &vectors,
+                window,
+                peak,
+                options,
+            )
+        })
+        .collect();
+    Fdd {
+        first_singular: values,
+        modes,
+    }
+}
+
+/// The bins of the band where the first singular value peaks.
+fn peaks(frequencies: &[f64], values: &[f64], options: &FddOptions) -> Vec<usize> {
+    let df = frequencies.get(1).copied().unwrap_or(1.0);
+    (1..values.len().saturating_sub(1))
+        .filter(|&k| {
+            let f = frequencies[k];
+            if f < options.band.0 || f > options.band.1 {
+                return false;
+            }
+            let reach = ((options.window * f / df).ceil() as usize).max(2);
+            let below = &values[k.saturating_sub(reach)..k];
+            let above = &values[k + 1..(k + 1 + reach).min(values.len())];
+            let highest = below.iter().chain(above).all(|v| *v < values[k]);
+            let low = |side: &[f64]| side.iter().copied().fold(f64::INFINITY, f64::min);
+            highest
+                && low(below) * options.prominence <= values[k]
+                && low(above) * options.prominence <= values[k]
+        })
+        .collect()
+}
+
+/// A peak's mode: its bell's correlation function's frequency and damping, the peak's
+/// singular vector as its shape. None when the correlation decays too fast to read.
+fn efdd(
+    frequencies: &[f64],
+    values: &[f64],
+    vectors: &[Vec<Complex>],
+    window: &[f64],
+    peak: usize,
+    options: &FddOptions,
+) -> Option<IdentifiedMode> {
+    let inside = |k: usize| {
+        mac(&vectors[k], &vectors[peak]) >= options.bell_mac
+            && values[k] >= options.bell_floor * values[peak]
+    };
+    let (mut low, mut high) = (peak, peak);
+    while low > 1 && inside(low - 1) {
+        low -= 1;
+    }
+    while high + 1 < values.len() && inside(high + 1) {
+        high += 1;
+    }
+    let correlation = bell_correlation(values, low..=high, window);
+    let dt = 1.0 / (2.0 * frequencies[frequencies.len() - 1]);
+    let (frequency, frequency_sd, damping, damping_sd) = decay(&correlation, dt)?;
+    let shape = normalised(vectors[peak].clone());
+    Some(IdentifiedMode {
+        frequency,
+        frequency_sd,
+        damping,
+        damping_sd,
+        mpc: mpc(&shape),
+        mpd: mpd(&shape),
+        shape_sd: vec![0.0; shape.len()],
+        shape,
+        orders: Vec::new(),
+    })
+}
+
+/// The bell (the first singular value over `bins`, zero elsewhere) back in the time domain:
+/// its correlation function, normalised to 1 at lag 0, over the lags where the window's
+/// autocorrelation (the Welch estimate's taper) is above a tenth.
+fn bell_correlation(
+    values: &[f64],
+    bins: std::ops::RangeInclusive<usize>,
+    window: &[f64],
+) -> Vec<f64> {
+    let length = window.len();
+    let mut spectrum = vec![Complex::new(0.0, 0.0); length];
+    for k in bins {
+        spectrum[k] = Complex::new(values[k], 0.0);
+        if k > 0 && k < length - k {
+            spectrum[length - k] = Complex::new(values[k], 0.0);
+        }
+    }
+    FftPlanner::new()
+        .plan_fft_inverse(length)
+        .process(&mut spectrum);
+    let power: f64 = window.iter().map(|w| w * w).sum();
+    let first = spectrum[0].re;
+    (0..length / 2)
+        .map_while(|lag| {
+            let taper: f64 = window[..length - lag]
+                .iter()
+                .zip(&window[lag..])
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                / power;
+            (taper > 0.1).then(|| spectrum[lag].re / first)
+        })
+        .collect()
+}
+
+/// Frequency (Hz) and damping of a decaying correlation sampled every `dt` s, each with the
+/// standard error of its regression: the zero crossings' times against their count (half
+/// periods), the logarithm of the extremes between them against their times (between 0.9 and
+/// 0.2 of the first value, up to the first below that). None with fewer than three of either.
+fn decay(correlation: &[f64], dt: f64) -> Option<(f64, f64, f64, f64)> {
+    let crossings: Vec<f64> = correlation
+        .windows(2)
+        .enumerate()
+        .filter(|(_, w)| w[0] * w[1] < 0.0)
+        .map(|(i, w)| (i as f64 + w[0] / (w[0] - w[1])) * dt)
+        .collect();
+    let extremes: Vec<(f64, f64)> = crossings
+        .windows(2)
+        .filter_map(|c| {
+            let (a, b) = ((c[0] / dt).ceil() as usize, (c[1] / dt).floor() as usize);
+            (a..=b.min(correlation.len() - 1))
+                .map(|i| (i as f64 * dt, correlation[i].abs()))
+                .max_by(|x, y| x.1.total_cmp(&y.1))
+        })
+        .skip_while(|(_, a)| *a > 0.9)
+        .take_while(|(_, a)| *a >= 0.2)
+        .collect();
+    if crossings.len() < 3 || extremes.len() < 3 {
+        return None;
+    }
+    let counts: Vec<(f64, f64)> = crossings
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (i as f64, *t))
+        .collect();
+    let (half_period, half_period_se) = slope(&counts);
+    let logs: Vec<(f64, f64)> = extremes.iter().map(|(t, a)| (*t, a.ln())).collect();
+    let (rate, rate_se) = slope(&logs);
+    let damped = std::f64::consts::PI / half_period;
+    let sigma = -rate;
+    let natural = (damped * damped + sigma * sigma).sqrt();
+    let tau = 2.0 * std::f64::consts::PI;
+    Some((
+        natural / tau,
+        damped / half_period * half_period_se / tau,
+        sigma / natural,
+        rate_se / natural,
+    ))
+}
+
+/// The least-squares slope of y on x and its standard error.
+fn slope(points: &[(f64, f64)]) -> (f64, f64) {
+    let n = points.len() as f64;
+    let mx = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let b = sxy / sxx;
+    let residual: f64 = points
+        .iter()
+        .map(|p| (p.1 - my - b * (p.0 - mx)).powi(2))
+        .sum();
+    let se = if points.len() > 2 {
+        (residual / (n - 2.0) / sxx).sqrt()
+    } else {
+        0.0
+    };
+    (b, se)
+}

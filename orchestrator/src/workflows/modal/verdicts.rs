@@ -1,0 +1,98 @@
+//! The methods' verdicts side by side: the modes of every method (LSCF, SSI-COV, FDD/EFDD)
+//! grouped by frequency into one table — per mode, the methods that found it with their
+//! frequencies and damping, the MAC between their shapes, and whether one method alone found
+//! it (a mode to look at twice).
+
+use serde::Serialize;
+
+use super::identify::RecordMode;
+use numerics::modal::mac;
+
+/// Two methods' modes within this relative frequency of each other are one mode.
+pub const SAME_MODE: f64 = 0.02;
+
+/// One method's answer for a mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodVerdict {
+    pub method: &'static str,
+    /// Hz.
+    pub frequency: f64,
+    pub damping: f64,
+    pub damping_sd: f64,
+}
+
+/// The MAC between two methods' shapes of one mode (when their shapes are at the same floors).
+#[derive(Debug, Clone, Serialize)]
+pub struct ShapeAgreement {
+    pub methods: (&'static str, &'static str),
+    pub mac: f64,
+}
+
+/// One row of the table.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeVerdict {
+    /// Hz, the mean of the methods' frequencies.
+    pub frequency: f64,
+    pub found_by: Vec<MethodVerdict>,
+    pub macs: Vec<ShapeAgreement>,
+    /// Found by one method only (of more than one that ran).
+    pub one_method_only: bool,
+}
+
+/// The table of `methods` (each its name and modes), by frequency.
+pub fn verdicts(methods: &[(&'static str, &[RecordMode])]) -> Vec<ModeVerdict> {
+    let mut all: Vec<(usize, &RecordMode)> = methods
+        .iter()
+        .enumerate()
+        .flat_map(|(k, (_, modes))| modes.iter().map(move |m| (k, m)))
+        .collect();
+    all.sort_by(|a, b| {
+        a.1.identified
+            .frequency
+            .total_cmp(&b.1.identified.frequency)
+    });
+    let mut rows: Vec<Vec<(usize, &RecordMode)>> = Vec::new();
+    for (k, m) in all {
+        match rows.last_mut() {
+            Some(row)
+                if (m.identified.frequency / row[0].1.identified.frequency - 1.0).abs()
+                    <= SAME_MODE
+                    && row.iter().all(|(other, _)| *other != k) =>
+            {
+                row.push((k, m))
+            }
+            _ => rows.push(vec![(k, m)]),
+        }
+    }
+    rows.into_iter().map(|row| verdict(methods, &row)).collect()
+}
+
+fn verdict(methods: &[(&'static str, &[RecordMode])], row: &[(usize, &RecordMode)]) -> ModeVerdict {
+    let found_by: Vec<MethodVerdict> = row
+        .iter()
+        .map(|(k, m)| MethodVerdict {
+            method: methods[*k].0,
+            frequency: m.identified.frequency,
+            damping: m.identified.damping,
+            damping_sd: m.identified.damping_sd,
+        })
+        .collect();
+    let mut macs = Vec::new();
+    for (i, (a, ma)) in row.iter().enumerate() {
+        for (b, mb) in &row[i + 1..] {
+            if ma.displacement_shape.len() == mb.displacement_shape.len() {
+                macs.push(ShapeAgreement {
+                    methods: (methods[*a].0, methods[*b].0),
+                    mac: mac(&ma.displacement_shape, &mb.displacement_shape),
+                });
+            }
+        }
+    }
+    let ran = methods.len();
+    ModeVerdict {
+        frequency: found_by.iter().map(|v| v.frequency).sum::<f64>() / found_by.len() as f64,
+        one_method_only: ran > 1 && found_by.len() == 1,
+        found_by,
+        macs,
+    }
+}
