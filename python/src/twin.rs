@@ -311,7 +311,7 @@ impl Twin {
             let compared = compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
                 .map_err(|e| to_py(kind, e))?;
             if let Some(path) = &plot {
-                orchestrator::workflows::compare::plot(
+                orchestrator::report::plot_compared(
                     &self.twin, data, &compared, &options, path, frf,
                 )
                 .map_err(|e| to_py(kind, e))?;
@@ -420,13 +420,16 @@ impl Twin {
             let v = calibrate_validated(&self.twin, &data_runs, &validation, &setup)
                 .map_err(|e| to_py(kind, e))?;
             if let Some(path) = &plot {
-                orchestrator::workflows::calibrate::validated::plot(
+                let comparison = orchestrator::twin::run::run_and_compare(
                     &v.twin,
                     data,
                     setup.transient,
-                    path,
+                    |_, _| {},
                 )
-                .map_err(|e| to_py(kind, e))?;
+                .map_err(|e| to_py(kind, e))?
+                .comparison;
+                orchestrator::report::plot_calibrated(&comparison, data, path)
+                    .map_err(|e| to_py(kind, e))?;
             }
             // `twin calibrate --report`'s fields, less `out` (nothing is written here).
             let report = orchestrator::report::json::calibrate(
@@ -1070,7 +1073,7 @@ impl Twin {
             let report =
                 orchestrator::report::json::learn(&self.twin, &names, &options, seconds, &results);
             if let Some(dir) = &out_dir {
-                orchestrator::workflows::learn::write_plots(&results, dir)
+                orchestrator::report::learn_plot::write_plots(&results, dir)
                     .map_err(|e| to_py(kind, e))?;
             }
             let learned = match results.as_slice() {

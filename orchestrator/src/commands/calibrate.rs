@@ -151,7 +151,10 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        crate::workflows::calibrate::validated::plot(&new_twin, data, args.transient, path)?;
+        let comparison =
+            crate::twin::run::run_and_compare(&new_twin, data, args.transient, |_, _| {})?
+                .comparison;
+        crate::report::plot_calibrated(&comparison, data, path)?;
     }
 
     print_calibration(&runs, &calibration, &validated);

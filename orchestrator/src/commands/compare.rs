@@ -153,14 +153,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        crate::workflows::compare::plot(
-            &twin,
-            &data,
-            &compared,
-            &options,
-            path,
-            args.frf.is_some(),
-        )?;
+        crate::report::plot_compared(&twin, &data, &compared, &options, path, args.frf.is_some())?;
     }
     print_summary(&twin, &data, comparison);
     match &modes {

@@ -8,8 +8,7 @@ use anyhow::{bail, Result};
 use super::write_json;
 use crate::twin::Twin;
 use crate::workflows::learn::{
-    chosen_modes, learned_twin, prepare, run_modes, table, write_plots, LearnOptions, Mode,
-    Stretch, FORGETTING,
+    chosen_modes, learned_twin, prepare, run_modes, table, LearnOptions, Mode, Stretch, FORGETTING,
 };
 use fmu_gp_corrector::TargetForm;
 
@@ -219,7 +218,7 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         .clone()
         .or_else(|| args.out_dir.as_ref().map(|d| d.join("learn.json")));
     if let Some(dir) = &args.out_dir {
-        for path in write_plots(&results, dir)? {
+        for path in crate::report::learn_plot::write_plots(&results, dir)? {
             println!("wrote {}", path.display());
         }
     }

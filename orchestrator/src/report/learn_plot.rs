@@ -299,3 +299,25 @@ fn draw_latent(
     }
     Ok(())
 }
+
+/// `twin learn --out-dir DIR`'s plots: one SVG per mode, `DIR/learn-TAG.svg`; their paths.
+pub fn write_plots(
+    results: &[ModeResult],
+    dir: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, super::ReportError> {
+    std::fs::create_dir_all(dir).map_err(|e| super::ReportError::BadInput {
+        path: dir.to_owned(),
+        message: format!("cannot create the directory: {e}"),
+    })?;
+    let mut written = Vec::new();
+    for r in results {
+        let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
+        let svg = plot_mode(r).map_err(|message| super::ReportError::Draw {
+            path: path.clone(),
+            message,
+        })?;
+        crate::fsutil::write_text_atomically(&path, &svg)?;
+        written.push(path);
+    }
+    Ok(written)
+}

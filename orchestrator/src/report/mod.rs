@@ -35,7 +35,9 @@ pub mod palette {
 }
 pub mod run_plot;
 
-pub use plot::{plot_comparison, plot_latent_variance, FRF_SEGMENT};
+pub use plot::{
+    plot_calibrated, plot_compared, plot_comparison, plot_latent_variance, FRF_SEGMENT,
+};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {

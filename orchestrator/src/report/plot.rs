@@ -135,6 +135,58 @@ pub fn plot_comparison(
     Ok(())
 }
 
+/// `twin compare --plot PATH [--frf]`: measured, predicted, ±3σ band, residual and failing
+/// windows per measured channel (and the frequency-response view); with a corrector, the
+/// latent-variance view of the channels it corrects beside it (`PATH-latent.svg`) against
+/// `options.latent_threshold` (default: each channel's calibrated noise variance, else 1e-3 ×
+/// its measured variance on this record).
+pub fn plot_compared(
+    twin: &crate::twin::Twin,
+    data: &crate::twin::data::Measurement,
+    compared: &crate::twin::run::Compared,
+    options: &crate::workflows::compare::CompareOptions,
+    path: &std::path::Path,
+    frf: bool,
+) -> Result<(), ReportError> {
+    let title = format!("{} on {}", twin.describe(), data.path.display());
+    let comparison = &compared.comparison;
+    plot_comparison(comparison, &data.excitation, &title, path, frf)?;
+    let latent: Vec<(usize, &[f64], f64)> = comparison
+        .channels
+        .iter()
+        .enumerate()
+        .filter_map(|(c, channel)| {
+            let values = compared.prediction.get(*channel)?.latent_var.as_deref()?;
+            let threshold = match (options.latent_threshold, twin.noise_variance_of(*channel)) {
+                (Some(t), _) => t,
+                (None, Some(v)) => v,
+                (None, None) => {
+                    crate::workflows::learn::PAPER_THRESHOLD
+                        * crate::evaluation::stats::variance(
+                            &comparison.measured[c][comparison.first..],
+                        )
+                }
+            };
+            Some((c, values, threshold))
+        })
+        .collect();
+    if !latent.is_empty() {
+        plot_latent_variance(comparison, &latent, &title, path)?;
+    }
+    Ok(())
+}
+
+/// `twin calibrate --plot PATH`: the calibrated twin's `comparison` with the calibration
+/// record `data` (as [`plot_comparison`], titled by the record).
+pub fn plot_calibrated(
+    comparison: &Comparison,
+    data: &crate::twin::data::Measurement,
+    path: &Path,
+) -> Result<(), ReportError> {
+    let title = format!("calibrated on {}", data.path.display());
+    plot_comparison(comparison, &data.excitation, &title, path, false)
+}
+
 /// The corrector's latent variance `V(f)` of each channel it corrects (`latent`: the channel's
 /// position in `c`, its variances, its threshold) on a log axis, with the threshold above which
 /// active learning would query a point (the reference paper's Figures 7–8, lower panels),

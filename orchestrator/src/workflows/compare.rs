@@ -89,47 +89,6 @@ pub fn compare(
     })
 }
 
-/// `twin compare --plot PATH [--frf]`: measured, predicted, ±3σ band, residual and failing
-/// windows per measured channel (and the frequency-response view); with a corrector, the
-/// latent-variance view of the channels it corrects beside it (`PATH-latent.svg`) against
-/// `options.latent_threshold` (default: each channel's calibrated noise variance, else 1e-3 ×
-/// its measured variance on this record).
-pub fn plot(
-    twin: &Twin,
-    data: &Measurement,
-    compared: &Compared,
-    options: &CompareOptions,
-    path: &std::path::Path,
-    frf: bool,
-) -> Result<(), crate::report::ReportError> {
-    let title = format!("{} on {}", twin.describe(), data.path.display());
-    let comparison = &compared.comparison;
-    crate::report::plot_comparison(comparison, &data.excitation, &title, path, frf)?;
-    let latent: Vec<(usize, &[f64], f64)> = comparison
-        .channels
-        .iter()
-        .enumerate()
-        .filter_map(|(c, channel)| {
-            let values = compared.prediction.get(*channel)?.latent_var.as_deref()?;
-            let threshold = match (options.latent_threshold, twin.noise_variance_of(*channel)) {
-                (Some(t), _) => t,
-                (None, Some(v)) => v,
-                (None, None) => {
-                    crate::workflows::learn::PAPER_THRESHOLD
-                        * crate::evaluation::stats::variance(
-                            &comparison.measured[c][comparison.first..],
-                        )
-                }
-            };
-            Some((c, values, threshold))
-        })
-        .collect();
-    if !latent.is_empty() {
-        crate::report::plot_latent_variance(comparison, &latent, &title, path)?;
-    }
-    Ok(())
-}
-
 /// One channel of `twin compare --frf FRF`: the measured and the twin's magnitude over the band
 /// (dB re 1 SI unit per unit excitation; the measured one less the gain offset, if any), the
 /// twin's ±3σ band from its parameters' posterior, and the error.

@@ -1580,21 +1580,3 @@ impl ModeResult {
         }
     }
 }
-
-/// `twin learn --out-dir DIR`'s plots: one SVG per mode, `DIR/learn-TAG.svg`; their paths.
-pub fn write_plots(
-    results: &[ModeResult],
-    dir: &std::path::Path,
-) -> Result<Vec<std::path::PathBuf>, LearnError> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| LearnError::Setup(format!("{}: cannot create: {e}", dir.display())))?;
-    let mut written = Vec::new();
-    for r in results {
-        let path = dir.join(format!("learn-{}.svg", r.mode_tag()));
-        let svg = crate::report::learn_plot::plot_mode(r)
-            .map_err(|e| LearnError::Setup(format!("{}: {e}", path.display())))?;
-        crate::fsutil::write_text_atomically(&path, &svg)?;
-        written.push(path);
-    }
-    Ok(written)
-}

@@ -21,8 +21,6 @@ pub enum CalibrateRunError {
     Calibrate(#[from] CalibrateError),
     #[error(transparent)]
     Run(#[from] RunError),
-    #[error(transparent)]
-    Plot(#[from] crate::report::ReportError),
 }
 
 impl CalibrationSetup {
@@ -161,18 +159,4 @@ pub fn check_plot(twin: &Twin, data: &[&Measurement]) -> Result<(), CalibrateRun
         )
         .into()),
     }
-}
-
-/// `twin calibrate --plot PATH`: the calibrated twin on the calibration record.
-pub fn plot(
-    calibrated: &Twin,
-    data: &Measurement,
-    transient: f64,
-    path: &std::path::Path,
-) -> Result<(), CalibrateRunError> {
-    let comparison =
-        crate::twin::run::run_and_compare(calibrated, data, transient, |_, _| {})?.comparison;
-    let title = format!("calibrated on {}", data.path.display());
-    crate::report::plot_comparison(&comparison, &data.excitation, &title, path, false)?;
-    Ok(())
 }
