@@ -564,21 +564,6 @@ impl Floors {
 /// same either way.
 const PARALLEL_LEARNING: usize = 1024;
 
-/// Run `work` for floors 0, 1, 2 in three threads (a panic in one is resumed in the caller).
-pub fn per_floor<T: Send>(work: impl Fn(usize) -> T + Sync) -> [T; 3] {
-    std::thread::scope(|scope| {
-        let work = &work;
-        let h1 = scope.spawn(move || work(1));
-        let h2 = scope.spawn(move || work(2));
-        let r0 = work(0);
-        let join = |h: std::thread::ScopedJoinHandle<'_, T>| match h.join() {
-            Ok(r) => r,
-            Err(payload) => std::panic::resume_unwind(payload),
-        };
-        [r0, join(h1), join(h2)]
-    })
-}
-
 /// Run `work` for channels `0..n` in threads (as many as the machine runs at once, at least 3,
 /// at most `n`; channel j on thread j mod threads), results in channel order (a panic in one
 /// is resumed in the caller).
