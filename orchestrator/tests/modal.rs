@@ -344,6 +344,79 @@ mod records {
         assert_eq!(ssi.len(), exact.len(), "SSI-COV {ssi:?}");
     }
 
+    /// A five-storey tower (1.26–8.49 Hz, damping 0.30–2.0 %) driven at its top floor by a
+    /// mass damper's narrow-band force, 1.0–1.5 Hz, 100 Hz for 410 s, every floor measured,
+    /// 2 % white and 2 % coloured noise: only the first mode is in the force's band, so it is
+    /// the one mode the FRF supports. The default identification fits LSCF over the force's
+    /// band alone (before, the empty bins set the force's typical level, every bin counted as
+    /// excited, the fit ran over 0–10 Hz and found nothing; then its basis lost rank at order
+    /// 16 and `twin modal` failed) and reports poles at that mode only; FDD/EFDD over the same
+    /// band and SSI-COV invent nothing elsewhere. Measured: LSCF's poles 1.2543 and 1.2616 Hz
+    /// for 1.2597 Hz (−0.43 / +0.15 %, damping 0.245 and 0.364 % for 0.295 %), MAC 1.0000;
+    /// FDD 1.2576 Hz (bars 1 %, 0.95, nothing elsewhere). Still open: the mode's half-power
+    /// width (0.0074 Hz) is below the FRF's bin (0.0122 Hz, 8,192-sample segments of a 410 s
+    /// record), and LSCF splits its smeared peak into two poles.
+    #[test]
+    fn a_mass_dampers_narrow_band_shows_the_one_mode_it_excites() {
+        let (data, exact) = record(
+            5,
+            (&[5.2; 5], &[4021.0; 5], &[3.0; 5]),
+            5,
+            (100.0, 410.0),
+            (1.0, 1.5),
+            &[1, 2, 3, 4, 5],
+            0.02,
+            3,
+        );
+        let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        let (low, high) = io.band.expect("LSCF's band");
+        assert!(
+            low >= 0.95 && high <= 1.55,
+            "the fit band {low}–{high} Hz is the force's"
+        );
+        let first = &exact[0];
+        assert!(!io.modes.is_empty(), "LSCF found the mode in the band");
+        for m in &io.modes {
+            let error = m.identified.frequency / first.frequency - 1.0;
+            let shape = mac(&m.displacement_shape, &first.shape);
+            println!(
+                "LSCF {:.4} Hz ({:+.3} %), ζ {:.3} ± {:.3} % for {:.3} %, MAC {shape:.5}",
+                m.identified.frequency,
+                100.0 * error,
+                100.0 * m.identified.damping,
+                100.0 * m.identified.damping_sd,
+                100.0 * first.damping
+            );
+            assert!(
+                error.abs() < 0.01,
+                "LSCF {} Hz: {error}",
+                m.identified.frequency
+            );
+            assert!(shape > 0.95, "MAC {shape}");
+        }
+        let ssi: Vec<f64> = found
+            .ssi
+            .modes
+            .iter()
+            .map(|m| m.identified.frequency)
+            .collect();
+        let (_, spurious) = matched(&ssi, &exact);
+        assert!(spurious.is_empty(), "SSI-COV spurious {spurious:?}");
+        let fdd: Vec<f64> = found
+            .fdd
+            .modes
+            .iter()
+            .map(|m| m.identified.frequency)
+            .collect();
+        println!("FDD {fdd:?}");
+        let (_, spurious) = matched(&fdd, &exact[..1]);
+        assert!(
+            spurious.is_empty(),
+            "FDD/EFDD outside the band: {spurious:?}"
+        );
+    }
+
     /// FDD/EFDD (output-only, non-parametric: the spectral matrix's first singular value,
     /// EFDD's SDOF bells) on the band-limited five-storey record, a cross-check: it finds the
     /// five modes, and the verdicts table holds each with all three methods; what FDD alone

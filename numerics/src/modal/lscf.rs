@@ -217,20 +217,25 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
     }
     let mut orders = Vec::new();
     let mut order = options.min_order;
-    while order <= max {
+    'orders: while order <= max {
         let n = order + 1;
         let mut reduced = DMatrix::<f64>::zeros(n, n);
         for o in 0..outputs {
-            let r_chol = r[o].view((0, 0), (n, n)).into_owned().cholesky().ok_or(
-                IdentificationError::Numerical {
-                    what: "LSCF",
-                    why: format!(
-                        "the basis' normal matrix of order {order} (output {}) is singular: \
-                         too few bins of weight in the band",
-                        o + 1
-                    ),
-                },
-            )?;
+            let Some(r_chol) = r[o].view((0, 0), (n, n)).into_owned().cholesky() else {
+                // A narrow band's basis (a short arc of the unit circle) loses rank as the
+                // order grows: the orders below are the diagram; none at all is an error.
+                if orders.is_empty() {
+                    return Err(IdentificationError::Numerical {
+                        what: "LSCF",
+                        why: format!(
+                            "the basis' normal matrix of order {order} (output {}) is \
+                             singular: too few bins of weight in the band",
+                            o + 1
+                        ),
+                    });
+                }
+                break 'orders;
+            };
             let s_n = s[o].view((0, 0), (n, n)).into_owned();
             reduced += t[o].view((0, 0), (n, n)) - s_n.transpose() * r_chol.solve(&s_n);
         }

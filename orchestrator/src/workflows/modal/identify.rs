@@ -887,8 +887,28 @@ pub fn default_segment(samples: usize) -> usize {
 }
 
 /// A bin is excited when the force's PSD there is at least this fraction of its typical
-/// level (the 90th percentile over the bins above DC): 20 dB down.
+/// level ([`typical_level`]): 20 dB down.
 pub const EXCITED_FRACTION: f64 = 0.01;
+
+/// The force's typical PSD level over the bins above DC (`levels`, sorted ascending): the
+/// 90th percentile, or — for a force whose power sits in a narrow band, as a mass damper's or
+/// a sine sweep's over part of the range, where nine bins in ten hold next to nothing — the
+/// level at which the bins above it hold half the power, whichever is higher. For a broadband
+/// force the percentile is the higher (Welch's levels scatter little about their mean).
+fn typical_level(levels: &[f64]) -> f64 {
+    let percentile = levels[((0.9 * levels.len() as f64) as usize).min(levels.len() - 1)];
+    let total: f64 = levels.iter().sum();
+    let mut above = 0.0;
+    let mut half_power = 0.0;
+    for &level in levels.iter().rev() {
+        above += level;
+        half_power = level;
+        if above >= 0.5 * total {
+            break;
+        }
+    }
+    percentile.max(half_power)
+}
 /// The default band's ends are the outermost excited bins where some output's coherence
 /// reaches this.
 pub const BAND_COHERENCE: f64 = 0.5;
@@ -904,7 +924,7 @@ pub fn excited_band(frequencies: &[f64], force_psd: &[f64]) -> Option<((f64, f64
     }
     let mut levels: Vec<f64> = force_psd[1..bins].to_vec();
     levels.sort_by(f64::total_cmp);
-    let typical = levels[((0.9 * levels.len() as f64) as usize).min(levels.len() - 1)];
+    let typical = typical_level(&levels);
     if typical <= 0.0 || !typical.is_finite() {
         return None;
     }
@@ -989,6 +1009,27 @@ fn record_modes(modes: Vec<IdentifiedMode>, floors: &[(usize, (usize, i32))]) ->
 mod tests {
     use super::*;
     use nalgebra::{DMatrix, DVector};
+
+    /// A force with power in 11 of 500 bins (a narrow band, as a mass damper drives a tower)
+    /// and a broadband one: the excited band is the narrow band's bins, and the broadband
+    /// force's first to last bin. With the 90th percentile alone as the typical level the
+    /// narrow band's empty bins set it, and every bin counted as excited.
+    #[test]
+    fn a_narrow_band_force_excites_its_band_only() {
+        let frequencies: Vec<f64> = (0..500).map(|k| 0.1 * k as f64).collect();
+        let narrow: Vec<f64> = (0..500)
+            .map(|k| if (20..=30).contains(&k) { 1.0 } else { 1e-12 })
+            .collect();
+        let ((low, high), (low_edge, high_edge)) =
+            excited_band(&frequencies, &narrow).expect("the force has power");
+        assert_eq!((low, high), (frequencies[20], frequencies[30]));
+        assert!(low_edge && high_edge);
+        let broad: Vec<f64> = (0..500)
+            .map(|k| 1.0 + 0.3 * ((k as f64) * 0.7).sin())
+            .collect();
+        let ((low, high), _) = excited_band(&frequencies, &broad).expect("the force has power");
+        assert_eq!((low, high), (frequencies[1], frequencies[499]));
+    }
     use numerics::modal::{mac, modes};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
