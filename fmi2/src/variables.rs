@@ -496,6 +496,19 @@ impl ModelInfo {
             w.write_event(Event::Empty(d)).expect(ok);
         }
 
+        self.write_variables(&mut w);
+        self.write_model_structure(&mut w);
+        w.write_event(Event::End(BytesEnd::new("fmiModelDescription")))
+            .expect(ok);
+
+        let mut text = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
+        text.push('\n');
+        text
+    }
+
+    /// `<ModelVariables>`: each variable with its index as a comment.
+    fn write_variables(&self, w: &mut Writer<Vec<u8>>) {
+        let ok = "writing XML to memory cannot fail";
         w.write_event(Event::Start(BytesStart::new("ModelVariables")))
             .expect(ok);
         for (index, v) in self.variables.iter().enumerate() {
@@ -548,7 +561,12 @@ impl ModelInfo {
         }
         w.write_event(Event::End(BytesEnd::new("ModelVariables")))
             .expect(ok);
+    }
 
+    /// `<ModelStructure>`: the outputs with their dependencies on inputs, and the initial
+    /// unknowns.
+    fn write_model_structure(&self, w: &mut Writer<Vec<u8>>) {
+        let ok = "writing XML to memory cannot fail";
         w.write_event(Event::Start(BytesStart::new("ModelStructure")))
             .expect(ok);
         let outputs: Vec<usize> = (0..self.variables.len())
@@ -593,12 +611,6 @@ impl ModelInfo {
         }
         w.write_event(Event::End(BytesEnd::new("ModelStructure")))
             .expect(ok);
-        w.write_event(Event::End(BytesEnd::new("fmiModelDescription")))
-            .expect(ok);
-
-        let mut text = String::from_utf8(w.into_inner()).expect("quick-xml writes UTF-8");
-        text.push('\n');
-        text
     }
 }
 
