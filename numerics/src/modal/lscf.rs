@@ -354,20 +354,7 @@ pub fn lsfd(
         }
     }
     // Columns of very different scale (1/ω², ω²): equilibrate before the least squares.
-    let scales: Vec<f64> = design
-        .column_iter()
-        .map(|c| {
-            let n = c.norm();
-            if n > 0.0 {
-                1.0 / n
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    for (c, scale) in scales.iter().enumerate() {
-        design.column_mut(c).scale_mut(*scale);
-    }
+    let scales = super::equilibrate_columns(&mut design);
     // One QR of the tall design matrix serves every output: x = R⁻¹ (Qᵀ h). An SVD of the
     // same matrix took most of an hour-long record's identification.
     let mut targets = DMatrix::from_fn(2 * bins.len(), frf.response.len(), |row, o| {

@@ -63,20 +63,7 @@ pub fn fit_residues(
 ) -> Option<TimeFit> {
     let mut x = design(dt, input, poles);
     // Columns of very different scale (an offset, a decay, a driven response): equilibrate.
-    let scales: Vec<f64> = x
-        .column_iter()
-        .map(|c| {
-            let n = c.norm();
-            if n > 0.0 {
-                1.0 / n
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    for (c, s) in scales.iter().enumerate() {
-        x.column_mut(c).scale_mut(*s);
-    }
+    let scales = super::equilibrate_columns(&mut x);
     let normal = x.tr_mul(&x).cholesky()?;
     let mut residues = vec![Vec::with_capacity(outputs.len()); poles.len()];
     let mut residual = 0.0;
