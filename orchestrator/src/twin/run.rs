@@ -338,7 +338,7 @@ pub fn run_and_compare_with(
     } else if let Some(band) = linear {
         Some(band)
     } else {
-        parameter_variance(twin, data, &prediction)?
+        fallback_parameter_variance(twin, data, &prediction)?
     };
     compare_with(
         twin,
@@ -500,6 +500,17 @@ pub fn parameter_variance(
     if let Some(band) = linear_parameter_variance(twin, data) {
         return Ok(Some(band));
     }
+    fallback_parameter_variance(twin, data, prediction)
+}
+
+/// [`parameter_variance`] of a twin that is not the linear shear model alone (the caller has
+/// asked [`linear_parameter_variance`] first): from its FMU's sensitivities, else by finite
+/// differences.
+fn fallback_parameter_variance(
+    twin: &Twin,
+    data: &Measurement,
+    prediction: &Prediction,
+) -> Result<Option<Vec<Vec<f64>>>, RunError> {
     let Some(cov) = &twin.parameter_covariance else {
         return Ok(None);
     };
