@@ -15,6 +15,7 @@ pub mod effects;
 pub mod integrate;
 pub mod kernels;
 pub mod linear;
+pub mod modal;
 pub mod model;
 pub mod piecewise;
 pub mod piecewise_any;

@@ -11,6 +11,7 @@ use std::path::Path;
 use ::structure::channel::{Channel, Quantity};
 use fmi2::CoSimModel;
 use fmu_shear::batch::{accelerations_along, LinearRecord};
+use fmu_shear::modal::{normals, Modal, Normals};
 use fmu_shear::{ShearModel, ShearParameters, StructureResource};
 use nalgebra::DMatrix;
 
@@ -112,16 +113,9 @@ impl LinearFit {
             .collect()
     }
 
-    /// Run the model with the calibrated parameters at `values` over `data`, measuring
-    /// `floors`: `each(k, predictions, derivatives)`, `derivatives[slot · p + j]` along
-    /// calibrated parameter j. None for a value the FMU's setters refuse.
-    pub fn run(
-        &self,
-        values: &[f64],
-        data: &Measurement,
-        floors: &[usize],
-        each: impl FnMut(usize, &[f64], &[f64]),
-    ) -> Option<()> {
+    /// The structure's parameters with the calibrated ones at `values`; None for a value the
+    /// FMU's setters refuse.
+    fn at(&self, values: &[f64]) -> Option<ShearParameters> {
         let n = self.params.storeys();
         let mut params = self.params.clone();
         for (&j, &v) in self.index.iter().zip(values) {
@@ -132,6 +126,20 @@ impl LinearFit {
             }
             [&mut params.mass, &mut params.damping, &mut params.stiffness][group][i] = v;
         }
+        Some(params)
+    }
+
+    /// Run the model with the calibrated parameters at `values` over `data`, measuring
+    /// `floors`: `each(k, predictions, derivatives)`, `derivatives[slot · p + j]` along
+    /// calibrated parameter j. None for a value the FMU's setters refuse.
+    pub fn run(
+        &self,
+        values: &[f64],
+        data: &Measurement,
+        floors: &[usize],
+        each: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Option<()> {
+        let params = self.at(values)?;
         let record = LinearRecord {
             dt: data.dt,
             excitation: &data.excitation.values,
@@ -139,6 +147,35 @@ impl LinearFit {
         };
         accelerations_along(&params, &record, &self.directions, each);
         Some(())
+    }
+
+    /// The model with the calibrated parameters at `values` over `data`, through its modes
+    /// (`fmu_shear::modal`): each of `floors`' predictions at every sample, and over the `used`
+    /// samples its `Σ ∂ŷ ∂ŷᵀ` and `Σ ∂ŷ (y − ŷ)` along the calibrated parameters, `measured`
+    /// the floors' records. None for a value the FMU's setters refuse, or a structure whose
+    /// modes are not distinct (then [`LinearFit::run`] gives the derivatives).
+    pub fn normals(
+        &self,
+        values: &[f64],
+        data: &Measurement,
+        floors: &[usize],
+        measured: &[&[f64]],
+        used: &[usize],
+    ) -> Option<Normals> {
+        let params = self.at(values)?;
+        let modal = Modal::new(&params, data.dt, floors, &self.directions)?;
+        let record = LinearRecord {
+            dt: data.dt,
+            excitation: &data.excitation.values,
+            floors,
+        };
+        let out = normals(&modal, &record, measured, used);
+        let finite = out
+            .blocks
+            .iter()
+            .all(|(a, g)| a.iter().chain(g.iter()).all(|x| x.is_finite()))
+            && out.predictions.iter().flatten().all(|x| x.is_finite());
+        finite.then_some(out)
     }
 }
 

@@ -436,16 +436,7 @@ fn sensitivity_jacobian(
     let rows = target.rows();
     let mut r = Vec::with_capacity(rows);
     let mut jac = DMatrix::zeros(rows, p);
-    // ∂u_j/∂z_j: the prior's scale, times the value where the prior is on the log.
-    let scale: Vec<f64> = (0..p)
-        .map(|j| {
-            let prior = &target.priors[j];
-            match prior.space {
-                Space::Linear => prior.sd(),
-                Space::Log => prior.sd() * values[j],
-            }
-        })
-        .collect();
+    let scale = prior_scales(target, &values);
     let mut row0 = 0;
     let mut through_fmi = false;
     for (sim, record) in sims.iter_mut().zip(&target.records) {
@@ -522,6 +513,102 @@ fn linear_outputs(fit: &LinearFit, record: &RecordTarget, values: &[f64]) -> Opt
     Some(out)
 }
 
+/// The model's normal equations at a point: the residuals `y − ŷ` (every block in turn) and,
+/// per block (record, channel), `J_bᵀ J_b` and `J_bᵀ r_b` with `J_b = ∂(y − ŷ)/∂z` of its rows.
+struct ModelNormals {
+    r: Vec<f64>,
+    blocks: Vec<(DMatrix<f64>, DVector<f64>)>,
+}
+
+impl ModelNormals {
+    fn from_jacobian(r: Vec<f64>, jac: &DMatrix<f64>, blocks: &[(usize, usize)]) -> Self {
+        let blocks = blocks
+            .iter()
+            .map(|&(start, per)| {
+                let jf = jac.rows(start, per);
+                let rf = DVector::from_column_slice(&r[start..start + per]);
+                (jf.transpose() * jf, jf.transpose() * rf)
+            })
+            .collect();
+        ModelNormals { r, blocks }
+    }
+
+    /// The normal equations of the weighted residuals and the prior's rows (`[w ∘ r; z]`):
+    /// `Σ_b w_b² J_bᵀ J_b + I` and `Σ_b w_b² J_bᵀ r_b + z`, `w_b` block b's weight.
+    fn weighted(&self, block_weights: &[f64], z: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+        let p = z.len();
+        let mut a = DMatrix::identity(p, p);
+        let mut g = DVector::from_column_slice(z);
+        for ((jtj, jtr), w) in self.blocks.iter().zip(block_weights) {
+            let w2 = w * w;
+            a += jtj * w2;
+            g += jtr * w2;
+        }
+        (a, g)
+    }
+}
+
+/// [`ModelNormals`] at `z`: through the linear model's modes in process where the twin is that
+/// model ([`LinearFit::normals`]: a Gram matrix of the modes' responses, no Jacobian formed),
+/// else from [`sensitivity_jacobian`]. None where that is.
+fn sensitivity_normals(sims: &mut [Simulator], target: &Target, z: &[f64]) -> Option<ModelNormals> {
+    if let Some(normals) = target
+        .linear
+        .as_ref()
+        .and_then(|fit| linear_normals(fit, target, z))
+    {
+        return Some(normals);
+    }
+    let (r, jac) = sensitivity_jacobian(sims, target, z)?;
+    Some(ModelNormals::from_jacobian(r, &jac, &target.blocks()))
+}
+
+/// [`ModelNormals`] from the linear model's modes in process (`J = −∂ŷ/∂θ · ∂θ/∂z`); None when
+/// a record's channel is not an accelerometer, the FMU would refuse the values, or the modes are
+/// not distinct.
+fn linear_normals(fit: &LinearFit, target: &Target, z: &[f64]) -> Option<ModelNormals> {
+    let values = target.values(z);
+    if values.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let scale = prior_scales(target, &values);
+    let mut r = Vec::with_capacity(target.rows());
+    let mut blocks = Vec::new();
+    for record in &target.records {
+        let names: Vec<&str> = record.channels.iter().map(|c| c.name.as_str()).collect();
+        let floors = fit.floors(&names)?;
+        let measured: Vec<&[f64]> = record.channels.iter().map(|c| c.values).collect();
+        let normals = fit.normals(&values, record.data, &floors, &measured, &record.used)?;
+        for ((c, predicted), (m, v)) in record
+            .channels
+            .iter()
+            .zip(&normals.predictions)
+            .zip(normals.blocks)
+        {
+            r.extend(record.used.iter().map(|&k| c.values[k] - predicted[k]));
+            let jtj =
+                DMatrix::from_fn(m.nrows(), m.ncols(), |a, b| scale[a] * m[(a, b)] * scale[b]);
+            let jtr = DVector::from_fn(v.len(), |a, _| -scale[a] * v[a]);
+            blocks.push((jtj, jtr));
+        }
+    }
+    Some(ModelNormals { r, blocks })
+}
+
+/// `∂u_j/∂z_j` at the values `u`: the prior's scale, times the value where the prior is on the
+/// log.
+fn prior_scales(target: &Target, values: &[f64]) -> Vec<f64> {
+    target
+        .priors
+        .iter()
+        .zip(values)
+        .map(|(prior, value)| match prior.space {
+            Space::Linear => prior.sd(),
+            Space::Log => prior.sd() * value,
+        })
+        .collect()
+}
+
 /// The sum of squares of every block (record, floor) of `r`.
 fn sse_per_block(r: &[f64], blocks: &[(usize, usize)]) -> Vec<f64> {
     blocks
@@ -542,8 +629,9 @@ struct Problem<'s, 'a> {
     evaluations: RefCell<usize>,
     /// FMU runs made.
     runs: RefCell<usize>,
-    /// The model Jacobian from the last trial's sensitivities, and where it was taken.
-    at_hand: RefCell<Option<(Vec<f64>, DMatrix<f64>)>>,
+    /// The model's normal equations from the last trial's sensitivities, and where they were
+    /// taken.
+    at_hand: RefCell<Option<(Vec<f64>, ModelNormals)>>,
     /// Simulations this least-squares solve may use.
     budget: usize,
 }
@@ -555,8 +643,9 @@ impl Problem<'_, '_> {
         let mut sims = self.sims.borrow_mut();
         // With sensitivities, every trial runs with them: an accepted trial's Jacobian is then
         // at hand, for less than a run of its own.
-        let r = match sensitivity_jacobian(&mut sims, self.target, z) {
-            Some((r, model)) => {
+        let r = match sensitivity_normals(&mut sims, self.target, z) {
+            Some(model) => {
+                let r = model.r.clone();
                 *self.at_hand.borrow_mut() = Some((z.to_vec(), model));
                 r
             }
@@ -693,6 +782,10 @@ impl lm::LeastSquares for Problem<'_, '_> {
     }
 
     fn jacobian(&mut self, z: &[f64], base: &DVector<f64>) -> Option<DMatrix<f64>> {
+        self.forward_differences(z, base)
+    }
+
+    fn normal(&mut self, z: &[f64], base: &DVector<f64>) -> Option<(DMatrix<f64>, DVector<f64>)> {
         // A start that has not settled within its budget is abandoned.
         if *self.evaluations.borrow() > self.budget {
             return None;
@@ -705,23 +798,24 @@ impl lm::LeastSquares for Problem<'_, '_> {
             .map(|(_, model)| model);
         let sensitive = at_hand.or_else(|| {
             let mut sims = self.sims.borrow_mut();
-            let (_, model) = sensitivity_jacobian(&mut sims, self.target, z)?;
+            let model = sensitivity_normals(&mut sims, self.target, z)?;
             *self.runs.borrow_mut() += self.target.records.len();
             Some(model)
         });
         if let Some(model) = sensitive {
             // Counted as the p runs it replaces, so a start's budget buys the same iterations.
             *self.evaluations.borrow_mut() += z.len();
-            let mut jac = DMatrix::zeros(base.len(), z.len());
-            for j in 0..z.len() {
-                for i in 0..model.nrows() {
-                    jac[(i, j)] = self.weights[i] * model[(i, j)];
-                }
-                jac[(model.nrows() + j, j)] = 1.0;
-            }
-            return Some(jac);
+            let block_weights: Vec<f64> = self
+                .target
+                .blocks()
+                .iter()
+                .map(|&(start, _)| self.weights.get(start).copied().unwrap_or(0.0))
+                .collect();
+            return Some(model.weighted(&block_weights, z));
         }
-        self.forward_differences(z, base)
+        let jac = self.forward_differences(z, base)?;
+        let jt = jac.transpose();
+        Some((&jt * &jac, &jt * base))
     }
 }
 
@@ -1136,20 +1230,19 @@ fn laplace<'a>(
     let p = z.len();
     let records = target.records.len();
     let blocks = target.blocks();
-    let ((r0, jac), runs) = match sensitivity_jacobian(sims, target, z) {
+    let (model, runs) = match sensitivity_normals(sims, target, z) {
         Some(exact) => (exact, records),
-        None => (central_differences(sims, target, z)?, (2 * p + 1) * records),
+        None => {
+            let (r0, jac) = central_differences(sims, target, z)?;
+            let model = ModelNormals::from_jacobian(r0, &jac, &blocks);
+            (model, (2 * p + 1) * records)
+        }
     };
-    let sse = sse_per_block(&r0, &blocks);
+    let sse = sse_per_block(&model.r, &blocks);
     let q = blocks.len();
     let mut hess = DMatrix::zeros(p + q, p + q);
-    for (b, &(start, per)) in blocks.iter().enumerate() {
+    for (b, (jtj, jtr)) in model.blocks.iter().enumerate() {
         let w = (-s[b]).exp();
-        let rows = start..start + per;
-        let jf = jac.rows(rows.start, per);
-        let rf = DVector::from_column_slice(&r0[rows]);
-        let jtj = jf.transpose() * jf;
-        let jtr = jf.transpose() * rf;
         for a in 0..p {
             for c in 0..p {
                 hess[(a, c)] += w * jtj[(a, c)];
