@@ -45,7 +45,8 @@ pub struct ModalArgs {
     /// reaches 0.5, at most up to 0.8 × Nyquist.
     #[arg(long, value_name = "LOW:HIGH", value_parser = parse_band)]
     pub band: Option<(f64, f64)>,
-    /// The largest model order of both methods (even).
+    /// The largest model order of both methods (even); LSCF goes on, 20 orders at a time up
+    /// to three times it, while modes are still forming at its highest order.
     #[arg(long, default_value_t = IdentifyOptions::default().max_order)]
     pub max_order: usize,
     /// SSI-COV's block rows; default: enough for the order, at least 20.

@@ -13,7 +13,6 @@
 //! 0.12 Hz bins, one pole cannot sit on all of them, and the residues it read off their peaks
 //! turned by up to 50° (MPC 0.36: the mode was set aside).
 
-use numerics::modal::lscf::{lscf, LscfOptions};
 use numerics::modal::stabilisation::{
     normalised, screen_modes, IdentifiedMode, RejectedMode, Rejection, ScreenOptions,
 };
@@ -97,15 +96,9 @@ impl Estimation<'_> {
                     .options
                     .band
                     .unwrap_or_else(|| fit_band(&frf, force_psd, top));
-                let options = LscfOptions {
-                    max_order: self.options.max_order,
-                    weighting: self.options.weighting,
-                    ..LscfOptions::over(band)
-                };
-                let orders = lscf(&frf, &options).map_err(self.sampling.method_err("LSCF"))?;
                 let evidence = Peaks::of_frf(&frf);
-                let method =
-                    self.chosen_modes("LSCF", Some(band), orders, screen, &[], evidence)?;
+                let sweep = self.lscf_orders(&frf, band, &evidence)?;
+                let method = self.chosen_modes("LSCF", Some(band), sweep, screen, &[], evidence)?;
                 Ok(RunModes { band, method })
             })
             .collect()
