@@ -35,16 +35,11 @@ pub struct Layout {
 }
 
 impl Default for Layout {
-    /// The paper's rig: acc1, acc2, acc3 and the force.
+    /// The paper's rig: acc1, acc2, acc3 and the force ([`structure::paper`]).
     fn default() -> Self {
         Layout {
-            channels: (1..=3)
-                .map(|floor| Channel::Response {
-                    quantity: Quantity::Acceleration,
-                    floor,
-                })
-                .collect(),
-            excitation: ExcitationKind::Force,
+            channels: structure::paper::channels(),
+            excitation: ExcitationKind::of(&structure::paper::EXCITATION),
         }
     }
 }
@@ -128,7 +123,7 @@ impl Layout {
 
     /// The paper's rig (its variables are those of `modelDescription/fmu_gp_corrector.xml`).
     pub fn is_paper(&self) -> bool {
-        *self == Layout::default()
+        structure::paper::is_measured(&self.channels, self.excitation)
     }
 
     /// The measured channels' names, in order.

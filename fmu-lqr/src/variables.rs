@@ -10,11 +10,11 @@ use std::sync::{Mutex, OnceLock};
 
 use fmi2::{DefaultExperiment, ModelInfo, Unit, Variability, Variable};
 use serde::{Deserialize, Serialize};
-use structure::channel::{Channel, Quantity};
+use structure::channel::{Channel, ExcitationKind, Quantity};
 use structure::{Excitation, Structure, MAX_STOREYS};
 
-/// The floor the control force acts on by default.
-pub const DEFAULT_ACTUATOR_FLOOR: usize = 1;
+/// The floor the control force acts on by default: the paper rig's.
+pub const DEFAULT_ACTUATOR_FLOOR: usize = structure::paper::CONTROL_FLOOR;
 
 /// Inputs: the excitation (`force`, N, or `ground_acc`, m/s²); output `control_force`.
 pub const FORCE: u32 = 1;
@@ -101,15 +101,9 @@ impl Default for Layout {
     /// 1, acc1..acc3 measured.
     fn default() -> Self {
         Layout {
-            structure: Structure::uniform(
-                structure::paper::STOREYS,
-                DEFAULT_MASS,
-                DEFAULT_DAMPING,
-                DEFAULT_STIFFNESS,
-                Excitation::Force { floor: 1 },
-            ),
+            structure: structure::paper::structure(),
             actuator_floor: DEFAULT_ACTUATOR_FLOOR,
-            measured: every_acceleration(structure::paper::STOREYS),
+            measured: structure::paper::channels(),
         }
     }
 }
@@ -193,7 +187,13 @@ impl Layout {
 
     /// The paper's rig (its table is [`info`]).
     pub fn is_paper(&self) -> bool {
-        *self == Layout::default()
+        use structure::paper;
+        paper::is_paper_rig(&self.structure)
+            && self.actuator_floor == paper::CONTROL_FLOOR
+            && paper::is_measured(
+                &self.measured,
+                ExcitationKind::of(&self.structure.excitation),
+            )
     }
 }
 

@@ -535,10 +535,10 @@ impl Twin {
             )
             .map_err(|e| to_py(kind, e))?;
             if let Some(p) = &plot {
-                let svg = orchestrator::report::mode_plot::draw_ambient_diagnosis(&self.twin, &d)
-                    .map_err(|m| {
-                    to_py(kind, anyhow::anyhow!("cannot draw {}: {m}", p.display()))
-                })?;
+                let svg =
+                    orchestrator::report::mode_plot::draw_ambient_diagnosis(&d).map_err(|m| {
+                        to_py(kind, anyhow::anyhow!("cannot draw {}: {m}", p.display()))
+                    })?;
                 orchestrator::fsutil::write_text_atomically(p, &svg).map_err(|e| to_py(kind, e))?;
             }
             Ok(d)

@@ -4,6 +4,7 @@
 //! Every "is this the rig?" asks [`is_layout`], [`is_channels`] or [`is_paper_rig`].
 
 use crate::building::{Excitation, Structure};
+use crate::channel::{Channel, ExcitationKind, Quantity};
 
 /// Storeys of the rig.
 pub const STOREYS: usize = 3;
@@ -17,6 +18,18 @@ pub const STIFFNESS: f64 = 4021.0;
 pub const EXCITATION: Excitation = Excitation::Force { floor: 1 };
 /// The rig's channels: an accelerometer on each of its floors, in floor order.
 pub const CHANNELS: [&str; STOREYS] = ["acc1", "acc2", "acc3"];
+/// The floor the rig's control force acts on: the shaker's.
+pub const CONTROL_FLOOR: usize = 1;
+
+/// The rig's channels ([`CHANNELS`]) as channels.
+pub fn channels() -> Vec<Channel> {
+    (1..=STOREYS)
+        .map(|floor| Channel::Response {
+            quantity: Quantity::Acceleration,
+            floor,
+        })
+        .collect()
+}
 
 /// The rig at its prior means.
 pub fn structure() -> Structure {
@@ -33,6 +46,13 @@ pub fn is_layout(storeys: usize, excitation: Excitation) -> bool {
 /// (its reports then show the floors side by side, as the paper does).
 pub fn is_channels<S: AsRef<str>>(channels: &[S]) -> bool {
     channels.len() == CHANNELS.len() && channels.iter().zip(CHANNELS).all(|(c, p)| c.as_ref() == p)
+}
+
+/// Whether `channels` measured under an excitation of kind `excitation` are the rig's (its
+/// accelerometers in floor order and the shaker's force): what the corrector and the
+/// controller FMUs ask before taking the rig's own variable table.
+pub fn is_measured(channels: &[Channel], excitation: ExcitationKind) -> bool {
+    excitation == ExcitationKind::of(&EXCITATION) && channels == self::channels().as_slice()
 }
 
 /// Whether `structure` is the rig at its prior means (what a twin made by `twin init` holds).
@@ -58,5 +78,10 @@ mod tests {
         assert!(is_channels(&CHANNELS));
         assert!(!is_channels(&["acc1", "acc3", "acc2"]));
         assert!(!is_channels(&["acc1", "acc2"]));
+        let names: Vec<String> = channels().iter().map(Channel::name).collect();
+        assert!(is_channels(&names));
+        assert!(is_measured(&channels(), ExcitationKind::Force));
+        assert!(!is_measured(&channels(), ExcitationKind::GroundAcc));
+        assert!(!is_measured(&channels()[..2], ExcitationKind::Force));
     }
 }

@@ -146,7 +146,7 @@ fn run_ambient(
     let plot = match &args.plot {
         Some(path) => Some((
             path,
-            crate::report::mode_plot::draw_ambient_diagnosis(twin, &d)
+            crate::report::mode_plot::draw_ambient_diagnosis(&d)
                 .map_err(|message| anyhow::anyhow!("cannot draw {}: {message}", path.display()))?,
         )),
         None => None,

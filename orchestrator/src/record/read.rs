@@ -113,40 +113,6 @@ impl Measurement {
         }
     }
 
-    /// The record in the paper's columns (`force`, `acc1..acc3`, SI), unchecked beyond equal
-    /// lengths: for records the twin makes itself (synth, a stream's kept samples).
-    pub fn paper_rig(
-        path: PathBuf,
-        time: Vec<f64>,
-        force: Vec<f64>,
-        acc: [Vec<f64>; 3],
-        dt: f64,
-        extra: HashMap<String, Vec<f64>>,
-    ) -> Measurement {
-        let responses = acc
-            .into_iter()
-            .enumerate()
-            .map(|(f, values)| Signal {
-                channel: acc_channel(f + 1),
-                unit: Unit::MetrePerSecond2,
-                values,
-            })
-            .collect();
-        Measurement {
-            path,
-            time,
-            dt,
-            excitation: Signal {
-                channel: Channel::Excitation(ExcitationKind::Force),
-                unit: Unit::Newton,
-                values: force,
-            },
-            responses,
-            extra,
-            header_line: None,
-        }
-    }
-
     /// Every channel: the excitation, then the responses.
     pub fn channels(&self) -> impl Iterator<Item = &Signal> {
         std::iter::once(&self.excitation).chain(&self.responses)

@@ -26,17 +26,8 @@ pub struct ObservedShapes<'a> {
 /// shapes along the height with the record's identified ones beside them, each panel titled
 /// with both frequencies.
 pub fn draw_ambient_diagnosis(
-    twin: &crate::twin::Twin,
     d: &crate::workflows::diagnose::AmbientDiagnosis,
 ) -> Result<String, String> {
-    let modes = crate::workflows::modal::twin_modes(
-        twin,
-        &crate::workflows::modal::ModalOptions {
-            samples: 0,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
     let observed: Vec<(f64, Vec<f64>)> = d
         .identified
         .iter()
@@ -47,7 +38,7 @@ pub fn draw_ambient_diagnosis(
         modes: observed,
         comparison: Some(&d.modes.comparison),
     };
-    draw_mode_shapes(&modes, Some(&shapes))
+    draw_mode_shapes(&d.twin_modes, Some(&shapes))
 }
 
 /// Writes the mode-shape view of `twin` (and of `observed`, when given) as an SVG at `path`.

@@ -1709,24 +1709,9 @@ fn record_fits(
 /// The structure the twin's physics FMU was made for: its `resources/structure.json`
 /// (`twin init --storeys/--excitation/--nominal`), or the paper's rig when it has none.
 pub fn physics_structure(fmu_path: &std::path::Path) -> Result<Structure, CalibrateError> {
-    let bad = |message: String| {
-        CalibrateError::Twin(TwinError::Invalid {
-            path: fmu_path.to_owned(),
-            message,
-        })
-    };
-    let file = std::fs::File::open(fmu_path).map_err(|e| bad(e.to_string()))?;
-    let mut archive = zip::ZipArchive::new(file).map_err(|e| bad(e.to_string()))?;
-    let mut entry = match archive.by_name("resources/structure.json") {
-        Ok(entry) => entry,
-        Err(zip::result::ZipError::FileNotFound) => return Ok(Structure::default()),
-        Err(e) => return Err(bad(e.to_string())),
-    };
-    let mut text = String::new();
-    std::io::Read::read_to_string(&mut entry, &mut text).map_err(|e| bad(e.to_string()))?;
-    let resource: fmu_shear::StructureResource =
-        serde_json::from_str(&text).map_err(|e| bad(format!("resources/structure.json: {e}")))?;
-    Ok(resource.structure)
+    Ok(crate::twin::structure::structure_of_fmu(fmu_path)?
+        .map(|r| r.structure)
+        .unwrap_or_default())
 }
 
 /// Whether calibration can use `data` on a twin of `structure`: its excitation is the one the

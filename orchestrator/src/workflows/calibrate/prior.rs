@@ -60,10 +60,14 @@ impl Prior {
 /// The engineering priors of the reference paper's Table 1 for the shear model's parameters;
 /// for any other positive parameter, a wide log-normal prior around its current value.
 pub fn default_prior(name: &str, current: f64) -> Prior {
-    let storey = |prefix: char| {
-        name.len() == 2 && name.starts_with(prefix) && matches!(name.as_bytes()[1], b'1'..=b'3')
-    };
     use ::structure::paper;
+    // A floor or storey the rig has: m1..m3, c1..c3, k1..k3.
+    let storey = |prefix: char| {
+        family(name) == Some(prefix)
+            && name[1..]
+                .parse::<usize>()
+                .is_ok_and(|i| i <= paper::STOREYS)
+    };
     if storey('m') {
         Prior::linear(paper::MASS, 0.5)
     } else if storey('c') {

@@ -21,9 +21,10 @@ use super::Action;
 use crate::record::AmbientRecord;
 use crate::twin::Twin;
 use crate::workflows::modal::{
-    evidence_of, explain_shifts, identify_ambient, Explanation, IdentifyOptions, ModalBand,
-    ModalError, ModalEvidence,
+    evidence_of, explain_shifts, identify_ambient, twin_modes, Explanation, IdentifyOptions,
+    ModalBand, ModalError, ModalEvidence, ModalOptions, RecordModes, TwinModes,
 };
+use ::structure::Structure;
 
 /// How many runners-up the reason names after the best explanations.
 const RUNNERS_UP: usize = 2;
@@ -71,9 +72,111 @@ pub struct AmbientDiagnosis {
     /// The misfit of the twin unchanged, to set the explanations' against.
     pub misfit_unchanged: f64,
     pub seconds: f64,
+    /// The twin's own modes (its nominal structure's, no sampling), for the report's shapes.
+    #[serde(skip)]
+    pub twin_modes: TwinModes,
 }
 
-/// Diagnose `twin` on an ambient record.
+/// The verdict on an ambient record's modes: the single changes that explain them (best
+/// first) and the misfit of none, the action and its reason.
+struct Verdict {
+    explanations: Vec<Explanation>,
+    misfit_unchanged: f64,
+    action: Action,
+    reason: String,
+}
+
+/// No mode of the twin was identified in the record: nothing to go on.
+fn nothing_identified(identified: &RecordModes, record: &AmbientRecord) -> Verdict {
+    Verdict {
+        explanations: Vec::new(),
+        misfit_unchanged: 0.0,
+        action: Action::None,
+        reason: format!(
+            "ambient record (no excitation column): the time domain cannot compare, and no \
+             mode of the twin was identified in it ({} channels, {:.0} s); nothing to go on",
+            identified.channels.len(),
+            record.len() as f64 * record.dt
+        ),
+    }
+}
+
+/// Every identified mode is within the twin's band: none, with the largest shift named.
+fn within_band(modes: &ModalEvidence) -> Verdict {
+    let largest = modes
+        .modes
+        .iter()
+        .max_by(|a, b| {
+            a.pair
+                .frequency_shift_percent
+                .abs()
+                .total_cmp(&b.pair.frequency_shift_percent.abs())
+        })
+        .map(|m| {
+            format!(
+                "largest shift mode {} {:+.2} %",
+                m.pair.twin_mode, m.pair.frequency_shift_percent
+            )
+        })
+        .unwrap_or_default();
+    Verdict {
+        explanations: Vec::new(),
+        misfit_unchanged: 0.0,
+        action: Action::None,
+        reason: format!(
+            "ambient record (no excitation column), compared by its modes: the {} modes \
+             identified ({}) are within the twin's band ({largest})",
+            modes.modes.len(),
+            modes.method
+        ),
+    }
+}
+
+/// Some mode moved beyond the band: recalibrate, with the single changes of `structure` that
+/// explain the shifts best and the runners-up.
+fn shifted(structure: &Structure, modes: &ModalEvidence) -> Result<Verdict, ModalError> {
+    let (explanations, unchanged) = explain_shifts(structure, modes)?;
+    let describe = |e: &Explanation| format!("{} {:+.1} %", e.parameter, e.change_percent);
+    let tied = tied_for_best(&explanations);
+    let best: Vec<String> = explanations[..tied].iter().map(describe).collect();
+    let next: Vec<String> = explanations[tied..]
+        .iter()
+        .take(RUNNERS_UP)
+        .map(|e| format!("{} (misfit {:.1})", describe(e), e.misfit))
+        .collect();
+    let best = match explanations.first() {
+        Some(first) if tied == 1 => format!(
+            "; the single change that explains them best: {} (misfit {:.1} against \
+             {unchanged:.1} unchanged; next: {})",
+            best[0],
+            first.misfit,
+            next.join(", ")
+        ),
+        Some(first) => format!(
+            "; the single changes that explain them best, which the frequencies \
+             cannot tell apart: {} (misfit {:.1} against {unchanged:.1} unchanged; next: {})",
+            best.join(" or "),
+            first.misfit,
+            next.join(", ")
+        ),
+        None => String::new(),
+    };
+    let reason = format!(
+        "ambient record (no excitation column), compared by its modes: {} moved beyond \
+         the twin's band, so the structure's stiffness or mass changed{best}; \
+         recalibrate, on a record with the excitation measured",
+        modes.describe_shifts()
+    );
+    Ok(Verdict {
+        explanations,
+        misfit_unchanged: unchanged,
+        action: Action::Recalibrate,
+        reason,
+    })
+}
+
+/// Diagnose `twin` on an ambient record: its modes identified, set against the twin's, the
+/// verdict.
 pub fn diagnose_ambient(
     twin: &Twin,
     record: &AmbientRecord,
@@ -84,84 +187,17 @@ pub fn diagnose_ambient(
         .map_err(|e| ModalError::Options(format!("identifying {}: {e}", record.path.display())))?;
     let modes = evidence_of(twin, &identified, band)?;
     let structure = twin.structure()?;
-    let (explanations, misfit_unchanged, action, reason) = if modes.modes.is_empty() {
-        (
-            Vec::new(),
-            0.0,
-            Action::None,
-            format!(
-                "ambient record (no excitation column): the time domain cannot compare, and no \
-                 mode of the twin was identified in it ({} channels, {:.0} s); nothing to go on",
-                identified.channels.len(),
-                record.len() as f64 * record.dt
-            ),
-        )
+    let Verdict {
+        explanations,
+        misfit_unchanged,
+        action,
+        reason,
+    } = if modes.modes.is_empty() {
+        nothing_identified(&identified, record)
     } else if modes.shifted.is_empty() {
-        let largest = modes
-            .modes
-            .iter()
-            .max_by(|a, b| {
-                a.pair
-                    .frequency_shift_percent
-                    .abs()
-                    .total_cmp(&b.pair.frequency_shift_percent.abs())
-            })
-            .map(|m| {
-                format!(
-                    "largest shift mode {} {:+.2} %",
-                    m.pair.twin_mode, m.pair.frequency_shift_percent
-                )
-            })
-            .unwrap_or_default();
-        (
-            Vec::new(),
-            0.0,
-            Action::None,
-            format!(
-                "ambient record (no excitation column), compared by its modes: the {} modes \
-                 identified ({}) are within the twin's band ({largest})",
-                modes.modes.len(),
-                modes.method
-            ),
-        )
+        within_band(&modes)
     } else {
-        let (explanations, unchanged) = explain_shifts(&structure, &modes)?;
-        let describe = |e: &Explanation| format!("{} {:+.1} %", e.parameter, e.change_percent);
-        let tied = tied_for_best(&explanations);
-        let best: Vec<String> = explanations[..tied].iter().map(describe).collect();
-        let next: Vec<String> = explanations[tied..]
-            .iter()
-            .take(RUNNERS_UP)
-            .map(|e| format!("{} (misfit {:.1})", describe(e), e.misfit))
-            .collect();
-        let best = match explanations.first() {
-            Some(first) if tied == 1 => format!(
-                "; the single change that explains them best: {} (misfit {:.1} against \
-                 {unchanged:.1} unchanged; next: {})",
-                best[0],
-                first.misfit,
-                next.join(", ")
-            ),
-            Some(first) => format!(
-                "; the single changes that explain them best, which the frequencies \
-                 cannot tell apart: {} (misfit {:.1} against {unchanged:.1} unchanged; next: {})",
-                best.join(" or "),
-                first.misfit,
-                next.join(", ")
-            ),
-            None => String::new(),
-        };
-        (
-            explanations,
-            unchanged,
-            Action::Recalibrate,
-            format!(
-                "ambient record (no excitation column), compared by its modes: {} moved beyond \
-                 the twin's band, so the structure's stiffness or mass changed{best}; \
-                 recalibrate, on a record with the excitation measured",
-                modes.describe_shifts()
-            ),
-        )
+        shifted(&structure, &modes)?
     };
     Ok(AmbientDiagnosis {
         record: record.path.display().to_string(),
@@ -188,5 +224,12 @@ pub fn diagnose_ambient(
         explanations,
         misfit_unchanged,
         seconds: started.elapsed().as_secs_f64(),
+        twin_modes: twin_modes(
+            twin,
+            &ModalOptions {
+                samples: 0,
+                ..Default::default()
+            },
+        )?,
     })
 }

@@ -253,7 +253,7 @@ fn start_values(twin: &Twin) -> Result<Option<Vec<String>>> {
         .component(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let md = Fmu::open(&component.fmu_path)?.model_description;
-    let storeys = super::storeys_in(&md, &component.fmu_name)?;
+    let storeys = super::storeys_of(twin)?;
     let names: Vec<String> = ["disp", "vel"]
         .iter()
         .flat_map(|q| (1..=storeys).map(move |i| format!("{q}{i}_start")))

@@ -360,30 +360,10 @@ impl PhysicsRun {
     }
 }
 
-/// The storeys of the building `twin`'s physics models: the one place a diagnosis learns them,
-/// from the shear FMU's variables (a stiffness `k1..kN` per storey, as `twin init` writes them
-/// for its structure).
+/// The storeys of the building `twin` models: its [`Twin::structure`] (what the record's guard
+/// checked the record against), the one place a diagnosis learns them.
 pub(crate) fn storeys_of(twin: &Twin) -> Result<usize> {
-    let component = twin
-        .component(PHYSICS)
-        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    storeys_in(
-        &Fmu::open(&component.fmu_path)?.model_description,
-        &component.fmu_name,
-    )
-}
-
-/// The storeys of a shear FMU: how many of `k1, k2, …` it has.
-fn storeys_in(md: &ModelDescription, fmu: &str) -> Result<usize> {
-    match (1..)
-        .take_while(|i| md.variable(&format!("k{i}")).is_some())
-        .count()
-    {
-        0 => Err(DiagnoseError::Setup(format!(
-            "{fmu}: no storey stiffness 'k1': a diagnosis needs the shear FMU's physics"
-        ))),
-        n => Ok(n),
-    }
+    Ok(twin.structure()?.storeys())
 }
 
 /// The measured channels a diagnosis reads, in the record's order: each one's name, floor,
@@ -560,7 +540,7 @@ fn run_physics(
         .component(PHYSICS)
         .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
     let fmu = Fmu::open(&component.fmu_path)?;
-    let storeys = storeys_in(&fmu.model_description, &component.fmu_name)?;
+    let storeys = storeys_of(twin)?;
     let mut base = component.parameters.clone();
     base.extend(extra.clone());
     for n in names {
@@ -610,7 +590,7 @@ impl PhysicsReals {
         // The model description alone: nothing here runs the FMU.
         let model_description = UnpackedFmu::open(&component.fmu_path)?.model_description;
         Ok(PhysicsReals {
-            storeys: storeys_in(&model_description, &component.fmu_name)?,
+            storeys: storeys_of(twin)?,
             given: component.parameters.clone(),
             model_description,
             fmu_name: component.fmu_name.clone(),

@@ -33,7 +33,7 @@ const PHYSICAL_OUTPUTS: [&str; 5] = ["measured_force", "y3", "v3", "relative", "
 /// Whether the substructure FMU's variables fit `s`: the paper's rig, three storeys cut at
 /// floor 2 (its `m1..m3`, `y2`, `y3`, ...).
 pub fn serves(s: &Frame) -> bool {
-    s.storeys() == 3 && s.floor == 2
+    s.storeys() == ::structure::paper::STOREYS && s.floor == 2
 }
 
 /// The FMU's role for the physical substructure of `split`.
