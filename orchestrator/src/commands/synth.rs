@@ -136,6 +136,75 @@ pub struct SynthArgs {
     pub controller_q: Option<f64>,
 }
 
+/// A flag's number: finite, or an error naming the flag.
+fn number(flag: &str, text: &str) -> Result<f64> {
+    match text.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(x),
+        _ => Err(anyhow!(
+            "--{flag} {text:?}: {:?} is not a finite number",
+            text.trim()
+        )),
+    }
+}
+
+/// A flag's comma-separated numbers.
+fn list(flag: &str, text: &str) -> Result<Vec<f64>> {
+    text.split(',').map(|part| number(flag, part)).collect()
+}
+
+/// `--units`' `QUANTITY=UNIT` parts applied to the scenario's response channels.
+fn with_units(t: &str, mut channels: Vec<(Channel, Unit)>) -> Result<Vec<(Channel, Unit)>> {
+    for part in t.split(',') {
+        let (key, unit) = part.split_once('=').ok_or_else(|| {
+            anyhow!("--units {t:?}: {part:?} is not QUANTITY=UNIT (acc=g, vel=mm/s, disp=mm)")
+        })?;
+        let quantity = match key.trim() {
+            "acc" => Quantity::Acceleration,
+            "vel" => Quantity::Velocity,
+            "disp" => Quantity::Displacement,
+            other => bail!("--units {t:?}: {other:?} is not acc, vel or disp"),
+        };
+        let unit = Unit::parse(unit)
+            .filter(|u| u.quantity() == quantity)
+            .ok_or_else(|| {
+                anyhow!(
+                    "--units {t:?}: {:?} is not a unit of {key} ({})",
+                    unit.trim(),
+                    Unit::ALL
+                        .iter()
+                        .filter(|u| u.quantity() == quantity)
+                        .map(|u| u.symbol())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })?;
+        for (channel, u) in channels.iter_mut() {
+            if matches!(channel, Channel::Response { quantity: q, .. } if *q == quantity) {
+                *u = unit;
+            }
+        }
+    }
+    Ok(channels)
+}
+
+/// `--force-window START:END:GAIN[:RAMP]`.
+fn force_window(w: &str) -> Result<ForceWindow> {
+    let parts: Vec<&str> = w.split(':').collect();
+    if !(3..=4).contains(&parts.len()) {
+        bail!("--force-window {w:?}: expected START:END:GAIN or START:END:GAIN:RAMP");
+    }
+    Ok(ForceWindow {
+        start: number("force-window", parts[0])?,
+        end: number("force-window", parts[1])?,
+        gain: number("force-window", parts[2])?,
+        ramp: if parts.len() == 4 {
+            number("force-window", parts[3])?
+        } else {
+            DEFAULT_WINDOW_RAMP
+        },
+    })
+}
+
 impl SynthArgs {
     /// The scenario: the file's (or the default), then the flags.
     pub fn scenario(&self) -> Result<Scenario> {
@@ -143,18 +212,28 @@ impl SynthArgs {
             Some(path) => (Scenario::load(path)?, path.display().to_string()),
             None => (Scenario::default(), "scenario".to_string()),
         };
-        let number = |flag: &str, text: &str| -> Result<f64> {
-            match text.trim().parse::<f64>() {
-                Ok(x) if x.is_finite() => Ok(x),
-                _ => Err(anyhow!(
-                    "--{flag} {text:?}: {:?} is not a finite number",
-                    text.trim()
-                )),
-            }
+        self.apply_timing(&mut s);
+        self.apply_structure(&mut s)?;
+        self.apply_channels(&mut s)?;
+        self.apply_force(&mut s)?;
+        self.apply_noise(&mut s)?;
+        for e in &self.effects {
+            s.effects.push(parse_effect_flag_for(e, s.storeys())?);
+        }
+        for c in &self.changes {
+            s.changes.push(parse_change_flag(c)?);
+        }
+        let origin = if self.scenario.is_some() {
+            format!("{origin} (with the command-line flags)")
+        } else {
+            "the command-line flags".into()
         };
-        let list = |flag: &str, text: &str| -> Result<Vec<f64>> {
-            text.split(',').map(|part| number(flag, part)).collect()
-        };
+        s.validate(&origin)?;
+        Ok(s)
+    }
+
+    /// `--seed`, `--duration`, `--sample-rate`, `--oversample`.
+    fn apply_timing(&self, s: &mut Scenario) {
         if let Some(x) = self.seed {
             s.seed = x;
         }
@@ -171,6 +250,10 @@ impl SynthArgs {
         if let Some(x) = self.oversample {
             s.oversample = x;
         }
+    }
+
+    /// `--storeys`, `--nominal`, `--mass`, `--damping`, `--stiffness`, `--excitation`.
+    fn apply_structure(&self, s: &mut Scenario) -> Result<()> {
         if let Some(n) = self.storeys {
             if !(1..=structure::MAX_STOREYS).contains(&n) {
                 bail!(
@@ -210,6 +293,11 @@ impl SynthArgs {
             s.excitation = Excitation::parse(t)
                 .map_err(|e| anyhow!("--excitation {t:?}: {e}; expected force:K or base"))?;
         }
+        Ok(())
+    }
+
+    /// `--channels`, then `--units`.
+    fn apply_channels(&self, s: &mut Scenario) -> Result<()> {
         if let Some(t) = &self.channels {
             s.channels = Some(
                 t.split(',')
@@ -220,41 +308,13 @@ impl SynthArgs {
             );
         }
         if let Some(t) = &self.units {
-            let mut channels = s.response_channels();
-            for part in t.split(',') {
-                let (key, unit) = part.split_once('=').ok_or_else(|| {
-                    anyhow!(
-                        "--units {t:?}: {part:?} is not QUANTITY=UNIT (acc=g, vel=mm/s, disp=mm)"
-                    )
-                })?;
-                let quantity = match key.trim() {
-                    "acc" => Quantity::Acceleration,
-                    "vel" => Quantity::Velocity,
-                    "disp" => Quantity::Displacement,
-                    other => bail!("--units {t:?}: {other:?} is not acc, vel or disp"),
-                };
-                let unit = Unit::parse(unit)
-                    .filter(|u| u.quantity() == quantity)
-                    .ok_or_else(|| {
-                        anyhow!(
-                            "--units {t:?}: {:?} is not a unit of {key} ({})",
-                            unit.trim(),
-                            Unit::ALL
-                                .iter()
-                                .filter(|u| u.quantity() == quantity)
-                                .map(|u| u.symbol())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )
-                    })?;
-                for (channel, u) in channels.iter_mut() {
-                    if matches!(channel, Channel::Response { quantity: q, .. } if *q == quantity) {
-                        *u = unit;
-                    }
-                }
-            }
-            s.channels = Some(channels);
+            s.channels = Some(with_units(t, s.response_channels())?);
         }
+        Ok(())
+    }
+
+    /// `--force-rms`, `--band-hz`, `--low-hz`, `--force-between-samples`, `--force-window`.
+    fn apply_force(&self, s: &mut Scenario) -> Result<()> {
         if let Some(x) = self.force_rms {
             s.force.rms = x;
         }
@@ -270,21 +330,13 @@ impl SynthArgs {
             })?;
         }
         for w in &self.force_windows {
-            let parts: Vec<&str> = w.split(':').collect();
-            if !(3..=4).contains(&parts.len()) {
-                bail!("--force-window {w:?}: expected START:END:GAIN or START:END:GAIN:RAMP");
-            }
-            s.force.windows.push(ForceWindow {
-                start: number("force-window", parts[0])?,
-                end: number("force-window", parts[1])?,
-                gain: number("force-window", parts[2])?,
-                ramp: if parts.len() == 4 {
-                    number("force-window", parts[3])?
-                } else {
-                    DEFAULT_WINDOW_RAMP
-                },
-            });
+            s.force.windows.push(force_window(w)?);
         }
+        Ok(())
+    }
+
+    /// `--noise-fraction` or `--noise-sd`, `--force-noise-fraction`.
+    fn apply_noise(&self, s: &mut Scenario) -> Result<()> {
         match (self.noise_fraction, self.noise_sd) {
             (Some(_), Some(_)) => bail!("give either --noise-fraction or --noise-sd, not both"),
             (Some(f), None) => s.noise.level = NoiseLevel::Fraction(vec![f]),
@@ -294,19 +346,7 @@ impl SynthArgs {
         if let Some(x) = self.force_noise_fraction {
             s.noise.force_fraction = x;
         }
-        for e in &self.effects {
-            s.effects.push(parse_effect_flag_for(e, s.storeys())?);
-        }
-        for c in &self.changes {
-            s.changes.push(parse_change_flag(c)?);
-        }
-        let origin = if self.scenario.is_some() {
-            format!("{origin} (with the command-line flags)")
-        } else {
-            "the command-line flags".into()
-        };
-        s.validate(&origin)?;
-        Ok(s)
+        Ok(())
     }
 }
 

@@ -150,28 +150,17 @@ pub(crate) fn check_frequency(frequency: &[f64]) -> Result<(), (usize, String)> 
     Ok(())
 }
 
-pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, DataError> {
-    let err = |line: Option<u64>, message: String| DataError {
-        path: path.to_owned(),
-        line,
-        message,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i as u64 + 1, l.trim()))
-        .filter(|(_, l)| !(l.is_empty() || l.starts_with('#')));
-    let (header_line, header) = lines.next().ok_or_else(|| {
-        err(
-            None,
-            "empty: no header (frequency,<ch>_re,<ch>_im or <ch>_db)".into(),
-        )
-    })?;
-    let fields: Vec<String> = header.split(',').map(|f| f.trim().to_owned()).collect();
-    // Per header field: the frequency, or (channel, part, SI factor).
+/// Per header field: None for the frequency, else its channel, part and SI factor.
+type FieldLayout = Vec<Option<(Channel, Part, f64)>>;
+
+/// The header's fields read: which is the frequency and what each other one holds. Err: the
+/// message about a field (named as written and as mapped).
+fn header_layout(
+    fields: &[String],
+    columns: &ColumnMap,
+) -> Result<(Option<usize>, FieldLayout), String> {
     let mut frequency_column = None;
-    let mut layout: Vec<Option<(Channel, Part, f64)>> = Vec::with_capacity(fields.len());
+    let mut layout: FieldLayout = Vec::with_capacity(fields.len());
     for (i, field) in fields.iter().enumerate() {
         let mapped = columns.apply(field);
         let (name, unit) = split_unit(&mapped);
@@ -181,7 +170,7 @@ pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, 
             } else {
                 format!("column '{field}' (mapped to '{mapped}')")
             };
-            err(Some(header_line), format!("{shown}: {m}"))
+            format!("{shown}: {m}")
         };
         if name == "frequency" {
             if unit.is_some_and(|u| u != "Hz") {
@@ -218,9 +207,12 @@ pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, 
         }
         layout.push(Some((channel, part, factor)));
     }
-    let frequency_column = frequency_column
-        .ok_or_else(|| err(Some(header_line), "missing column 'frequency' (Hz)".into()))?;
-    // The channels in the order of their first column, each complete.
+    Ok((frequency_column, layout))
+}
+
+/// The channels in the order of their first column, each with its parts, each complete
+/// (`_re` and `_im`, or `_db`).
+fn channel_parts(layout: &FieldLayout) -> Result<Vec<(Channel, Vec<Part>)>, String> {
     let mut channels: Vec<(Channel, Vec<Part>)> = Vec::new();
     for (channel, part, _) in layout.iter().flatten() {
         match channels.iter_mut().find(|(c, _)| c == channel) {
@@ -229,53 +221,61 @@ pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, 
         }
     }
     if channels.is_empty() {
-        return Err(err(
-            Some(header_line),
-            "no response column: <channel>_re,<channel>_im or <channel>_db".into(),
-        ));
+        return Err("no response column: <channel>_re,<channel>_im or <channel>_db".into());
     }
     for (channel, parts) in &channels {
         let name = channel.name();
         let complex = parts.contains(&Part::Re) || parts.contains(&Part::Im);
         if complex && parts.contains(&Part::Db) {
-            return Err(err(
-                Some(header_line),
-                format!("'{name}' has both complex and dB columns: give one or the other"),
+            return Err(format!(
+                "'{name}' has both complex and dB columns: give one or the other"
             ));
         }
         if complex && !(parts.contains(&Part::Re) && parts.contains(&Part::Im)) {
-            return Err(err(
-                Some(header_line),
-                format!("'{name}' needs both {name}_re and {name}_im"),
-            ));
+            return Err(format!("'{name}' needs both {name}_re and {name}_im"));
         }
     }
+    Ok(channels)
+}
+
+/// The data rows' values per field, in SI, and each row's line. Err: (line, message).
+fn read_rows<'a>(
+    lines: impl Iterator<Item = (u64, &'a str)>,
+    fields: &[String],
+    layout: &FieldLayout,
+) -> Result<(Vec<Vec<f64>>, Vec<u64>), (u64, String)> {
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); fields.len()];
     let mut lines_of_rows = Vec::new();
     for (line, row) in lines {
         let cells: Vec<&str> = row.split(',').map(str::trim).collect();
         if cells.len() != fields.len() {
-            return Err(err(
-                Some(line),
+            return Err((
+                line,
                 format!("{} fields, the header has {}", cells.len(), fields.len()),
             ));
         }
         for (i, cell) in cells.iter().enumerate() {
-            let v = parse_value(&fields[i], cell).map_err(|m| err(Some(line), m))?;
+            let v = parse_value(&fields[i], cell).map_err(|m| (line, m))?;
             let factor = layout[i].map_or(1.0, |(_, _, f)| f);
             values[i].push(v * factor);
         }
         lines_of_rows.push(line);
     }
-    let frequency = std::mem::take(&mut values[frequency_column]);
-    check_frequency(&frequency)
-        .map_err(|(k, m)| err(lines_of_rows.get(k).copied().or(Some(header_line)), m))?;
+    Ok((values, lines_of_rows))
+}
+
+/// Each channel's FRF from its columns' values: its dB magnitude, or its complex ratio.
+fn assemble(
+    channels: Vec<(Channel, Vec<Part>)>,
+    layout: &FieldLayout,
+    values: &[Vec<f64>],
+) -> Vec<FrfChannel> {
     let column = |channel: Channel, part: Part| {
         layout
             .iter()
             .position(|l| matches!(l, Some((c, p, _)) if *c == channel && *p == part))
     };
-    let channels = channels
+    channels
         .into_iter()
         .map(|(channel, parts)| {
             let values = if parts.contains(&Part::Db) {
@@ -298,11 +298,44 @@ pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, 
             };
             FrfChannel { channel, values }
         })
-        .collect();
+        .collect()
+}
+
+/// A measured FRF's CSV: its header (the frequency and each channel's parts), its rows, the
+/// frequencies checked, each channel assembled.
+pub(super) fn read_csv(path: &Path, columns: &ColumnMap) -> Result<MeasuredFrf, DataError> {
+    let err = |line: Option<u64>, message: String| DataError {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| err(None, format!("cannot read: {e}")))?;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i as u64 + 1, l.trim()))
+        .filter(|(_, l)| !(l.is_empty() || l.starts_with('#')));
+    let (header_line, header) = lines.next().ok_or_else(|| {
+        err(
+            None,
+            "empty: no header (frequency,<ch>_re,<ch>_im or <ch>_db)".into(),
+        )
+    })?;
+    let at_header = |m: String| err(Some(header_line), m);
+    let fields: Vec<String> = header.split(',').map(|f| f.trim().to_owned()).collect();
+    let (frequency_column, layout) = header_layout(&fields, columns).map_err(at_header)?;
+    let frequency_column = frequency_column
+        .ok_or_else(|| err(Some(header_line), "missing column 'frequency' (Hz)".into()))?;
+    let channels = channel_parts(&layout).map_err(at_header)?;
+    let (mut values, lines_of_rows) =
+        read_rows(lines, &fields, &layout).map_err(|(line, m)| err(Some(line), m))?;
+    let frequency = std::mem::take(&mut values[frequency_column]);
+    check_frequency(&frequency)
+        .map_err(|(k, m)| err(lines_of_rows.get(k).copied().or(Some(header_line)), m))?;
     Ok(MeasuredFrf {
         path: path.to_owned(),
         frequency,
-        channels,
+        channels: assemble(channels, &layout, &values),
     })
 }
 

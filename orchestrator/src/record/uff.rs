@@ -189,12 +189,52 @@ fn read_functions(path: &Path) -> Result<Vec<Function>, DataError> {
     Ok(functions)
 }
 
-fn read_58(
-    cursor: &mut Cursor,
-    start: u64,
-    binary: bool,
-    byte_order: i64,
-) -> Result<Function, (u64, String)> {
+/// How a dataset 58's numbers are laid out (its record 7).
+#[derive(Clone, Copy)]
+struct Form {
+    points: usize,
+    complex: bool,
+    double: bool,
+    /// Evenly spaced abscissae (not written per point).
+    even: bool,
+    minimum: f64,
+    increment: f64,
+}
+
+impl Form {
+    /// Numbers per point: the ordinate's one or two, and the abscissa when uneven.
+    fn per_point(&self) -> usize {
+        usize::from(self.complex) + 1 + usize::from(!self.even)
+    }
+    fn count(&self) -> usize {
+        self.points * self.per_point()
+    }
+
+    /// The abscissae and ordinates of the numbers read.
+    fn points_of(&self, numbers: &[f64]) -> (Vec<f64>, Vec<Complex<f64>>) {
+        let per_point = self.per_point();
+        let mut abscissa = Vec::with_capacity(self.points);
+        let mut values = Vec::with_capacity(self.points);
+        for k in 0..self.points {
+            let row = &numbers[k * per_point..(k + 1) * per_point];
+            let (x, rest) = if self.even {
+                (self.minimum + k as f64 * self.increment, row)
+            } else {
+                (row[0], &row[1..])
+            };
+            abscissa.push(x);
+            values.push(Complex::new(
+                rest[0],
+                if self.complex { rest[1] } else { 0.0 },
+            ));
+        }
+        (abscissa, values)
+    }
+}
+
+/// A dataset 58's records 1–11: its DOFs, its data's form and its axes' types and units (a
+/// [`Function`] without its data).
+fn read_58_header(cursor: &mut Cursor, start: u64) -> Result<(Function, Form), (u64, String)> {
     let mut record = |what: &str| -> Result<(u64, &str), (u64, String)> {
         let line = cursor
             .next_line()
@@ -242,83 +282,115 @@ fn read_58(
     if points < 2 {
         return Err((l7, format!("{points} points; at least 2 are needed")));
     }
-    let points = points as usize;
-    let per_point = if complex { 2 } else { 1 } + if even { 0 } else { 1 };
-    let count = points * per_point;
-    let numbers: Vec<f64> = if binary {
-        let width = if double { 8 } else { 4 };
-        let data_line = cursor.line + 1;
-        let block = cursor.take(count * width).ok_or_else(|| {
+    let function = Function {
+        line: start,
+        function_type,
+        response_node,
+        response_direction,
+        reference_node,
+        reference_direction,
+        abscissa: Vec::new(),
+        values: Vec::new(),
+        complex,
+        abscissa_type,
+        ordinate_type,
+        ordinate_units,
+        denominator_type,
+        denominator_units,
+    };
+    let form = Form {
+        points: points as usize,
+        complex,
+        double,
+        even,
+        minimum,
+        increment,
+    };
+    Ok((function, form))
+}
+
+/// A 58b dataset's numbers: `form.count()` values of 4 or 8 bytes in the byte order.
+fn read_58_binary(
+    cursor: &mut Cursor,
+    form: Form,
+    start: u64,
+    byte_order: i64,
+) -> Result<Vec<f64>, (u64, String)> {
+    let (count, double) = (form.count(), form.double);
+    let width = if double { 8 } else { 4 };
+    let data_line = cursor.line + 1;
+    let block = cursor.take(count * width).ok_or_else(|| {
+        (
+            data_line,
+            format!("the binary data ends before {count} values of {width} bytes"),
+        )
+    })?;
+    let little = match byte_order {
+        1 => true,
+        2 => false,
+        other => {
+            return Err((
+                start,
+                format!("byte order {other}: 1 (little endian) or 2 (big endian)"),
+            ))
+        }
+    };
+    Ok(block
+        .chunks_exact(width)
+        .map(|c| match (double, little) {
+            (true, true) => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
+            (true, false) => f64::from_be_bytes(c.try_into().unwrap_or([0; 8])),
+            (false, true) => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+            (false, false) => f32::from_be_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+        })
+        .collect())
+}
+
+/// An ASCII dataset 58's numbers, in fixed widths: 13 (single), 20 (double); an uneven
+/// double abscissa is 13 wide.
+fn read_58_ascii(cursor: &mut Cursor, form: Form) -> Result<Vec<f64>, (u64, String)> {
+    let count = form.count();
+    let widths: Vec<usize> = match (form.double, form.even, form.complex) {
+        (false, _, _) => vec![13],
+        (true, true, _) => vec![20],
+        (true, false, false) => vec![13, 20],
+        (true, false, true) => vec![13, 20, 20],
+    };
+    let mut numbers = Vec::with_capacity(count);
+    while numbers.len() < count {
+        let line = cursor.next_line().ok_or_else(|| {
             (
-                data_line,
-                format!("the binary data ends before {count} values of {width} bytes"),
+                cursor.line,
+                format!("the file ends after {} of {count} values", numbers.len()),
             )
         })?;
-        let little = match byte_order {
-            1 => true,
-            2 => false,
-            other => {
-                return Err((
-                    start,
-                    format!("byte order {other}: 1 (little endian) or 2 (big endian)"),
-                ))
-            }
-        };
-        block
-            .chunks_exact(width)
-            .map(|c| match (double, little) {
-                (true, true) => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
-                (true, false) => f64::from_be_bytes(c.try_into().unwrap_or([0; 8])),
-                (false, true) => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
-                (false, false) => f32::from_be_bytes(c.try_into().unwrap_or([0; 4])) as f64,
-            })
-            .collect()
-    } else {
-        // Fixed widths: 13 (single), 20 (double); an uneven double abscissa is 13 wide.
-        let widths: Vec<usize> = match (double, even, complex) {
-            (false, _, _) => vec![13],
-            (true, true, _) => vec![20],
-            (true, false, false) => vec![13, 20],
-            (true, false, true) => vec![13, 20, 20],
-        };
-        let mut numbers = Vec::with_capacity(count);
-        while numbers.len() < count {
-            let line = cursor.next_line().ok_or_else(|| {
-                (
-                    cursor.line,
-                    format!("the file ends after {} of {count} values", numbers.len()),
-                )
-            })?;
-            let l = cursor.line;
-            if line.trim() == "-1" {
-                return Err((
-                    l,
-                    format!(
-                        "the dataset closes after {} of {count} values",
-                        numbers.len()
-                    ),
-                ));
-            }
-            let mut at = 0;
-            while at < line.trim_end().len() && numbers.len() < count {
-                let w = widths[numbers.len() % widths.len()];
-                let field = line.get(at..(at + w).min(line.len())).unwrap_or("");
-                numbers.push(
-                    real(field, &format!("value {}", numbers.len() + 1)).map_err(|m| (l, m))?,
-                );
-                at += w;
-            }
+        let l = cursor.line;
+        if line.trim() == "-1" {
+            return Err((
+                l,
+                format!(
+                    "the dataset closes after {} of {count} values",
+                    numbers.len()
+                ),
+            ));
         }
-        numbers
-    };
-    if let Some(k) = numbers.iter().position(|v| !v.is_finite()) {
-        return Err((start, format!("value {} is not finite", k + 1)));
+        let mut at = 0;
+        while at < line.trim_end().len() && numbers.len() < count {
+            let w = widths[numbers.len() % widths.len()];
+            let field = line.get(at..(at + w).min(line.len())).unwrap_or("");
+            numbers.push(real(field, &format!("value {}", numbers.len() + 1)).map_err(|m| (l, m))?);
+            at += w;
+        }
     }
-    // The closing "-1" (after binary data, possibly on the same line as the last byte).
+    Ok(numbers)
+}
+
+/// The closing "-1" (after binary data, possibly on the same line as the last byte).
+fn close_dataset(cursor: &mut Cursor) -> Result<(), (u64, String)> {
     loop {
         match cursor.next_line() {
             Some(l) if l.trim().is_empty() => continue,
-            Some(l) if l.trim() == "-1" => break,
+            Some(l) if l.trim() == "-1" => return Ok(()),
             Some(l) => {
                 return Err((
                     cursor.line,
@@ -328,34 +400,28 @@ fn read_58(
             None => return Err((cursor.line, "the dataset is not closed by '-1'".into())),
         }
     }
-    let mut abscissa = Vec::with_capacity(points);
-    let mut values = Vec::with_capacity(points);
-    for k in 0..points {
-        let row = &numbers[k * per_point..(k + 1) * per_point];
-        let (x, rest) = if even {
-            (minimum + k as f64 * increment, row)
-        } else {
-            (row[0], &row[1..])
-        };
-        abscissa.push(x);
-        values.push(Complex::new(rest[0], if complex { rest[1] } else { 0.0 }));
+}
+
+/// One dataset 58 from its record 1 on (at line `start`): its header, its numbers (binary or
+/// ASCII), every one finite, the closing "-1".
+fn read_58(
+    cursor: &mut Cursor,
+    start: u64,
+    binary: bool,
+    byte_order: i64,
+) -> Result<Function, (u64, String)> {
+    let (mut function, form) = read_58_header(cursor, start)?;
+    let numbers = if binary {
+        read_58_binary(cursor, form, start, byte_order)?
+    } else {
+        read_58_ascii(cursor, form)?
+    };
+    if let Some(k) = numbers.iter().position(|v| !v.is_finite()) {
+        return Err((start, format!("value {} is not finite", k + 1)));
     }
-    Ok(Function {
-        line: start,
-        function_type,
-        response_node,
-        response_direction,
-        reference_node,
-        reference_direction,
-        abscissa,
-        values,
-        complex,
-        abscissa_type,
-        ordinate_type,
-        ordinate_units,
-        denominator_type,
-        denominator_units,
-    })
+    close_dataset(cursor)?;
+    (function.abscissa, function.values) = form.points_of(&numbers);
+    Ok(function)
 }
 
 /// The quantity of a specific data type: 8 displacement, 11 velocity, 12 acceleration, 13 force.

@@ -53,8 +53,8 @@ struct Run<'a> {
     contacts: Vec<f64>,
 }
 
-/// The SVG text of the plot.
-pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, String> {
+/// The plot's lines: the passive run, each design that ran, the gain schedule.
+fn runs_of(outcome: &ControlOutcome) -> Vec<Run<'_>> {
     let mut runs = vec![Run {
         label: format!("passive ({} contacts)", outcome.report.passive.contacts),
         colour: palette::GREY,
@@ -84,11 +84,175 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
             contacts: s.contact_times.clone(),
         });
     }
+    runs
+}
+
+/// The record's time axis: its samples' times and the last (at least one interval).
+struct Axis {
+    dt: f64,
+    time: Vec<f64>,
+    t_end: f64,
+}
+
+type Area<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
+
+/// The key: each run's colour and label in a row.
+fn draw_key(key: &Area, runs: &[Run]) -> Result<(), String> {
+    let mut x = 80;
+    for run in runs {
+        key.draw(&PathElement::new(
+            vec![(x, 20), (x + 30, 20)],
+            run.colour.stroke_width(2),
+        ))
+        .map_err(text)?;
+        key.draw(&Text::new(
+            run.label.clone(),
+            (x + 36, 12),
+            (FONT, 14).into_font(),
+        ))
+        .map_err(text)?;
+        x += 40 + 8 * run.label.len() as i32;
+    }
+    Ok(())
+}
+
+/// Floor `floor`'s frequency response from the force to its acceleration, every run's.
+fn draw_frf_panel(
+    panel: &Area,
+    runs: &[Run],
+    force: &[f64],
+    axis: &Axis,
+    floor: usize,
+) -> Result<(), String> {
+    let n = force.len();
+    let frfs: Vec<_> = runs
+        .iter()
+        .map(|r| {
+            welch_h1(
+                force,
+                &r.acc[floor][..n.min(r.acc[floor].len())],
+                axis.dt,
+                FRF_SEGMENT,
+            )
+        })
+        .collect();
+    let (lo, hi) = frfs
+        .iter()
+        .flatten()
+        .flat_map(|h| h.magnitude_db.iter().copied())
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    let (lo, hi) = if lo.is_finite() {
+        ((hi - 80.0).max(lo) - 2.0, hi + 3.0)
+    } else {
+        (-1.0, 1.0)
+    };
+    let nyquist = 0.5 / axis.dt;
+    let mut chart = ChartBuilder::on(panel)
+        .caption(
+            format!("floor {}: force → acceleration", floor + 1),
+            (FONT, 15),
+        )
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..nyquist.min(30.0), lo..hi)
+        .map_err(text)?;
+    draw_mesh(&mut chart, "frequency (Hz)", "|H| (dB re 1 (m/s²)/N)")?;
+    for (run, h) in runs.iter().zip(&frfs) {
+        if let Some(h) = h {
+            let pts = h
+                .frequency
+                .iter()
+                .zip(&h.magnitude_db)
+                .filter(|(f, m)| **f <= 30.0 && m.is_finite())
+                .map(|(f, m)| (*f, m.max(lo)));
+            chart
+                .draw_series(LineSeries::new(pts, run.colour.stroke_width(1)))
+                .map_err(text)?;
+        }
+    }
+    Ok(())
+}
+
+/// Floor `floor`'s acceleration against time, every run's.
+fn draw_time_panel(panel: &Area, runs: &[Run], axis: &Axis, floor: usize) -> Result<(), String> {
+    let peak = runs
+        .iter()
+        .flat_map(|r| r.acc[floor].iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max(1e-12)
+        * 1.05;
+    let mut chart = ChartBuilder::on(panel)
+        .caption(format!("floor {}: acceleration", floor + 1), (FONT, 15))
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..axis.t_end, -peak..peak)
+        .map_err(text)?;
+    draw_mesh(&mut chart, "time (s)", "m/s²")?;
+    for run in runs {
+        let pts = axis
+            .time
+            .iter()
+            .zip(run.acc[floor].iter())
+            .map(|(t, a)| (*t, *a));
+        chart
+            .draw_series(LineSeries::new(pts, run.colour.mix(0.8).stroke_width(1)))
+            .map_err(text)?;
+    }
+    Ok(())
+}
+
+/// Contact initiations: one row of ticks per run (the paper's vertical lines).
+fn draw_contacts(area: &Area, runs: &[Run], axis: &Axis) -> Result<(), String> {
+    let t_end = axis.t_end;
+    let rows_n = runs.len() as f64;
+    let mut chart = ChartBuilder::on(area)
+        .caption("contact initiations (drift crossing the gap)", (FONT, 15))
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..t_end, 0.0..rows_n)
+        .map_err(text)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_y_axis()
+        .x_desc("time (s)")
+        .label_style((FONT, 12))
+        .draw()
+        .map_err(text)?;
+    for (i, run) in runs.iter().enumerate() {
+        let y = rows_n - i as f64 - 1.0;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                run.label.clone(),
+                (0.005 * t_end, y + 0.75),
+                (FONT, 11).into_font().color(&run.colour),
+            )))
+            .map_err(text)?;
+        for &t in &run.contacts {
+            chart
+                .draw_series(LineSeries::new(
+                    [(t, y + 0.1), (t, y + 0.9)],
+                    run.colour.stroke_width(2),
+                ))
+                .map_err(text)?;
+        }
+    }
+    Ok(())
+}
+
+/// The SVG text of the plot.
+pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, String> {
+    let runs = runs_of(outcome);
     let dt = outcome.dt;
-    let n = outcome.force.len();
-    let nyquist = 0.5 / dt;
-    let time: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let time: Vec<f64> = (0..outcome.force.len()).map(|k| k as f64 * dt).collect();
     let t_end = time.last().copied().unwrap_or(1.0).max(dt);
+    let axis = Axis { dt, time, t_end };
     let contact_rows = runs.len() as u32 * 16 + 60;
     let height = 90 + 3 * ROW + contact_rows;
     let mut svg = String::new();
@@ -97,133 +261,14 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
         root.fill(&WHITE).map_err(text)?;
         let root = root.titled(title, (FONT, 22)).map_err(text)?;
         let (key, rest) = root.split_vertically(40);
-        let mut x = 80;
-        for run in &runs {
-            key.draw(&PathElement::new(
-                vec![(x, 20), (x + 30, 20)],
-                run.colour.stroke_width(2),
-            ))
-            .map_err(text)?;
-            key.draw(&Text::new(
-                run.label.clone(),
-                (x + 36, 12),
-                (FONT, 14).into_font(),
-            ))
-            .map_err(text)?;
-            x += 40 + 8 * run.label.len() as i32;
-        }
+        draw_key(&key, &runs)?;
         let (rows, bottom) = rest.split_vertically(3 * ROW);
         let panels = rows.split_evenly((3, 2));
         for floor in 0..3 {
-            // Frequency responses.
-            let frfs: Vec<_> = runs
-                .iter()
-                .map(|r| {
-                    welch_h1(
-                        &outcome.force,
-                        &r.acc[floor][..n.min(r.acc[floor].len())],
-                        dt,
-                        FRF_SEGMENT,
-                    )
-                })
-                .collect();
-            let (lo, hi) = frfs
-                .iter()
-                .flatten()
-                .flat_map(|h| h.magnitude_db.iter().copied())
-                .filter(|v| v.is_finite())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                    (a.min(v), b.max(v))
-                });
-            let (lo, hi) = if lo.is_finite() {
-                ((hi - 80.0).max(lo) - 2.0, hi + 3.0)
-            } else {
-                (-1.0, 1.0)
-            };
-            let mut chart = ChartBuilder::on(&panels[2 * floor])
-                .caption(
-                    format!("floor {}: force → acceleration", floor + 1),
-                    (FONT, 15),
-                )
-                .margin(8)
-                .x_label_area_size(30)
-                .y_label_area_size(55)
-                .build_cartesian_2d(0.0..nyquist.min(30.0), lo..hi)
-                .map_err(text)?;
-            draw_mesh(&mut chart, "frequency (Hz)", "|H| (dB re 1 (m/s²)/N)")?;
-            for (run, h) in runs.iter().zip(&frfs) {
-                if let Some(h) = h {
-                    let pts = h
-                        .frequency
-                        .iter()
-                        .zip(&h.magnitude_db)
-                        .filter(|(f, m)| **f <= 30.0 && m.is_finite())
-                        .map(|(f, m)| (*f, m.max(lo)));
-                    chart
-                        .draw_series(LineSeries::new(pts, run.colour.stroke_width(1)))
-                        .map_err(text)?;
-                }
-            }
-            // Time histories.
-            let peak = runs
-                .iter()
-                .flat_map(|r| r.acc[floor].iter())
-                .fold(0.0f64, |m, v| m.max(v.abs()))
-                .max(1e-12)
-                * 1.05;
-            let mut chart = ChartBuilder::on(&panels[2 * floor + 1])
-                .caption(format!("floor {}: acceleration", floor + 1), (FONT, 15))
-                .margin(8)
-                .x_label_area_size(30)
-                .y_label_area_size(55)
-                .build_cartesian_2d(0.0..t_end, -peak..peak)
-                .map_err(text)?;
-            draw_mesh(&mut chart, "time (s)", "m/s²")?;
-            for run in &runs {
-                let pts = time
-                    .iter()
-                    .zip(run.acc[floor].iter())
-                    .map(|(t, a)| (*t, *a));
-                chart
-                    .draw_series(LineSeries::new(pts, run.colour.mix(0.8).stroke_width(1)))
-                    .map_err(text)?;
-            }
+            draw_frf_panel(&panels[2 * floor], &runs, &outcome.force, &axis, floor)?;
+            draw_time_panel(&panels[2 * floor + 1], &runs, &axis, floor)?;
         }
-        // Contact initiations: one row of ticks per run (the paper's vertical lines).
-        let rows_n = runs.len() as f64;
-        let mut chart = ChartBuilder::on(&bottom)
-            .caption("contact initiations (drift crossing the gap)", (FONT, 15))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(55)
-            .build_cartesian_2d(0.0..t_end, 0.0..rows_n)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .disable_y_axis()
-            .x_desc("time (s)")
-            .label_style((FONT, 12))
-            .draw()
-            .map_err(text)?;
-        for (i, run) in runs.iter().enumerate() {
-            let y = rows_n - i as f64 - 1.0;
-            chart
-                .draw_series(std::iter::once(Text::new(
-                    run.label.clone(),
-                    (0.005 * t_end, y + 0.75),
-                    (FONT, 11).into_font().color(&run.colour),
-                )))
-                .map_err(text)?;
-            for &t in &run.contacts {
-                chart
-                    .draw_series(LineSeries::new(
-                        [(t, y + 0.1), (t, y + 0.9)],
-                        run.colour.stroke_width(2),
-                    ))
-                    .map_err(text)?;
-            }
-        }
+        draw_contacts(&bottom, &runs, &axis)?;
         root.present().map_err(text)?;
     }
     Ok(svg)

@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::{
     effect_report, estimates, fit, fitting_twin, prior_scales, run_physics, Action,
     AddPhysicsReport, Addition, Candidate, DiagnoseError, DiagnoseOptions, EffectReport, Estimate,
-    PhysicsReals, RecordNmse, Result, Split,
+    Kind, PhysicsReals, RecordNmse, Result, Scales, Side, Split,
 };
 use crate::evaluation::stats::first_after_transient;
 use crate::twin::data::Measurement;
@@ -40,6 +40,77 @@ pub fn add_physics(
     }
     let physics = physics_only(twin);
     let storeys = super::storeys_of(twin)?;
+    check_additions(candidates, storeys)?;
+    super::Channels::of(data, storeys)?;
+    let n = data.len();
+    let first = first_after_transient(&data.time, options.transient);
+    if n - first < 20 {
+        return Err(DiagnoseError::Setup(format!(
+            "{}: too few samples after the transient",
+            data.path.display()
+        )));
+    }
+    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
+    let reals = PhysicsReals::of(&physics)?;
+    let scales = prior_scales(&reals, &base_run, data, first)?;
+    let mut switched = switch_on(&physics, candidates, &scales)?;
+    // Stage 1: the effects alone, the physics held.
+    let stage1 = fit_effects_alone(&physics, &switched, data, first, candidates.len(), options)?;
+    // Stage 2: effects and structure jointly over every record, from stage 1.
+    let component = switched
+        .twin
+        .component_mut(PHYSICS)
+        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
+    for p in &stage1.calibration.parameters {
+        component
+            .parameters
+            .insert(p.name.clone(), ParameterValue::Real(p.value));
+    }
+    let (all, at) = with_record(data, records);
+    let refit = refit_over_records(
+        twin,
+        &switched.twin,
+        &all,
+        switched.names.clone(),
+        switched.priors,
+        options,
+    )?;
+    let values = estimates(&refit.calibration);
+    let effects: Vec<EffectReport> = candidates
+        .iter()
+        .map(|c| effect_report(c, &values, &scales))
+        .collect();
+    let own = refit.records[at].clone();
+    let report = AddPhysicsReport {
+        record: data.path.display().to_string(),
+        effect: effects[0].clone(),
+        effects,
+        refined_physics: refit
+            .calibration
+            .parameters
+            .iter()
+            .skip(switched.names.len())
+            .map(|p| Estimate {
+                name: p.name.clone(),
+                value: p.value,
+                sd: p.sd,
+            })
+            .collect(),
+        nmse_before: own.nmse_before.clone(),
+        nmse_after: own.nmse_after.clone(),
+        nmse_effects_alone: stage1.nmse_after,
+        evidence: stage1.evidence,
+        noise_variance: own.noise_variance.clone(),
+        records: refit.records,
+        validation_nmse: refit.twin.validation_nmse,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    Ok((refit.twin, report))
+}
+
+/// Every candidate acts at sites the building of `storeys` storeys has; Err names the first
+/// that does not.
+fn check_additions(candidates: &[Addition], storeys: usize) -> Result<()> {
     for c in candidates {
         let inside = match c {
             Addition::Library(c) => super::check_sites([c], storeys),
@@ -57,19 +128,19 @@ pub fn add_physics(
         };
         inside.map_err(DiagnoseError::Setup)?;
     }
-    super::Channels::of(data, storeys)?;
-    let n = data.len();
-    let first = first_after_transient(&data.time, options.transient);
-    if n - first < 20 {
-        return Err(DiagnoseError::Setup(format!(
-            "{}: too few samples after the transient",
-            data.path.display()
-        )));
-    }
-    let after: Vec<usize> = (first..n).collect();
-    let base_run = run_physics(&physics, data, &BTreeMap::new(), &[], &[])?;
-    let reals = PhysicsReals::of(&physics)?;
-    let scales = prior_scales(&reals, &base_run, data, first)?;
+    Ok(())
+}
+
+/// The physics twin with the candidates' effects switched on, and what is fitted of them: their
+/// parameters' names and priors, and the start values a discovered effect comes with.
+struct Switched {
+    twin: Twin,
+    names: Vec<String>,
+    priors: BTreeMap<String, Prior>,
+    initial: BTreeMap<String, f64>,
+}
+
+fn switch_on(physics: &Twin, candidates: &[Addition], scales: &Scales) -> Result<Switched> {
     let mut switched = physics.duplicate();
     let mut effect_params = Vec::new();
     let mut initial = BTreeMap::new();
@@ -79,7 +150,7 @@ pub fn add_physics(
             .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?
             .parameters
             .extend(c.switches());
-        let params = c.parameters(&scales);
+        let params = c.parameters(scales);
         if let Addition::Discovered(terms) = c {
             for (p, t) in params.iter().zip(terms) {
                 initial.insert(p.0.clone(), t.coefficient);
@@ -87,23 +158,39 @@ pub fn add_physics(
         }
         effect_params.extend(params);
     }
-    let names: Vec<String> = effect_params.iter().map(|p| p.0.clone()).collect();
-    let priors: BTreeMap<String, Prior> =
-        effect_params.iter().map(|p| (p.0.clone(), p.2)).collect();
+    Ok(Switched {
+        twin: switched,
+        names: effect_params.iter().map(|p| p.0.clone()).collect(),
+        priors: effect_params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+        initial,
+    })
+}
+
+/// Stage 1: the switched-on effects fitted alone on `data` (samples from `first` on), the
+/// physics held; every start on every sample (add-physics is not told where the effect shows),
+/// the evidence against the physics alone's.
+fn fit_effects_alone(
+    physics: &Twin,
+    switched: &Switched,
+    data: &Measurement,
+    first: usize,
+    effects: usize,
+    options: &DiagnoseOptions,
+) -> Result<super::Fitted> {
+    let n = data.len();
+    let after: Vec<usize> = (first..n).collect();
     let mask = vec![true; n];
     let evidence_setup = CalibrationSetup {
         transient: options.transient,
         ..CalibrationSetup::default()
     };
-    let baseline = fixed_log_evidence(&physics, data, &evidence_setup)?;
+    let baseline = fixed_log_evidence(physics, data, &evidence_setup)?;
     options.tell("the effects alone, the physics held");
-    // Stage 1: the effects alone, the physics held.
-    let stage1 = fit(
-        &switched,
+    fit(
+        &switched.twin,
         data,
-        names.clone(),
-        priors.clone(),
-        // Every start on every sample: add-physics is not told where the effect shows.
+        switched.names.clone(),
+        switched.priors.clone(),
         Split {
             mask: &mask,
             held_out: &after,
@@ -112,54 +199,12 @@ pub fn add_physics(
         },
         options.starts.max(8),
         options.threads,
-        options.simulations_per_start * candidates.len(),
+        options.simulations_per_start * effects,
         options,
         baseline,
-        &initial,
+        &switched.initial,
         Vec::new(),
-    )?;
-    // Stage 2: effects and structure jointly over every record, from stage 1.
-    let component = switched
-        .component_mut(PHYSICS)
-        .ok_or_else(|| DiagnoseError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    for p in &stage1.calibration.parameters {
-        component
-            .parameters
-            .insert(p.name.clone(), ParameterValue::Real(p.value));
-    }
-    let (all, at) = with_record(data, records);
-    let refit = refit_over_records(twin, &switched, &all, names.clone(), priors, options)?;
-    let values = estimates(&refit.calibration);
-    let effects: Vec<EffectReport> = candidates
-        .iter()
-        .map(|c| effect_report(c, &values, &scales))
-        .collect();
-    let own = refit.records[at].clone();
-    let report = AddPhysicsReport {
-        record: data.path.display().to_string(),
-        effect: effects[0].clone(),
-        effects,
-        refined_physics: refit
-            .calibration
-            .parameters
-            .iter()
-            .skip(effect_params.len())
-            .map(|p| Estimate {
-                name: p.name.clone(),
-                value: p.value,
-                sd: p.sd,
-            })
-            .collect(),
-        nmse_before: own.nmse_before.clone(),
-        nmse_after: own.nmse_after.clone(),
-        nmse_effects_alone: stage1.nmse_after,
-        evidence: stage1.evidence,
-        noise_variance: own.noise_variance.clone(),
-        records: refit.records,
-        validation_nmse: refit.twin.validation_nmse,
-        seconds: started.elapsed().as_secs_f64(),
-    };
-    Ok((refit.twin, report))
+    )
 }
 
 /// `records` (each measurement once) with `data` after them unless it is one of them, and
@@ -306,6 +351,36 @@ pub struct HybridAddReport {
     pub seconds: f64,
 }
 
+/// `twin` with the contact law a hybrid test identified switched on in its physics as the
+/// library's contact between floors 2 and 3 — closing when floor 2 runs ahead of floor 3 by the
+/// gap, i.e. on the storey's negative drift — with the identified gap and stiffness.
+fn with_identified_contact(
+    twin: &Twin,
+    law: &crate::workflows::hybrid::identify::ContactLaw,
+) -> Result<Twin> {
+    let contact = Candidate {
+        kind: Kind::Contact,
+        at: 3,
+        side: Side::Negative,
+    };
+    let mut out = twin.duplicate();
+    let component = out.component_mut(PHYSICS).ok_or_else(|| {
+        DiagnoseError::Setup(format!(
+            "hybrid test: the twin has no '{PHYSICS}' component"
+        ))
+    })?;
+    component.parameters.extend(contact.switches());
+    let prefix = contact.prefix();
+    component
+        .parameters
+        .insert(format!("{prefix}_gap"), ParameterValue::Real(law.gap));
+    component.parameters.insert(
+        format!("{prefix}_stiffness"),
+        ParameterValue::Real(law.contact_stiffness),
+    );
+    Ok(out)
+}
+
 /// Add the contact law a `twin hybrid run` report identified (`report`) to `twin`, held as
 /// identified, and refit the structure's nine parameters with it over `records` (a multi-record
 /// MAP, see [`refit_over_records`]).
@@ -316,9 +391,9 @@ pub fn add_hybrid_contact(
     options: &DiagnoseOptions,
 ) -> Result<(Twin, HybridAddReport)> {
     let started = Instant::now();
-    let (with_contact, law, a_err) =
-        crate::workflows::hybrid::experiment::add_identified_contact(twin, report)
-            .map_err(|e| DiagnoseError::Setup(e.to_string()))?;
+    let (law, a_err) = crate::workflows::hybrid::experiment::identified_contact(report)
+        .map_err(|e| DiagnoseError::Setup(e.to_string()))?;
+    let with_contact = with_identified_contact(twin, &law)?;
     let refit = refit_over_records(
         twin,
         &physics_only(&with_contact),

@@ -381,15 +381,8 @@ pub fn runs(
 }
 
 /// The contact law a `twin hybrid run` report identified (from the measured interface of its
-/// run with the smallest |a_err|), switched on in `twin`'s physics as the library's contact
-/// between floors 2 and 3 — closing when floor 2 runs ahead of floor 3 by the gap, i.e. on the
-/// storey's negative drift — with the identified gap and stiffness. Also the law and its a_err.
-pub fn add_identified_contact(
-    twin: &crate::twin::Twin,
-    report: &std::path::Path,
-) -> Result<(crate::twin::Twin, ContactLaw, f64)> {
-    use crate::twin::{ParameterValue, PHYSICS};
-    use crate::workflows::diagnose::{Candidate, Kind, Side};
+/// run with the smallest |a_err|), and that a_err; Err when no run identified a contact.
+pub fn identified_contact(report: &std::path::Path) -> Result<(ContactLaw, f64)> {
     let bad = |what: String| HybridError::Setup(format!("{}: {what}", report.display()));
     let text = std::fs::read_to_string(report).map_err(|e| bad(e.to_string()))?;
     let value: serde_json::Value =
@@ -413,23 +406,5 @@ pub fn add_identified_contact(
             law.gap, law.contact_stiffness
         )));
     }
-    let contact = Candidate {
-        kind: Kind::Contact,
-        at: 3,
-        side: Side::Negative,
-    };
-    let mut out = twin.duplicate();
-    let component = out
-        .component_mut(PHYSICS)
-        .ok_or_else(|| HybridError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    component.parameters.extend(contact.switches());
-    let prefix = contact.prefix();
-    component
-        .parameters
-        .insert(format!("{prefix}_gap"), ParameterValue::Real(law.gap));
-    component.parameters.insert(
-        format!("{prefix}_stiffness"),
-        ParameterValue::Real(law.contact_stiffness),
-    );
-    Ok((out, law, a_err))
+    Ok((law, a_err))
 }

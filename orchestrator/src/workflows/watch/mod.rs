@@ -1262,17 +1262,8 @@ impl Watcher<'_> {
     /// A background diagnosis finished: its report beside the alerts, and a `diagnosis`
     /// alert (without a sequence number: when it comes depends on the machine).
     fn diagnosed(&mut self, finished: Finished) -> Result<(), WatchError> {
-        let Finished {
-            job,
-            result,
-            seconds,
-            firm,
-            second,
-            weight,
-            because,
-            before,
-        } = finished;
         *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
+        let job = &finished.job;
         if self
             .alerts
             .diagnosed
@@ -1281,78 +1272,16 @@ impl Watcher<'_> {
             // Reported before a restart.
             return Ok(());
         }
-        let (from, to) = job.span();
-        let width = job.columns.width();
+        let mut body = self.diagnosis_body(&finished);
         let mut adoption = None;
-        // The samples it used: all from `from` to `to`; after a located change, those from the
-        // change on are the ones its error measures score.
-        let mut body = json!({
-            "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
-            "from": from, "to": to, "samples_used": job.samples.len() / width,
-            "seconds": seconds, "round": job.round,
-        });
-        if let (Some(change), Value::Object(m)) = (job.change, &mut body) {
-            m.insert("change_time".into(), json!(change));
-            m.insert("post_change_seconds".into(), json!(to - change));
-            m.insert("firm".into(), json!(firm));
-            if let Some(w) = &weight {
-                m.insert("evidence".into(), json!(w));
-            }
-            if let Some(b) = &before {
-                // Its effects against the samples before the change: there all along?
-                m.insert("before_the_change".into(), json!(b));
-            }
-            if let Some(why) = &because {
-                // How much post-change data it waited for, and why that was enough.
-                m.insert(
-                    "waited".into(),
-                    json!(format!(
-                        "{:.1} s of post-change data, because {why}",
-                        to - change
-                    )),
-                );
-            }
-            if let Some(c) = &second {
-                // It answered on the samples before a second change found in them.
-                m.insert(
-                    "second_change".into(),
-                    json!({"time": c.time, "low": c.low, "high": c.high}),
-                );
-            }
-        }
-        match result {
+        match &finished.result {
             Ok(d) => {
-                let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
-                let path = background::report_path(&self.options.alerts, k);
-                if self.options.adopt && firm {
-                    adoption = answer(&d).map(|p| (p, background::verdict(&d), path.clone()));
-                }
-                let text = serde_json::to_string_pretty(&d)
-                    .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
-                write_text_atomically(&path, &text)?;
-                // The samples it ran on, for `twin add-physics --diagnosis R --data R.csv`
-                // (the live page's accept).
-                let samples = path.with_extension("csv");
-                if let Ok(m) = background::record(&job) {
-                    write_text_atomically(&samples, &crate::record::csv_text(&m))?;
+                let path = self.write_diagnosis(d, job)?;
+                if self.options.adopt && finished.firm {
+                    adoption = answer(d).map(|p| (p, background::verdict(d), path.clone()));
                 }
                 if let Value::Object(m) = &mut body {
-                    m.insert("action".into(), json!(d.action));
-                    m.insert("reason".into(), json!(d.reason));
-                    m.insert("effects".into(), json!(d.effects));
-                    m.insert("channels".into(), json!(d.channels));
-                    m.insert("nmse_before".into(), floats(&d.nmse_before));
-                    m.insert("nmse_after".into(), floats(&d.nmse_after));
-                    if let Some(at) = d.changed_at {
-                        // Its fits started there, from the state the twin reached on the
-                        // samples before; those after are the ones it scored.
-                        m.insert("fitted_from".into(), json!(at));
-                    }
-                    m.insert("report".into(), json!(path.display().to_string()));
-                    m.insert(
-                        "samples".into(),
-                        json!(path.with_extension("csv").display().to_string()),
-                    );
+                    answer_fields(m, d, &path);
                 }
             }
             Err(error) => {
@@ -1367,10 +1296,73 @@ impl Watcher<'_> {
             return Ok(());
         };
         self.adopt(&parameters, verdict, report)?;
-        if let (Some(c), Some(b)) = (&second, &mut self.background) {
+        if let (Some(c), Some(b)) = (&finished.second, &mut self.background) {
             b.second(c);
         }
         Ok(())
+    }
+
+    /// The diagnosis alert's body before its answer: the samples it used (all from `from` to
+    /// `to`; after a located change, those from the change on are the ones its error measures
+    /// score) and, after a change, whether it is firm, its evidence, what it waited for.
+    fn diagnosis_body(&self, finished: &Finished) -> Value {
+        let job = &finished.job;
+        let (from, to) = job.span();
+        let width = job.columns.width();
+        let mut body = json!({
+            "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
+            "from": from, "to": to, "samples_used": job.samples.len() / width,
+            "seconds": finished.seconds, "round": job.round,
+        });
+        if let (Some(change), Value::Object(m)) = (job.change, &mut body) {
+            m.insert("change_time".into(), json!(change));
+            m.insert("post_change_seconds".into(), json!(to - change));
+            m.insert("firm".into(), json!(finished.firm));
+            if let Some(w) = &finished.weight {
+                m.insert("evidence".into(), json!(w));
+            }
+            if let Some(b) = &finished.before {
+                // Its effects against the samples before the change: there all along?
+                m.insert("before_the_change".into(), json!(b));
+            }
+            if let Some(why) = &finished.because {
+                // How much post-change data it waited for, and why that was enough.
+                m.insert(
+                    "waited".into(),
+                    json!(format!(
+                        "{:.1} s of post-change data, because {why}",
+                        to - change
+                    )),
+                );
+            }
+            if let Some(c) = &finished.second {
+                // It answered on the samples before a second change found in them.
+                m.insert(
+                    "second_change".into(),
+                    json!({"time": c.time, "low": c.low, "high": c.high}),
+                );
+            }
+        }
+        body
+    }
+
+    /// The diagnosis report written beside the alerts, and the samples it ran on (for `twin
+    /// add-physics --diagnosis R --data R.csv`, the live page's accept); the report's path.
+    fn write_diagnosis(
+        &self,
+        d: &crate::workflows::diagnose::Diagnosis,
+        job: &background::Job,
+    ) -> Result<PathBuf, WatchError> {
+        let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
+        let path = background::report_path(&self.options.alerts, k);
+        let text =
+            serde_json::to_string_pretty(d).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+        write_text_atomically(&path, &text)?;
+        let samples = path.with_extension("csv");
+        if let Ok(m) = background::record(job) {
+            write_text_atomically(&samples, &crate::record::csv_text(&m))?;
+        }
+        Ok(path)
     }
 
     /// Adopt the twin a firm verdict names ([`answer`]): written beside the alerts, swapped in
@@ -1469,6 +1461,31 @@ fn open_stepper(
         stepper.set_learner_parameter("refit_every", learning.refit_every as i32);
     }
     Ok((stepper, budget))
+}
+
+/// A diagnosis alert's answer: the diagnosis's action, reason, effects and scores, where its
+/// fits started, and its report's and samples' paths.
+fn answer_fields(
+    m: &mut serde_json::Map<String, Value>,
+    d: &crate::workflows::diagnose::Diagnosis,
+    path: &Path,
+) {
+    m.insert("action".into(), json!(d.action));
+    m.insert("reason".into(), json!(d.reason));
+    m.insert("effects".into(), json!(d.effects));
+    m.insert("channels".into(), json!(d.channels));
+    m.insert("nmse_before".into(), floats(&d.nmse_before));
+    m.insert("nmse_after".into(), floats(&d.nmse_after));
+    if let Some(at) = d.changed_at {
+        // Its fits started there, from the state the twin reached on the samples before;
+        // those after are the ones it scored.
+        m.insert("fitted_from".into(), json!(at));
+    }
+    m.insert("report".into(), json!(path.display().to_string()));
+    m.insert(
+        "samples".into(),
+        json!(path.with_extension("csv").display().to_string()),
+    );
 }
 
 /// The physics parameters a firm verdict sets: a recalibration's every parameter; the
@@ -1591,34 +1608,11 @@ pub fn watch_observed(
         pushed_back,
     } = opening(&mut reader, saved.as_ref(), &structure)?;
     let describe = twin.describe();
-    let header = Header::parse(&header_line, &options.columns, &structure, &describe)
-        .map_err(WatchError::Header)?;
-    // The stream's channels: its first header's, or those of the run a checkpoint saved.
-    let (excitation, channels) = match &saved {
-        Some(state) => (state.excitation, state.channels.clone()),
-        None => (header.0.excitation(), header.0.responses().to_vec()),
-    };
-    let mut header = header
-        .for_stream(excitation, &channels)
-        .map_err(|message| match &options.checkpoint {
-            Some(path) => WatchError::BadCheckpoint {
-                path: path.clone(),
-                message: format!("made on another stream: {message}"),
-            },
-            None => WatchError::Header(message),
-        })?;
+    let (mut header, excitation, channels) =
+        stream_header(&header_line, options, &structure, &describe, saved.as_ref())?;
     let (mut stepper, budget) = open_stepper(twin, excitation, &channels, &options.learning)?;
     let resuming = saved.is_some();
-    let mut state = match saved {
-        Some(state) => {
-            if let Some(start) = state.segment_start {
-                stepper.start(start)?;
-                stepper.restore(&state.fmu, state.fmu_last)?;
-            }
-            state
-        }
-        None => State::fresh(detector_options, excitation, channels.clone()),
-    };
+    let mut state = start_state(&mut stepper, saved, detector_options, excitation, &channels)?;
     if from_broker {
         state.header = Some(header_line.clone());
     }
@@ -1626,22 +1620,7 @@ pub fn watch_observed(
         state.supervisor = Some(Supervisor::new(options.learning.threshold, channels.len()));
     }
     let alerts = Alerts::open(&options.alerts, resuming)?;
-    let background = options.diagnosis.map(|o| {
-        let diagnose = crate::workflows::diagnose::DiagnoseOptions {
-            transient: options.transient,
-            tolerance: options.tolerance,
-            ..Default::default()
-        };
-        let columns = Columns {
-            excitation,
-            channels: channels.clone(),
-        };
-        let mut b = Background::new(twin, o, diagnose, state.background.clone(), columns);
-        if let Some(dt) = state.dt {
-            b.set_dt(dt);
-        }
-        b
-    });
+    let background = background_of(twin, options, &state, excitation, &channels);
     let twin_noise = channels
         .iter()
         .map(|&c| twin.noise_variance_of(c))
@@ -1686,6 +1665,80 @@ pub fn watch_observed(
     };
     let run = read_stream(&mut w, &stream, &mut header, &mut progress)?;
     end(&mut w, &run, &channels, &tolerance, budget, &mut progress)
+}
+
+/// The stream's header and its channels: its first header's, or those of the run a checkpoint
+/// saved (a header that does not fit them: the checkpoint was made on another stream).
+fn stream_header(
+    header_line: &str,
+    options: &WatchOptions,
+    structure: &::structure::Structure,
+    describe: &str,
+    saved: Option<&State>,
+) -> Result<(Header, Channel, Vec<Channel>), WatchError> {
+    let header = Header::parse(header_line, &options.columns, structure, describe)
+        .map_err(WatchError::Header)?;
+    let (excitation, channels) = match saved {
+        Some(state) => (state.excitation, state.channels.clone()),
+        None => (header.0.excitation(), header.0.responses().to_vec()),
+    };
+    let header = header
+        .for_stream(excitation, &channels)
+        .map_err(|message| match &options.checkpoint {
+            Some(path) => WatchError::BadCheckpoint {
+                path: path.clone(),
+                message: format!("made on another stream: {message}"),
+            },
+            None => WatchError::Header(message),
+        })?;
+    Ok((header, excitation, channels))
+}
+
+/// The watch's state: the checkpoint's, its segment's FMU state restored in `stepper`, or a
+/// fresh one.
+fn start_state(
+    stepper: &mut Stepper,
+    saved: Option<State>,
+    detector_options: Options,
+    excitation: Channel,
+    channels: &[Channel],
+) -> Result<State, WatchError> {
+    Ok(match saved {
+        Some(state) => {
+            if let Some(start) = state.segment_start {
+                stepper.start(start)?;
+                stepper.restore(&state.fmu, state.fmu_last)?;
+            }
+            state
+        }
+        None => State::fresh(detector_options, excitation, channels.to_vec()),
+    })
+}
+
+/// The background diagnosis, when the watch runs one.
+fn background_of(
+    twin: &Twin,
+    options: &WatchOptions,
+    state: &State,
+    excitation: Channel,
+    channels: &[Channel],
+) -> Option<Background> {
+    options.diagnosis.map(|o| {
+        let diagnose = crate::workflows::diagnose::DiagnoseOptions {
+            transient: options.transient,
+            tolerance: options.tolerance,
+            ..Default::default()
+        };
+        let columns = Columns {
+            excitation,
+            channels: channels.to_vec(),
+        };
+        let mut b = Background::new(twin, o, diagnose, state.background.clone(), columns);
+        if let Some(dt) = state.dt {
+            b.set_dt(dt);
+        }
+        b
+    })
 }
 
 /// The stream's opening: its header line, the broker's connection events before it, and a
@@ -1786,14 +1839,16 @@ fn read_stream(
     progress: &mut impl FnMut(&Status),
 ) -> Result<Run, WatchError> {
     let options = w.options;
-    // Lines and samples the checkpoint has consumed are skipped (a broker does not replay:
-    // there only the samples' times tell what was seen).
-    let skip_lines = if stream.from_broker { 0 } else { w.state.lines };
-    let skip_until = w.state.last_time;
-    let mut line_number: u64 = 0;
+    let mut position = Position {
+        // Lines and samples the checkpoint has consumed are skipped (a broker does not
+        // replay: there only the samples' times tell what was seen).
+        skip_lines: if stream.from_broker { 0 } else { w.state.lines },
+        skip_until: w.state.last_time,
+        line_number: 0,
+        this_run: 0,
+    };
     let mut latency = Latency::new();
     let started = Instant::now();
-    let mut this_run: u64 = 0;
     let mut since_save: u64 = 0;
     let mut last_status = Instant::now();
     // Time spent waiting for a live source (a followed file, a broker), left out of the speed.
@@ -1810,73 +1865,34 @@ fn read_stream(
             // A file's blank line still counts for the line numbers; a broker's empty line is
             // only a connection change.
             if !stream.from_broker {
-                line_number += 1;
+                position.line_number += 1;
             }
             continue;
         }
-        line_number += 1;
+        position.line_number += 1;
         if stream.from_broker && is_header(&line) {
-            match Header::parse(&line, &options.columns, stream.structure, stream.describe)
-                .and_then(|h| h.for_stream(stream.excitation, stream.channels))
-            {
-                Ok(h) => {
-                    *header = h;
-                    w.state.header = Some(line);
-                    continue;
-                }
-                Err(e) => {
-                    w.state.bad_lines += 1;
-                    let time = w.state.last_time;
-                    w.alert(
-                        time,
-                        "bad_sample",
-                        json!({"line": line_number, "reason": e.to_string()}),
-                    )?;
-                    continue;
-                }
-            }
+            broker_header(w, stream, header, line, position.line_number)?;
+            continue;
         }
         let began = Instant::now();
-        let sample = header.0.sample_into(&line, &mut w.measured);
-        if line_number <= skip_lines {
-            continue;
-        }
-        if let (Ok((t, ..)), Some(until)) = (&sample, skip_until) {
-            if this_run == 0 && *t <= until {
-                w.state.lines = line_number;
-                continue;
-            }
-        }
-        w.state.lines = line_number;
-        if let (true, Ok((t, ..)), Some(last)) = (stream.from_broker, &sample, w.state.last_time) {
-            if *t <= last {
-                w.state.duplicates += 1;
-                continue;
-            }
-        }
-        let sample = sample.and_then(|s| match w.state.last_time {
-            Some(last) if s.0 <= last => {
-                Err(format!("time {} does not increase (previous {last})", s.0))
-            }
-            _ => Ok(s),
-        });
-        match sample {
-            Err(reason) => {
+        match seen(w, stream, header, &line, &mut position) {
+            Seen::Skipped => {}
+            Seen::Bad(reason) => {
                 w.state.bad_lines += 1;
                 let time = w.state.last_time;
                 // A file's line numbers count the header as line 1; a broker's count the lines
                 // of its messages from 1.
                 let line = if stream.from_broker {
-                    line_number
+                    position.line_number
                 } else {
-                    line_number + 1
+                    position.line_number + 1
                 };
                 w.alert(time, "bad_sample", json!({"line": line, "reason": reason}))?;
             }
-            Ok((time, excitation)) => {
+            Seen::Sample(time, excitation) => {
                 w.sample(time, excitation)?;
                 w.show(time, began);
-                this_run += 1;
+                position.this_run += 1;
                 latency.add(began.elapsed().as_secs_f64());
                 since_save += 1;
                 if since_save >= options.checkpoint_every {
@@ -1885,19 +1901,101 @@ fn read_stream(
                 }
                 if last_status.elapsed() > Duration::from_millis(200) {
                     last_status = Instant::now();
-                    progress(&status(&w, this_run, started));
+                    progress(&status(w, position.this_run, started));
                     let elapsed = started.elapsed().saturating_sub(waited).as_secs_f64();
-                    w.show_state(this_run, elapsed, false);
+                    w.show_state(position.this_run, elapsed, false);
                 }
             }
         }
     }
     Ok(Run {
-        samples: this_run,
+        samples: position.this_run,
         latency,
         started,
         waited,
     })
+}
+
+/// Where the stream is: the line read last, the samples this run took, and what a checkpoint
+/// consumed already (skipped).
+struct Position {
+    skip_lines: u64,
+    skip_until: Option<f64>,
+    line_number: u64,
+    this_run: u64,
+}
+
+/// What a data line is to the watch.
+enum Seen {
+    /// Consumed by the run a checkpoint saved, or a broker's duplicate.
+    Skipped,
+    Bad(String),
+    /// A sample's time and excitation (its responses in the watcher's `measured`).
+    Sample(f64, f64),
+}
+
+/// A broker's header line mid-stream: the header from then on, or a bad sample when it does not
+/// fit the stream.
+fn broker_header(
+    w: &mut Watcher,
+    stream: &Stream,
+    header: &mut Header,
+    line: String,
+    line_number: u64,
+) -> Result<(), WatchError> {
+    match Header::parse(&line, &w.options.columns, stream.structure, stream.describe)
+        .and_then(|h| h.for_stream(stream.excitation, stream.channels))
+    {
+        Ok(h) => {
+            *header = h;
+            w.state.header = Some(line);
+        }
+        Err(e) => {
+            w.state.bad_lines += 1;
+            let time = w.state.last_time;
+            w.alert(
+                time,
+                "bad_sample",
+                json!({"line": line_number, "reason": e.to_string()}),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// A data line read into the watcher's `measured`: skipped when a checkpoint consumed it or a
+/// broker sent it twice, bad when it does not parse or its time does not increase.
+fn seen(
+    w: &mut Watcher,
+    stream: &Stream,
+    header: &Header,
+    line: &str,
+    position: &mut Position,
+) -> Seen {
+    let sample = header.0.sample_into(line, &mut w.measured);
+    if position.line_number <= position.skip_lines {
+        return Seen::Skipped;
+    }
+    if let (Ok((t, ..)), Some(until)) = (&sample, position.skip_until) {
+        if position.this_run == 0 && *t <= until {
+            w.state.lines = position.line_number;
+            return Seen::Skipped;
+        }
+    }
+    w.state.lines = position.line_number;
+    if let (true, Ok((t, ..)), Some(last)) = (stream.from_broker, &sample, w.state.last_time) {
+        if *t <= last {
+            w.state.duplicates += 1;
+            return Seen::Skipped;
+        }
+    }
+    match (sample, w.state.last_time) {
+        (Ok((t, _)), Some(last)) if t <= last => {
+            Seen::Bad(format!("time {t} does not increase (previous {last})"))
+        }
+        (Ok((time, excitation)), _) => Seen::Sample(time, excitation),
+        (Err(reason), _) => Seen::Bad(reason),
+    }
 }
 
 /// The stream's end: the checkpoint saved, the open segment finished, the diagnoses still
