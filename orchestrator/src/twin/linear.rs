@@ -11,7 +11,7 @@ use std::path::Path;
 use ::structure::channel::{Channel, Quantity};
 use fmi2::CoSimModel;
 use fmu_shear::batch::{accelerations_along, LinearRecord};
-use fmu_shear::modal::{normals, Modal, Normals};
+use fmu_shear::modal::{band, normals, Modal, Normals};
 use fmu_shear::{ShearModel, ShearParameters, StructureResource};
 use nalgebra::DMatrix;
 
@@ -257,6 +257,13 @@ pub fn acceleration_band(
         excitation: &data.excitation.values,
         floors: &floors,
     };
+    // Through the modes (one product a block), else the sensitivity state in groups.
+    if let Some(modal) = Modal::new(&params, data.dt, &floors, &directions) {
+        let band = band(&modal, &record);
+        if band.iter().flatten().all(|v| v.is_finite()) {
+            return Some(band);
+        }
+    }
     band_in_groups(&params, &record, &directions)
 }
 
