@@ -11,6 +11,9 @@ use orchestrator::{
     choice, cosim, evaluation, fsutil, record, report, serve, synth, twin, workflows,
 };
 
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() -> ExitCode {
     restore_sigpipe();
     match commands::run(commands::Cli::parse()) {
