@@ -6,7 +6,7 @@
 use plotters::prelude::*;
 
 use super::palette;
-use crate::evaluation::frf::{welch_h1, FRF_SEGMENT};
+use crate::evaluation::frf::FrequencyResponse;
 use crate::workflows::control::ControlOutcome;
 
 const FONT: &str = "sans-serif";
@@ -45,11 +45,13 @@ fn draw_mesh<DB: DrawingBackend>(
         .map_err(text)
 }
 
-/// One line of the plot: its label, colour and accelerations (record rate).
+/// One line of the plot: its label, colour, accelerations (record rate) and frequency
+/// responses per floor.
 struct Run<'a> {
     label: String,
     colour: RGBColor,
     acc: &'a [Vec<f64>],
+    frf: &'a [Option<FrequencyResponse>],
     contacts: Vec<f64>,
 }
 
@@ -59,21 +61,28 @@ fn runs_of(outcome: &ControlOutcome) -> Vec<Run<'_>> {
         label: format!("passive ({} contacts)", outcome.report.passive.contacts),
         colour: palette::GREY,
         acc: &outcome.passive.acc,
+        frf: &outcome.passive_frf,
         contacts: outcome.report.passive.contact_times.clone(),
     }];
     let mut c = 0;
-    for (d, r) in outcome.report.designs.iter().zip(&outcome.designs) {
-        if let Some(r) = r {
+    let designs = outcome.report.designs.iter().zip(&outcome.designs);
+    for ((d, r), frf) in designs.zip(&outcome.design_frfs) {
+        if let (Some(r), Some(frf)) = (r, frf) {
             runs.push(Run {
                 label: format!("LQR q = {} ({} contacts)", d.design.q, d.contacts),
                 colour: COLOURS[c % COLOURS.len()],
                 acc: &r.acc,
+                frf,
                 contacts: d.contact_times.clone(),
             });
             c += 1;
         }
     }
-    if let (Some(s), Some(r)) = (&outcome.report.schedule, &outcome.scheduled) {
+    if let (Some(s), Some(r), Some(frf)) = (
+        &outcome.report.schedule,
+        &outcome.scheduled,
+        &outcome.scheduled_frf,
+    ) {
         runs.push(Run {
             label: format!(
                 "scheduled q = {} / {} ({} contacts)",
@@ -81,6 +90,7 @@ fn runs_of(outcome: &ControlOutcome) -> Vec<Run<'_>> {
             ),
             colour: palette::DARK_GREY,
             acc: &r.acc,
+            frf,
             contacts: s.contact_times.clone(),
         });
     }
@@ -117,27 +127,11 @@ fn draw_key(key: &Area, runs: &[Run]) -> Result<(), String> {
 }
 
 /// Floor `floor`'s frequency response from the force to its acceleration, every run's.
-fn draw_frf_panel(
-    panel: &Area,
-    runs: &[Run],
-    force: &[f64],
-    axis: &Axis,
-    floor: usize,
-) -> Result<(), String> {
-    let n = force.len();
-    let frfs: Vec<_> = runs
-        .iter()
-        .map(|r| {
-            welch_h1(
-                force,
-                &r.acc[floor][..n.min(r.acc[floor].len())],
-                axis.dt,
-                FRF_SEGMENT,
-            )
-        })
-        .collect();
+fn draw_frf_panel(panel: &Area, runs: &[Run], axis: &Axis, floor: usize) -> Result<(), String> {
+    let frfs: Vec<&Option<FrequencyResponse>> = runs.iter().map(|r| &r.frf[floor]).collect();
     let (lo, hi) = frfs
         .iter()
+        .copied()
         .flatten()
         .flat_map(|h| h.magnitude_db.iter().copied())
         .filter(|v| v.is_finite())
@@ -161,7 +155,7 @@ fn draw_frf_panel(
         .build_cartesian_2d(0.0..nyquist.min(30.0), lo..hi)
         .map_err(text)?;
     draw_mesh(&mut chart, "frequency (Hz)", "|H| (dB re 1 (m/s²)/N)")?;
-    for (run, h) in runs.iter().zip(&frfs) {
+    for (run, h) in runs.iter().zip(frfs) {
         if let Some(h) = h {
             let pts = h
                 .frequency
@@ -265,7 +259,7 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
         let (rows, bottom) = rest.split_vertically(3 * ROW);
         let panels = rows.split_evenly((3, 2));
         for floor in 0..3 {
-            draw_frf_panel(&panels[2 * floor], &runs, &outcome.force, &axis, floor)?;
+            draw_frf_panel(&panels[2 * floor], &runs, &axis, floor)?;
             draw_time_panel(&panels[2 * floor + 1], &runs, &axis, floor)?;
         }
         draw_contacts(&bottom, &runs, &axis)?;

@@ -18,7 +18,7 @@ use structure::Structure;
 
 use crate::blocks::lqr::SensorNoise;
 use crate::cosim::master::MasterError;
-use crate::evaluation::frf::{welch_h1, FRF_SEGMENT};
+use crate::evaluation::frf::{welch_h1, FrequencyResponse, FRF_SEGMENT};
 use crate::evaluation::stats::rms;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
@@ -277,7 +277,8 @@ pub struct ControlReport {
     pub estimator_costs: Vec<EstimatorCost>,
 }
 
-/// Everything `twin control` computed: the report and the time histories for the plot.
+/// Everything `twin control` computed: the report, and the time histories and frequency
+/// responses for the plot.
 pub struct ControlOutcome {
     pub report: ControlReport,
     pub passive: Response,
@@ -286,6 +287,23 @@ pub struct ControlOutcome {
     pub scheduled: Option<Response>,
     pub force: Vec<f64>,
     pub dt: f64,
+    /// Per floor, the frequency response from the excitation to the floor's acceleration
+    /// ([`floor_frfs`]) of the passive run, of each design's (None when it did not run), of the
+    /// gain schedule's.
+    pub passive_frf: Vec<Option<FrequencyResponse>>,
+    pub design_frfs: Vec<Option<Vec<Option<FrequencyResponse>>>>,
+    pub scheduled_frf: Option<Vec<Option<FrequencyResponse>>>,
+}
+
+/// Per floor, the Welch H1 estimate from `force` to the run's acceleration (None where the
+/// record is too short for a segment).
+pub fn floor_frfs(force: &[f64], response: &Response, dt: f64) -> Vec<Option<FrequencyResponse>> {
+    let n = force.len();
+    response
+        .acc
+        .iter()
+        .map(|acc| welch_h1(force, &acc[..n.min(acc.len())], dt, FRF_SEGMENT))
+        .collect()
 }
 
 /// Peak of the FRF (dB) in the band around each resonance (rows), per floor (columns).
@@ -1236,12 +1254,22 @@ fn control_outcome(
         schedule,
         estimator_costs: runs.estimator_costs,
     };
+    let force = &data.excitation.values;
+    let frfs = |r: &Response| floor_frfs(force, r, data.dt);
     ControlOutcome {
         report,
+        passive_frf: frfs(&passive),
+        design_frfs: runs
+            .designs
+            .responses
+            .iter()
+            .map(|r| r.as_ref().map(frfs))
+            .collect(),
+        scheduled_frf: scheduled.as_ref().map(frfs),
         passive,
         designs: runs.designs.responses,
         scheduled,
-        force: data.excitation.values.clone(),
+        force: force.clone(),
         dt: data.dt,
     }
 }
