@@ -138,10 +138,13 @@ impl Modes {
             return None;
         }
         let kept = (0..s)
-            .filter_map(|j| match lambda[j].im {
-                im if im > 0.0 => Some((j, 2.0)),
-                im if im == 0.0 => Some((j, 1.0)),
-                _ => None,
+            .filter_map(|j| {
+                let im = lambda[j].im;
+                if im > 0.0 {
+                    Some((j, 2.0))
+                } else {
+                    (im == 0.0).then_some((j, 1.0))
+                }
             })
             .collect();
         let mut modes = Modes {
@@ -444,7 +447,7 @@ fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
         .map(|d| {
             let mut nonzero = d.iter().enumerate().filter(|(_, x)| **x != 0.0);
             match (nonzero.next(), nonzero.next()) {
-                (Some((j, &x)), None) if x == 1.0 => Some(j),
+                (Some((j, &x)), None) => (x == 1.0).then_some(j),
                 _ => None,
             }
         })
