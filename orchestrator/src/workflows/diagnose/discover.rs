@@ -778,6 +778,100 @@ pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
 /// What discovery found and, when it passes the gates, its terms and fit.
 pub(super) type Discovered = (DiscoveryReport, Option<(Vec<Term>, Fitted)>);
 
+/// The regression problem around the run of the model at `values`, with `terms` (their
+/// linearised response) added back to the residual, solved: the sparse terms that cut the
+/// residual on the samples `fitted_idx`.
+fn regression_problem(
+    ctx: &select::Context,
+    fitted_idx: &[usize],
+    values: &Estimates,
+    run: &PhysicsRun,
+    terms: &[Term],
+) -> Result<Found> {
+    let data = ctx.data;
+    let value = |name: &str| -> Result<f64> {
+        match values.get(name) {
+            Some(&(v, _)) => Ok(v),
+            None => ctx.reals.get(name),
+        }
+    };
+    let per_storey = |p: char| -> Result<Vec<f64>> {
+        (1..=ctx.reals.storeys)
+            .map(|i| value(&format!("{p}{i}")))
+            .collect()
+    };
+    let linear = LinearPart {
+        mass: per_storey('m')?,
+        damping: per_storey('c')?,
+        stiffness: per_storey('k')?,
+    };
+    let states = States {
+        drift: &run.drift,
+        velocity: &run.velocity,
+        acceleration: &run.acc,
+    };
+    let channels = ctx.channels;
+    let sensors = channels.sensors();
+    let mut residual = channels.residuals(run);
+    for t in terms {
+        let share = term_response(&linear, &states, t, data.dt, &sensors);
+        for (residual, share) in residual.iter_mut().zip(&share) {
+            for (r, s) in residual.iter_mut().zip(share) {
+                *r += s;
+            }
+        }
+    }
+    let problem = Problem {
+        linear,
+        states,
+        sensors: &sensors,
+        residual,
+        variance: channels
+            .measured
+            .iter()
+            .map(|m| variance(&m[ctx.split.first..]))
+            .collect(),
+        dt: data.dt,
+        fitted: fitted_idx,
+        held_out: ctx.split.held_out,
+        first: ctx.split.first,
+    };
+    regress(&problem, ctx.options.gates.step_cut)
+        .ok_or_else(|| DiagnoseError::Setup("no sparse model cuts the residual".into()))
+}
+
+/// `terms` refitted through the FMU with the physics of `chosen` at `values`: the terms with
+/// their fitted coefficients, and the fit.
+fn refit_terms(
+    ctx: &select::Context,
+    chosen: &[Candidate],
+    values: &Estimates,
+    terms: &[Term],
+) -> Result<(Vec<Term>, Fitted)> {
+    ctx.options.tell(&format!(
+        "refitting {} through the FMU",
+        terms
+            .iter()
+            .map(|t| t.to_string())
+            .collect::<Vec<_>>()
+            .join(" + ")
+    ));
+    let fitted = ctx.fit_addition(chosen, values, &Addition::Discovered(terms.to_vec()))?;
+    let mut terms = terms.to_vec();
+    let names = Addition::Discovered(terms.clone()).parameters(ctx.scales);
+    for (t, (name, _, _)) in terms.iter_mut().zip(&names) {
+        if let Some(p) = fitted
+            .calibration
+            .parameters
+            .iter()
+            .find(|p| &p.name == name)
+        {
+            t.coefficient = p.value;
+        }
+    }
+    Ok((terms, fitted))
+}
+
 /// Sparse regression of the missing force on top of the model of `chosen` at `values` (whose
 /// physics run is `run`), refitted through FMI with the physics (see the module documentation).
 pub(super) fn missing(
@@ -793,59 +887,10 @@ pub(super) fn missing(
     let data = ctx.data;
     let n = data.len();
     let fitted_idx: Vec<usize> = (0..n).filter(|&k| ctx.split.mask[k]).collect();
-    // The regression problem around the run of the model at `values`, with `terms` (their
-    // linearised response) added back to the residual.
-    let problem = |values: &Estimates, run: &PhysicsRun, terms: &[Term]| -> Result<Found> {
-        let value = |name: &str| -> Result<f64> {
-            match values.get(name) {
-                Some(&(v, _)) => Ok(v),
-                None => ctx.reals.get(name),
-            }
-        };
-        let per_storey = |p: char| -> Result<Vec<f64>> {
-            (1..=ctx.reals.storeys)
-                .map(|i| value(&format!("{p}{i}")))
-                .collect()
-        };
-        let linear = LinearPart {
-            mass: per_storey('m')?,
-            damping: per_storey('c')?,
-            stiffness: per_storey('k')?,
-        };
-        let states = States {
-            drift: &run.drift,
-            velocity: &run.velocity,
-            acceleration: &run.acc,
-        };
-        let channels = ctx.channels;
-        let sensors = channels.sensors();
-        let mut residual = channels.residuals(run);
-        for t in terms {
-            let share = term_response(&linear, &states, t, data.dt, &sensors);
-            for (residual, share) in residual.iter_mut().zip(&share) {
-                for (r, s) in residual.iter_mut().zip(share) {
-                    *r += s;
-                }
-            }
-        }
-        let problem = Problem {
-            linear,
-            states,
-            sensors: &sensors,
-            residual,
-            variance: channels
-                .measured
-                .iter()
-                .map(|m| variance(&m[ctx.split.first..]))
-                .collect(),
-            dt: data.dt,
-            fitted: &fitted_idx,
-            held_out: ctx.split.held_out,
-            first: ctx.split.first,
-        };
-        regress(&problem, gates.step_cut)
-            .ok_or_else(|| DiagnoseError::Setup("no sparse model cuts the residual".into()))
+    let problem = |values: &Estimates, run: &PhysicsRun, terms: &[Term]| {
+        regression_problem(ctx, &fitted_idx, values, run, terms)
     };
+    let refit = |terms: &[Term]| refit_terms(ctx, chosen, values, terms);
     let found = problem(values, run, &[]).ok();
     let mut report = DiscoveryReport {
         regression: found.clone(),
@@ -859,30 +904,6 @@ pub(super) fn missing(
     let Some(found) = found else {
         report.seconds = started.elapsed().as_secs_f64();
         return Ok((report, None));
-    };
-    let refit = |terms: &[Term]| -> Result<(Vec<_>, Fitted)> {
-        ctx.options.tell(&format!(
-            "refitting {} through the FMU",
-            terms
-                .iter()
-                .map(|t| t.to_string())
-                .collect::<Vec<_>>()
-                .join(" + ")
-        ));
-        let fitted = ctx.fit_addition(chosen, values, &Addition::Discovered(terms.to_vec()))?;
-        let mut terms = terms.to_vec();
-        let names = Addition::Discovered(terms.clone()).parameters(ctx.scales);
-        for (t, (name, _, _)) in terms.iter_mut().zip(&names) {
-            if let Some(p) = fitted
-                .calibration
-                .parameters
-                .iter()
-                .find(|p| &p.name == name)
-            {
-                t.coefficient = p.value;
-            }
-        }
-        Ok((terms, fitted))
     };
     let mut best = refit(&found.terms)?;
     // A second pass around the refitted model's trajectory, closer to the structure's: the

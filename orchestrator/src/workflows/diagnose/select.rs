@@ -397,19 +397,13 @@ pub(super) fn forward(
             && recal * gates.step_cut <= current
             && picked.is_none_or(|((_, f), _)| recal < worst(&f.nmse_held_out));
         if take_recalibration {
-            selection
-                .values
-                .extend(estimates(&recalibrated.calibration));
-            selection.steps.push(SelectionStep {
+            let step = Step {
                 round,
-                added: "recalibration".into(),
                 worst_before: current,
-                nmse_held_out_effect: recalibrated.nmse_held_out.clone(),
-                nmse_held_out_joint: recalibrated.nmse_held_out.clone(),
-                joint_kept: true,
                 tried: std::mem::take(&mut tried),
-                seconds: started.elapsed().as_secs_f64(),
-            });
+                started,
+            };
+            adopt_recalibration(&mut selection, recalibrated, step);
             current = recal;
             physics_moved = true;
             full_round_next = true;
@@ -450,27 +444,7 @@ pub(super) fn forward(
             break;
         }
         round += 1;
-        progress(&format!(
-            "round {round}: {} candidates on top of {}",
-            next.len(),
-            selection
-                .steps
-                .iter()
-                .map(|s| s.added.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-        let base = ctx.model(&selection.chosen, &selection.values)?;
-        results = Vec::new();
-        for (c, r) in ctx.round(&base, &next) {
-            match r {
-                Ok(f) => {
-                    tried.push((c.label(), worst(&f.nmse_held_out)));
-                    results.push((c, f));
-                }
-                Err(e) => tried.push((format!("{} (failed: {e})", c.label()), f64::NAN)),
-            }
-        }
+        results = next_round(ctx, &selection, &next, round, progress, &mut tried)?;
         passing = vec![false; results.len()];
         if full {
             screened = screen(&results, current);
@@ -478,6 +452,58 @@ pub(super) fn forward(
     }
     polish(ctx, &mut selection, progress);
     Ok(selection)
+}
+
+/// The recalibration taken as the round's move: its values in the selection, its step
+/// reported (its held-out NMSE both alone and joint), its fit the selection's.
+fn adopt_recalibration(selection: &mut Selection, recalibrated: &Fitted, step: Step) {
+    selection
+        .values
+        .extend(estimates(&recalibrated.calibration));
+    selection.steps.push(SelectionStep {
+        round: step.round,
+        added: "recalibration".into(),
+        worst_before: step.worst_before,
+        nmse_held_out_effect: recalibrated.nmse_held_out.clone(),
+        nmse_held_out_joint: recalibrated.nmse_held_out.clone(),
+        joint_kept: true,
+        tried: step.tried,
+        seconds: step.started.elapsed().as_secs_f64(),
+    });
+}
+
+/// Round `round`: each of `next` fitted on top of the selection so far; the fits, and each
+/// candidate added to `tried` (its held-out worst NMSE, or its failure).
+fn next_round(
+    ctx: &Context,
+    selection: &Selection,
+    next: &[Candidate],
+    round: usize,
+    progress: &dyn Fn(&str),
+    tried: &mut Vec<(String, f64)>,
+) -> Result<Vec<(Candidate, Fitted)>> {
+    progress(&format!(
+        "round {round}: {} candidates on top of {}",
+        next.len(),
+        selection
+            .steps
+            .iter()
+            .map(|s| s.added.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    let base = ctx.model(&selection.chosen, &selection.values)?;
+    let mut results = Vec::new();
+    for (c, r) in ctx.round(&base, next) {
+        match r {
+            Ok(f) => {
+                tried.push((c.label(), worst(&f.nmse_held_out)));
+                results.push((c, f));
+            }
+            Err(e) => tried.push((format!("{} (failed: {e})", c.label()), f64::NAN)),
+        }
+    }
+    Ok(results)
 }
 
 /// The next round's candidates, at locations not yet `chosen`: the whole library when the round
