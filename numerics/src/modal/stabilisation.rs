@@ -365,7 +365,9 @@ pub enum Rejection {
     /// sensor's own resonance, not a mode of a frame whose floors move together.
     OneChannel,
     /// Closer to a mode made of more poles than the record can resolve
-    /// ([`ScreenOptions::resolution`]): one resonance the fit split in two.
+    /// ([`ScreenOptions::resolution`]), or within [`ScreenOptions::split_frequency`] of it
+    /// with the same shape (MAC at least [`ScreenOptions::split_mac`]): one resonance the fit
+    /// split in two.
     Unresolved,
     /// No measured curve (an FRF's magnitude, or the responses' spectrum) peaks at its
     /// frequency ([`peak_supported`]): a pole the fit made of noise.
@@ -380,7 +382,10 @@ impl Rejection {
             Rejection::ExcitationEdge => "at the edge of the force's band (excitation)",
             Rejection::OutsideExcitation => "outside the force's band (excitation)",
             Rejection::OneChannel => "its shape is one channel",
-            Rejection::Unresolved => "within the record's resolution of a stronger mode",
+            Rejection::Unresolved => {
+                "one resonance with a stronger mode (within the record's resolution, or as close \
+                 with its shape)"
+            }
             Rejection::NoPeak => "no peak of the measured FRF or spectrum there",
             Rejection::FewRuns => "found in fewer than half of the roving runs",
         }
@@ -405,6 +410,23 @@ pub struct ScreenOptions {
     /// Hz: two modes closer than this are one (the record's frequency resolution: a Welch
     /// bin); None: every mode stands.
     pub resolution: Option<f64>,
+    /// Two modes within this relative frequency distance whose shapes have a MAC of at least
+    /// [`ScreenOptions::split_mac`] are one resonance the fit split: a 0.3 %-damped tower
+    /// mode's leaky FRF peak, 1.2 bins wide, came out of LSCF as two modes 0.58 % apart
+    /// with the same shape (MAC 1.0000 both with the exact one). Modes of a frame differ in
+    /// shape; on one channel every shape is alike, and modes this close are one peak.
+    #[serde(default = "split_frequency")]
+    pub split_frequency: f64,
+    #[serde(default = "split_mac")]
+    pub split_mac: f64,
+}
+
+fn split_frequency() -> f64 {
+    0.01
+}
+
+fn split_mac() -> f64 {
+    0.95
 }
 
 impl Default for ScreenOptions {
@@ -416,6 +438,8 @@ impl Default for ScreenOptions {
             edge: 0.05,
             one_channel: 0.9,
             resolution: None,
+            split_frequency: split_frequency(),
+            split_mac: split_mac(),
         }
     }
 }
@@ -424,6 +448,8 @@ impl ScreenOptions {
     pub fn validate(&self) -> Result<(), IdentificationError> {
         fraction("distance from the force's band edge", self.edge)?;
         fraction("one channel's share of a shape", self.one_channel)?;
+        fraction("split modes' frequency distance", self.split_frequency)?;
+        fraction("split modes' MAC", self.split_mac)?;
         match self.resolution {
             Some(r) if !(r.is_finite() && r > 0.0) => Err(IdentificationError::Option {
                 what: "frequency resolution",
@@ -452,7 +478,7 @@ pub fn screen_modes(
 ) -> (Vec<IdentifiedMode>, Vec<RejectedMode>) {
     let mut kept = Vec::new();
     let mut rejected = Vec::new();
-    let unresolved = unresolved_modes(&modes, options.resolution);
+    let unresolved = unresolved_modes(&modes, options);
     for (index, mode) in modes.into_iter().enumerate() {
         let f = mode.frequency;
         let near = |edge: f64| relative(f, edge) <= options.edge;
@@ -576,11 +602,15 @@ pub fn screen_by_peaks(
     supported
 }
 
-/// Per mode (ascending frequency), whether a mode within `resolution` Hz of it is made of
+/// Per mode (ascending frequency), whether a mode that is the same resonance — within the
+/// options' resolution (Hz), or within their split distance with the same shape — is made of
 /// more poles (ties: the earlier one stands).
-fn unresolved_modes(modes: &[IdentifiedMode], resolution: Option<f64>) -> Vec<bool> {
-    let Some(resolution) = resolution else {
-        return vec![false; modes.len()];
+fn unresolved_modes(modes: &[IdentifiedMode], options: &ScreenOptions) -> Vec<bool> {
+    let same = |a: &IdentifiedMode, b: &IdentifiedMode| {
+        let apart = (a.frequency - b.frequency).abs();
+        options.resolution.is_some_and(|r| apart < r)
+            || (relative(a.frequency, b.frequency) <= options.split_frequency
+                && mac(&a.shape, &b.shape) >= options.split_mac)
     };
     modes
         .iter()
@@ -588,7 +618,7 @@ fn unresolved_modes(modes: &[IdentifiedMode], resolution: Option<f64>) -> Vec<bo
         .map(|(i, mode)| {
             modes.iter().enumerate().any(|(j, other)| {
                 j != i
-                    && (other.frequency - mode.frequency).abs() < resolution
+                    && same(mode, other)
                     && (other.orders.len() > mode.orders.len()
                         || (other.orders.len() == mode.orders.len() && j < i))
             })
@@ -808,6 +838,16 @@ mod tests {
         assert_eq!(kept.len(), 1);
         assert_eq!(kept[0].frequency, 9.1);
         assert_eq!(rejected[0].rejection, Rejection::Unresolved);
+        // Beyond the resolution but within 1 % with the same shape: one resonance split by
+        // the fit. With another shape, two modes.
+        let (kept, rejected) = screen_modes(vec![mode(30.0, 5), mode(30.27, 9)], &options);
+        assert_eq!(kept.len(), 1);
+        assert_eq!(kept[0].frequency, 30.27);
+        assert_eq!(rejected[0].rejection, Rejection::Unresolved);
+        let mut other = mode(30.27, 9);
+        other.shape = vec![Complex::new(0.5, 0.0), Complex::new(-1.0, 0.0)];
+        let (kept, _) = screen_modes(vec![mode(30.0, 5), other], &options);
+        assert_eq!(kept.len(), 2);
     }
 
     #[test]
