@@ -238,12 +238,15 @@ fn channel_parts(layout: &FieldLayout) -> Result<Vec<(Channel, Vec<Part>)>, Stri
     Ok(channels)
 }
 
-/// The data rows' values per field, in SI, and each row's line. Err: (line, message).
+/// The data rows' values per field (SI), and each row's line.
+type Rows = (Vec<Vec<f64>>, Vec<u64>);
+
+/// The data rows read. Err: (line, message).
 fn read_rows<'a>(
     lines: impl Iterator<Item = (u64, &'a str)>,
     fields: &[String],
     layout: &FieldLayout,
-) -> Result<(Vec<Vec<f64>>, Vec<u64>), (u64, String)> {
+) -> Result<Rows, (u64, String)> {
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); fields.len()];
     let mut lines_of_rows = Vec::new();
     for (line, row) in lines {
