@@ -20,6 +20,7 @@ pub mod guard;
 pub mod linear;
 pub mod noise;
 pub mod run;
+pub mod simulator;
 pub mod structure;
 pub mod system;
 

@@ -715,8 +715,7 @@ fn stream_sensitivities(
     mut each: impl FnMut(&[f64]),
 ) -> Option<()> {
     use crate::cosim::import::Fmu;
-    use crate::workflows::calibrate::simulator::Simulator;
-    use crate::workflows::calibrate::{channel_sensitivities, sensitivity_switch};
+    use crate::twin::simulator::{channel_sensitivities, sensitivity_switch, Simulator};
     if data.extra.contains_key("control") || twin.components.len() != 1 {
         return None;
     }

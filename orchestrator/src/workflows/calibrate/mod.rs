@@ -23,7 +23,6 @@ pub mod frf;
 pub mod ladder;
 pub mod lm;
 pub mod prior;
-pub mod simulator;
 pub mod validated;
 
 use std::cell::RefCell;
@@ -43,11 +42,11 @@ use crate::cosim::import::{Causality, Fmu, ScalarType};
 use crate::twin::data::Measurement;
 use crate::twin::linear::LinearFit;
 use crate::twin::noise::NoiseVariances;
+use crate::twin::simulator::{channel_sensitivities, sensitivity_switch, Simulator};
 use crate::twin::{Component, ParameterValue, Twin, TwinError, PHYSICS};
 pub use prior::{
     default_prior, priors_from_json, read_priors, structure_prior, Prior, PriorSpec, Space,
 };
-use simulator::Simulator;
 pub use validated::{calibrate_validated, CalibrateRunError, Validated};
 
 /// The default set of calibrated parameters.
@@ -295,39 +294,11 @@ struct Sensitivity {
 
 impl Sensitivity {
     fn find(fmu: &Fmu) -> Option<Self> {
-        let md = &fmu.model_description;
-        let switch = md.variable("sensitivities").filter(|v| {
-            v.scalar_type == ScalarType::Boolean
-                && v.causality == crate::cosim::import::Causality::Parameter
-        })?;
         Some(Sensitivity {
-            switch: switch.value_reference,
+            switch: sensitivity_switch(fmu)?,
             failed: AtomicBool::new(false),
         })
     }
-}
-
-/// The value reference of the FMU's Boolean parameter that switches its forward sensitivities
-/// on, if it has one.
-pub(crate) fn sensitivity_switch(fmu: &Fmu) -> Option<u32> {
-    Sensitivity::find(fmu).map(|s| s.switch)
-}
-
-/// The value references of `d_{channel}_d_{p}` for every calibrated parameter, if the FMU has
-/// them all.
-pub(crate) fn channel_sensitivities(
-    fmu: &Fmu,
-    channel: &str,
-    parameters: &[String],
-) -> Option<Vec<u32>> {
-    parameters
-        .iter()
-        .map(|p| {
-            fmu.model_description
-                .variable(&format!("d_{channel}_d_{p}"))
-                .map(|v| v.value_reference)
-        })
-        .collect()
 }
 
 impl Target<'_> {

@@ -5,11 +5,12 @@
 use serde::Serialize;
 
 use super::{
-    calibrate_records, calibrated_twin, physics_structure, simulator::Simulator, CalibrateError,
-    Calibration, CalibrationSetup, RecordInput,
+    calibrate_records, calibrated_twin, physics_structure, CalibrateError, Calibration,
+    CalibrationSetup, RecordInput,
 };
 use crate::twin::data::Measurement;
 use crate::twin::run::{nmse_on, RunError};
+use crate::twin::simulator::Simulator;
 use crate::twin::{Twin, TwinError, PHYSICS};
 use crate::workflows::options::{check_threads, check_transient_leaves, InvalidOption};
 

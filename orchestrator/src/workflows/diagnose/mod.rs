@@ -100,9 +100,9 @@ use crate::evaluation::stats::{first_after_transient, nmse, rms, variance};
 use crate::twin::data::Measurement;
 use crate::twin::noise::NoiseVariances;
 use crate::twin::run::{run_and_compare_with, Compared, Tolerance};
+use crate::twin::simulator::Simulator;
 use crate::twin::TwinError;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
-use crate::workflows::calibrate::simulator::Simulator;
 use crate::workflows::calibrate::CalibrateError;
 use crate::workflows::calibrate::{
     calibrate, fixed_log_evidence, Calibration, CalibrationSetup, Prior,

@@ -7,7 +7,7 @@ use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::rc::Rc;
 
-use crate::cosim::import::{Fmu, Instance, StepEnd};
+use crate::cosim::import::{Causality, Fmu, Instance, ScalarType, StepEnd};
 use crate::cosim::master::{Clock, MasterError, Port, Recorder, Slave, System};
 use crate::twin::data::Measurement;
 use crate::twin::system::initialise;
@@ -241,4 +241,31 @@ fn master_error(e: MasterError) -> TwinError {
         MasterError::Import(e) => TwinError::Import(e),
         other => TwinError::Message(other.to_string()),
     }
+}
+
+/// The value reference of the FMU's Boolean parameter that switches its forward sensitivities
+/// on, if it has one.
+pub(crate) fn sensitivity_switch(fmu: &Fmu) -> Option<u32> {
+    let switch = fmu
+        .model_description
+        .variable("sensitivities")
+        .filter(|v| v.scalar_type == ScalarType::Boolean && v.causality == Causality::Parameter)?;
+    Some(switch.value_reference)
+}
+
+/// The value references of `d_{channel}_d_{p}` for every calibrated parameter, if the FMU has
+/// them all.
+pub(crate) fn channel_sensitivities(
+    fmu: &Fmu,
+    channel: &str,
+    parameters: &[String],
+) -> Option<Vec<u32>> {
+    parameters
+        .iter()
+        .map(|p| {
+            fmu.model_description
+                .variable(&format!("d_{channel}_d_{p}"))
+                .map(|v| v.value_reference)
+        })
+        .collect()
 }
