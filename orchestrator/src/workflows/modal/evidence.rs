@@ -97,13 +97,23 @@ impl ModalEvidence {
     }
 }
 
-/// The record's modes against the twin's.
+/// The record's modes against the twin's (identified as `twin modal` does by default).
 pub fn modal_evidence(
     twin: &Twin,
     data: &Measurement,
     band: ModalBand,
 ) -> Result<ModalEvidence, ModalError> {
-    let record = identify(std::slice::from_ref(data), &IdentifyOptions::default())
+    modal_evidence_with(twin, data, band, &IdentifyOptions::default())
+}
+
+/// [`modal_evidence`] with the record's modes identified with `options`.
+pub fn modal_evidence_with(
+    twin: &Twin,
+    data: &Measurement,
+    band: ModalBand,
+    options: &IdentifyOptions,
+) -> Result<ModalEvidence, ModalError> {
+    let record = identify(std::slice::from_ref(data), options)
         .map_err(|e| ModalError::Options(format!("identifying {}: {e}", data.path.display())))?;
     evidence_of(twin, &record, band)
 }

@@ -11,7 +11,9 @@ pub mod pair;
 pub mod twin;
 pub mod verdicts;
 
-pub use evidence::{evidence_of, modal_evidence, ModalBand, ModalEvidence, ModeShift};
+pub use evidence::{
+    evidence_of, modal_evidence, modal_evidence_with, ModalBand, ModalEvidence, ModeShift,
+};
 pub use explain::{explain_shifts, Explanation};
 pub use identify::{identify, identify_ambient, IdentifyError, IdentifyOptions, RecordModes};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
