@@ -10,7 +10,7 @@
 //! fit pays per trial: its parameters change every run),
 //! `error_controlled/N` Dormand–Prince to `ADAPTIVE_TOLERANCE` split at the kinks (the path
 //! other structures took before), and `exact_rig/3` the paper's rig (force at floor 1) on its
-//! fixed-array path (`piecewise`).
+//! fixed-size state (`piecewise_any` on `[f64; 6]`).
 //!
 //! Group "smooth": the same record with friction on floor 1 (0.1 N, 1 mm/s) or a cubic spring in
 //! storey 1 (1e9 N/m³) at N = 4, 10, stepped as a diagnosis's fits step them (RK4, 8 fixed

@@ -1,28 +1,27 @@
 //! The exact contact stepping of the paper's rig (three storeys, force at floor 1, a bumper in
 //! storey 1 at half the linear response's largest drift, 9000 N/m, both sides), one 20 s record
-//! (1024 steps of 1/51.2 s) repeated, by each path of the same run: `fixed` (`piecewise`, the
-//! rig's fixed arrays), `generic` (`piecewise_any` on the rig's `[f64; 6]`), `inline`
-//! (`piecewise_any` on its inline vector, the path of every other structure). Prints steps per
-//! second of each, the median over interleaved rounds of the generic paths' rates to the fixed
-//! one's, and the largest difference of the generic paths' states from the fixed one's,
-//! relative to the largest |state| component.
+//! (1024 steps of 1/51.2 s) repeated, by `piecewise_any` on each kind of state: `array` (the
+//! rig's `[f64; 6]`, the path `ShearModel::advance` takes on the rig) and `inline` (a small
+//! vector, the path of every other structure). Prints steps per second of each, the median over
+//! interleaved rounds of the inline path's rate to the array one's, and the largest difference
+//! of their states, relative to the largest |state| component.
 //!
-//! `cargo run --release -p fmu-shear --example contact_paths -- [all|fixed|generic|inline] [RECORDS]`
+//! `cargo run --release -p fmu-shear --example contact_paths -- [all|array|inline] [RECORDS]`
 //! One path alone is for counting instructions, robust to the load of a shared machine: the
-//! difference of `valgrind --tool=callgrind` totals at 13 and 3 records, over 10 × 1024 steps.
+//! difference of `valgrind --tool=cachegrind --cache-sim=no` totals at 13 and 3 records, over
+//! 10 × 1024 steps (`scripts/bench-contact-paths.sh`).
 
 use std::time::Instant;
 
 use fmu_shear::effects::{contact, Contact, Effects, Law};
 use fmu_shear::linear::StepInputs;
-use fmu_shear::piecewise::ContactMaps;
 use fmu_shear::piecewise_any::{AnyContactMaps, Inline};
 use fmu_shear::{ShearModel, ShearParameters};
 use structure::{Excitation, Structure};
 
 const STEP: f64 = 1.0 / 51.2;
 const STEPS: usize = 1024;
-/// Interleaved rounds of the three paths (`all`).
+/// Interleaved rounds of the two paths (`all`).
 const ROUNDS: usize = 9;
 
 fn force() -> Vec<f64> {
@@ -71,7 +70,7 @@ fn inputs(force: &[f64], k: usize) -> StepInputs {
 fn run(
     records: usize,
     force: &[f64],
-    mut step: impl FnMut(&[f64; 6], &StepInputs) -> [f64; 6],
+    step: &mut impl FnMut(&[f64; 6], &StepInputs) -> [f64; 6],
 ) -> (Vec<[f64; 6]>, f64) {
     let start = Instant::now();
     let mut states = Vec::with_capacity(STEPS);
@@ -94,64 +93,37 @@ fn main() {
     let records: usize = args.next().map_or(50, |r| r.parse().expect("RECORDS"));
     let force = force();
     let model = rig(&force);
-    let mut fixed = ContactMaps::new(&model, STEP);
-    let mut generic = AnyContactMaps::new(&model, STEP);
+    let mut array = AnyContactMaps::new(&model, STEP);
     let mut inline = AnyContactMaps::new(&model, STEP);
+    let mut by_array = |x: &[f64; 6], i: &StepInputs| array.advance_in(x, i).expect("finite");
+    let mut by_inline = |x: &[f64; 6], i: &StepInputs| {
+        let x: Inline = Inline::from_slice(x);
+        let y = inline.advance_in(&x, i).expect("finite");
+        std::array::from_fn(|j| y[j])
+    };
     let mut results = Vec::new();
-    if which == "all" || which == "fixed" {
-        let r = run(records, &force, |x, i| {
-            fixed
-                .advance(x, i.excitation, i.excitation_slope)
-                .expect("finite")
-        });
-        results.push(("fixed", r));
-    }
-    if which == "all" || which == "generic" {
-        let r = run(records, &force, |x, i| {
-            generic.advance_in(x, i).expect("finite")
-        });
-        results.push(("generic", r));
+    if which == "all" || which == "array" {
+        results.push(("array", run(records, &force, &mut by_array)));
     }
     if which == "all" || which == "inline" {
-        let r = run(records, &force, |x, i| {
-            let x: Inline = Inline::from_slice(x);
-            let y = inline.advance_in(&x, i).expect("finite");
-            std::array::from_fn(|j| y[j])
-        });
-        results.push(("inline", r));
+        results.push(("inline", run(records, &force, &mut by_inline)));
     }
     if which == "all" {
         // Interleaved rounds, the rate ratio of each round (robust to a load that changes).
-        let mut ratios: Vec<[f64; 2]> = (0..ROUNDS)
+        let mut ratios: Vec<f64> = (0..ROUNDS)
             .map(|_| {
-                let f = run(records, &force, |x, i| {
-                    fixed
-                        .advance(x, i.excitation, i.excitation_slope)
-                        .expect("finite")
-                })
-                .1;
-                let g = run(records, &force, |x, i| {
-                    generic.advance_in(x, i).expect("finite")
-                })
-                .1;
-                let v = run(records, &force, |x, i| {
-                    let x: Inline = Inline::from_slice(x);
-                    let y = inline.advance_in(&x, i).expect("finite");
-                    std::array::from_fn(|j| y[j])
-                })
-                .1;
-                [g / f, v / f]
+                let a = run(records, &force, &mut by_array).1;
+                let v = run(records, &force, &mut by_inline).1;
+                v / a
             })
             .collect();
-        for (k, name) in ["generic", "inline"].iter().enumerate() {
-            ratios.sort_by(|a, b| a[k].total_cmp(&b[k]));
-            let r: Vec<String> = ratios.iter().map(|r| format!("{:.2}", r[k])).collect();
-            println!(
-                "{name} / fixed over {ROUNDS} interleaved rounds: median {:.2} (sorted: {})",
-                ratios[ROUNDS / 2][k],
-                r.join(" ")
-            );
-        }
+        ratios.sort_by(f64::total_cmp);
+        let r: Vec<String> = ratios.iter().map(|r| format!("{r:.2}")).collect();
+        println!(
+            "inline / array over {ROUNDS} interleaved rounds: median {:.2} (sorted: {})",
+            ratios[ROUNDS / 2],
+            r.join(" ")
+        );
     }
     let reference = results[0].1 .0.clone();
     let scale = reference

@@ -16,9 +16,10 @@ use numerics::ode::{self, OdeState};
 use crate::effects::Switches;
 use crate::linear::StepInputs;
 use crate::model::{ShearModel, ADAPTIVE_TOLERANCE};
+use crate::piecewise_any::{AnyContactMaps, Buffer};
 
 /// The state `[y, ẏ]` of the paper's three storeys as a fixed array (the effect paths of the
-/// paper's rig; any other structure steps a `Vec<f64>` of length 2N).
+/// paper's rig; any other structure steps a small vector of length 2N).
 pub type State = [f64; 6];
 
 /// `ẋ` for the state `x = [y, ẏ]` (any N) under the excitation `excitation` and the control
@@ -59,72 +60,33 @@ impl AsRef<[f64]> for Switches {
     }
 }
 
-/// The exact contact flows: the fixed array of the paper's three storeys steps them with
-/// `piecewise`, a vector (any other structure) with `piecewise_any`.
-pub trait Exact: Sized {
-    fn exact_contacts(
-        model: &mut ShearModel,
-        x0: &Self,
-        inputs: &StepInputs,
-        h: f64,
-    ) -> Option<Self>;
-}
-
-impl Exact for State {
-    fn exact_contacts(
-        model: &mut ShearModel,
-        x0: &State,
-        inputs: &StepInputs,
-        h: f64,
-    ) -> Option<State> {
-        use crate::piecewise::ContactMaps;
-        if !model
-            .contact_maps
-            .as_ref()
-            .is_some_and(|m| m.fits(model, h))
-        {
-            let maps = match model.contact_maps.take() {
-                Some(mut maps) => {
-                    maps.adapt(model, h);
-                    maps
-                }
-                None => Box::new(ContactMaps::new(model, h)),
-            };
-            model.contact_maps = Some(maps);
-        }
-        let maps = model.contact_maps.as_mut()?;
-        maps.advance(x0, inputs.excitation, inputs.excitation_slope)
-            .ok()
+/// The exact contact flows (`piecewise_any`) of the model's contacts over one step from `x0`,
+/// the maps built or adapted for its parameters and step first; `None` when the exact path does
+/// not serve the model (too many contacts) or a flow is not finite.
+pub fn exact_contacts<B: Buffer>(
+    model: &mut ShearModel,
+    x0: &B,
+    inputs: &StepInputs,
+    h: f64,
+) -> Option<B> {
+    if !AnyContactMaps::serves(model) {
+        return None;
     }
-}
-
-impl Exact for Vec<f64> {
-    fn exact_contacts(
-        model: &mut ShearModel,
-        x0: &Vec<f64>,
-        inputs: &StepInputs,
-        h: f64,
-    ) -> Option<Vec<f64>> {
-        use crate::piecewise_any::AnyContactMaps;
-        if !AnyContactMaps::serves(model) {
-            return None;
-        }
-        if !model
-            .any_contact_maps
-            .as_ref()
-            .is_some_and(|m| m.fits(model, h))
-        {
-            let maps = match model.any_contact_maps.take() {
-                Some(mut maps) => {
-                    maps.adapt(model, h);
-                    maps
-                }
-                None => Box::new(AnyContactMaps::new(model, h)),
-            };
-            model.any_contact_maps = Some(maps);
-        }
-        model.any_contact_maps.as_mut()?.advance(x0, inputs).ok()
+    if !model
+        .contact_maps
+        .as_ref()
+        .is_some_and(|m| m.fits(model, h))
+    {
+        let maps = match model.contact_maps.take() {
+            Some(mut maps) => {
+                maps.adapt(model, h);
+                maps
+            }
+            None => Box::new(AnyContactMaps::new(model, h)),
+        };
+        model.contact_maps = Some(maps);
     }
+    model.contact_maps.as_mut()?.advance_in(x0, inputs).ok()
 }
 
 /// RK4 sub-steps over `[0, h]` from `x`, split at every switch of the effects (contact kinks):

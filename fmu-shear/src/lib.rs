@@ -8,16 +8,16 @@
 //! at `fmi2Instantiate`, the paper's rig (3 storeys, a force at floor 1) without it; each
 //! structure has its own variable table and GUID (`variables::table`). `g` is the optional-effect
 //! library (`effects/`) at every site of the structure, every effect off by default; contacts
-//! alone step exactly (`piecewise` on the paper's rig, `piecewise_any` on any structure).
+//! alone step exactly (`piecewise_any`, any structure).
 
 pub mod batch;
 pub mod effects;
+pub(crate) mod hermite;
 pub mod integrate;
 pub mod kernels;
 pub mod linear;
 pub mod modal;
 pub mod model;
-pub mod piecewise;
 pub mod piecewise_any;
 pub mod sensitivity;
 pub mod variables;

@@ -96,8 +96,8 @@ impl ShearParameters {
     }
 
     /// The reference paper's layout: three storeys, the force and the control force on floor 1.
-    /// Its steps with effects keep their fixed arrays (`piecewise` for contacts, to the bit as
-    /// before); every other layout steps vectors (`piecewise_any` for contacts).
+    /// Its steps with effects keep their fixed arrays and the net input on floor 1 (to the bit
+    /// as before); every other layout steps small vectors and its two inputs apart.
     pub fn is_paper_layout(&self) -> bool {
         structure::paper::is_layout(self.storeys(), self.excitation)
             && Excitation::Force {
@@ -110,7 +110,7 @@ impl ShearParameters {
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
 pub enum Integrator {
     /// Contacts alone: the exact flow of each contact region, the step split at the kinks
-    /// (`piecewise`); any other effect: error-controlled Dormand–Prince 5(4) to
+    /// (`piecewise_any`); any other effect: error-controlled Dormand–Prince 5(4) to
     /// [`ADAPTIVE_TOLERANCE`], split at the kinks.
     #[default]
     Exact,
@@ -151,12 +151,10 @@ pub struct ShearModel {
     /// How steps with effects are integrated.
     #[serde(default)]
     pub integrator: Integrator,
-    /// The contact regions' flows, cached for the current parameters and step.
+    /// The contact regions' flows (`piecewise_any`), cached for the current parameters and
+    /// step.
     #[serde(skip)]
-    pub contact_maps: Option<Box<crate::piecewise::ContactMaps>>,
-    /// The same for any other structure (`piecewise_any`).
-    #[serde(skip)]
-    pub any_contact_maps: Option<Box<crate::piecewise_any::AnyContactMaps>>,
+    pub contact_maps: Option<Box<crate::piecewise_any::AnyContactMaps>>,
     /// The error-controlled path's next trial step, carried between communication steps (part
     /// of the state, so that a restored state steps on exactly).
     #[serde(default)]
@@ -224,7 +222,6 @@ impl ShearModel {
             step_map: None,
             integrator: Integrator::default(),
             contact_maps: None,
-            any_contact_maps: None,
             adaptive_step: 0.0,
             sensitivities: Default::default(),
             origin: None,
@@ -382,8 +379,8 @@ impl ShearModel {
         x0.extend_from_slice(&self.displacement);
         x0.extend_from_slice(&self.velocity);
         if self.effects.any_enabled() && self.params.is_paper_layout() {
-            // The paper's layout: the net input on floor 1, the state a fixed array (the exact
-            // contact flows are written for it).
+            // The paper's layout: the net input on floor 1 and the state a fixed array, as its
+            // effect paths always stepped it (their results to the bit).
             let (f0, fs) = (
                 self.force.value - self.control_force.value,
                 self.force.slope - self.control_force.slope,
@@ -401,7 +398,7 @@ impl ShearModel {
         } else if self.effects.any_enabled() {
             // Any other structure: the excitation and the control force each as its ramp.
             let inputs = self.step_inputs();
-            let x = self.advance_with_effects(&x0.to_vec(), &inputs, h);
+            let x = self.advance_with_effects(&x0, &inputs, h);
             self.displacement.copy_from_slice(&x[..n]);
             self.velocity.copy_from_slice(&x[n..]);
         } else {
@@ -434,27 +431,26 @@ impl ShearModel {
     }
 
     /// A step with effects from `x0` (`[y, ẏ]`, a fixed array on the paper's rig, a vector
-    /// otherwise). Contacts alone step exactly: the paper's layout by `piecewise`, any other
-    /// by `piecewise_any` (up to `piecewise_any::MAX_EXACT_CONTACTS` contacts); other effects,
+    /// otherwise). Contacts alone step exactly by `piecewise_any` (up to
+    /// `piecewise_any::MAX_EXACT_CONTACTS` contacts); other effects,
     /// and more contacts, by the error-controlled path, split at their kinks.
-    fn advance_with_effects<S: numerics::ode::OdeState + integrate::Exact>(
+    fn advance_with_effects<S: crate::piecewise_any::Buffer>(
         &mut self,
         x0: &S,
         inputs: &StepInputs,
         h: f64,
     ) -> S {
-        use crate::piecewise::ContactMaps;
+        use crate::piecewise_any::AnyContactMaps;
         if self.integrator == Integrator::FixedSubsteps {
             return integrate::rk4_with_events(self, x0, inputs, h, self.params.substeps);
         }
-        let contacts_alone = ContactMaps::applies(self);
+        let contacts_alone = AnyContactMaps::applies(self);
         if !contacts_alone && self.integrator == Integrator::ExactContactsElseFixed {
             return integrate::rk4_with_events(self, x0, inputs, h, self.params.substeps);
         }
         if contacts_alone {
-            // The paper's rig steps its fixed arrays (`piecewise`), any other structure its
-            // vectors (`piecewise_any`, up to its number of contacts).
-            if let Some(x) = S::exact_contacts(self, x0, inputs, h) {
+            // Up to `piecewise_any`'s number of contacts.
+            if let Some(x) = integrate::exact_contacts(self, x0, inputs, h) {
                 return x;
             }
             // Not finite: the error-controlled path steps it and the host is told of the
@@ -631,7 +627,6 @@ impl CoSimModel for ShearModel {
         // (`adapt`). A calibration resets between simulations of one structure.
         model.step_map = self.step_map.take();
         model.contact_maps = self.contact_maps.take();
-        model.any_contact_maps = self.any_contact_maps.take();
         *self = model;
         Ok(())
     }

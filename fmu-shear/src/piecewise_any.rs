@@ -1,8 +1,7 @@
 //! Exact stepping of gap contacts on any shear building: N storeys (1..=50), a force at floor K
 //! or ground acceleration, the control force at its floor, any set of enabled contacts (storey
 //! L joins floors L and L + 1, storey 0 the ground and floor 1; each closing on the positive,
-//! the negative or both sides) — the algorithm of [`crate::piecewise`] (the paper's rig, fixed
-//! arrays, kept for it to the bit) on nalgebra's dynamic matrices.
+//! the negative or both sides), the paper's rig among them.
 //!
 //! **The flow.** Between the instants where a gap opens or closes every bumper's force is
 //! affine in its drift, so the model is linear in its *region* `r` (per enabled contact: open,
@@ -14,13 +13,13 @@
 //! its storey and its `∓k_c·gap` in the constant column,
 //! `b_e = M⁻¹e_K` or `−1`, `b_c = −M⁻¹e_cf`, the ramps' `ė`, `ċ` integrating into `e`, `c`).
 //! Its flow over δ is `exp(M_r δ)` (nalgebra's Padé approximant with scaling and squaring,
-//! accurate to rounding for these norms). A region's flows over `h / 2^l`, `l = 0..=DEPTH`, are
+//! accurate to rounding for these norms; see [`exponential`] for the kernel). A region's flows over `h / 2^l`, `l = 0..=DEPTH`, are
 //! built the first time the step needs that level (most steps use level 0 and the check level
 //! alone) and cached per region in a table indexed by the region's base-3 code over the
 //! enabled contacts; any piece `[k·2^{-l} h, (k+1)·2^{-l} h]` is then one 2N × (2N + 5) matrix–vector
 //! product (the inputs' values at the piece's start are in the augmented state).
 //!
-//! **The kinks.** As in `piecewise`: a step whose every switch (`d ∓ gap` of each enabled
+//! **The kinks.** A step whose every switch (`d ∓ gap` of each enabled
 //! side) stays clear of zero over the whole step — the cubic Hermite interpolant of the switch
 //! from its values and slopes at both ends (the drift and its rate are in the state) at least
 //! twice its interpolation error bound from zero — is one product. Otherwise the step advances
@@ -31,9 +30,8 @@
 //! tick before, changed at it) or, failing that, by bisection down to one tick `h / 2^DEPTH`.
 //! That tick is taken with the old region's flow and the step goes on from the new region.
 //!
-//! **The error, and why it is the paper path's.** Inside a region each piece is the exact flow
-//! to rounding; the error comes from the kinks alone, the same two sources as on the rig, with
-//! the same bounds, because nothing in the argument uses N, the excitation or the input
+//! **The error.** Inside a region each piece is the exact flow to rounding; the error comes
+//! from the kinks alone, two sources whose bounds use neither N, the excitation nor the input
 //! columns:
 //! - *A located crossing* is past by at most one tick (`h / 2^24`, 1.2e-9 s at 51.2 Hz), over
 //!   which the bumper's force is taken from the old region: a force error of `k_c |ḋ| · tick`
@@ -48,12 +46,13 @@
 //!   closed bumper adds a non-negative stiffness to its storey), so their eigenvalues are real,
 //!   non-negative and under their Gershgorin row sums, and an eigenvalue λ of
 //!   `λ² M + λ C + K_r` has `|λ| ≤ ρ(M⁻¹C) + √ρ(M⁻¹K_r)`. A graze shallower than that error is
-//!   the only kind missed, as on the rig. The whole-step test uses the same bound over `h`,
+//!   the only kind missed. The whole-step test uses the same bound over `h`,
 //!   with the drift amplitude `√(2E/k_s)` that the energy `E` of the relative motion (kinetic,
 //!   storey springs, closed bumpers; the larger of the step's ends) allows storey s.
 //!
-//! So the measured errors match the rig's: `tests/contact_storeys.rs` gives them for N = 1, 2,
-//! 5, 10 under both excitations with contacts at low and high sites.
+//! `tests/contact_storeys.rs` gives the measured errors for N = 1, 2, 5, 10 under both
+//! excitations with contacts at low and high sites; `tests/rig_contacts_golden.rs` holds the
+//! rig's runs to the states its former fixed-array stepper wrote.
 //!
 //! **When it does not apply.** Each region visited costs its flows (up to DEPTH + 1 exponentials
 //! of a (2N + 5)-square matrix), worth it when a run keeps returning to a few regions. With more
@@ -64,25 +63,36 @@
 //! 100 × 105 numbers).
 //!
 //! **Speed.** A step allocates nothing: the state is a [`Buffer`] on the stack (a fixed array
-//! when its length is known when compiling, the flow's product then unrolled; else inline up to
-//! [`INLINE_STOREYS`] storeys), and a region's flows are one index away. A control force on the
-//! floor the force excites is folded into one net input there (`u = e − c`: three extra columns,
-//! not five), and `M_r` is built in the same sums as `piecewise` builds the rig's. On the rig's
-//! `[f64; 6]` a step costs 5,384 instructions against `piecewise`'s 4,602 (1.17×; on the inline
-//! vector 14,489, 3.1×; `examples/contact_paths.rs` under callgrind); the two paths' states
-//! differ by 1.05e-10 of the largest (nalgebra's exponential rounds a dynamic 9-square matrix
-//! otherwise than a static one, ~1e-15, and a crossing's tick then lands one apart) — so the
-//! rig keeps `piecewise`.
+//! when its length is known when compiling, as the rig's `[f64; 6]`, the flow's product then
+//! unrolled; else a small vector inline up to its capacity), and a region's flows are one index
+//! away. A control force on the floor the force excites is folded into one net input there
+//! (`u = e − c`: three extra columns, not five). Up to four storeys the product is unrolled
+//! for a small vector too. On the rig (`examples/contact_paths.rs`, instructions per step by
+//! `scripts/bench-contact-paths.sh`): 4,529 on `[f64; 6]`, 6,077 on the small vector, against
+//! 4,624 of the rig's former fixed-array stepper, whose states the rig's golden file holds to
+//! the bit.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, SMatrix};
 use smallvec::SmallVec;
 use structure::Excitation;
 
 use crate::effects::contact::{SIDE_NEGATIVE, SIDE_POSITIVE};
 use crate::effects::Contact;
+use crate::hermite::{hermite_crosses, hermite_distance, hermite_root};
 use crate::linear::{product_by_columns, same_step, StepInputs};
 use crate::model::{ShearModel, ShearParameters};
-use crate::piecewise::{hermite_crosses, hermite_distance, hermite_root, ExactError, DEPTH};
+
+/// Finest dyadic level: a tick is `h / 2^DEPTH`.
+pub const DEPTH: u32 = 24;
+
+/// Why the exact path cannot step.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ExactError {
+    #[error("the region's system matrix is not finite (parameters {0})")]
+    NotFinite(String),
+    #[error("{0} contacts enabled: the exact path steps at most {MAX_EXACT_CONTACTS}")]
+    TooManyContacts(usize),
+}
 
 /// The most contacts enabled at once that the exact path steps (3^8 possible regions); more go
 /// to the error-controlled path.
@@ -113,7 +123,7 @@ pub trait Buffer: Clone + AsRef<[f64]> + AsMut<[f64]> {
 
 /// `flow · (x, extra)` for a state of `L` values and `E` extra columns: column by column, each
 /// row's sum in column order.
-#[inline]
+#[inline(always)]
 fn flowed_fixed<const L: usize, const E: usize>(
     flow: &[f64],
     x: &[f64; L],
@@ -135,9 +145,31 @@ pub const INLINE_STOREYS: usize = 10;
 /// A state of any length, inline up to [`INLINE_STOREYS`] storeys.
 pub type Inline = SmallVec<[f64; 2 * INLINE_STOREYS]>;
 
-impl Buffer for Inline {
+impl<A: smallvec::Array<Item = f64> + Clone> Buffer for SmallVec<A> {
     fn zeros(len: usize) -> Self {
         SmallVec::from_elem(0.0, len)
+    }
+
+    /// Up to four storeys the fixed arrays' unrolled product (the same sums in the same order),
+    /// else [`product_by_columns`].
+    #[inline]
+    fn flowed(flow: &[f64], x: &Self, extra: &[f64]) -> Self {
+        macro_rules! fixed_rows {
+            ($($len:literal)*) => {
+                match x.len() {
+                    $($len => {
+                        if let Ok(x) = <&[f64; $len]>::try_from(x.as_slice()) {
+                            return SmallVec::from_slice(&<[f64; $len]>::flowed(flow, x, extra));
+                        }
+                    })*
+                    _ => {}
+                }
+            };
+        }
+        fixed_rows!(2 4 6 8);
+        let mut out = Self::zeros(x.len());
+        product_by_columns(flow, x.as_ref(), extra, out.as_mut());
+        out
     }
 }
 
@@ -149,7 +181,7 @@ impl<const L: usize> Buffer for [f64; L] {
 
     /// The same sums in the same order as [`product_by_columns`], the lengths known when
     /// compiling (the loops unrolled).
-    #[inline]
+    #[inline(always)]
     fn flowed(flow: &[f64], x: &Self, extra: &[f64]) -> Self {
         match *extra {
             [u, slope, one] => flowed_fixed(flow, x, &[u, slope, one]),
@@ -209,9 +241,11 @@ fn enabled_contacts(model: &ShearModel) -> impl Iterator<Item = (usize, &Contact
     lib.enabled_sites().map(move |s| (s, lib.effect(s)))
 }
 
-/// The drift of storey `s` and its rate, in the state `x = [y, ẏ]` of `n` floors.
-#[inline]
-fn drift(x: &[f64], n: usize, s: usize) -> (f64, f64) {
+/// The drift of storey `s` and its rate, in the state `x = [y, ẏ]` (N floors, `x.len()` 2N:
+/// a constant when the state is a fixed array).
+#[inline(always)]
+fn drift(x: &[f64], s: usize) -> (f64, f64) {
+    let n = x.len() / 2;
     if s == 0 {
         (x[0], x[n])
     } else {
@@ -219,22 +253,28 @@ fn drift(x: &[f64], n: usize, s: usize) -> (f64, f64) {
     }
 }
 
-/// The switch offsets of a contact: `+gap` when positive drift closes it, `−gap` when negative
-/// drift does.
-#[inline]
-fn offsets(c: &Contact) -> [Option<f64>; 2] {
-    [
-        (c.side != SIDE_NEGATIVE).then_some(c.gap),
-        (c.side != SIDE_POSITIVE).then_some(-c.gap),
-    ]
+/// Whether `test` holds for one of a contact's switch offsets, in order: `+gap` when positive
+/// drift closes it, `−gap` when negative drift does (two branches, no iterator: the step's
+/// hot loop asks it of every piece).
+#[inline(always)]
+fn any_switch(c: &Contact, mut test: impl FnMut(f64) -> bool) -> bool {
+    (c.side != SIDE_NEGATIVE && test(c.gap)) || (c.side != SIDE_POSITIVE && test(-c.gap))
 }
 
 impl AnyContactMaps {
     /// Whether the exact path steps this model: contacts are the only effects enabled, at most
     /// [`MAX_EXACT_CONTACTS`] of them.
     pub fn serves(model: &ShearModel) -> bool {
-        crate::piecewise::ContactMaps::applies(model)
-            && model.effects.contact.enabled_sites().count() <= MAX_EXACT_CONTACTS
+        Self::applies(model) && model.effects.contact.enabled_sites().count() <= MAX_EXACT_CONTACTS
+    }
+
+    /// Whether contacts are the only effects enabled (however many).
+    pub fn applies(model: &ShearModel) -> bool {
+        let e = &model.effects;
+        e.contact.any_enabled()
+            && !e.cubic.any_enabled()
+            && !e.friction.any_enabled()
+            && !e.discovered.any_enabled()
     }
 
     pub fn new(model: &ShearModel, step: f64) -> Self {
@@ -295,12 +335,12 @@ impl AnyContactMaps {
     /// The region of a state: per enabled contact (in storey order) 0 open, 1 closed on the
     /// positive side, 2 on the negative side (the strict inequalities of
     /// [`Contact::force_at`]), in base 3.
-    #[inline]
+    #[inline(always)]
     fn region_of(&self, x: &[f64]) -> u64 {
         let mut region = 0;
         let mut weight = 1;
         for (s, c) in &self.key.contacts {
-            let (d, _) = drift(x, self.n, *s);
+            let (d, _) = drift(x, *s);
             if c.side != SIDE_NEGATIVE && d > c.gap {
                 region += weight;
             } else if c.side != SIDE_POSITIVE && d < -c.gap {
@@ -418,24 +458,33 @@ impl AnyContactMaps {
     }
 
     /// The region `code`, built when first visited.
-    #[inline]
+    #[inline(always)]
     fn region(&mut self, code: u64) -> Result<&mut Region, ExactError> {
         let slot = code as usize;
-        if slot >= self.regions.len() {
-            return Err(ExactError::TooManyContacts(self.key.contacts.len()));
-        }
-        if self.regions[slot].is_none() {
-            if self.cached >= MAX_CACHED_REGIONS {
-                self.regions.iter_mut().for_each(|r| *r = None);
-                self.cached = 0;
-            }
-            self.regions[slot] = Some(Box::new(self.build(code)?));
-            self.cached += 1;
+        if !matches!(self.regions.get(slot), Some(Some(_))) {
+            self.visit(slot, code)?;
         }
         match self.regions[slot].as_deref_mut() {
             Some(r) => Ok(r),
-            None => unreachable!("built above"),
+            None => unreachable!("built by visit"),
         }
+    }
+
+    /// A region not cached yet: built (the cache emptied first when full), or the error of a
+    /// code past the table.
+    #[cold]
+    #[inline(never)]
+    fn visit(&mut self, slot: usize, code: u64) -> Result<(), ExactError> {
+        if slot >= self.regions.len() {
+            return Err(ExactError::TooManyContacts(self.key.contacts.len()));
+        }
+        if self.cached >= MAX_CACHED_REGIONS {
+            self.regions.iter_mut().for_each(|r| *r = None);
+            self.cached = 0;
+        }
+        self.regions[slot] = Some(Box::new(self.build(code)?));
+        self.cached += 1;
+        Ok(())
     }
 
     /// The region's flow over `size` ticks (a power of two) from `x`, the inputs `tau` seconds
@@ -471,7 +520,7 @@ impl AnyContactMaps {
         let region = self.region(code)?;
         if region.levels[level].is_none() {
             let delta = step / f64::from(1u32 << level);
-            let e = (&region.matrix * delta).exp();
+            let e = exponential(&region.matrix * delta);
             if !e.iter().all(|v| v.is_finite()) {
                 return Err(ExactError::NotFinite(format!(
                     "the flow over {delta} s of region {code}"
@@ -500,12 +549,10 @@ impl AnyContactMaps {
             return true;
         }
         for (s, c) in &self.key.contacts {
-            let (da, va) = drift(a, self.n, *s);
-            let (db, vb) = drift(b, self.n, *s);
-            for offset in offsets(c).into_iter().flatten() {
-                if hermite_crosses(da - offset, db - offset, dt * va, dt * vb) {
-                    return true;
-                }
+            let (da, va) = drift(a, *s);
+            let (db, vb) = drift(b, *s);
+            if any_switch(c, |o| hermite_crosses(da - o, db - o, dt * va, dt * vb)) {
+                return true;
             }
         }
         false
@@ -513,12 +560,12 @@ impl AnyContactMaps {
 
     /// The energy of the relative motion: kinetic, storey springs and closed bumpers.
     fn energy(&self, x: &[f64]) -> f64 {
-        let n = self.n;
+        let n = x.len() / 2;
         let p = &self.key.params;
         let mut e = 0.0;
         let mut contacts = self.key.contacts.iter().peekable();
         for s in 0..n {
-            let (d, _) = drift(x, n, s);
+            let (d, _) = drift(x, s);
             e += 0.5 * p.mass[s] * x[n + s] * x[n + s] + 0.5 * p.stiffness[s] * d * d;
             // The storey's bumper, if any (the contacts are in storey order).
             if let Some((_, c)) = contacts.next_if(|(site, _)| *site == s) {
@@ -548,12 +595,12 @@ impl AnyContactMaps {
             if !margin.is_finite() {
                 return Ok(false);
             }
-            let (da, va) = drift(a, self.n, *s);
-            let (db, vb) = drift(b, self.n, *s);
-            for offset in offsets(c).into_iter().flatten() {
-                if hermite_distance(da - offset, db - offset, h * va, h * vb) <= margin {
-                    return Ok(false);
-                }
+            let (da, va) = drift(a, *s);
+            let (db, vb) = drift(b, *s);
+            if any_switch(c, |o| {
+                hermite_distance(da - o, db - o, h * va, h * vb) <= margin
+            }) {
+                return Ok(false);
             }
         }
         Ok(true)
@@ -660,20 +707,20 @@ impl AnyContactMaps {
         tick: f64,
         inputs: &StepInputs,
     ) -> Result<Option<(u64, B)>, ExactError> {
-        let n = self.n;
         let (a_state, b_state) = (a.as_ref(), b.as_ref());
         let dt = size as f64 * tick;
         let mut first: Option<(f64, usize, f64)> = None;
         for (s, c) in &self.key.contacts {
-            let (da, va) = drift(a_state, n, *s);
-            let (db, vb) = drift(b_state, n, *s);
-            for offset in offsets(c).into_iter().flatten() {
+            let (da, va) = drift(a_state, *s);
+            let (db, vb) = drift(b_state, *s);
+            any_switch(c, |offset| {
                 if let Some(theta) = hermite_root(da - offset, db - offset, dt * va, dt * vb) {
                     if first.is_none_or(|(t, _, _)| theta < t) {
                         first = Some((theta, *s, offset));
                     }
                 }
-            }
+                false
+            });
         }
         let Some((theta, storey, offset)) = first else {
             return Ok(None);
@@ -684,7 +731,7 @@ impl AnyContactMaps {
         if self.region_of(x1.as_ref()) != region {
             return Ok(None);
         }
-        let (d, v) = drift(x1.as_ref(), n, storey);
+        let (d, v) = drift(x1.as_ref(), storey);
         let sigma = d - offset;
         if v == 0.0 || !(sigma / v).is_finite() {
             return Ok(None);
@@ -717,4 +764,24 @@ impl AnyContactMaps {
     pub fn cached_regions(&self) -> usize {
         self.cached
     }
+}
+
+/// `exp(m)` by nalgebra's Padé approximant with scaling and squaring. Up to four storeys (the
+/// augmented matrix at most 13 square) in its fixed-size kernel: faster for these sizes, and
+/// its products sum in their own column loop, as the rig's former fixed-array stepper did —
+/// nalgebra hands a dynamic matrix past 5 × 5 to `matrixmultiply`, whose sums round otherwise
+/// (1e-15 in a flow; a crossing's tick then lands one apart, 1e-10 of the rig's states).
+fn exponential(m: DMatrix<f64>) -> DMatrix<f64> {
+    macro_rules! fixed_size {
+        ($($size:literal)*) => {
+            match m.nrows() {
+                $($size => {
+                    let e = SMatrix::<f64, $size, $size>::from_column_slice(m.as_slice()).exp();
+                    DMatrix::from_column_slice($size, $size, e.as_slice())
+                })*
+                _ => m.exp(),
+            }
+        };
+    }
+    fixed_size!(7 9 11 13)
 }

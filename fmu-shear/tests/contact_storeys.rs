@@ -3,7 +3,7 @@
 //! with `REFERENCE_SUBSTEPS` sub-steps split at the kinks), for N = 1, 2, 5, 10 under a force at
 //! a floor and under ground acceleration, with the control force ramping on its floor and a
 //! bumper at a low site (the ground and floor 1) and at a high one (floors N − 1 and N); and the
-//! generic code on the paper's rig against the rig's fixed-array path. The error measure is the
+//! generic code on vectors against the rig's fixed-array path (both `piecewise_any`). The error measure is the
 //! paper's NMSE of the accelerations an accelerometer reads (%), the worst floor.
 //!
 //! Print the table with `cargo test -p fmu-shear --test contact_storeys -- --nocapture`.
@@ -251,7 +251,7 @@ fn exact_contacts_on_any_building_against_a_fine_reference() {
                      effect {effect:.1e} %"
                 );
                 let regions = stepped
-                    .any_contact_maps
+                    .contact_maps
                     .as_ref()
                     .map(|m| m.cached_regions())
                     .unwrap_or(0);
@@ -270,7 +270,8 @@ fn exact_contacts_on_any_building_against_a_fine_reference() {
 }
 
 /// The generic code on the paper's rig (three storeys, force at floor 1, control on floor 1)
-/// steps as the rig's fixed-array path (`piecewise`, which `integrator = 0` uses there): the
+/// steps as the rig's fixed-array path (`piecewise_any` on `[f64; 6]` with the net input, which
+/// `integrator = 0` uses there; before, the rig's own fixed-array stepper): the
 /// examples' bumper, three bumpers of different sides and a stiff one, each run's states equal
 /// to 1e-12 of their peak (measured 2.3e-14 and 9.3e-14), the stiff one (1e6 N/m, whose
 /// response the paper's test calls very sensitive) to 1e-11 (measured 3.1e-12).
@@ -358,11 +359,11 @@ fn too_many_contacts_step_error_controlled() {
         .collect();
     let (model, e, c) = with_contacts(n, excitation, n, &sites, 0.7);
     let (_, stepped) = run(&model, &e, &c, Path::Exact);
-    assert!(stepped.any_contact_maps.is_none(), "nine contacts: no maps");
+    assert!(stepped.contact_maps.is_none(), "nine contacts: no maps");
     let mut eight = model.clone();
     eight.effects.contact.enable(MAX_EXACT_CONTACTS, false);
     let (a, stepped) = run(&eight, &e, &c, Path::Exact);
-    assert!(stepped.any_contact_maps.is_some(), "eight contacts: exact");
+    assert!(stepped.contact_maps.is_some(), "eight contacts: exact");
     let (b, _) = run(&eight, &e, &c, Path::ErrorControlled);
     let difference = worst(&a, &b);
     println!("eight contacts, exact against error-controlled: {difference:.1e} %");
@@ -386,7 +387,7 @@ fn too_many_contacts_step_error_controlled() {
 /// A calibration runs one structure again and again with a contact's gap and stiffness
 /// changed: the maps adapted from the last run keep the regions whose system is unchanged (the
 /// open one, whatever the contact) and step exactly as maps built afresh, to the bit — on five
-/// storeys (`piecewise_any`) and on the paper's rig (`piecewise`, through the model). A change of
+/// storeys (`piecewise_any`) and on the paper's rig (through the model). A change of
 /// the structure keeps none.
 #[test]
 fn adapted_maps_step_as_fresh_ones_to_the_bit() {

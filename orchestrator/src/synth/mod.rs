@@ -660,7 +660,6 @@ impl<'a> Integration<'a> {
                 // The effects start: the model's caches were for the linear structure.
                 self.model.effects = self.dormant.take().expect("dormant effects");
                 self.model.contact_maps = None;
-                self.model.any_contact_maps = None;
             }
             while self.changes.due(j0 as f64 * hf).is_some() {
                 self.changes.apply_next(&mut self.model);
