@@ -222,7 +222,7 @@ impl Modal {
         let derivatives: Vec<AccelerationRows> = (0..3 * n)
             .map(|theta| AccelerationRows::derivative(params, theta))
             .collect();
-        let parts = ModeParts::new(&modes, &derivatives);
+        let parts = ModeParts::new(&modes, &derivatives, &alpha);
         let per_parameter = assemble(&modes, &parts, &alpha, &derivatives, floors);
         let coefficients = per_parameter.iter().map(|k| along(directions, k)).collect();
         let outputs = floors
@@ -309,91 +309,119 @@ impl Modal {
     }
 }
 
-/// What each parameter does to each kept mode, before the outputs: the projector's part
-/// through the other modes (`through`: 2N × (3N · kept), column `θ · kept + m` takes the
-/// outputs' αᵢ to mode m's coefficient), its part through the mode itself (`own`, times αⱼ) and
-/// the eigenvalue's derivative (`dlambda`), both 3N × kept.
+/// What each parameter does to each kept mode: the measured slots' coefficient of `zⱼ` through
+/// the projector's part in the other modes (`outputs`: slots × (3N · kept), column `θ · kept + m`),
+/// its part through the mode itself (`own`, to be taken times αⱼ) and the eigenvalue's derivative
+/// (`dlambda`), both 3N × kept.
 struct ModeParts {
-    through: Mat<C64>,
+    outputs: Mat<C64>,
     own: DMatrix<C64>,
     dlambda: DMatrix<C64>,
 }
 
 impl ModeParts {
-    /// `Wᵀ A' V` is needed in the kept modes' columns (`through`) and rows (`own`, `dlambda`):
-    /// `A'` is nonzero only in the acceleration rows, so both are a product of `Wᵀ`'s
-    /// acceleration block with `Y = A'_a V` (N × 2N a parameter, from `A'`'s few nonzeros).
-    fn new(modes: &Modes, derivatives: &[AccelerationRows]) -> ModeParts {
+    /// `Wᵀ A' V` is needed in the kept modes' columns and rows. `A'` is nonzero only in the
+    /// acceleration rows, and there in one row (a mass) or two (a storey's damping or
+    /// stiffness): with `Y = A'_a V` (those rows only) every entry is a sum over at most two
+    /// rows. The outputs' part `Σᵢ αᵢ (Wᵀ A' V)ᵢⱼ βⱼ / (λⱼ − λᵢ)` is `βⱼ Σᵣ Yᵣⱼ Gⱼ[r]`, with
+    /// `Gⱼ = (α ∘ 1/(λⱼ − λ)) Wᵀ_a` the same for every parameter: one product per kept mode, and
+    /// O(N) a parameter after it (where a dense `Wᵀ A' V` costs O(N³) a parameter).
+    fn new(modes: &Modes, derivatives: &[AccelerationRows], alpha: &Mat<C64>) -> ModeParts {
         let beta = &modes.beta;
         let s = modes.lambda.len();
         let n = s / 2;
         let p = derivatives.len();
         let kept = modes.kept.len();
+        let slots = alpha.nrows();
         let gaps = modes.inverse_gaps();
-        let mut y = Mat::<C64>::zeros(n, p * s);
-        for (theta, d) in derivatives.iter().enumerate() {
-            for r in 0..n {
-                for c in 0..s {
-                    let a = d.a[(r, c)];
-                    if a != 0.0 {
-                        for i in 0..s {
-                            y[(r, theta * s + i)] += modes.v[(c, i)] * a;
-                        }
-                    }
+        let wt_acc = Mat::<C64>::from_fn(s, n, |i, r| modes.wt[(i, n + r)]);
+        // g: slots × (kept · N), block m = Gⱼₘ.
+        let mut g = Mat::<C64>::zeros(slots, kept * n);
+        let mut scaled = Mat::<C64>::zeros(slots, s);
+        for (m, &(j, _)) in modes.kept.iter().enumerate() {
+            for i in 0..s {
+                for slot in 0..slots {
+                    scaled[(slot, i)] = alpha[(slot, i)] * gaps[(i, j)];
                 }
             }
+            matmul(
+                g.as_mut().submatrix_mut(0, m * n, slots, n),
+                Accum::Replace,
+                scaled.as_ref(),
+                wt_acc.as_ref(),
+                C64::new(1.0, 0.0),
+                Par::Seq,
+            );
         }
-        let one = C64::new(1.0, 0.0);
-        let wt_acc = Mat::<C64>::from_fn(s, n, |i, r| modes.wt[(i, n + r)]);
-        let wt_kept = Mat::<C64>::from_fn(kept, n, |m, r| modes.wt[(modes.kept[m].0, n + r)]);
-        let y_kept = Mat::<C64>::from_fn(n, p * kept, |r, col| {
-            y[(r, (col / kept) * s + modes.kept[col % kept].0)]
-        });
-        // columns[(i, θ·kept + m)] = (Wᵀ A'_θ V)[i, jₘ]; rows[(m, θ·2N + i)] = (…)[jₘ, i].
-        let mut columns = Mat::<C64>::zeros(s, p * kept);
-        matmul(
-            columns.as_mut(),
-            Accum::Replace,
-            wt_acc.as_ref(),
-            y_kept.as_ref(),
-            one,
-            Par::Seq,
-        );
-        let mut rows = Mat::<C64>::zeros(kept, p * s);
-        matmul(
-            rows.as_mut(),
-            Accum::Replace,
-            wt_kept.as_ref(),
-            y.as_ref(),
-            one,
-            Par::Seq,
-        );
-        let mut through = Mat::<C64>::zeros(s, p * kept);
+        let mut outputs = Mat::<C64>::zeros(slots, p * kept);
         let mut own = DMatrix::<C64>::zeros(p, kept);
         let mut dlambda = DMatrix::<C64>::zeros(p, kept);
         for (theta, d) in derivatives.iter().enumerate() {
+            let y = SparseRows::new(d, &modes.v);
             let dbeta = modes.project_rows(&d.b_excitation);
             for (m, &(j, _)) in modes.kept.iter().enumerate() {
                 let col = theta * kept + m;
+                for slot in 0..slots {
+                    let through: C64 = y
+                        .rows
+                        .iter()
+                        .zip(&y.values)
+                        .map(|(&r, yr)| yr[j] * g[(slot, m * n + r)])
+                        .sum();
+                    outputs[(slot, col)] = through * beta[j];
+                }
                 let mut sum = dbeta[j];
-                for i in 0..s {
-                    through[(i, col)] = columns[(i, col)] * beta[j] * gaps[(i, j)];
-                    sum += rows[(m, theta * s + i)] * beta[i] * gaps[(i, j)];
+                let mut eigen = C64::new(0.0, 0.0);
+                for (&r, yr) in y.rows.iter().zip(&y.values) {
+                    let w = modes.wt[(j, n + r)];
+                    let h: C64 = (0..s).map(|i| yr[i] * beta[i] * gaps[(i, j)]).sum();
+                    sum += w * h;
+                    eigen += w * yr[j];
                 }
                 own[(theta, m)] = sum;
-                dlambda[(theta, m)] = rows[(m, theta * s + j)];
+                dlambda[(theta, m)] = eigen;
             }
         }
         ModeParts {
-            through,
+            outputs,
             own,
             dlambda,
         }
     }
 }
 
+/// `Y = A'_a V` on the acceleration rows where `A'` has a nonzero entry.
+struct SparseRows {
+    rows: Vec<usize>,
+    values: Vec<Vec<C64>>,
+}
+
+impl SparseRows {
+    fn new(d: &AccelerationRows, v: &DMatrix<C64>) -> SparseRows {
+        let (n, s) = (d.a.nrows(), d.a.ncols());
+        let mut rows = Vec::new();
+        let mut values = Vec::new();
+        for r in 0..n {
+            let entries: Vec<(usize, f64)> = (0..s)
+                .map(|c| (c, d.a[(r, c)]))
+                .filter(|(_, a)| *a != 0.0)
+                .collect();
+            if entries.is_empty() {
+                continue;
+            }
+            rows.push(r);
+            values.push(
+                (0..s)
+                    .map(|i| entries.iter().map(|&(c, a)| v[(c, i)] * a).sum())
+                    .collect(),
+            );
+        }
+        SparseRows { rows, values }
+    }
+}
+
 /// Per slot, the derivatives' coefficients of `ζ` along the 3N parameters (3N × L): each kept
-/// mode's `zⱼ` (`α Σᵢ … + αⱼ own`) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as twice the real part of a
+/// mode's `zⱼ` (`Σᵢ … + αⱼ own`) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as twice the real part of a
 /// conjugate pair, then the state and the excitation at a fixed state.
 fn assemble(
     modes: &Modes,
@@ -404,15 +432,7 @@ fn assemble(
 ) -> Vec<DMatrix<f64>> {
     let kept = modes.kept.len();
     let s = modes.lambda.len();
-    let mut cz = Mat::<C64>::zeros(floors.len(), parts.through.ncols());
-    matmul(
-        cz.as_mut(),
-        Accum::Replace,
-        alpha.as_ref(),
-        parts.through.as_ref(),
-        C64::new(1.0, 0.0),
-        Par::Seq,
-    );
+    let cz = &parts.outputs;
     let direct = 4 * kept;
     floors
         .iter()
