@@ -603,6 +603,9 @@ struct Problem<'s, 'a> {
     /// The model's normal equations from the last trial's sensitivities, and where they were
     /// taken.
     at_hand: RefCell<Option<(Vec<f64>, ModelNormals)>>,
+    /// The last trial and its residuals `y − ŷ`: where the fit ended, the noise's next estimate
+    /// needs no run of its own.
+    last: RefCell<Option<(Vec<f64>, Vec<f64>)>>,
     /// Simulations this least-squares solve may use.
     budget: usize,
 }
@@ -622,7 +625,9 @@ impl Problem<'_, '_> {
             }
             None => raw_residuals(&mut sims, self.target, z, &mut self.buf.borrow_mut())?,
         };
-        Some(with_prior_rows(&r, &self.weights, z))
+        let weighted = with_prior_rows(&r, &self.weights, z);
+        *self.last.borrow_mut() = Some((z.to_vec(), r));
+        Some(weighted)
     }
 
     /// The forward-difference Jacobian at `z` (`base` its residuals), one run per parameter:
@@ -907,6 +912,7 @@ fn outer_iteration<'a>(
         evaluations: RefCell::new(0),
         runs: RefCell::new(0),
         at_hand: RefCell::new(None),
+        last: RefCell::new(None),
         budget: budget.saturating_sub(start.evaluations),
     };
     let z = std::mem::take(&mut start.z);
@@ -916,9 +922,16 @@ fn outer_iteration<'a>(
     };
     start.evaluations += *problem.evaluations.borrow();
     start.runs += *problem.runs.borrow();
-    let r = raw_residuals(sims, target, &start.z, &mut buf)?;
-    start.evaluations += 1;
-    start.runs += records;
+    // The fit's last trial is usually where it ended (a fit stops on the step it would take
+    // next, untried): its residuals are at hand.
+    let r = match problem.last.take() {
+        Some((at, r)) if at == start.z => r,
+        _ => {
+            start.evaluations += 1;
+            start.runs += records;
+            raw_residuals(sims, target, &start.z, &mut buf)?
+        }
+    };
     let sse = sse_per_block(&r, &blocks);
     let s_new: Vec<f64> = (0..blocks.len())
         .map(|b| {
@@ -1127,6 +1140,11 @@ fn on_threads<'a, J: Send, T: Send>(
     work: impl Fn(&mut [Simulator<'a>], J) -> T + Sync,
 ) -> Result<Vec<T>, TwinError> {
     let threads = threads.clamp(1, jobs.len().max(1));
+    if threads == 1 {
+        // One thread's work on this one: no thread to start and schedule, no fresh heap.
+        let mut sims = simulators(target, "calibration")?;
+        return Ok(jobs.into_iter().map(|job| work(&mut sims, job)).collect());
+    }
     let mut chunks: Vec<Vec<J>> = (0..threads).map(|_| Vec::new()).collect();
     for (k, job) in jobs.into_iter().enumerate() {
         chunks[k % threads].push(job);
