@@ -354,7 +354,8 @@ mod records {
     /// make a cluster, the seven-storey one gave two of seven modes and the eight-storey one
     /// one of eight. The sweep now goes on while modes are still forming at its top order.
     /// Measured: five storeys at order 40, within +0.032 %; seven and eight at order 60,
-    /// within +0.096 % and −0.412 % (mode 1, 0.19 % damped, a tenth of a bin wide); none
+    /// within +0.011 % and +0.012 % (eight storeys' mode 1, 0.19 % damped, a tenth of a bin
+    /// wide, was −0.412 % before the leaky modes were refined in the time domain); none
     /// spurious. Bars: the 0.5 %, none spurious.
     #[test]
     fn lscf_finds_every_mode_of_a_tower_low_in_a_broad_band() {
@@ -416,8 +417,9 @@ mod records {
     /// 1.2 bins of the FRF (0.0061 Hz, 16,384-sample segments), and LSCF splits its leaky peak
     /// into two modes of one shape, 1.2543 and 1.2616 Hz (−0.43 / +0.15 %, damping 0.245 and
     /// 0.364 % for 0.295 %, MAC 1.0000 both): the one of fewer poles (1.2616 Hz) is now set
-    /// aside as the same resonance, and the mode reported once. FDD 1.2576 Hz. Bars: 1 %,
-    /// MAC 0.95, one LSCF mode, nothing elsewhere.
+    /// aside as the same resonance, and the mode reported once; refined in the time domain
+    /// (a leaky mode), it is 1.2597 Hz (+0.000 %), damping 0.295 % for 0.295 %. FDD
+    /// 1.2576 Hz. Bars: 1 %, MAC 0.95, one LSCF mode, nothing elsewhere.
     #[test]
     fn a_mass_dampers_narrow_band_shows_the_one_mode_it_excites() {
         let (data, exact) = record(
@@ -674,9 +676,10 @@ mod records {
     /// the frame lacks. Before the fit's damping was freed from order-to-order stability, the
     /// four-segment default and the peak screen, LSCF found 2, 3 and 2 modes on such runs made
     /// by `twin synth` (mode 1 missed in runs 1 and 3; a 13.3 Hz double in run 3). Measured
-    /// now: mode 1 −0.73, −0.33, +0.27 %; modes 2–3 within 0.10 %; none spurious (bars 1 %,
-    /// none). SSI-COV, output-only on one channel, is not held to it: it finds 0, 1 and 2 of
-    /// the modes (printed).
+    /// now (the leaky modes refined in the time domain; before that, mode 1 −0.73, −0.33,
+    /// +0.27 %): every mode within 0.01 %; none spurious (bars 1 %, none).
+    /// SSI-COV, output-only on one channel, is not held to it: it finds 0, 1 and 2 of the
+    /// modes (printed).
     #[test]
     fn every_peak_of_a_lab_frames_runs_is_found_and_nothing_else() {
         let runs = lab_frame_runs();
@@ -705,6 +708,62 @@ mod records {
                 assert!(error.abs() < 0.01, "{} Hz: {error}", e.frequency);
             }
             assert!(spurious.is_empty(), "spurious {spurious:?}");
+        }
+    }
+
+    /// Lightly damped modes on single records, narrower than a bin of the Welch FRF: the lab
+    /// frame's 0.39 %-damped first mode on each 30 s run (a third of a 0.13 Hz bin wide) and
+    /// the band-limited five-storey building's 0.35 %-damped one (2.6 bins). LSCF's damping
+    /// of such a mode is the window's leakage (measured on these runs before: 0.89–1.11 % for
+    /// 0.39 %); the record taken whole in the time domain through its force gives the
+    /// structure's. Measured: the lab runs' mode 1 0.396 / 0.394 / 0.394 % for 0.387 %
+    /// (+2.4 / +2.0 / +1.9 %; its reported sd, 0.002 %, is the white-residual one, too small
+    /// under the coloured noise), modes 2–3 within 0.2 %; the five storeys' mode 1 0.3453 %
+    /// for 0.3454 %, all five within 0.1 %; none spurious. Bar (the issue's): within the
+    /// larger of 10 % and 2.5 reported sds.
+    #[test]
+    fn lightly_damped_modes_keep_their_damping_on_single_records() {
+        let mut records: Vec<(String, Measurement, Vec<Mode>)> = lab_frame_runs()
+            .into_iter()
+            .map(|(d, e)| (format!("lab {}", d.responses[0].channel.name()), d, e))
+            .collect();
+        let (five, exact) = record(
+            5,
+            (&[5.2; 5], &[64_000.0; 5], &[14.0; 5]),
+            2,
+            (200.0, 300.0),
+            (0.5, 40.0),
+            &[1, 2, 3, 4, 5],
+            0.05,
+            11,
+        );
+        records.push(("five storeys".into(), five, exact));
+        for (name, data, exact) in records {
+            let found = identify(std::slice::from_ref(&data), &IdentifyOptions::default())
+                .expect("identified");
+            let io = found.input_output.as_ref().expect("LSCF ran");
+            let (nearest, spurious) = matched(&lscf_frequencies(&found), &exact);
+            assert!(spurious.is_empty(), "{name}: spurious {spurious:?}");
+            for ((i, _), e) in nearest.iter().zip(&exact) {
+                let m = &io.modes[*i].identified;
+                let error = m.damping / e.damping - 1.0;
+                println!(
+                    "{name}: {:.4} Hz ζ {:.4} ± {:.4} % for {:.4} % ({:+.1} %)",
+                    m.frequency,
+                    100.0 * m.damping,
+                    100.0 * m.damping_sd,
+                    100.0 * e.damping,
+                    100.0 * error
+                );
+                let bar = (0.10 * e.damping).max(2.5 * m.damping_sd);
+                assert!(
+                    (m.damping - e.damping).abs() <= bar,
+                    "{name}: {} Hz: damping {} for {}",
+                    e.frequency,
+                    m.damping,
+                    e.damping
+                );
+            }
         }
     }
 

@@ -195,8 +195,9 @@ def test_lscf_agrees_with_sdypy_emas(five_storeys):
         print(f"mode {k + 1}: exact {f_exact:.4f} Hz {100 * z_exact:.3f} %; ours {f:.4f} Hz "
               f"{100 * z:.3f} %; sdypy-EMA {peer}")
         assert peer is not None, f"sdypy-EMA's LSCF has no stable pole near {f} Hz"
-        # Measured: within 0.015 % in frequency (mode 5) and 5.2 % in damping (mode 1,
-        # 0.365 % against 0.385 %; the exact 0.364 %); held to 0.1 % and 15 %.
+        # Measured: within 0.015 % in frequency (mode 5) and 10.2 % in damping (mode 1:
+        # ours, refined in the time domain, 0.346 % against sdypy-EMA's 0.385 %; the exact
+        # 0.345 %; the other modes within 0.8 %); held to 0.1 % and 15 %.
         assert abs(f / peer[0] - 1) < 1e-3, (k, f, peer)
         assert abs(z / peer[1] - 1) < 0.15, (k, z, peer)
     # Nothing of ours that sdypy-EMA's stable poles do not support, and the reverse for the
@@ -239,12 +240,14 @@ def test_a_lab_frames_runs_agree_with_sdypy_emas_lscf(twin_binary, tmp_path, flo
               f"{f:.4f} Hz {100 * z:.3f} %; sdypy-EMA {peer}")
         assert abs(f / f_exact - 1) < 0.01, (k, f, f_exact)
         assert peer is not None, f"sdypy-EMA's LSCF has no stable pole near {f} Hz"
-        # Measured (runs 1, 2, 3): mode 1 −0.14, −0.08, +0.73 % from sdypy-EMA's, modes 2–3
-        # within 0.26 %; held to 1 %, the issue's bar.
+        # Measured (runs 1, 2, 3): mode 1 −0.03, +0.38, +0.38 % from sdypy-EMA's (ours within
+        # 0.003 % of the exact), modes 2–3 within 0.15 %; held to 1 %, the issue's bar.
         assert abs(f / peer[0] - 1) < 0.01, (k, f, peer)
+        # Ours against the exact damping: measured within 0.3 % (mode 1, 0.39 %, narrower
+        # than a bin of a 30 s run's FRF, refined in the time domain); held to the issue's 10 %.
+        assert abs(z / z_exact - 1) < 0.10, (k, z, z_exact)
         if k > 0:
-            # Modes 2–3, measured within 27 % of sdypy-EMA's damping (run 3's mode 2: 1.21 %
-            # against 0.96 %; the exact 1.05 %); held to 35 %. Mode 1 (0.39 %, narrower than a
-            # bin of a 30 s run's FRF) is leaked high by both: ours 0.89–1.11 %, sdypy-EMA's
-            # 1.23–1.78 %, so it is not compared.
-            assert abs(z / peer[1] - 1) < 0.35, (k, z, peer)
+            # Modes 2–3, measured within 12.3 % of sdypy-EMA's damping (run 2's mode 2: 1.052 %
+            # against 1.200 %; the exact 1.054 %); held to 25 %. Mode 1 is leaked high by
+            # sdypy-EMA's FRF fit (1.23–1.78 % for 0.39 %), so it is not compared.
+            assert abs(z / peer[1] - 1) < 0.25, (k, z, peer)

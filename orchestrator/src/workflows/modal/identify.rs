@@ -4,6 +4,7 @@
 //! (SSI-COV) always, each with its stabilisation diagram and the automatically chosen physical
 //! modes. Any channels, units and excitation; several runs of one test average together.
 
+mod leaky;
 mod roving;
 
 use serde::Serialize;
@@ -821,7 +822,8 @@ impl Estimation<'_> {
         } else if self.options.input_output {
             let evidence = Peaks::of_frf(&frf);
             let orders = self.lscf_orders(&frf, band, &evidence)?;
-            Some(self.chosen_modes("LSCF", Some(band), orders, screen, floors, evidence)?)
+            let chosen = self.chosen_modes("LSCF", Some(band), orders, screen, floors, evidence)?;
+            Some(self.refined_leaky(chosen, floors))
         } else {
             None
         };

@@ -310,7 +310,7 @@ fn eigenvalue(mode: &IdentifiedMode) -> Complex {
 }
 
 /// The pole (rad/s, positive imaginary part) of a frequency (Hz) and damping ratio.
-fn pole(frequency: f64, damping: f64) -> Complex {
+pub(super) fn pole(frequency: f64, damping: f64) -> Complex {
     let w = 2.0 * std::f64::consts::PI * frequency;
     Complex::new(-damping * w, w * (1.0 - damping * damping).max(0.0).sqrt())
 }
