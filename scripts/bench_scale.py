@@ -279,7 +279,16 @@ class Bench:
                     got = peer_job(job, self.work, self.cap)
                     return (None, None) if got is None else (got["seconds"], got)
 
-                r = self.series(f"{label} calibrate --starts {starts}", cmd, peer)
+                fits: list[float] = []
+
+                def ours(cmd=cmd, rep=rep, fits=fits):
+                    t = timed(cmd, self.cap)
+                    if t is not None:
+                        fits.append(json.loads(rep.read_text())["seconds"])
+                    return t
+
+                r = self.series(f"{label} calibrate --starts {starts}", ours, peer)
+                r["ours_fit"] = float(np.median(fits)) if fits else None
                 if r["ours"] is not None:
                     report = json.loads(rep.read_text())
                     rec = rec or bs.Record(b["cal"], n)
@@ -414,12 +423,13 @@ class Bench:
             rep = d / f"cal-s{starts}.json"
             cmd = [self.twin, "calibrate", "--twin", str(init), "--data", *map(str, runs), "--starts", str(starts),
                    "--out", str(d / f"cal-s{starts}.ssp"), "--report", str(rep)]
-            state = {}
+            state = {"fits": []}
 
             def ours(cmd=cmd, rep=rep):
                 t = timed(cmd, self.cap)
                 if t is not None:
                     state["report"] = json.loads(rep.read_text())
+                    state["fits"].append(state["report"]["seconds"])
                 return t
 
             def peer(starts=starts):
@@ -428,6 +438,7 @@ class Bench:
                 return (None, None) if got is None else (got["seconds"], got)
 
             r = self.series(f"roving calibrate --starts {starts}", ours, peer)
+            r["ours_fit"] = float(np.median(state["fits"])) if state["fits"] else None
             if "report" in state:
                 report = state["report"]
                 problem = RovingMap([Run(p) for p in runs], n, priors)
@@ -498,12 +509,17 @@ def report(bench: Bench, args, cpus: int, total: float) -> None:
     if rows["calibrate"]:
         print("\ncalibrate: `twin calibrate --starts S` (every core) vs least_squares(lm) MAP (peer_calibrate, S starts, "
               f"{cpus} processes); J: bench_storeys' one formula (lower = better posterior)")
-        print(f"{head} {'starts':>6} {'J ours':>12} {'J peer':>12}")
+        print("  'fit s': the calibration in our process (the report's seconds: records in memory, the twin not yet "
+              "written), as the peer's seconds are its fit in its process; 'fit ×' = peer / fit s")
+        print(f"{head} {'fit s':>9} {'fit ×':>7} {'starts':>6} {'J ours':>12} {'J peer':>12}")
         for r in rows["calibrate"]:
             jo = f"{r['ours_j']:12.2f}" if r.get("ours_j") is not None else f"{'—':>12}"
             jp = f"{r['peer_j']:12.2f}" if r.get("peer_j") is not None else f"{'—':>12}"
+            fit = r.get("ours_fit")
+            fs = f"{fit:9.3f}" if fit else f"{'—':>9}"
+            fr = f"{r['peer'] / fit:7.1f}" if fit and r.get("peer") is not None else f"{'—':>7}"
             print(f"{r['storeys']!s:>6} {r['samples']!s:>9} | {cell(r, 'ours', cap)} {cell(r, 'peer', cap)} {ratio(r)} "
-                  f"{r['starts']:>6} {jo} {jp}" + (f"  ({r['peer_note']})" if r.get("peer_note") else ""))
+                  f"{fs} {fr} {r['starts']:>6} {jo} {jp}" + (f"  ({r['peer_note']})" if r.get("peer_note") else ""))
     if rows["diagnose"]:
         print("\ndiagnose: the whole `twin diagnose` (its default threads). NO FULL PEER: the nonlinear candidates are "
               "ours only; 'peer' is bench_storeys' peer of the recalibration job alone (8 starts, 1 process), its ratio "
