@@ -311,8 +311,23 @@ impl Twin {
             let compared = compare(&self.twin, data, &options, spec.as_ref(), |_, _| {})
                 .map_err(|e| to_py(kind, e))?;
             if let Some(path) = &plot {
+                let view = orchestrator::workflows::compare::compare_plot(
+                    &self.twin, data, &compared, &options, frf,
+                )
+                .map_err(|message| {
+                    to_py(
+                        kind,
+                        orchestrator::report::ReportError::BadInput {
+                            path: path.clone(),
+                            message,
+                        },
+                    )
+                })?;
                 orchestrator::report::plot_compared(
-                    &self.twin, data, &compared, &options, path, frf,
+                    &compared.comparison,
+                    &data.excitation.channel,
+                    &view,
+                    path,
                 )
                 .map_err(|e| to_py(kind, e))?;
             }

@@ -153,7 +153,18 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        crate::report::plot_compared(&twin, &data, &compared, &options, path, args.frf.is_some())?;
+        let view = crate::workflows::compare::compare_plot(
+            &twin,
+            &data,
+            &compared,
+            &options,
+            args.frf.is_some(),
+        )
+        .map_err(|message| crate::report::ReportError::BadInput {
+            path: path.clone(),
+            message,
+        })?;
+        crate::report::plot_compared(&compared.comparison, &data.excitation.channel, &view, path)?;
     }
     print_summary(&twin, &data, comparison);
     match &modes {

@@ -21,6 +21,61 @@ pub struct FrequencyResponse {
     pub segments: usize,
 }
 
+/// The frequency view of a comparison (`twin compare --frf`): per channel, the H1 estimates
+/// ([`welch_h1`], segments of [`FRF_SEGMENT`]) from the excitation to the measured and to the
+/// predicted value, over the samples after the transient.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComparisonResponses {
+    /// Per channel of the comparison: `[measured, predicted]`.
+    pub channels: Vec<[FrequencyResponse; 2]>,
+    /// Samples per segment (fewer when the record after the transient is shorter).
+    pub segment_len: usize,
+    /// The sampling interval (s), from the comparison's time axis.
+    pub dt: f64,
+}
+
+/// The frequency view of comparison `c` under `excitation` (force or ground acceleration, one
+/// sample per time sample); an error in words when the lengths differ or fewer than 4 samples
+/// follow the transient.
+pub fn comparison_responses(
+    c: &crate::evaluation::compare::Comparison,
+    excitation: &crate::record::Signal,
+) -> Result<ComparisonResponses, String> {
+    let n = c.time.len();
+    let force = &excitation.values;
+    if force.len() != n {
+        return Err(format!(
+            "{} {} samples for {n} time samples",
+            force.len(),
+            excitation.channel.name()
+        ));
+    }
+    let first = c.first.min(n);
+    let dt = if n >= 2 {
+        (c.time[n - 1] - c.time[0]) / (n - 1) as f64
+    } else {
+        f64::NAN
+    };
+    let estimate = |response: &[f64]| {
+        let response = response.get(first..).unwrap_or(&[]);
+        welch_h1(&force[first..], response, dt, FRF_SEGMENT).ok_or_else(|| {
+            format!(
+                "the frequency view needs at least 4 samples after the transient and a positive sampling interval; \
+                 there are {} samples, every {dt} s",
+                n - first
+            )
+        })
+    };
+    let channels = (0..c.channels.len())
+        .map(|i| Ok([estimate(&c.measured[i])?, estimate(&c.predicted[i])?]))
+        .collect::<Result<_, String>>()?;
+    Ok(ComparisonResponses {
+        channels,
+        segment_len: FRF_SEGMENT.min(n - first),
+        dt,
+    })
+}
+
 /// H1 estimate `H = Σ conj(X)·Y / Σ |X|²` of the response `output` to `input` (sampled every
 /// `dt` s), Welch-averaged over Hann-windowed segments of `segment_len` samples with 50 %
 /// overlap, each with its mean removed; trailing samples that do not fill a segment are

@@ -1,5 +1,7 @@
 //! SVG plots of a [`Comparison`]: the time view (the paper's Figure 4) and the frequency view
-//! (its Figure 3), which draws the H1 frequency-response estimates of `evaluation::frf`.
+//! (its Figure 3), which draws the H1 frequency-response estimates of `evaluation::frf`
+//! ([`ComparisonResponses`]), and the corrector's latent variance against the thresholds
+//! `workflows::compare::compare_plot` sets. Nothing here computes: it checks and draws.
 
 use std::fmt::Display;
 use std::path::{Path, PathBuf};
@@ -10,9 +12,9 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{palette, ReportError};
 use crate::evaluation::compare::Comparison;
-use crate::evaluation::frf::{welch_h1, FrequencyResponse};
+use crate::evaluation::frf::ComparisonResponses;
 use crate::fsutil::write_text_atomically;
-use crate::record::Signal;
+use crate::workflows::compare::ComparePlot;
 use ::structure::channel::{Channel, Quantity};
 
 pub use crate::evaluation::frf::FRF_SEGMENT;
@@ -77,20 +79,19 @@ const TRANSIENT_OPACITY: f64 = 0.18;
 /// band in the window, faintly on the others. The caption gives the channel's NMSE after the
 /// transient.
 ///
-/// With `frequency_view`, a second SVG is written beside the first, `<stem>-frf.svg`: per
-/// channel, the H1 estimate (see [`welch_h1`], segments of [`FRF_SEGMENT`]) of the response
-/// from the `excitation` (force or ground acceleration) to the measured and to the predicted
-/// value, in dB up to Nyquist, over the samples after the transient. `excitation` is only read
-/// for this view.
+/// With `responses` (`evaluation::frf::comparison_responses`), a second SVG is written beside
+/// the first, `<stem>-frf.svg`: per channel, the H1 estimates of the response from the
+/// `excitation` (force or ground acceleration) to the measured and to the predicted value, in
+/// dB up to Nyquist, over the samples after the transient.
 ///
 /// Each file is written to a temporary file in its directory and renamed into place, and
 /// everything is drawn before anything is written: an error leaves no partial file.
 pub fn plot_comparison(
     c: &Comparison,
-    excitation: &Signal,
+    excitation: &Channel,
+    responses: Option<&ComparisonResponses>,
     title: &str,
     path: &Path,
-    frequency_view: bool,
 ) -> Result<(), ReportError> {
     let is_svg = path
         .extension()
@@ -105,13 +106,7 @@ pub fn plot_comparison(
         path: path.to_owned(),
         message,
     };
-    let force = &excitation.values;
-    check_lengths(c, excitation, frequency_view).map_err(bad_input)?;
-    let responses = if frequency_view {
-        Some(channel_responses(c, force).map_err(bad_input)?)
-    } else {
-        None
-    };
+    check_lengths(c, responses).map_err(bad_input)?;
 
     let time_view = draw_time_view(c, title).map_err(|message| ReportError::Draw {
         path: path.to_owned(),
@@ -120,13 +115,12 @@ pub fn plot_comparison(
     let mut files = vec![(path.to_owned(), time_view)];
     if let Some(responses) = responses {
         let frf_path = frf_path(path);
-        let svg =
-            draw_frequency_view(c, &responses, &excitation.channel, title).map_err(|message| {
-                ReportError::Draw {
-                    path: frf_path.clone(),
-                    message,
-                }
-            })?;
+        let svg = draw_frequency_view(c, responses, excitation, title).map_err(|message| {
+            ReportError::Draw {
+                path: frf_path.clone(),
+                message,
+            }
+        })?;
         files.push((frf_path, svg));
     }
     for (path, svg) in &files {
@@ -137,41 +131,28 @@ pub fn plot_comparison(
 
 /// `twin compare --plot PATH [--frf]`: measured, predicted, ±3σ band, residual and failing
 /// windows per measured channel (and the frequency-response view); with a corrector, the
-/// latent-variance view of the channels it corrects beside it (`PATH-latent.svg`) against
-/// `options.latent_threshold` (default: each channel's calibrated noise variance, else 1e-3 ×
-/// its measured variance on this record).
+/// latent-variance view of the channels it corrects beside it (`PATH-latent.svg`) against their
+/// thresholds — all as `view` (`workflows::compare::compare_plot`) holds them.
 pub fn plot_compared(
-    twin: &crate::twin::Twin,
-    data: &crate::twin::data::Measurement,
-    compared: &crate::twin::run::Compared,
-    options: &crate::workflows::compare::CompareOptions,
+    comparison: &Comparison,
+    excitation: &Channel,
+    view: &ComparePlot,
     path: &std::path::Path,
-    frf: bool,
 ) -> Result<(), ReportError> {
-    let title = format!("{} on {}", twin.describe(), data.path.display());
-    let comparison = &compared.comparison;
-    plot_comparison(comparison, &data.excitation, &title, path, frf)?;
-    let latent: Vec<(usize, &[f64], f64)> = comparison
-        .channels
+    plot_comparison(
+        comparison,
+        excitation,
+        view.responses.as_ref(),
+        &view.title,
+        path,
+    )?;
+    let latent: Vec<(usize, &[f64], f64)> = view
+        .latent
         .iter()
-        .enumerate()
-        .filter_map(|(c, channel)| {
-            let values = compared.prediction.get(*channel)?.latent_var.as_deref()?;
-            let threshold = match (options.latent_threshold, twin.noise_variance_of(*channel)) {
-                (Some(t), _) => t,
-                (None, Some(v)) => v,
-                (None, None) => {
-                    crate::workflows::learn::PAPER_THRESHOLD
-                        * crate::evaluation::stats::variance(
-                            &comparison.measured[c][comparison.first..],
-                        )
-                }
-            };
-            Some((c, values, threshold))
-        })
+        .map(|l| (l.channel, l.values.as_slice(), l.threshold))
         .collect();
     if !latent.is_empty() {
-        plot_latent_variance(comparison, &latent, &title, path)?;
+        plot_latent_variance(comparison, &latent, &view.title, path)?;
     }
     Ok(())
 }
@@ -184,7 +165,7 @@ pub fn plot_calibrated(
     path: &Path,
 ) -> Result<(), ReportError> {
     let title = format!("calibrated on {}", data.path.display());
-    plot_comparison(comparison, &data.excitation, &title, path, false)
+    plot_comparison(comparison, &data.excitation.channel, None, &title, path)
 }
 
 /// The corrector's latent variance `V(f)` of each channel it corrects (`latent`: the channel's
@@ -344,8 +325,7 @@ fn frf_path(path: &Path) -> PathBuf {
     path.with_file_name(format!("{stem}-frf.svg"))
 }
 
-fn check_lengths(c: &Comparison, excitation: &Signal, frequency_view: bool) -> Result<(), String> {
-    let force = &excitation.values;
+fn check_lengths(c: &Comparison, responses: Option<&ComparisonResponses>) -> Result<(), String> {
     let n = c.time.len();
     if n < 2 {
         return Err(format!(
@@ -367,12 +347,14 @@ fn check_lengths(c: &Comparison, excitation: &Signal, frequency_view: bool) -> R
     if c.first > n {
         return Err(format!("the transient ends at sample {} of {n}", c.first));
     }
-    if frequency_view && force.len() != n {
-        return Err(format!(
-            "{} {} samples for {n} time samples",
-            force.len(),
-            excitation.channel.name()
-        ));
+    if let Some(r) = responses {
+        if r.channels.len() != c.channels.len() {
+            return Err(format!(
+                "{} frequency responses for {} channels",
+                r.channels.len(),
+                c.channels.len()
+            ));
+        }
     }
     Ok(())
 }
@@ -380,24 +362,6 @@ fn check_lengths(c: &Comparison, excitation: &Signal, frequency_view: bool) -> R
 fn sampling_interval(c: &Comparison) -> f64 {
     let n = c.time.len();
     (c.time[n - 1] - c.time[0]) / (n - 1) as f64
-}
-
-/// Per channel, the H1 estimate from the excitation to the measured and to the predicted value.
-fn channel_responses(c: &Comparison, force: &[f64]) -> Result<Vec<[FrequencyResponse; 2]>, String> {
-    let after = c.first..c.time.len();
-    let dt = sampling_interval(c);
-    let estimate = |acc: &[f64]| {
-        welch_h1(&force[after.clone()], &acc[after.clone()], dt, FRF_SEGMENT).ok_or_else(|| {
-            format!(
-                "the frequency view needs at least 4 samples after the transient and a positive sampling interval; \
-                 there are {} samples, every {dt} s",
-                after.len()
-            )
-        })
-    };
-    (0..c.channels.len())
-        .map(|i| Ok([estimate(&c.measured[i])?, estimate(&c.predicted[i])?]))
-        .collect()
 }
 
 fn text(e: impl Display) -> String {
@@ -689,12 +653,12 @@ fn draw_channel(
 
 fn draw_frequency_view(
     c: &Comparison,
-    responses: &[[FrequencyResponse; 2]],
+    view: &ComparisonResponses,
     excitation: &Channel,
     title: &str,
 ) -> Result<String, String> {
-    let dt = sampling_interval(c);
-    let nyquist = 0.5 / dt;
+    let responses = &view.channels;
+    let nyquist = 0.5 / view.dt;
     let (lo, hi) = padded_range(
         responses
             .iter()
@@ -706,7 +670,7 @@ fn draw_frequency_view(
     let frequency_label = |f: &f64| tick_label(*f, nyquist);
     let db_label = |db: &f64| tick_label(*db, 1000.0);
     let segments = responses[0][0].segments;
-    let segment_len = FRF_SEGMENT.min(c.time.len() - c.first);
+    let segment_len = view.segment_len;
 
     let mut svg = String::new();
     {
@@ -795,6 +759,8 @@ fn draw_frequency_view(
 mod tests {
     use super::*;
     use crate::evaluation::compare::{compare, CompareOptions, FailingWindow};
+    use crate::evaluation::frf::{comparison_responses, welch_h1, FRF_SEGMENT};
+    use crate::record::Signal;
     use quick_xml::events::Event;
     use std::f64::consts::PI;
 
@@ -935,7 +901,8 @@ mod tests {
         let (c, force) = synthetic();
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("comparison.svg");
-        plot_comparison(&c, &force, "dataset 2 <linear model>", &path, false).expect("plots");
+        plot_comparison(&c, &force.channel, None, "dataset 2 <linear model>", &path)
+            .expect("plots");
 
         let svg = parse_svg(&path);
         assert!(
@@ -988,7 +955,15 @@ mod tests {
     fn frequency_view_is_written_beside_the_time_view() {
         let (c, force) = synthetic();
         let dir = tempfile::tempdir().expect("temp dir");
-        plot_comparison(&c, &force, "dataset 2", &dir.path().join("d2.svg"), true).expect("plots");
+        let responses = comparison_responses(&c, &force).expect("estimates");
+        plot_comparison(
+            &c,
+            &force.channel,
+            Some(&responses),
+            "dataset 2",
+            &dir.path().join("d2.svg"),
+        )
+        .expect("plots");
         let svg = parse_svg(&dir.path().join("d2-frf.svg"));
         for expected in ["dataset 2", "acc1", "acc3", "frequency (Hz)", "H1 estimate"] {
             assert!(
@@ -1006,7 +981,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("temp dir");
         for name in ["comparison.png", "comparison"] {
             let path = dir.path().join(name);
-            let err = plot_comparison(&c, &force, "t", &path, false).expect_err("refused");
+            let err = plot_comparison(&c, &force.channel, None, "t", &path).expect_err("refused");
             assert!(matches!(err, ReportError::UnsupportedFormat { .. }));
             assert_eq!(
                 err.to_string(),
@@ -1019,17 +994,14 @@ mod tests {
     #[test]
     fn bad_input_is_refused_before_anything_is_written() {
         let (c, force) = synthetic();
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = dir.path().join("comparison.svg");
         let short = force_signal(force.values[..100].to_vec());
-        let err = plot_comparison(&c, &short, "t", &path, true).expect_err("refused");
-        assert!(matches!(err, ReportError::BadInput { .. }), "{err}");
+        // The frequency view is computed (`comparison_responses`) before anything is drawn or
+        // written, and refuses the short excitation.
+        let err = comparison_responses(&c, &short).expect_err("refused");
         assert!(
-            err.to_string()
-                .contains("100 force samples for 1024 time samples"),
+            err.contains("100 force samples for 1024 time samples"),
             "{err}"
         );
-        assert_eq!(std::fs::read_dir(dir.path()).expect("lists").count(), 0);
     }
 
     #[test]
@@ -1141,12 +1113,13 @@ mod tests {
 
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("dataset1.svg");
+        let responses = comparison_responses(&c, &m.excitation).expect("estimates");
         plot_comparison(
             &c,
-            &m.excitation,
+            &m.excitation.channel,
+            Some(&responses),
             "dataset 1 — smoothed stand-in prediction",
             &path,
-            true,
         )
         .expect("plots");
         let svg = parse_svg(&path);

@@ -3,10 +3,13 @@
 //! channel.
 
 use crate::evaluation::compare::DEFAULT_TRANSIENT;
+use crate::evaluation::frf::{comparison_responses, ComparisonResponses};
+use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::run::{compare_with, run_and_compare_with, Compared, RunError};
 use crate::twin::Twin;
 use crate::workflows::control::{predict_controlled, ControlError, ControllerSpec};
+use crate::workflows::learn::PAPER_THRESHOLD;
 use crate::workflows::options::{check_tolerance, check_transient_leaves, InvalidOption};
 
 /// `twin compare`'s options (what it writes aside).
@@ -86,6 +89,68 @@ pub fn compare(
                 None,
             )?
         }
+    })
+}
+
+/// What `twin compare --plot PATH [--frf]` draws (`report::plot_compared`), computed here: the
+/// title, the frequency view's estimates (with `--frf`) and, with a corrector, the latent
+/// variance of each channel it corrects with its threshold.
+#[derive(Debug, Clone)]
+pub struct ComparePlot {
+    pub title: String,
+    pub responses: Option<ComparisonResponses>,
+    pub latent: Vec<LatentVariance>,
+}
+
+/// A corrected channel's latent variance `V(f)` and the threshold above which active learning
+/// would query a point.
+#[derive(Debug, Clone)]
+pub struct LatentVariance {
+    /// The channel's position in the comparison.
+    pub channel: usize,
+    pub values: Vec<f64>,
+    pub threshold: f64,
+}
+
+/// The plot of a comparison: the threshold of a corrected channel is `options.latent_threshold`
+/// when given, else its calibrated noise variance, else [`PAPER_THRESHOLD`] × its measured
+/// variance after the transient on this record; an error in words when the frequency view
+/// cannot be estimated.
+pub fn compare_plot(
+    twin: &Twin,
+    data: &Measurement,
+    compared: &Compared,
+    options: &CompareOptions,
+    frequency_view: bool,
+) -> Result<ComparePlot, String> {
+    let comparison = &compared.comparison;
+    let responses = frequency_view
+        .then(|| comparison_responses(comparison, &data.excitation))
+        .transpose()?;
+    let latent = comparison
+        .channels
+        .iter()
+        .enumerate()
+        .filter_map(|(c, channel)| {
+            let values = compared.prediction.get(*channel)?.latent_var.clone()?;
+            let threshold = match (options.latent_threshold, twin.noise_variance_of(*channel)) {
+                (Some(t), _) => t,
+                (None, Some(v)) => v,
+                (None, None) => {
+                    PAPER_THRESHOLD * variance(&comparison.measured[c][comparison.first..])
+                }
+            };
+            Some(LatentVariance {
+                channel: c,
+                values,
+                threshold,
+            })
+        })
+        .collect();
+    Ok(ComparePlot {
+        title: format!("{} on {}", twin.describe(), data.path.display()),
+        responses,
+        latent,
     })
 }
 
