@@ -53,7 +53,7 @@ for _error in (ShearTwinError, DataError, TwinError, CalibrateError, DiagnoseErr
 
 __all__ = [
     "Twin", "Record", "Report", "Comparison", "Control", "RunResult", "synth", "run", "pack_fmu",
-    "export_fmus", "init", "record_from_frame", "read_frf",
+    "export_fmus", "init", "record_from_frame", "read_frf", "identify_modes",
     "ShearTwinError", "DataError", "TwinError", "CalibrateError", "DiagnoseError",
     "ControlError", "WatchError", "SynthError", "TrainError", "RunError", "HybridError",
 ]
@@ -494,6 +494,24 @@ def read_frf(path: str | os.PathLike) -> dict[str, Any]:
     ``{"path", "frequency": array (Hz), "channels": {"acc1": array, ...}}``, each channel
     complex (SI per unit excitation) or, for a magnitude-only file, in dB."""
     return _native.read_frf(_os.fspath(path))
+
+
+def identify_modes(records: Record | Sequence[Record]) -> Report:
+    """``twin modal --data RUN1 --data RUN2 …``: the modes of a record, or of several runs of one
+    test, as the CLI identifies them — LSCF through the measured force (the ``input_output``
+    method, its band the one the force excites), SSI-COV from the responses alone (``ssi``),
+    FDD/EFDD (``fdd``) and the methods' verdicts side by side (``verdicts``); each method's
+    ``modes`` (frequency Hz, damping ratio, each with its sd; ``displacement_shape`` per floor of
+    ``floors``) and the modes it set aside with the reason (``rejected``).
+
+    Several runs: runs that share their response channels average together; runs that each
+    measured other floors, all with the same measured force (a roving accelerometer), merge
+    into one set of modes with shapes at every floor any run measured (PoSER style: the force
+    is every run's reference, each run's pole refined in the time domain, each floor's shape
+    component its run's residue at the mean pole). ``DataError`` when the runs cannot be one
+    test (another sampling rate, a roving set without a measured force)."""
+    runs = [records] if isinstance(records, Record) else list(records)
+    return Report(_native.identify_modes(runs))
 
 
 def export_fmus(out: str | os.PathLike) -> list[str]:

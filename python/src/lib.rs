@@ -178,6 +178,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<record::Record>()?;
     m.add_class::<twin::Twin>()?;
     m.add_function(wrap_pyfunction!(record::synth, m)?)?;
+    m.add_function(wrap_pyfunction!(record::identify_modes, m)?)?;
     m.add_function(wrap_pyfunction!(run::run, m)?)?;
     m.add_function(wrap_pyfunction!(run::pack_fmu, m)?)?;
     m.add_function(wrap_pyfunction!(run::export_fmus, m)?)?;

@@ -218,3 +218,28 @@ pub fn synth<'py>(
     }
     Ok((Record { measurement }, to_object(py, &truth)?))
 }
+
+/// `twin modal --data RUN1 --data RUN2 …`: the modes of one record or of several runs of one
+/// test, identified as the CLI does (LSCF through a measured force, SSI-COV, FDD/EFDD, the
+/// methods' verdicts side by side). Runs that share their response channels average together;
+/// runs that each measured other floors with the same measured force (a roving accelerometer)
+/// merge into one set of modes with shapes at every floor any run measured. Returns the CLI
+/// report's `record` object; `DataError` when the runs cannot be one test.
+#[pyfunction]
+pub fn identify_modes<'py>(
+    py: Python<'py>,
+    records: Vec<PyRef<'py, Record>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    if records.is_empty() {
+        return Err(to_py(
+            Kind::Data,
+            anyhow::anyhow!("identify_modes: no record given"),
+        ));
+    }
+    let runs: Vec<Measurement> = records.iter().map(|r| r.measurement.clone()).collect();
+    let options = orchestrator::workflows::modal::IdentifyOptions::default();
+    let found = detached(py, || {
+        orchestrator::workflows::modal::identify(&runs, &options).map_err(|e| to_py(Kind::Data, e))
+    })?;
+    to_object(py, &found)
+}
