@@ -18,8 +18,9 @@
 //! state. A conjugate pair enters once, as twice its real part.
 
 use faer::linalg::matmul::matmul;
+use faer::linalg::solvers::DenseSolveCore;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
-use nalgebra::{Complex, DMatrix, DVector};
+use nalgebra::{Complex, DMatrix, DVector, SMatrix};
 use structure::Excitation;
 
 use crate::batch::LinearRecord;
@@ -51,7 +52,7 @@ struct ModeStep {
 /// upper-left (as `crate::sensitivity` does for the state).
 fn mode_step(lambda: C64, step: f64, substeps: u32) -> ModeStep {
     let one = C64::new(1.0, 0.0);
-    let mut b = DMatrix::<C64>::zeros(6, 6);
+    let mut b = Block6::zeros();
     for o in [0, 3] {
         b[(o, o)] = lambda;
         b[(o, o + 1)] = one;
@@ -70,24 +71,27 @@ fn mode_step(lambda: C64, step: f64, substeps: u32) -> ModeStep {
     }
 }
 
-fn rk4(hf: &DMatrix<C64>) -> DMatrix<C64> {
-    let id = DMatrix::<C64>::identity(hf.nrows(), hf.ncols());
-    let mut r = &id + hf / C64::new(4.0, 0.0);
-    r = &id + hf * r / C64::new(3.0, 0.0);
-    r = &id + hf * r / C64::new(2.0, 0.0);
+/// The block system of [`mode_step`]: fixed size, on the stack.
+type Block6 = SMatrix<C64, 6, 6>;
+
+fn rk4(hf: &Block6) -> Block6 {
+    let id = Block6::identity();
+    let mut r = id + hf / C64::new(4.0, 0.0);
+    r = id + hf * r / C64::new(3.0, 0.0);
+    r = id + hf * r / C64::new(2.0, 0.0);
     id + hf * r
 }
 
-fn power(m: &DMatrix<C64>, mut n: u32) -> DMatrix<C64> {
-    let mut result = DMatrix::<C64>::identity(m.nrows(), m.ncols());
-    let mut square = m.clone();
+fn power(m: &Block6, mut n: u32) -> Block6 {
+    let mut result = Block6::identity();
+    let mut square = *m;
     while n > 0 {
         if n & 1 == 1 {
-            result = &result * &square;
+            result *= square;
         }
         n >>= 1;
         if n > 0 {
-            square = &square * &square;
+            square = square * square;
         }
     }
     result
@@ -121,7 +125,12 @@ impl Modes {
         let vectors = eigen.U();
         let lambda: Vec<C64> = (0..s).map(|j| values[j]).collect();
         let v = DMatrix::from_fn(s, s, |r, c| vectors[(r, c)]);
-        let wt = v.clone().try_inverse()?;
+        // V⁻¹ by faer's LU (ten times nalgebra's at 40 states); a singular V shows as
+        // non-finite entries, refused below.
+        let inverse = Mat::<C64>::from_fn(s, s, |r, c| vectors[(r, c)])
+            .partial_piv_lu()
+            .inverse();
+        let wt = DMatrix::from_fn(s, s, |r, c| inverse[(r, c)]);
         let scale = lambda.iter().map(|l| l.norm()).fold(0.0, f64::max);
         let distinct = (0..s).all(|i| {
             (0..i).all(|j| (lambda[i] - lambda[j]).norm() > DISTINCT * scale.max(f64::MIN_POSITIVE))
@@ -158,10 +167,11 @@ impl Modes {
         Some(modes)
     }
 
-    /// `1/(λⱼ − λᵢ)` at `(i, j)`, 0 on the diagonal.
+    /// `1/(λⱼ − λᵢ)` at `(i, m)` for each kept mode `m = jₘ`, 0 at `i = jₘ`.
     fn inverse_gaps(&self) -> DMatrix<C64> {
         let s = self.lambda.len();
-        DMatrix::from_fn(s, s, |i, j| {
+        DMatrix::from_fn(s, self.kept.len(), |i, m| {
+            let j = self.kept[m].0;
             if i == j {
                 C64::new(0.0, 0.0)
             } else {
@@ -224,7 +234,10 @@ impl Modal {
             .collect();
         let parts = ModeParts::new(&modes, &derivatives, &alpha);
         let per_parameter = assemble(&modes, &parts, &alpha, &derivatives, floors);
-        let coefficients = per_parameter.iter().map(|k| along(directions, k)).collect();
+        let coefficients = per_parameter
+            .into_iter()
+            .map(|k| along(directions, k))
+            .collect();
         let outputs = floors
             .iter()
             .map(|&f| {
@@ -327,54 +340,57 @@ impl ModeParts {
     /// `Gⱼ = (α ∘ 1/(λⱼ − λ)) Wᵀ_a` the same for every parameter: one product per kept mode, and
     /// O(N) a parameter after it (where a dense `Wᵀ A' V` costs O(N³) a parameter).
     fn new(modes: &Modes, derivatives: &[AccelerationRows], alpha: &Mat<C64>) -> ModeParts {
-        let beta = &modes.beta;
         let s = modes.lambda.len();
         let n = s / 2;
         let p = derivatives.len();
         let kept = modes.kept.len();
         let slots = alpha.nrows();
+        // gaps[(i, m)] = 1/(λⱼ − λᵢ) and weighted[(i, m)] = βᵢ/(λⱼ − λᵢ) for kept mode m = jₘ.
         let gaps = modes.inverse_gaps();
+        let weighted = Mat::<C64>::from_fn(s, kept, |i, m| modes.beta[i] * gaps[(i, m)]);
         let wt_acc = Mat::<C64>::from_fn(s, n, |i, r| modes.wt[(i, n + r)]);
-        // g: slots × (kept · N), block m = Gⱼₘ.
-        let mut g = Mat::<C64>::zeros(slots, kept * n);
-        let mut scaled = Mat::<C64>::zeros(slots, s);
-        for (m, &(j, _)) in modes.kept.iter().enumerate() {
-            for i in 0..s {
-                for slot in 0..slots {
-                    scaled[(slot, i)] = alpha[(slot, i)] * gaps[(i, j)];
-                }
-            }
-            matmul(
-                g.as_mut().submatrix_mut(0, m * n, slots, n),
-                Accum::Replace,
-                scaled.as_ref(),
-                wt_acc.as_ref(),
-                C64::new(1.0, 0.0),
-                Par::Seq,
-            );
-        }
+        // g: (kept · slots) × N, rows m · slots.. = Gⱼₘ, one product for every kept mode.
+        let scaled = Mat::<C64>::from_fn(kept * slots, s, |row, i| {
+            alpha[(row % slots, i)] * gaps[(i, row / slots)]
+        });
+        let mut g = Mat::<C64>::zeros(kept * slots, n);
+        matmul(
+            g.as_mut(),
+            Accum::Replace,
+            scaled.as_ref(),
+            wt_acc.as_ref(),
+            C64::new(1.0, 0.0),
+            Par::Seq,
+        );
         let mut outputs = Mat::<C64>::zeros(slots, p * kept);
         let mut own = DMatrix::<C64>::zeros(p, kept);
         let mut dlambda = DMatrix::<C64>::zeros(p, kept);
         for (theta, d) in derivatives.iter().enumerate() {
             let y = SparseRows::new(d, &modes.v);
-            let dbeta = modes.project_rows(&d.b_excitation);
             for (m, &(j, _)) in modes.kept.iter().enumerate() {
                 let col = theta * kept + m;
+                let beta = modes.beta[j];
                 for slot in 0..slots {
                     let through: C64 = y
                         .rows
                         .iter()
                         .zip(&y.values)
-                        .map(|(&r, yr)| yr[j] * g[(slot, m * n + r)])
+                        .map(|(&r, yr)| yr[j] * g[(m * slots + slot, r)])
                         .sum();
-                    outputs[(slot, col)] = through * beta[j];
+                    outputs[(slot, col)] = through * beta;
                 }
-                let mut sum = dbeta[j];
+                // βⱼ' = wⱼᵀ b': b' is nonzero where the excitation's coefficient moves.
+                let mut sum: C64 = d
+                    .b_excitation
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| **b != 0.0)
+                    .map(|(r, b)| modes.wt[(j, n + r)] * *b)
+                    .sum();
                 let mut eigen = C64::new(0.0, 0.0);
                 for (&r, yr) in y.rows.iter().zip(&y.values) {
                     let w = modes.wt[(j, n + r)];
-                    let h: C64 = (0..s).map(|i| yr[i] * beta[i] * gaps[(i, j)]).sum();
+                    let h: C64 = (0..s).map(|i| yr[i] * weighted[(i, m)]).sum();
                     sum += w * h;
                     eigen += w * yr[j];
                 }
@@ -438,17 +454,22 @@ fn assemble(
         .iter()
         .enumerate()
         .map(|(slot, &f)| {
+            // Column by column (the matrix's order): a mode's four, then the state's, then the
+            // excitation's, each down the parameters.
             let mut k = DMatrix::zeros(derivatives.len(), direct + s + 1);
-            for (theta, d) in derivatives.iter().enumerate() {
-                for (m, &(j, weight)) in modes.kept.iter().enumerate() {
-                    let a = alpha[(slot, j)];
+            for (m, &(j, weight)) in modes.kept.iter().enumerate() {
+                let a = alpha[(slot, j)];
+                let ab = a * modes.beta[j];
+                for theta in 0..derivatives.len() {
                     let z = cz[(slot, theta * kept + m)] + a * parts.own[(theta, m)];
-                    let w = a * modes.beta[j] * parts.dlambda[(theta, m)];
+                    let w = ab * parts.dlambda[(theta, m)];
                     k[(theta, 4 * m)] = weight * z.re;
                     k[(theta, 4 * m + 1)] = -weight * z.im;
                     k[(theta, 4 * m + 2)] = weight * w.re;
                     k[(theta, 4 * m + 3)] = -weight * w.im;
                 }
+            }
+            for (theta, d) in derivatives.iter().enumerate() {
                 for c in 0..s {
                     k[(theta, direct + c)] = d.a[(f, c)];
                 }
@@ -461,7 +482,7 @@ fn assemble(
 
 /// `directionsᵀ k`: the coefficients along the directions; a direction that is one parameter
 /// takes its row.
-fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
+fn along(directions: &DMatrix<f64>, k: DMatrix<f64>) -> DMatrix<f64> {
     let unit: Option<Vec<usize>> = directions
         .column_iter()
         .map(|d| {
@@ -473,6 +494,8 @@ fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
         })
         .collect();
     match unit {
+        // Every parameter in its own order: `k` itself.
+        Some(rows) if rows.len() == k.nrows() && rows.iter().enumerate().all(|(a, &r)| a == r) => k,
         Some(rows) => DMatrix::from_fn(rows.len(), k.ncols(), |a, l| k[(rows[a], l)]),
         None => directions.transpose() * k,
     }
