@@ -62,6 +62,10 @@ const MAX_STEP: f64 = 10.0;
 /// Minimises `f` (value and gradient) over the box `[lower, upper]` from `x0` (projected into
 /// the box first). An error from `f` at the start is returned; at a trial point it counts as a
 /// failed trial (the step shrinks), so a region where `f` cannot be evaluated is avoided.
+///
+/// Each iteration: the stopping test on the projected gradient, the variables held at a bound
+/// ([`Bounds::free`]), the search direction ([`search`]), the line search ([`line_search`]),
+/// the curvature pair kept ([`remember`]) and the stopping test on the relative reduction.
 pub(crate) fn minimise<E>(
     mut f: impl FnMut(&[f64]) -> Result<(f64, Vec<f64>), E>,
     x0: &[f64],
@@ -69,150 +73,200 @@ pub(crate) fn minimise<E>(
     upper: &[f64],
     settings: &Settings,
 ) -> Result<Outcome, E> {
-    let project = |x: &mut [f64]| {
-        for ((x, lo), hi) in x.iter_mut().zip(lower).zip(upper) {
-            *x = x.clamp(*lo, *hi);
-        }
-    };
+    let bounds = Bounds { lower, upper };
     let mut x = x0.to_vec();
-    project(&mut x);
-    let (mut value, mut gradient) = f(&x)?;
+    bounds.project(&mut x);
+    let (value, gradient) = f(&x)?;
+    let mut point = Point { x, value, gradient };
     let mut evaluations = 1;
     let mut pairs: VecDeque<(Vec<f64>, Vec<f64>)> = VecDeque::with_capacity(settings.history);
-    let outcome = |x, value, iterations, evaluations, termination| Outcome {
-        x,
-        value,
+    let outcome = |point: Point, iterations, evaluations, termination| Outcome {
+        x: point.x,
+        value: point.value,
         iterations,
         evaluations,
         termination,
     };
 
     for iteration in 0..settings.max_iterations {
-        let projected_gradient = x
-            .iter()
-            .zip(&gradient)
-            .zip(lower.iter().zip(upper))
-            .map(|((x, g), (lo, hi))| ((x - g).clamp(*lo, *hi) - x).abs())
-            .fold(0.0, f64::max);
-        if projected_gradient <= settings.gradient_tolerance {
-            return Ok(outcome(
-                x,
-                value,
-                iteration,
-                evaluations,
-                Termination::ProjectedGradient,
-            ));
+        if bounds.projected_gradient(&point) <= settings.gradient_tolerance {
+            let end = Termination::ProjectedGradient;
+            return Ok(outcome(point, iteration, evaluations, end));
         }
-        // Variables at a bound with the gradient pushing outwards stay there this iteration.
-        let free: Vec<bool> = x
-            .iter()
-            .zip(&gradient)
-            .zip(lower.iter().zip(upper))
-            .map(|((x, g), (lo, hi))| !((*x <= *lo && *g > 0.0) || (*x >= *hi && *g < 0.0)))
-            .collect();
-        let mut direction = two_loop(&gradient, &free, &pairs);
-        let mut slope: f64 = direction.iter().zip(&gradient).map(|(d, g)| d * g).sum();
-        if !slope.is_finite() || slope >= 0.0 {
-            // Not a descent direction (rounding in the curvature pairs): restart from the
-            // steepest descent on the free variables.
-            pairs.clear();
-            direction = masked(&gradient, &free).iter().map(|g| -g).collect();
-            slope = -direction.iter().map(|d| d * d).sum::<f64>();
-        }
-        let largest = direction.iter().fold(0.0f64, |m, d| m.max(d.abs()));
-        let norm = direction.iter().map(|d| d * d).sum::<f64>().sqrt();
-        let mut step = if pairs.is_empty() {
-            // No curvature yet: a unit step in the variables, as L-BFGS-B's first iteration.
-            1.0f64.min(1.0 / norm)
-        } else {
-            1.0
+        let free = bounds.free(&point);
+        let direction = search(&point, &free, &mut pairs);
+        let Some(next) = line_search(&mut f, &point, &direction, &bounds, &mut evaluations) else {
+            let end = Termination::LineSearch;
+            return Ok(outcome(point, iteration, evaluations, end));
         };
-        step = step.min(MAX_STEP / largest);
-
-        let mut accepted = None;
-        for _ in 0..MAX_TRIALS {
-            let mut trial: Vec<f64> = x
-                .iter()
-                .zip(&direction)
-                .map(|(x, d)| x + step * d)
-                .collect();
-            project(&mut trial);
-            let moved: f64 = trial.iter().zip(&x).map(|(t, x)| (t - x) * (t - x)).sum();
-            if moved == 0.0 {
-                break;
-            }
-            let predicted: f64 = trial
-                .iter()
-                .zip(&x)
-                .zip(&gradient)
-                .map(|((t, x), g)| (t - x) * g)
-                .sum();
-            let evaluated = f(&trial);
-            evaluations += 1;
-            match evaluated {
-                Ok((v, g)) if v.is_finite() && v <= value + ARMIJO * predicted => {
-                    accepted = Some((trial, v, g));
-                    break;
-                }
-                Ok((v, _)) if v.is_finite() => {
-                    // Minimum of the quadratic through f(0), f'(0) and f(step), kept within
-                    // [0.1, 0.5] of the step.
-                    let denominator = 2.0 * (v - value - slope * step);
-                    let minimiser = if denominator > 0.0 {
-                        -slope * step * step / denominator
-                    } else {
-                        0.5 * step
-                    };
-                    step = minimiser.clamp(0.1 * step, 0.5 * step);
-                }
-                _ => step *= 0.1,
-            }
-        }
-        let Some((next, next_value, next_gradient)) = accepted else {
-            return Ok(outcome(
-                x,
-                value,
-                iteration,
-                evaluations,
-                Termination::LineSearch,
-            ));
-        };
-
-        let s: Vec<f64> = next.iter().zip(&x).map(|(a, b)| a - b).collect();
-        let y: Vec<f64> = next_gradient
-            .iter()
-            .zip(&gradient)
-            .map(|(a, b)| a - b)
-            .collect();
-        let sy: f64 = s.iter().zip(&y).map(|(s, y)| s * y).sum();
-        let yy: f64 = y.iter().map(|y| y * y).sum();
-        if sy > f64::EPSILON * yy {
-            if pairs.len() == settings.history {
-                pairs.pop_front();
-            }
-            pairs.push_back((s, y));
-        }
-        let reduction = (value - next_value) / value.abs().max(next_value.abs()).max(1.0);
-        x = next;
-        value = next_value;
-        gradient = next_gradient;
+        remember(&mut pairs, settings.history, &point, &next);
+        let reduction =
+            (point.value - next.value) / point.value.abs().max(next.value.abs()).max(1.0);
+        point = next;
         if reduction <= settings.cost_tolerance {
-            return Ok(outcome(
-                x,
-                value,
-                iteration + 1,
-                evaluations,
-                Termination::RelativeReduction,
-            ));
+            let end = Termination::RelativeReduction;
+            return Ok(outcome(point, iteration + 1, evaluations, end));
         }
     }
-    Ok(outcome(
-        x,
-        value,
-        settings.max_iterations,
-        evaluations,
-        Termination::MaxIterations,
-    ))
+    let end = Termination::MaxIterations;
+    Ok(outcome(point, settings.max_iterations, evaluations, end))
+}
+
+/// The box `[lower, upper]`.
+struct Bounds<'a> {
+    lower: &'a [f64],
+    upper: &'a [f64],
+}
+
+impl Bounds<'_> {
+    fn project(&self, x: &mut [f64]) {
+        for ((x, lo), hi) in x.iter_mut().zip(self.lower).zip(self.upper) {
+            *x = x.clamp(*lo, *hi);
+        }
+    }
+
+    /// The max-norm of the projected gradient `P(x − g) − x`.
+    fn projected_gradient(&self, p: &Point) -> f64 {
+        p.x.iter()
+            .zip(&p.gradient)
+            .zip(self.lower.iter().zip(self.upper))
+            .map(|((x, g), (lo, hi))| ((x - g).clamp(*lo, *hi) - x).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// The free variables: not at a bound with the gradient pushing outwards (those stay there
+    /// this iteration).
+    fn free(&self, p: &Point) -> Vec<bool> {
+        p.x.iter()
+            .zip(&p.gradient)
+            .zip(self.lower.iter().zip(self.upper))
+            .map(|((x, g), (lo, hi))| !((*x <= *lo && *g > 0.0) || (*x >= *hi && *g < 0.0)))
+            .collect()
+    }
+}
+
+/// A point with its value and gradient.
+struct Point {
+    x: Vec<f64>,
+    value: f64,
+    gradient: Vec<f64>,
+}
+
+/// A search direction, its slope `dᵀg` and the first trial step along it.
+struct Direction {
+    direction: Vec<f64>,
+    slope: f64,
+    step: f64,
+}
+
+/// The L-BFGS direction on the free variables, or the steepest descent on them (the curvature
+/// pairs dropped) when that is not a descent direction; the first trial step a unit step in the
+/// variables without curvature yet, else 1, at most [`MAX_STEP`] in any variable.
+fn search(point: &Point, free: &[bool], pairs: &mut VecDeque<(Vec<f64>, Vec<f64>)>) -> Direction {
+    let gradient = &point.gradient;
+    let mut direction = two_loop(gradient, free, pairs);
+    let mut slope: f64 = direction.iter().zip(gradient).map(|(d, g)| d * g).sum();
+    if !slope.is_finite() || slope >= 0.0 {
+        // Not a descent direction (rounding in the curvature pairs): restart from the
+        // steepest descent on the free variables.
+        pairs.clear();
+        direction = masked(gradient, free).iter().map(|g| -g).collect();
+        slope = -direction.iter().map(|d| d * d).sum::<f64>();
+    }
+    let largest = direction.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    let norm = direction.iter().map(|d| d * d).sum::<f64>().sqrt();
+    let step = if pairs.is_empty() {
+        // No curvature yet: a unit step in the variables, as L-BFGS-B's first iteration.
+        1.0f64.min(1.0 / norm)
+    } else {
+        1.0
+    };
+    Direction {
+        direction,
+        slope,
+        step: step.min(MAX_STEP / largest),
+    }
+}
+
+/// Armijo backtracking along the projected path from `point`: the first trial point that lowers
+/// the value enough, or `None` after [`MAX_TRIALS`] or when the projection no longer moves.
+/// A failed trial shrinks the step to the quadratic's minimum (within [0.1, 0.5] of it), or to
+/// a tenth when `f` fails or is not finite there.
+fn line_search<E>(
+    f: &mut impl FnMut(&[f64]) -> Result<(f64, Vec<f64>), E>,
+    point: &Point,
+    search: &Direction,
+    bounds: &Bounds,
+    evaluations: &mut usize,
+) -> Option<Point> {
+    let (x, value, gradient) = (&point.x, point.value, &point.gradient);
+    let Direction {
+        direction, slope, ..
+    } = search;
+    let mut step = search.step;
+    for _ in 0..MAX_TRIALS {
+        let mut trial: Vec<f64> = x.iter().zip(direction).map(|(x, d)| x + step * d).collect();
+        bounds.project(&mut trial);
+        let moved: f64 = trial.iter().zip(x).map(|(t, x)| (t - x) * (t - x)).sum();
+        if moved == 0.0 {
+            return None;
+        }
+        let predicted: f64 = trial
+            .iter()
+            .zip(x)
+            .zip(gradient)
+            .map(|((t, x), g)| (t - x) * g)
+            .sum();
+        let evaluated = f(&trial);
+        *evaluations += 1;
+        match evaluated {
+            Ok((v, g)) if v.is_finite() && v <= value + ARMIJO * predicted => {
+                return Some(Point {
+                    x: trial,
+                    value: v,
+                    gradient: g,
+                });
+            }
+            Ok((v, _)) if v.is_finite() => {
+                // Minimum of the quadratic through f(0), f'(0) and f(step), kept within
+                // [0.1, 0.5] of the step.
+                let denominator = 2.0 * (v - value - slope * step);
+                let minimiser = if denominator > 0.0 {
+                    -slope * step * step / denominator
+                } else {
+                    0.5 * step
+                };
+                step = minimiser.clamp(0.1 * step, 0.5 * step);
+            }
+            _ => step *= 0.1,
+        }
+    }
+    None
+}
+
+/// Keeps the step's curvature pair `(s, y)` when `sᵀy` is positive (beyond rounding), the
+/// oldest dropped past `history`.
+fn remember(
+    pairs: &mut VecDeque<(Vec<f64>, Vec<f64>)>,
+    history: usize,
+    point: &Point,
+    next: &Point,
+) {
+    let s: Vec<f64> = next.x.iter().zip(&point.x).map(|(a, b)| a - b).collect();
+    let y: Vec<f64> = next
+        .gradient
+        .iter()
+        .zip(&point.gradient)
+        .map(|(a, b)| a - b)
+        .collect();
+    let sy: f64 = s.iter().zip(&y).map(|(s, y)| s * y).sum();
+    let yy: f64 = y.iter().map(|y| y * y).sum();
+    if sy > f64::EPSILON * yy {
+        if pairs.len() == history {
+            pairs.pop_front();
+        }
+        pairs.push_back((s, y));
+    }
 }
 
 fn masked(v: &[f64], free: &[bool]) -> Vec<f64> {
