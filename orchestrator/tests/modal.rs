@@ -406,6 +406,45 @@ mod records {
         }
     }
 
+    /// A ten-storey tower (0.66–8.75 Hz, damping 0.16–2.05 %; the `twin synth --storeys 10`
+    /// tower) under a force at its top over 0–50 Hz, 100 Hz for 300 s, every floor measured,
+    /// 2 % white noise. Its top two modes, 8.458 and 8.753 Hz, are 3.5 % apart at 2 %
+    /// damping: one hump in the FRF, the top mode a shoulder of it, and the peak screen set it
+    /// aside (measured: 9 of 10 modes, 8.7629 Hz "no peak", on this record and on `twin
+    /// synth`'s). It is judged now after the other modes' fitted contributions are taken away.
+    /// Measured: ten modes within +0.118 % (the top one); none spurious. Bars: the issue's
+    /// 0.5 %, none spurious. (With 2 % coloured noise as well, LSCF's diagram holds no cluster
+    /// at the top mode at all — 9 of 10, not held here.)
+    #[test]
+    fn a_mode_on_its_neighbours_shoulder_is_kept() {
+        let (data, exact) = record(
+            10,
+            (&[5.2; 10], &[4021.0; 10], &[3.0; 10]),
+            10,
+            (100.0, 300.0),
+            (0.0, 50.0),
+            &(1..=10).collect::<Vec<_>>(),
+            0.0,
+            1,
+        );
+        let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        let (nearest, spurious) = matched(&lscf_frequencies(&found), &exact);
+        println!(
+            "{:+.3?} %, spurious {spurious:?}, set aside {:?}",
+            nearest.iter().map(|(_, e)| 100.0 * e).collect::<Vec<_>>(),
+            io.rejected
+                .iter()
+                .map(|r| (r.mode.frequency, r.rejection))
+                .collect::<Vec<_>>()
+        );
+        for ((_, error), e) in nearest.iter().zip(&exact) {
+            assert!(error.abs() < 0.005, "{} Hz: {error}", e.frequency);
+        }
+        assert!(spurious.is_empty(), "spurious {spurious:?}");
+        assert_eq!(io.modes.len(), exact.len());
+    }
+
     /// A five-storey tower (1.26–8.49 Hz, damping 0.30–2.0 %) driven at its top floor by a
     /// mass damper's narrow-band force, 1.0–1.5 Hz, 100 Hz for 410 s, every floor measured,
     /// 2 % white and 2 % coloured noise: only the first mode is in the force's band, so it is

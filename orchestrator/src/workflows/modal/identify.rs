@@ -6,6 +6,7 @@
 
 mod leaky;
 mod roving;
+mod shoulder;
 
 use serde::Serialize;
 use structure::channel::{Channel, Quantity};
@@ -823,6 +824,7 @@ impl Estimation<'_> {
             let evidence = Peaks::of_frf(&frf);
             let orders = self.lscf_orders(&frf, band, &evidence)?;
             let chosen = self.chosen_modes("LSCF", Some(band), orders, screen, floors, evidence)?;
+            let chosen = shoulder::restored_shoulders(chosen, &frf, floors);
             Some(self.refined_leaky(chosen, floors))
         } else {
             None
