@@ -18,6 +18,7 @@
 //! state. A conjugate pair enters once, as twice its real part.
 
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use nalgebra::{Complex, DMatrix, DVector, SMatrix};
@@ -544,10 +545,26 @@ pub fn normals(
             return;
         }
         let z = MatRef::from_column_major_slice(&picked[..width * count], width, count);
-        matmul(gram.as_mut(), Accum::Add, z, z.transpose(), 1.0, Par::Seq);
+        // Σ ζ ζᵀ is symmetric: its lower half here, mirrored after the pass.
+        triangular::matmul(
+            gram.as_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            z,
+            BlockStructure::Rectangular,
+            z.transpose(),
+            BlockStructure::Rectangular,
+            1.0,
+            Par::Seq,
+        );
         let r = MatRef::from_column_major_slice_with_stride(&residuals, count, slots, BLOCK);
         matmul(projections.as_mut(), Accum::Add, z, r, 1.0, Par::Seq);
     });
+    for c in 0..width {
+        for r in 0..c {
+            gram[(r, c)] = gram[(c, r)];
+        }
+    }
     let blocks = modal
         .coefficients
         .iter()
