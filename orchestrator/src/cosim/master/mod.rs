@@ -14,13 +14,16 @@
 
 mod clock;
 mod decimated;
+mod recorder;
+mod slave;
 mod system;
 
 pub use clock::Clock;
 pub use decimated::Decimated;
+pub use recorder::Recorder;
+pub use slave::{Block, Observer, Slave};
 pub use system::{
-    Algorithm, Block, NodeId, Observer, Port, PortType, Recorder, Recording, RunEnd, SavedNode,
-    SavedState, Slave, System, TypedPort,
+    Algorithm, NodeId, Port, PortType, Recording, RunEnd, SavedNode, SavedState, System, TypedPort,
 };
 
 #[derive(Debug, thiserror::Error)]
