@@ -7,8 +7,9 @@ lines, in the files git tracks.
 
 A file counts whole (its unit tests included). A function is counted from its `fn` line to the
 line of its closing brace, found by counting braces outside comments, strings and character
-literals; functions inside a `#[cfg(test)]` module, and in `tests/`, `benches/` and `examples/`
-folders, are reported apart ("test") from the rest ("production").
+literals; functions inside a `#[cfg(test)]` module, in a unit-test file `tests.rs` and in `tests/`,
+`benches/` and `examples/` folders are reported apart ("test") from the rest ("production"), and
+so are files there.
 """
 
 import re
@@ -126,7 +127,11 @@ def main():
     long = []
     for path in files:
         n = sum(1 for _ in open(path, encoding="utf-8"))
-        in_tests = any(part in path for part in TEST_DIRS) or path.startswith(TEST_DIRS)
+        in_tests = (
+            any(part in path for part in TEST_DIRS)
+            or path.startswith(TEST_DIRS)
+            or path.endswith("/tests.rs")
+        )
         if n > 1000:
             big.append((n, path, "test" if in_tests else "production"))
         for name, start, size, test_module in functions(path):

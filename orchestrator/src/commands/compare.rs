@@ -153,18 +153,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
-        let view = crate::workflows::compare::compare_plot(
-            &twin,
-            &data,
-            &compared,
-            &options,
-            args.frf.is_some(),
-        )
-        .map_err(|message| crate::report::ReportError::BadInput {
-            path: path.clone(),
-            message,
-        })?;
-        crate::report::plot_compared(&compared.comparison, &data.excitation.channel, &view, path)?;
+        plot(&twin, &data, &compared, &options, path, args.frf.is_some())?;
     }
     print_summary(&twin, &data, comparison);
     match &modes {
@@ -196,6 +185,25 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             n => format!("; {n} out-of-band window(s) below it not counted"),
         }
     );
+    Ok(())
+}
+
+/// `--plot PATH [--frf]`: what the plot shows computed (`workflows::compare::compare_plot`; an
+/// error in it named by the plot's path), then drawn.
+fn plot(
+    twin: &Twin,
+    data: &Measurement,
+    compared: &Compared,
+    options: &CompareOptions,
+    path: &std::path::Path,
+    frf: bool,
+) -> Result<()> {
+    let view = crate::workflows::compare::compare_plot(twin, data, compared, options, frf)
+        .map_err(|message| crate::report::ReportError::BadInput {
+            path: path.to_owned(),
+            message,
+        })?;
+    crate::report::plot_compared(&compared.comparison, &data.excitation.channel, &view, path)?;
     Ok(())
 }
 
