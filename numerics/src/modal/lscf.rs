@@ -158,6 +158,28 @@ fn check_frf(frf: &Frf) -> Result<(), IdentificationError> {
     Ok(())
 }
 
+/// One output's sums over the bins that fill LSCF's Toeplitz matrices: `Σ w Ω^d`,
+/// `Σ w H Ω^d`, `Σ w H Ω^−d` and `Σ w |H|² Ω^d`, `d = 0..=max`.
+#[derive(Clone)]
+struct ToeplitzSums {
+    basis: Vec<Complex>,
+    forward: Vec<Complex>,
+    backward: Vec<Complex>,
+    squared: Vec<Complex>,
+}
+
+impl ToeplitzSums {
+    fn new(size: usize) -> Self {
+        let zero = vec![Complex::new(0.0, 0.0); size];
+        ToeplitzSums {
+            basis: zero.clone(),
+            forward: zero.clone(),
+            backward: zero.clone(),
+            squared: zero,
+        }
+    }
+}
+
 /// The poles (and their LSFD shapes) of every order of `options`, fitted to `frf`.
 pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, IdentificationError> {
     options.validate()?;
@@ -180,41 +202,51 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
     }
     let period = 1.0 / (2.0 * options.band.1);
     let max = options.max_order;
-    // Powers Ω_k^j, j = 0..=max, once for every order.
-    let powers: Vec<Vec<Complex>> = bins
-        .iter()
-        .map(|(_, w)| {
-            let omega = Complex::from_polar(1.0, w * period);
-            std::iter::successors(Some(Complex::new(1.0, 0.0)), |p| Some(p * omega))
-                .take(max + 1)
-                .collect()
-        })
-        .collect();
     let outputs = frf.response.len();
     let weights = bin_weights(frf, &bins, options.weighting);
+    let size = max + 1;
     // Per output R_o, S_o and T_o at the largest order; each order takes the leading block.
     // With w the squared weight: R_jm = Re Σ w conj(Ω^j) Ω^m; S_jm = Re Σ w conj(Ω^j) (−H Ω^m);
-    // T_jm = Re Σ w |H|² conj(Ω^j) Ω^m.
-    let size = max + 1;
-    let mut r = vec![DMatrix::<f64>::zeros(size, size); outputs];
-    let mut s = vec![DMatrix::<f64>::zeros(size, size); outputs];
-    let mut t = vec![DMatrix::<f64>::zeros(size, size); outputs];
-    for (b, (k, _)) in bins.iter().enumerate() {
-        let p = &powers[b];
-        for j in 0..size {
-            let pj = p[j].conj();
-            for m in 0..size {
-                let basis = pj * p[m];
-                for o in 0..outputs {
-                    let w = weights[o][b];
-                    let h = frf.response[o][*k];
-                    r[o][(j, m)] += w * basis.re;
-                    s[o][(j, m)] -= w * (basis * h).re;
-                    t[o][(j, m)] += w * basis.re * h.norm_sqr();
-                }
+    // T_jm = Re Σ w |H|² conj(Ω^j) Ω^m. On the unit circle conj(Ω^j) Ω^m = Ω^(m−j): all three
+    // are Toeplitz, from the sums over the bins of w Ω^d, w H Ω^d, w H Ω^−d and w |H|² Ω^d,
+    // d = 0..=max (O(bins · max) where the matrices entry by entry are O(bins · max²)).
+    let mut sums = vec![ToeplitzSums::new(size); outputs];
+    for (b, (k, w_bin)) in bins.iter().enumerate() {
+        let omega = Complex::from_polar(1.0, w_bin * period);
+        for (o, sum) in sums.iter_mut().enumerate() {
+            let w = weights[o][b];
+            let h = frf.response[o][*k];
+            let (wh, wh2) = (h * w, w * h.norm_sqr());
+            let mut power = Complex::new(1.0, 0.0);
+            for d in 0..size {
+                sum.basis[d] += power * w;
+                sum.forward[d] += wh * power;
+                sum.backward[d] += wh * power.conj();
+                sum.squared[d] += power * wh2;
+                power *= omega;
             }
         }
     }
+    let r: Vec<DMatrix<f64>> = sums
+        .iter()
+        .map(|t| DMatrix::from_fn(size, size, |j, m| t.basis[j.abs_diff(m)].re))
+        .collect();
+    let s: Vec<DMatrix<f64>> = sums
+        .iter()
+        .map(|t| {
+            DMatrix::from_fn(size, size, |j, m| {
+                if m >= j {
+                    -t.forward[m - j].re
+                } else {
+                    -t.backward[j - m].re
+                }
+            })
+        })
+        .collect();
+    let t: Vec<DMatrix<f64>> = sums
+        .iter()
+        .map(|t| DMatrix::from_fn(size, size, |j, m| t.squared[j.abs_diff(m)].re))
+        .collect();
     let mut orders = Vec::new();
     let mut order = options.min_order;
     'orders: while order <= max {
