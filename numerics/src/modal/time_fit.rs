@@ -11,7 +11,11 @@
 //! its residue scattered by tens of per cent from run to run. The time-domain fit takes the
 //! run whole: no window, no leakage, the run's start a free decay of known poles.
 
-use nalgebra::{DMatrix, DVector};
+use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
+use faer::linalg::solvers::Solve;
+use faer::{Accum, Mat, MatRef, Par, Side};
+use nalgebra::DMatrix;
 
 use super::Complex;
 
@@ -64,23 +68,57 @@ pub fn fit_residues(
     let mut x = design(dt, input, poles);
     // Columns of very different scale (an offset, a decay, a driven response): equilibrate.
     let scales = super::equilibrate_columns(&mut x);
-    let normal = x.tr_mul(&x).cholesky()?;
-    let mut residues = vec![Vec::with_capacity(outputs.len()); poles.len()];
+    let (n, c) = x.shape();
+    let m = outputs.len();
+    let xf = MatRef::from_column_major_slice(x.as_slice(), n, c);
+    let y = Mat::<f64>::from_fn(n, m, |k, o| outputs[o][k]);
+    // Every output at once: XᵀX (its lower half, what the Cholesky factor reads), XᵀY, the
+    // coefficients and the misfits Y − XC as products over the whole record.
+    let mut normal = Mat::<f64>::zeros(c, c);
+    triangular::matmul(
+        normal.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        xf.transpose(),
+        BlockStructure::Rectangular,
+        xf,
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+    let llt = normal.llt(Side::Lower).ok()?;
+    let coefficients = llt.solve(xf.transpose() * &y);
+    let mut misfit = y.clone();
+    matmul(
+        misfit.as_mut(),
+        Accum::Add,
+        xf,
+        coefficients.as_ref(),
+        -1.0,
+        Par::Seq,
+    );
     let mut residual = 0.0;
-    for output in outputs {
-        let y = DVector::from_column_slice(output);
-        let coefficients = normal.solve(&x.tr_mul(&y));
-        let power = y.norm_squared();
-        let misfit = (&y - &x * &coefficients).norm_squared();
-        residual += if power > 0.0 { misfit / power } else { 0.0 };
-        for (p, r) in residues.iter_mut().enumerate() {
-            let c = 2 + 4 * p;
-            r.push(Complex::new(
-                coefficients[c] * scales[c],
-                coefficients[c + 1] * scales[c + 1],
-            ));
-        }
+    for o in 0..m {
+        let power = y.col(o).squared_norm_l2();
+        residual += if power > 0.0 {
+            misfit.col(o).squared_norm_l2() / power
+        } else {
+            0.0
+        };
     }
+    let residues = (0..poles.len())
+        .map(|p| {
+            let c = 2 + 4 * p;
+            (0..m)
+                .map(|o| {
+                    Complex::new(
+                        coefficients[(c, o)] * scales[c],
+                        coefficients[(c + 1, o)] * scales[c + 1],
+                    )
+                })
+                .collect()
+        })
+        .collect();
     residual
         .is_finite()
         .then_some(TimeFit { residues, residual })
