@@ -388,7 +388,9 @@ fn the_cli_writes_the_report_and_a_plot_per_mode() {
     )
     .expect("the learned twin runs");
     assert!(
-        prediction.paper_latent_var().is_some(),
+        prediction
+            .latent_vars(&structure::paper::channels())
+            .is_some(),
         "no corrector in the twin"
     );
     let reported = &report["modes"][0]["final_gps_nmse"][1];

@@ -10,7 +10,8 @@ use crate::twin::run::Tolerance;
 use crate::twin::{RecordRef, RecordRole, Twin};
 use crate::workflows::calibrate::validated::{check_plot, ChannelNmse};
 use crate::workflows::calibrate::{
-    calibrate_validated, default_parameters, read_priors, Calibration, CalibrationSetup, Validated,
+    calibrate_validated, default_parameters, read_priors, Calibration, CalibrationSetup,
+    RecordCalibration, Validated,
 };
 use crate::workflows::options::check_svg;
 
@@ -170,6 +171,18 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
 /// What `twin calibrate` prints of a calibration on `runs` (the first the report's record): the
 /// starts and the ladder, the MAP table, the noise, the strongest correlations, the NMSE on
 /// every run and on every validation record.
+/// Whether the calibration was on one record that measured the paper rig's channels alone, in
+/// any order (it is then printed as it has always been, per floor). Sorted, the rig's names
+/// are in floor order.
+fn is_rig_record(records: &[RecordCalibration]) -> bool {
+    let [record] = records else {
+        return false;
+    };
+    let mut channels = record.channels.clone();
+    channels.sort();
+    ::structure::paper::is_channels(&channels)
+}
+
 fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated: &[ChannelNmse]) {
     let data = runs[0];
     let names: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
@@ -203,18 +216,19 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
             p.prior.value(p.prior.mean)
         );
     }
-    let paper = calibration.records.len() == 1
-        && calibration.records[0]
-            .paper_floors(&calibration.nmse)
-            .is_some();
+    let paper = is_rig_record(&calibration.records);
     if paper {
         // The paper's rig, as it has always been printed.
-        for f in 0..3 {
+        let noise = calibration
+            .noise_variance
+            .iter()
+            .zip(&calibration.noise_log_sd);
+        for (f, (variance, log_sd)) in noise.enumerate() {
             println!(
                 "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
                 f + 1,
-                calibration.noise_variance[f],
-                calibration.noise_log_sd[f]
+                variance,
+                log_sd
             );
         }
     } else {
@@ -245,6 +259,11 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
         .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
         .collect();
     println!("strongest correlations: {}", shown.join(", "));
+    // The rig's NMSE, floor by floor (its channels are its floors).
+    let per_floor = |nmse: &[f64]| -> String {
+        let shown: Vec<String> = nmse.iter().map(|n| format!("{n:.3}")).collect();
+        shown.join(" / ")
+    };
     let per_channel = |channels: &[String], nmse: &[f64]| -> String {
         channels
             .iter()
@@ -255,11 +274,9 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
     };
     if paper {
         println!(
-            "NMSE % on {}: {:.3} / {:.3} / {:.3}",
+            "NMSE % on {}: {}",
             data.path.display(),
-            calibration.nmse[0],
-            calibration.nmse[1],
-            calibration.nmse[2]
+            per_floor(&calibration.nmse)
         );
     } else {
         for r in &calibration.records {
@@ -272,7 +289,7 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
     }
     for v in validated {
         let shown = if ::structure::paper::is_channels(&v.channels) {
-            format!("{:.3} / {:.3} / {:.3}", v.nmse[0], v.nmse[1], v.nmse[2])
+            per_floor(&v.nmse)
         } else {
             per_channel(&v.channels, &v.nmse)
         };

@@ -85,15 +85,13 @@ impl Prediction {
             .values
     }
 
-    /// The paper rig's three accelerations (see [`Prediction::acc`]).
-    pub fn accs(&self) -> [&[f64]; 3] {
-        std::array::from_fn(|f| self.acc(f))
-    }
-
-    /// The paper rig's three latent variances, when the twin's corrector gives them.
-    pub fn paper_latent_var(&self) -> Option<[Vec<f64>; 3]> {
-        let one = |f: usize| self.get(acc_channel(f + 1))?.latent_var.clone();
-        Some([one(0)?, one(1)?, one(2)?])
+    /// The latent variances of `channels`, in their order, when the twin's corrector gives one
+    /// for each (the paper's rig: `structure::paper::channels()`).
+    pub fn latent_vars(&self, channels: &[Channel]) -> Option<Vec<&[f64]>> {
+        channels
+            .iter()
+            .map(|&c| self.get(c)?.latent_var.as_deref())
+            .collect()
     }
 }
 

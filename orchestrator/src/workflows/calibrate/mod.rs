@@ -1303,23 +1303,6 @@ pub struct RecordCalibration {
     pub nmse: Vec<f64>,
 }
 
-impl RecordCalibration {
-    /// The three floors' values of `per_channel` (one per channel, in this record's order) when
-    /// the record measured `acc1`, `acc2` and `acc3` alone (the paper's rig, whose twin stores
-    /// noise variances per floor).
-    pub fn paper_floors(&self, per_channel: &[f64]) -> Option<[f64; 3]> {
-        if self.channels.len() != 3 {
-            return None;
-        }
-        let at = |f: usize| {
-            let name = format!("acc{f}");
-            self.channels.iter().position(|c| *c == name)
-        };
-        let [a, b, c] = [at(1)?, at(2)?, at(3)?];
-        Some([per_channel[a], per_channel[b], per_channel[c]])
-    }
-}
-
 /// Calibrate the physics component of `twin` on `data` (the one record of
 /// [`calibrate_records`], its mask `setup.mask`).
 pub fn calibrate(
