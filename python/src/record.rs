@@ -73,7 +73,7 @@ impl Record {
             Path::new(name),
             vec(&time),
             vec(&force),
-            [vec(&acc1), vec(&acc2), vec(&acc3)],
+            vec![vec(&acc1), vec(&acc2), vec(&acc3)],
             extra,
         )
         .map_err(|e| to_py(Kind::Data, e))?;

@@ -157,24 +157,25 @@ impl Measurement {
         self.channels().map(|s| s.channel.name()).collect()
     }
 
-    /// The force (N). Panics unless [`Measurement::require_paper_rig`] holds, as it does for
-    /// every record the paper-rig workflows are given (the commands and the Python package
-    /// check it when they read one).
+    /// The force (N). Panics unless the record is excited by a force, as every record the
+    /// paper-rig workflows are given is ([`Measurement::require_paper_rig`]: the commands and the
+    /// Python package check it when they read one).
     pub fn force(&self) -> &[f64] {
-        self.paper_force_checked();
+        self.force_checked();
         &self.excitation.values
     }
 
-    /// Floor `f`'s acceleration (m/s², `f` from 0). Panics unless
-    /// [`Measurement::require_paper_rig`] holds.
+    /// Floor `f`'s acceleration (m/s², `f` from 0). Panics when the record has no
+    /// `acc{f + 1}` (it has floors 1 to 3's when [`Measurement::require_paper_rig`] holds).
     pub fn acc(&self, f: usize) -> &[f64] {
         self.channel(acc_channel(f + 1))
             .unwrap_or_else(|| panic!("{}: no column acc{}", self.path.display(), f + 1))
     }
 
-    /// The three floors' accelerations. Panics unless [`Measurement::require_paper_rig`] holds.
-    pub fn accs(&self) -> [&[f64]; 3] {
-        std::array::from_fn(|f| self.acc(f))
+    /// The values of `channels`, in their order, when the record measured each of them (the
+    /// paper's rig: `structure::paper::channels()`).
+    pub fn values_of(&self, channels: &[Channel]) -> Option<Vec<&[f64]>> {
+        channels.iter().map(|&c| self.channel(c)).collect()
     }
 
     /// Floor `f`'s acceleration to change in place (a sensor fault planted by a test).
@@ -189,11 +190,11 @@ impl Measurement {
 
     /// The force to change in place.
     pub fn force_mut(&mut self) -> &mut Vec<f64> {
-        self.paper_force_checked();
+        self.force_checked();
         &mut self.excitation.values
     }
 
-    fn paper_force_checked(&self) {
+    fn force_checked(&self) {
         assert!(
             self.excitation.channel == Channel::Excitation(ExcitationKind::Force),
             "{}: the excitation is '{}', not 'force'",
@@ -256,13 +257,14 @@ impl Measurement {
         })
     }
 
-    /// A record in the paper's columns from arrays (SI), checked as a file is; `extra` more
-    /// named columns (e.g. `control`).
+    /// A record of a force and floor accelerations from arrays (SI; `acc[f]` floor `f + 1`'s,
+    /// the paper's rig: `acc1..acc3`), checked as a file is; `extra` more named columns (e.g.
+    /// `control`).
     pub fn from_columns(
         origin: &Path,
         time: Vec<f64>,
         force: Vec<f64>,
-        acc: [Vec<f64>; 3],
+        acc: Vec<Vec<f64>>,
         extra: HashMap<String, Vec<f64>>,
     ) -> Result<Self, DataError> {
         let mut named = vec![("time".to_owned(), time), ("force".to_owned(), force)];

@@ -310,14 +310,23 @@ fn renders_dataset_one_against_a_smoothed_stand_in() {
     // Stand-in prediction, only for the picture: the measurement through a centred
     // [1/4, 1/2, 1/4] smoother, with floor 3 in anti-phase between 12 and 13 s (a residual
     // of twice the response there, ~13 band sds: severe enough for a failing window).
-    let predicted = m.accs().map(<[f64]>::to_vec).map(|acc: Vec<f64>| {
-        let n = acc.len();
-        (0..n)
-            .map(|k| {
-                0.25 * acc[k.saturating_sub(1)] + 0.5 * acc[k] + 0.25 * acc[(k + 1).min(n - 1)]
-            })
-            .collect::<Vec<f64>>()
-    });
+    let measured: Vec<Vec<f64>> = m
+        .values_of(&accs())
+        .expect("acc1..acc3")
+        .into_iter()
+        .map(<[f64]>::to_vec)
+        .collect();
+    let predicted: Vec<Vec<f64>> = measured
+        .iter()
+        .map(|acc| {
+            let n = acc.len();
+            (0..n)
+                .map(|k| {
+                    0.25 * acc[k.saturating_sub(1)] + 0.5 * acc[k] + 0.25 * acc[(k + 1).min(n - 1)]
+                })
+                .collect::<Vec<f64>>()
+        })
+        .collect();
     // The band: what the smoothing leaves, before floor 3 is pushed off.
     let noise_variance = [0, 1, 2].map(|f| {
         let residual = m
@@ -336,7 +345,7 @@ fn renders_dataset_one_against_a_smoothed_stand_in() {
     let c = compare(
         &m.time,
         &accs(),
-        &m.accs().map(<[f64]>::to_vec),
+        &measured,
         &predicted,
         &noise_variance,
         None,
