@@ -1,0 +1,91 @@
+//! `twin modal --data` on the project's own bundled records (data/dataset1.csv, dataset2.csv:
+//! the paper's three-storey frame, 20 s at 51.2 Hz — 1,024 samples — force at floor 1, three
+//! accelerometers). The first record a newcomer identifies: each method's default result holds
+//! the frame's three modes and nothing else.
+//!
+//! The reference is the twin calibrated on the same record by `twin calibrate` (the MAP of the
+//! time-domain likelihood, which uses no modal identification): its modes are 2.0025 / 5.9488
+//! / 8.3788 Hz on dataset1 and 2.0014 / 5.9494 / 8.3801 Hz on dataset2 (`twin modal --twin`
+//! of it, measured). dataset3 is left out: the bumper between floors 2 and 3 makes contact
+//! there, a nonlinear record whose FRF has coherent peaks of the contact's own (12.8, 17.9,
+//! 18.9 Hz) and whose modes move with it.
+//!
+//! Before the averaged evidence (a short record's FRF judged over seven segments of 256, not
+//! its single segment of 1,024 whose coherence is 1 everywhere) and the half-power merge of
+//! same-shaped modes: dataset1 gave LSCF 6 modes (a 2.0187 Hz twin of the 1.9484 Hz mode;
+//! 16.82 and 17.94 Hz at MPC 0.71 / 0.73) and FDD/EFDD 7 (0.46, 1.40, 4.66, 7.46 Hz of
+//! noise); dataset2 LSCF 3, FDD/EFDD 6 (1.14, 3.31, 3.78 Hz).
+
+use orchestrator::record::Measurement;
+use orchestrator::workflows::modal::identify::{RecordMode, RecordModes};
+use orchestrator::workflows::modal::{identify, IdentifyOptions};
+use std::path::PathBuf;
+
+fn bundled(name: &str) -> RecordModes {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("data")
+        .join(name);
+    let record = Measurement::read(&path).expect("the bundled record reads");
+    identify(&[record], &IdentifyOptions::default()).expect("identified")
+}
+
+/// The methods' modes (name, frequencies), each printed.
+fn methods(found: &RecordModes) -> Vec<(&'static str, Vec<f64>)> {
+    let io = found
+        .input_output
+        .as_ref()
+        .expect("the force was measured: LSCF ran");
+    let frequencies = |modes: &[RecordMode]| -> Vec<f64> {
+        modes.iter().map(|m| m.identified.frequency).collect()
+    };
+    let all = vec![
+        (io.method, frequencies(&io.modes)),
+        (found.ssi.method, frequencies(&found.ssi.modes)),
+        (found.fdd.method, frequencies(&found.fdd.modes)),
+    ];
+    for (method, f) in &all {
+        println!("{method}: {f:.4?}");
+    }
+    all
+}
+
+/// Each method's default result is the calibrated twin's three modes, nothing else: LSCF
+/// within 1 % (measured: dataset1 −0.07 / −0.08 / −0.21 %, dataset2 −0.04 / +0.24 / −0.05 %);
+/// SSI-COV and FDD/EFDD within 2 % — the 1 % is not theirs on a 20 s record, whose FRF
+/// bin (0.05 Hz) is 2.5 % of the first mode: measured SSI-COV −1.96 / +0.08 / −0.14 % and
+/// −0.98 / −0.74 / +0.48 %, FDD/EFDD −0.67 / +0.94 / +0.80 % and −0.01 / +1.37 / +0.72 %.
+/// The side-by-side table has three rows, each mode found by all three methods.
+#[test]
+fn the_bundled_records_give_their_three_modes_and_nothing_else() {
+    let references = [
+        ("dataset1.csv", [2.0025, 5.9488, 8.3788]),
+        ("dataset2.csv", [2.0014, 5.9494, 8.3801]),
+    ];
+    for (name, reference) in references {
+        let found = bundled(name);
+        for (method, frequencies) in methods(&found) {
+            assert_eq!(
+                frequencies.len(),
+                reference.len(),
+                "{name} {method}: {frequencies:?}"
+            );
+            let bar = if method == "LSCF" { 0.01 } else { 0.02 };
+            for (f, r) in frequencies.iter().zip(&reference) {
+                let error = f / r - 1.0;
+                println!("{name} {method}: {f:.4} Hz, {:+.2} %", 100.0 * error);
+                assert!(error.abs() < bar, "{name} {method}: {f} Hz for {r}");
+            }
+        }
+        assert_eq!(found.verdicts.len(), reference.len(), "{name}");
+        for verdict in &found.verdicts {
+            assert_eq!(
+                verdict.found_by.len(),
+                3,
+                "{name} {:.4} Hz",
+                verdict.frequency
+            );
+            assert!(!verdict.one_method_only);
+        }
+    }
+}
