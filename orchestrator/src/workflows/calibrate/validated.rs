@@ -8,6 +8,8 @@ use super::{
     calibrate_records, calibrated_twin, physics_structure, CalibrateError, Calibration,
     CalibrationSetup, RecordInput,
 };
+use ::structure::Structure;
+
 use crate::twin::data::Measurement;
 use crate::twin::run::{nmse_on, RunError};
 use crate::twin::simulator::Simulator;
@@ -48,29 +50,33 @@ pub struct Validated {
     pub validated: Vec<ChannelNmse>,
 }
 
-/// Whether `twin` and `data` are the paper's rig as the three-floor workflows know it (its
-/// comparison, band and plot): the twin's physics is the paper's structure and the record
-/// has a force and `acc1..acc3`.
-fn paper_rig(twin: &Twin, data: &Measurement) -> Result<bool, CalibrateError> {
+/// The building of `twin`'s physics component.
+fn twin_structure(twin: &Twin) -> Result<Structure, CalibrateError> {
     let physics = twin
         .component(PHYSICS)
         .ok_or_else(|| CalibrateError::Setup(format!("the twin has no '{PHYSICS}' component")))?;
-    Ok(
-        ::structure::paper::is_paper_rig(&physics_structure(&physics.fmu_path)?)
-            && data.require_paper_rig().is_ok(),
-    )
+    physics_structure(&physics.fmu_path)
+}
+
+/// Whether a twin of `structure` and `data` are the paper's rig as the three-floor workflows
+/// know it (its comparison, band and plot): the structure is the paper's and the record has a
+/// force and `acc1..acc3`.
+fn paper_rig(structure: &Structure, data: &Measurement) -> bool {
+    ::structure::paper::is_paper_rig(structure) && data.require_paper_rig().is_ok()
 }
 
 /// The calibrated twin's NMSE % per channel of `data` after the transient: on the paper's rig
 /// the whole twin's (as `twin compare`), on any other structure its physics component run on
-/// the record's excitation, each measured channel against its output.
+/// the record's excitation, each measured channel against its output. `structure`: the
+/// twin's physics component's.
 pub fn channel_nmse(
     twin: &Twin,
+    structure: &Structure,
     data: &Measurement,
     transient: f64,
 ) -> Result<ChannelNmse, CalibrateRunError> {
     let name = data.path.display().to_string();
-    if paper_rig(twin, data)? {
+    if paper_rig(structure, data) {
         return Ok(ChannelNmse {
             data: name,
             channels: data.responses.iter().map(|s| s.channel.name()).collect(),
@@ -128,8 +134,11 @@ pub fn calibrate_validated(
     let calibration = calibrate_records(twin, &inputs, setup)?;
     let mut new_twin = calibrated_twin(twin, &calibration)?;
     let mut validated = Vec::new();
-    for v in validation {
-        validated.push(channel_nmse(&new_twin, v, setup.transient)?);
+    if !validation.is_empty() {
+        let structure = twin_structure(&new_twin)?;
+        for v in validation {
+            validated.push(channel_nmse(&new_twin, &structure, v, setup.transient)?);
+        }
     }
     // The worst validation NMSE sets the default tolerance of compare and diagnose.
     new_twin.validation_nmse = crate::twin::run::validation_nmse(
@@ -148,7 +157,7 @@ pub fn calibrate_validated(
 /// Refuse `--plot` at once where it cannot be drawn: the plot is the paper rig's three floors.
 pub fn check_plot(twin: &Twin, data: &[&Measurement]) -> Result<(), CalibrateRunError> {
     match data {
-        [one] if paper_rig(twin, one)? => Ok(()),
+        [one] if paper_rig(&twin_structure(twin)?, one) => Ok(()),
         [_] => Err(CalibrateError::Setup(
             "--plot draws the paper rig's three floors (a force and acc1..acc3 on the paper's \
              structure); leave it out for this structure or record"
