@@ -247,8 +247,10 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
     let time: Vec<f64> = (0..outcome.force.len()).map(|k| k as f64 * dt).collect();
     let t_end = time.last().copied().unwrap_or(1.0).max(dt);
     let axis = Axis { dt, time, t_end };
+    // A row per floor of the structure (the paper's rig: three).
+    let floors = outcome.passive.acc.len();
     let contact_rows = runs.len() as u32 * 16 + 60;
-    let height = 90 + 3 * ROW + contact_rows;
+    let height = 90 + floors as u32 * ROW + contact_rows;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (WIDTH, height)).into_drawing_area();
@@ -256,9 +258,9 @@ pub fn plot_control(outcome: &ControlOutcome, title: &str) -> Result<String, Str
         let root = root.titled(title, (FONT, 22)).map_err(text)?;
         let (key, rest) = root.split_vertically(40);
         draw_key(&key, &runs)?;
-        let (rows, bottom) = rest.split_vertically(3 * ROW);
-        let panels = rows.split_evenly((3, 2));
-        for floor in 0..3 {
+        let (rows, bottom) = rest.split_vertically(floors as u32 * ROW);
+        let panels = rows.split_evenly((floors, 2));
+        for floor in 0..floors {
             draw_frf_panel(&panels[2 * floor], &runs, &axis, floor)?;
             draw_time_panel(&panels[2 * floor + 1], &runs, &axis, floor)?;
         }
