@@ -174,13 +174,14 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
 /// Whether the calibration was on one record that measured the paper rig's channels alone, in
 /// any order (it is then printed as it has always been, per floor). Sorted, the rig's names
 /// are in floor order.
+/// One record of the rig's accelerometers in the rig's order: its noise and NMSE lines are
+/// printed floor by floor (`noise1`, …). Any other order prints each line by its channel's
+/// name (floor by floor would label a channel by its column).
 fn is_rig_record(records: &[RecordCalibration]) -> bool {
     let [record] = records else {
         return false;
     };
-    let mut channels = record.channels.clone();
-    channels.sort();
-    ::structure::paper::is_channels(&channels)
+    ::structure::paper::is_channels(&record.channels)
 }
 
 fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated: &[ChannelNmse]) {
