@@ -98,37 +98,10 @@ impl TimeDomain<'_> {
     /// over the leaky modes only — the modes the FRF resolves are right already, and a
     /// five-storey 300 s record refined whole took 4 s more. None when the fit is singular.
     fn refine(&self, modes: &[(f64, f64)], leaky: &[usize]) -> Option<Vec<(f64, f64)>> {
-        let mut modes = modes.to_vec();
-        let mut best = self.residual(&modes)?;
         let sweeps = if leaky.len() > 1 { 2 } else { 1 };
-        for &m in leaky.iter().cycle().take(sweeps * leaky.len()) {
-            let (mut df, mut dz) = (0.003, 1.5f64.ln());
-            while df > 1e-5 {
-                let (f, z) = modes[m];
-                let trials = [
-                    (f * (1.0 + df), z),
-                    (f / (1.0 + df), z),
-                    (f, (z * dz.exp()).min(0.3)),
-                    (f, (z / dz.exp()).max(1e-4)),
-                ];
-                let (trial, value) = trials
-                    .iter()
-                    .map(|t| {
-                        let mut candidate = modes.clone();
-                        candidate[m] = *t;
-                        (*t, self.residual(&candidate).unwrap_or(f64::INFINITY))
-                    })
-                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
-                if value < best {
-                    best = value;
-                    modes[m] = trial;
-                } else {
-                    df /= 2.0;
-                    dz /= 2.0;
-                }
-            }
-        }
-        Some(modes)
+        time_fit::pattern_search(modes, leaky, sweeps, |m| {
+            self.residual(m).unwrap_or(f64::INFINITY)
+        })
     }
 
     /// Mode `i`'s frequency and damping sds from the residual's curvature at its minimum
