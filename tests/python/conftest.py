@@ -17,6 +17,18 @@ import pytest
 from shear_drive import ShearFmu, read_record
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
+TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
+
+
+@pytest.fixture(scope="module")
+def twin_binary() -> Path:
+    """The `twin` CLI of this build (or the file named by TWIN_BIN); a test that needs it fails,
+    naming the build command, when it is missing."""
+    path = Path(os.environ.get("TWIN_BIN", TARGET / "release" / "twin"))
+    if not path.is_file():
+        pytest.fail(f"{path} does not exist: cargo build --release -p orchestrator --bin twin",
+                    pytrace=False)
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import subprocess
 import warnings
 from pathlib import Path
@@ -34,8 +33,6 @@ import pytest
 import scipy.linalg
 import scipy.signal
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
 
 # The band-limited five-storey building of tests/modal.rs (5.0–33.9 Hz, 0.36–2.3 %): force at
 # floor 2, 0.5–40 Hz, 200 Hz for 300 s, every floor measured, 2 % sensor noise.
@@ -51,13 +48,6 @@ LAB = ["--storeys", "3", "--excitation", "force:1", "--mass", "5.201,5.201,5.201
        "--force-rms", "1"]
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = Path(os.environ.get("TWIN_BIN", TARGET / "release" / "twin"))
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: cargo build --release -p orchestrator --bin twin",
-                    pytrace=False)
-    return path
 
 
 def synth_and_identify(twin: Path, folder: Path, name: str, flags: list[str]):

@@ -10,7 +10,6 @@ the file named by the environment variable TWIN_BIN.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -19,20 +18,11 @@ import pytest
 
 import modal_records as mr
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
 
 DURATION = 1200.0
 DT = 0.01
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = Path(os.environ.get("TWIN_BIN", TARGET / "release" / "twin"))
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: cargo build --release -p orchestrator --bin twin",
-                    pytrace=False)
-    return path
 
 
 @pytest.fixture(scope="module")
