@@ -1,89 +1,248 @@
-//! `modelDescription.xml` of an FMI 2.0 FMU, read with quick-xml + serde into typed structs,
-//! then checked for what the orchestrator relies on.
+//! `modelDescription.xml` of an FMI 2.0 FMU, read as a stream of quick-xml events into typed
+//! structs (one pass, no intermediate tree: a 20-storey shear model describes 1,601
+//! variables), then checked for what the orchestrator relies on.
 
 use std::collections::HashMap;
 use std::path::Path;
 
-use serde::Deserialize;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::Reader;
 
 use super::ImportError;
 
-#[derive(Debug, Deserialize)]
-struct RawModelDescription {
-    #[serde(rename = "@fmiVersion")]
-    fmi_version: String,
-    #[serde(rename = "@modelName")]
-    model_name: String,
-    #[serde(rename = "@guid")]
-    guid: String,
-    #[serde(rename = "CoSimulation")]
-    co_simulation: Option<RawCoSimulation>,
-    #[serde(rename = "DefaultExperiment")]
-    default_experiment: Option<RawDefaultExperiment>,
-    #[serde(rename = "ModelVariables")]
-    model_variables: Option<RawModelVariables>,
+/// The root's attributes, as read.
+#[derive(Default)]
+struct RawRoot {
+    fmi_version: Option<String>,
+    model_name: Option<String>,
+    guid: Option<String>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Default)]
 struct RawCoSimulation {
-    #[serde(rename = "@modelIdentifier")]
-    model_identifier: String,
-    #[serde(rename = "@canInterpolateInputs", default)]
+    model_identifier: Option<String>,
     can_interpolate_inputs: Option<bool>,
-    #[serde(rename = "@canGetAndSetFMUstate", default)]
     can_get_and_set_fmu_state: Option<bool>,
-    #[serde(rename = "@canSerializeFMUstate", default)]
     can_serialize_fmu_state: Option<bool>,
-    #[serde(rename = "@canHandleVariableCommunicationStepSize", default)]
     can_handle_variable_step: Option<bool>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Default)]
 struct RawDefaultExperiment {
-    #[serde(rename = "@startTime")]
     start_time: Option<f64>,
-    #[serde(rename = "@stopTime")]
     stop_time: Option<f64>,
-    #[serde(rename = "@stepSize")]
     step_size: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
-struct RawModelVariables {
-    #[serde(rename = "ScalarVariable", default)]
+/// A `<ScalarVariable>` being read: its attributes, then its type element's.
+struct RawScalarVariable {
+    name: String,
+    value_reference: u32,
+    causality: Option<String>,
+    variability: Option<String>,
+    initial: Option<String>,
+    /// The type elements inside it (exactly one is valid) and the first one's attributes.
+    types: Vec<ScalarType>,
+    start: Option<String>,
+    unit: Option<String>,
+}
+
+/// Everything the file says that [`ModelDescription::parse`] checks.
+#[derive(Default)]
+struct RawModelDescription {
+    root: Option<RawRoot>,
+    co_simulation: Option<RawCoSimulation>,
+    default_experiment: Option<RawDefaultExperiment>,
     variables: Vec<RawScalarVariable>,
 }
 
-#[derive(Debug, Deserialize)]
-struct RawScalarVariable {
-    #[serde(rename = "@name")]
-    name: String,
-    #[serde(rename = "@valueReference")]
-    value_reference: u32,
-    #[serde(rename = "@causality", default)]
-    causality: Option<String>,
-    #[serde(rename = "@variability", default)]
-    variability: Option<String>,
-    #[serde(rename = "@initial", default)]
-    initial: Option<String>,
-    #[serde(rename = "Real")]
-    real: Option<RawTypeAttrs>,
-    #[serde(rename = "Integer")]
-    integer: Option<RawTypeAttrs>,
-    #[serde(rename = "Boolean")]
-    boolean: Option<RawTypeAttrs>,
-    #[serde(rename = "String")]
-    string: Option<RawTypeAttrs>,
-    #[serde(rename = "Enumeration")]
-    enumeration: Option<RawTypeAttrs>,
+/// An element's attributes as (name, unescaped value) pairs.
+fn attributes(e: &BytesStart) -> Result<Vec<(String, String)>, String> {
+    e.attributes()
+        .map(|a| {
+            let a = a.map_err(|e| e.to_string())?;
+            let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
+            let value = a.unescape_value().map_err(|e| e.to_string())?.into_owned();
+            Ok((key, value))
+        })
+        .collect()
 }
 
-#[derive(Debug, Deserialize)]
-struct RawTypeAttrs {
-    #[serde(rename = "@start")]
-    start: Option<String>,
-    #[serde(rename = "@unit")]
-    unit: Option<String>,
+fn parse_bool(name: &str, text: &str) -> Result<bool, String> {
+    match text.trim() {
+        "true" | "1" => Ok(true),
+        "false" | "0" => Ok(false),
+        other => Err(format!("{name}=\"{other}\" is not a boolean")),
+    }
+}
+
+fn parse_real(name: &str, text: &str) -> Result<f64, String> {
+    text.trim()
+        .parse()
+        .map_err(|_| format!("{name}=\"{text}\" is not a number"))
+}
+
+impl RawModelDescription {
+    /// One pass over the events: the root, `CoSimulation`, `DefaultExperiment` and each
+    /// `ModelVariables/ScalarVariable` with its type element; everything else skipped.
+    fn read(xml: &str) -> Result<Self, String> {
+        let mut reader = Reader::from_str(xml);
+        let mut raw = RawModelDescription::default();
+        // The open elements' names, the root first.
+        let mut open: Vec<Vec<u8>> = Vec::new();
+        loop {
+            let at = reader.buffer_position();
+            let event = reader
+                .read_event()
+                .map_err(|e| format!("line {}: {e}", line_of(xml, at)))?;
+            let (element, empty) = match &event {
+                Event::Start(e) => (e, false),
+                Event::Empty(e) => (e, true),
+                Event::End(_) => {
+                    open.pop();
+                    continue;
+                }
+                Event::Eof => break,
+                _ => continue,
+            };
+            let name = element.name().as_ref().to_vec();
+            raw.element(&open, &name, element)
+                .map_err(|e| format!("line {}: {e}", line_of(xml, at)))?;
+            if !empty {
+                open.push(name);
+            }
+        }
+        if !open.is_empty() {
+            return Err("the file ends inside an element".into());
+        }
+        Ok(raw)
+    }
+
+    /// An element opened inside `open` (the names of its ancestors).
+    fn element(&mut self, open: &[Vec<u8>], name: &[u8], e: &BytesStart) -> Result<(), String> {
+        let parent = open.last().map(Vec::as_slice);
+        match (open.len(), parent, name) {
+            (0, _, b"fmiModelDescription") => self.root = Some(root(e)?),
+            (0, _, other) => {
+                return Err(format!(
+                    "the root element is <{}>, not <fmiModelDescription>",
+                    String::from_utf8_lossy(other)
+                ))
+            }
+            (1, _, b"CoSimulation") => self.co_simulation = Some(co_simulation(e)?),
+            (1, _, b"DefaultExperiment") => self.default_experiment = Some(default_experiment(e)?),
+            (2, Some(b"ModelVariables"), b"ScalarVariable") => {
+                self.variables.push(scalar_variable(e)?)
+            }
+            (3, Some(b"ScalarVariable"), kind) if open[1] == b"ModelVariables" => {
+                let scalar_type = match kind {
+                    b"Real" => ScalarType::Real,
+                    b"Integer" => ScalarType::Integer,
+                    b"Boolean" => ScalarType::Boolean,
+                    b"String" => ScalarType::String,
+                    b"Enumeration" => ScalarType::Enumeration,
+                    _ => return Ok(()),
+                };
+                let v = self.variables.last_mut().expect("inside a ScalarVariable");
+                if v.types.is_empty() {
+                    for (key, value) in attributes(e)? {
+                        match key.as_str() {
+                            "start" => v.start = Some(value),
+                            "unit" => v.unit = Some(value),
+                            _ => {}
+                        }
+                    }
+                }
+                v.types.push(scalar_type);
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+fn root(e: &BytesStart) -> Result<RawRoot, String> {
+    let mut r = RawRoot::default();
+    for (key, value) in attributes(e)? {
+        match key.as_str() {
+            "fmiVersion" => r.fmi_version = Some(value),
+            "modelName" => r.model_name = Some(value),
+            "guid" => r.guid = Some(value),
+            _ => {}
+        }
+    }
+    Ok(r)
+}
+
+fn co_simulation(e: &BytesStart) -> Result<RawCoSimulation, String> {
+    let mut cs = RawCoSimulation::default();
+    for (key, value) in attributes(e)? {
+        let flag = || parse_bool(&key, &value).map(Some);
+        match key.as_str() {
+            "modelIdentifier" => cs.model_identifier = Some(value.clone()),
+            "canInterpolateInputs" => cs.can_interpolate_inputs = flag()?,
+            "canGetAndSetFMUstate" => cs.can_get_and_set_fmu_state = flag()?,
+            "canSerializeFMUstate" => cs.can_serialize_fmu_state = flag()?,
+            "canHandleVariableCommunicationStepSize" => cs.can_handle_variable_step = flag()?,
+            _ => {}
+        }
+    }
+    Ok(cs)
+}
+
+fn default_experiment(e: &BytesStart) -> Result<RawDefaultExperiment, String> {
+    let mut d = RawDefaultExperiment::default();
+    for (key, value) in attributes(e)? {
+        let real = || parse_real(&key, &value).map(Some);
+        match key.as_str() {
+            "startTime" => d.start_time = real()?,
+            "stopTime" => d.stop_time = real()?,
+            "stepSize" => d.step_size = real()?,
+            _ => {}
+        }
+    }
+    Ok(d)
+}
+
+fn scalar_variable(e: &BytesStart) -> Result<RawScalarVariable, String> {
+    let (mut name, mut value_reference) = (None, None);
+    let mut v = RawScalarVariable {
+        name: String::new(),
+        value_reference: 0,
+        causality: None,
+        variability: None,
+        initial: None,
+        types: Vec::new(),
+        start: None,
+        unit: None,
+    };
+    for (key, value) in attributes(e)? {
+        match key.as_str() {
+            "name" => name = Some(value),
+            "valueReference" => {
+                value_reference = Some(value.trim().parse::<u32>().map_err(|_| {
+                    format!("valueReference=\"{value}\" is not an unsigned 32-bit integer")
+                })?)
+            }
+            "causality" => v.causality = Some(value),
+            "variability" => v.variability = Some(value),
+            "initial" => v.initial = Some(value),
+            _ => {}
+        }
+    }
+    v.name = name.ok_or("a ScalarVariable has no name")?;
+    v.value_reference =
+        value_reference.ok_or_else(|| format!("variable '{}' has no valueReference", v.name))?;
+    Ok(v)
+}
+
+/// The 1-based line of byte `offset` in `text`.
+fn line_of(text: &str, offset: u64) -> usize {
+    let end = (offset as usize).min(text.len());
+    1 + text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -141,74 +300,39 @@ impl ModelDescription {
             path: path.to_owned(),
             message,
         };
-        let raw: RawModelDescription =
-            quick_xml::de::from_str(xml).map_err(|e| bad(format!("malformed: {e}")))?;
-        if !raw.fmi_version.starts_with("2.") {
+        let raw = RawModelDescription::read(xml).map_err(|e| bad(format!("malformed: {e}")))?;
+        let root = raw
+            .root
+            .ok_or_else(|| bad("malformed: no fmiModelDescription element".into()))?;
+        let required = |value: Option<String>, what: &str| {
+            value.ok_or_else(|| bad(format!("malformed: fmiModelDescription has no {what}")))
+        };
+        let fmi_version = required(root.fmi_version, "fmiVersion")?;
+        let model_name = required(root.model_name, "modelName")?;
+        let guid = required(root.guid, "guid")?;
+        if !fmi_version.starts_with("2.") {
             return Err(bad(format!(
-                "fmiVersion is '{}'; only FMI 2.0 is supported",
-                raw.fmi_version
+                "fmiVersion is '{fmi_version}'; only FMI 2.0 is supported"
             )));
         }
         let cs = raw
             .co_simulation
             .ok_or_else(|| bad("no CoSimulation element: not a co-simulation FMU".into()))?;
-        if cs.model_identifier.is_empty() || cs.model_identifier.contains(['/', '\\', '.']) {
+        let model_identifier = cs
+            .model_identifier
+            .ok_or_else(|| bad("malformed: CoSimulation has no modelIdentifier".into()))?;
+        if model_identifier.is_empty() || model_identifier.contains(['/', '\\', '.']) {
             return Err(bad(format!(
-                "modelIdentifier '{}' is not a valid file stem",
-                cs.model_identifier
+                "modelIdentifier '{model_identifier}' is not a valid file stem"
             )));
         }
-        let mut variables = Vec::new();
-        let mut by_name = HashMap::new();
-        for v in raw.model_variables.map(|m| m.variables).unwrap_or_default() {
-            let (scalar_type, attrs) =
-                match (&v.real, &v.integer, &v.boolean, &v.string, &v.enumeration) {
-                    (Some(a), None, None, None, None) => (ScalarType::Real, a),
-                    (None, Some(a), None, None, None) => (ScalarType::Integer, a),
-                    (None, None, Some(a), None, None) => (ScalarType::Boolean, a),
-                    (None, None, None, Some(a), None) => (ScalarType::String, a),
-                    (None, None, None, None, Some(a)) => (ScalarType::Enumeration, a),
-                    _ => {
-                        return Err(bad(format!(
-                            "variable '{}' must have exactly one type element",
-                            v.name
-                        )))
-                    }
-                };
-            let causality = match v.causality.as_deref().unwrap_or("local") {
-                "parameter" => Causality::Parameter,
-                "calculatedParameter" => Causality::CalculatedParameter,
-                "input" => Causality::Input,
-                "output" => Causality::Output,
-                "local" => Causality::Local,
-                "independent" => Causality::Independent,
-                other => {
-                    return Err(bad(format!(
-                        "variable '{}' has unknown causality '{other}'",
-                        v.name
-                    )))
-                }
-            };
-            if by_name.insert(v.name.clone(), variables.len()).is_some() {
-                return Err(bad(format!("variable name '{}' appears twice", v.name)));
-            }
-            variables.push(ScalarVariable {
-                name: v.name,
-                value_reference: v.value_reference,
-                scalar_type,
-                causality,
-                variability: v.variability.unwrap_or_else(|| "continuous".into()),
-                initial: v.initial,
-                start: attrs.start.clone(),
-                unit: attrs.unit.clone(),
-            });
-        }
+        let (variables, by_name) = checked_variables(raw.variables).map_err(bad)?;
         let de = raw.default_experiment;
         Ok(ModelDescription {
-            fmi_version: raw.fmi_version,
-            model_name: raw.model_name,
-            guid: raw.guid,
-            model_identifier: cs.model_identifier,
+            fmi_version,
+            model_name,
+            guid,
+            model_identifier,
             can_interpolate_inputs: cs.can_interpolate_inputs.unwrap_or(false),
             can_get_and_set_fmu_state: cs.can_get_and_set_fmu_state.unwrap_or(false),
             can_serialize_fmu_state: cs.can_serialize_fmu_state.unwrap_or(false),
@@ -236,6 +360,51 @@ impl ModelDescription {
             .iter()
             .filter(|v| v.causality == Causality::Input)
     }
+}
+
+/// The variables, each with exactly one type element and a known causality, names unique; and
+/// each name's index.
+fn checked_variables(
+    raw: Vec<RawScalarVariable>,
+) -> Result<(Vec<ScalarVariable>, HashMap<String, usize>), String> {
+    let mut variables = Vec::with_capacity(raw.len());
+    let mut by_name = HashMap::with_capacity(raw.len());
+    for v in raw {
+        let [scalar_type] = v.types[..] else {
+            return Err(format!(
+                "variable '{}' must have exactly one type element",
+                v.name
+            ));
+        };
+        let causality = match v.causality.as_deref().unwrap_or("local") {
+            "parameter" => Causality::Parameter,
+            "calculatedParameter" => Causality::CalculatedParameter,
+            "input" => Causality::Input,
+            "output" => Causality::Output,
+            "local" => Causality::Local,
+            "independent" => Causality::Independent,
+            other => {
+                return Err(format!(
+                    "variable '{}' has unknown causality '{other}'",
+                    v.name
+                ))
+            }
+        };
+        if by_name.insert(v.name.clone(), variables.len()).is_some() {
+            return Err(format!("variable name '{}' appears twice", v.name));
+        }
+        variables.push(ScalarVariable {
+            name: v.name,
+            value_reference: v.value_reference,
+            scalar_type,
+            causality,
+            variability: v.variability.unwrap_or_else(|| "continuous".into()),
+            initial: v.initial,
+            start: v.start,
+            unit: v.unit,
+        });
+    }
+    Ok((variables, by_name))
 }
 
 #[cfg(test)]
@@ -283,5 +452,32 @@ mod tests {
         assert!(err.to_string().contains("co-simulation"), "{err}");
         let dup = MINIMAL.replace("name=\"y\"", "name=\"u\"");
         assert!(ModelDescription::parse(&dup, Path::new("x.xml")).is_err());
+    }
+
+    #[test]
+    fn says_which_line_and_which_variable_is_wrong() {
+        let two_types = MINIMAL.replace(r#"<Real unit="m"/>"#, r#"<Real unit="m"/><Integer/>"#);
+        let err = ModelDescription::parse(&two_types, Path::new("x.xml")).expect_err("two types");
+        assert!(
+            err.to_string().contains("'y' must have exactly one type"),
+            "{err}"
+        );
+        let vr = MINIMAL.replace(r#"valueReference="2""#, r#"valueReference="-2""#);
+        let err = ModelDescription::parse(&vr, Path::new("x.xml")).expect_err("negative vr");
+        assert!(err.to_string().contains("line 6"), "{err}");
+        let flag = MINIMAL.replace(
+            r#"canInterpolateInputs="true""#,
+            r#"canInterpolateInputs="yes""#,
+        );
+        let err = ModelDescription::parse(&flag, Path::new("x.xml")).expect_err("not a bool");
+        assert!(err.to_string().contains("canInterpolateInputs"), "{err}");
+        let unclosed = MINIMAL.replace("</fmiModelDescription>", "");
+        assert!(ModelDescription::parse(&unclosed, Path::new("x.xml")).is_err());
+        let no_guid = MINIMAL.replace(r#" guid="{g}""#, "");
+        let err = ModelDescription::parse(&no_guid, Path::new("x.xml")).expect_err("no guid");
+        assert!(err.to_string().contains("no guid"), "{err}");
+        let escaped = MINIMAL.replace(r#"name="u""#, r#"name="u&amp;v""#);
+        let md = ModelDescription::parse(&escaped, Path::new("x.xml")).expect("escaped name");
+        assert!(md.variable("u&v").is_some());
     }
 }
