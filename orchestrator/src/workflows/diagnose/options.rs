@@ -1,9 +1,11 @@
-//! `twin diagnose`'s options checked, and its `--effects` read, once for the CLI and the
-//! Python package.
+//! `twin diagnose`'s options and decision gates, the options checked, and its `--effects` read,
+//! once for the CLI and the Python package.
 
+use serde::Serialize;
 use structure::building::MAX_STOREYS;
 
-use super::{Addition, Candidate, DiagnoseOptions};
+use super::fit::FIT_SUBSTEPS;
+use super::{Addition, Candidate};
 use crate::twin::data::Measurement;
 use crate::workflows::options::{
     check_threads, check_tolerance, check_transient_leaves, InvalidOption,
@@ -52,4 +54,109 @@ pub fn parse_additions(effects: &[String]) -> Result<Vec<Addition>, InvalidOptio
         .into_iter()
         .map(Addition::Library)
         .collect())
+}
+
+/// The decision thresholds (see the module documentation).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Gates {
+    /// `none` when every floor's NMSE ≤ this × the NMSE noise alone explains.
+    pub none_factor: f64,
+    /// An alternative must cut the worst-floor held-out NMSE by at least this factor.
+    pub required_cut: f64,
+    /// An effect must beat recalibration's worst-floor held-out NMSE by this factor.
+    pub beat_recalibration: f64,
+    /// Recalibration explains the error when every floor's held-out NMSE is within this factor
+    /// of the noise level.
+    pub recalibration_noise_factor: f64,
+    /// Forward selection adds an effect that cuts the model's worst-floor held-out NMSE by at
+    /// least this factor (the combination must still meet `required_cut` and
+    /// `beat_recalibration` as a whole).
+    pub step_cut: f64,
+    /// At most this many effects are added.
+    pub max_effects: usize,
+}
+
+impl Default for Gates {
+    fn default() -> Self {
+        Gates {
+            none_factor: 2.0,
+            required_cut: 4.0,
+            beat_recalibration: 2.0,
+            recalibration_noise_factor: 3.0,
+            step_cut: 1.5,
+            max_effects: 3,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct DiagnoseOptions {
+    pub transient: f64,
+    /// Length (s) of the alternating fitted and held-out blocks.
+    pub block: f64,
+    pub gates: Gates,
+    /// The candidates tried (None: the whole library at every site of the twin's building,
+    /// [`Candidate::library`]).
+    pub candidates: Option<Vec<Candidate>>,
+    /// Optimiser starts per candidate, and for the recalibration.
+    pub starts: usize,
+    pub recalibration_starts: usize,
+    /// Simulations one start of a candidate fit may use.
+    pub simulations_per_start: usize,
+    pub threads: usize,
+    pub seed: u64,
+    /// Fit every alternative even when the error is within the noise (`none`).
+    pub always_fit: bool,
+    /// Practical significance, NMSE % (None: the twin's default, see [`crate::twin::run::Tolerance::resolve`]).
+    pub tolerance: Option<f64>,
+    /// RK4 sub-steps of the shear FMU while candidates are fitted (its `substeps`); each fit is
+    /// then scored at the twin's own sub-steps. `None`: the twin's own throughout.
+    pub fit_substeps: Option<i32>,
+    /// Told what the diagnosis is doing, stage by stage (a terminal's progress line).
+    pub progress: Option<Progress>,
+    /// The time (s of the record) the structure changed at, when known (a located change):
+    /// the twin holds before it, and what came after is diagnosed from the state the twin
+    /// reached there ([`change`]).
+    pub changed_at: Option<f64>,
+}
+
+/// Where a diagnosis says what it is doing.
+#[derive(Clone)]
+pub struct Progress(pub std::sync::Arc<dyn Fn(&str) + Send + Sync>);
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Progress")
+    }
+}
+
+impl DiagnoseOptions {
+    pub(super) fn tell(&self, what: &str) {
+        if let Some(p) = &self.progress {
+            (p.0)(what);
+        }
+    }
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            transient: crate::evaluation::compare::DEFAULT_TRANSIENT,
+            block: 1.0,
+            gates: Gates::default(),
+            candidates: None,
+            starts: 3,
+            recalibration_starts: 8,
+            simulations_per_start: 250,
+            threads: std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
+            seed: 1,
+            always_fit: false,
+            tolerance: None,
+            fit_substeps: Some(FIT_SUBSTEPS),
+            progress: None,
+            changed_at: None,
+        }
+    }
 }

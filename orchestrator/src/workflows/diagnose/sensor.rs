@@ -2,11 +2,17 @@
 //! twin's own prediction `ŷ_f` (the physics unchanged). Linear in the three parameters, so each
 //! floor's candidate is an ordinary least-squares fit on the fitted blocks, its sd from the
 //! residual, and it is scored on the held-out blocks like the other alternatives. One
-//! candidate per measured channel.
+//! candidate per measured channel. The decision (stage 3a of [`super::diagnose`]): the one
+//! channel whose fault explains the error, while every other floor is already fine, is a
+//! `sensor_fault`.
 
 use serde::Serialize;
+use structure::channel::{Channel, Quantity};
 
+use super::baseline::Baseline;
+use super::{Action, Diagnosis, Gates};
 use crate::evaluation::stats::nmse;
+use crate::twin::data::Measurement;
 
 /// A channel's fitted fault: `measured ≈ gain·predicted + offset + drift·(t − t₀)`, `t₀` the
 /// record's first sample time.
@@ -133,6 +139,138 @@ fn invert3(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
             (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det
         })
     }))
+}
+
+/// Stage 3a, faulty sensors: per channel, the measured as gain·ŷ + offset + drift·t of the
+/// twin's prediction, least squares on the fitted blocks, scored on the held-out ones, into the
+/// diagnosis's sensor candidates. The one fault that explains the error, with its reason.
+pub(super) fn faulty_sensor(
+    b: &Baseline,
+    data: &Measurement,
+    gates: &Gates,
+    diagnosis: &mut Diagnosis,
+) -> Option<(SensorFit, String)> {
+    let fitted_idx: Vec<usize> = (0..b.samples.n).filter(|&k| b.samples.mask[k]).collect();
+    diagnosis.sensor_candidates = (0..b.nc)
+        .filter_map(|c| {
+            fit_channel(
+                &b.channels.names[c],
+                b.channels.floors[c] + 1,
+                &b.channels.measured[c],
+                &b.scores.predicted[c],
+                &data.time,
+                &fitted_idx,
+                &b.samples.held_out,
+                &b.samples.after,
+            )
+        })
+        .collect();
+    sensor_decision(
+        &b.channels.names,
+        &diagnosis.sensor_candidates,
+        &b.scores.nmse_before_held_out,
+        &b.scores.noise_nmse_held_out,
+        &b.scores.band_nmse,
+        b.scores.tolerance.value,
+        gates,
+    )
+}
+
+/// `sensor_fault`: its reason, and the faulty channel's prediction and NMSE read through the
+/// fault.
+pub(super) fn report_sensor_fault(
+    b: &Baseline,
+    data: &Measurement,
+    diagnosis: &mut Diagnosis,
+    fault: &SensorFit,
+    reason: &str,
+) {
+    let c = b.channels.index(&fault.channel);
+    diagnosis.action = Action::SensorFault;
+    diagnosis.reason = reason.to_owned();
+    diagnosis.sensor = Some(fault.clone());
+    diagnosis.series.after[c] = fault.apply(&b.scores.predicted[c], &data.time);
+    diagnosis.nmse_after[c] = fault.nmse_after;
+}
+
+/// A sensor fault: exactly one floor's channel candidate cuts that floor's held-out NMSE by
+/// [`Gates::required_cut`] and brings it within [`Gates::recalibration_noise_factor`] × its
+/// explained level (or the tolerance), while every other floor is already fine: within
+/// [`Gates::none_factor`] × its explained level, or the tolerance. A structural change moves
+/// several floors' residuals coherently; a faulty sensor only its own.
+pub(super) fn sensor_decision(
+    names: &[String],
+    fits: &[SensorFit],
+    before_held_out: &[f64],
+    noise_held_out: &[f64],
+    band: &[f64],
+    tolerance: f64,
+    gates: &Gates,
+) -> Option<(SensorFit, String)> {
+    let explained = |c: usize| noise_held_out[c] + band[c];
+    let fine = |c: usize, x: f64, factor: f64| x <= (factor * explained(c)).max(tolerance);
+    let index = |s: &SensorFit| names.iter().position(|n| *n == s.channel);
+    let explains: Vec<&SensorFit> = fits
+        .iter()
+        .filter(|s| {
+            let Some(c) = index(s) else { return false };
+            s.nmse_held_out * gates.required_cut <= before_held_out[c]
+                && fine(c, s.nmse_held_out, gates.recalibration_noise_factor)
+                && (0..names.len())
+                    .filter(|&g| g != c)
+                    .all(|g| fine(g, before_held_out[g], gates.none_factor))
+        })
+        .collect();
+    let [s] = explains.as_slice() else {
+        return None;
+    };
+    let c = index(s)?;
+    let others: Vec<String> = (0..names.len())
+        .filter(|&g| g != c)
+        .map(|g| format!("{} {:.3} %", floor_of(&names[g]), before_held_out[g]))
+        .collect();
+    let (sensor, unit, rate) = match Channel::parse(&s.channel) {
+        Some(Channel::Response {
+            quantity: Quantity::Velocity,
+            ..
+        }) => ("velocity sensor", "m/s", "m/s²"),
+        Some(Channel::Response {
+            quantity: Quantity::Displacement,
+            ..
+        }) => ("displacement sensor", "m", "m/s"),
+        _ => ("accelerometer", "m/s²", "m/s³"),
+    };
+    Some((
+        (*s).clone(),
+        format!(
+            "the {sensor} on floor {} reads gain {:.3} ± {:.3}, offset {:.4} ± {:.4} {unit}, \
+             drift {:.5} ± {:.5} {rate} of the twin's prediction: that cuts floor {}'s held-out \
+             NMSE from {:.3} % to {:.3} % ({:.1}×), while the other floors are already within \
+             the noise or the tolerance ({}): a sensor fault, not physics",
+            s.floor,
+            s.gain,
+            s.sd.gain,
+            s.offset,
+            s.sd.offset,
+            s.drift,
+            s.sd.drift,
+            s.floor,
+            s.nmse_held_out_before,
+            s.nmse_held_out,
+            s.nmse_held_out_before / s.nmse_held_out,
+            others.join(", ")
+        ),
+    ))
+}
+
+/// `floor 2` for `acc2`: how the reasons name a channel's floor.
+pub(super) fn floor_of(name: &str) -> String {
+    let digits = name.trim_start_matches(|c: char| !c.is_ascii_digit());
+    if digits.is_empty() {
+        name.to_string()
+    } else {
+        format!("floor {digits}")
+    }
 }
 
 #[cfg(test)]
