@@ -20,15 +20,30 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
 
 
-@pytest.fixture(scope="module")
+def require_built(*paths: Path) -> None:
+    """Fail (naming the build command) when a file the test runs is missing."""
+    for path in paths:
+        if not path.is_file():
+            pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
+
+
+@pytest.fixture(scope="session")
 def twin_binary() -> Path:
-    """The `twin` CLI of this build (or the file named by TWIN_BIN); a test that needs it fails,
-    naming the build command, when it is missing."""
-    path = Path(os.environ.get("TWIN_BIN", TARGET / "release" / "twin"))
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: cargo build --release -p orchestrator --bin twin",
-                    pytrace=False)
+    """The `twin` CLI of this build (or the file named by TWIN_BIN, or TWIN_BINARY); a test that
+    needs it fails, naming the build command, when it is missing."""
+    named = os.environ.get("TWIN_BIN") or os.environ.get("TWIN_BINARY")
+    path = Path(named) if named else TARGET / "release" / "twin"
+    require_built(path)
     return path
+
+
+@pytest.fixture(scope="session")
+def twin_fmus() -> Path:
+    """The folder of this build's FMUs (`TWIN_FMU_DIR` of the tests' `twin` runs), checked to hold
+    the shear and LQR FMUs; a module that runs them lists it in `pytestmark`."""
+    folder = TARGET / "fmu"
+    require_built(folder / "fmu_shear.fmu", folder / "fmu_lqr.fmu")
+    return folder
 
 
 @pytest.fixture(scope="session")

@@ -32,14 +32,6 @@ G = 9.80665
 NOISE_FRACTION = 0.05
 
 
-@pytest.fixture(scope="session")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
-
-
 def twin(binary: Path, *args: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
     return subprocess.run([str(binary), *args], capture_output=True, text=True, env=env, timeout=300)

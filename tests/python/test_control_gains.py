@@ -26,12 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file() or not (TARGET / "fmu" / "fmu_shear.fmu").is_file():
-        pytest.fail(f"{path} or the FMUs are missing: run scripts/build-fmus.sh", pytrace=False)
-    return path
+pytestmark = pytest.mark.usefixtures("twin_fmus")
 
 
 def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:

@@ -44,13 +44,7 @@ FORCE = 2.0
 OUTPUTS = ("physics.acc1", "physics.acc2", "physics.acc3", "lqr.control_force")
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    for needed in (path, TARGET / "fmu" / "fmu_shear.fmu", TARGET / "fmu" / "fmu_lqr.fmu"):
-        if not needed.is_file():
-            pytest.fail(f"{needed} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
+pytestmark = pytest.mark.usefixtures("twin_fmus")
 
 
 def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:

@@ -39,12 +39,7 @@ MASS, DAMPING, STIFFNESS = 5.2, 20.0, 4021.0
 Q, R = 1e5, 0.1
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file() or not (TARGET / "fmu" / "fmu_shear.fmu").is_file():
-        pytest.fail(f"{path} or the FMUs are missing: run scripts/build-fmus.sh", pytrace=False)
-    return path
+pytestmark = pytest.mark.usefixtures("twin_fmus")
 
 
 def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:

@@ -18,7 +18,7 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
-from test_fmpy_storeys import STEP, excitation_signal, make_fmu, nominal, twin_binary  # noqa: F401
+from test_fmpy_storeys import STEP, excitation_signal, make_fmu, nominal
 
 import shutil
 from fmpy.fmi2 import FMU2Slave

@@ -55,14 +55,6 @@ CASES = [
 ]
 
 
-@pytest.fixture(scope="session")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
-
-
 def nominal(storeys: int, seed: int) -> dict:
     """Floors and storeys that all differ (so a swapped index shows): m ~ U(4, 6) kg,
     c ~ U(0.5, 5) N s/m, k ~ U(3000, 5000) N/m."""

@@ -44,14 +44,6 @@ STEPPED_TOL = 0.02
 
 
 @pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
-
-
-@pytest.fixture(scope="module")
 def calibrated(twin_binary, tmp_path_factory) -> Path:
     """The twin calibrated on dataset1: the structure the thresholds are computed on."""
     out = tmp_path_factory.mktemp("hybrid_twin") / "calibrated.ssp"

@@ -41,14 +41,6 @@ CASES = ((5, 3), (4, 1))
 STEPPED_TOL = {(5, 3): 0.01, (4, 1): 0.06}
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
-
-
 def run(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
     return subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=600)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from test_fmpy_storeys import TARGET, twin_binary  # noqa: F401
+from test_fmpy_storeys import TARGET
 
 CHANGE_AT = 30.0
 TOKEN = "page-test-token"

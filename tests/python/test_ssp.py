@@ -51,14 +51,7 @@ SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 PHYSICS = {"k2": ("Real", "5200.0"), "c3": ("Real", "0.1"), "substeps": ("Integer", "16")}
 
 
-@pytest.fixture(scope="module")
-def twin_binary() -> Path:
-    path = TARGET / "release" / "twin"
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    if not (TARGET / "fmu" / "fmu_shear.fmu").is_file():
-        pytest.fail(f"{TARGET / 'fmu' / 'fmu_shear.fmu'} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
+pytestmark = pytest.mark.usefixtures("twin_fmus")
 
 
 def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from test_fmpy_storeys import TARGET, twin_binary  # noqa: F401
+from test_fmpy_storeys import TARGET
 
 G = 9.80665
 

@@ -33,14 +33,6 @@ TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 G = 9.80665
 
 
-@pytest.fixture(scope="session")
-def twin_binary() -> Path:
-    path = Path(os.environ.get("TWIN_BINARY", TARGET / "release" / "twin"))
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
-    return path
-
-
 def twin(binary: Path, *args: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
     done = subprocess.run([str(binary), *args], capture_output=True, text=True, env=env, timeout=600)

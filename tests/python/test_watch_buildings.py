@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import shear_twin as st
-from test_fmpy_storeys import TARGET, twin_binary  # noqa: F401
+from test_fmpy_storeys import TARGET
 
 CHANGE_AT = 30.0
 
