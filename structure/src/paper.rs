@@ -36,6 +36,18 @@ pub fn structure() -> Structure {
     Structure::uniform(STOREYS, MASS, LOG_DAMPING.exp(), STIFFNESS, EXCITATION)
 }
 
+/// The header of the rig's records: `time`, the shaker's force and [`CHANNELS`]
+/// (`time,force,acc1,acc2,acc3`).
+pub fn header() -> String {
+    let force = Channel::Excitation(ExcitationKind::of(&EXCITATION)).name();
+    let mut header = format!("time,{force}");
+    for channel in CHANNELS {
+        header.push(',');
+        header.push_str(channel);
+    }
+    header
+}
+
 /// Whether a building of `storeys` storeys under `excitation` is laid out as the rig (three
 /// storeys, the shaker at floor 1), whatever its masses, dampings and stiffnesses.
 pub fn is_layout(storeys: usize, excitation: Excitation) -> bool {
@@ -83,5 +95,6 @@ mod tests {
         assert!(is_measured(&channels(), ExcitationKind::Force));
         assert!(!is_measured(&channels(), ExcitationKind::GroundAcc));
         assert!(!is_measured(&channels()[..2], ExcitationKind::Force));
+        assert_eq!(header(), "time,force,acc1,acc2,acc3");
     }
 }

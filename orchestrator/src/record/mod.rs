@@ -26,7 +26,7 @@ use std::path::Path;
 use ::structure::channel::{split_unit, Channel};
 
 pub use read::{AmbientRecord, DataError, Measurement, ReadOptions, Signal, EXTRA_COLUMNS};
-pub use stream::{default_header, nominal_step, LineLayout, DEFAULT_HEADER};
+pub use stream::{default_header, nominal_step, LineLayout};
 pub use write::{columns_csv, csv_text, format_g9};
 
 // Which reader a file goes to, here above the readers: a universal file (`.uff`, `.unv`) to
@@ -72,9 +72,6 @@ pub fn has_excitation_column(path: &Path, options: &ReadOptions) -> Result<bool,
         read::csv_has_excitation(path, options)
     }
 }
-
-/// The columns of the paper's records.
-pub const REQUIRED_COLUMNS: [&str; 5] = ["time", "force", "acc1", "acc2", "acc3"];
 
 /// Header names a file uses for the twin's, as `--columns MAP.json` gives them:
 /// `{"dotx1 (m/s)": "vel1", "fp (N)": "force"}`. A key matches a header field by its name and,

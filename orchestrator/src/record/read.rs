@@ -9,7 +9,7 @@ use ::structure::channel::{
 };
 
 use super::grid::{nominal_grid, resolution, GridError};
-use super::{ColumnMap, REQUIRED_COLUMNS};
+use super::ColumnMap;
 
 #[derive(Debug, thiserror::Error)]
 #[error("{path}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -382,7 +382,7 @@ fn csv_header<'a>(
             Some(header_line),
             format!(
                 "missing columns: no header (the paper's header is {})",
-                REQUIRED_COLUMNS.join(",")
+                ::structure::paper::header()
             ),
         ));
     }
@@ -611,13 +611,13 @@ impl Layout {
         if excitation.is_none() && require_excitation {
             return Err(format!(
                 "missing column 'force' or 'ground_acc' (the excitation; the paper's header is {})",
-                REQUIRED_COLUMNS.join(",")
+                ::structure::paper::header()
             ));
         }
         if responses.is_empty() {
             return Err(format!(
                 "no response column: at least one of acc<i>, vel<i>, disp<i> (the paper's header is {})",
-                REQUIRED_COLUMNS.join(",")
+                ::structure::paper::header()
             ));
         }
         Ok(Layout {

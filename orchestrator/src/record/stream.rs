@@ -7,13 +7,9 @@ use ::structure::channel::Channel;
 use super::read::{parse_value, Layout};
 use super::ColumnMap;
 
-/// The columns of a paper-rig stream without a header line of its own (an MQTT message); a
-/// stream of another building without a header has `time`, its excitation and an
-/// accelerometer on every floor ([`default_header`]).
-pub const DEFAULT_HEADER: &str = "time,force,acc1,acc2,acc3";
-
-/// The header a stream without one is taken to have: `time`, the excitation (`force` or
-/// `ground_acc`) and `acc1..accN`; [`DEFAULT_HEADER`] for the paper's rig.
+/// The header a stream without one (an MQTT message) is taken to have: `time`, the excitation
+/// (`force` or `ground_acc`) and `acc1..accN`; the rig's [`::structure::paper::header`] for
+/// the paper's rig.
 pub fn default_header(excitation: Channel, storeys: usize) -> String {
     let mut header = format!("time,{}", excitation.name());
     for floor in 1..=storeys {
@@ -220,6 +216,12 @@ mod tests {
         assert_eq!(
             default_header(Channel::parse("ground_acc").expect("g"), 2),
             "time,ground_acc,acc1,acc2"
+        );
+        let rig = ::structure::paper::structure();
+        let force = Channel::Excitation(::structure::channel::ExcitationKind::of(&rig.excitation));
+        assert_eq!(
+            default_header(force, rig.storeys()),
+            ::structure::paper::header()
         );
     }
 }
