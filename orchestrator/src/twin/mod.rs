@@ -318,93 +318,21 @@ impl Twin {
             message,
         };
         let unpacked = import::unpack(path, UnpackLimits::default())?;
-        let ssd_path = unpacked.path().join("SystemStructure.ssd");
-        let ssd = std::fs::read_to_string(&ssd_path)
+        let root = unpacked.path();
+        let ssd = std::fs::read_to_string(root.join("SystemStructure.ssd"))
             .map_err(|e| invalid(format!("no readable SystemStructure.ssd: {e}")))?;
         let parsed = parse_ssd(&ssd).map_err(|m| invalid(format!("SystemStructure.ssd: {m}")))?;
-        let mut components = Vec::new();
-        for c in parsed.components {
-            let fmu_name = c
-                .source
-                .strip_prefix("resources/")
-                .filter(|n| !n.contains('/'))
-                .ok_or_else(|| {
-                    invalid(format!(
-                        "component '{}': source '{}' is not resources/<file>.fmu",
-                        c.name, c.source
-                    ))
-                })?
-                .to_owned();
-            let fmu_path = unpacked.path().join("resources").join(&fmu_name);
-            if !fmu_path.is_file() {
-                return Err(invalid(format!(
-                    "component '{}': {} is missing from the archive",
-                    c.name, c.source
-                )));
-            }
-            let mut parameters = BTreeMap::new();
-            for binding in c.bindings {
-                let ssv_path = unpacked.path().join(&binding);
-                let ssv = std::fs::read_to_string(&ssv_path)
-                    .map_err(|e| invalid(format!("{binding}: {e}")))?;
-                for (name, value) in
-                    parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?
-                {
-                    parameters.insert(name, value);
-                }
-            }
-            components.push(Component {
-                name: c.name,
-                fmu_name,
-                fmu_path,
-                parameters,
-            });
-        }
-        let mut noise_variance = None;
-        let mut parameter_covariance = None;
-        let mut validation_nmse = None;
-        let mut records = Vec::new();
+        let components = parsed
+            .components
+            .into_iter()
+            .map(|c| read_component(root, c).map_err(invalid))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut system = SystemValues::default();
         for binding in parsed.system_bindings {
-            let ssv = std::fs::read_to_string(unpacked.path().join(&binding))
-                .map_err(|e| invalid(format!("{binding}: {e}")))?;
-            let mut values: BTreeMap<String, ParameterValue> = BTreeMap::new();
-            let mut strings: BTreeMap<String, String> = BTreeMap::new();
-            for (name, value) in
-                ssp::parse_ssv(&ssv).map_err(|m| invalid(format!("{binding}: {m}")))?
-            {
-                let value = match value {
-                    SsvValue::Real(x) => ParameterValue::Real(x),
-                    SsvValue::Integer(i) => ParameterValue::Integer(i),
-                    SsvValue::Boolean(b) => ParameterValue::Boolean(b),
-                    SsvValue::String(text) => {
-                        strings.insert(name, text);
-                        continue;
-                    }
-                    other => {
-                        return Err(invalid(format!(
-                            "{binding}: parameter '{name}': {other:?} is not a Real, Integer, \
-                             Boolean or String"
-                        )))
-                    }
-                };
-                values.insert(name, value);
-            }
-            records = read_records(&strings).map_err(|m| invalid(format!("{binding}: {m}")))?;
-            noise_variance = noise::NoiseVariances::from_parameters(&values)
+            system = read_system_values(root, &binding)
                 .map_err(|m| invalid(format!("{binding}: {m}")))?;
-            parameter_covariance =
-                read_covariance(&values).map_err(|m| invalid(format!("{binding}: {m}")))?;
-            validation_nmse = match values.get("validation_nmse") {
-                None => None,
-                Some(ParameterValue::Real(x)) if *x >= 0.0 && x.is_finite() => Some(*x),
-                Some(other) => {
-                    return Err(invalid(format!(
-                        "{binding}: validation_nmse = {other} is not a non-negative real"
-                    )))
-                }
-            };
         }
-        let priors_path = unpacked.path().join(PRIORS_RESOURCE);
+        let priors_path = root.join(PRIORS_RESOURCE);
         let priors = if priors_path.is_file() {
             Some(
                 std::fs::read_to_string(&priors_path)
@@ -417,11 +345,11 @@ impl Twin {
             name: parsed.name,
             components,
             connections: parsed.connections,
-            noise_variance,
+            noise_variance: system.noise_variance,
             default_experiment: parsed.start_time.zip(parsed.stop_time),
-            parameter_covariance,
-            validation_nmse,
-            records,
+            parameter_covariance: system.parameter_covariance,
+            validation_nmse: system.validation_nmse,
+            records: system.records,
             priors,
             source: Some(path.to_owned()),
             keep_alive: vec![std::sync::Arc::new(unpacked)],
@@ -537,100 +465,102 @@ impl Twin {
     }
 
     fn ssd_xml(&self) -> String {
-        let ok = "writing XML to memory cannot fail";
         let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
         w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
-            .expect(ok);
+            .expect(XML_IN_MEMORY);
         let mut root = BytesStart::new("ssd:SystemStructureDescription");
         root.push_attribute(("xmlns:ssd", NS_SSD));
         root.push_attribute(("xmlns:ssc", NS_SSC));
         root.push_attribute(("xmlns:ssv", NS_SSV));
         root.push_attribute(("version", "1.0"));
         root.push_attribute(("name", self.name.as_str()));
-        w.write_event(Event::Start(root)).expect(ok);
+        w.write_event(Event::Start(root)).expect(XML_IN_MEMORY);
         let mut system = BytesStart::new("ssd:System");
         system.push_attribute(("name", self.name.as_str()));
-        w.write_event(Event::Start(system)).expect(ok);
+        w.write_event(Event::Start(system)).expect(XML_IN_MEMORY);
+        self.write_system_connectors(&mut w);
+        w.write_event(Event::Start(BytesStart::new("ssd:Elements")))
+            .expect(XML_IN_MEMORY);
+        for c in &self.components {
+            self.write_component(&mut w, c);
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:Elements")))
+            .expect(XML_IN_MEMORY);
+        self.write_connections(&mut w);
+        w.write_event(Event::End(BytesEnd::new("ssd:System")))
+            .expect(XML_IN_MEMORY);
+        if let Some((start, stop)) = self.default_experiment {
+            let mut e = BytesStart::new("ssd:DefaultExperiment");
+            e.push_attribute(("startTime", format!("{start:?}").as_str()));
+            e.push_attribute(("stopTime", format!("{stop:?}").as_str()));
+            w.write_event(Event::Empty(e)).expect(XML_IN_MEMORY);
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription")))
+            .expect(XML_IN_MEMORY);
+        finish_xml(w)
+    }
 
-        let connector = |w: &mut Writer<Vec<u8>>, name: &str, kind: &str, ty: &str| {
-            let mut c = BytesStart::new("ssd:Connector");
-            c.push_attribute(("name", name));
-            c.push_attribute(("kind", kind));
-            w.write_event(Event::Start(c)).expect(ok);
-            w.write_event(Event::Empty(BytesStart::new(format!("ssc:{ty}"))))
-                .expect(ok);
-            w.write_event(Event::End(BytesEnd::new("ssd:Connector")))
-                .expect(ok);
-        };
-        let binding = |w: &mut Writer<Vec<u8>>, source: &str| {
-            w.write_event(Event::Start(BytesStart::new("ssd:ParameterBindings")))
-                .expect(ok);
-            let mut b = BytesStart::new("ssd:ParameterBinding");
-            b.push_attribute(("source", source));
-            w.write_event(Event::Empty(b)).expect(ok);
-            w.write_event(Event::End(BytesEnd::new("ssd:ParameterBindings")))
-                .expect(ok);
-        };
-
+    /// The system's own connectors (its inputs, outputs and parameters) and, with values of
+    /// its own, their binding.
+    fn write_system_connectors(&self, w: &mut Writer<Vec<u8>>) {
         w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
-            .expect(ok);
+            .expect(XML_IN_MEMORY);
         for input in self.system_inputs() {
-            connector(&mut w, &input, "input", "Real");
+            write_connector(w, &input, "input", "Real");
         }
         for output in self.system_outputs() {
-            connector(&mut w, &output, "output", "Real");
+            write_connector(w, &output, "output", "Real");
         }
         for name in self.system_values().keys() {
-            connector(&mut w, name, "parameter", "Real");
+            write_connector(w, name, "parameter", "Real");
         }
         if self.has_system_values() {
             for name in self.system_strings().keys() {
-                connector(&mut w, name, "parameter", "String");
+                write_connector(w, name, "parameter", "String");
             }
         }
         w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
-            .expect(ok);
+            .expect(XML_IN_MEMORY);
         if self.has_system_values() {
-            binding(&mut w, "resources/twin.ssv");
+            write_binding(w, "resources/twin.ssv");
         }
+    }
 
-        w.write_event(Event::Start(BytesStart::new("ssd:Elements")))
-            .expect(ok);
-        for c in &self.components {
-            let mut e = BytesStart::new("ssd:Component");
-            e.push_attribute(("name", c.name.as_str()));
-            e.push_attribute(("type", "application/x-fmu-sharedlibrary"));
-            e.push_attribute(("source", format!("resources/{}", c.fmu_name).as_str()));
-            w.write_event(Event::Start(e)).expect(ok);
-            w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
-                .expect(ok);
-            // Each connector once, however many connections it has (an output can feed
-            // another component and the system).
-            let mut listed: Vec<(&str, &str)> = Vec::new();
-            for conn in &self.connections {
-                if conn.end_element.as_deref() == Some(&c.name) {
-                    listed.push((&conn.end_connector, "input"));
-                }
-                if conn.start_element.as_deref() == Some(&c.name) {
-                    listed.push((&conn.start_connector, "output"));
-                }
+    /// A component: its FMU, the connectors its connections use and its parameters' binding.
+    fn write_component(&self, w: &mut Writer<Vec<u8>>, c: &Component) {
+        let mut e = BytesStart::new("ssd:Component");
+        e.push_attribute(("name", c.name.as_str()));
+        e.push_attribute(("type", "application/x-fmu-sharedlibrary"));
+        e.push_attribute(("source", format!("resources/{}", c.fmu_name).as_str()));
+        w.write_event(Event::Start(e)).expect(XML_IN_MEMORY);
+        w.write_event(Event::Start(BytesStart::new("ssd:Connectors")))
+            .expect(XML_IN_MEMORY);
+        // Each connector once, however many connections it has (an output can feed
+        // another component and the system).
+        let mut listed: Vec<(&str, &str)> = Vec::new();
+        for conn in &self.connections {
+            if conn.end_element.as_deref() == Some(&c.name) {
+                listed.push((&conn.end_connector, "input"));
             }
-            let mut seen = std::collections::HashSet::new();
-            listed.retain(|(name, _)| seen.insert(*name));
-            for (name, kind) in listed {
-                connector(&mut w, name, kind, "Real");
+            if conn.start_element.as_deref() == Some(&c.name) {
+                listed.push((&conn.start_connector, "output"));
             }
-            w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
-                .expect(ok);
-            binding(&mut w, &format!("resources/{}.ssv", c.name));
-            w.write_event(Event::End(BytesEnd::new("ssd:Component")))
-                .expect(ok);
         }
-        w.write_event(Event::End(BytesEnd::new("ssd:Elements")))
-            .expect(ok);
+        let mut seen = std::collections::HashSet::new();
+        listed.retain(|(name, _)| seen.insert(*name));
+        for (name, kind) in listed {
+            write_connector(w, name, kind, "Real");
+        }
+        w.write_event(Event::End(BytesEnd::new("ssd:Connectors")))
+            .expect(XML_IN_MEMORY);
+        write_binding(w, &format!("resources/{}.ssv", c.name));
+        w.write_event(Event::End(BytesEnd::new("ssd:Component")))
+            .expect(XML_IN_MEMORY);
+    }
 
+    fn write_connections(&self, w: &mut Writer<Vec<u8>>) {
         w.write_event(Event::Start(BytesStart::new("ssd:Connections")))
-            .expect(ok);
+            .expect(XML_IN_MEMORY);
         for conn in &self.connections {
             let mut e = BytesStart::new("ssd:Connection");
             if let Some(s) = &conn.start_element {
@@ -641,22 +571,124 @@ impl Twin {
                 e.push_attribute(("endElement", s.as_str()));
             }
             e.push_attribute(("endConnector", conn.end_connector.as_str()));
-            w.write_event(Event::Empty(e)).expect(ok);
+            w.write_event(Event::Empty(e)).expect(XML_IN_MEMORY);
         }
         w.write_event(Event::End(BytesEnd::new("ssd:Connections")))
-            .expect(ok);
-        w.write_event(Event::End(BytesEnd::new("ssd:System")))
-            .expect(ok);
-        if let Some((start, stop)) = self.default_experiment {
-            let mut e = BytesStart::new("ssd:DefaultExperiment");
-            e.push_attribute(("startTime", format!("{start:?}").as_str()));
-            e.push_attribute(("stopTime", format!("{stop:?}").as_str()));
-            w.write_event(Event::Empty(e)).expect(ok);
-        }
-        w.write_event(Event::End(BytesEnd::new("ssd:SystemStructureDescription")))
-            .expect(ok);
-        finish_xml(w)
+            .expect(XML_IN_MEMORY);
     }
+}
+
+/// Writing XML to a `Vec<u8>` cannot fail; the `expect`s say so.
+const XML_IN_MEMORY: &str = "writing XML to memory cannot fail";
+
+fn write_connector(w: &mut Writer<Vec<u8>>, name: &str, kind: &str, ty: &str) {
+    let mut c = BytesStart::new("ssd:Connector");
+    c.push_attribute(("name", name));
+    c.push_attribute(("kind", kind));
+    w.write_event(Event::Start(c)).expect(XML_IN_MEMORY);
+    w.write_event(Event::Empty(BytesStart::new(format!("ssc:{ty}"))))
+        .expect(XML_IN_MEMORY);
+    w.write_event(Event::End(BytesEnd::new("ssd:Connector")))
+        .expect(XML_IN_MEMORY);
+}
+
+fn write_binding(w: &mut Writer<Vec<u8>>, source: &str) {
+    w.write_event(Event::Start(BytesStart::new("ssd:ParameterBindings")))
+        .expect(XML_IN_MEMORY);
+    let mut b = BytesStart::new("ssd:ParameterBinding");
+    b.push_attribute(("source", source));
+    w.write_event(Event::Empty(b)).expect(XML_IN_MEMORY);
+    w.write_event(Event::End(BytesEnd::new("ssd:ParameterBindings")))
+        .expect(XML_IN_MEMORY);
+}
+
+/// What the twin's own parameter set (`resources/twin.ssv`) holds.
+#[derive(Default)]
+struct SystemValues {
+    noise_variance: Option<noise::NoiseVariances>,
+    parameter_covariance: Option<ParameterCovariance>,
+    validation_nmse: Option<f64>,
+    records: Vec<RecordRef>,
+}
+
+/// A component of the unpacked archive at `root`: its FMU, which must be there, and its
+/// parameter values from its bindings.
+fn read_component(root: &Path, c: ssp::SsdComponent) -> Result<Component, String> {
+    let fmu_name = c
+        .source
+        .strip_prefix("resources/")
+        .filter(|n| !n.contains('/'))
+        .ok_or_else(|| {
+            format!(
+                "component '{}': source '{}' is not resources/<file>.fmu",
+                c.name, c.source
+            )
+        })?
+        .to_owned();
+    let fmu_path = root.join("resources").join(&fmu_name);
+    if !fmu_path.is_file() {
+        return Err(format!(
+            "component '{}': {} is missing from the archive",
+            c.name, c.source
+        ));
+    }
+    let mut parameters = BTreeMap::new();
+    for binding in c.bindings {
+        let ssv =
+            std::fs::read_to_string(root.join(&binding)).map_err(|e| format!("{binding}: {e}"))?;
+        for (name, value) in parse_ssv(&ssv).map_err(|m| format!("{binding}: {m}"))? {
+            parameters.insert(name, value);
+        }
+    }
+    Ok(Component {
+        name: c.name,
+        fmu_name,
+        fmu_path,
+        parameters,
+    })
+}
+
+/// The system's parameter set `binding` of the unpacked archive at `root`: the noise
+/// variances, the parameters' covariance, the validation NMSE and the records.
+fn read_system_values(root: &Path, binding: &str) -> Result<SystemValues, String> {
+    let ssv = std::fs::read_to_string(root.join(binding)).map_err(|e| e.to_string())?;
+    let mut values: BTreeMap<String, ParameterValue> = BTreeMap::new();
+    let mut strings: BTreeMap<String, String> = BTreeMap::new();
+    for (name, value) in ssp::parse_ssv(&ssv)? {
+        let value = match value {
+            SsvValue::Real(x) => ParameterValue::Real(x),
+            SsvValue::Integer(i) => ParameterValue::Integer(i),
+            SsvValue::Boolean(b) => ParameterValue::Boolean(b),
+            SsvValue::String(text) => {
+                strings.insert(name, text);
+                continue;
+            }
+            other => {
+                return Err(format!(
+                    "parameter '{name}': {other:?} is not a Real, Integer, Boolean or String"
+                ))
+            }
+        };
+        values.insert(name, value);
+    }
+    let records = read_records(&strings)?;
+    let noise_variance = noise::NoiseVariances::from_parameters(&values)?;
+    let parameter_covariance = read_covariance(&values)?;
+    let validation_nmse = match values.get("validation_nmse") {
+        None => None,
+        Some(ParameterValue::Real(x)) if *x >= 0.0 && x.is_finite() => Some(*x),
+        Some(other) => {
+            return Err(format!(
+                "validation_nmse = {other} is not a non-negative real"
+            ))
+        }
+    };
+    Ok(SystemValues {
+        noise_variance,
+        parameter_covariance,
+        records,
+        validation_nmse,
+    })
 }
 
 /// An error's text with the unpacked FMU's temporary path taken out (the caller names the
@@ -718,7 +750,7 @@ fn ssv_xml_with_strings(
     parameters: &BTreeMap<String, ParameterValue>,
     strings: &BTreeMap<String, String>,
 ) -> String {
-    let ok = "writing XML to memory cannot fail";
+    let ok = XML_IN_MEMORY;
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))
         .expect(ok);
