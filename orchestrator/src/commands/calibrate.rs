@@ -185,7 +185,6 @@ fn is_rig_record(records: &[RecordCalibration]) -> bool {
 }
 
 fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated: &[ChannelNmse]) {
-    let data = runs[0];
     let names: Vec<String> = runs.iter().map(|r| r.path.display().to_string()).collect();
     println!(
         "calibrated on {} ({} starts, {} simulations, {:.2} s)",
@@ -204,79 +203,14 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
              refined {then}on every sample"
         );
     }
-    println!(
-        "{:<10} {:>12} {:>12} {:>14}",
-        "parameter", "MAP", "sd", "prior mean"
-    );
-    for p in &calibration.parameters {
-        println!(
-            "{:<10} {:>12.4} {:>12.4} {:>14.4}",
-            p.name,
-            p.value,
-            p.sd,
-            p.prior.value(p.prior.mean)
-        );
-    }
+    print_parameters(calibration);
     let paper = is_rig_record(&calibration.records);
-    if paper {
-        // The paper's rig, as it has always been printed.
-        let noise = calibration
-            .noise_variance
-            .iter()
-            .zip(&calibration.noise_log_sd);
-        for (f, (variance, log_sd)) in noise.enumerate() {
-            println!(
-                "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
-                f + 1,
-                variance,
-                log_sd
-            );
-        }
-    } else {
-        for r in &calibration.records {
-            for (c, name) in r.channels.iter().enumerate() {
-                println!(
-                    "noise {:<6} {:>12.4e} (σ² in SI²; sd of log σ² {:.3}) on {}",
-                    name, r.noise_variance[c], r.noise_log_sd[c], r.record
-                );
-            }
-        }
-    }
-    let pnames: Vec<&str> = calibration
-        .parameters
-        .iter()
-        .map(|p| p.name.as_str())
-        .collect();
-    let mut strongest = Vec::new();
-    for a in 0..pnames.len() {
-        for b in a + 1..pnames.len() {
-            strongest.push((calibration.correlation[a][b], pnames[a], pnames[b]));
-        }
-    }
-    strongest.sort_by(|x, y| y.0.abs().total_cmp(&x.0.abs()));
-    let shown: Vec<String> = strongest
-        .iter()
-        .take(3)
-        .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
-        .collect();
-    println!("strongest correlations: {}", shown.join(", "));
-    // The rig's NMSE, floor by floor (its channels are its floors).
-    let per_floor = |nmse: &[f64]| -> String {
-        let shown: Vec<String> = nmse.iter().map(|n| format!("{n:.3}")).collect();
-        shown.join(" / ")
-    };
-    let per_channel = |channels: &[String], nmse: &[f64]| -> String {
-        channels
-            .iter()
-            .zip(nmse)
-            .map(|(c, n)| format!("{c} {n:.3}"))
-            .collect::<Vec<_>>()
-            .join(" / ")
-    };
+    print_noise(calibration, paper);
+    print_correlations(calibration);
     if paper {
         println!(
             "NMSE % on {}: {}",
-            data.path.display(),
+            runs[0].path.display(),
             per_floor(&calibration.nmse)
         );
     } else {
@@ -304,6 +238,88 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
             }
         );
     }
+}
+
+/// The MAP, sd and prior mean of each parameter, a row each.
+fn print_parameters(calibration: &Calibration) {
+    println!(
+        "{:<10} {:>12} {:>12} {:>14}",
+        "parameter", "MAP", "sd", "prior mean"
+    );
+    for p in &calibration.parameters {
+        println!(
+            "{:<10} {:>12.4} {:>12.4} {:>14.4}",
+            p.name,
+            p.value,
+            p.sd,
+            p.prior.value(p.prior.mean)
+        );
+    }
+}
+
+/// The noise variances: the paper's rig's as it has always been printed (`noise1..`), any
+/// other record's by channel and record.
+fn print_noise(calibration: &Calibration, paper: bool) {
+    if paper {
+        let noise = calibration
+            .noise_variance
+            .iter()
+            .zip(&calibration.noise_log_sd);
+        for (f, (variance, log_sd)) in noise.enumerate() {
+            println!(
+                "noise{}     {:>12.4e} (σ² in (m/s²)²; sd of log σ² {:.3})",
+                f + 1,
+                variance,
+                log_sd
+            );
+        }
+        return;
+    }
+    for r in &calibration.records {
+        for (c, name) in r.channels.iter().enumerate() {
+            println!(
+                "noise {:<6} {:>12.4e} (σ² in SI²; sd of log σ² {:.3}) on {}",
+                name, r.noise_variance[c], r.noise_log_sd[c], r.record
+            );
+        }
+    }
+}
+
+/// The three strongest posterior correlations between parameters.
+fn print_correlations(calibration: &Calibration) {
+    let names: Vec<&str> = calibration
+        .parameters
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    let mut strongest = Vec::new();
+    for a in 0..names.len() {
+        for b in a + 1..names.len() {
+            strongest.push((calibration.correlation[a][b], names[a], names[b]));
+        }
+    }
+    strongest.sort_by(|x, y| y.0.abs().total_cmp(&x.0.abs()));
+    let shown: Vec<String> = strongest
+        .iter()
+        .take(3)
+        .map(|(r, a, b)| format!("{a}–{b} {r:+.2}"))
+        .collect();
+    println!("strongest correlations: {}", shown.join(", "));
+}
+
+/// The rig's NMSE, floor by floor (its channels are its floors).
+fn per_floor(nmse: &[f64]) -> String {
+    let shown: Vec<String> = nmse.iter().map(|n| format!("{n:.3}")).collect();
+    shown.join(" / ")
+}
+
+fn per_channel(channels: &[String], nmse: &[f64]) -> String {
+    channels
+        .iter()
+        .zip(nmse)
+        .map(|(c, n)| format!("{c} {n:.3}"))
+        .collect::<Vec<_>>()
+        .join(" / ")
 }
 
 /// `twin calibrate --frf FRF --out T.ssp`.

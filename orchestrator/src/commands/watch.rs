@@ -17,7 +17,7 @@ use crate::workflows::watch::background::DiagnosisOptions;
 use crate::workflows::watch::modes::TrackOptions;
 use crate::workflows::watch::supervise::LearnOptions;
 use crate::workflows::watch::{
-    watch_observed, Status, StreamSource, WatchOptions, CHECKPOINT_EVERY, WINDOW,
+    watch_observed, Status, StreamSource, Summary, WatchOptions, CHECKPOINT_EVERY, WINDOW,
 };
 
 #[derive(clap::Args)]
@@ -225,31 +225,7 @@ pub fn run(args: &WatchArgs) -> Result<()> {
         &options,
         |status: &Status| {
             if let Some(s) = &spinner {
-                let nmse: Vec<String> = status
-                    .channels
-                    .iter()
-                    .zip(&status.rolling_nmse)
-                    .map(|(name, v)| {
-                        if v.is_finite() {
-                            format!("{name} {v:.2}")
-                        } else {
-                            format!("{name} -")
-                        }
-                    })
-                    .collect();
-                s.set_message(format!(
-                    "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
-                    status.samples,
-                    status.time,
-                    status.samples_per_second,
-                    nmse.join(", "),
-                    if status.open_window { ", FAILING" } else { "" },
-                    if status.diagnosing {
-                        ", diagnosing in the background"
-                    } else {
-                        ""
-                    }
-                ));
+                s.set_message(status_line(status));
             }
         },
         &mut |_| Ok(()),
@@ -272,6 +248,50 @@ pub fn run(args: &WatchArgs) -> Result<()> {
             return Err(e.into());
         }
     };
+    print_summary(&summary);
+    println!("alerts: {}", args.alerts.display());
+    if let Some(plot) = &args.modes_plot {
+        let tracked = crate::workflows::watch::modes::read_tracked(&args.alerts)
+            .map_err(anyhow::Error::msg)?;
+        crate::report::mode_plot::plot_tracked_frequencies(&tracked, plot)?;
+        println!("tracked frequencies: {}", plot.display());
+    }
+    linger(args, page);
+    Ok(())
+}
+
+/// The spinner's line: samples, rate, each channel's rolling NMSE, an open window, a
+/// diagnosis under way.
+fn status_line(status: &Status) -> String {
+    let nmse: Vec<String> = status
+        .channels
+        .iter()
+        .zip(&status.rolling_nmse)
+        .map(|(name, v)| {
+            if v.is_finite() {
+                format!("{name} {v:.2}")
+            } else {
+                format!("{name} -")
+            }
+        })
+        .collect();
+    format!(
+        "{} samples (t = {:.1} s), {:.0} samples/s, rolling NMSE % {}{}{}",
+        status.samples,
+        status.time,
+        status.samples_per_second,
+        nmse.join(", "),
+        if status.open_window { ", FAILING" } else { "" },
+        if status.diagnosing {
+            ", diagnosing in the background"
+        } else {
+            ""
+        }
+    )
+}
+
+/// What the watch saw: lines, gaps and windows, the NMSE, the speed, MQTT and the corrector.
+fn print_summary(summary: &Summary) {
     let nmse: Vec<String> = summary
         .channels
         .iter()
@@ -326,15 +346,6 @@ pub fn run(args: &WatchArgs) -> Result<()> {
                 .map_or("the FMU's own, 2048".into(), |b| b.to_string())
         );
     }
-    println!("alerts: {}", args.alerts.display());
-    if let Some(plot) = &args.modes_plot {
-        let tracked = crate::workflows::watch::modes::read_tracked(&args.alerts)
-            .map_err(anyhow::Error::msg)?;
-        crate::report::mode_plot::plot_tracked_frequencies(&tracked, plot)?;
-        println!("tracked frequencies: {}", plot.display());
-    }
-    linger(args, page);
-    Ok(())
 }
 
 /// Start the page's server: `serving URL` on standard error (one line, for scripts).
