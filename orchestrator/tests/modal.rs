@@ -695,6 +695,11 @@ mod records {
     /// 1–60 Hz, 500 Hz for 30 s per run, one accelerometer per run (floors 1, 2, 3), 2 % white
     /// and 5 % coloured noise.
     fn lab_frame_runs() -> Vec<(Measurement, Vec<Mode>)> {
+        lab_frame_runs_with(0.05)
+    }
+
+    /// [`lab_frame_runs`] with `coloured` × each channel's RMS of coloured noise.
+    fn lab_frame_runs_with(coloured: f64) -> Vec<(Measurement, Vec<Mode>)> {
         (1..=3)
             .map(|floor| {
                 record(
@@ -704,7 +709,7 @@ mod records {
                     (500.0, 30.0),
                     (1.0, 60.0),
                     &[floor],
-                    0.05,
+                    coloured,
                     40 + floor as u64,
                 )
             })
@@ -719,9 +724,21 @@ mod records {
     /// +0.27 %): every mode within 0.01 %; none spurious (bars 1 %, none).
     /// SSI-COV, output-only on one channel, is not held to it: it finds 0, 1 and 2 of the
     /// modes (printed).
+    /// The same runs with white sensor noise alone (no coloured noise) had LSCF report a pole
+    /// of noise beside the three modes on runs 2 and 3, 55.64 Hz and 39.41 Hz, each from 7
+    /// of the sweep's 20 orders where the modes hold 12–17. An FRF fit's mode now needs 0.45
+    /// of the best-supported mode's orders (identify/orders.rs: 39.41 Hz, 7 of 17, set aside
+    /// `few-orders`) and its own fitted term 1.4 times the fit's misfit around it
+    /// (identify/shoulder.rs: 55.64 Hz, 7 of 14 orders, 0.93, set aside `below-misfit`; the
+    /// modes 1.70–23.9). Measured with both: every mode within 0.01 %, none spurious.
     #[test]
     fn every_peak_of_a_lab_frames_runs_is_found_and_nothing_else() {
-        let runs = lab_frame_runs();
+        for coloured in [0.05, 0.0] {
+            every_peak_is_found_and_nothing_else(lab_frame_runs_with(coloured));
+        }
+    }
+
+    fn every_peak_is_found_and_nothing_else(runs: Vec<(Measurement, Vec<Mode>)>) {
         let exact = runs[0].1.clone();
         for e in &exact {
             println!("exact {:.4} Hz ζ {:.3} %", e.frequency, 100.0 * e.damping);
@@ -731,11 +748,16 @@ mod records {
                 .expect("identified");
             let frequencies = lscf_frequencies(&found);
             let (nearest, spurious) = matched(&frequencies, &exact);
+            let io = found.input_output.as_ref().expect("LSCF ran");
             println!(
-                "{}: LSCF {:+.3?} % over {:?}; SSI-COV {:.4?}",
+                "{}: LSCF {:+.3?} % over {:?}, set aside {:?}; SSI-COV {:.4?}",
                 data.responses[0].channel.name(),
                 nearest.iter().map(|(_, e)| 100.0 * e).collect::<Vec<_>>(),
-                found.input_output.as_ref().and_then(|m| m.band),
+                io.band,
+                io.rejected
+                    .iter()
+                    .map(|r| (r.mode.frequency, r.mode.orders.len(), r.rejection))
+                    .collect::<Vec<_>>(),
                 found
                     .ssi
                     .modes

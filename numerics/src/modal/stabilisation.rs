@@ -374,6 +374,12 @@ pub enum Rejection {
     NoPeak,
     /// Found in fewer than half of a roving test's runs (each run fitted alone).
     FewRuns,
+    /// Its cluster holds poles from too few model orders beside the best-supported mode's: a
+    /// pole the fit makes of noise at some orders and not at others.
+    FewOrders,
+    /// An FRF fit's mode whose own fitted term stands no higher than the fit's misfit around
+    /// it: a pole made of the FRF's noise, which it explains no better than the noise does.
+    BelowMisfit,
 }
 
 impl Rejection {
@@ -388,6 +394,10 @@ impl Rejection {
             }
             Rejection::NoPeak => "no peak of the measured FRF or spectrum there",
             Rejection::FewRuns => "found in fewer than half of the roving runs",
+            Rejection::BelowMisfit => "its fitted term no larger than the fit's misfit (noise)",
+            Rejection::FewOrders => {
+                "found at too few model orders beside the best-supported mode (a pole of noise)"
+            }
         }
     }
 }
