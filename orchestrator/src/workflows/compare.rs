@@ -189,6 +189,81 @@ pub struct FrfView {
     pub peak_method: &'static str,
 }
 
+/// The posterior over the structure's own parameters (others, e.g. an effect's, are not in the
+/// linear FRF).
+fn structure_covariance(
+    cov: &crate::twin::ParameterCovariance,
+    structure: &::structure::Structure,
+) -> crate::twin::ParameterCovariance {
+    let keep: Vec<usize> = (0..cov.names.len())
+        .filter(|&a| structure.get(&cov.names[a]).is_some())
+        .collect();
+    crate::twin::ParameterCovariance {
+        names: keep.iter().map(|&a| cov.names[a].clone()).collect(),
+        matrix: keep
+            .iter()
+            .map(|&a| keep.iter().map(|&b| cov.matrix[a][b]).collect())
+            .collect(),
+    }
+}
+
+/// Channel `c`'s view (its name left to the caller): the measured magnitude less `offset`
+/// (dB), the twin's with its ±sd from `covariance` (the first-order sd of 20 log10|H|), the
+/// RMS error and the share of lines inside ±3 sd.
+fn channel_view(
+    model: &crate::evaluation::frf::StructureFrf,
+    c: usize,
+    measured: &[f64],
+    twin_db: &[f64],
+    offset: f64,
+    covariance: Option<&crate::twin::ParameterCovariance>,
+) -> FrfChannelView {
+    let to_db = 20.0 / std::f64::consts::LN_10;
+    let lines = twin_db.len();
+    let measured_db: Vec<f64> = measured.iter().map(|m| m - offset).collect();
+    let twin_sd_db = covariance.map(|cov| {
+        (0..lines)
+            .map(|k| {
+                let g: Vec<f64> = (0..cov.names.len())
+                    .map(|j| to_db * (model.sensitivities[c][j][k] / model.values[c][k]).re)
+                    .collect();
+                let mut v = 0.0;
+                for a in 0..g.len() {
+                    for b in 0..g.len() {
+                        v += g[a] * cov.matrix[a][b] * g[b];
+                    }
+                }
+                v.max(0.0).sqrt()
+            })
+            .collect::<Vec<f64>>()
+    });
+    let n = lines as f64;
+    let rms_error_db = (measured_db
+        .iter()
+        .zip(twin_db)
+        .map(|(m, t)| (m - t).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let inside_band = twin_sd_db.as_ref().map(|sd| {
+        measured_db
+            .iter()
+            .zip(twin_db)
+            .zip(sd)
+            .filter(|((m, t), s)| (*m - *t).abs() <= 3.0 * *s)
+            .count() as f64
+            / n
+    });
+    FrfChannelView {
+        channel: String::new(),
+        measured_db,
+        twin_db: twin_db.to_vec(),
+        twin_sd_db,
+        rms_error_db,
+        inside_band,
+    }
+}
+
 /// `twin compare --frf FRF`: the twin's exact FRF (its linear structure: any effect it carries
 /// is linearised away) against the measured one over `band` (every line above 0 Hz when None).
 pub fn frf_view(
@@ -218,18 +293,10 @@ pub fn frf_view(
     }
     // The posterior over the structure's own parameters (others, e.g. an effect's, are not in
     // the linear FRF).
-    let covariance = twin.parameter_covariance.as_ref().map(|cov| {
-        let keep: Vec<usize> = (0..cov.names.len())
-            .filter(|&a| structure.get(&cov.names[a]).is_some())
-            .collect();
-        crate::twin::ParameterCovariance {
-            names: keep.iter().map(|&a| cov.names[a].clone()).collect(),
-            matrix: keep
-                .iter()
-                .map(|&a| keep.iter().map(|&b| cov.matrix[a][b]).collect())
-                .collect(),
-        }
-    });
+    let covariance = twin
+        .parameter_covariance
+        .as_ref()
+        .map(|cov| structure_covariance(cov, &structure));
     let names = covariance
         .as_ref()
         .map(|c| c.names.clone())
@@ -257,54 +324,17 @@ pub fn frf_view(
             .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
         sum / n as f64
     });
-    let to_db = 20.0 / std::f64::consts::LN_10;
     let views = (0..channels.len())
-        .map(|c| {
-            let measured_db: Vec<f64> = measured[c]
-                .iter()
-                .map(|m| m - offset.unwrap_or(0.0))
-                .collect();
-            let twin_sd_db = covariance.as_ref().map(|cov| {
-                (0..frequency.len())
-                    .map(|k| {
-                        let g: Vec<f64> = (0..names.len())
-                            .map(|j| to_db * (model.sensitivities[c][j][k] / model.values[c][k]).re)
-                            .collect();
-                        let mut v = 0.0;
-                        for a in 0..g.len() {
-                            for b in 0..g.len() {
-                                v += g[a] * cov.matrix[a][b] * g[b];
-                            }
-                        }
-                        v.max(0.0).sqrt()
-                    })
-                    .collect::<Vec<f64>>()
-            });
-            let n = frequency.len() as f64;
-            let rms_error_db = (measured_db
-                .iter()
-                .zip(&twin_db[c])
-                .map(|(m, t)| (m - t).powi(2))
-                .sum::<f64>()
-                / n)
-                .sqrt();
-            let inside_band = twin_sd_db.as_ref().map(|sd| {
-                measured_db
-                    .iter()
-                    .zip(&twin_db[c])
-                    .zip(sd)
-                    .filter(|((m, t), s)| (*m - *t).abs() <= 3.0 * *s)
-                    .count() as f64
-                    / n
-            });
-            FrfChannelView {
-                channel: channels[c].name(),
-                measured_db,
-                twin_db: twin_db[c].clone(),
-                twin_sd_db,
-                rms_error_db,
-                inside_band,
-            }
+        .map(|c| FrfChannelView {
+            channel: channels[c].name(),
+            ..channel_view(
+                &model,
+                c,
+                &measured[c],
+                &twin_db[c],
+                offset.unwrap_or(0.0),
+                covariance.as_ref(),
+            )
         })
         .collect();
     Ok(FrfView {
