@@ -1,12 +1,98 @@
-//! `twin control`'s options: their defaults, checks and the texts of `--gap`,
+//! `twin control`'s options: what they are, their defaults, checks and the texts of `--gap`,
 //! `--variance-threshold` and `--sensor-noise`, once for the CLI and the Python package.
 
+use serde::Serialize;
 use structure::effects::{Kind, Law, Side};
 
 use super::closed_loop::Gap;
-use super::{ControlOptions, EstimatorChoice, Retune, ScheduleOptions, StateUnit, VarianceTrigger};
+use super::StateUnit;
 use crate::twin::Twin;
 use crate::workflows::options::InvalidOption;
+
+/// Half-width of the band around a resonance in which the peak is read, relative.
+pub const RESONANCE_BAND: f64 = 0.1;
+/// The grid `--retune` searches, as multiples of the smallest `--q`.
+pub const RETUNE_GRID: [f64; 13] = [
+    1.0, 1.5, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 70.0, 100.0,
+];
+
+/// `--retune`: the smallest q on the grid that keeps the contacts at or below `target` with the
+/// peak control force within `max_force`.
+#[derive(Clone, Debug)]
+pub struct Retune {
+    pub target: usize,
+    pub max_force: Option<f64>,
+}
+
+/// `--schedule`: switch between the smallest and the largest design (or the retuned one).
+#[derive(Clone, Debug)]
+pub struct ScheduleOptions {
+    pub margin: f64,
+    pub lookahead: f64,
+    pub dwell: f64,
+    pub variance: VarianceTrigger,
+}
+
+/// Whether the schedule also switches on the corrector's latent variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VarianceTrigger {
+    /// When the twin has a corrector: above the twin's noise variance (the threshold active
+    /// learning queries at), else 1e-3 of the record's measured variance.
+    Auto,
+    /// This threshold on every floor, (m/s²)².
+    Value(f64),
+    Off,
+}
+
+#[derive(Clone, Debug)]
+pub struct ControlOptions {
+    pub qs: Vec<f64>,
+    pub r: f64,
+    pub unit: StateUnit,
+    pub estimator: EstimatorChoice,
+    /// Corner of the integrating estimator's drift removal, Hz.
+    pub highpass_hz: f64,
+    /// Controller samples per record sample (None: from the fastest closed-loop pole).
+    pub substeps: Option<usize>,
+    /// Accelerometer noise sd the controller reads, per floor, or one for every floor (None:
+    /// the twin's calibrated noise).
+    pub sensor_noise: Option<Vec<f64>>,
+    pub seed: u64,
+    /// Gaps to watch besides the twin's own contacts.
+    pub gaps: Vec<Gap>,
+    pub retune: Option<Retune>,
+    pub schedule: Option<ScheduleOptions>,
+    /// Compare the estimators' cost on the first design.
+    pub estimator_costs: bool,
+    /// The floor the control force acts on (1-based).
+    pub actuator_floor: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EstimatorChoice {
+    /// Integrate the measured accelerations twice with drift removal (the paper's).
+    Integrate,
+    /// A steady-state Kalman observer on the twin's linear model.
+    Kalman,
+}
+
+impl crate::choice::Choice for EstimatorChoice {
+    const CHOICES: &'static [(&'static str, &'static str, Self)] = &[
+        (
+            "integrate",
+            "integrate the measured accelerations twice with drift removal",
+            EstimatorChoice::Integrate,
+        ),
+        (
+            "kalman",
+            "a steady-state Kalman observer on the twin's linear model",
+            EstimatorChoice::Kalman,
+        ),
+    ];
+}
+
+crate::choice::display_by_name!(EstimatorChoice);
 
 impl Default for ControlOptions {
     /// No design (`qs` empty: give at least one q), R = 0.1, the state in m, the integrating
