@@ -28,6 +28,9 @@ pub(super) fn isclose(a: f64, b: f64) -> bool {
 }
 
 impl InputTable {
+    /// The input file at `path` read against `model`: a `time` column first, then one column
+    /// per input of the model (or system input), every row parsed as its input's type, the
+    /// times not decreasing. Errors name the file and the line.
     pub(super) fn read(path: &Path, model: &Model) -> Result<Self, RunError> {
         let at = |line: usize, message: String| RunError::Input {
             path: path.to_owned(),
@@ -51,6 +54,15 @@ impl InputTable {
                 ),
             ));
         }
+        let mut columns = Self::columns(&header, model).map_err(|m| at(1, m))?;
+        let time = Self::rows(&mut reader, &header, &mut columns, &at)?;
+        Ok(InputTable { time, columns })
+    }
+
+    /// The header's columns after `time`, each matched to the input (or the system input's
+    /// targets) of `model` it drives; Err: a column that drives none (with the closest inputs'
+    /// names), or one named twice.
+    fn columns(header: &csv::StringRecord, model: &Model) -> Result<Vec<InputColumn>, String> {
         let drivable =
             |v: &ScalarVariable| v.causality == Causality::Input || v.variability == "tunable";
         let mut columns = Vec::new();
@@ -67,21 +79,18 @@ impl InputTable {
                     .chain(model.system_inputs.iter().cloned())
                     .collect();
                 let close = closest(name, &inputs);
-                return Err(at(
-                    1,
-                    format!(
-                        "column '{name}' is no input of {}{}",
-                        model.path.display(),
-                        if close.is_empty() {
-                            format!(" (its inputs: {})", inputs.join(", "))
-                        } else {
-                            format!(" (closest: {})", close.join(", "))
-                        }
-                    ),
+                return Err(format!(
+                    "column '{name}' is no input of {}{}",
+                    model.path.display(),
+                    if close.is_empty() {
+                        format!(" (its inputs: {})", inputs.join(", "))
+                    } else {
+                        format!(" (closest: {})", close.join(", "))
+                    }
                 ));
             };
             if columns.iter().any(|c: &InputColumn| c.name == name) {
-                return Err(at(1, format!("column '{name}' appears twice")));
+                return Err(format!("column '{name}' appears twice"));
             }
             columns.push(InputColumn {
                 name: name.to_owned(),
@@ -93,6 +102,17 @@ impl InputTable {
                 texts: Vec::new(),
             });
         }
+        Ok(columns)
+    }
+
+    /// The file's rows into `columns` (each parsed as its input's type); the times, not
+    /// decreasing, at least one row. `at` makes the error of a line.
+    fn rows(
+        reader: &mut csv::Reader<std::fs::File>,
+        header: &csv::StringRecord,
+        columns: &mut [InputColumn],
+        at: &dyn Fn(usize, String) -> RunError,
+    ) -> Result<Vec<f64>, RunError> {
         let mut time: Vec<f64> = Vec::new();
         for (row, record) in reader.records().enumerate() {
             let line = row + 2;
@@ -136,7 +156,7 @@ impl InputTable {
         if time.is_empty() {
             return Err(at(2, "no rows".into()));
         }
-        Ok(InputTable { time, columns })
+        Ok(time)
     }
 
     /// Input events after `time`: repeated time rows and changes of a held input (fmpy's

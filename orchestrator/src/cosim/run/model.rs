@@ -39,6 +39,7 @@ pub(super) fn is_ssp(path: &Path) -> Result<bool, RunError> {
 }
 
 impl Model {
+    /// The model at `path`: one FMU, or an SSP archive's system of them.
     pub(super) fn open(path: &Path) -> Result<Self, RunError> {
         if !path.is_file() {
             return Err(RunError::Model {
@@ -46,31 +47,43 @@ impl Model {
                 message: "no such file".into(),
             });
         }
-        if !is_ssp(path)? {
-            let fmu = UnpackedFmu::open(path)?;
-            let md = fmu.model_description.clone();
-            let (start, stop, step) = (
-                md.default_start_time,
-                md.default_stop_time,
-                md.default_step_size,
-            );
-            return Ok(Model {
-                path: path.to_owned(),
-                components: vec![Component {
-                    name: md.model_identifier.clone(),
-                    prefix: String::new(),
-                    md,
-                    fmu: Some(fmu),
-                    bound: Vec::new(),
-                }],
-                connections: Vec::new(),
-                system_inputs: Vec::new(),
-                default_start: start,
-                default_stop: stop,
-                default_step: step,
-                _archive: None,
-            });
+        if is_ssp(path)? {
+            Self::of_system(path)
+        } else {
+            Self::of_fmu(path)
         }
+    }
+
+    /// One FMU: its one component, the experiment its modelDescription gives.
+    fn of_fmu(path: &Path) -> Result<Self, RunError> {
+        let fmu = UnpackedFmu::open(path)?;
+        let md = fmu.model_description.clone();
+        let (start, stop, step) = (
+            md.default_start_time,
+            md.default_stop_time,
+            md.default_step_size,
+        );
+        Ok(Model {
+            path: path.to_owned(),
+            components: vec![Component {
+                name: md.model_identifier.clone(),
+                prefix: String::new(),
+                md,
+                fmu: Some(fmu),
+                bound: Vec::new(),
+            }],
+            connections: Vec::new(),
+            system_inputs: Vec::new(),
+            default_start: start,
+            default_stop: stop,
+            default_step: step,
+            _archive: None,
+        })
+    }
+
+    /// An SSP archive: its SystemStructure.ssd's components (each an FMU inside the archive,
+    /// with its parameter bindings), connections, system inputs and experiment.
+    fn of_system(path: &Path) -> Result<Self, RunError> {
         let bad = |message: String| RunError::Model {
             path: path.to_owned(),
             message,
@@ -87,39 +100,7 @@ impl Model {
             if ssd.components[..i].iter().any(|d| d.name == c.name) {
                 return Err(bad(format!("two components are named '{}'", c.name)));
             }
-            // A source is a path inside the archive: nothing absolute, no '..', no other scheme.
-            let inside = !c.source.starts_with('/')
-                && !c.source.contains(':')
-                && !c.source.split('/').any(|part| part == "..");
-            let fmu_path = archive.path().join(&c.source);
-            if !inside || !fmu_path.is_file() {
-                return Err(bad(format!(
-                    "component '{}': its source '{}' is not in the archive",
-                    c.name, c.source
-                )));
-            }
-            let fmu = UnpackedFmu::open(&fmu_path).map_err(|e| {
-                bad(format!(
-                    "component '{}' ({}): {}",
-                    c.name,
-                    c.source,
-                    e.to_string()
-                        .replace(&fmu_path.display().to_string(), "the FMU")
-                ))
-            })?;
-            let mut bound = Vec::new();
-            for binding in &c.bindings {
-                bound.extend(
-                    ssp::parse_ssv(&read(binding)?).map_err(|m| bad(format!("{binding}: {m}")))?,
-                );
-            }
-            components.push(Component {
-                name: c.name.clone(),
-                prefix: format!("{}.", c.name),
-                md: fmu.model_description.clone(),
-                fmu: Some(fmu),
-                bound,
-            });
+            components.push(system_component(archive.path(), c, &read, &bad)?);
         }
         if components.is_empty() {
             return Err(bad("the system has no components".into()));
@@ -210,6 +191,47 @@ impl Model {
             .iter()
             .all(|c| c.md.can_handle_variable_step)
     }
+}
+
+/// The system's component `c`: its FMU (a path inside the archive unpacked at `root`: nothing
+/// absolute, no '..', no other scheme) and the values its bindings give. `read` reads a file of
+/// the archive, `bad` makes the archive's error.
+fn system_component(
+    root: &Path,
+    c: &ssp::SsdComponent,
+    read: &dyn Fn(&str) -> Result<String, RunError>,
+    bad: &dyn Fn(String) -> RunError,
+) -> Result<Component, RunError> {
+    let inside = !c.source.starts_with('/')
+        && !c.source.contains(':')
+        && !c.source.split('/').any(|part| part == "..");
+    let fmu_path = root.join(&c.source);
+    if !inside || !fmu_path.is_file() {
+        return Err(bad(format!(
+            "component '{}': its source '{}' is not in the archive",
+            c.name, c.source
+        )));
+    }
+    let fmu = UnpackedFmu::open(&fmu_path).map_err(|e| {
+        bad(format!(
+            "component '{}' ({}): {}",
+            c.name,
+            c.source,
+            e.to_string()
+                .replace(&fmu_path.display().to_string(), "the FMU")
+        ))
+    })?;
+    let mut bound = Vec::new();
+    for binding in &c.bindings {
+        bound.extend(ssp::parse_ssv(&read(binding)?).map_err(|m| bad(format!("{binding}: {m}")))?);
+    }
+    Ok(Component {
+        name: c.name.clone(),
+        prefix: format!("{}.", c.name),
+        md: fmu.model_description.clone(),
+        fmu: Some(fmu),
+        bound,
+    })
 }
 
 /// Up to three names closest to `name` (by edit distance), for "did you mean".

@@ -84,7 +84,37 @@ pub(super) struct Plan {
     pub(super) times: Vec<f64>,
 }
 
+/// The run's plan: the experiment, the start values, the input file and the recorded
+/// variables, each checked against the model before any FMU's code is loaded, and the
+/// communication points.
 pub(super) fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError> {
+    let Experiment { start, stop, step } = experiment(model, options)?;
+    let starts = start_values(model, options)?;
+    let input = input_table(model, options)?;
+    let recorded = recorded(model, options);
+    let events = input.as_ref().map(InputTable::events).unwrap_or_default();
+    let times = schedule(start, stop, step, &events, model.can_vary_step());
+    Ok(Plan {
+        start,
+        stop,
+        step,
+        starts,
+        input,
+        recorded,
+        times,
+    })
+}
+
+/// The run's experiment: start and stop times and the communication step.
+struct Experiment {
+    start: f64,
+    stop: f64,
+    step: f64,
+}
+
+/// The options' experiment, else the model's default one, else `0`, `start + 1` and fmpy's
+/// round step; checked (finite, stop after start, a positive step, at most 10⁸ steps).
+fn experiment(model: &Model, options: &RunOptions) -> Result<Experiment, RunError> {
     let start = options.start.or(model.default_start).unwrap_or(0.0);
     let stop = options.stop.or(model.default_stop).unwrap_or(start + 1.0);
     if !start.is_finite() || !stop.is_finite() {
@@ -112,7 +142,27 @@ pub(super) fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError
             ((stop - start) / step).ceil()
         )));
     }
+    Ok(Experiment { start, stop, step })
+}
 
+/// Per component, its start values: the system's parameter bindings, then the options'
+/// `--set NAME=VALUE` (a later one replacing an earlier value of the same variable).
+fn start_values(
+    model: &Model,
+    options: &RunOptions,
+) -> Result<Vec<Vec<(ScalarVariable, Value)>>, RunError> {
+    let mut starts = bound_values(model)?;
+    for set in &options.sets {
+        let (i, variable, value) = set_value_of(model, set)?;
+        starts[i].retain(|(v, _)| v.name != variable.name);
+        starts[i].push((variable, value));
+    }
+    Ok(starts)
+}
+
+/// Per component, the values its parameter set binds (an SSP system's), each checked against
+/// the component's modelDescription.
+fn bound_values(model: &Model) -> Result<Vec<Vec<(ScalarVariable, Value)>>, RunError> {
     let mut starts: Vec<Vec<(ScalarVariable, Value)>> = vec![Vec::new(); model.components.len()];
     for (i, c) in model.components.iter().enumerate() {
         for (name, value) in &c.bound {
@@ -134,30 +184,37 @@ pub(super) fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError
             starts[i].push((variable.clone(), value));
         }
     }
-    for set in &options.sets {
-        let (name, text) = set
-            .split_once('=')
-            .ok_or_else(|| RunError::Config(format!("--set '{set}': expected NAME=VALUE")))?;
-        let name = name.trim();
-        let (i, variable) = model
-            .find(name)
-            .ok_or_else(|| model.unknown("--set", name, model.all_variable_names()))?;
-        if !settable(variable) {
-            return Err(RunError::Config(format!(
-                "--set '{name}': a {:?} variable of variability '{}' cannot be given a start value",
-                variable.causality, variable.variability
-            )));
-        }
-        let value = parse_value(variable, text).map_err(|expected| {
-            RunError::Config(format!(
-                "--set '{name}': '{text}' is not {expected} ('{name}' is {:?})",
-                variable.scalar_type
-            ))
-        })?;
-        starts[i].retain(|(v, _)| v.name != variable.name);
-        starts[i].push((variable.clone(), value));
-    }
+    Ok(starts)
+}
 
+/// One `--set NAME=VALUE`: the component, the variable (one that takes a start value) and the
+/// value parsed as its type.
+fn set_value_of(model: &Model, set: &str) -> Result<(usize, ScalarVariable, Value), RunError> {
+    let (name, text) = set
+        .split_once('=')
+        .ok_or_else(|| RunError::Config(format!("--set '{set}': expected NAME=VALUE")))?;
+    let name = name.trim();
+    let (i, variable) = model
+        .find(name)
+        .ok_or_else(|| model.unknown("--set", name, model.all_variable_names()))?;
+    if !settable(variable) {
+        return Err(RunError::Config(format!(
+            "--set '{name}': a {:?} variable of variability '{}' cannot be given a start value",
+            variable.causality, variable.variability
+        )));
+    }
+    let value = parse_value(variable, text).map_err(|expected| {
+        RunError::Config(format!(
+            "--set '{name}': '{text}' is not {expected} ('{name}' is {:?})",
+            variable.scalar_type
+        ))
+    })?;
+    Ok((i, variable.clone(), value))
+}
+
+/// The options' input file, read against the model; no column may drive an input a connection
+/// already feeds, nor a String input.
+fn input_table(model: &Model, options: &RunOptions) -> Result<Option<InputTable>, RunError> {
     let input = options
         .input
         .as_deref()
@@ -191,7 +248,12 @@ pub(super) fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError
             }
         }
     }
+    Ok(input)
+}
 
+/// The variables recorded: every component's outputs (and its locals with `output_all`), each
+/// as (component, variable, its name in the run).
+fn recorded(model: &Model, options: &RunOptions) -> Vec<(usize, ScalarVariable, String)> {
     let mut recorded = Vec::new();
     for (i, c) in model.components.iter().enumerate() {
         for v in &c.md.variables {
@@ -202,18 +264,7 @@ pub(super) fn plan(model: &Model, options: &RunOptions) -> Result<Plan, RunError
             }
         }
     }
-
-    let events = input.as_ref().map(InputTable::events).unwrap_or_default();
-    let times = schedule(start, stop, step, &events, model.can_vary_step());
-    Ok(Plan {
-        start,
-        stop,
-        step,
-        starts,
-        input,
-        recorded,
-        times,
-    })
+    recorded
 }
 
 #[cfg(test)]
