@@ -39,12 +39,12 @@ fn linear_shear_of(
     fmu: &Path,
     parameters: &BTreeMap<String, ParameterValue>,
 ) -> Option<ShearParameters> {
-    let (resource, description) = shear_archive(fmu)?;
+    let (resource, guid) = shear_archive(fmu)?;
     let params = resource.parameters().ok()?;
     let mut model = ShearModel::for_parameters(params);
     let info = model.table();
     // The shear model's own description of that structure, or another FMU.
-    if !description.contains(&format!("guid=\"{}\"", info.guid)) {
+    if guid != info.guid {
         return None;
     }
     for (name, value) in parameters {
@@ -183,12 +183,7 @@ impl LinearFit {
 /// `modelDescription.xml`; None when either cannot be read.
 fn shear_archive(fmu: &Path) -> Option<(StructureResource, String)> {
     let mut archive = zip::ZipArchive::new(std::fs::File::open(fmu).ok()?).ok()?;
-    let mut description = String::new();
-    archive
-        .by_name("modelDescription.xml")
-        .ok()?
-        .read_to_string(&mut description)
-        .ok()?;
+    let guid = description_guid(archive.by_name("modelDescription.xml").ok()?)?;
     let mut text = String::new();
     let resource = match archive.by_name(RESOURCE) {
         Ok(mut entry) => {
@@ -201,7 +196,28 @@ fn shear_archive(fmu: &Path) -> Option<(StructureResource, String)> {
         },
         Err(_) => return None,
     };
-    Some((resource, description))
+    Some((resource, guid))
+}
+
+/// The `guid` of a modelDescription's root element, read up to that element only (a 20-storey
+/// shear model's description is 621 kB; its root is in the first few hundred bytes).
+fn description_guid(description: impl Read) -> Option<String> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_reader(std::io::BufReader::new(description));
+    let mut buf = Vec::new();
+    loop {
+        match reader.read_event_into(&mut buf).ok()? {
+            Event::Start(e) | Event::Empty(e) => {
+                if e.name().as_ref() != b"fmiModelDescription" {
+                    return None;
+                }
+                let guid = e.try_get_attribute("guid").ok()??;
+                return Some(guid.unescape_value().ok()?.into_owned());
+            }
+            Event::Eof => return None,
+            _ => buf.clear(),
+        }
+    }
 }
 
 /// The index of `name` among `m1..mN, c1..cN, k1..kN` (the sensitivities' order).
@@ -331,6 +347,52 @@ fn band_along(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The root's guid, read without the rest; anything else at the root is not a description.
+    #[test]
+    fn the_guid_is_read_from_the_root_alone() {
+        let xml = "<?xml version=\"1.0\"?>\n<!-- c -->\n<fmiModelDescription fmiVersion=\"2.0\" \
+                   guid=\"{a&amp;b}\"><ModelVariables>";
+        assert_eq!(description_guid(xml.as_bytes()).as_deref(), Some("{a&b}"));
+        assert_eq!(description_guid("<other guid=\"{x}\"/>".as_bytes()), None);
+        assert_eq!(description_guid("<fmiModelDescription/>".as_bytes()), None);
+        assert_eq!(description_guid("".as_bytes()), None);
+    }
+
+    /// The default twin's FMU is the linear shear model; the same archive with another GUID in
+    /// its description is not taken for it.
+    #[test]
+    fn the_shear_fmu_is_recognised_by_its_guid() {
+        let twin = Twin::default_twin().expect("the default twin");
+        assert!(
+            linear_shear(&twin).is_some(),
+            "the default twin is the linear model"
+        );
+        let physics = twin.component(PHYSICS).expect("physics");
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let altered = dir.path().join("altered.fmu");
+        let mut source =
+            zip::ZipArchive::new(std::fs::File::open(&physics.fmu_path).expect("open"))
+                .expect("an archive");
+        let mut out = zip::ZipWriter::new(std::fs::File::create(&altered).expect("create"));
+        for i in 0..source.len() {
+            let mut entry = source.by_index(i).expect("entry");
+            let name = entry.name().to_owned();
+            let mut bytes = Vec::new();
+            entry.read_to_end(&mut bytes).expect("read");
+            if name == "modelDescription.xml" {
+                let text = String::from_utf8(bytes).expect("UTF-8");
+                let at = text.find("guid=\"{").expect("a guid") + 7;
+                let other = if &text[at..=at] == "0" { "1" } else { "0" };
+                bytes = format!("{}{other}{}", &text[..at], &text[at + 1..]).into_bytes();
+            }
+            out.start_file(name, zip::write::SimpleFileOptions::default())
+                .expect("start");
+            std::io::Write::write_all(&mut out, &bytes).expect("write");
+        }
+        out.finish().expect("finish");
+        assert!(linear_shear_of(&altered, &physics.parameters).is_none());
+    }
 
     /// Twelve storeys, 36 directions (two groups): the band in groups is the band of one pass
     /// to rounding (the sums only added in another order; bar 1e-12 of each sample's value).

@@ -31,7 +31,6 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-
 use crate::cosim::import::{self, Fmu, ImportError, Instance, ScalarType, UnpackLimits};
 pub use crate::cosim::ssp::Connection;
 use crate::cosim::ssp::{self, parse_ssd, SsvValue};
