@@ -194,6 +194,18 @@ impl Workspace {
             });
         }
 
+        let gradient = self.gradient(&z, &alpha, noise_variance);
+        Ok(LikelihoodGradient {
+            nlml,
+            gradient,
+            jitter,
+        })
+    }
+
+    /// The NLML's gradient in the log length-scales, then the log signal and noise variances,
+    /// from the factor, `K_f` and its length-scale factor in the workspace (`α = K⁻¹y`).
+    fn gradient(&mut self, z: &Mat<f64>, alpha: &[f64], noise_variance: f64) -> Vec<f64> {
+        let n = alpha.len();
         // Lower triangle of K⁻¹ = L⁻ᵀ L⁻¹.
         inverse::inverse(
             self.inverse.as_mut(),
@@ -237,51 +249,52 @@ impl Workspace {
             }
             row_sums[j] += sum_j;
         }
-        // A Z with A symmetric, zero diagonal, held in the strict lower triangle.
-        let mut az = Mat::zeros(n, dim);
-        triangular::matmul(
-            az.as_mut(),
-            BlockStructure::Rectangular,
-            Accum::Replace,
-            self.inverse.as_ref(),
-            BlockStructure::StrictTriangularLower,
-            z.as_ref(),
-            BlockStructure::Rectangular,
-            1.0,
-            Par::Seq,
-        );
-        triangular::matmul(
-            az.as_mut(),
-            BlockStructure::Rectangular,
-            Accum::Add,
-            self.inverse.as_ref().transpose(),
-            BlockStructure::StrictTriangularUpper,
-            z.as_ref(),
-            BlockStructure::Rectangular,
-            1.0,
-            Par::Seq,
-        );
-        clear_upper_vector_state();
-        let g_lengthscale: Vec<f64> = (0..dim)
-            .map(|t| {
-                let zt = z.col_as_slice(t);
-                let azt = az.col_as_slice(t);
-                zt.iter()
-                    .zip(azt)
-                    .zip(&row_sums)
-                    .map(|((z, az), s)| s * z * z - z * az)
-                    .sum()
-            })
-            .collect();
-        let mut gradient = g_lengthscale;
+        let mut gradient = lengthscale_gradient(&self.inverse, z, &row_sums);
         gradient.push(0.5 * g_signal);
         gradient.push(0.5 * g_noise);
-        Ok(LikelihoodGradient {
-            nlml,
-            gradient,
-            jitter,
-        })
+        gradient
     }
+}
+
+/// The length-scales' part of the gradient: `Σᵢ sᵢ zᵢₜ² − zᵢₜ (A Z)ᵢₜ` per input dimension `t`,
+/// `A` symmetric with a zero diagonal held in the strict lower triangle of `a`, `s` its row sums.
+fn lengthscale_gradient(a: &Mat<f64>, z: &Mat<f64>, row_sums: &[f64]) -> Vec<f64> {
+    let (n, dim) = (z.nrows(), z.ncols());
+    let mut az = Mat::zeros(n, dim);
+    triangular::matmul(
+        az.as_mut(),
+        BlockStructure::Rectangular,
+        Accum::Replace,
+        a.as_ref(),
+        BlockStructure::StrictTriangularLower,
+        z.as_ref(),
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+    triangular::matmul(
+        az.as_mut(),
+        BlockStructure::Rectangular,
+        Accum::Add,
+        a.as_ref().transpose(),
+        BlockStructure::StrictTriangularUpper,
+        z.as_ref(),
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+    clear_upper_vector_state();
+    (0..dim)
+        .map(|t| {
+            let zt = z.col_as_slice(t);
+            let azt = az.col_as_slice(t);
+            zt.iter()
+                .zip(azt)
+                .zip(row_sums)
+                .map(|((z, az), s)| s * z * z - z * az)
+                .sum()
+        })
+        .collect()
 }
 
 /// Cholesky factor of `K = K_f + (noise_variance + jitter) I` into the lower triangle of `out`
