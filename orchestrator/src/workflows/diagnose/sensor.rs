@@ -14,6 +14,13 @@ use super::{Action, Diagnosis, Gates};
 use crate::evaluation::stats::nmse;
 use crate::twin::data::Measurement;
 
+/// The fault model's parameters: gain, offset and drift (three whatever the building).
+const PARAMETERS: usize = 3;
+/// A row of the fault model's design matrix, or its gain, offset and drift.
+type Parameters = nalgebra::SVector<f64, PARAMETERS>;
+/// The normal matrix XᵀX of the fault model's least squares.
+type Normal = nalgebra::SMatrix<f64, PARAMETERS, PARAMETERS>;
+
 /// A channel's fitted fault: `measured ≈ gain·predicted + offset + drift·(t − t₀)`, `t₀` the
 /// record's first sample time.
 #[derive(Clone, Debug, Serialize)]
@@ -69,32 +76,28 @@ pub fn fit_channel(
     after: &[usize],
 ) -> Option<SensorFit> {
     let t0 = time.first().copied().unwrap_or(0.0);
-    let row = |k: usize| [predicted[k], 1.0, time[k] - t0];
+    let row = |k: usize| Parameters::new(predicted[k], 1.0, time[k] - t0);
     // Normal equations XᵀX b = Xᵀy.
-    let mut a = [[0.0; 3]; 3];
-    let mut b = [0.0; 3];
+    let mut a = Normal::zeros();
+    let mut b = Parameters::zeros();
     for &k in fitted {
         let x = row(k);
-        for i in 0..3 {
-            b[i] += x[i] * measured[k];
-            for j in 0..3 {
-                a[i][j] += x[i] * x[j];
-            }
-        }
+        b += x * measured[k];
+        a += x * x.transpose();
     }
-    let inv = invert3(&a)?;
-    let beta: [f64; 3] = [0, 1, 2].map(|i| (0..3).map(|j| inv[i][j] * b[j]).sum());
+    let inv = invert(&a)?;
+    let beta = inv * b;
     let rss: f64 = fitted
         .iter()
         .map(|&k| {
             let x = row(k);
-            let p: f64 = (0..3).map(|i| x[i] * beta[i]).sum();
+            let p = x.dot(&beta);
             (measured[k] - p).powi(2)
         })
         .sum();
-    let dof = fitted.len().saturating_sub(3).max(1) as f64;
+    let dof = fitted.len().saturating_sub(PARAMETERS).max(1) as f64;
     let s2 = rss / dof;
-    let sd = [0, 1, 2].map(|i| (s2 * inv[i][i]).max(0.0).sqrt());
+    let sd = inv.diagonal().map(|v| (s2 * v).max(0.0).sqrt());
     let model = |k: usize| beta[0] * predicted[k] + beta[1] + beta[2] * (time[k] - t0);
     let score = |idx: &[usize]| {
         let y: Vec<f64> = idx.iter().map(|&k| measured[k]).collect();
@@ -123,22 +126,15 @@ pub fn fit_channel(
     })
 }
 
-fn invert3(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
-        - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-    let scale = a.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
-    if !(det.is_finite() && det.abs() > 1e-14 * scale.powi(3)) {
+/// The inverse of the normal matrix; None when it is singular for its scale (a constant
+/// prediction).
+fn invert(a: &Normal) -> Option<Normal> {
+    let det = a.determinant();
+    let scale = a.amax();
+    if !(det.is_finite() && det.abs() > 1e-14 * scale.powi(PARAMETERS as i32)) {
         return None;
     }
-    // The adjugate: inv[i][j] = cofactor(j, i) / det (cyclic indices).
-    Some([0, 1, 2].map(|i| {
-        [0, 1, 2].map(|j| {
-            let (r1, r2) = ((j + 1) % 3, (j + 2) % 3);
-            let (c1, c2) = ((i + 1) % 3, (i + 2) % 3);
-            (a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]) / det
-        })
-    }))
+    a.try_inverse()
 }
 
 /// Stage 3a, faulty sensors: per channel, the measured as gain·ŷ + offset + drift·t of the
