@@ -136,8 +136,9 @@
 //!   responses written, each in its unit; default an accelerometer per floor in m/s²; the noise
 //!   `fraction`/`sd` one value or one per channel, `sd` in SI). Effects at any site of the
 //!   building (`contact` `[L, L+1]` for L = 0..N−1, `cubic` storeys 1..N, `friction` floors
-//!   1..N); hysteresis, quadratic damping and a controller in the loop are written for the
-//!   paper's layout and refused elsewhere, naming the field. Under `"base"` the excitation column
+//!   1..N, hysteresis and quadratic damping at any storey or floor); a controller in the loop is
+//!   written for the paper's layout (its force at the shaker's floor) and refused elsewhere.
+//!   Under `"base"` the excitation column
 //!   is `ground_acc` (m/s²), accelerometers read the absolute acceleration, and the signal is
 //!   [`ground_motion`]: Gaussian white noise shaped by the Kanai–Tajimi filter
 //!   (`"ground_motion": {"soil_hz": 2.5, "soil_damping": 0.6, ...}`: firm soil) in the force's
@@ -230,13 +231,12 @@ pub const DEFAULT_OVERSAMPLE: u32 = 64;
 pub const DEFAULT_FORCE_RMS: f64 = 0.25;
 pub const DEFAULT_NOISE_FRACTION: f64 = 0.03;
 pub const DEFAULT_WINDOW_RAMP: f64 = 0.5;
-/// The structure `data/dataset1.csv` suggests: the MAP of `twin calibrate` on it (NMSE 0.05 /
-/// 0.10 / 0.06 %), rounded. The reference paper's Table 1 MAP for its dataset one (m = {4.908,
-/// 5.577, 5.187}, c = {3.307, 0.002, 0}, k = {4051, 4320, 4964}) has the same k/m ratios but far
-/// less damping, and misses this project's dataset1 (NMSE > 100 %).
-pub const DEFAULT_MASS: [f64; 3] = [4.637, 5.284, 4.920];
-pub const DEFAULT_DAMPING: [f64; 3] = [8.14, 3.65, 2.56];
-pub const DEFAULT_STIFFNESS: [f64; 3] = [3850.0, 4100.0, 4681.0];
+/// The paper rig's scenario is made of the structure `data/dataset1.csv` shows (the rig's
+/// [`::structure::paper::DATASET1_MASS`] and the rest).
+pub use ::structure::paper::{
+    DATASET1_DAMPING as DEFAULT_DAMPING, DATASET1_MASS as DEFAULT_MASS,
+    DATASET1_STIFFNESS as DEFAULT_STIFFNESS,
+};
 /// White-noise points per sample interval on which the force is generated.
 pub const GENERATOR_OVERSAMPLE: usize = 8;
 /// Defaults of the `hysteresis` effect (Bouc–Wen): k_h N/m, z_y m, β, γ, n.
@@ -283,7 +283,7 @@ pub struct SynthRecord {
 pub struct HysteresisTrace {
     /// Index in the scenario's effects.
     pub effect: usize,
-    /// 1..3.
+    /// 1..N.
     pub storey: usize,
     /// The hysteretic variable z, m (the storey force is `k_h · z`).
     pub z: Vec<f64>,
@@ -294,28 +294,15 @@ pub struct HysteresisTrace {
 }
 
 /// The floor accelerations an accelerometer reads at the model's state under the excitation
-/// `excitation` (and the model's control force): the paper's layout through the hysteretic
-/// structure (as records were always made), any other structure from the model itself, plus the
-/// ground acceleration under ground motion.
+/// `excitation` (and the model's control force), through the effects beside the model: relative
+/// to the ground, plus the ground acceleration under ground motion.
 fn floor_accelerations(
     s: &Scenario,
     hysteretic: &Hysteretic,
     model: &ShearModel,
     excitation: f64,
 ) -> Vec<f64> {
-    if s.is_paper_layout() {
-        return hysteretic
-            .acceleration(model, excitation - model.control_force.value)
-            .to_vec();
-    }
-    let mut a = vec![0.0; model.storeys()];
-    model.accelerations_into(
-        &model.displacement,
-        &model.velocity,
-        excitation,
-        model.control_force.value,
-        &mut a,
-    );
+    let mut a = hysteretic.acceleration(model, excitation);
     if s.excitation == Excitation::Base {
         for x in &mut a {
             *x += excitation;
@@ -378,7 +365,7 @@ pub fn synth_controlled(
     control: Option<InLoopController>,
 ) -> Result<(SynthRecord, Truth)> {
     s.validate("scenario")?;
-    if control.is_some() && !s.is_paper_layout() {
+    if control.is_some() && !::structure::paper::is_layout(s.storeys(), s.excitation) {
         return Err(SynthError::Scenario(format!(
             "a controller in the loop is written for the paper's layout (3 storeys, a force at floor 1), not {} storeys under {}",
             s.storeys(),
@@ -547,7 +534,7 @@ impl ControlLoop {
         time: f64,
     ) -> Result<()> {
         // The sensors read the structure as it is, under the force held so far.
-        let a = hysteretic.acceleration(model, force - model.control_force.value);
+        let a = hysteretic.acceleration(model, force);
         let measured: Vec<f64> = a
             .iter()
             .zip(self.sensor_sd.iter())

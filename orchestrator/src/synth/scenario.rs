@@ -839,12 +839,6 @@ impl Scenario {
         }
     }
 
-    /// Whether this is the paper's layout (3 storeys, a force at floor 1), which the hysteresis,
-    /// the quadratic damping and a controller in the loop are written for.
-    pub fn is_paper_layout(&self) -> bool {
-        ::structure::paper::is_layout(self.storeys(), self.excitation)
-    }
-
     /// Check the ranges; `origin` names the source (a file, or "scenario") in the errors.
     pub fn validate(&self, origin: &str) -> Result<()> {
         let at = Loc {
@@ -854,7 +848,6 @@ impl Scenario {
         let n = self.check_sampling(&at)?;
         let n_storeys = self.check_structure(&at)?;
         let channels = self.check_channels(&at, n_storeys)?;
-        self.check_layout(&at, n_storeys)?;
         self.check_force(&at, n)?;
         self.check_noise(&at, channels)?;
         self.check_effects(&at, n_storeys)?;
@@ -985,22 +978,6 @@ impl Scenario {
             }
         }
         Ok(channels.len())
-    }
-
-    /// Outside the paper's layout, only the library's effects (hysteresis and quadratic damping
-    /// are written for that layout).
-    fn check_layout(&self, at: &Loc, n_storeys: usize) -> Result<()> {
-        if !self.is_paper_layout() {
-            if let Some(i) = self.effects.iter().position(|e| !e.in_library()) {
-                return Err(at.field("effects").index(i).error(format!(
-                    "{} is written for the paper's layout (3 storeys, a force at floor 1), not {} storeys under {}",
-                    self.effects[i].kind(),
-                    n_storeys,
-                    self.excitation.describe()
-                )));
-            }
-        }
-        Ok(())
     }
 
     /// The force: its level, a band below the Nyquist frequency that holds at least one of the
@@ -1177,18 +1154,18 @@ fn check_effect(at: &Loc, e: &EffectSpec, n_storeys: usize) -> Result<()> {
                     .error(format!("floor {floor} is not one of 1..{n_storeys}")));
             }
         }
-        EffectSpec::Hysteresis { .. } => check_hysteresis(at, e)?,
+        EffectSpec::Hysteresis { .. } => check_hysteresis(at, e, n_storeys)?,
         EffectSpec::QuadraticDamping { site, coefficient } => {
             match site {
-                DampingSite::Storey(s) if !(1..=3).contains(&s) => {
+                DampingSite::Storey(s) if !(1..=n_storeys).contains(&s) => {
                     return Err(at
                         .field("location")
-                        .error(format!("storey {s} is not 1, 2 or 3")))
+                        .error(format!("storey {s} is not one of 1..{n_storeys}")))
                 }
-                DampingSite::Floor(f) if !(1..=3).contains(&f) => {
+                DampingSite::Floor(f) if !(1..=n_storeys).contains(&f) => {
                     return Err(at
                         .field("floor")
-                        .error(format!("floor {f} is not 1, 2 or 3")))
+                        .error(format!("floor {f} is not one of 1..{n_storeys}")))
                 }
                 _ => {}
             }
@@ -1198,9 +1175,9 @@ fn check_effect(at: &Loc, e: &EffectSpec, n_storeys: usize) -> Result<()> {
     Ok(())
 }
 
-/// A hysteresis effect (at `at`): storey 1, 2 or 3, positive stiffness and yield drift, finite
-/// β and γ with β + γ > 0, an exponent ≥ 1.
-fn check_hysteresis(at: &Loc, e: &EffectSpec) -> Result<()> {
+/// A hysteresis effect (at `at`): a storey of the `n_storeys`, positive stiffness and yield
+/// drift, finite β and γ with β + γ > 0, an exponent ≥ 1.
+fn check_hysteresis(at: &Loc, e: &EffectSpec, n_storeys: usize) -> Result<()> {
     let EffectSpec::Hysteresis {
         storey,
         stiffness,
@@ -1212,10 +1189,10 @@ fn check_hysteresis(at: &Loc, e: &EffectSpec) -> Result<()> {
     else {
         return Ok(());
     };
-    if !(1..=3).contains(&storey) {
+    if !(1..=n_storeys).contains(&storey) {
         return Err(at
             .field("location")
-            .error(format!("storey {storey} is not 1, 2 or 3")));
+            .error(format!("storey {storey} is not one of 1..{n_storeys}")));
     }
     positive(at.field("stiffness"), stiffness, true)?;
     positive(at.field("yield"), yield_drift, true)?;
@@ -1273,7 +1250,7 @@ pub(super) fn parse_effect(at: &Loc, value: &Value, storeys: usize) -> Result<Ef
             .and_then(|l| l.storey(storeys))
             .ok_or_else(|| {
                 loc.error(format!(
-            "{location:?} is not a storey; expected [1], [2] or [3] (storey 1 = ground–floor 1) or two adjacent floors"
+            "{location:?} is not a storey; expected [1]..[{storeys}] (storey 1 = ground–floor 1) or two adjacent floors"
         ))
             })
     };
@@ -1281,11 +1258,11 @@ pub(super) fn parse_effect(at: &Loc, value: &Value, storeys: usize) -> Result<Ef
         let q: QuadraticDampingFile = read(at, value)?;
         let site = match (head.location, q.floor) {
             (Some(location), None) => DampingSite::Storey(storey_or_adjacent(&location.floors())?),
-            (None, Some(f)) if (1..=3).contains(&f) => DampingSite::Floor(small(f)),
+            (None, Some(f)) if (1..=storeys as u64).contains(&f) => DampingSite::Floor(small(f)),
             (None, Some(f)) => {
                 return Err(at
                     .field("floor")
-                    .error(format!("floor {f} is not 1, 2 or 3")))
+                    .error(format!("floor {f} is not one of 1..{storeys}")))
             }
             (Some(_), Some(_)) => {
                 return Err(at.error(
@@ -1294,7 +1271,7 @@ pub(super) fn parse_effect(at: &Loc, value: &Value, storeys: usize) -> Result<Ef
                 ))
             }
             (None, None) => return Err(loc.error(
-                "is missing; give `location` (a storey: [1], [2], [3] or two adjacent floors) or `floor` (1, 2 or 3, damped to the ground)".into(),
+                format!("is missing; give `location` (a storey: [1]..[{storeys}] or two adjacent floors) or `floor` (1..{storeys}, damped to the ground)"),
             )),
         };
         return Ok(EffectSpec::QuadraticDamping {

@@ -2,13 +2,14 @@
 //! the quadratic (velocity-squared) damping, effects the FMU's library lacks.
 
 use ::structure::effects::{add_storey_force, drift};
+use ::structure::Excitation;
 use fmu_shear::ShearModel;
 use numerics::ode::rk4_with_events;
 
 use super::scenario::{DampingSite, EffectSpec};
 
-/// Displacements or velocities of the paper rig's three floors.
-type Floors = [f64; 3];
+/// Displacements or velocities of the building's floors 1..N.
+type Floors = [f64];
 
 // ---------------------------------------------------------------------------------------------
 // Quadratic damping: not in the FMU's library, integrated here beside the model
@@ -92,31 +93,70 @@ impl BoucWen {
     }
 }
 
-/// At most one hysteresis effect per storey (validation refuses two at one storey).
-const MAX_LAWS: usize = 3;
-/// At most one quadratic damper per storey and per floor (validation refuses two at one site).
-const MAX_DAMPERS: usize = 6;
-/// The state beside the model: `[y1..y3, ẏ1..ẏ3, z per law, ∫ k_h z dδ per law, ∫ c₂ |v|³ dt
-/// per damper]`. Entries of absent laws and dampers stay 0 (their rates are 0), so the other
-/// entries are stepped exactly as without them.
-type HState = [f64; 6 + 2 * MAX_LAWS + MAX_DAMPERS];
-const Z0: usize = 6;
-const W0: usize = 6 + MAX_LAWS;
-const E0: usize = 6 + 2 * MAX_LAWS;
+/// The state beside the model: `[y1..yN, ẏ1..ẏN, z per law, ∫ k_h z dδ per law, ∫ c₂ |v|³ dt
+/// per damper]` (at most one law per storey and one damper per storey and per floor: validation
+/// refuses two at one site).
+type HState = Vec<f64>;
+
+/// Where each part of [`HState`] starts: the velocities, the laws' z, their work and the
+/// dampers' energies.
+#[derive(Clone, Copy)]
+struct Offsets {
+    v: usize,
+    z: usize,
+    w: usize,
+    e: usize,
+    len: usize,
+}
+
+/// The excitation and the control force over a step, each a ramp `value + slope·τ`; when the
+/// control force acts at the floor the force excites, their difference is one ramp (the net
+/// force on that floor) and the control none, as [`ShearModel::advance`] steps such a building.
+#[derive(Clone, Copy)]
+struct Inputs {
+    excitation: (f64, f64),
+    control: (f64, f64),
+}
+
+impl Inputs {
+    fn of(model: &ShearModel) -> Inputs {
+        let (f, c) = (&model.force, &model.control_force);
+        match model.params.excitation {
+            Excitation::Force { floor } if floor == model.params.control_floor => Inputs {
+                excitation: (f.value - c.value, f.slope - c.slope),
+                control: (0.0, 0.0),
+            },
+            _ => Inputs {
+                excitation: (f.value, f.slope),
+                control: (c.value, c.slope),
+            },
+        }
+    }
+
+    /// The excitation and the control force at `τ` into the step.
+    #[inline]
+    fn at(&self, tau: f64) -> (f64, f64) {
+        (
+            self.excitation.0 + self.excitation.1 * tau,
+            self.control.0 + self.control.1 * tau,
+        )
+    }
+}
 
 /// The hysteresis effects' and quadratic dampers' states, and the structure's steps with them.
 /// Without either it steps the model by [`ShearModel::advance`], exactly as before they
 /// existed.
 pub(super) struct Hysteretic {
     pub(super) laws: Vec<BoucWen>,
-    pub(super) z: [f64; MAX_LAWS],
-    pub(super) work: [f64; MAX_LAWS],
-    pub(super) max_abs_z: [f64; MAX_LAWS],
+    /// Per law.
+    pub(super) z: Vec<f64>,
+    pub(super) work: Vec<f64>,
+    pub(super) max_abs_z: Vec<f64>,
     pub(super) dampers: Vec<QuadraticDamper>,
     /// Per damper, the energy it dissipated so far, `∫ c₂ |v|³ dt`, J.
-    pub(super) dissipated: [f64; MAX_DAMPERS],
+    pub(super) dissipated: Vec<f64>,
     /// Per damper, the largest |v| it saw on the fine grid, m/s.
-    pub(super) max_abs_velocity: [f64; MAX_DAMPERS],
+    pub(super) max_abs_velocity: Vec<f64>,
 }
 
 impl Hysteretic {
@@ -132,8 +172,7 @@ impl Hysteretic {
                 }),
                 _ => None,
             })
-            .take(MAX_DAMPERS)
-            .collect();
+            .collect::<Vec<_>>();
         let laws = effects
             .iter()
             .enumerate()
@@ -156,16 +195,15 @@ impl Hysteretic {
                 }),
                 _ => None,
             })
-            .take(MAX_LAWS)
-            .collect();
+            .collect::<Vec<_>>();
         Hysteretic {
+            z: vec![0.0; laws.len()],
+            work: vec![0.0; laws.len()],
+            max_abs_z: vec![0.0; laws.len()],
             laws,
-            z: [0.0; MAX_LAWS],
-            work: [0.0; MAX_LAWS],
-            max_abs_z: [0.0; MAX_LAWS],
+            dissipated: vec![0.0; dampers.len()],
+            max_abs_velocity: vec![0.0; dampers.len()],
             dampers,
-            dissipated: [0.0; MAX_DAMPERS],
-            max_abs_velocity: [0.0; MAX_DAMPERS],
         }
     }
 
@@ -174,81 +212,91 @@ impl Hysteretic {
         self.laws.is_empty() && self.dampers.is_empty()
     }
 
+    /// Where each part of the state beside a model of `n` storeys starts.
+    fn offsets(&self, n: usize) -> Offsets {
+        let (v, z) = (n, 2 * n);
+        let w = z + self.laws.len();
+        let e = w + self.laws.len();
+        Offsets {
+            v,
+            z,
+            w,
+            e,
+            len: e + self.dampers.len(),
+        }
+    }
+
     /// Subtract the hysteretic storey forces `k_h z` and the dampers' forces at the velocities
     /// `v` from the accelerations `a`; the power each damper dissipates, in `power`.
     #[inline]
     fn add_to(&self, model: &ShearModel, z: &[f64], v: &Floors, a: &mut Floors, power: &mut [f64]) {
-        let mut g = [0.0; 3];
+        let mut g = vec![0.0; a.len()];
         for (law, &z) in self.laws.iter().zip(z) {
             add_storey_force(law.storey, law.stiffness * z, &mut g);
         }
         for (damper, p) in self.dampers.iter().zip(power) {
             *p = damper.add_to(v, &mut g);
         }
-        for f in 0..3 {
-            a[f] -= g[f] / model.params.mass[f];
+        for (f, a) in a.iter_mut().enumerate() {
+            *a -= g[f] / model.params.mass[f];
         }
     }
 
-    /// The floor accelerations of the model's state, these z and the dampers.
-    pub(super) fn acceleration(&self, model: &ShearModel, input: f64) -> Floors {
-        let mut a = [0.0; 3];
-        model.accelerations_into(&model.displacement, &model.velocity, input, 0.0, &mut a);
+    /// The floor accelerations (relative to the ground) of the model's state and control
+    /// force under the excitation `excitation`, with these z and the dampers.
+    pub(super) fn acceleration(&self, model: &ShearModel, excitation: f64) -> Vec<f64> {
+        let mut a = vec![0.0; model.storeys()];
+        let control = model.control_force.value;
+        model.accelerations_into(
+            &model.displacement,
+            &model.velocity,
+            excitation,
+            control,
+            &mut a,
+        );
         if !self.is_empty() {
-            let mut power = [0.0; MAX_DAMPERS];
-            let v = std::array::from_fn(|i| model.velocity[i]);
-            self.add_to(model, &self.z, &v, &mut a, &mut power);
+            let mut power = vec![0.0; self.dampers.len()];
+            self.add_to(model, &self.z, &model.velocity, &mut a, &mut power);
         }
         a
     }
 
     #[inline]
-    fn rhs(&self, model: &ShearModel, x: &HState, input: f64) -> HState {
-        let y = [x[0], x[1], x[2]];
-        let v = [x[3], x[4], x[5]];
-        let mut a = [0.0; 3];
-        model.accelerations_into(&y, &v, input, 0.0, &mut a);
-        let mut dx = [0.0; 6 + 2 * MAX_LAWS + MAX_DAMPERS];
-        self.add_to(
-            model,
-            &x[Z0..Z0 + self.laws.len()],
-            &v,
-            &mut a,
-            &mut dx[E0..E0 + self.dampers.len()],
-        );
-        dx[..3].copy_from_slice(&v);
-        dx[3..6].copy_from_slice(&a);
+    fn rhs(&self, model: &ShearModel, x: &HState, inputs: (f64, f64)) -> HState {
+        let at = self.offsets(model.storeys());
+        let (y, v) = (&x[..at.v], &x[at.v..at.z]);
+        let mut dx = vec![0.0; at.len];
+        let (dy, rest) = dx.split_at_mut(at.v);
+        let (a, rest) = rest.split_at_mut(at.z - at.v);
+        model.accelerations_into(y, v, inputs.0, inputs.1, a);
+        let power = &mut rest[at.e - at.z..];
+        self.add_to(model, &x[at.z..at.w], v, a, power);
+        dy.copy_from_slice(v);
         for (i, law) in self.laws.iter().enumerate() {
-            let z = x[Z0 + i];
-            let rate = drift(&v, law.storey);
-            dx[Z0 + i] = law.z_rate(rate, z);
-            dx[W0 + i] = law.stiffness * z * rate;
+            let z = x[at.z + i];
+            let rate = drift(v, law.storey);
+            dx[at.z + i] = law.z_rate(rate, z);
+            dx[at.w + i] = law.stiffness * z * rate;
         }
         dx
     }
 
     /// Where the vector field has kinks: the contacts' gaps and each law's `δ̇ z`.
-    fn switches(&self, model: &ShearModel, x: &HState) -> ([f64; 6 + MAX_LAWS], usize) {
-        let contact = model.effects.switches(&[x[0], x[1], x[2]]);
-        let mut out = [0.0; 6 + MAX_LAWS];
-        let mut len = contact.values.len();
-        out[..len].copy_from_slice(&contact.values);
+    fn switches(&self, model: &ShearModel, x: &HState) -> Vec<f64> {
+        let at = self.offsets(model.storeys());
+        let mut out = model.effects.switches(&x[..at.v]).values.to_vec();
         for (i, law) in self.laws.iter().enumerate() {
-            out[len] = drift(&[x[3], x[4], x[5]], law.storey) * x[Z0 + i];
-            len += 1;
+            out.push(drift(&x[at.v..at.z], law.storey) * x[at.z + i]);
         }
-        (out, len)
+        out
     }
 
-    /// RK4 over `[0, h]` with the input `u0 + slope·τ`, `substeps` sub-steps, each split just
-    /// past every sign change of a switch (numerics' stepper, as the shear FMU's contact steps).
-    fn step(&self, model: &ShearModel, x: &HState, u0: f64, slope: f64, h: f64) -> HState {
+    /// RK4 over `[0, h]` with the inputs as ramps, `substeps` sub-steps, each split just past
+    /// every sign change of a switch (numerics' stepper, as the shear FMU's contact steps).
+    fn step(&self, model: &ShearModel, x: &HState, inputs: Inputs, h: f64) -> HState {
         rk4_with_events(
-            |tau: f64, x: &HState| self.rhs(model, x, u0 + slope * tau),
-            |x: &HState| {
-                let (values, len) = self.switches(model, x);
-                SwitchList { values, len }
-            },
+            |tau: f64, x: &HState| self.rhs(model, x, inputs.at(tau)),
+            |x: &HState| self.switches(model, x),
             x,
             h,
             model.params.substeps,
@@ -263,20 +311,19 @@ impl Hysteretic {
             model.advance(h);
             return;
         }
-        let u0 = model.force.value - model.control_force.value;
-        let slope = model.force.slope - model.control_force.slope;
-        let mut x = [0.0; 6 + 2 * MAX_LAWS + MAX_DAMPERS];
-        x[..3].copy_from_slice(&model.displacement);
-        x[3..6].copy_from_slice(&model.velocity);
-        x[Z0..W0].copy_from_slice(&self.z);
-        x[W0..E0].copy_from_slice(&self.work);
-        x[E0..].copy_from_slice(&self.dissipated);
-        let x = self.step(model, &x, u0, slope, h);
-        model.displacement.copy_from_slice(&x[..3]);
-        model.velocity.copy_from_slice(&x[3..6]);
-        self.z.copy_from_slice(&x[Z0..W0]);
-        self.work.copy_from_slice(&x[W0..E0]);
-        self.dissipated.copy_from_slice(&x[E0..]);
+        let at = self.offsets(model.storeys());
+        let mut x = Vec::with_capacity(at.len);
+        x.extend_from_slice(&model.displacement);
+        x.extend_from_slice(&model.velocity);
+        x.extend_from_slice(&self.z);
+        x.extend_from_slice(&self.work);
+        x.extend_from_slice(&self.dissipated);
+        let x = self.step(model, &x, Inputs::of(model), h);
+        model.displacement.copy_from_slice(&x[..at.v]);
+        model.velocity.copy_from_slice(&x[at.v..at.z]);
+        self.z.copy_from_slice(&x[at.z..at.w]);
+        self.work.copy_from_slice(&x[at.w..at.e]);
+        self.dissipated.copy_from_slice(&x[at.e..]);
         for input in [&mut model.force, &mut model.control_force] {
             input.value += input.slope * h;
             input.slope = 0.0;
@@ -288,22 +335,8 @@ impl Hysteretic {
             self.max_abs_z[i] = self.max_abs_z[i].max(self.z[i].abs());
         }
         for (i, damper) in self.dampers.iter().enumerate() {
-            let v = damper
-                .velocity(&std::array::from_fn(|i| model.velocity[i]))
-                .abs();
+            let v = damper.velocity(&model.velocity).abs();
             self.max_abs_velocity[i] = self.max_abs_velocity[i].max(v);
         }
-    }
-}
-
-/// The switch values of [`Hysteretic::switches`], as numerics' stepper reads them.
-struct SwitchList {
-    values: [f64; 6 + MAX_LAWS],
-    len: usize,
-}
-
-impl AsRef<[f64]> for SwitchList {
-    fn as_ref(&self) -> &[f64] {
-        &self.values[..self.len]
     }
 }
