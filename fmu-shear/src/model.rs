@@ -94,16 +94,6 @@ impl ShearParameters {
             excitation: self.excitation,
         }
     }
-
-    /// The reference paper's layout: three storeys, the force and the control force on floor 1.
-    /// Its steps with effects keep their fixed arrays and the net input on floor 1 (to the bit
-    /// as before); every other layout steps small vectors and its two inputs apart.
-    pub fn is_paper_layout(&self) -> bool {
-        structure::paper::is_layout(self.storeys(), self.excitation)
-            && Excitation::Force {
-                floor: self.control_floor,
-            } == structure::paper::EXCITATION
-    }
 }
 
 /// How a step with effects is integrated (the linear model always uses its step map).
@@ -378,9 +368,13 @@ impl ShearModel {
         let mut x0: SmallVec<[f64; 2 * STATES_ON_STACK]> = SmallVec::with_capacity(2 * n);
         x0.extend_from_slice(&self.displacement);
         x0.extend_from_slice(&self.velocity);
-        if self.effects.any_enabled() && self.params.is_paper_layout() {
+        let p = &self.params;
+        let rig =
+            structure::paper::is_controlled_layout(p.storeys(), p.excitation, p.control_floor);
+        if self.effects.any_enabled() && rig {
             // The paper's layout: the net input on floor 1 and the state a fixed array, as its
-            // effect paths always stepped it (their results to the bit).
+            // effect paths always stepped it (their results to the bit); every other layout
+            // steps small vectors and its two inputs apart.
             let (f0, fs) = (
                 self.force.value - self.control_force.value,
                 self.force.slope - self.control_force.slope,

@@ -65,6 +65,13 @@ pub fn is_layout(storeys: usize, excitation: Excitation) -> bool {
     storeys == STOREYS && excitation == EXCITATION
 }
 
+/// Whether a model of `storeys` storeys under `excitation`, its control force on
+/// `control_floor`, is laid out as the rig (the force and the control force on floor 1): the
+/// shear FMU steps it with effects on its fixed arrays and the net force on that floor.
+pub fn is_controlled_layout(storeys: usize, excitation: Excitation, control_floor: usize) -> bool {
+    is_layout(storeys, excitation) && control_floor == CONTROL_FLOOR
+}
+
 /// Whether `channels` are the rig's, in its order: the one test of "is this the rig's record?"
 /// (its reports then show the floors side by side, as the paper does).
 pub fn is_channels<S: AsRef<str>>(channels: &[S]) -> bool {
@@ -94,6 +101,8 @@ mod tests {
         assert!(is_layout(STOREYS, Excitation::default()));
         assert!(!is_layout(STOREYS, Excitation::Base));
         assert!(!is_layout(4, EXCITATION));
+        assert!(is_controlled_layout(STOREYS, EXCITATION, CONTROL_FLOOR));
+        assert!(!is_controlled_layout(STOREYS, EXCITATION, 2));
         let mut stiffer = structure();
         stiffer.stiffness[0] *= 1.01;
         assert!(!is_paper_rig(&stiffer));
