@@ -48,13 +48,14 @@ pub const ROLE_PHYSICAL_FLOORS_2_3: i32 = 2;
 
 /// The one structure this FMU's variable table serves, the paper's rig: three storeys cut at
 /// floor 2 (the orchestrator runs other cuts on its Rust loop, the same `numerics::substructure`).
-pub const STOREYS: usize = 3;
-pub const SPLIT_FLOOR: usize = 2;
+pub const STOREYS: usize = structure::paper::STOREYS;
+pub const SPLIT_FLOOR: usize = structure::paper::SPLIT_FLOOR;
 
-/// The shear FMU's defaults for the structure; the bumper of the hybrid test's setup.
-pub const DEFAULT_MASS: f64 = 5.2;
-pub const DEFAULT_DAMPING: f64 = 0.010_001_702_004_705_479; // exp(−4.605)
-pub const DEFAULT_STIFFNESS: f64 = 4021.0;
+/// The shear FMU's defaults for the structure (the rig's prior means); the bumper of the hybrid
+/// test's setup.
+pub const DEFAULT_MASS: f64 = structure::paper::MASS;
+pub const DEFAULT_DAMPING: f64 = 0.010_001_702_004_705_479; // exp(paper::LOG_DAMPING), a test says so
+pub const DEFAULT_STIFFNESS: f64 = structure::paper::STIFFNESS;
 pub const DEFAULT_GAP: f64 = 5e-4;
 pub const DEFAULT_CONTACT_STIFFNESS: f64 = 0.0;
 pub const DEFAULT_SUBSTEPS: i32 = 1;
@@ -254,5 +255,6 @@ mod tests {
     #[test]
     fn the_default_damping_is_the_shear_fmus() {
         assert_eq!(super::DEFAULT_DAMPING, (-4.605f64).exp());
+        assert_eq!(super::DEFAULT_DAMPING, structure::paper::LOG_DAMPING.exp());
     }
 }

@@ -31,9 +31,9 @@ const PHYSICAL_INPUTS: [&str; 4] = ["y2_start", "v2_start", "y2_end", "v2_end"];
 const PHYSICAL_OUTPUTS: [&str; 5] = ["measured_force", "y3", "v3", "relative", "a2"];
 
 /// Whether the substructure FMU's variables fit `s`: the paper's rig, three storeys cut at
-/// floor 2 (its `m1..m3`, `y2`, `y3`, ...).
+/// its [`::structure::paper::SPLIT_FLOOR`] (its `m1..m3`, `y2`, `y3`, ...).
 pub fn serves(s: &Frame) -> bool {
-    s.storeys() == ::structure::paper::STOREYS && s.floor == 2
+    s.storeys() == ::structure::paper::STOREYS && s.floor == ::structure::paper::SPLIT_FLOOR
 }
 
 /// The FMU's role for the physical substructure of `split`.
