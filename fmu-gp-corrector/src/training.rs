@@ -180,7 +180,8 @@ pub struct TrainingFile {
     pub lags: usize,
     pub target: TargetForm,
     pub inputs: Vec<Vec<f64>>,
-    pub targets: Vec<[f64; 3]>,
+    /// Per point, the rig's floors 1..3 (this is the rig's own file format).
+    pub targets: Vec<[f64; structure::paper::STOREYS]>,
     /// Written as `null` when absent (not skipped: the struct also travels in the FMU state,
     /// whose binary format has no optional fields); a file may leave it out.
     #[serde(default)]
@@ -344,7 +345,7 @@ impl LayoutTraining {
             targets: self
                 .targets
                 .iter()
-                .map(|y| <[f64; 3]>::try_from(y.as_slice()).ok())
+                .map(|y| <[f64; structure::paper::STOREYS]>::try_from(y.as_slice()).ok())
                 .collect::<Option<_>>()?,
             hyperparameters: self.hyperparameters.clone(),
         })

@@ -336,14 +336,15 @@ pub fn with_corrector(twin: &Twin, trained: &LayoutTraining) -> Result<Twin, Tra
         .map_err(|e| TrainError::Setup(format!("temporary directory: {e}")))?;
     let fmu_path = scratch.path().join(CORRECTOR_FMU);
     // The paper rig's file in its own format (no channels, no excitation).
-    let json = match trained.to_rig() {
-        Some(rig) => serde_json::to_vec(&rig),
+    let rig = trained.to_rig();
+    let json = match &rig {
+        Some(rig) => serde_json::to_vec(rig),
         None => serde_json::to_vec(&trained),
     }
     .map_err(|e| TrainError::Setup(format!("training set: {e}")))?;
     // Another layout than the rig's: the modelDescription of its variable table, the one the
     // library serves when it reads the training file at instantiation.
-    let xml = (!layout.is_paper()).then(|| {
+    let xml = rig.is_none().then(|| {
         fmu_gp_corrector::variables::table(&layout)
             .to_model_description_xml()
             .into_bytes()
