@@ -1,7 +1,11 @@
 //! The reference paper's rig, the one place that says what it is: a three-storey frame shaken by
 //! a force at floor 1 (a shaker), the control force on that floor too, an accelerometer on each
 //! floor (`acc1..acc3`), and the paper's prior means (its Table 1) for every floor and storey.
-//! Every "is this the rig?" asks [`is_layout`], [`is_channels`] or [`is_paper_rig`].
+//! Every "is this the rig?" is asked here, of what the asker has: a building's layout
+//! ([`is_layout`], with its control floor [`is_controlled_layout`]), a record's channels
+//! ([`is_channels`], as channels and excitation [`is_measured`]) or a whole structure
+//! ([`is_paper_rig`]). The rig's record and hybrid-test facts ([`header`], [`SPLIT_FLOOR`]) and
+//! the structure its synthetic records are made of ([`DATASET1_MASS`] ...) live here too.
 
 use crate::building::{Excitation, Structure};
 use crate::channel::{Channel, ExcitationKind, Quantity};
