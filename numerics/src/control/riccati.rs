@@ -201,26 +201,8 @@ pub fn solve_care(
     let q = symmetric_part("Q", q)?;
     let r = symmetric_part("R", r)?;
 
-    let (r_min, r_max) = eigenvalue_range(&r);
-    if !(r_min > m as f64 * f64::EPSILON * r_max) {
-        return Err(RiccatiError::RNotPositiveDefinite {
-            min_eigenvalue: r_min,
-            max_eigenvalue: r_max,
-        });
-    }
-    let (q_min, q_max) = eigenvalue_range(&q);
-    if q_min < -100.0 * n as f64 * f64::EPSILON * q_min.abs().max(q_max.abs()) {
-        return Err(RiccatiError::QNotPositiveSemidefinite {
-            min_eigenvalue: q_min,
-            max_eigenvalue: q_max,
-        });
-    }
-    let cholesky = r.cholesky().ok_or(RiccatiError::RNotPositiveDefinite {
-        min_eigenvalue: r_min,
-        max_eigenvalue: r_max,
-    })?;
-    // R⁻¹Bᵀ (m×n), then G = B R⁻¹ Bᵀ, symmetric by construction up to rounding.
-    let r_inv_bt = cholesky.solve(&b.transpose());
+    let r_inv_bt = check_weights(&q, &r, b, n, m)?;
+    // G = B R⁻¹ Bᵀ, symmetric by construction up to rounding.
     let g = symmetrised(b * &r_inv_bt);
 
     check_stabilisable(a, b)?;
@@ -255,30 +237,10 @@ pub fn solve_care(
 
     // Step 4: the sign function and the stable invariant subspace.
     let (w, sign_iterations) = sign_function(h)?;
-    let mut x = symmetrised(stable_subspace_solution(&w, n)? * sigma);
+    let x = symmetrised(stable_subspace_solution(&w, n)? * sigma);
 
     // Step 5: Newton–Kleinman polishing.
-    let mut relative_residual = residual(a, &g, &q, &x).1;
-    let mut polishing_steps = 0;
-    for _ in 0..MAX_POLISHING_STEPS {
-        let (res, _) = residual(a, &g, &q, &x);
-        let closed = a - &g * &x;
-        let Some(delta) = solve_lyapunov_symmetric(&closed, &(-res)) else {
-            break;
-        };
-        let candidate = symmetrised(&x + delta);
-        let candidate_residual = residual(a, &g, &q, &candidate).1;
-        if !(candidate_residual < relative_residual) {
-            break;
-        }
-        let falling = candidate_residual < 0.5 * relative_residual;
-        x = candidate;
-        relative_residual = candidate_residual;
-        polishing_steps += 1;
-        if !falling || relative_residual == 0.0 {
-            break;
-        }
-    }
+    let (x, relative_residual, polishing_steps) = polish(a, &g, &q, x);
 
     // Step 6: the checks on the answer.
     if !(relative_residual <= RESIDUAL_TOLERANCE) {
@@ -292,12 +254,7 @@ pub fn solve_care(
         });
     }
     let gain = &r_inv_bt * &x;
-    let mut closed_loop_poles: Vec<Complex<f64>> =
-        eigenvalues_of(a - b * &gain, "the closed loop A − BK")?;
-    closed_loop_poles.sort_by(|x, y| x.im.total_cmp(&y.im).then(x.re.total_cmp(&y.re)));
-    if let Some(&pole) = closed_loop_poles.iter().find(|p| !(p.re < 0.0)) {
-        return Err(RiccatiError::UnstableClosedLoop { pole });
-    }
+    let closed_loop_poles = stable_closed_loop(a, b, &gain)?;
     Ok(Care {
         x,
         gain,
@@ -307,6 +264,85 @@ pub fn solve_care(
         sign_iterations,
         polishing_steps,
     })
+}
+
+/// `R` positive definite and `Q` positive semidefinite (to rounding); `R⁻¹Bᵀ` (m×n).
+fn check_weights(
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    n: usize,
+    m: usize,
+) -> Result<DMatrix<f64>, RiccatiError> {
+    let (r_min, r_max) = eigenvalue_range(r);
+    if !(r_min > m as f64 * f64::EPSILON * r_max) {
+        return Err(RiccatiError::RNotPositiveDefinite {
+            min_eigenvalue: r_min,
+            max_eigenvalue: r_max,
+        });
+    }
+    let (q_min, q_max) = eigenvalue_range(q);
+    if q_min < -100.0 * n as f64 * f64::EPSILON * q_min.abs().max(q_max.abs()) {
+        return Err(RiccatiError::QNotPositiveSemidefinite {
+            min_eigenvalue: q_min,
+            max_eigenvalue: q_max,
+        });
+    }
+    let cholesky = r
+        .clone()
+        .cholesky()
+        .ok_or(RiccatiError::RNotPositiveDefinite {
+            min_eigenvalue: r_min,
+            max_eigenvalue: r_max,
+        })?;
+    Ok(cholesky.solve(&b.transpose()))
+}
+
+/// Newton–Kleinman steps from `x` while each halves the relative residual (one more that
+/// only lowers it is kept, then no more): the solution, its relative residual and the steps.
+fn polish(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    mut x: DMatrix<f64>,
+) -> (DMatrix<f64>, f64, usize) {
+    let mut relative_residual = residual(a, g, q, &x).1;
+    let mut polishing_steps = 0;
+    for _ in 0..MAX_POLISHING_STEPS {
+        let (res, _) = residual(a, g, q, &x);
+        let closed = a - g * &x;
+        let Some(delta) = solve_lyapunov_symmetric(&closed, &(-res)) else {
+            break;
+        };
+        let candidate = symmetrised(&x + delta);
+        let candidate_residual = residual(a, g, q, &candidate).1;
+        if !(candidate_residual < relative_residual) {
+            break;
+        }
+        let falling = candidate_residual < 0.5 * relative_residual;
+        x = candidate;
+        relative_residual = candidate_residual;
+        polishing_steps += 1;
+        if !falling || relative_residual == 0.0 {
+            break;
+        }
+    }
+    (x, relative_residual, polishing_steps)
+}
+
+/// The poles of `A − BK`, sorted by imaginary then real part, every one in the open left
+/// half-plane.
+fn stable_closed_loop(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    gain: &DMatrix<f64>,
+) -> Result<Vec<Complex<f64>>, RiccatiError> {
+    let mut poles: Vec<Complex<f64>> = eigenvalues_of(a - b * gain, "the closed loop A − BK")?;
+    poles.sort_by(|x, y| x.im.total_cmp(&y.im).then(x.re.total_cmp(&y.re)));
+    if let Some(&pole) = poles.iter().find(|p| !(p.re < 0.0)) {
+        return Err(RiccatiError::UnstableClosedLoop { pole });
+    }
+    Ok(poles)
 }
 
 /// `n` and `m` from the shapes, or the first matrix whose shape is wrong.
