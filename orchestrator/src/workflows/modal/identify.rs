@@ -21,7 +21,7 @@ use numerics::modal::ssi::{ssi_cov, SsiOptions};
 use numerics::modal::stabilisation::{
     forming_poles, screen_by_peaks, screen_modes, select_modes, IdentifiedMode, ModelOrder,
     PeakEvidence, RejectedMode, ScreenOptions, SelectionOptions, StabilisationDiagram,
-    StabilityTolerances, ONE_CHANNEL_AMONG,
+    StabilityTolerances, ONE_CHANNEL_AMONG, PEAK_COHERENCE,
 };
 use numerics::modal::{Complex, IdentificationError};
 
@@ -790,6 +790,7 @@ impl Estimation<'_> {
             self.options.max_order
         };
         let selection = self.selection(true);
+        let peaks = evidence.peaks_within(band);
         loop {
             let top = orders.last().map_or(0, |o| o.order);
             // Short of the orders asked for: the basis lost rank (a narrow band).
@@ -800,11 +801,18 @@ impl Estimation<'_> {
                 .map_err(self.sampling.method_err("the diagram"))?;
             let modes =
                 select_modes(&diagram, &selection).map_err(self.sampling.method_err("LSCF"))?;
-            let peaks = evidence.of();
-            if !forming_poles(&diagram, &selection, &modes)
+            let supported = evidence.of();
+            let forming = forming_poles(&diagram, &selection, &modes)
                 .iter()
-                .any(|p| peaks.supports(p.frequency))
-            {
+                .any(|p| supported.supports(p.frequency));
+            // Nothing forming at the top order, but the FRF peaks where no mode is yet: a
+            // broad band whose modes sit low in it (an eight-storey tower forced at its top
+            // over 0–50 Hz stood nowhere at order 40, all eight modes by 120).
+            let unexplained = modes.is_empty()
+                && peaks
+                    .iter()
+                    .any(|p| !explained(*p, &modes, &frf.frequencies));
+            if !forming && !unexplained {
                 break;
             }
             let next = LscfOptions {
@@ -943,6 +951,32 @@ impl Peaks {
         }
     }
 
+    /// Hz: the frequencies within `band` where some curve peaks — the largest within two bins
+    /// either side, coherent (an FRF's [`PEAK_COHERENCE`]) and supported as a mode's peak
+    /// would be ([`PeakEvidence::supports`]).
+    fn peaks_within(&self, band: (f64, f64)) -> Vec<f64> {
+        let evidence = self.of();
+        let mut peaks: Vec<f64> = Vec::new();
+        let n = self.frequencies.len();
+        for k in 2..n.saturating_sub(2) {
+            let f = self.frequencies[k];
+            if f < band.0 || f > band.1 || peaks.last() == Some(&f) {
+                continue;
+            }
+            let peaked = self.curves.iter().enumerate().any(|(i, curve)| {
+                let coherent = self
+                    .coherence
+                    .as_ref()
+                    .is_none_or(|c| c[i][k] >= PEAK_COHERENCE);
+                coherent && (k - 2..=k + 2).all(|j| curve[j] <= curve[k])
+            });
+            if peaked && evidence.supports(f) {
+                peaks.push(f);
+            }
+        }
+        peaks
+    }
+
     fn of(&self) -> PeakEvidence<'_> {
         PeakEvidence {
             frequencies: &self.frequencies,
@@ -950,6 +984,19 @@ impl Peaks {
             coherence: self.coherence.as_deref(),
         }
     }
+}
+
+/// Whether a mode of `modes` lies at the peak `frequency` (Hz): within the selection's
+/// cluster distance (1 %) or two bins of `bins`' spacing, whichever is wider.
+fn explained(frequency: f64, modes: &[IdentifiedMode], bins: &[f64]) -> bool {
+    let bin = match bins {
+        [a, b, ..] => b - a,
+        _ => 0.0,
+    };
+    let within = (0.01 * frequency).max(2.0 * bin);
+    modes
+        .iter()
+        .any(|m| (m.frequency - frequency).abs() <= within)
 }
 
 /// What sets an identified mode aside, with the band the force excites (when it was measured).

@@ -78,9 +78,16 @@ pub(super) fn screened_by_misfit(mut method: MethodModes, frf: &Frf) -> MethodMo
     let Some(ratios) = terms_over_misfit(frf, band, &modes) else {
         return method;
     };
+    let bin = match frf.frequencies.as_slice() {
+        [a, b, ..] => b - a,
+        _ => 0.0,
+    };
     let mut kept = Vec::with_capacity(modes.len());
     for (mode, ratio) in method.modes.drain(..).zip(ratios) {
-        if ratio >= MIN_TERM_OVER_MISFIT {
+        // A mode narrower than a few bins leaks: LSCF's pole misses its peak, and the misfit
+        // there is the leakage's, not the noise's (the time-domain refinement judges it).
+        let (f, z) = (mode.identified.frequency, mode.identified.damping);
+        if ratio >= MIN_TERM_OVER_MISFIT || 2.0 * z * f < super::leaky::LEAKY_BINS * bin {
             kept.push(mode);
         } else {
             method.rejected.push(RejectedMode {
