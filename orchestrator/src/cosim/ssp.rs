@@ -92,12 +92,7 @@ fn parse_time(attrs: &BTreeMap<String, String>, key: &str) -> Result<Option<f64>
 /// Parse `SystemStructure.ssd`.
 pub fn parse_ssd(xml: &str) -> Result<Ssd, String> {
     let mut reader = quick_xml::Reader::from_str(xml);
-    let mut parsed = Ssd::default();
-    let mut in_component = false;
-    let mut depth_system = 0usize;
-    let mut saw_root = false;
-    // The connector whose type element comes next.
-    let mut open_connector: Option<Connector> = None;
+    let mut ssd = SsdReader::default();
     loop {
         let event = reader
             .read_event()
@@ -106,106 +101,133 @@ pub fn parse_ssd(xml: &str) -> Result<Ssd, String> {
             Event::Start(e) | Event::Empty(e) => {
                 let local = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
                 let attrs = attributes(e)?;
-                let is_start = matches!(event, Event::Start(_));
-                match local.as_str() {
-                    "SystemStructureDescription" => {
-                        saw_root = true;
-                        if attrs.get("version").map(String::as_str) != Some("1.0") {
-                            return Err(format!(
-                                "version is {:?}; SSP 1.0 is expected",
-                                attrs.get("version")
-                            ));
-                        }
-                        parsed.name = attrs.get("name").cloned().unwrap_or_default();
-                    }
-                    "System" => {
-                        depth_system += 1;
-                        if depth_system > 1 {
-                            return Err("nested systems are not supported".into());
-                        }
-                    }
-                    "DefaultExperiment" => {
-                        parsed.start_time = parse_time(&attrs, "startTime")?;
-                        parsed.stop_time = parse_time(&attrs, "stopTime")?;
-                    }
-                    "Component" => {
-                        let name = attrs
-                            .get("name")
-                            .cloned()
-                            .ok_or("a Component has no name")?;
-                        let source = attrs
-                            .get("source")
-                            .cloned()
-                            .ok_or(format!("component '{name}' has no source"))?;
-                        parsed.components.push(SsdComponent {
-                            name,
-                            source,
-                            connectors: Vec::new(),
-                            bindings: Vec::new(),
-                        });
-                        in_component = is_start;
-                    }
-                    "Connector" => {
-                        let name = attrs
-                            .get("name")
-                            .cloned()
-                            .ok_or("a Connector has no name")?;
-                        let connector = Connector {
-                            name,
-                            kind: attrs.get("kind").cloned().unwrap_or_default(),
-                            type_name: None,
-                        };
-                        if is_start {
-                            open_connector = Some(connector);
-                        } else {
-                            push_connector(&mut parsed, in_component, connector);
-                        }
-                    }
-                    t if TYPES.contains(&t) => {
-                        if let Some(c) = open_connector.as_mut() {
-                            c.type_name = Some(t.to_owned());
-                        }
-                    }
-                    "ParameterBinding" => {
-                        let source = attrs.get("source").cloned().ok_or(
-                            "a ParameterBinding has no source (inline values are not supported)",
-                        )?;
-                        match (in_component, parsed.components.last_mut()) {
-                            (true, Some(c)) => c.bindings.push(source),
-                            _ => parsed.system_bindings.push(source),
-                        }
-                    }
-                    "Connection" => {
-                        let get = |k: &str| attrs.get(k).cloned();
-                        parsed.connections.push(Connection {
-                            start_element: get("startElement"),
-                            start_connector: get("startConnector")
-                                .ok_or("a Connection has no startConnector")?,
-                            end_element: get("endElement"),
-                            end_connector: get("endConnector")
-                                .ok_or("a Connection has no endConnector")?,
-                        });
-                    }
-                    _ => {}
-                }
+                ssd.element(&local, &attrs, matches!(event, Event::Start(_)))?;
             }
-            Event::End(e) => match e.local_name().as_ref() {
-                b"Component" => in_component = false,
-                b"Connector" => {
-                    if let Some(c) = open_connector.take() {
-                        push_connector(&mut parsed, in_component, c);
-                    }
-                }
-                _ => {}
-            },
+            Event::End(e) => ssd.end(e.local_name().as_ref()),
             Event::Eof => break,
             _ => {}
         }
     }
-    if !saw_root {
+    if !ssd.saw_root {
         return Err("no SystemStructureDescription element".into());
     }
-    Ok(parsed)
+    Ok(ssd.parsed)
+}
+
+/// `SystemStructure.ssd` as it is read: what is parsed so far and where the reader is.
+#[derive(Default)]
+struct SsdReader {
+    parsed: Ssd,
+    in_component: bool,
+    depth_system: usize,
+    saw_root: bool,
+    /// The connector whose type element comes next.
+    open_connector: Option<Connector>,
+}
+
+impl SsdReader {
+    /// An element opened (`is_start`) or empty, by its local name.
+    fn element(
+        &mut self,
+        local: &str,
+        attrs: &BTreeMap<String, String>,
+        is_start: bool,
+    ) -> Result<(), String> {
+        match local {
+            "SystemStructureDescription" => {
+                self.saw_root = true;
+                if attrs.get("version").map(String::as_str) != Some("1.0") {
+                    return Err(format!(
+                        "version is {:?}; SSP 1.0 is expected",
+                        attrs.get("version")
+                    ));
+                }
+                self.parsed.name = attrs.get("name").cloned().unwrap_or_default();
+            }
+            "System" => {
+                self.depth_system += 1;
+                if self.depth_system > 1 {
+                    return Err("nested systems are not supported".into());
+                }
+            }
+            "DefaultExperiment" => {
+                self.parsed.start_time = parse_time(&attrs, "startTime")?;
+                self.parsed.stop_time = parse_time(&attrs, "stopTime")?;
+            }
+            "Component" => {
+                let name = attrs
+                    .get("name")
+                    .cloned()
+                    .ok_or("a Component has no name")?;
+                let source = attrs
+                    .get("source")
+                    .cloned()
+                    .ok_or(format!("component '{name}' has no source"))?;
+                self.parsed.components.push(SsdComponent {
+                    name,
+                    source,
+                    connectors: Vec::new(),
+                    bindings: Vec::new(),
+                });
+                self.in_component = is_start;
+            }
+            "Connector" => {
+                let name = attrs
+                    .get("name")
+                    .cloned()
+                    .ok_or("a Connector has no name")?;
+                let connector = Connector {
+                    name,
+                    kind: attrs.get("kind").cloned().unwrap_or_default(),
+                    type_name: None,
+                };
+                if is_start {
+                    self.open_connector = Some(connector);
+                } else {
+                    push_connector(&mut self.parsed, self.in_component, connector);
+                }
+            }
+            t if TYPES.contains(&t) => {
+                if let Some(c) = self.open_connector.as_mut() {
+                    c.type_name = Some(t.to_owned());
+                }
+            }
+            "ParameterBinding" => {
+                let source = attrs
+                    .get("source")
+                    .cloned()
+                    .ok_or("a ParameterBinding has no source (inline values are not supported)")?;
+                match (self.in_component, self.parsed.components.last_mut()) {
+                    (true, Some(c)) => c.bindings.push(source),
+                    _ => self.parsed.system_bindings.push(source),
+                }
+            }
+            "Connection" => {
+                let get = |k: &str| attrs.get(k).cloned();
+                self.parsed.connections.push(Connection {
+                    start_element: get("startElement"),
+                    start_connector: get("startConnector")
+                        .ok_or("a Connection has no startConnector")?,
+                    end_element: get("endElement"),
+                    end_connector: get("endConnector").ok_or("a Connection has no endConnector")?,
+                });
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn end(&mut self, local: &[u8]) {
+        match local {
+            b"Component" => self.in_component = false,
+            b"Connector" => {
+                if let Some(c) = self.open_connector.take() {
+                    push_connector(&mut self.parsed, self.in_component, c);
+                }
+            }
+            _ => {}
+        }
+    }
 }
 
 fn push_connector(parsed: &mut Ssd, in_component: bool, connector: Connector) {
