@@ -23,10 +23,7 @@ class Record:
         self,
         time: npt.NDArray[np.float64],
         force: npt.NDArray[np.float64],
-        acc1: npt.NDArray[np.float64],
-        acc2: npt.NDArray[np.float64],
-        acc3: npt.NDArray[np.float64],
-        *,
+        *acc: npt.NDArray[np.float64],
         extra: dict[str, npt.NDArray[np.float64]] | None = None,
         name: str = "<arrays>",
     ) -> None: ...

@@ -9,7 +9,7 @@ use numpy::{PyArray1, PyReadonlyArray1};
 use orchestrator::record::{csv_text, ColumnMap, Measurement, ReadOptions};
 use orchestrator::synth::{synth_controlled, InLoopController, Scenario};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
 use crate::{detached, to_object, to_py, Kind};
 
@@ -49,17 +49,16 @@ pub(crate) fn column_map(columns: Option<&Bound<'_, PyAny>>) -> PyResult<ColumnM
 
 #[pymethods]
 impl Record {
-    /// A record from arrays: `time`, `force`, `acc1`, `acc2`, `acc3` (1-D float arrays of one
-    /// length), checked as a CSV file is; `extra` more named columns (e.g. `control`).
+    /// A record from arrays: `time`, `force` and one acceleration per floor, `acc1..accN` in
+    /// floor order (1-D float arrays of one length; the paper's rig: `acc1, acc2, acc3`),
+    /// checked as a CSV file is; `extra` more named columns (e.g. `control`). Other channels
+    /// and units: [`Record::from_arrays`].
     #[new]
-    #[pyo3(signature = (time, force, acc1, acc2, acc3, *, extra = None, name = "<arrays>"))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (time, force, *acc, extra = None, name = "<arrays>"))]
     fn new(
         time: PyReadonlyArray1<'_, f64>,
         force: PyReadonlyArray1<'_, f64>,
-        acc1: PyReadonlyArray1<'_, f64>,
-        acc2: PyReadonlyArray1<'_, f64>,
-        acc3: PyReadonlyArray1<'_, f64>,
+        acc: &Bound<'_, PyTuple>,
         extra: Option<HashMap<String, PyReadonlyArray1<'_, f64>>>,
         name: &str,
     ) -> PyResult<Self> {
@@ -69,14 +68,13 @@ impl Record {
             .map(|(k, v)| (k, v.as_array().to_vec()))
             .collect();
         let vec = |a: &PyReadonlyArray1<'_, f64>| a.as_array().to_vec();
-        let measurement = Measurement::from_columns(
-            Path::new(name),
-            vec(&time),
-            vec(&force),
-            vec![vec(&acc1), vec(&acc2), vec(&acc3)],
-            extra,
-        )
-        .map_err(|e| to_py(Kind::Data, e))?;
+        let acc = acc
+            .iter()
+            .map(|a| Ok(vec(&a.extract::<PyReadonlyArray1<'_, f64>>()?)))
+            .collect::<PyResult<Vec<_>>>()?;
+        let measurement =
+            Measurement::from_columns(Path::new(name), vec(&time), vec(&force), acc, extra)
+                .map_err(|e| to_py(Kind::Data, e))?;
         Ok(Record { measurement })
     }
 

@@ -118,6 +118,15 @@ def test_arrays_are_checked_like_a_file():
         st.Record(t, z, acc, z, z)
 
 
+def test_a_record_from_arrays_has_an_accelerometer_per_floor_given():
+    t = np.arange(100) / 51.2
+    z = np.zeros(100)
+    five = st.Record(t, z, z, z, z, z, z)
+    assert five.channels == ["force", "acc1", "acc2", "acc3", "acc4", "acc5"]
+    with pytest.raises(st.DataError, match="no response column"):
+        st.Record(t, z)
+
+
 def test_a_missing_twin_raises_the_cli_message(tmp_path):
     missing = tmp_path / "nothing.ssp"
     done = cli("compare", "--twin", str(missing), "--data", "data/dataset1.csv")
