@@ -10,7 +10,6 @@ use super::channels::Channels;
 use super::fit::{climbs, Split};
 use super::localise::{localise, missing_floor_force, missing_shear};
 use super::physics::{prior_scales, run_physics, storeys_of, PhysicsReals, PhysicsRun};
-use super::verdict::Verdict;
 use super::{
     check_sites, select, Action, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
     LatentVariance, Localisation, Result, Scales, Series,
@@ -477,21 +476,6 @@ impl Baseline {
             channels: &self.channels,
             candidates,
             tolerance: self.scores.tolerance.value,
-        }
-    }
-
-    /// The decision's stage on this record (sampled every `dt`), with the twin's and the
-    /// recalibration's worst-floor held-out NMSE.
-    pub(super) fn verdict(&self, dt: f64, before_worst: f64, recal_worst: f64) -> Verdict<'_> {
-        Verdict {
-            channels: &self.channels,
-            mass: &self.mass,
-            reals: &self.reals,
-            scales: &self.scales,
-            storeys: self.storeys,
-            dt,
-            before_worst,
-            recal_worst,
         }
     }
 }

@@ -12,23 +12,12 @@ use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 use crate::workflows::calibrate::{calibrate, Calibration, CalibrationSetup, Prior};
 
-/// Sub-steps while fitting candidates. The fits run the shear FMU with `integrator` = 2: contacts
-/// alone step exactly (their cost does not depend on sub-steps), every other effect (cubic,
-/// friction, discovered terms) with this many fixed RK4 sub-steps, and a fit's cost is
-/// proportional to them. RK4's error falls 16× per doubling: 64 sub-steps give 1.1e-9 %
-/// worst-floor NMSE for a 1e9 N/m³ cubic on the paper's prior damping
-/// (`fmu-shear/tests/effects_accuracy.rs`), so about 2e-2 % at 8, below the differences the
-/// decision gates look at (factors of 2 and 4 on NMSEs of 0.1 % and up). Measured on dataset3:
-/// every candidate's NMSE after its fit within 2e-3 % of the fit at 16 sub-steps, the same
-/// decision, 30 % less CPU. The fitted parameters are then scored with the twin's own integrator.
-pub const FIT_SUBSTEPS: i32 = 8;
-
 /// The largest phase (radians) of the structure's fastest mode over one RK4 sub-step of a fit.
 /// The paper's rig at its prior means (fastest mode 7.97 Hz) sampled at 51.2 Hz takes 0.98 rad
-/// a sample, so [`FIT_SUBSTEPS`] there (0.12 rad each, whose error is measured above). A record
+/// a sample, so [`FIT_SUBSTEPS`](super::FIT_SUBSTEPS) there (0.12 rad each, whose error is measured above). A record
 /// sampled far above its structure's modes needs fewer for the same error per period: the
 /// 4-storey frame at 322.58 Hz (fastest mode 8.4 Hz) takes 2. Below the rig's 0.12 so
-/// that its records and every slower-sampled one keep the full [`FIT_SUBSTEPS`].
+/// that its records and every slower-sampled one keep the full [`FIT_SUBSTEPS`](super::FIT_SUBSTEPS).
 pub const FIT_STEP_PHASE: f64 = 0.1;
 
 /// The RK4 sub-steps a sample of the fits take: as many as keep the structure's fastest mode
@@ -183,6 +172,7 @@ pub(super) fn fit(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::workflows::diagnose::FIT_SUBSTEPS;
 
     /// The fits' sub-steps follow the structure's fastest mode: the rig at 51.2 Hz keeps all
     /// eight, the 4-storey frame sampled at 322.58 Hz takes two, a building whose fastest mode

@@ -76,8 +76,9 @@
 //! 2), [`sensor`] (3a), `screen` (the library screened), `round_one` (the recalibration and the
 //! candidates fitted alone), `search` (forward selection through [`select`], and discovery
 //! through [`discover`]), `verdict` (the action and its evidence). They share `channels` (the
-//! record's channels), `physics` (the physics run), `fit` (one alternative's fit) and
-//! `localise` (the missing force).
+//! record's channels), `physics` (the physics run), `fit` (one alternative's fit), `localise`
+//! (the missing force) and [`effects`] (a fit's estimates and the effect's report, read by the
+//! verdict, the selection, discovery and `add`).
 //!
 //! `twin add-physics` refuses a `sensor_fault` diagnosis (not physics); it switches the chosen
 //! effects on (a discovered one with its terms), estimates their parameters on the whole record
@@ -90,6 +91,7 @@ pub mod candidate;
 pub mod change;
 mod channels;
 pub mod discover;
+pub(crate) mod effects;
 mod fit;
 mod localise;
 mod options;
@@ -123,9 +125,9 @@ use sensor::{faulty_sensor, report_sensor_fault};
 use significance::{none_without_fits, significance};
 
 // What the stages share, read by the other submodules as `super::…`.
+use effects::{effect_report, estimates};
 use fit::{fit, fitting_twin, with_switches, Fitted, Split};
 use physics::{prior_scales, run_physics, PhysicsReals, PhysicsRun};
-use verdict::{effect_report, estimates};
 
 /// What can stop a diagnosis or an added effect. The messages say which record, twin or file.
 #[derive(Debug, thiserror::Error)]
@@ -177,11 +179,12 @@ pub use sensor::{SensorFit, SensorSd};
 
 pub use baseline::blocks;
 pub(crate) use channels::Channels;
-pub use fit::{fit_substeps, FIT_STEP_PHASE, FIT_SUBSTEPS};
+pub(crate) use effects::Estimates;
+pub use fit::{fit_substeps, FIT_STEP_PHASE};
+pub use options::FIT_SUBSTEPS;
 pub use options::{DiagnoseOptions, Gates, Progress};
 pub(crate) use physics::storeys_of;
 pub use screen::{SCREEN_DECISIVE, SCREEN_KEEP, SCREEN_SITES};
-pub(crate) use verdict::Estimates;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]

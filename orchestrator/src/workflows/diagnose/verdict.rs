@@ -7,16 +7,16 @@ use std::collections::BTreeMap;
 use structure::building::parameter_names;
 use structure::effects::{Law, Placement, Term};
 
+use super::baseline::Baseline;
 use super::channels::{worst, Channels};
+use super::effects::{effect_report, estimates, Estimates};
 use super::fit::Fitted;
 use super::localise::{missing_floor_force, storey_shear};
 use super::physics::{PhysicsReals, PhysicsRun};
 use super::search::{Discovery, Search};
 use super::{
-    discover, select, Action, Addition, Candidate, Diagnosis, EffectName, EffectReport, Gates,
-    MovedParameter, Scales, TermReport,
+    discover, select, Action, Addition, Candidate, Diagnosis, Gates, MovedParameter, Scales,
 };
-use crate::workflows::calibrate::Calibration;
 
 /// The decision's stage: what each verdict's explanation reads (the round's results come as
 /// arguments), and one method per verdict that writes its action, reason, scores and evidence
@@ -32,6 +32,24 @@ pub(super) struct Verdict<'a> {
     /// Worst-floor held-out NMSE of the twin as given, and after recalibration.
     pub(super) before_worst: f64,
     pub(super) recal_worst: f64,
+}
+
+/// The decision's stage of a baseline.
+impl Baseline {
+    /// The decision's stage on this record (sampled every `dt`), with the twin's and the
+    /// recalibration's worst-floor held-out NMSE.
+    pub(super) fn verdict(&self, dt: f64, before_worst: f64, recal_worst: f64) -> Verdict<'_> {
+        Verdict {
+            channels: &self.channels,
+            mass: &self.mass,
+            reals: &self.reals,
+            scales: &self.scales,
+            storeys: self.storeys,
+            dt,
+            before_worst,
+            recal_worst,
+        }
+    }
 }
 
 impl Verdict<'_> {
@@ -286,52 +304,6 @@ pub(super) fn moved_physics(
         .collect();
     moved.sort_by(|a, b| b.change_in_sd.abs().total_cmp(&a.change_in_sd.abs()));
     moved
-}
-
-/// Fitted values and posterior sds by FMU parameter name.
-pub(crate) type Estimates = BTreeMap<String, (f64, f64)>;
-
-pub(super) fn estimates(calibration: &Calibration) -> Estimates {
-    calibration
-        .parameters
-        .iter()
-        .map(|p| (p.name.clone(), (p.value, p.sd)))
-        .collect()
-}
-
-pub(super) fn effect_report(a: &Addition, fitted: &Estimates, scales: &Scales) -> EffectReport {
-    let mut parameters = BTreeMap::new();
-    let mut sd = BTreeMap::new();
-    for (name, short, _) in a.parameters(scales) {
-        if let Some(&(value, s)) = fitted.get(&name) {
-            parameters.insert(short.clone(), value);
-            sd.insert(short, s);
-        }
-    }
-    let mut terms = Vec::new();
-    match a {
-        Addition::Library(c) if c.kind.has_side() => {
-            parameters.insert("side".into(), f64::from(c.side.code()));
-        }
-        Addition::Library(_) => {}
-        Addition::Discovered(found) => {
-            for (i, t) in found.iter().enumerate() {
-                let key = format!("term{}", i + 1);
-                terms.push(TermReport {
-                    function: t.function.name().to_string(),
-                    coefficient: parameters.get(&key).copied().unwrap_or(t.coefficient),
-                    sd: sd.get(&key).copied().unwrap_or(f64::NAN),
-                    scale: t.function.uses_scale().then_some(t.scale),
-                });
-            }
-        }
-    }
-    EffectReport {
-        name: EffectName::of_addition(a),
-        parameters,
-        sd,
-        terms,
-    }
 }
 
 /// The fitted effect's storey force along the run's drift (contact and cubic), or its floor
