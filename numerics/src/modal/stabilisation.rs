@@ -480,6 +480,17 @@ pub struct RejectedMode {
     pub reason: String,
 }
 
+impl RejectedMode {
+    /// `mode` set aside for `rejection`, with its reason in words.
+    pub fn new(mode: IdentifiedMode, rejection: Rejection) -> Self {
+        RejectedMode {
+            reason: rejection.reason().to_owned(),
+            mode,
+            rejection,
+        }
+    }
+}
+
 /// Splits `modes` into those of the structure and those set aside as the excitation's or a
 /// single channel's ([`Rejection`]), each list by ascending frequency.
 pub fn screen_modes(
@@ -514,11 +525,7 @@ pub fn screen_modes(
         .or_else(|| unresolved[index].then_some(Rejection::Unresolved));
         match rejection {
             None => kept.push(mode),
-            Some(rejection) => rejected.push(RejectedMode {
-                reason: rejection.reason().to_owned(),
-                mode,
-                rejection,
-            }),
+            Some(rejection) => rejected.push(RejectedMode::new(mode, rejection)),
         }
     }
     (kept, rejected)
@@ -603,11 +610,11 @@ pub fn screen_by_peaks(
     let (supported, unsupported): (Vec<_>, Vec<_>) = kept
         .into_iter()
         .partition(|m| evidence.supports(m.frequency));
-    rejected.extend(unsupported.into_iter().map(|mode| RejectedMode {
-        reason: Rejection::NoPeak.reason().to_owned(),
-        mode,
-        rejection: Rejection::NoPeak,
-    }));
+    rejected.extend(
+        unsupported
+            .into_iter()
+            .map(|mode| RejectedMode::new(mode, Rejection::NoPeak)),
+    );
     rejected.sort_by(|a, b| a.mode.frequency.total_cmp(&b.mode.frequency));
     supported
 }

@@ -27,11 +27,10 @@ pub(super) fn screen_by_orders(
     let (kept, few): (Vec<_>, Vec<_>) = modes
         .into_iter()
         .partition(|m| m.orders.len() as f64 >= needed);
-    rejected.extend(few.into_iter().map(|mode| RejectedMode {
-        reason: Rejection::FewOrders.reason().to_owned(),
-        mode,
-        rejection: Rejection::FewOrders,
-    }));
+    rejected.extend(
+        few.into_iter()
+            .map(|mode| RejectedMode::new(mode, Rejection::FewOrders)),
+    );
     rejected.sort_by(|a, b| a.mode.frequency.total_cmp(&b.mode.frequency));
     kept
 }

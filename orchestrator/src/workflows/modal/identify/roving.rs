@@ -47,11 +47,10 @@ impl Estimation<'_> {
         let (modes, mut rejected) = screen_modes(merged, screen);
         rejected.extend(few.iter().map(|g| {
             let (r, i) = g[0];
-            RejectedMode {
-                mode: per_run[r].method.modes[i].identified.clone(),
-                rejection: Rejection::FewRuns,
-                reason: Rejection::FewRuns.reason().to_owned(),
-            }
+            RejectedMode::new(
+                per_run[r].method.modes[i].identified.clone(),
+                Rejection::FewRuns,
+            )
         }));
         for run in &per_run {
             rejected.extend(run.method.rejected.iter().cloned());

@@ -90,11 +90,9 @@ pub(super) fn screened_by_misfit(mut method: MethodModes, frf: &Frf) -> MethodMo
         if ratio >= MIN_TERM_OVER_MISFIT || 2.0 * z * f < super::leaky::LEAKY_BINS * bin {
             kept.push(mode);
         } else {
-            method.rejected.push(RejectedMode {
-                reason: Rejection::BelowMisfit.reason().to_owned(),
-                mode: mode.identified,
-                rejection: Rejection::BelowMisfit,
-            });
+            method
+                .rejected
+                .push(RejectedMode::new(mode.identified, Rejection::BelowMisfit));
         }
     }
     method.modes = kept;
