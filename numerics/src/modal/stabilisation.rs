@@ -380,6 +380,11 @@ pub enum Rejection {
     /// An FRF fit's mode whose own fitted term stands no higher than the fit's misfit around
     /// it: a pole made of the FRF's noise, which it explains no better than the noise does.
     BelowMisfit,
+    /// A lightly damped mode the record taken whole in the time domain (through its measured
+    /// force) does not need: left out of the fit, the residual rises by less than a small
+    /// share of itself — a pole the FRF fit made of noise, or of a nonlinearity's trace (a
+    /// contact's harmonics), not a resonance the force drove.
+    NotInRecord,
 }
 
 impl Rejection {
@@ -395,6 +400,10 @@ impl Rejection {
             Rejection::NoPeak => "no peak of the measured FRF or spectrum there",
             Rejection::FewRuns => "found in fewer than half of the roving runs",
             Rejection::BelowMisfit => "its fitted term no larger than the fit's misfit (noise)",
+            Rejection::NotInRecord => {
+                "the record taken whole explains next to nothing more with it (noise, or a \
+                 nonlinearity's trace)"
+            }
             Rejection::FewOrders => {
                 "found at too few model orders beside the best-supported mode (a pole of noise)"
             }

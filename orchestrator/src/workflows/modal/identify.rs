@@ -855,7 +855,11 @@ impl Estimation<'_> {
             let chosen = self.chosen_modes("LSCF", Some(band), orders, screen, floors, evidence)?;
             let chosen = shoulder::restored_shoulders(chosen, averaged, floors);
             let chosen = shoulder::screened_by_misfit(chosen, averaged);
-            Some(self.refined_leaky(chosen, floors))
+            let evidence_bin = match averaged.frequencies.as_slice() {
+                [a, b, ..] => b - a,
+                _ => 0.0,
+            };
+            Some(self.refined_leaky(chosen, floors, evidence_bin, screen))
         } else {
             None
         };
