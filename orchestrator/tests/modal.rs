@@ -567,8 +567,9 @@ mod records {
     /// FDD/EFDD (output-only, non-parametric: the spectral matrix's first singular value,
     /// EFDD's SDOF bells) on the band-limited five-storey record, a cross-check: it finds the
     /// five modes, and the verdicts table holds each with all three methods; what FDD alone
-    /// finds (peaks of the coloured noise under 1.2 Hz, one at 10.75 Hz) is marked one method
-    /// only. Measured: frequencies −0.19 to +0.36 %, damping −26 (mode 1, 0.35 %) to +14 %,
+    /// finds (peaks of the coloured noise under 1.2 Hz, one at 11.37 Hz) is marked one method
+    /// only. Measured: frequencies −0.16 to +0.18 % (−0.19 to +0.36 % before EFDD read its
+    /// crossings where the correlation decays), damping −26 (mode 1, 0.35 %) to +14 %,
     /// MAC with the other methods 0.940 (mode 3) to 1.000; four FDD-only peaks. Bars: 0.5 %,
     /// 30 %, MAC 0.90.
     #[test]

@@ -53,10 +53,14 @@ fn methods(found: &RecordModes) -> Vec<(&'static str, Vec<f64>)> {
 
 /// Each method's default result is the calibrated twin's three modes, nothing else: LSCF
 /// within 1 % (measured: dataset1 −0.07 / −0.08 / −0.21 %, dataset2 −0.04 / +0.24 / −0.05 %);
-/// SSI-COV and FDD/EFDD within 2 % — the 1 % is not theirs on a 20 s record, whose FRF
-/// bin (0.05 Hz) is 2.5 % of the first mode: measured SSI-COV −1.96 / +0.08 / −0.14 % and
-/// −0.98 / −0.74 / +0.48 %, FDD/EFDD −0.67 / +0.94 / +0.80 % and −0.01 / +1.37 / +0.72 %.
-/// The side-by-side table has three rows, each mode found by all three methods.
+/// FDD/EFDD within 1.2 % (measured −0.66 / +0.83 / −0.27 % and −0.01 / −0.45 / −0.91 %:
+/// EFDD's 0.2 Hz bins, seven segments of 256, make a bell of three to eight bins; before it
+/// read its zero crossings only where the correlation decays, −0.67 / +0.94 / +0.80 % and
+/// −0.01 / +1.37 / +0.72 %); SSI-COV within 2 % — the 1 % is not its on a 20 s record
+/// forced by a band-limited (not white) force, which output-only methods take for white:
+/// measured −1.96 / +0.08 / −0.14 % and −0.98 / −0.74 / +0.48 % (the first mode's −1.9 % stays
+/// at 30 and 40 block rows). The side-by-side table has three rows, each mode found by all
+/// three methods.
 #[test]
 fn the_bundled_records_give_their_three_modes_and_nothing_else() {
     let references = [
@@ -71,7 +75,11 @@ fn the_bundled_records_give_their_three_modes_and_nothing_else() {
                 reference.len(),
                 "{name} {method}: {frequencies:?}"
             );
-            let bar = if method == "LSCF" { 0.01 } else { 0.02 };
+            let bar = match method {
+                "LSCF" => 0.01,
+                "FDD/EFDD" => 0.012,
+                _ => 0.02,
+            };
             for (f, r) in frequencies.iter().zip(&reference) {
                 let error = f / r - 1.0;
                 println!("{name} {method}: {f:.4} Hz, {:+.2} %", 100.0 * error);
