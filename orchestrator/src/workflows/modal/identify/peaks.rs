@@ -1,0 +1,84 @@
+//! The measured curves a method's modes must peak in (each channel's FRF, or the responses'
+//! spectrum), and where they peak.
+
+use numerics::modal::spectral::Frf;
+use numerics::modal::stabilisation::{IdentifiedMode, PeakEvidence, PEAK_COHERENCE};
+
+use super::SpectrumReport;
+
+/// The measured magnitudes a method's modes must peak in: each channel's FRF magnitude for
+/// the input–output method, the responses' total spectrum (its square root) for SSI-COV.
+pub(super) struct Peaks {
+    pub(super) frequencies: Vec<f64>,
+    pub(super) curves: Vec<Vec<f64>>,
+    pub(super) coherence: Option<Vec<Vec<f64>>>,
+}
+
+impl Peaks {
+    pub(super) fn of_frf(frf: &Frf) -> Peaks {
+        Peaks {
+            frequencies: frf.frequencies.clone(),
+            curves: frf
+                .response
+                .iter()
+                .map(|h| h.iter().map(|v| v.norm()).collect())
+                .collect(),
+            coherence: Some(frf.coherence.clone()),
+        }
+    }
+
+    pub(super) fn of_spectrum(spectrum: &SpectrumReport) -> Peaks {
+        Peaks {
+            frequencies: spectrum.frequencies.clone(),
+            curves: vec![spectrum.total.iter().map(|v| v.max(0.0).sqrt()).collect()],
+            coherence: None,
+        }
+    }
+
+    /// Hz: the frequencies within `band` where some curve peaks — the largest within two bins
+    /// either side, coherent (an FRF's [`PEAK_COHERENCE`]) and supported as a mode's peak
+    /// would be ([`PeakEvidence::supports`]).
+    pub(super) fn peaks_within(&self, band: (f64, f64)) -> Vec<f64> {
+        let evidence = self.of();
+        let mut peaks: Vec<f64> = Vec::new();
+        let n = self.frequencies.len();
+        for k in 2..n.saturating_sub(2) {
+            let f = self.frequencies[k];
+            if f < band.0 || f > band.1 || peaks.last() == Some(&f) {
+                continue;
+            }
+            let peaked = self.curves.iter().enumerate().any(|(i, curve)| {
+                let coherent = self
+                    .coherence
+                    .as_ref()
+                    .is_none_or(|c| c[i][k] >= PEAK_COHERENCE);
+                coherent && (k - 2..=k + 2).all(|j| curve[j] <= curve[k])
+            });
+            if peaked && evidence.supports(f) {
+                peaks.push(f);
+            }
+        }
+        peaks
+    }
+
+    pub(super) fn of(&self) -> PeakEvidence<'_> {
+        PeakEvidence {
+            frequencies: &self.frequencies,
+            curves: &self.curves,
+            coherence: self.coherence.as_deref(),
+        }
+    }
+}
+
+/// Whether a mode of `modes` lies at the peak `frequency` (Hz): within the selection's
+/// cluster distance (1 %) or two bins of `bins`' spacing, whichever is wider.
+pub(super) fn explained(frequency: f64, modes: &[IdentifiedMode], bins: &[f64]) -> bool {
+    let bin = match bins {
+        [a, b, ..] => b - a,
+        _ => 0.0,
+    };
+    let within = (0.01 * frequency).max(2.0 * bin);
+    modes
+        .iter()
+        .any(|m| (m.frequency - frequency).abs() <= within)
+}
