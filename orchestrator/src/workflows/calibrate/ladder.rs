@@ -12,10 +12,9 @@
 //! records, so the estimates and the posterior are those of all samples (to the fit's stopping
 //! gain, [`FINE_GAIN`](super::FINE_GAIN)).
 
-use super::{
-    finish_start, record_targets, screened_starts, CalibrateError, CalibrationSetup, RecordInput,
-    Running, StartOutcome, StartResult, Target,
-};
+use super::starts::{finish_start, screened_starts, Running, StartResult};
+use super::target::Target;
+use super::{record_targets, CalibrateError, CalibrationSetup, RecordInput, StartOutcome};
 use crate::cosim::import::Fmu;
 use crate::twin::data::Measurement;
 use crate::twin::Component;
