@@ -76,7 +76,20 @@ fn units() -> Vec<Unit> {
     ]
 }
 
+/// The model's variables, in value-reference order of their groups: the role and the
+/// structure, the bumper and stepping, then each role's inputs and outputs.
 fn variables() -> Vec<Variable> {
+    let mut v = role_and_structure();
+    bumper_and_stepping(&mut v);
+    numerical_inputs(&mut v);
+    physical_inputs(&mut v);
+    numerical_outputs(&mut v);
+    physical_outputs(&mut v);
+    v
+}
+
+/// The role, then each floor's mass and each storey's damping and stiffness.
+fn role_and_structure() -> Vec<Variable> {
     let mut v = vec![Variable::integer_parameter("role", ROLE, ROLE_NUMERICAL)
         .min(0.0)
         .max(2.0)
@@ -112,6 +125,11 @@ fn variables() -> Vec<Variable> {
                 .describe(&format!("stiffness of storey {n} ({side} role)")),
         );
     }
+    v
+}
+
+/// The bumper's gap and stiffness, the RK4 substeps and the physical role's motion time.
+fn bumper_and_stepping(v: &mut Vec<Variable>) {
     v.push(
         Variable::real_parameter("gap", GAP, "m", DEFAULT_GAP)
             .min(0.0)
@@ -139,6 +157,10 @@ fn variables() -> Vec<Variable> {
             .min(0.0)
             .describe("physical role: the duration of the imposed motion; every fmi2DoStep must be this long (1e-9 relative)"),
     );
+}
+
+/// The numerical role's inputs: the excitation and floor 2's load with its slope.
+fn numerical_inputs(v: &mut Vec<Variable>) {
     v.push(
         Variable::real_input("force", FORCE, "N", 0.0)
             .describe("numerical role: excitation force on floor 1 (first-order interpolation through fmi2SetRealInputDerivatives)"),
@@ -151,6 +173,10 @@ fn variables() -> Vec<Variable> {
         Variable::real_input("interface_force_rate", INTERFACE_FORCE_RATE, "N/s", 0.0)
             .describe("numerical role: slope of floor 2's load over the coming step (load(tau) = interface_force + interface_force_rate * tau)"),
     );
+}
+
+/// The physical role's inputs: the imposed motion's ends.
+fn physical_inputs(v: &mut Vec<Variable>) {
     for (name, vr, unit, what) in [
         (
             "y2_start",
@@ -181,6 +207,10 @@ fn variables() -> Vec<Variable> {
             "physical role: {what} (the actuator's motion over control_step, a cubic Hermite)"
         )));
     }
+}
+
+/// The numerical role's outputs: floors 1 and 2's motion.
+fn numerical_outputs(v: &mut Vec<Variable>) {
     for (name, vr, unit, what) in [
         ("y1", Y1, "m", "floor 1's displacement"),
         ("v1", V1, "m/s", "floor 1's velocity"),
@@ -197,6 +227,10 @@ fn variables() -> Vec<Variable> {
                 .describe(&format!("numerical role: {what} (0 in the physical role)")),
         );
     }
+}
+
+/// The physical role's outputs at the end of the imposed motion.
+fn physical_outputs(v: &mut Vec<Variable>) {
     let motion = [Y2_START, V2_START, Y2_END, V2_END];
     for (name, vr, unit, what) in [
         (
@@ -223,7 +257,6 @@ fn variables() -> Vec<Variable> {
                 )),
         );
     }
-    v
 }
 
 /// The table, built and checked once.
