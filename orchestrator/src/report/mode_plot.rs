@@ -4,11 +4,12 @@
 
 use std::path::Path;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::{palette, ReportError};
 use crate::fsutil::write_text_atomically;
-use crate::workflows::modal::{ModeComparison, TwinModes};
+use crate::workflows::modal::{ModeComparison, TwinMode, TwinModes};
 
 const TWIN: RGBColor = palette::BLUE;
 const OBSERVED: RGBColor = palette::VERMILION;
@@ -65,7 +66,6 @@ pub fn draw_mode_shapes(
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        let err = |e: &dyn std::fmt::Display| e.to_string();
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let root = root
             .titled(
@@ -74,104 +74,143 @@ pub fn draw_mode_shapes(
             )
             .map_err(|e| err(&e))?;
         let areas = root.split_evenly((1, panels));
-        let storeys = twin.storeys as f64;
         for (mode, area) in twin.modes.iter().zip(areas.iter()) {
-            let sd = |v: Option<f64>| v.map(|s| format!(" ± {:.2e}", s)).unwrap_or_default();
-            let caption = format!(
-                "mode {}: {:.3}{} Hz, ζ {:.3}{} %",
-                mode.number,
-                mode.frequency,
-                sd(mode.frequency_sd),
-                100.0 * mode.damping,
-                mode.damping_sd
-                    .map(|s| format!(" ± {:.2e}", 100.0 * s))
-                    .unwrap_or_default()
-            );
-            let mut chart = ChartBuilder::on(area)
-                .margin(10)
-                .caption(caption, ("sans-serif", 13))
-                .x_label_area_size(30)
-                .y_label_area_size(30)
-                .build_cartesian_2d(-1.3f64..1.3f64, 0f64..storeys + 0.3)
-                .map_err(|e| err(&e))?;
-            chart
-                .configure_mesh()
-                .y_desc("floor")
-                .x_labels(5)
-                .y_labels(twin.storeys + 1)
-                .y_label_formatter(&|y| format!("{y:.0}"))
-                .draw()
-                .map_err(|e| err(&e))?;
-            let points: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
-                .chain(
-                    mode.shape
-                        .iter()
-                        .enumerate()
-                        .map(|(i, &x)| (x, (i + 1) as f64)),
-                )
-                .collect();
-            chart
-                .draw_series(LineSeries::new(points.clone(), TWIN.stroke_width(2)))
-                .map_err(|e| err(&e))?
-                .label("twin")
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], TWIN.stroke_width(2)));
-            if let Some(sds) = &mode.shape_sd {
-                chart
-                    .draw_series(mode.shape.iter().zip(sds).enumerate().map(|(i, (&x, &s))| {
-                        let y = (i + 1) as f64;
-                        PathElement::new([(x - 2.0 * s, y), (x + 2.0 * s, y)], TWIN.stroke_width(3))
-                    }))
-                    .map_err(|e| err(&e))?;
-            }
-            chart
-                .draw_series(
-                    points
-                        .iter()
-                        .skip(1)
-                        .map(|&p| Circle::new(p, 3, TWIN.filled())),
-                )
-                .map_err(|e| err(&e))?;
-            // The observed mode paired with this one, at the floors the record measures,
-            // scaled to the twin's shape there (least squares) so that the two lie together.
-            if let Some(obs) = observed {
-                let partner = obs.comparison.and_then(|c| {
-                    c.pairs
-                        .iter()
-                        .find(|p| p.twin_mode == mode.number)
-                        .map(|p| (p.observed_mode - 1, p.mac))
-                });
-                if let Some((j, mac)) = partner {
-                    if let Some((freq, shape)) = obs.modes.get(j) {
-                        let twin_at: Vec<f64> = obs
-                            .floors
-                            .iter()
-                            .map(|&f| mode.shape.get(f.wrapping_sub(1)).copied().unwrap_or(0.0))
-                            .collect();
-                        let dot: f64 = twin_at.iter().zip(shape).map(|(a, b)| a * b).sum();
-                        let norm: f64 = shape.iter().map(|b| b * b).sum();
-                        let scale = if norm > 0.0 { dot / norm } else { 1.0 };
-                        chart
-                            .draw_series(obs.floors.iter().zip(shape).map(|(&f, &x)| {
-                                Cross::new((scale * x, f as f64), 5, OBSERVED.stroke_width(2))
-                            }))
-                            .map_err(|e| err(&e))?
-                            .label(format!("record {freq:.3} Hz, MAC {mac:.3}"))
-                            .legend(|(x, y)| Cross::new((x + 8, y), 4, OBSERVED.stroke_width(2)));
-                    }
-                }
-            }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(palette::GREY)
-                .label_font(("sans-serif", 11))
-                .position(SeriesLabelPosition::LowerLeft)
-                .draw()
-                .map_err(|e| err(&e))?;
+            mode_panel(area, twin.storeys, mode, observed)?;
         }
         root.present().map_err(|e| err(&e))?;
     }
     Ok(svg)
+}
+
+/// A drawing error as the message the caller reports.
+fn err(e: &dyn std::fmt::Display) -> String {
+    e.to_string()
+}
+
+type ShapeChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// One twin mode's panel: its shape along the `storeys` floors with ±2 sd, the observed mode
+/// paired with it (when given) and the legend.
+fn mode_panel(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    storeys: usize,
+    mode: &TwinMode,
+    observed: Option<&ObservedShapes>,
+) -> Result<(), String> {
+    let sd = |v: Option<f64>| v.map(|s| format!(" ± {:.2e}", s)).unwrap_or_default();
+    let caption = format!(
+        "mode {}: {:.3}{} Hz, ζ {:.3}{} %",
+        mode.number,
+        mode.frequency,
+        sd(mode.frequency_sd),
+        100.0 * mode.damping,
+        mode.damping_sd
+            .map(|s| format!(" ± {:.2e}", 100.0 * s))
+            .unwrap_or_default()
+    );
+    let mut chart = ChartBuilder::on(area)
+        .margin(10)
+        .caption(caption, ("sans-serif", 13))
+        .x_label_area_size(30)
+        .y_label_area_size(30)
+        .build_cartesian_2d(-1.3f64..1.3f64, 0f64..storeys as f64 + 0.3)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .y_desc("floor")
+        .x_labels(5)
+        .y_labels(storeys + 1)
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .draw()
+        .map_err(|e| err(&e))?;
+    draw_twin_shape(&mut chart, mode)?;
+    if let Some(obs) = observed {
+        draw_observed_partner(&mut chart, mode, obs)?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(palette::GREY)
+        .label_font(("sans-serif", 11))
+        .position(SeriesLabelPosition::LowerLeft)
+        .draw()
+        .map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// The twin's shape from the ground up, its ±2 sd bars and a dot at each floor.
+fn draw_twin_shape(chart: &mut ShapeChart, mode: &TwinMode) -> Result<(), String> {
+    let points: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
+        .chain(
+            mode.shape
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| (x, (i + 1) as f64)),
+        )
+        .collect();
+    chart
+        .draw_series(LineSeries::new(points.clone(), TWIN.stroke_width(2)))
+        .map_err(|e| err(&e))?
+        .label("twin")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], TWIN.stroke_width(2)));
+    if let Some(sds) = &mode.shape_sd {
+        chart
+            .draw_series(mode.shape.iter().zip(sds).enumerate().map(|(i, (&x, &s))| {
+                let y = (i + 1) as f64;
+                PathElement::new([(x - 2.0 * s, y), (x + 2.0 * s, y)], TWIN.stroke_width(3))
+            }))
+            .map_err(|e| err(&e))?;
+    }
+    chart
+        .draw_series(
+            points
+                .iter()
+                .skip(1)
+                .map(|&p| Circle::new(p, 3, TWIN.filled())),
+        )
+        .map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// The observed mode paired with this one, at the floors the record measures, scaled to the
+/// twin's shape there (least squares) so that the two lie together.
+fn draw_observed_partner(
+    chart: &mut ShapeChart,
+    mode: &TwinMode,
+    obs: &ObservedShapes,
+) -> Result<(), String> {
+    let partner = obs.comparison.and_then(|c| {
+        c.pairs
+            .iter()
+            .find(|p| p.twin_mode == mode.number)
+            .map(|p| (p.observed_mode - 1, p.mac))
+    });
+    let Some((j, mac)) = partner else {
+        return Ok(());
+    };
+    let Some((freq, shape)) = obs.modes.get(j) else {
+        return Ok(());
+    };
+    let twin_at: Vec<f64> = obs
+        .floors
+        .iter()
+        .map(|&f| mode.shape.get(f.wrapping_sub(1)).copied().unwrap_or(0.0))
+        .collect();
+    let dot: f64 = twin_at.iter().zip(shape).map(|(a, b)| a * b).sum();
+    let norm: f64 = shape.iter().map(|b| b * b).sum();
+    let scale = if norm > 0.0 { dot / norm } else { 1.0 };
+    chart
+        .draw_series(
+            obs.floors
+                .iter()
+                .zip(shape)
+                .map(|(&f, &x)| Cross::new((scale * x, f as f64), 5, OBSERVED.stroke_width(2))),
+        )
+        .map_err(|e| err(&e))?
+        .label(format!("record {freq:.3} Hz, MAC {mac:.3}"))
+        .legend(|(x, y)| Cross::new((x + 8, y), 4, OBSERVED.stroke_width(2)));
+    Ok(())
 }
 
 /// Writes the MAC matrix of a comparison (twin modes down, record modes across) as an SVG.

@@ -6,6 +6,7 @@
 use std::fmt::Display;
 use std::path::{Path, PathBuf};
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -530,52 +531,19 @@ fn draw_channel(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     with_time_axis: bool,
 ) -> Result<(), String> {
-    let n = c.time.len();
-    let (t0, t1) = (c.time[0], c.time[n - 1]);
-    let half_sample = 0.5 * sampling_interval(c);
-    let measured = &c.measured[channel];
-    let predicted = &c.predicted[channel];
-    let residual = c.residual(channel);
-    let name = c.channels[channel].name();
-    // ±3σ at each sample: the noise σ, or the corrector's predictive σ where the twin has one.
-    let band: Vec<f64> = (0..n)
-        .map(|k| 3.0 * c.sd_at(channel, k))
-        .map(|b| if b.is_finite() { b } else { 0.0 })
-        .collect();
-    let (lo, hi) = padded_range(
-        measured.iter().chain(&residual).copied().chain(
-            predicted
-                .iter()
-                .zip(&band)
-                .flat_map(|(p, b)| [p - b, p + b]),
-        ),
-        0.04,
-    );
-
-    let windows_here = c
-        .failing_windows
-        .iter()
-        .filter(|w| w.channels.contains(&name))
-        .count();
-    let mut caption = format!("{name} — NMSE {}", percent(c.nmse[channel]));
-    if windows_here > 0 {
-        caption += &format!(
-            " — out of band in {windows_here} window{}",
-            if windows_here == 1 { "" } else { "s" }
-        );
-    }
+    let panel = ChannelPanel::of(c, channel);
     let mut chart = ChartBuilder::on(area)
-        .caption(caption, (FONT, 17))
+        .caption(channel_caption(c, channel, &panel.name), (FONT, 17))
         .margin_left(10)
         .margin_right(24)
         .margin_top(2)
         .margin_bottom(4)
         .x_label_area_size(if with_time_axis { TIME_AXIS_HEIGHT } else { 0 })
         .y_label_area_size(PANEL_LEFT)
-        .build_cartesian_2d(t0..t1, lo..hi)
+        .build_cartesian_2d(panel.t0..panel.t1, panel.lo..panel.hi)
         .map_err(text)?;
-    let time_label = |t: &f64| tick_label(*t, t1 - t0);
-    let value_label = |a: &f64| tick_label(*a, hi - lo);
+    let time_label = |t: &f64| tick_label(*t, panel.t1 - panel.t0);
+    let value_label = |a: &f64| tick_label(*a, panel.hi - panel.lo);
     let mut mesh = chart.configure_mesh();
     mesh.x_label_formatter(&time_label)
         .y_label_formatter(&value_label)
@@ -591,9 +559,81 @@ fn draw_channel(
         mesh.x_desc("time (s)");
     }
     mesh.draw().map_err(text)?;
+    draw_spans(&mut chart, c, &panel)?;
+    draw_traces(&mut chart, c, channel, &panel)
+}
 
+type TimeChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// What one channel's panel shows: its name, the time span, the residual, the ±3σ band at
+/// each sample and the value range that holds them all.
+struct ChannelPanel {
+    name: String,
+    t0: f64,
+    t1: f64,
+    residual: Vec<f64>,
+    band: Vec<f64>,
+    lo: f64,
+    hi: f64,
+}
+
+impl ChannelPanel {
+    fn of(c: &Comparison, channel: usize) -> Self {
+        let n = c.time.len();
+        let measured = &c.measured[channel];
+        let predicted = &c.predicted[channel];
+        let residual = c.residual(channel);
+        // ±3σ at each sample: the noise σ, or the corrector's predictive σ where the twin has
+        // one.
+        let band: Vec<f64> = (0..n)
+            .map(|k| 3.0 * c.sd_at(channel, k))
+            .map(|b| if b.is_finite() { b } else { 0.0 })
+            .collect();
+        let (lo, hi) = padded_range(
+            measured.iter().chain(&residual).copied().chain(
+                predicted
+                    .iter()
+                    .zip(&band)
+                    .flat_map(|(p, b)| [p - b, p + b]),
+            ),
+            0.04,
+        );
+        ChannelPanel {
+            name: c.channels[channel].name(),
+            t0: c.time[0],
+            t1: c.time[n - 1],
+            residual,
+            band,
+            lo,
+            hi,
+        }
+    }
+}
+
+/// The panel's caption: the channel, its NMSE and the failing windows it is out of band in.
+fn channel_caption(c: &Comparison, channel: usize, name: &str) -> String {
+    let windows_here = c
+        .failing_windows
+        .iter()
+        .filter(|w| w.channels.iter().any(|ch| ch == name))
+        .count();
+    let mut caption = format!("{name} — NMSE {}", percent(c.nmse[channel]));
+    if windows_here > 0 {
+        caption += &format!(
+            " — out of band in {windows_here} window{}",
+            if windows_here == 1 { "" } else { "s" }
+        );
+    }
+    caption
+}
+
+/// The transient and the failing windows as shaded spans (darker where this channel fails).
+fn draw_spans(chart: &mut TimeChart, c: &Comparison, panel: &ChannelPanel) -> Result<(), String> {
+    let (t0, t1, lo, hi) = (panel.t0, panel.t1, panel.lo, panel.hi);
+    let half_sample = 0.5 * sampling_interval(c);
     if c.first > 0 {
-        let end = c.time[c.first.min(n - 1)];
+        let end = c.time[c.first.min(c.time.len() - 1)];
         chart
             .draw_series(std::iter::once(Rectangle::new(
                 [(t0, lo), (end, hi)],
@@ -602,7 +642,7 @@ fn draw_channel(
             .map_err(text)?;
     }
     for window in &c.failing_windows {
-        let opacity = if window.channels.contains(&name) {
+        let opacity = if window.channels.contains(&panel.name) {
             FAILING_OPACITY
         } else {
             FAILING_ELSEWHERE_OPACITY
@@ -618,10 +658,23 @@ fn draw_channel(
             )))
             .map_err(text)?;
     }
+    Ok(())
+}
+
+/// The prediction's ±3σ band, then the measured, predicted and residual traces.
+fn draw_traces(
+    chart: &mut TimeChart,
+    c: &Comparison,
+    channel: usize,
+    panel: &ChannelPanel,
+) -> Result<(), String> {
+    let measured = &c.measured[channel];
+    let predicted = &c.predicted[channel];
+    let band = &panel.band;
     if band.iter().any(|&b| b > 0.0) {
-        let upper = points(&c.time, predicted.iter().zip(&band).map(|(p, b)| p + b));
+        let upper = points(&c.time, predicted.iter().zip(band).map(|(p, b)| p + b));
         let lower: Vec<(f64, f64)> =
-            points(&c.time, predicted.iter().zip(&band).map(|(p, b)| p - b)).collect();
+            points(&c.time, predicted.iter().zip(band).map(|(p, b)| p - b)).collect();
         let outline: Vec<(f64, f64)> = upper.chain(lower.into_iter().rev()).collect();
         chart
             .draw_series(std::iter::once(Polygon::new(
@@ -644,7 +697,7 @@ fn draw_channel(
         .map_err(text)?;
     chart
         .draw_series(LineSeries::new(
-            points(&c.time, residual.iter().copied()),
+            points(&c.time, panel.residual.iter().copied()),
             RESIDUAL.stroke_width(1),
         ))
         .map_err(text)?;
