@@ -1,6 +1,11 @@
 //! The estimators compared: each choice run on the record, its cost beside the others'.
 
-use super::*;
+use super::closed_loop::{Gains, StateSource};
+use super::options::{ControlOptions, EstimatorChoice};
+use super::report::{DesignRun, EstimatorCost};
+use super::runs::{check_estimator, estimator_of, ControlBasis, Runner};
+use super::ControlError;
+use crate::twin::data::Measurement;
 
 /// The states `--estimator-costs` compares: the exact one, and each estimator that can run on
 /// the record's channels (the integrating one needs every floor's acceleration).

@@ -24,18 +24,9 @@ mod retune;
 mod runs;
 mod schedule;
 
-use numerics::lqr::{Estimator, Schedule, StateSpace};
-use serde::Serialize;
-use structure::channel::{Channel, Quantity};
-use structure::Structure;
-
-use crate::blocks::lqr::SensorNoise;
 use crate::cosim::master::MasterError;
-use crate::evaluation::frf::{welch_h1, FrequencyResponse, FRF_SEGMENT};
-use crate::evaluation::stats::rms;
 use crate::twin::data::Measurement;
 use crate::twin::{Twin, TwinError};
-use closed_loop::{simulate, ContactEvent, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
 pub use design::{
     design, physics_resource, plant_measuring, plant_of, structure_of, with_actuator_at, Design,
     StateUnit,

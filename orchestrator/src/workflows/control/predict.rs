@@ -1,7 +1,15 @@
 //! A controller given as a spec (`twin control --spec`, the Python package): its designs, and
 //! the twin's response under it predicted.
 
-use super::*;
+use super::closed_loop::{simulate, Gains, LoopLaw, LoopSetup, StateSource};
+use super::design::{plant_measuring, with_actuator_at};
+use super::runs::{check_record, force_limit};
+use super::ControlError;
+use crate::twin::data::Measurement;
+use crate::twin::Twin;
+use numerics::lqr::Estimator;
+use structure::channel::Channel;
+use structure::Structure;
 
 /// A controller read back from a `twin control` report: what `twin synth --controller` puts in
 /// the synthetic structure's loop.

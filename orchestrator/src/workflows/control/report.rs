@@ -1,7 +1,16 @@
 //! What `twin control` reports: each design's run, the passive structure's, the retune's rows,
 //! the schedule's switches, the estimators' costs and the contacts — and the outcome those make.
 
-use super::*;
+use super::closed_loop::{ContactEvent, Response};
+use super::design::{self, Design, StateUnit};
+use super::options::ControlOptions;
+use super::response::{acc_rms, floor_frfs};
+use super::runs::{ControlBasis, LoopPlan, Runs};
+use crate::evaluation::frf::FrequencyResponse;
+use crate::twin::data::Measurement;
+use numerics::lqr::Estimator;
+use serde::Serialize;
+use structure::channel::Channel;
 
 /// Attenuation at one resonance: passive peak over controlled peak, per floor, dB.
 #[derive(Clone, Debug, Serialize)]

@@ -1,7 +1,11 @@
 //! The responses read: each floor's FRF from the force, the attenuation at each resonance of the
 //! passive structure, the floors' RMS accelerations.
 
-use super::*;
+use super::closed_loop::Response;
+use super::options::RESONANCE_BAND;
+use super::report::Attenuation;
+use crate::evaluation::frf::{welch_h1, FrequencyResponse, FRF_SEGMENT};
+use crate::evaluation::stats::rms;
 
 /// Per floor, the Welch H1 estimate from `force` to the run's acceleration (None where the
 /// record is too short for a segment).

@@ -1,6 +1,11 @@
 //! `retune`: the smallest state weight of the grid that keeps the contacts at the target.
 
-use super::*;
+use super::closed_loop::Response;
+use super::design::Design;
+use super::options::{Retune, RETUNE_GRID};
+use super::report::{DesignRun, RetuneReport, RetuneRow};
+use super::runs::{DesignRuns, Runner};
+use super::ControlError;
 
 /// `--retune`: run the grid's designs (multiples of `q0`, the smallest q) in order and choose
 /// the first that meets the target; the chosen run joins `designs` unless its q is there.

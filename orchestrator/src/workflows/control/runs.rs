@@ -2,7 +2,19 @@
 //! designs and the loop's plan, the estimator chosen for the record's sensors, and a [`Runner`]
 //! that drives the structure passive and under each design.
 
-use super::*;
+use super::closed_loop::{simulate, Gains, Gap, LoopLaw, LoopSetup, Response, StateSource};
+use super::design::{self, design, plant_measuring, structure_of, with_actuator_at, Design};
+use super::options::{ControlOptions, EstimatorChoice, RETUNE_GRID};
+use super::report::{Attenuation, DesignRun, EstimatorCost, RetuneReport, ScheduleReport};
+use super::response::{acc_rms, attenuation, resonance_peaks};
+use super::{closed_loop, ControlError};
+use crate::blocks::lqr::SensorNoise;
+use crate::evaluation::stats::rms;
+use crate::twin::data::Measurement;
+use crate::twin::Twin;
+use numerics::lqr::{Estimator, StateSpace};
+use structure::channel::{Channel, Quantity};
+use structure::Structure;
 
 /// Controller samples per record sample: the fastest closed-loop pole moves by at most 0.1 rad
 /// per sample; a power of two (so that it divides a synthetic record's fine grid), at least 4,

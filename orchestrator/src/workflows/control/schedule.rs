@@ -1,7 +1,16 @@
 //! The gain schedule: low and high gains, switched when the estimated drift (or the residual's
 //! variance) approaches the gap.
 
-use super::*;
+use super::closed_loop::{Gains, Gap, StateSource};
+use super::options::{ScheduleOptions, VarianceTrigger};
+use super::report::{DesignRun, RetuneReport, ScheduleReport, Switch};
+use super::response::acc_rms;
+use super::runs::{ControlBasis, Runner, ScheduledRun};
+use super::ControlError;
+use crate::twin::data::Measurement;
+use crate::twin::Twin;
+use numerics::lqr::Schedule;
+use structure::channel::{Channel, Quantity};
 
 /// `--schedule`: run the gain schedule between the smallest stable design and the highest (the
 /// retuned one, else the largest q), watching the first gap, with the corrector beside the

@@ -119,21 +119,11 @@ mod run;
 mod stream;
 mod threshold;
 
-use fmu_gp_corrector::model::{
-    per_channel, FitOptions, GaussianProcess, Inputs, TrackedPoints, Tracking,
-};
-use fmu_gp_corrector::training::MAX_TRAINING_POINTS;
-use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Layout, LayoutTraining, TargetForm};
-use serde::Serialize;
+use fmu_gp_corrector::TargetForm;
 
 pub use crate::blocks::supervisor::{Mode, Supervisor, FORGETTING_FACTORS};
-use crate::cosim::master::{Block, MasterError};
-use crate::evaluation::compare::nmse;
-use crate::twin::data::Measurement;
-use crate::twin::run::run_twin;
+use crate::cosim::master::MasterError;
 use crate::twin::run::RunError;
-use crate::twin::Twin;
-use crate::workflows::train::{physics_only, Channels};
 
 pub use modes::{chosen_modes, learned_twin, run_modes, FORGETTING, MODE};
 pub use refit::{initial_floors, RefitSchedule};
@@ -149,8 +139,6 @@ pub use threshold::{
 };
 
 // What the stages share: each submodule reads the others' through `use super::*`.
-use refit::*;
-use stream::*;
 
 /// What can stop the learning. The messages say which record, floor or time.
 #[derive(Debug, thiserror::Error)]

@@ -1,6 +1,13 @@
 //! The modes chosen (`--modes`), run in parallel threads, and the learned twin written.
 
-use super::*;
+use super::refit::initial_floors;
+use super::results::ModeResult;
+use super::run::run_mode;
+use super::stream::Stream;
+use super::threshold::fixed_threshold;
+use super::{LearnOptions, Result};
+use crate::blocks::supervisor::Mode;
+use crate::twin::Twin;
 
 impl LearnOptions {
     /// The options `prepare` and `run_modes` do not check themselves.

@@ -1,6 +1,10 @@
 //! The GPs' initial fit on the first points, and their refits as the training set grows.
 
-use super::*;
+use super::results::RefitRecord;
+use super::stream::{trained, Stream};
+use super::{refit_iterations, LearnError, LearnOptions, Result};
+use fmu_gp_corrector::model::FitOptions;
+use fmu_gp_corrector::{Floors, Layout, LayoutTraining};
 
 /// Fit the initial GPs on the first `initial` points after the first record's transient.
 pub fn initial_floors(streams: &[Stream], options: &LearnOptions) -> Result<Floors> {

@@ -1,7 +1,10 @@
 //! What a mode's run gives: per record its queries, NMSE after each update, refits and timings,
 //! the possible changes flagged, and the Table 2 view of every mode.
 
-use super::*;
+use super::threshold::FixedThreshold;
+use crate::blocks::supervisor::Mode;
+use fmu_gp_corrector::Floors;
+use serde::Serialize;
 
 /// A run of consecutive queried samples long enough to suggest the structure changed.
 #[derive(Clone, Debug, Serialize, PartialEq)]

@@ -2,7 +2,20 @@
 //! the supervisor, a query appended to the GPs, the threshold updated and the GPs refitted on
 //! schedule; the training set carried to the next record.
 
-use super::*;
+use super::refit::{refit_floors, RefitSchedule};
+use super::results::{
+    change_flags, ModeResult, NmsePoint, RecordResult, RefitRecord, Timing, Trace,
+};
+use super::stream::{
+    corrected, corrected_from_means, sync, track, trained, Stream, PARALLEL_TRACKING,
+};
+use super::threshold::FixedThreshold;
+use super::{LearnError, LearnOptions, Result};
+use crate::blocks::supervisor::{Mode, Supervisor};
+use crate::cosim::master::Block;
+use fmu_gp_corrector::model::{Inputs, TrackedPoints};
+use fmu_gp_corrector::training::MAX_TRAINING_POINTS;
+use fmu_gp_corrector::{Floors, TargetForm};
 
 /// Algorithm 1 over all records in one mode, from the initial GPs.
 /// One mode over the records from the initial GPs; `fixed` is the fixed mode's threshold (see

@@ -2,7 +2,14 @@
 //! on it ([`prepare`]), the corrected prediction from the GPs' means, and the GPs' tracked
 //! points kept in step with their training sets.
 
-use super::*;
+use super::{LearnError, LearnOptions, Result};
+use crate::evaluation::compare::nmse;
+use crate::twin::data::Measurement;
+use crate::twin::run::run_twin;
+use crate::twin::Twin;
+use crate::workflows::train::{physics_only, Channels};
+use fmu_gp_corrector::model::{per_channel, GaussianProcess, Inputs, TrackedPoints, Tracking};
+use fmu_gp_corrector::{lagged_inputs, FloorGp, Floors, Layout, TargetForm};
 
 /// One record, ready to stream: the corrector's layout (the record's channels and
 /// excitation), the whole lag vector and the targets (one per channel) at every sample, physics

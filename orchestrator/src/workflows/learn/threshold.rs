@@ -2,7 +2,11 @@
 //! queried, read from the streams (absolute, relative to each channel's variance, or from a
 //! reference stretch).
 
-use super::*;
+use super::refit::fit_floors;
+use super::stream::{trained, Stream};
+use super::{LearnError, LearnOptions, Result, PAPER_THRESHOLD};
+use fmu_gp_corrector::TargetForm;
+use serde::Serialize;
 
 /// Samples of the test stretch whose largest latent variance is the fixed threshold (the
 /// reference paper's Fig. 8: the first 100 points of dataset two).

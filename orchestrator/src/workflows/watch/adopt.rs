@@ -1,7 +1,19 @@
 //! A failing window diagnosed in the background and, on its verdict, a twin adopted: the
 //! diagnosis written beside the alerts, the answered parameters applied to the live twin.
 
-use super::*;
+use super::alerts::{floats, window_values};
+use super::background::{Background, Columns, Finished};
+use super::checkpoint::State;
+use super::options::WatchOptions;
+use super::watcher::{open_stepper, Watcher};
+use super::{background, WatchError};
+use crate::fsutil::write_text_atomically;
+use crate::twin::{ParameterValue, Twin, TwinError};
+use crate::workflows::diagnose::Action;
+use ::structure::channel::Channel;
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
 
 /// A twin the watch adopted: live from `at` (s of the stream), written to `twin`, on the
 /// verdict of the diagnosis `report`.

@@ -1,7 +1,14 @@
 //! The alerts: JSON lines written and flushed (with their latency), the detector's events and
 //! the connection's turned into alerts.
 
-use super::*;
+use super::mqtt::ConnectionEvent;
+use super::online::{names_and_floors, Detector, Event};
+use super::watcher::Watcher;
+use super::{io, WatchError};
+use serde_json::{json, Value};
+use std::fs::File;
+use std::io::{Read, Seek, Write};
+use std::path::Path;
 
 /// Per-sample processing times in logarithmic bins (5 % wide, from 10 ns): constant memory.
 pub(super) struct Latency {

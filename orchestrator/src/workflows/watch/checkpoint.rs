@@ -2,7 +2,19 @@
 //! comparison state, counters, the FMUs' serialised states), saved now and then and read back
 //! at the start; the noise reference's running sums.
 
-use super::*;
+use super::adopt::Adopted;
+use super::online::{Detector, Options};
+use super::stepper::{NodeState, Stepper};
+use super::supervise::Supervisor;
+use super::watcher::Watcher;
+use super::{background, WatchError};
+use crate::fsutil::write_text_atomically;
+use ::structure::channel::Channel;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
 
 /// A checkpoint's format version (2: any channels).
 pub(super) const CHECKPOINT_VERSION: u32 = 2;

@@ -28,29 +28,19 @@ mod options;
 mod stream;
 mod watcher;
 
-use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{BufRead, BufReader, Read, Seek, Write};
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant, SystemTime};
+use std::path::PathBuf;
 
-use crate::workflows::diagnose::Action;
 use ::structure::channel::Channel;
-use serde::{Deserialize, Serialize};
-use serde_json::{json, Value};
+use serde_json::Value;
 
 use crate::cosim::import::ImportError;
 use crate::evaluation::compare::CompareOptions;
-use crate::fsutil::{write_text_atomically, WriteError};
+use crate::fsutil::WriteError;
 pub use crate::record::nominal_step;
-use crate::record::{default_header, ColumnMap, LineLayout};
-use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
-use crate::twin::{ParameterValue, Twin, TwinError};
-use background::{Background, Columns, DiagnosisOptions, Finished};
-use mqtt::{ConnectionEvent, ConnectionStats, MqttSource, MqttUrl};
-use online::{names_and_floors, Detector, Event, Options};
-use stepper::{NodeState, Stepper};
-use supervise::{Decision, LearnOptions, Supervisor};
+use crate::twin::run::Tolerance;
+use crate::twin::{Twin, TwinError};
+use online::Options;
+use supervise::Supervisor;
 
 pub use adopt::Adopted;
 pub use observe::{LearningSummary, LiveState, Observer, Point, Status, Summary};
@@ -62,7 +52,6 @@ pub use options::{
 use adopt::*;
 use alerts::*;
 use checkpoint::*;
-use observe::*;
 use options::*;
 use stream::*;
 use watcher::*;

@@ -2,7 +2,15 @@
 //! [`Observer`] (`twin watch --serve`) told of the samples, alerts and state, and the summary the
 //! `end` alert carries.
 
-use super::*;
+use super::background::Background;
+use super::mqtt::ConnectionStats;
+use super::online::Detector;
+use super::watcher::Watcher;
+use ::structure::channel::Channel;
+use serde::Serialize;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::time::{Instant, SystemTime};
 
 /// What the progress display shows.
 #[derive(Debug, Clone)]

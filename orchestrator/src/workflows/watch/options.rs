@@ -1,7 +1,13 @@
 //! `twin watch`'s options: where the stream comes from, the window, the checkpoint and the
 //! background diagnosis, checked before any work.
 
-use super::*;
+use super::background::DiagnosisOptions;
+use super::mqtt::MqttUrl;
+use super::supervise::LearnOptions;
+use super::{background, modes, WatchError};
+use crate::record::ColumnMap;
+use std::path::PathBuf;
+use std::time::Duration;
 
 /// Where the samples come from.
 #[derive(Debug, Clone)]

@@ -2,7 +2,19 @@
 //! checked against the twin's structure, the opening of a resumed or broker stream, and the
 //! loop over its samples ([`read_stream`]) with their gaps and duplicates.
 
-use super::*;
+use super::alerts::Latency;
+use super::checkpoint::State;
+use super::mqtt::{ConnectionEvent, MqttSource};
+use super::observe::{status, Status};
+use super::options::{StreamSource, WatchOptions};
+use super::watcher::{structure_excitation, Watcher};
+use super::{io, WatchError};
+use crate::record::{default_header, ColumnMap, LineLayout};
+use ::structure::channel::Channel;
+use serde_json::json;
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::time::{Duration, Instant};
 
 pub(super) const POLL: Duration = Duration::from_millis(100);
 

@@ -2,7 +2,22 @@
 //! channel once the noise band is known, the modes tracked and the learner supervised; and the
 //! watch's end, its summary.
 
-use super::*;
+use super::alerts::{floats, window_values, Alerts};
+use super::background::Background;
+use super::checkpoint::{State, Welford};
+use super::observe::{status, LearningSummary, Observer, Status, Summary};
+use super::online::{names_and_floors, Detector};
+use super::options::{WatchOptions, GAP_FACTOR, NOISE_REFERENCE};
+use super::stepper::Stepper;
+use super::stream::{LineReader, Run};
+use super::supervise::{Decision, LearnOptions};
+use super::{modes, stepper, WatchError};
+use crate::record::nominal_step;
+use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
+use crate::twin::Twin;
+use ::structure::channel::Channel;
+use serde_json::{json, Value};
+use std::time::{Duration, Instant};
 
 pub(super) struct Watcher<'a> {
     /// Told of every alert written (its JSON object); an error stops the watch.
