@@ -9,6 +9,7 @@ environment variable SHEAR_FMU. Run with the project's environment:
 from __future__ import annotations
 
 import os
+import subprocess
 from pathlib import Path
 
 import fmpy.simulation
@@ -25,6 +26,26 @@ def require_built(*paths: Path) -> None:
     for path in paths:
         if not path.is_file():
             pytest.fail(f"{path} does not exist: run scripts/build-fmus.sh", pytrace=False)
+
+
+def run_twin(binary: Path, *args: str, check: bool = False, timeout: float = 900,
+             fmu_dir: Path | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """`binary` (this build's `twin`) run with `args`, its output captured as text, TWIN_FMU_DIR
+    this build's FMUs (or `fmu_dir`) and TWIN_FMU_LOG unset. `check`: assert that it exited 0,
+    the message naming the command, its exit code and its output."""
+    env = dict(os.environ, TWIN_FMU_DIR=str(fmu_dir or TARGET / "fmu"))
+    env.pop("TWIN_FMU_LOG", None)
+    done = subprocess.run([str(binary), *args], capture_output=True, text=True, env=env,
+                          timeout=timeout, cwd=cwd)
+    if check:
+        assert done.returncode == 0, \
+            f"twin {' '.join(args)}: exit {done.returncode}\n{done.stdout}\n{done.stderr}"
+    return done
+
+
+def run_twin_ok(binary: Path, *args: str, **options) -> subprocess.CompletedProcess:
+    """[`run_twin`] that asserts the run exited 0."""
+    return run_twin(binary, *args, check=True, **options)
 
 
 @pytest.fixture(scope="session")

@@ -15,33 +15,26 @@ sensors on some floors in their own units, Gaussian noise added.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
+from conftest import run_twin
 
 ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 G = 9.80665
 
 #: Sensor noise, as a fraction of each channel's RMS: its NMSE is this squared, 0.25 %.
 NOISE_FRACTION = 0.05
 
 
-def twin(binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    return subprocess.run([str(binary), *args], capture_output=True, text=True, env=env, timeout=300)
-
-
 def init(binary: Path, folder: Path, name: str, excitation: str, values: dict) -> Path:
     nominal = folder / f"{name}-nominal.json"
     nominal.write_text(json.dumps(values))
     out = folder / f"{name}.ssp"
-    done = twin(binary, "init", "--storeys", str(len(values["m"])), "--excitation", excitation,
+    done = run_twin(binary, "init", "--storeys", str(len(values["m"])), "--excitation", excitation,
                 "--nominal", str(nominal), "--out", str(out))
     assert done.returncode == 0, done.stderr
     return out
@@ -111,7 +104,7 @@ def write_record(path: Path, time: np.ndarray, columns: dict) -> Path:
 
 def compare(binary: Path, twin_path: Path, record: Path, folder: Path):
     report = folder / f"{twin_path.stem}-{record.stem}.json"
-    done = twin(binary, "compare", "--twin", str(twin_path), "--data", str(record),
+    done = run_twin(binary, "compare", "--twin", str(twin_path), "--data", str(record),
                 "--report", str(report), "--plot", str(report.with_suffix(".svg")))
     assert done.returncode == 0, done.stderr
     return json.loads(report.read_text()), done.stdout
@@ -179,14 +172,14 @@ def test_the_guard_refuses_a_force_record_and_a_floor_the_twin_lacks(twin_binary
     lines = record.read_text().splitlines()
     forced = folder / "forced.csv"
     forced.write_text("\n".join([lines[0].replace("ground_acc (g)", "force (N)"), *lines[1:]]) + "\n")
-    done = twin(twin_binary, "compare", "--twin", str(twin_path), "--data", str(forced))
+    done = run_twin(twin_binary, "compare", "--twin", str(twin_path), "--data", str(forced))
     assert done.returncode != 0
     assert "column 'force'" in done.stderr and "forced.csv:1" in done.stderr, done.stderr
     assert "ground acceleration" in done.stderr, done.stderr
 
     high = folder / "acc7.csv"
     high.write_text("\n".join([lines[0].replace("acc5 (g)", "acc7 (g)"), *lines[1:]]) + "\n")
-    done = twin(twin_binary, "compare", "--twin", str(twin_path), "--data", str(high))
+    done = run_twin(twin_binary, "compare", "--twin", str(twin_path), "--data", str(high))
     assert done.returncode != 0
     assert "column 'acc7'" in done.stderr and "floors 1 to 5" in done.stderr, done.stderr
 
@@ -200,7 +193,7 @@ def test_a_five_storey_twin_takes_the_paper_record_in_compare_and_train(twin_bin
     report, _ = compare(twin_binary, twin_path, dataset1, tmp_path)
     assert report["channels"] == ["acc1", "acc2", "acc3"]
     trained = tmp_path / "train.json"
-    done = twin(twin_binary, "train", "--twin", str(twin_path), "--data", str(dataset1),
+    done = run_twin(twin_binary, "train", "--twin", str(twin_path), "--data", str(dataset1),
                 "--stride", "8", "--out", str(tmp_path / "t.ssp"), "--report", str(trained))
     assert done.returncode == 0, done.stderr
     assert json.loads(trained.read_text())["channels"] == ["acc1", "acc2", "acc3"]

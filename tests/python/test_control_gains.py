@@ -13,26 +13,18 @@ numerics/tests/riccati.rs).
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import control
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import run_twin
 
 ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 
 
 pytestmark = pytest.mark.usefixtures("twin_fmus")
-
-
-def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    env.pop("TWIN_FMU_LOG", None)
-    return subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=300)
 
 
 def tridiagonal(c: list[float]) -> np.ndarray:

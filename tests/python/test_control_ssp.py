@@ -24,17 +24,14 @@ from __future__ import annotations
 
 import csv
 import math
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
 from fmpy.ssp.simulation import simulate_ssp
+from conftest import run_twin_ok
 
-ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 RECORD_STEP = 1.0 / 51.2
 SUBSTEPS = 4
 #: 1/204.8 s = 5/1024 s: exact in binary, so fmpy's running sum of times is exact.
@@ -45,14 +42,6 @@ OUTPUTS = ("physics.acc1", "physics.acc2", "physics.acc3", "lqr.control_force")
 
 
 pytestmark = pytest.mark.usefixtures("twin_fmus")
-
-
-def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    env.pop("TWIN_FMU_LOG", None)
-    completed = subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=300)
-    assert completed.returncode == 0, f"twin {' '.join(args)}: exit {completed.returncode}\n{completed.stderr}"
-    return completed
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +62,7 @@ def systems(twin_binary, tmp_path_factory) -> dict:
     for estimator in ("integrate", "kalman"):
         ssp = directory / f"{estimator}.ssp"
         report = directory / f"{estimator}.json"
-        run_twin(twin_binary, "control", "--data", str(record), "--q", "1e2", "1e3", "--r", "0.1",
+        run_twin_ok(twin_binary, "control", "--data", str(record), "--q", "1e2", "1e3", "--r", "0.1",
                  "--substeps", str(SUBSTEPS), "--sensor-noise", "0", "--estimator", estimator,
                  "--report", str(report), "--ssp", str(ssp), "--ssp-q", "1e3")
         out[estimator] = (ssp, report)
@@ -126,7 +115,7 @@ def test_twin_run_jacobi_and_fmpy_run_the_same_controlled_system(twin_binary, sy
         writer.writerow([repr(POINTS * STEP), repr(FORCE)])
     for estimator, (ssp, _) in systems.items():
         out = tmp_path / f"{estimator}.csv"
-        run_twin(twin_binary, "run", str(ssp), "--input", str(force), "--hold-inputs", "--algorithm", "jacobi",
+        run_twin_ok(twin_binary, "run", str(ssp), "--input", str(force), "--hold-inputs", "--algorithm", "jacobi",
                  "--step", repr(STEP), "--stop", repr((POINTS - 1) * STEP), "--output", str(out))
         ours = np.genfromtxt(out, delimiter=",", names=True, deletechars="")
         assert len(ours) == POINTS

@@ -19,17 +19,14 @@ Kalman observer from those three channels.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import control
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import run_twin
 
-ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 DT = 1.0 / 51.2
 SAMPLES = 4096
 STOREYS = 5
@@ -40,12 +37,6 @@ Q, R = 1e5, 0.1
 
 
 pytestmark = pytest.mark.usefixtures("twin_fmus")
-
-
-def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    env.pop("TWIN_FMU_LOG", None)
-    return subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=600)
 
 
 def tridiagonal(c: list[float]) -> np.ndarray:

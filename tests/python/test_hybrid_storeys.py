@@ -16,16 +16,13 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
+from conftest import run_twin
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
 RATE = 512.0
 SUBSTEPS = 4
 DURATION = 10.0
@@ -41,11 +38,6 @@ CASES = ((5, 3), (4, 1))
 STEPPED_TOL = {(5, 3): 0.01, (4, 1): 0.06}
 
 
-def run(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    return subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=600)
-
-
 def building(twin_binary: Path, storeys: int, folder: Path) -> Path:
     """`twin init` of a building whose floors and storeys all differ (so a swapped index shows)."""
     rng = np.random.default_rng(27 + storeys)
@@ -57,7 +49,7 @@ def building(twin_binary: Path, storeys: int, folder: Path) -> Path:
     path = folder / f"nominal{storeys}.json"
     path.write_text(json.dumps(nominal))
     out = folder / f"building{storeys}.ssp"
-    done = run(twin_binary, "init", "--storeys", str(storeys), "--nominal", str(path), "--out", str(out))
+    done = run_twin(twin_binary, "init", "--storeys", str(storeys), "--nominal", str(path), "--out", str(out))
     assert done.returncode == 0, done.stderr
     return out
 
@@ -86,7 +78,7 @@ def thresholds(twin_binary: Path, twin: Path, csv_path: Path, report: Path, *ext
     args += ["--substeps", str(SUBSTEPS), "--report", str(report)]
     for a in A_ERRS:
         args += ["--a-err", repr(a)]
-    done = run(twin_binary, *args, *extra)
+    done = run_twin(twin_binary, *args, *extra)
     assert done.returncode == 0, f"{' '.join(args)} {extra}: exit {done.returncode}\n{done.stderr}"
     return json.loads(report.read_text()) | {"stdout": done.stdout}
 
@@ -176,7 +168,7 @@ def test_a_bad_split_is_refused_naming_the_option(twin_binary, tmp_path):
         ("floor-2", "specimen-floors-J-N"),
     ]:
         report = tmp_path / "bad.json"
-        done = run(twin_binary, "hybrid", "threshold", "--twin", str(twin), "--split", bad,
+        done = run_twin(twin_binary, "hybrid", "threshold", "--twin", str(twin), "--split", bad,
                    "--duration", "1", "--report", str(report))
         assert done.returncode != 0, bad
         assert "--split" in done.stderr and why in done.stderr, done.stderr

@@ -28,17 +28,12 @@ from pathlib import Path
 import pytest
 
 from test_fmpy_storeys import TARGET
+from conftest import run_twin_ok
 
 CHANGE_AT = 30.0
 TOKEN = "page-test-token"
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
-
-
-def cli(binary: Path, *args: str) -> None:
-    completed = subprocess.run([str(binary), *args], capture_output=True, text=True, timeout=300,
-                               env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")))
-    assert completed.returncode == 0, completed.stderr
 
 
 @pytest.fixture(scope="module")
@@ -47,10 +42,10 @@ def building(tmp_path_factory, twin_binary):  # noqa: F811
     with 0.003 m/s² of sensor noise, and a 60 s stream whose storey 2 loses 15 % of its
     stiffness at 30 s."""
     folder = tmp_path_factory.mktemp("page")
-    cli(twin_binary, "synth", "--seed", "1", "--noise-sd", "0.003", "--duration", "20",
+    run_twin_ok(twin_binary, "synth", "--seed", "1", "--noise-sd", "0.003", "--duration", "20",
         "--out", str(folder / "calibration.csv"))
-    cli(twin_binary, "calibrate", "--data", str(folder / "calibration.csv"), "--out", str(folder / "T.ssp"))
-    cli(twin_binary, "synth", "--seed", "2", "--noise-sd", "0.003", "--duration", "60",
+    run_twin_ok(twin_binary, "calibrate", "--data", str(folder / "calibration.csv"), "--out", str(folder / "T.ssp"))
+    run_twin_ok(twin_binary, "synth", "--seed", "2", "--noise-sd", "0.003", "--duration", "60",
         "--change", f"k2@{CHANGE_AT}:0.85", "--out", str(folder / "changed.csv"))
     return folder
 
@@ -238,7 +233,7 @@ def test_accepting_a_diagnosis_writes_a_new_twin_beside_the_old(twin_binary, tmp
     the old one, which is unchanged; a diagnosis that has not landed is refused (404)."""
     root = Path(__file__).resolve().parents[2]
     twin = tmp_path / "T.ssp"
-    cli(twin_binary, "calibrate", "--data", str(root / "data" / "dataset1.csv"), "--out", str(twin))
+    run_twin_ok(twin_binary, "calibrate", "--data", str(root / "data" / "dataset1.csv"), "--out", str(twin))
     original = twin.read_bytes()
     alerts = tmp_path / "alerts.jsonl"
     watch = subprocess.Popen(

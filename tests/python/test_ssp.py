@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
-import subprocess
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -37,9 +35,8 @@ import numpy as np
 import pytest
 from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
 from fmpy.ssp.simulation import simulate_ssp
+from conftest import run_twin_ok
 
-ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 #: 1/51.2 s = 5/256 s: exact in binary, so the running sum fmpy keeps is exact too.
 STEP = 1.0 / 51.2
 SAMPLES = 1024
@@ -52,14 +49,6 @@ PHYSICS = {"k2": ("Real", "5200.0"), "c3": ("Real", "0.1"), "substeps": ("Intege
 
 
 pytestmark = pytest.mark.usefixtures("twin_fmus")
-
-
-def run_twin(twin_binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    env.pop("TWIN_FMU_LOG", None)
-    completed = subprocess.run([str(twin_binary), *args], capture_output=True, text=True, env=env, timeout=120)
-    assert completed.returncode == 0, f"twin {' '.join(args)}: exit {completed.returncode}\n{completed.stderr}"
-    return completed
 
 
 def physics_ssv(parameters: dict) -> bytes:
@@ -77,7 +66,7 @@ def archives(twin_binary, tmp_path_factory) -> dict:
     """The default twin from `twin init`, and a copy whose resources/physics.ssv sets PHYSICS."""
     directory = tmp_path_factory.mktemp("ssp")
     default = directory / "default.ssp"
-    run_twin(twin_binary, "init", "--out", str(default))
+    run_twin_ok(twin_binary, "init", "--out", str(default))
     changed = directory / "stiff.ssp"
     with zipfile.ZipFile(default) as source, zipfile.ZipFile(changed, "w", zipfile.ZIP_DEFLATED) as target:
         names = source.namelist()
@@ -104,7 +93,7 @@ def orchestrator_predictions(twin_binary, data: Path, archive: Path | None, out:
     args = ["compare", "--data", str(data), "--predictions", str(out)]
     if archive is not None:
         args += ["--twin", str(archive)]
-    run_twin(twin_binary, *args)
+    run_twin_ok(twin_binary, *args)
     table = np.genfromtxt(out, delimiter=",", names=True)
     assert table.dtype.names == ("time", *ACCELERATIONS)
     assert len(table) == SAMPLES

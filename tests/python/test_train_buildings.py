@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import zipfile
 from pathlib import Path
 
 import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
+from conftest import run_twin_ok
 
 ROOT = Path(__file__).resolve().parents[2]
 BINARY = Path(os.environ.get("TWIN_BINARY", ROOT / "target" / "release" / "twin"))
@@ -50,13 +50,6 @@ SHARE_UNSEEN = 0.95
 SHARE_LEARNED = 0.9
 
 
-def twin(*args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(FMU_DIR))
-    done = subprocess.run([str(BINARY), *args], capture_output=True, text=True, env=env, timeout=900)
-    assert done.returncode == 0, f"twin {' '.join(args)}: exit {done.returncode}\n{done.stderr}"
-    return done
-
-
 @pytest.fixture(scope="module")
 def building(tmp_path_factory):
     """The five-storey twin and two records of the building with the hidden cubic spring."""
@@ -66,11 +59,11 @@ def building(tmp_path_factory):
     folder = tmp_path_factory.mktemp("five")
     model, nominal = folder / "five.ssp", folder / "nominal.json"
     nominal.write_text(json.dumps(NOMINAL))
-    twin("init", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal), "--out", str(model))
+    run_twin_ok(BINARY, "init", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal), "--out", str(model))
     records = []
     for seed in (1, 2):
         record = folder / f"r{seed}.csv"
-        twin("synth", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal),
+        run_twin_ok(BINARY, "synth", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal),
              "--channels", ",".join(CHANNELS), "--units", "acc=g", "--effect", EFFECT,
              "--duration", "20", "--seed", str(seed), "--out", str(record))
         records.append(record)
@@ -80,7 +73,7 @@ def building(tmp_path_factory):
 
 def compare_nmse(model: Path, record: Path, folder: Path, name: str) -> list[float]:
     report = folder / f"{name}.json"
-    twin("compare", "--twin", str(model), "--data", str(record), "--report", str(report))
+    run_twin_ok(BINARY, "compare", "--twin", str(model), "--data", str(record), "--report", str(report))
     got = json.loads(report.read_text())
     assert got["channels"] == CHANNELS
     return got["nmse"]
@@ -89,7 +82,7 @@ def compare_nmse(model: Path, record: Path, folder: Path, name: str) -> list[flo
 def test_train_corrects_every_channel_of_a_five_storey_building(building):
     folder, model, (first, second) = building
     trained, report = folder / "trained.ssp", folder / "train.json"
-    twin("train", "--twin", str(model), "--data", str(first), "--stride", "2", "--out", str(trained),
+    run_twin_ok(BINARY, "train", "--twin", str(model), "--data", str(first), "--stride", "2", "--out", str(trained),
          "--report", str(report))
     got = json.loads(report.read_text())
     assert got["channels"] == CHANNELS
@@ -113,7 +106,7 @@ def test_train_corrects_every_channel_of_a_five_storey_building(building):
 def test_the_trained_corrector_fmu_is_laid_out_for_the_channels_and_validates(building):
     folder, model, (first, _) = building
     trained = folder / "trained-fmu.ssp"
-    twin("train", "--twin", str(model), "--data", str(first), "--lags", "2", "--stride", "8",
+    run_twin_ok(BINARY, "train", "--twin", str(model), "--data", str(first), "--lags", "2", "--stride", "8",
          "--out", str(trained))
     with zipfile.ZipFile(trained) as ssp:
         inner = [n for n in ssp.namelist() if n.endswith("fmu_gp_corrector.fmu")]
@@ -135,7 +128,7 @@ def test_the_trained_corrector_fmu_is_laid_out_for_the_channels_and_validates(bu
 def test_learn_streams_the_records_of_a_five_storey_building(building):
     folder, model, records = building
     report = folder / "learn.json"
-    twin("learn", "--twin", str(model), "--data", *map(str, records), "--mode", "uniform",
+    run_twin_ok(BINARY, "learn", "--twin", str(model), "--data", *map(str, records), "--mode", "uniform",
          "--report", str(report), "--out", str(folder / "learned.ssp"))
     got = json.loads(report.read_text())
     (mode,) = got["modes"]

@@ -20,24 +20,15 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import pyuff
+from conftest import run_twin_ok
 
 ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 G = 9.80665
-
-
-def twin(binary: Path, *args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    done = subprocess.run([str(binary), *args], capture_output=True, text=True, env=env, timeout=600)
-    assert done.returncode == 0, f"twin {' '.join(args)}:\n{done.stdout}\n{done.stderr}"
-    return done
 
 
 def write_uff(path: Path, datasets: list[dict]) -> None:
@@ -67,7 +58,7 @@ def time_dataset(binary: int, node: int, kind: int, time, values, units: str) ->
 @pytest.fixture(scope="module")
 def rig(twin_binary, tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("uff")
-    twin(twin_binary, "init", "--out", str(folder / "rig.ssp"))
+    run_twin_ok(twin_binary, "init", "--out", str(folder / "rig.ssp"))
     return folder / "rig.ssp"
 
 
@@ -92,7 +83,7 @@ def test_frfs_written_by_pyuff_read_as_the_csv(twin_binary, rig, tmp_path, binar
     reports = {}
     for name in ("frf.uff", "frf.csv"):
         report = tmp_path / f"{name}.json"
-        twin(twin_binary, "compare", "--twin", str(rig), "--frf", str(tmp_path / name),
+        run_twin_ok(twin_binary, "compare", "--twin", str(rig), "--frf", str(tmp_path / name),
              "--report", str(report))
         reports[name] = json.loads(report.read_text())
     uff, ref = reports["frf.uff"], reports["frf.csv"]
@@ -126,7 +117,7 @@ def test_time_responses_written_by_pyuff_read_as_the_csv(twin_binary, rig, tmp_p
     reports = {}
     for name in ("record.uff", "record.csv"):
         report = tmp_path / f"{name}.json"
-        twin(twin_binary, "compare", "--twin", str(rig), "--data", str(tmp_path / name),
+        run_twin_ok(twin_binary, "compare", "--twin", str(rig), "--data", str(tmp_path / name),
              "--report", str(report))
         reports[name] = json.loads(report.read_text())
     uff, ref = reports["record.uff"], reports["record.csv"]

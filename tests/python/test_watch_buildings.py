@@ -9,22 +9,13 @@ lacks raises `WatchError` naming it.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-from pathlib import Path
 
 import pytest
 
 import shear_twin as st
-from test_fmpy_storeys import TARGET
+from conftest import run_twin_ok
 
 CHANGE_AT = 30.0
-
-
-def cli(binary: Path, *args: str) -> None:
-    completed = subprocess.run([str(binary), *args], capture_output=True, text=True, timeout=300,
-                               env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")))
-    assert completed.returncode == 0, completed.stderr
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +23,9 @@ def five_storeys(tmp_path_factory, twin_binary):  # noqa: F811
     folder = tmp_path_factory.mktemp("watch5")
     (folder / "nominal.json").write_text(json.dumps({"m": [5.2] * 5, "c": [3.0] * 5, "k": [4021.0] * 5}))
     (folder / "stationary.json").write_text(json.dumps({"ground_motion": {"strong_end": 1000}}))
-    cli(twin_binary, "init", "--storeys", "5", "--excitation", "base",
+    run_twin_ok(twin_binary, "init", "--storeys", "5", "--excitation", "base",
         "--nominal", str(folder / "nominal.json"), "--out", str(folder / "T.ssp"))
-    cli(twin_binary, "synth", "--scenario", str(folder / "stationary.json"), "--storeys", "5",
+    run_twin_ok(twin_binary, "synth", "--scenario", str(folder / "stationary.json"), "--storeys", "5",
         "--excitation", "base", "--duration", "60", "--seed", "3", "--channels", "acc1,acc3,acc5",
         "--units", "acc=g", "--change", f"k2@{CHANGE_AT}:0.7", "--out", str(folder / "changed.csv"))
     return folder
