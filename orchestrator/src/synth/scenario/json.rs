@@ -33,32 +33,12 @@ impl Scenario {
         s.duration = file.duration.unwrap_or(s.duration);
         s.sample_rate = file.sample_rate.unwrap_or(s.sample_rate);
         s.oversample = file.oversample.unwrap_or(s.oversample);
-        // The storey count: `storeys`, else the masses' length, else the default 3 (damping
-        // and stiffness lists must then match it).
-        let given = file
-            .parameters
-            .as_ref()
-            .and_then(|p| p.m.as_ref())
-            .map(Vec::len);
-        if let Some(n) = file.storeys.or(given) {
-            if !(1..=MAX_STOREYS).contains(&n) {
-                return Err(at
-                    .field("storeys")
-                    .error(format!("{n} storeys; a structure has 1 to {MAX_STOREYS}")));
-            }
-            s.set_storeys(n);
-        }
-        if let Some(p) = file.parameters {
-            s.mass = p.m.unwrap_or(s.mass);
-            s.damping = p.c.unwrap_or(s.damping);
-            s.stiffness = p.k.unwrap_or(s.stiffness);
-        }
-        if let Some(text) = &file.excitation {
-            s.excitation = Excitation::parse(text).map_err(|e| {
-                at.field("excitation")
-                    .error(format!("{e}; expected \"force:K\" or \"base\""))
-            })?;
-        }
+        s.structure_from(
+            &at,
+            file.storeys,
+            file.parameters,
+            file.excitation.as_deref(),
+        )?;
         s.ground = GroundMotion::for_duration(s.duration);
         if let Some(g) = file.ground_motion {
             s.ground.soil_hz = g.soil_hz.unwrap_or(s.ground.soil_hz);
@@ -80,34 +60,10 @@ impl Scenario {
             );
         }
         if let Some(f) = file.force {
-            s.force.rms = f.rms.unwrap_or(s.force.rms);
-            s.force.band_hz = f.band_hz.or(s.force.band_hz);
-            s.force.low_hz = f.low_hz.unwrap_or(s.force.low_hz);
-            s.force.between_samples = f.between_samples.unwrap_or(s.force.between_samples);
-            s.force.windows = f
-                .windows
-                .unwrap_or_default()
-                .into_iter()
-                .map(|w| ForceWindow {
-                    start: w.start,
-                    end: w.end,
-                    gain: w.gain,
-                    ramp: w.ramp.unwrap_or(DEFAULT_WINDOW_RAMP),
-                })
-                .collect();
+            s.force_from(f);
         }
         if let Some(n) = file.noise {
-            match (n.fraction, n.sd) {
-                (Some(_), Some(_)) => {
-                    return Err(at
-                        .field("noise")
-                        .error("give either `fraction` or `sd`, not both".into()))
-                }
-                (Some(x), None) => s.noise.level = NoiseLevel::Fraction(x.values()),
-                (None, Some(x)) => s.noise.level = NoiseLevel::Sd(x.values()),
-                (None, None) => {}
-            }
-            s.noise.force_fraction = n.force_fraction.unwrap_or(s.noise.force_fraction);
+            s.noise_from(&at, n)?;
         }
         let effects = at.field("effects");
         for (i, e) in file.effects.unwrap_or_default().iter().enumerate() {
@@ -120,14 +76,94 @@ impl Scenario {
                 .field("effects_from")
                 .error("the effects' start must be a time ≥ 0 s".into()));
         }
-        let changes = at.field("changes");
-        for (i, c) in file.changes.unwrap_or_default().into_iter().enumerate() {
-            let at = changes.index(i);
+        s.changes_from(&at, file.changes.unwrap_or_default())?;
+        Ok(s)
+    }
+
+    /// The file's storey count (`storeys`, else the masses' length, else the default 3: damping
+    /// and stiffness lists must then match it), its parameters and its excitation.
+    fn structure_from(
+        &mut self,
+        at: &Loc,
+        storeys: Option<usize>,
+        parameters: Option<ParametersFile>,
+        excitation: Option<&str>,
+    ) -> Result<()> {
+        let given = parameters.as_ref().and_then(|p| p.m.as_ref()).map(Vec::len);
+        if let Some(n) = storeys.or(given) {
+            if !(1..=MAX_STOREYS).contains(&n) {
+                return Err(at
+                    .field("storeys")
+                    .error(format!("{n} storeys; a structure has 1 to {MAX_STOREYS}")));
+            }
+            self.set_storeys(n);
+        }
+        if let Some(p) = parameters {
+            if let Some(m) = p.m {
+                self.mass = m;
+            }
+            if let Some(c) = p.c {
+                self.damping = c;
+            }
+            if let Some(k) = p.k {
+                self.stiffness = k;
+            }
+        }
+        if let Some(text) = excitation {
+            self.excitation = Excitation::parse(text).map_err(|e| {
+                at.field("excitation")
+                    .error(format!("{e}; expected \"force:K\" or \"base\""))
+            })?;
+        }
+        Ok(())
+    }
+
+    /// The file's force over the defaults: level, band, interpolation and windows.
+    fn force_from(&mut self, f: ForceFile) {
+        self.force.rms = f.rms.unwrap_or(self.force.rms);
+        self.force.band_hz = f.band_hz.or(self.force.band_hz);
+        self.force.low_hz = f.low_hz.unwrap_or(self.force.low_hz);
+        self.force.between_samples = f.between_samples.unwrap_or(self.force.between_samples);
+        self.force.windows = f
+            .windows
+            .unwrap_or_default()
+            .into_iter()
+            .map(|w| ForceWindow {
+                start: w.start,
+                end: w.end,
+                gain: w.gain,
+                ramp: w.ramp.unwrap_or(DEFAULT_WINDOW_RAMP),
+            })
+            .collect();
+    }
+
+    /// The file's noise: a fraction or an sd (not both), and the force's fraction.
+    fn noise_from(&mut self, at: &Loc, n: NoiseFile) -> Result<()> {
+        match (n.fraction, n.sd) {
+            (Some(_), Some(_)) => {
+                return Err(at
+                    .field("noise")
+                    .error("give either `fraction` or `sd`, not both".into()))
+            }
+            (Some(x), None) => self.noise.level = NoiseLevel::Fraction(x.values()),
+            (None, Some(x)) => self.noise.level = NoiseLevel::Sd(x.values()),
+            (None, None) => {}
+        }
+        self.noise.force_fraction = n.force_fraction.unwrap_or(self.noise.force_fraction);
+        Ok(())
+    }
+
+    /// The file's parameter changes, each naming a parameter of this structure and exactly one
+    /// of a factor and a value.
+    fn changes_from(&mut self, at: &Loc, changes: Vec<ChangeFile>) -> Result<()> {
+        let list = at.field("changes");
+        for (i, c) in changes.into_iter().enumerate() {
+            let at = list.index(i);
             let parameter = ParamName::parse(&c.parameter).ok_or_else(|| {
                 at.field("parameter").error(format!(
                     "unknown parameter {:?}; expected m1..m{n}, c1..c{n} or k1..k{n}",
                     c.parameter,
-                    n = s.storeys()
+                    n = self.storeys()
                 ))
             })?;
             let how = match (c.factor, c.value) {
@@ -135,13 +171,13 @@ impl Scenario {
                 (None, Some(x)) => ChangeHow::Value(x),
                 _ => return Err(at.error("give exactly one of `factor` and `value`".into())),
             };
-            s.changes.push(Change {
+            self.changes.push(Change {
                 at: c.at,
                 parameter,
                 how,
             });
         }
-        Ok(s)
+        Ok(())
     }
 
     /// The scenario as JSON, every default filled in: [`Scenario::from_json`] reads it back equal.
@@ -207,54 +243,17 @@ pub(in crate::synth) fn parse_effect(
     storeys: usize,
 ) -> Result<EffectSpec> {
     let head: EffectHead = read(at, value)?;
-    let loc = at.field("location");
-    let small = |x: u64| usize::try_from(x).unwrap_or(usize::MAX);
-    // The file's list of floor numbers as the text form's location.
-    let place = |location: &[u64]| {
-        Location::from_numbers(&location.iter().map(|&x| small(x)).collect::<Vec<_>>())
-    };
-    let storey_or_adjacent = |location: &[u64]| {
-        place(location)
-            .and_then(|l| l.storey(storeys))
-            .ok_or_else(|| {
-                loc.error(format!(
-            "{location:?} is not a storey; expected [1]..[{storeys}] (storey 1 = ground–floor 1) or two adjacent floors"
-        ))
-            })
-    };
     if head.kind == "quadratic_damping" {
-        let q: QuadraticDampingFile = read(at, value)?;
-        let site = match (head.location, q.floor) {
-            (Some(location), None) => DampingSite::Storey(storey_or_adjacent(&location.floors())?),
-            (None, Some(f)) if (1..=storeys as u64).contains(&f) => DampingSite::Floor(small(f)),
-            (None, Some(f)) => {
-                return Err(at
-                    .field("floor")
-                    .error(format!("floor {f} is not one of 1..{storeys}")))
-            }
-            (Some(_), Some(_)) => {
-                return Err(at.error(
-                    "give either `location` (a storey) or `floor` (to the ground), not both"
-                        .into(),
-                ))
-            }
-            (None, None) => return Err(loc.error(
-                format!("is missing; give `location` (a storey: [1]..[{storeys}] or two adjacent floors) or `floor` (1..{storeys}, damped to the ground)"),
-            )),
-        };
-        return Ok(EffectSpec::QuadraticDamping {
-            site,
-            coefficient: q.coefficient.unwrap_or(DEFAULT_QUADRATIC_DAMPING),
-        });
+        return quadratic_damping(at, value, head.location, storeys);
     }
     let location = match head.location {
         Some(location) => location.floors(),
-        None => return Err(loc.error("is missing".into())),
+        None => return Err(at.field("location").error("is missing".into())),
     };
     if head.kind == "hysteresis" {
         let h: HysteresisFile = read(at, value)?;
         return Ok(EffectSpec::Hysteresis {
-            storey: storey_or_adjacent(&location)?,
+            storey: storey_or_adjacent(at, &location, storeys)?,
             stiffness: h.stiffness.unwrap_or(DEFAULT_HYSTERESIS_STIFFNESS),
             yield_drift: h.yield_drift.unwrap_or(DEFAULT_HYSTERESIS_YIELD),
             beta: h.beta.unwrap_or(DEFAULT_HYSTERESIS_BETA),
@@ -262,10 +261,77 @@ pub(in crate::synth) fn parse_effect(
             exponent: h.exponent.unwrap_or(DEFAULT_HYSTERESIS_EXPONENT),
         });
     }
-    let Some(kind) = Kind::parse(&head.kind) else {
+    library_effect(at, value, &head.kind, &location, storeys)
+}
+
+/// A floor number of the file as an index (too large: one no structure has).
+fn small(x: u64) -> usize {
+    usize::try_from(x).unwrap_or(usize::MAX)
+}
+
+/// The file's list of floor numbers as the text form's location.
+fn place(location: &[u64]) -> Option<Location> {
+    Location::from_numbers(&location.iter().map(|&x| small(x)).collect::<Vec<_>>())
+}
+
+/// The storey (1-based) the file's `location` names: one storey, or two adjacent floors.
+fn storey_or_adjacent(at: &Loc, location: &[u64], storeys: usize) -> Result<usize> {
+    place(location)
+        .and_then(|l| l.storey(storeys))
+        .ok_or_else(|| {
+            at.field("location").error(format!(
+        "{location:?} is not a storey; expected [1]..[{storeys}] (storey 1 = ground–floor 1) or two adjacent floors"
+    ))
+        })
+}
+
+/// A quadratic damper: on a storey (`location`) or from a floor to the ground (`floor`).
+fn quadratic_damping(
+    at: &Loc,
+    value: &Value,
+    location: Option<LocationFile>,
+    storeys: usize,
+) -> Result<EffectSpec> {
+    let q: QuadraticDampingFile = read(at, value)?;
+    let site = match (location, q.floor) {
+        (Some(location), None) => {
+            DampingSite::Storey(storey_or_adjacent(at, &location.floors(), storeys)?)
+        }
+        (None, Some(f)) if (1..=storeys as u64).contains(&f) => DampingSite::Floor(small(f)),
+        (None, Some(f)) => {
+            return Err(at
+                .field("floor")
+                .error(format!("floor {f} is not one of 1..{storeys}")))
+        }
+        (Some(_), Some(_)) => {
+            return Err(at.error(
+                "give either `location` (a storey) or `floor` (to the ground), not both".into(),
+            ))
+        }
+        (None, None) => return Err(at.field("location").error(
+            format!("is missing; give `location` (a storey: [1]..[{storeys}] or two adjacent floors) or `floor` (1..{storeys}, damped to the ground)"),
+        )),
+    };
+    Ok(EffectSpec::QuadraticDamping {
+        site,
+        coefficient: q.coefficient.unwrap_or(DEFAULT_QUADRATIC_DAMPING),
+    })
+}
+
+/// An effect of the library's catalogue (`kind`): its parameters (and contact's side) and
+/// nothing else, at a site the catalogue allows.
+fn library_effect(
+    at: &Loc,
+    value: &Value,
+    kind_name: &str,
+    location: &[u64],
+    storeys: usize,
+) -> Result<EffectSpec> {
+    let loc = at.field("location");
+    let Some(kind) = Kind::parse(kind_name) else {
         return Err(at.field("kind").error(format!(
             "unknown effect kind {:?}; expected \"contact\", \"cubic\", \"friction\", \"hysteresis\" or \"quadratic_damping\"",
-            head.kind
+            kind_name
         )));
     };
     // The rest of the object: the kind's parameters (and contact's side), nothing else.
@@ -282,7 +348,7 @@ pub(in crate::synth) fn parse_effect(
         )));
     }
     // 0-based, as the library counts; where each kind may sit is the catalogue's.
-    let location = match place(&location) {
+    let location = match place(location) {
         Some(at) => kind
             .site(at, storeys)
             .map_err(|e| loc.error(format!("{location:?}: {e}")))?,
