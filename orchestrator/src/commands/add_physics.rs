@@ -12,7 +12,7 @@ use crate::twin::data::Measurement;
 use crate::twin::{RecordRef, RecordRole, Twin};
 use crate::workflows::diagnose::{
     add_hybrid_contact, add_physics, effects_from_report, parse_additions, with_record,
-    DiagnoseOptions, Progress, RecordNmse,
+    AddPhysicsReport, DiagnoseOptions, Progress, RecordNmse,
 };
 
 #[derive(clap::Args)]
@@ -134,72 +134,141 @@ pub fn run(args: &AddPhysicsArgs) -> Result<()> {
 
 /// Everything but the spinner; what to print, once the spinner is gone.
 fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
-    use std::fmt::Write;
     let mut text = String::new();
-    let twin = Twin::load(Some(&args.twin))?;
-    let others = other_records(args, &twin, &mut text)?;
-    let data = args
-        .data
-        .as_deref()
-        .map(|p| args.columns.read_any(p))
-        .transpose()?;
-    for record in others.iter().chain(&data) {
-        crate::twin::guard::check_record(&twin, record)?;
+    let inputs = Inputs::read(args, &mut text)?;
+    match &args.hybrid {
+        Some(path) => hybrid_and_write(args, path, &inputs, o, &mut text)?,
+        None => effects_and_write(args, &inputs, o, &mut text)?,
     }
-    // In the refit's order: the twin's records, then the new one.
-    let mut paths: Vec<PathBuf> = others.iter().map(|m| m.path.clone()).collect();
-    paths.extend(data.iter().map(|d| d.path.clone()));
-    if let Some(path) = &args.hybrid {
-        let all: Vec<&Measurement> = match &data {
-            Some(d) => with_record(d, &others).0,
-            None => others.iter().collect(),
-        };
-        if all.is_empty() {
-            bail!(
-                "no record to refit the structure over: the twin remembers none; give --data \
-                 D.csv or --records D1.csv ..."
-            );
+    Ok(text)
+}
+
+/// What the refit starts from: the twin, the records it remembers and the new one (each
+/// checked against it), and their paths in the refit's order (the twin's, then the new one).
+struct Inputs {
+    twin: Twin,
+    others: Vec<Measurement>,
+    data: Option<Measurement>,
+    paths: Vec<PathBuf>,
+}
+
+impl Inputs {
+    fn read(args: &AddPhysicsArgs, text: &mut String) -> Result<Inputs> {
+        let twin = Twin::load(Some(&args.twin))?;
+        let others = other_records(args, &twin, text)?;
+        let data = args
+            .data
+            .as_deref()
+            .map(|p| args.columns.read_any(p))
+            .transpose()?;
+        for record in others.iter().chain(&data) {
+            crate::twin::guard::check_record(&twin, record)?;
         }
-        let (mut new_twin, report) = add_hybrid_contact(&twin, path, &all, o)?;
-        new_twin.records = fitted_records(&paths)?;
-        new_twin.write(&args.out)?;
-        if let Some(out) = &args.report {
-            write_json(out, &report)?;
-        }
-        let law = &report.law;
-        let _ = writeln!(
-            text,
-            "effect        contact@2-3:negative from the hybrid test (a_err {:+.3}), held: gap \
-             {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
-            report.a_err, law.gap, law.gap_sd, law.contact_stiffness, law.contact_stiffness_sd
-        );
-        let _ = writeln!(
-            text,
-            "structure refitted over {} records:",
-            report.records.len()
-        );
-        for p in &report.refined_physics {
-            let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
-        }
-        print_records(&mut text, &report.records);
-        print_tolerance(&mut text, &new_twin);
-        let _ = writeln!(text, "wrote {}", args.out.display());
-        return Ok(text);
+        let mut paths: Vec<PathBuf> = others.iter().map(|m| m.path.clone()).collect();
+        paths.extend(data.iter().map(|d| d.path.clone()));
+        Ok(Inputs {
+            twin,
+            others,
+            data,
+            paths,
+        })
     }
+}
+
+/// `--hybrid`: the contact the hybrid test measured, held, and the structure refitted over
+/// every record; the twin and the report written, the printout in `text`.
+fn hybrid_and_write(
+    args: &AddPhysicsArgs,
+    path: &std::path::Path,
+    inputs: &Inputs,
+    o: &DiagnoseOptions,
+    text: &mut String,
+) -> Result<()> {
+    use std::fmt::Write;
+    let all: Vec<&Measurement> = match &inputs.data {
+        Some(d) => with_record(d, &inputs.others).0,
+        None => inputs.others.iter().collect(),
+    };
+    if all.is_empty() {
+        bail!(
+            "no record to refit the structure over: the twin remembers none; give --data \
+             D.csv or --records D1.csv ..."
+        );
+    }
+    let (mut new_twin, report) = add_hybrid_contact(&inputs.twin, path, &all, o)?;
+    new_twin.records = fitted_records(&inputs.paths)?;
+    new_twin.write(&args.out)?;
+    if let Some(out) = &args.report {
+        write_json(out, &report)?;
+    }
+    let law = &report.law;
+    let _ = writeln!(
+        text,
+        "effect        contact@2-3:negative from the hybrid test (a_err {:+.3}), held: gap \
+         {:.4e} ± {:.1e} m, stiffness {:.4e} ± {:.1e} N/m",
+        report.a_err, law.gap, law.gap_sd, law.contact_stiffness, law.contact_stiffness_sd
+    );
+    let _ = writeln!(
+        text,
+        "structure refitted over {} records:",
+        report.records.len()
+    );
+    for p in &report.refined_physics {
+        let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+    }
+    print_records(text, &report.records);
+    print_tolerance(text, &new_twin);
+    let _ = writeln!(text, "wrote {}", args.out.display());
+    Ok(())
+}
+
+/// `--effect` or `--diagnosis`: the effects estimated on the record and the structure refitted
+/// with them; the twin and the report written, the printout in `text`.
+fn effects_and_write(
+    args: &AddPhysicsArgs,
+    inputs: &Inputs,
+    o: &DiagnoseOptions,
+    text: &mut String,
+) -> Result<()> {
+    use std::fmt::Write;
     let candidates = match (args.effect.is_empty(), &args.diagnosis) {
         (false, _) => parse_additions(&args.effect)?,
         (true, Some(path)) => effects_from_report(path)?.0,
         (true, None) => bail!("give --effect KIND@LOCATION or --diagnosis R.json"),
     };
-    let Some(data) = &data else {
+    let Some(data) = &inputs.data else {
         bail!("give --data D.csv: the record the effects are estimated on");
     };
-    let (mut new_twin, report) = add_physics(&twin, data, &others, &candidates, o)?;
-    new_twin.records = fitted_records(&paths)?;
+    let (mut new_twin, report) = add_physics(&inputs.twin, data, &inputs.others, &candidates, o)?;
+    new_twin.records = fitted_records(&inputs.paths)?;
     new_twin.write(&args.out)?;
     if let Some(path) = &args.report {
         write_json(path, &report)?;
     }
+    print_effects(text, &report);
+    let _ = writeln!(
+        text,
+        "structure refitted with the effects over {} records:",
+        report.records.len()
+    );
+    for p in &report.refined_physics {
+        let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
+    }
+    let _ = writeln!(
+        text,
+        "NMSE on {} with the effects alone (physics held): {}",
+        report.record,
+        pct(&report.nmse_effects_alone)
+    );
+    print_records(text, &report.records);
+    print_tolerance(text, &new_twin);
+    writeln!(text, "wrote {}", args.out.display())?;
+    Ok(())
+}
+
+/// Each effect added: its terms with their sd, or its parameters with theirs.
+fn print_effects(text: &mut String, report: &AddPhysicsReport) {
+    use std::fmt::Write;
     for effect in &report.effects {
         let _ = writeln!(text, "effect        {}", effect.name.label);
         for t in &effect.terms {
@@ -224,24 +293,6 @@ fn fit_and_write(args: &AddPhysicsArgs, o: &DiagnoseOptions) -> Result<String> {
             }
         }
     }
-    let _ = writeln!(
-        text,
-        "structure refitted with the effects over {} records:",
-        report.records.len()
-    );
-    for p in &report.refined_physics {
-        let _ = writeln!(text, "  {:<14} {:.4} ± {:.2e}", p.name, p.value, p.sd);
-    }
-    let _ = writeln!(
-        text,
-        "NMSE on {} with the effects alone (physics held): {}",
-        report.record,
-        pct(&report.nmse_effects_alone)
-    );
-    print_records(&mut text, &report.records);
-    print_tolerance(&mut text, &new_twin);
-    writeln!(text, "wrote {}", args.out.display())?;
-    Ok(text)
 }
 
 fn print_tolerance(text: &mut String, twin: &Twin) {
