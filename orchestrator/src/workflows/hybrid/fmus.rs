@@ -20,7 +20,7 @@ use std::rc::Rc;
 use super::blocks::{ActuatorBlock, InterfaceBlock, InterfaceLog};
 use super::{Frame, HybridError, HybridRun, Result, Split};
 use crate::cosim::import::{Fmu, Instance};
-use crate::cosim::master::{Clock, MasterError, Port, System};
+use crate::cosim::master::{Clock, MasterError, NodeId, Port, System};
 
 /// The FMU's file name (found by [`crate::twin::find_fmu`]).
 pub const SUBSTRUCTURE_FMU: &str = "fmu_substructure.fmu";
@@ -171,35 +171,15 @@ pub fn run_with_fmu(
         InterfaceBlock::INPUTS,
         InterfaceBlock::OUTPUTS,
     );
-    // The excitation at the control rate, linear between the record's samples (as `run`
-    // evaluates it); the master sends each segment's slope to the numerical FMU.
-    let mut force = Vec::with_capacity((excitation.len() - 1) * substeps as usize + 1);
-    for w in excitation.windows(2) {
-        let slope = (w[1] - w[0]) / dt;
-        for j in 0..substeps {
-            force.push(w[0] + slope * (f64::from(j) * h));
-        }
-    }
-    force.push(excitation[excitation.len() - 1]);
+    let force = control_rate_force(excitation, dt, substeps, h);
     let steps = (force.len() - 1) as u64;
-    let wire = |system: &mut System| -> std::result::Result<(), MasterError> {
-        let signal = system.add_signal("force", force);
-        system.connect(signal, numerical, 0)?;
-        system.connect(Port::Output(bookkeeping, 0), numerical, 1)?;
-        system.connect(Port::Output(bookkeeping, 1), numerical, 2)?;
-        system.connect(Port::Output(numerical, 2), actuator, 0)?;
-        for p in 0..4 {
-            system.connect(Port::Output(actuator, p), physical, p)?;
-        }
-        system.connect(Port::Output(numerical, 0), bookkeeping, 0)?;
-        system.connect(Port::Output(numerical, 2), bookkeeping, 1)?;
-        system.connect(Port::Output(actuator, 2), bookkeeping, 2)?;
-        for (port, input) in [(0, 3), (1, 4), (3, 5), (4, 6)] {
-            system.connect(Port::Output(physical, port), bookkeeping, input)?;
-        }
-        Ok(())
+    let nodes = LoopNodes {
+        numerical,
+        actuator,
+        physical,
+        bookkeeping,
     };
-    wire(&mut system).map_err(setup)?;
+    wire(&mut system, &nodes, force).map_err(setup)?;
     let result = system.run(Clock::new(0.0, h, steps), &mut [], |_, _| {});
     drop(system);
     let mut log = log.take();
@@ -208,6 +188,55 @@ pub fn run_with_fmu(
     }
     result.map_err(setup)?;
     Ok(log.run)
+}
+
+/// The excitation at the control rate, linear between the record's samples (as `run`
+/// evaluates it); the master sends each segment's slope to the numerical FMU.
+fn control_rate_force(excitation: &[f64], dt: f64, substeps: u32, h: f64) -> Vec<f64> {
+    let mut force = Vec::with_capacity((excitation.len() - 1) * substeps as usize + 1);
+    for w in excitation.windows(2) {
+        let slope = (w[1] - w[0]) / dt;
+        for j in 0..substeps {
+            force.push(w[0] + slope * (f64::from(j) * h));
+        }
+    }
+    force.push(excitation[excitation.len() - 1]);
+    force
+}
+
+/// The loop's four nodes in the master's system.
+struct LoopNodes {
+    numerical: NodeId,
+    actuator: NodeId,
+    physical: NodeId,
+    bookkeeping: NodeId,
+}
+
+/// The loop's wiring: the force into the numerical FMU with floor 2's load from the
+/// bookkeeping, its floor 2 to the actuator, the actuator's motion to the physical FMU, and
+/// both sides' outputs to the bookkeeping.
+fn wire(
+    system: &mut System,
+    n: &LoopNodes,
+    force: Vec<f64>,
+) -> std::result::Result<(), MasterError> {
+    let (numerical, actuator, physical, bookkeeping) =
+        (n.numerical, n.actuator, n.physical, n.bookkeeping);
+    let signal = system.add_signal("force", force);
+    system.connect(signal, numerical, 0)?;
+    system.connect(Port::Output(bookkeeping, 0), numerical, 1)?;
+    system.connect(Port::Output(bookkeeping, 1), numerical, 2)?;
+    system.connect(Port::Output(numerical, 2), actuator, 0)?;
+    for p in 0..4 {
+        system.connect(Port::Output(actuator, p), physical, p)?;
+    }
+    system.connect(Port::Output(numerical, 0), bookkeeping, 0)?;
+    system.connect(Port::Output(numerical, 2), bookkeeping, 1)?;
+    system.connect(Port::Output(actuator, 2), bookkeeping, 2)?;
+    for (port, input) in [(0, 3), (1, 4), (3, 5), (4, 6)] {
+        system.connect(Port::Output(physical, port), bookkeeping, input)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

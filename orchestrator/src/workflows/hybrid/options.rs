@@ -162,78 +162,14 @@ impl HybridOptions {
         let c = self;
         let s = self.structure(twin)?;
         let n = s.storeys();
-        if n < 2 {
-            return Err(InvalidOption(format!(
-                "{}: a {n}-storey structure cannot be split (the actuator drives a floor with a \
-                 storey above it)",
-                if c.storeys.is_some() {
-                    "--storeys".to_string()
-                } else {
-                    twin.describe()
-                }
-            ))
-            .into());
-        }
-        let cut = c.split.unwrap_or(Cut {
-            floor: n.min(3) - 1,
-            split: Split::FloorPhysical,
-            storeys: None,
-        });
-        if let Some(stated) = cut.storeys.filter(|&stated| stated != n) {
-            return Err(InvalidOption(format!(
-                "--split {cut}: names a {stated}-storey structure; {} has {n} storeys",
-                twin.describe()
-            ))
-            .into());
-        }
-        if !(1..n).contains(&cut.floor) {
-            return Err(InvalidOption(format!(
-                "--split {cut}: the actuator's floor must be 1 to {} of {}'s {n} storeys (the \
-                 specimen holds the storey above it, with the bumper)",
-                n - 1,
-                twin.describe()
-            ))
-            .into());
-        }
+        let cut = self.checked_cut(twin, n)?;
         let structure = super::cut(&s, cut.floor, c.gap, c.contact_stiffness);
         structure.check().map_err(HybridError::Setup)?;
         if c.substeps == 0 {
             return Err(InvalidOption("--substeps must be at least 1".into()).into());
         }
-        let (signal, dt, source) = match &c.excitation {
-            Some(path) => {
-                let (force, dt) = crate::record::excitation::read_excitation(path)
-                    .map_err(|e| HybridError::Setup(e.to_string()))?;
-                (force, dt, path.display().to_string())
-            }
-            None => {
-                let spec = ExcitationSpec {
-                    duration: c.duration,
-                    sample_rate: c.sample_rate,
-                    seed: c.seed,
-                    peak_force: 1.0,
-                    ..ExcitationSpec::default()
-                };
-                let force = spec.generate()?;
-                (
-                    force,
-                    1.0 / c.sample_rate,
-                    format!(
-                        "Clough–Penzien filtered noise, {} s at {} Hz, seed {}",
-                        c.duration, c.sample_rate, c.seed
-                    ),
-                )
-            }
-        };
-        let actuator = ActuatorSpec {
-            amplitude_error: 0.0,
-            delay: c.delay,
-            lag: c.lag,
-            compensation: match c.compensate {
-                Some(order) => Compensation::Polynomial { order },
-                None => Compensation::None,
-            },
-        };
+        let (signal, dt, source) = self.excitation()?;
+        let actuator = self.actuator();
         let mut parameters = BTreeMap::new();
         for i in 0..s.mass.len() {
             parameters.insert(format!("m{}", i + 1), s.mass[i]);
@@ -266,6 +202,90 @@ impl HybridOptions {
             coupling: setup.resolved()?,
         };
         Ok((setup, header))
+    }
+
+    /// The cut (`--split`, else the paper's at floor min(n, 3) − 1), checked against the
+    /// twin's `n` storeys: at least two, the same count the split names, the actuator's floor
+    /// below the top.
+    fn checked_cut(&self, twin: &Twin, n: usize) -> Result<Cut, HybridTestError> {
+        if n < 2 {
+            return Err(InvalidOption(format!(
+                "{}: a {n}-storey structure cannot be split (the actuator drives a floor with a \
+                 storey above it)",
+                if self.storeys.is_some() {
+                    "--storeys".to_string()
+                } else {
+                    twin.describe()
+                }
+            ))
+            .into());
+        }
+        let cut = self.split.unwrap_or(Cut {
+            floor: n.min(3) - 1,
+            split: Split::FloorPhysical,
+            storeys: None,
+        });
+        if let Some(stated) = cut.storeys.filter(|&stated| stated != n) {
+            return Err(InvalidOption(format!(
+                "--split {cut}: names a {stated}-storey structure; {} has {n} storeys",
+                twin.describe()
+            ))
+            .into());
+        }
+        if !(1..n).contains(&cut.floor) {
+            return Err(InvalidOption(format!(
+                "--split {cut}: the actuator's floor must be 1 to {} of {}'s {n} storeys (the \
+                 specimen holds the storey above it, with the bumper)",
+                n - 1,
+                twin.describe()
+            ))
+            .into());
+        }
+        Ok(cut)
+    }
+
+    /// The excitation force (`--excitation`'s file, else Clough–Penzien filtered noise of
+    /// unit peak), its sample interval and where it came from.
+    fn excitation(&self) -> Result<(Vec<f64>, f64, String), HybridTestError> {
+        let c = self;
+        Ok(match &c.excitation {
+            Some(path) => {
+                let (force, dt) = crate::record::excitation::read_excitation(path)
+                    .map_err(|e| HybridError::Setup(e.to_string()))?;
+                (force, dt, path.display().to_string())
+            }
+            None => {
+                let spec = ExcitationSpec {
+                    duration: c.duration,
+                    sample_rate: c.sample_rate,
+                    seed: c.seed,
+                    peak_force: 1.0,
+                    ..ExcitationSpec::default()
+                };
+                let force = spec.generate()?;
+                (
+                    force,
+                    1.0 / c.sample_rate,
+                    format!(
+                        "Clough–Penzien filtered noise, {} s at {} Hz, seed {}",
+                        c.duration, c.sample_rate, c.seed
+                    ),
+                )
+            }
+        })
+    }
+
+    /// The actuator: its delay, lag and compensation, no amplitude error.
+    fn actuator(&self) -> ActuatorSpec {
+        ActuatorSpec {
+            amplitude_error: 0.0,
+            delay: self.delay,
+            lag: self.lag,
+            compensation: match self.compensate {
+                Some(order) => Compensation::Polynomial { order },
+                None => Compensation::None,
+            },
+        }
     }
 }
 
