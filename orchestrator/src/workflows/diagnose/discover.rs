@@ -47,8 +47,10 @@ use super::{
 use crate::evaluation::stats::variance;
 
 mod columns;
+mod sensitivity;
 
 use columns::{columns, quantile, site_states};
+use sensitivity::sensitivity;
 
 /// RK4 sub-steps per sample of the sensitivity runs.
 pub const SUBSTEPS: u32 = 8;
@@ -259,124 +261,6 @@ pub struct Found {
     pub site: String,
     pub held_out_fraction: f64,
     pub sites: Vec<SiteModel>,
-}
-
-/// The response at `sensors` (floor from 0, quantity: absolute acceleration, or velocity or
-/// displacement relative to the ground, each a row of the state or its derivative) of the base
-/// model's linear part driven by the force `−P φ(t)` of a unit coefficient at `site` (`φ`
-/// linear between samples), from rest; one series per sensor.
-///
-/// Integrated by RK4 with [`SUBSTEPS`] fixed sub-steps per sample. With the force linear between
-/// samples that sample step is itself linear in the state and the two end values of `φ`, so it
-/// is formed once as a matrix (the RK4 step applied to each unit state and unit input) and each
-/// sample costs one product with it: `2N` by `2N` for `N` storeys, instead of `4·SUBSTEPS`
-/// evaluations of the structure's dynamics.
-fn sensitivity(
-    linear: &LinearPart,
-    site: Site,
-    phi: &[f64],
-    dt: f64,
-    sensors: &[(usize, Quantity)],
-) -> Vec<Vec<f64>> {
-    let storeys = linear.storeys();
-    let m_inv = DVector::from_iterator(storeys, linear.mass.iter().map(|m| 1.0 / m));
-    let storey = |c: &[f64]| {
-        let mut m = DMatrix::zeros(storeys, storeys);
-        for i in 0..storeys {
-            m[(i, i)] += c[i];
-            if i + 1 < storeys {
-                m[(i, i)] += c[i + 1];
-                m[(i, i + 1)] -= c[i + 1];
-                m[(i + 1, i)] -= c[i + 1];
-            }
-        }
-        m
-    };
-    let c = storey(&linear.damping);
-    let k = storey(&linear.stiffness);
-    let mut pattern = vec![0.0; storeys];
-    site.add_force(1.0, &mut pattern);
-    let p = -DVector::from_vec(pattern);
-    let accel = |y: &DVector<f64>, v: &DVector<f64>, u: f64| -> DVector<f64> {
-        (&p * u - &c * v - &k * y).component_mul(&m_inv)
-    };
-    let h = dt / f64::from(SUBSTEPS);
-    // One sample of RK4 sub-steps from (y, v) with the force from u0 to u1.
-    let sample = |mut y: DVector<f64>, mut v: DVector<f64>, u0: f64, u1: f64| {
-        for i in 0..SUBSTEPS {
-            let s = f64::from(i) / f64::from(SUBSTEPS);
-            let u = |tau: f64| u0 + (u1 - u0) * (s + tau / dt);
-            let k1v = accel(&y, &v, u(0.0));
-            let k1y = v.clone();
-            let k2v = accel(
-                &(&y + &k1y * (h / 2.0)),
-                &(&v + &k1v * (h / 2.0)),
-                u(h / 2.0),
-            );
-            let k2y = &v + &k1v * (h / 2.0);
-            let k3v = accel(
-                &(&y + &k2y * (h / 2.0)),
-                &(&v + &k2v * (h / 2.0)),
-                u(h / 2.0),
-            );
-            let k3y = &v + &k2v * (h / 2.0);
-            let k4v = accel(&(&y + &k3y * h), &(&v + &k3v * h), u(h));
-            let k4y = &v + &k3v * h;
-            y += (k1y + k2y * 2.0 + k3y * 2.0 + k4y) * (h / 6.0);
-            v += (k1v + k2v * 2.0 + k3v * 2.0 + k4v) * (h / 6.0);
-        }
-        let mut x = DVector::zeros(2 * storeys);
-        x.rows_mut(0, storeys).copy_from(&y);
-        x.rows_mut(storeys, storeys).copy_from(&v);
-        x
-    };
-    let zero = || DVector::zeros(storeys);
-    let unit = |i: usize| {
-        let mut e = DVector::zeros(storeys);
-        e[i] = 1.0;
-        e
-    };
-    // x' = A x + B0 u0 + B1 u1, and the accelerations a = Cx x + D u.
-    let mut a = DMatrix::zeros(2 * storeys, 2 * storeys);
-    let mut cx = DMatrix::zeros(storeys, 2 * storeys);
-    for i in 0..storeys {
-        a.set_column(i, &sample(unit(i), zero(), 0.0, 0.0));
-        a.set_column(storeys + i, &sample(zero(), unit(i), 0.0, 0.0));
-        cx.set_column(i, &accel(&unit(i), &zero(), 0.0));
-        cx.set_column(storeys + i, &accel(&zero(), &unit(i), 0.0));
-    }
-    let b0 = sample(zero(), zero(), 1.0, 0.0);
-    let b1 = sample(zero(), zero(), 0.0, 1.0);
-    let d = accel(&zero(), &zero(), 1.0);
-    let n = phi.len();
-    let mut out = vec![vec![0.0; n]; sensors.len()];
-    let mut x = DVector::zeros(2 * storeys);
-    let mut next = DVector::zeros(2 * storeys);
-    let mut acc = DVector::zeros(storeys);
-    let accelerations = sensors
-        .iter()
-        .any(|&(_, q)| !matches!(q, Quantity::Velocity | Quantity::Displacement));
-    for j in 0..n {
-        if accelerations {
-            acc.gemv(1.0, &cx, &x, 0.0);
-            acc.axpy(phi[j], &d, 1.0);
-        }
-        for (&(f, q), out) in sensors.iter().zip(out.iter_mut()) {
-            out[j] = match q {
-                Quantity::Displacement => x[f],
-                Quantity::Velocity => x[storeys + f],
-                _ => acc[f],
-            };
-        }
-        if j + 1 == n {
-            break;
-        }
-        next.gemv(1.0, &a, &x, 0.0);
-        next.axpy(phi[j], &b0, 1.0);
-        next.axpy(phi[j + 1], &b1, 1.0);
-        std::mem::swap(&mut x, &mut next);
-    }
-    out
 }
 
 /// Weighted Gram matrix, right-hand side and residual energy over `rows`.
@@ -601,6 +485,58 @@ fn swap(fit: &Normal, active: &mut [usize], q: usize, p: usize) -> DVector<f64> 
     theta
 }
 
+/// The greedy path from the physics parameters alone (`base`): at each step the candidate
+/// among the `count` responses that most lowers the fitted blocks' residual, then swaps while
+/// one lowers it more; each step's set, coefficients and held-out residual.
+fn greedy_path(
+    fit: &Normal,
+    held: &Normal,
+    base: &[usize],
+    count: usize,
+) -> Vec<(Vec<usize>, DVector<f64>, f64)> {
+    let q = base.len();
+    let mut active: Vec<usize> = base.to_vec();
+    let mut path: Vec<(Vec<usize>, DVector<f64>, f64)> = Vec::new();
+    while active.len() < q + MAX_TERMS_FOUND {
+        let mut step: Option<(usize, DVector<f64>, f64)> = None;
+        for i in q..count {
+            if active.contains(&i) {
+                continue;
+            }
+            let mut trial = active.clone();
+            trial.push(i);
+            let Some(theta) = solve(fit, &trial) else {
+                continue;
+            };
+            let e = left(fit, &trial, &theta);
+            if step.as_ref().is_none_or(|s| e < s.2) {
+                step = Some((i, theta, e));
+            }
+        }
+        let Some((i, _, _)) = step else { break };
+        active.push(i);
+        // Swaps: each chosen term against every other candidate, while one lowers the
+        // fitted-block residual (greedy picks are often a near-twin of the truth first,
+        // `v^3` for `v|v|`).
+        let theta = swap(fit, &mut active, q, count);
+        let e_held = left(held, &active, &theta);
+        path.push((active.clone(), theta, e_held));
+    }
+    path
+}
+
+/// The path's first step whose held-out residual is within [`PARSIMONY`] × `reference` of the
+/// path's least (None for an empty path).
+fn parsimonious(
+    path: &[(Vec<usize>, DVector<f64>, f64)],
+    reference: f64,
+) -> Option<(Vec<usize>, DVector<f64>, f64)> {
+    let min_held = path.iter().map(|p| p.2).min_by(f64::total_cmp)?;
+    path.iter()
+        .find(|p| p.2 <= min_held + PARSIMONY * reference)
+        .cloned()
+}
+
 /// Find the sparse model of the missing force (see the module documentation); `None` when no
 /// site's model cuts the held-out residual the physics parameters alone leave by `min_cut`.
 pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
@@ -631,42 +567,8 @@ pub fn regress(problem: &Problem, min_cut: f64) -> Option<Found> {
         let reference = solve(&fit, &base)
             .map(|theta| left(&held, &base, &theta))
             .unwrap_or(held.energy);
-        // The greedy path, scored on the held-out blocks.
-        let mut active: Vec<usize> = base.clone();
-        let mut path: Vec<(Vec<usize>, DVector<f64>, f64)> = Vec::new();
-        while active.len() < q + MAX_TERMS_FOUND {
-            let mut step: Option<(usize, DVector<f64>, f64)> = None;
-            for i in q..responses.len() {
-                if active.contains(&i) {
-                    continue;
-                }
-                let mut trial = active.clone();
-                trial.push(i);
-                let Some(theta) = solve(&fit, &trial) else {
-                    continue;
-                };
-                let e = left(&fit, &trial, &theta);
-                if step.as_ref().is_none_or(|s| e < s.2) {
-                    step = Some((i, theta, e));
-                }
-            }
-            let Some((i, _, _)) = step else { break };
-            active.push(i);
-            // Swaps: each chosen term against every other candidate, while one lowers the
-            // fitted-block residual (greedy picks are often a near-twin of the truth first,
-            // `v^3` for `v|v|`).
-            let theta = swap(&fit, &mut active, q, responses.len());
-            let e_held = left(&held, &active, &theta);
-            path.push((active.clone(), theta, e_held));
-        }
-        let Some(min_held) = path.iter().map(|p| p.2).min_by(f64::total_cmp) else {
-            continue;
-        };
-        let Some((set, theta, e_held)) = path
-            .iter()
-            .find(|p| p.2 <= min_held + PARSIMONY * reference)
-            .cloned()
-        else {
+        let path = greedy_path(&fit, &held, &base, responses.len());
+        let Some((set, theta, e_held)) = parsimonious(&path, reference) else {
             continue;
         };
         let fraction = e_held / reference;
