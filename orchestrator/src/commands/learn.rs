@@ -8,7 +8,8 @@ use anyhow::{bail, Result};
 use super::write_json;
 use crate::twin::Twin;
 use crate::workflows::learn::{
-    chosen_modes, learned_twin, prepare, run_modes, table, LearnOptions, Mode, Stretch, FORGETTING,
+    chosen_modes, learned_twin, prepare, run_modes, table, FixedThreshold, LearnOptions, Mode,
+    ModeResult, Stretch, FORGETTING,
 };
 use fmu_gp_corrector::TargetForm;
 
@@ -153,52 +154,9 @@ pub fn run(args: &LearnArgs) -> Result<()> {
 
     print!("{}", table(&results));
     if let Some(fixed) = results.iter().find_map(|r| r.fixed_threshold.as_ref()) {
-        let stretch = |s: &Option<Stretch>| {
-            s.as_ref().map_or(String::new(), |s| {
-                format!(
-                    "{} {:.1}–{:.1} s ({} points)",
-                    s.record, s.from, s.to, s.points
-                )
-            })
-        };
-        let how = match (&fixed.trained_on, &fixed.tested_on) {
-            (Some(_), Some(_)) => format!(
-                ": trained on {}, largest V(f) on {}",
-                stretch(&fixed.trained_on),
-                stretch(&fixed.tested_on)
-            ),
-            _ => String::new(),
-        };
-        let channels = streams[0].layout.names();
-        if ::structure::paper::is_channels(&channels) {
-            println!(
-                "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
-                fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
-            );
-        } else {
-            let each: Vec<String> = fixed.values.iter().map(|v| format!("{v:.3e}")).collect();
-            println!(
-                "fixed threshold ({}{how}): {} ({}; each in its unit squared)",
-                fixed.rule,
-                each.join(" / "),
-                channels.join(" / ")
-            );
-        }
+        print_fixed_threshold(fixed, &streams[0].layout.names());
     }
-    for r in &results {
-        for (k, rec) in r.records.iter().enumerate() {
-            for flag in &rec.structure_may_have_changed {
-                println!(
-                    "{}: record {}: {} consecutive queries {:.2}–{:.2} s: the structure may have changed",
-                    r.mode,
-                    k + 1,
-                    flag.samples,
-                    flag.start,
-                    flag.end
-                );
-            }
-        }
-    }
+    print_change_flags(&results);
     println!(
         "{:.2} s ({} modes in parallel threads)",
         seconds,
@@ -229,4 +187,57 @@ pub fn run(args: &LearnArgs) -> Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The fixed threshold's rule and values (per channel, in its unit squared), and the stretches
+/// it was trained and tested on.
+fn print_fixed_threshold(fixed: &FixedThreshold, channels: &[String]) {
+    let stretch = |s: &Option<Stretch>| {
+        s.as_ref().map_or(String::new(), |s| {
+            format!(
+                "{} {:.1}–{:.1} s ({} points)",
+                s.record, s.from, s.to, s.points
+            )
+        })
+    };
+    let how = match (&fixed.trained_on, &fixed.tested_on) {
+        (Some(_), Some(_)) => format!(
+            ": trained on {}, largest V(f) on {}",
+            stretch(&fixed.trained_on),
+            stretch(&fixed.tested_on)
+        ),
+        _ => String::new(),
+    };
+    if ::structure::paper::is_channels(channels) {
+        println!(
+            "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
+            fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]
+        );
+    } else {
+        let each: Vec<String> = fixed.values.iter().map(|v| format!("{v:.3e}")).collect();
+        println!(
+            "fixed threshold ({}{how}): {} ({}; each in its unit squared)",
+            fixed.rule,
+            each.join(" / "),
+            channels.join(" / ")
+        );
+    }
+}
+
+/// Each mode's runs of consecutive queries that say the structure may have changed.
+fn print_change_flags(results: &[ModeResult]) {
+    for r in results {
+        for (k, rec) in r.records.iter().enumerate() {
+            for flag in &rec.structure_may_have_changed {
+                println!(
+                    "{}: record {}: {} consecutive queries {:.2}–{:.2} s: the structure may have changed",
+                    r.mode,
+                    k + 1,
+                    flag.samples,
+                    flag.start,
+                    flag.end
+                );
+            }
+        }
+    }
 }
