@@ -309,67 +309,27 @@ fn accepted_path(twin: &Path, k: usize) -> PathBuf {
 /// `twin add-physics --diagnosis REPORT --data SAMPLES`, writing a new twin beside the old; it
 /// runs in the background (202), its end an `accept` event on the page.
 async fn accept(State(app): State<Arc<App>>, headers: HeaderMap, body: String) -> Response {
-    const REQUEST: &str = "POST /api/accept";
-    const EXPECTED: &str = r#"{"diagnosis": K} with K a diagnosis's number (1, 2, …), or {}"#;
-    if let Err(r) = authorize(&app, &headers, REQUEST) {
+    if let Err(r) = authorize(&app, &headers, ACCEPT_REQUEST) {
         return *r;
     }
-    let map = match json_object(&body, REQUEST, EXPECTED) {
+    let map = match json_object(&body, ACCEPT_REQUEST, ACCEPT_EXPECTED) {
         Ok(m) => m,
         Err(r) => return *r,
     };
-    let diagnoses = app.hub.diagnoses();
-    let k = match map.get("diagnosis") {
-        None | Some(Value::Null) => diagnoses.len(),
-        Some(v) => match v.as_u64().filter(|&k| k > 0) {
-            Some(k) => k as usize,
-            None => {
-                return error(
-                    StatusCode::BAD_REQUEST,
-                    format!(
-                        "{REQUEST}: \"diagnosis\" must be a positive integer; expected {EXPECTED}"
-                    ),
-                )
-            }
-        },
-    };
-    if diagnoses.is_empty() {
-        return error(
-            StatusCode::CONFLICT,
-            format!("{REQUEST}: no diagnosis has landed"),
-        );
-    }
-    let Some(d) = diagnoses.get(k - 1) else {
-        return error(
-            StatusCode::NOT_FOUND,
-            format!("{REQUEST}: no diagnosis {k} ({} landed)", diagnoses.len()),
-        );
-    };
-    let action = d["action"].as_str().unwrap_or("none");
-    if action != "add_physics" {
-        return error(
-            StatusCode::CONFLICT,
-            format!(
-                "{REQUEST}: diagnosis {k}'s action is '{action}'; only add_physics adds physics"
-            ),
-        );
-    }
-    let (Some(report), Some(samples)) = (d["report"].as_str(), d["samples"].as_str()) else {
-        return error(
-            StatusCode::CONFLICT,
-            format!("{REQUEST}: diagnosis {k} has no report or samples file"),
-        );
+    let (k, report, samples) = match chosen_diagnosis(&app, &map) {
+        Ok(chosen) => chosen,
+        Err(r) => return *r,
     };
     let (Some(twin), Some(binary)) = (&app.actions.twin, &app.actions.binary) else {
         return error(
             StatusCode::CONFLICT,
-            format!("{REQUEST}: the watch was started without a --twin file to add to"),
+            format!("{ACCEPT_REQUEST}: the watch was started without a --twin file to add to"),
         );
     };
     if app.accepting.swap(true, Ordering::SeqCst) {
         return error(
             StatusCode::CONFLICT,
-            format!("{REQUEST}: an accepted diagnosis is being added already"),
+            format!("{ACCEPT_REQUEST}: an accepted diagnosis is being added already"),
         );
     }
     let out = accepted_path(twin, k);
@@ -388,8 +348,83 @@ async fn accept(State(app): State<Arc<App>>, headers: HeaderMap, body: String) -
     let started = json!({"type": "accept", "status": "started", "diagnosis": k,
                          "out": out.display().to_string()});
     app.hub.publish(Kind::Other, started.clone());
-    let worker = app.clone();
-    let spawned = std::thread::Builder::new()
+    if let Err(e) = run_accept(app.clone(), command, k, out) {
+        app.accepting.store(false, Ordering::SeqCst);
+        return error(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("{ACCEPT_REQUEST}: cannot start add-physics: {e}"),
+        );
+    }
+    (StatusCode::ACCEPTED, Json(started)).into_response()
+}
+
+const ACCEPT_REQUEST: &str = "POST /api/accept";
+const ACCEPT_EXPECTED: &str = r#"{"diagnosis": K} with K a diagnosis's number (1, 2, …), or {}"#;
+
+/// The diagnosis the request names (default: the latest): its number, its report and its
+/// samples file; refused unless it landed and its action is add_physics.
+fn chosen_diagnosis(
+    app: &App,
+    map: &serde_json::Map<String, Value>,
+) -> Result<(usize, String, String), Box<Response>> {
+    let refuse = |status, message: String| Box::new(error(status, message));
+    let diagnoses = app.hub.diagnoses();
+    let k = match map.get("diagnosis") {
+        None | Some(Value::Null) => diagnoses.len(),
+        Some(v) => match v.as_u64().filter(|&k| k > 0) {
+            Some(k) => k as usize,
+            None => {
+                return Err(refuse(
+                    StatusCode::BAD_REQUEST,
+                    format!(
+                        "{ACCEPT_REQUEST}: \"diagnosis\" must be a positive integer; expected {ACCEPT_EXPECTED}"
+                    ),
+                ))
+            }
+        },
+    };
+    if diagnoses.is_empty() {
+        return Err(refuse(
+            StatusCode::CONFLICT,
+            format!("{ACCEPT_REQUEST}: no diagnosis has landed"),
+        ));
+    }
+    let Some(d) = diagnoses.get(k - 1) else {
+        return Err(refuse(
+            StatusCode::NOT_FOUND,
+            format!(
+                "{ACCEPT_REQUEST}: no diagnosis {k} ({} landed)",
+                diagnoses.len()
+            ),
+        ));
+    };
+    let action = d["action"].as_str().unwrap_or("none");
+    if action != "add_physics" {
+        return Err(refuse(
+            StatusCode::CONFLICT,
+            format!(
+                "{ACCEPT_REQUEST}: diagnosis {k}'s action is '{action}'; only add_physics adds physics"
+            ),
+        ));
+    }
+    let (Some(report), Some(samples)) = (d["report"].as_str(), d["samples"].as_str()) else {
+        return Err(refuse(
+            StatusCode::CONFLICT,
+            format!("{ACCEPT_REQUEST}: diagnosis {k} has no report or samples file"),
+        ));
+    };
+    Ok((k, report.to_string(), samples.to_string()))
+}
+
+/// `command` (add-physics for diagnosis `k`, writing `out`) on a thread of its own; its end an
+/// `accept` event, and the next accept allowed.
+fn run_accept(
+    app: Arc<App>,
+    mut command: std::process::Command,
+    k: usize,
+    out: PathBuf,
+) -> std::io::Result<()> {
+    std::thread::Builder::new()
         .name("accept".into())
         .spawn(move || {
             let event = match command.output() {
@@ -401,15 +436,8 @@ async fn accept(State(app): State<Arc<App>>, headers: HeaderMap, body: String) -
                 Err(e) => json!({"type": "accept", "status": "failed", "diagnosis": k,
                     "error": e.to_string()}),
             };
-            worker.hub.publish(Kind::Other, event);
-            worker.accepting.store(false, Ordering::SeqCst);
-        });
-    if let Err(e) = spawned {
-        app.accepting.store(false, Ordering::SeqCst);
-        return error(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("{REQUEST}: cannot start add-physics: {e}"),
-        );
-    }
-    (StatusCode::ACCEPTED, Json(started)).into_response()
+            app.hub.publish(Kind::Other, event);
+            app.accepting.store(false, Ordering::SeqCst);
+        })
+        .map(|_| ())
 }
