@@ -13,7 +13,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{palette, ReportError};
 use crate::evaluation::compare::Comparison;
-use crate::evaluation::frf::ComparisonResponses;
+use crate::evaluation::frf::{ComparisonResponses, FrequencyResponse};
 use crate::fsutil::write_text_atomically;
 use crate::workflows::compare::ComparePlot;
 use ::structure::channel::{Channel, Quantity};
@@ -720,8 +720,6 @@ fn draw_frequency_view(
         0.05,
     );
     let lo = lo.max(hi - FRF_DEPTH_DB);
-    let frequency_label = |f: &f64| tick_label(*f, nyquist);
-    let db_label = |db: &f64| tick_label(*db, 1000.0);
     let segments = responses[0][0].segments;
     let segment_len = view.segment_len;
 
@@ -730,26 +728,8 @@ fn draw_frequency_view(
         let size = view_size(FRF_VIEW_SIZE, responses.len(), FRF_PANEL_HEIGHT);
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(text)?;
-        let what = match excitation {
-            Channel::Excitation(::structure::channel::ExcitationKind::GroundAcc) => {
-                "ground acceleration"
-            }
-            _ => "force",
-        };
-        let responses_are = if c
-            .channels
-            .iter()
-            .all(|ch| ch.quantity() == Quantity::Acceleration)
-        {
-            "floor acceleration"
-        } else {
-            "measured channel"
-        };
         let root = root
-            .titled(
-                &format!("{title} — frequency response, {what} → {responses_are}"),
-                (FONT, 24),
-            )
+            .titled(&frequency_view_title(c, excitation, title), (FONT, 24))
             .map_err(text)?;
         let (key, panels) = root.split_vertically(30);
         let method = format!(
@@ -767,45 +747,94 @@ fn draw_frequency_view(
         )?;
         let input_unit = unit_label(excitation);
         for (i, area) in panels.split_evenly((1, responses.len())).iter().enumerate() {
-            let channel = &c.channels[i];
-            let mut chart = ChartBuilder::on(area)
-                .caption(channel.name(), (FONT, 17))
-                .margin_left(10)
-                .margin_right(20)
-                .margin_bottom(4)
-                .x_label_area_size(TIME_AXIS_HEIGHT)
-                .y_label_area_size(PANEL_LEFT)
-                .build_cartesian_2d(0.0..nyquist, lo..hi)
-                .map_err(text)?;
-            chart
-                .configure_mesh()
-                .x_label_formatter(&frequency_label)
-                .y_label_formatter(&db_label)
-                .x_labels(8)
-                .y_labels(8)
-                .max_light_lines(1)
-                .bold_line_style(BLACK.mix(0.10))
-                .light_line_style(BLACK.mix(0.04))
-                .label_style((FONT, 13))
-                .axis_desc_style((FONT, 14))
-                .x_desc("frequency (Hz)")
-                .y_desc(format!(
-                    "|H| (dB re 1 ({})/{input_unit})",
-                    unit_label(channel)
-                ))
-                .draw()
-                .map_err(text)?;
-            for (response, colour) in responses[i].iter().zip([MEASURED, PREDICTED]) {
-                let clamped = response.magnitude_db.iter().map(|db| db.max(lo));
-                let line = points(&response.frequency, clamped);
-                chart
-                    .draw_series(LineSeries::new(line, colour.stroke_width(1)))
-                    .map_err(text)?;
-            }
+            let axes = FrequencyAxes {
+                nyquist,
+                lo,
+                hi,
+                input_unit,
+            };
+            draw_frequency_panel(area, &c.channels[i], &responses[i], &axes)?;
         }
         root.present().map_err(text)?;
     }
     Ok(svg)
+}
+
+/// The view's title: what drives the structure and what responds.
+fn frequency_view_title(c: &Comparison, excitation: &Channel, title: &str) -> String {
+    let what = match excitation {
+        Channel::Excitation(::structure::channel::ExcitationKind::GroundAcc) => {
+            "ground acceleration"
+        }
+        _ => "force",
+    };
+    let responses_are = if c
+        .channels
+        .iter()
+        .all(|ch| ch.quantity() == Quantity::Acceleration)
+    {
+        "floor acceleration"
+    } else {
+        "measured channel"
+    };
+    format!("{title} — frequency response, {what} → {responses_are}")
+}
+
+/// The axes every panel of the frequency view shares: 0 to Nyquist, the dB range, the
+/// excitation's unit.
+struct FrequencyAxes<'a> {
+    nyquist: f64,
+    lo: f64,
+    hi: f64,
+    input_unit: &'a str,
+}
+
+/// One channel's panel: the measured and predicted |H| in dB, clamped at the range's floor.
+fn draw_frequency_panel(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    channel: &Channel,
+    responses: &[FrequencyResponse; 2],
+    axes: &FrequencyAxes,
+) -> Result<(), String> {
+    let (nyquist, lo, hi) = (axes.nyquist, axes.lo, axes.hi);
+    let frequency_label = |f: &f64| tick_label(*f, nyquist);
+    let db_label = |db: &f64| tick_label(*db, 1000.0);
+    let mut chart = ChartBuilder::on(area)
+        .caption(channel.name(), (FONT, 17))
+        .margin_left(10)
+        .margin_right(20)
+        .margin_bottom(4)
+        .x_label_area_size(TIME_AXIS_HEIGHT)
+        .y_label_area_size(PANEL_LEFT)
+        .build_cartesian_2d(0.0..nyquist, lo..hi)
+        .map_err(text)?;
+    chart
+        .configure_mesh()
+        .x_label_formatter(&frequency_label)
+        .y_label_formatter(&db_label)
+        .x_labels(8)
+        .y_labels(8)
+        .max_light_lines(1)
+        .bold_line_style(BLACK.mix(0.10))
+        .light_line_style(BLACK.mix(0.04))
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .x_desc("frequency (Hz)")
+        .y_desc(format!(
+            "|H| (dB re 1 ({})/{})",
+            unit_label(channel),
+            axes.input_unit
+        ))
+        .draw()
+        .map_err(text)?;
+    for (response, colour) in responses.iter().zip([MEASURED, PREDICTED]) {
+        let clamped = response.magnitude_db.iter().map(|db| db.max(lo));
+        let line = points(&response.frequency, clamped);
+        chart
+            .draw_series(LineSeries::new(line, colour.stroke_width(1)))
+            .map_err(text)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
