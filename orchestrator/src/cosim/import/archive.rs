@@ -50,6 +50,7 @@ enum Place {
     Linked {
         dir: tempfile::TempDir,
         key: String,
+        entry: PathBuf,
     },
 }
 
@@ -63,7 +64,16 @@ impl Unpacked {
 
     /// Whether this is a directory of the FMU cache, or links into one.
     pub fn is_cached(&self) -> bool {
-        matches!(self.place, Place::Cached { .. } | Place::Linked { .. })
+        self.cache_entry().is_some()
+    }
+
+    /// The FMU cache's directory of this archive, when it is one or links into one: where what
+    /// is derived from the archive's files alone may be kept for the next process.
+    pub fn cache_entry(&self) -> Option<&Path> {
+        match &self.place {
+            Place::Cached { dir, .. } | Place::Linked { entry: dir, .. } => Some(dir),
+            Place::Temporary(_) => None,
+        }
     }
 }
 
@@ -236,7 +246,11 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
     Some(Unpacked {
         place: if first {
             in_use.insert(key.clone());
-            Place::Linked { dir: own, key }
+            Place::Linked {
+                dir: own,
+                key,
+                entry: dir,
+            }
         } else {
             Place::Temporary(own)
         },

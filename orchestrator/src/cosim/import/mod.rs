@@ -74,12 +74,12 @@ impl UnpackedFmu {
     }
 
     fn read(path: &Path, unpacked: Unpacked) -> Result<Self, ImportError> {
-        let md_path = unpacked.path().join("modelDescription.xml");
-        let xml = std::fs::read_to_string(&md_path).map_err(|e| ImportError::Archive {
-            path: path.to_owned(),
-            message: format!("no readable modelDescription.xml: {e}"),
-        })?;
-        let model_description = ModelDescription::parse(&xml, path)?;
+        let model_description = match unpacked.cache_entry() {
+            Some(entry) => ModelDescription::read_cached(entry, path)?,
+            None => {
+                ModelDescription::read_file(&unpacked.path().join("modelDescription.xml"), path)?
+            }
+        };
         Ok(UnpackedFmu {
             path: path.to_owned(),
             model_description,
