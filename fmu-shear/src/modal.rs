@@ -234,10 +234,15 @@ impl Modal {
             .map(|theta| AccelerationRows::derivative(params, theta))
             .collect();
         let parts = ModeParts::new(&modes, &derivatives, &alpha);
-        let per_parameter = assemble(&modes, &parts, &alpha, &derivatives, floors);
-        let coefficients = per_parameter
-            .into_iter()
-            .map(|k| along(directions, k))
+        // One slot's 3N × L coefficients at a time, in one buffer, taken along the directions.
+        let mut k = DMatrix::zeros(derivatives.len(), 4 * modes.kept.len() + s + 1);
+        let coefficients = floors
+            .iter()
+            .enumerate()
+            .map(|(slot, &f)| {
+                assemble(&modes, &parts, &alpha, &derivatives, (slot, f), &mut k);
+                along(directions, &k)
+            })
             .collect();
         let outputs = floors
             .iter()
@@ -437,53 +442,46 @@ impl SparseRows {
     }
 }
 
-/// Per slot, the derivatives' coefficients of `ζ` along the 3N parameters (3N × L): each kept
-/// mode's `zⱼ` (`Σᵢ … + αⱼ own`) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as twice the real part of a
-/// conjugate pair, then the state and the excitation at a fixed state.
+/// The derivatives' coefficients of `ζ` of the slot `(slot, floor)` along the 3N parameters,
+/// into `k` (3N × L): each kept mode's `zⱼ` (`Σᵢ … + αⱼ own`) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as
+/// twice the real part of a conjugate pair, then the state and the excitation at a fixed state.
 fn assemble(
     modes: &Modes,
     parts: &ModeParts,
     alpha: &Mat<C64>,
     derivatives: &[AccelerationRows],
-    floors: &[usize],
-) -> Vec<DMatrix<f64>> {
+    (slot, f): (usize, usize),
+    k: &mut DMatrix<f64>,
+) {
     let kept = modes.kept.len();
     let s = modes.lambda.len();
     let cz = &parts.outputs;
     let direct = 4 * kept;
-    floors
-        .iter()
-        .enumerate()
-        .map(|(slot, &f)| {
-            // Column by column (the matrix's order): a mode's four, then the state's, then the
-            // excitation's, each down the parameters.
-            let mut k = DMatrix::zeros(derivatives.len(), direct + s + 1);
-            for (m, &(j, weight)) in modes.kept.iter().enumerate() {
-                let a = alpha[(slot, j)];
-                let ab = a * modes.beta[j];
-                for theta in 0..derivatives.len() {
-                    let z = cz[(slot, theta * kept + m)] + a * parts.own[(theta, m)];
-                    let w = ab * parts.dlambda[(theta, m)];
-                    k[(theta, 4 * m)] = weight * z.re;
-                    k[(theta, 4 * m + 1)] = -weight * z.im;
-                    k[(theta, 4 * m + 2)] = weight * w.re;
-                    k[(theta, 4 * m + 3)] = -weight * w.im;
-                }
-            }
-            for (theta, d) in derivatives.iter().enumerate() {
-                for c in 0..s {
-                    k[(theta, direct + c)] = d.a[(f, c)];
-                }
-                k[(theta, direct + s)] = d.b_excitation[f];
-            }
-            k
-        })
-        .collect()
+    // Column by column (the matrix's order): a mode's four, then the state's, then the
+    // excitation's, each down the parameters.
+    for (m, &(j, weight)) in modes.kept.iter().enumerate() {
+        let a = alpha[(slot, j)];
+        let ab = a * modes.beta[j];
+        for theta in 0..derivatives.len() {
+            let z = cz[(slot, theta * kept + m)] + a * parts.own[(theta, m)];
+            let w = ab * parts.dlambda[(theta, m)];
+            k[(theta, 4 * m)] = weight * z.re;
+            k[(theta, 4 * m + 1)] = -weight * z.im;
+            k[(theta, 4 * m + 2)] = weight * w.re;
+            k[(theta, 4 * m + 3)] = -weight * w.im;
+        }
+    }
+    for (theta, d) in derivatives.iter().enumerate() {
+        for c in 0..s {
+            k[(theta, direct + c)] = d.a[(f, c)];
+        }
+        k[(theta, direct + s)] = d.b_excitation[f];
+    }
 }
 
 /// `directionsᵀ k`: the coefficients along the directions; a direction that is one parameter
 /// takes its row.
-fn along(directions: &DMatrix<f64>, k: DMatrix<f64>) -> DMatrix<f64> {
+fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
     let unit: Option<Vec<usize>> = directions
         .column_iter()
         .map(|d| {
@@ -496,9 +494,26 @@ fn along(directions: &DMatrix<f64>, k: DMatrix<f64>) -> DMatrix<f64> {
         .collect();
     match unit {
         // Every parameter in its own order: `k` itself.
-        Some(rows) if rows.len() == k.nrows() && rows.iter().enumerate().all(|(a, &r)| a == r) => k,
+        Some(rows) if rows.len() == k.nrows() && rows.iter().enumerate().all(|(a, &r)| a == r) => {
+            k.clone()
+        }
         Some(rows) => DMatrix::from_fn(rows.len(), k.ncols(), |a, l| k[(rows[a], l)]),
-        None => directions.transpose() * k,
+        // faer's product, sequential: nalgebra's (matrixmultiply) packs into megabyte buffers
+        // that a process touches fresh each call, 25 % of a 20-storey compare's page faults.
+        None => {
+            let (rows, d) = directions.shape();
+            let mut out = DMatrix::zeros(d, k.ncols());
+            let (out_rows, out_cols) = out.shape();
+            matmul(
+                MatMut::from_column_major_slice_mut(out.as_mut_slice(), out_rows, out_cols),
+                Accum::Replace,
+                MatRef::from_column_major_slice(directions.as_slice(), rows, d).transpose(),
+                MatRef::from_column_major_slice(k.as_slice(), k.nrows(), k.ncols()),
+                1.0,
+                Par::Seq,
+            );
+            out
+        }
     }
 }
 
