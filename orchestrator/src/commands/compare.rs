@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use super::{progress_bar, write_json, write_text_atomically, Compared};
+use super::{progress_bar, write_json, Compared};
 use crate::evaluation::compare::Comparison;
 use crate::twin::data::Measurement;
 use crate::twin::run::Prediction;
@@ -147,7 +147,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 
     // Everything is computed before anything is written: a failure leaves no partial output.
     if let Some(path) = &args.predictions {
-        write_text_atomically(path, &predictions_csv(prediction))?;
+        crate::fsutil::write_atomically(path, |file| predictions_csv(file, prediction))?;
     }
     if let Some(path) = &args.report {
         write_json(path, &report)?;
@@ -210,7 +210,7 @@ fn plot(
 /// `time` and every predicted channel by name (`acc1,acc2,acc3` on the paper's rig), in SI;
 /// then the corrector's latent variance and sd of each channel it corrects, named as its
 /// outputs are (`latent_var<i>`, `sd<i>` for `acc<i>`; `latent_var_vel2`, `sd_vel2` …).
-fn predictions_csv(p: &Prediction) -> String {
+fn predictions_csv(out: &mut impl std::io::Write, p: &Prediction) -> std::io::Result<()> {
     let mut columns: Vec<(String, &[f64])> = p
         .channels
         .iter()
@@ -227,7 +227,7 @@ fn predictions_csv(p: &Prediction) -> String {
             }
         }
     }
-    crate::record::columns_csv(&p.time, &columns)
+    crate::record::columns_csv(out, &p.time, &columns)
 }
 
 /// The record's modes beside the twin's, one line per paired mode.
