@@ -1,6 +1,8 @@
 //! `Twin`: a twin (an SSP archive around the shear FMU) and the CLI's operations on it —
 //! compare, calibrate, diagnose, add physics, control, watch — each with the GIL released.
 
+mod control;
+
 use std::path::PathBuf;
 
 use numpy::PyArray1;
@@ -8,7 +10,6 @@ use orchestrator::cosim::import::Fmu;
 use orchestrator::record::frf::{FrfValues, MeasuredFrf};
 use orchestrator::record::ColumnMap;
 use orchestrator::record::DataError;
-use orchestrator::report::control_plot::plot_control;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::{ParameterValue, RecordRef, RecordRole, Twin as CoreTwin};
 use orchestrator::workflows::calibrate::validated::check_plot;
@@ -17,10 +18,7 @@ use orchestrator::workflows::calibrate::{
 };
 use orchestrator::workflows::compare::{compare, CompareOptions};
 use orchestrator::workflows::control::closed_loop::{Gap, Response};
-use orchestrator::workflows::control::{
-    run_control, twin_for_control, ControlOptions, ControllerSpec, Retune, ScheduleOptions,
-    VarianceTrigger,
-};
+use orchestrator::workflows::control::ControllerSpec;
 use orchestrator::workflows::diagnose::{
     add_hybrid_contact, add_physics, diagnose, effects_from_report, parse_additions,
     parse_candidates, with_record, DiagnoseOptions,
@@ -37,6 +35,7 @@ use pyo3::types::PyDict;
 
 use crate::record::Record;
 use crate::{choice, detached, invalid, to_object, to_py, Kind};
+use control::{control_and_write, control_result, design_options, schedule_options};
 
 /// A twin: the shear FMU (and a GP corrector, when trained) with its parameters, noise
 /// variances and calibration, as an SSP archive. Open one with `Twin.open(path)`; every
@@ -770,32 +769,18 @@ impl Twin {
             check_svg(path).map_err(|e| to_py(kind, e))?;
         }
         let err = |e: orchestrator::workflows::options::InvalidOption| to_py(kind, e);
-        let d = ControlOptions::default();
-        let rd = Retune::default();
-        let sd = ScheduleOptions::default();
-        let mut options = ControlOptions {
-            qs: q,
-            r: r.unwrap_or(d.r),
-            unit: match state_unit {
-                Some(t) => choice(kind, "state-unit", t)?,
-                None => d.unit,
-            },
-            estimator: match estimator {
-                Some(t) => choice(kind, "estimator", t)?,
-                None => d.estimator,
-            },
-            highpass_hz: highpass.unwrap_or(d.highpass_hz),
-            substeps: substeps.or(d.substeps),
-            seed: seed.unwrap_or(d.seed),
-            retune: Some(Retune {
-                target: target_contacts.unwrap_or(rd.target),
-                max_force,
-            }),
+        let mut options = design_options(
+            q,
+            r,
+            state_unit,
+            estimator,
+            highpass,
+            substeps,
+            seed,
+            (target_contacts, max_force),
             estimator_costs,
-            actuator_floor: actuator_floor.unwrap_or(d.actuator_floor),
-            ..ControlOptions::default()
-        };
-        options.validate().map_err(err)?;
+            actuator_floor,
+        )?;
         options.retune = options.retune.filter(|_| retune);
         options.sensor_noise = orchestrator::workflows::control::sensor_noise(sensor_noise)
             .map_err(err)?
@@ -805,72 +790,13 @@ impl Twin {
             .map(|g| Gap::parse(g))
             .collect::<Result<Vec<_>, _>>()
             .map_err(err)?;
-        let variance = match variance_threshold {
-            Some(t) => VarianceTrigger::parse(t).map_err(err)?,
-            None => sd.variance,
-        };
-        options.schedule = schedule.then_some(ScheduleOptions {
-            margin: margin.unwrap_or(sd.margin),
-            lookahead: lookahead.unwrap_or(sd.lookahead),
-            dwell: dwell.unwrap_or(sd.dwell),
-            variance,
-        });
+        options.schedule =
+            schedule_options(schedule, margin, lookahead, dwell, variance_threshold)?;
         let data = record.for_twin(&self.twin)?;
         let outcome = detached(py, || {
-            let twin = twin_for_control(&self.twin, sensor_noise);
-            let outcome =
-                run_control(&twin, data, &options, &mut |_, _| {}).map_err(|e| to_py(kind, e))?;
-            let svg = match &plot {
-                Some(path) => Some((
-                    path,
-                    plot_control(
-                        &outcome,
-                        &format!("twin control on {}", data.path.display()),
-                    )
-                    .map_err(|m| invalid(kind, format!("cannot draw {}: {m}", path.display())))?,
-                )),
-                None => None,
-            };
-            if let Some(path) = &ssp {
-                let span = (data.time[0], *data.time.last().unwrap_or(&data.time[0]));
-                orchestrator::workflows::control::ssp::write_controlled_ssp(
-                    &twin,
-                    &outcome.report,
-                    ssp_q,
-                    Some(span),
-                    path,
-                )
-                .map_err(|e| {
-                    to_py(
-                        kind,
-                        anyhow::Error::from(e).context(format!("--ssp {}", path.display())),
-                    )
-                })?;
-            }
-            if let Some((path, text)) = svg {
-                orchestrator::fsutil::write_text_atomically(path, &text)
-                    .map_err(|e| to_py(kind, e))?;
-            }
-            Ok(outcome)
+            control_and_write(&self.twin, data, &options, sensor_noise, &plot, &ssp, ssp_q)
         })?;
-        let out = PyDict::new(py);
-        out.set_item("report", to_object(py, &outcome.report)?)?;
-        out.set_item("passive", response(py, &outcome.passive)?)?;
-        let designs = outcome
-            .designs
-            .iter()
-            .map(|d| d.as_ref().map(|r| response(py, r)).transpose())
-            .collect::<PyResult<Vec<_>>>()?;
-        out.set_item("designs", designs)?;
-        out.set_item(
-            "scheduled",
-            outcome
-                .scheduled
-                .as_ref()
-                .map(|r| response(py, r))
-                .transpose()?,
-        )?;
-        Ok(out)
+        control_result(py, &outcome)
     }
 
     /// `twin watch`: the operational twin on a stream — `source` `-` (standard input), a CSV
