@@ -1,25 +1,102 @@
-//! `Twin.control`'s stages: the designs' and the schedule's options from the keyword
-//! arguments, the runs with the plot and the SSP archive written, and the result as a dict.
+//! `Twin.control`: LQR designs on the twin's structure run in the loop on a record.
 
-use std::path::PathBuf;
-
+use super::{response, Twin};
+use crate::record::Record;
+use crate::{choice, detached, invalid, to_object, to_py, Kind};
 use orchestrator::report::control_plot::plot_control;
 use orchestrator::twin::data::Measurement;
 use orchestrator::twin::Twin as CoreTwin;
+use orchestrator::workflows::control::closed_loop::Gap;
+use orchestrator::workflows::control::ControlOutcome;
 use orchestrator::workflows::control::{
-    run_control, twin_for_control, ControlOptions, ControlOutcome, Retune, ScheduleOptions,
-    VarianceTrigger,
+    run_control, twin_for_control, ControlOptions, Retune, ScheduleOptions, VarianceTrigger,
 };
+use orchestrator::workflows::options::check_svg;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::path::PathBuf;
 
-use super::response;
-use crate::{choice, invalid, to_object, to_py, Kind};
+#[pymethods]
+impl Twin {
+    /// `twin control`: LQR designs (one per `q`) on the twin's structure, run in the loop on
+    /// the record's force, passive and under each design; `retune`, `schedule` as the CLI's;
+    /// `ssp`: also write the controlled system as an SSP archive. Returns `{"report": <the
+    /// CLI's JSON report>, "passive": {...}, "designs": [{...} or None], "scheduled": {...} or
+    /// None}`, each response as arrays `time`, `acc1`.., `control`.
+    #[pyo3(signature = (record, q, *, r = None, state_unit = None, estimator = None,
+                        highpass = None, substeps = None, sensor_noise = None, seed = None,
+                        gaps = Vec::new(), retune = false, target_contacts = None,
+                        max_force = None, schedule = false, margin = None, lookahead = None,
+                        dwell = None, variance_threshold = None, estimator_costs = false,
+                        actuator_floor = None, ssp = None, ssp_q = None, plot = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn control<'py>(
+        &self,
+        py: Python<'py>,
+        record: &Record,
+        q: Vec<f64>,
+        r: Option<f64>,
+        state_unit: Option<&str>,
+        estimator: Option<&str>,
+        highpass: Option<f64>,
+        substeps: Option<usize>,
+        sensor_noise: Option<f64>,
+        seed: Option<u64>,
+        gaps: Vec<String>,
+        retune: bool,
+        target_contacts: Option<usize>,
+        max_force: Option<f64>,
+        schedule: bool,
+        margin: Option<f64>,
+        lookahead: Option<f64>,
+        dwell: Option<f64>,
+        variance_threshold: Option<&str>,
+        estimator_costs: bool,
+        actuator_floor: Option<usize>,
+        ssp: Option<PathBuf>,
+        ssp_q: Option<f64>,
+        plot: Option<PathBuf>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let kind = Kind::Control;
+        if let Some(path) = &plot {
+            check_svg(path).map_err(|e| to_py(kind, e))?;
+        }
+        let err = |e: orchestrator::workflows::options::InvalidOption| to_py(kind, e);
+        let mut options = design_options(
+            q,
+            r,
+            state_unit,
+            estimator,
+            highpass,
+            substeps,
+            seed,
+            (target_contacts, max_force),
+            estimator_costs,
+            actuator_floor,
+        )?;
+        options.retune = options.retune.filter(|_| retune);
+        options.sensor_noise = orchestrator::workflows::control::sensor_noise(sensor_noise)
+            .map_err(err)?
+            .0;
+        options.gaps = gaps
+            .iter()
+            .map(|g| Gap::parse(g))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(err)?;
+        options.schedule =
+            schedule_options(schedule, margin, lookahead, dwell, variance_threshold)?;
+        let data = record.for_twin(&self.twin)?;
+        let outcome = detached(py, || {
+            control_and_write(&self.twin, data, &options, sensor_noise, &plot, &ssp, ssp_q)
+        })?;
+        control_result(py, &outcome)
+    }
+}
 
 /// The designs' options from the keyword arguments (None: the CLI's default), checked; the
 /// retune's (`target_contacts`, `max_force`) kept for the caller to switch on.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn design_options(
+fn design_options(
     q: Vec<f64>,
     r: Option<f64>,
     state_unit: Option<&str>,
@@ -61,7 +138,7 @@ pub(super) fn design_options(
 }
 
 /// The gain schedule's options when `schedule` is on (None: the CLI's default each).
-pub(super) fn schedule_options(
+fn schedule_options(
     schedule: bool,
     margin: Option<f64>,
     lookahead: Option<f64>,
@@ -84,7 +161,7 @@ pub(super) fn schedule_options(
 /// The runs (passive and under each design) on the twin as controlled, then the plot and the
 /// SSP archive written when asked (the plot drawn before the archive is written, written
 /// after).
-pub(super) fn control_and_write(
+fn control_and_write(
     twin: &CoreTwin,
     data: &Measurement,
     options: &ControlOptions,
@@ -131,10 +208,7 @@ pub(super) fn control_and_write(
 
 /// The result as a dict: the CLI's report and each run's response (None for a design that
 /// did not run).
-pub(super) fn control_result<'py>(
-    py: Python<'py>,
-    outcome: &ControlOutcome,
-) -> PyResult<Bound<'py, PyDict>> {
+fn control_result<'py>(py: Python<'py>, outcome: &ControlOutcome) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     out.set_item("report", to_object(py, &outcome.report)?)?;
     out.set_item("passive", response(py, &outcome.passive)?)?;
