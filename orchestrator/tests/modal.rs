@@ -773,6 +773,45 @@ mod records {
         }
     }
 
+    /// The lab frame's runs forced by white noise over the whole band (0–250 Hz at 500 Hz),
+    /// one accelerometer per run as in [`lab_frame_runs`], and one run of every floor.
+    fn white_lab_frame_runs(floors: &[&[usize]], coloured: f64) -> Vec<(Measurement, Vec<Mode>)> {
+        floors
+            .iter()
+            .enumerate()
+            .map(|(i, measured)| {
+                record(
+                    3,
+                    (&[5.201; 3], &[9562.0, 11806.0, 11332.0], &[4.0; 3]),
+                    1,
+                    (500.0, 30.0),
+                    (0.0, 250.0),
+                    measured,
+                    coloured,
+                    60 + i as u64,
+                )
+            })
+            .collect()
+    }
+
+    /// The lab frame forced by white noise over its whole band, every floor measured, white
+    /// sensor noise: the default `twin modal` finds the three peaks within 1 %, none spurious.
+    /// Before, LSCF's sweep stopped at order 40 with 9.03 and 13.43 Hz only on runs 2 and 3:
+    /// the 0.39 %-damped 3.17 Hz (a fifth of a 0.12 Hz bin wide) dips H1's coherence at its
+    /// own bin to 0.17, so the FRF's peaks did not list it, and the sweep went on only while
+    /// no mode stood at all; once swept on (formed above order 40) its 9 orders were few
+    /// beside modes standing since order 20. Now a peak coherent within two bins, below the highest
+    /// mode and unexplained, takes the sweep on, and a mode formed above the orders asked for
+    /// is judged against the orders since it formed. Measured: 3.17 / 9.03 / 13.43 Hz within
+    /// 0.001 % on all three runs; `twin synth`'s same frame (seeds 1–3) 2 / 2 / 2 → 3 / 3 / 3
+    /// modes, 3.1700 Hz each. Not covered: one accelerometer per run (the sweep does not go
+    /// past the orders asked for on fewer than three channels) and coloured sensor noise.
+    #[test]
+    fn every_peak_of_a_lab_frame_forced_over_its_whole_band_is_found() {
+        let every_floor: &[&[usize]] = &[&[1, 2, 3], &[1, 2, 3], &[1, 2, 3]];
+        every_peak_is_found_and_nothing_else(white_lab_frame_runs(every_floor, 0.0));
+    }
+
     fn every_peak_is_found_and_nothing_else(runs: Vec<(Measurement, Vec<Mode>)>) {
         let exact = runs[0].1.clone();
         for e in &exact {

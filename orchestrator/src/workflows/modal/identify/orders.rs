@@ -17,20 +17,38 @@ pub const MIN_SHARE_OF_LARGEST: f64 = 0.45;
 
 /// Splits `modes` into those made of at least [`MIN_SHARE_OF_LARGEST`] of the
 /// best-supported mode's orders and those set aside ([`Rejection::FewOrders`], appended to
-/// `rejected`, which stays sorted by frequency).
+/// `rejected`, which stays sorted by frequency). A mode that first forms above `asked` (the
+/// highest order asked for: the sweep went on for a peak no mode explained) is judged
+/// against the orders from where it formed: it could not stand at the orders below (the lab
+/// frame forced over 0–250 Hz: its 3.17 Hz formed above order 40, with 9 orders where the
+/// others held 20 and more).
 pub(super) fn screen_by_orders(
     modes: Vec<IdentifiedMode>,
     rejected: &mut Vec<RejectedMode>,
+    asked: usize,
 ) -> Vec<IdentifiedMode> {
-    let largest = modes.iter().map(|m| m.orders.len()).max().unwrap_or(0);
-    let needed = MIN_SHARE_OF_LARGEST * largest as f64;
+    let largest_from = |from: usize| {
+        modes
+            .iter()
+            .map(|m| m.orders.iter().filter(|o| **o >= from).count())
+            .max()
+            .unwrap_or(0)
+    };
+    let needed: Vec<f64> = modes
+        .iter()
+        .map(|m| {
+            let first = m.orders.iter().copied().min().unwrap_or(0);
+            let from = if first > asked { first } else { 0 };
+            MIN_SHARE_OF_LARGEST * largest_from(from) as f64
+        })
+        .collect();
     let (kept, few): (Vec<_>, Vec<_>) = modes
         .into_iter()
-        .partition(|m| m.orders.len() as f64 >= needed);
-    rejected.extend(
-        few.into_iter()
-            .map(|mode| RejectedMode::new(mode, Rejection::FewOrders)),
-    );
+        .zip(needed)
+        .partition(|(m, needed)| m.orders.len() as f64 >= *needed);
+    let kept: Vec<IdentifiedMode> = kept.into_iter().map(|(m, _)| m).collect();
+    let few = few.into_iter().map(|(m, _)| m);
+    rejected.extend(few.map(|mode| RejectedMode::new(mode, Rejection::FewOrders)));
     rejected.sort_by(|a, b| a.mode.frequency.total_cmp(&b.mode.frequency));
     kept
 }
@@ -64,7 +82,7 @@ mod tests {
             mode(39.41, 7),
         ];
         let mut rejected = Vec::new();
-        let kept = screen_by_orders(modes, &mut rejected);
+        let kept = screen_by_orders(modes, &mut rejected, 40);
         let frequencies: Vec<f64> = kept.iter().map(|m| m.frequency).collect();
         assert_eq!(frequencies, vec![3.17, 9.03, 13.43]);
         assert_eq!(rejected.len(), 1);
