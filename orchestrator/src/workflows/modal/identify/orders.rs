@@ -89,4 +89,23 @@ mod tests {
         assert_eq!(rejected[0].mode.frequency, 39.41);
         assert_eq!(rejected[0].rejection, Rejection::FewOrders);
     }
+
+    /// A mode that formed only once the sweep went past the 40 orders asked for (the lab frame
+    /// forced over 0–250 Hz: 3.17 Hz from order 42, 9 orders beside modes of 25) is judged
+    /// against the orders from there; the same 9 orders formed below 40 are few.
+    #[test]
+    fn a_mode_formed_past_the_orders_asked_for_is_judged_from_there() {
+        let late = |frequency: f64, from: usize, orders: usize| IdentifiedMode {
+            orders: (0..orders).map(|o| from + 2 * o).collect(),
+            ..mode(frequency, 0)
+        };
+        let modes = vec![late(3.17, 42, 9), late(9.03, 10, 25), late(13.43, 12, 24)];
+        let mut rejected = Vec::new();
+        assert_eq!(screen_by_orders(modes, &mut rejected, 40).len(), 3);
+        assert!(rejected.is_empty());
+        let modes = vec![late(3.17, 22, 9), late(9.03, 10, 25), late(13.43, 12, 24)];
+        let kept = screen_by_orders(modes, &mut rejected, 40);
+        assert_eq!(kept.len(), 2);
+        assert_eq!(rejected[0].mode.frequency, 3.17);
+    }
 }
