@@ -619,16 +619,46 @@ pub fn normals(
 /// `Σₐ (∂yₖ/∂dₐ)²` per slot and sample of `record` over the directions `dₐ` of `modal`: a
 /// band's variance, the directions the rows of its covariance's root. Per block of samples one
 /// product of each slot's coefficients with the block's `ζ`.
+///
+/// The slots are shared among the cores, each group of them a pass of its own over the record
+/// (the modes' recursion, a small part of the work, done once a group): every slot's variance
+/// is computed as in one pass, to the bit.
 pub fn band(modal: &Modal, record: &LinearRecord) -> Vec<Vec<f64>> {
+    let slots = modal.coefficients.len();
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |t| t.get())
+        .min(slots);
+    if threads <= 1 {
+        return band_of(modal, record, &modal.coefficients);
+    }
+    let group = slots.div_ceil(threads);
+    std::thread::scope(|scope| {
+        let parts: Vec<_> = modal
+            .coefficients
+            .chunks(group)
+            .map(|coefficients| scope.spawn(move || band_of(modal, record, coefficients)))
+            .collect();
+        parts
+            .into_iter()
+            .flat_map(|part| {
+                part.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+            .collect()
+    })
+}
+
+/// [`band`] of the slots whose coefficients are `coefficients`, in one pass.
+fn band_of(modal: &Modal, record: &LinearRecord, coefficients: &[DMatrix<f64>]) -> Vec<Vec<f64>> {
     let width = modal.width();
     let samples = record.excitation.len();
-    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(samples); modal.coefficients.len()];
-    let d = modal.coefficients.first().map_or(0, DMatrix::nrows);
+    let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(samples); coefficients.len()];
+    let d = coefficients.first().map_or(0, DMatrix::nrows);
     let mut along = Mat::<f64>::zeros(d, BLOCK);
     modal.run(record, |_, _, zeta| {
         let len = zeta.len() / width;
         let z = MatRef::from_column_major_slice(zeta, width, len);
-        for (k, variances) in modal.coefficients.iter().zip(&mut out) {
+        for (k, variances) in coefficients.iter().zip(&mut out) {
             let kf = MatRef::from_column_major_slice(k.as_slice(), d, width);
             matmul(
                 along.as_mut().submatrix_mut(0, 0, d, len),
