@@ -372,10 +372,8 @@ impl ModelDescription {
         if let Ok(bytes) = postcard::to_stdvec(&description) {
             // Another process may write the same copy at once: each writes its own temporary
             // file and renames it; a failure only means the next process parses again.
-            let _ = tempfile::NamedTempFile::new_in(dir).and_then(|mut tmp| {
-                std::io::Write::write_all(&mut tmp, &bytes)?;
-                tmp.persist(&cached).map_err(|e| e.error)?;
-                Ok(())
+            let _ = crate::fsutil::write_atomically(&cached, |file| {
+                std::io::Write::write_all(file, &bytes)
             });
         }
         Ok(description)
