@@ -236,12 +236,13 @@ impl Modal {
         let parts = ModeParts::new(&modes, &derivatives, &alpha);
         // One slot's 3N × L coefficients at a time, in one buffer, taken along the directions.
         let mut k = DMatrix::zeros(derivatives.len(), 4 * modes.kept.len() + s + 1);
+        let unit = unit_rows(directions);
         let coefficients = floors
             .iter()
             .enumerate()
             .map(|(slot, &f)| {
                 assemble(&modes, &parts, &alpha, &derivatives, (slot, f), &mut k);
-                along(directions, &k)
+                along(directions, unit.as_deref(), &k)
             })
             .collect();
         let outputs = floors
@@ -479,10 +480,9 @@ fn assemble(
     }
 }
 
-/// `directionsᵀ k`: the coefficients along the directions; a direction that is one parameter
-/// takes its row.
-fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
-    let unit: Option<Vec<usize>> = directions
+/// The parameter each direction is, when every direction is one parameter (a unit column).
+fn unit_rows(directions: &DMatrix<f64>) -> Option<Vec<usize>> {
+    directions
         .column_iter()
         .map(|d| {
             let mut nonzero = d.iter().enumerate().filter(|(_, x)| **x != 0.0);
@@ -491,7 +491,12 @@ fn along(directions: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
                 _ => None,
             }
         })
-        .collect();
+        .collect()
+}
+
+/// `directionsᵀ k`: the coefficients along the directions; where every direction is one
+/// parameter (`unit`, from [`unit_rows`]), their rows.
+fn along(directions: &DMatrix<f64>, unit: Option<&[usize]>, k: &DMatrix<f64>) -> DMatrix<f64> {
     match unit {
         // Every parameter in its own order: `k` itself.
         Some(rows) if rows.len() == k.nrows() && rows.iter().enumerate().all(|(a, &r)| a == r) => {
@@ -620,36 +625,10 @@ pub fn normals(
 /// band's variance, the directions the rows of its covariance's root. Per block of samples one
 /// product of each slot's coefficients with the block's `ζ`.
 ///
-/// The slots are shared among the cores, each group of them a pass of its own over the record
-/// (the modes' recursion, a small part of the work, done once a group): every slot's variance
-/// is computed as in one pass, to the bit.
-pub fn band(modal: &Modal, record: &LinearRecord) -> Vec<Vec<f64>> {
-    let slots = modal.coefficients.len();
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |t| t.get())
-        .min(slots);
-    if threads <= 1 {
-        return band_of(modal, record, &modal.coefficients);
-    }
-    let group = slots.div_ceil(threads);
-    std::thread::scope(|scope| {
-        let parts: Vec<_> = modal
-            .coefficients
-            .chunks(group)
-            .map(|coefficients| scope.spawn(move || band_of(modal, record, coefficients)))
-            .collect();
-        parts
-            .into_iter()
-            .flat_map(|part| {
-                part.join()
-                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-            })
-            .collect()
-    })
-}
-
-/// [`band`] of the slots whose coefficients are `coefficients`, in one pass.
-fn band_of(modal: &Modal, record: &LinearRecord, coefficients: &[DMatrix<f64>]) -> Vec<Vec<f64>> {
+/// `coefficients` are the slots' (all of [`Modal::coefficients`], or some of them: a host may
+/// share the slots among threads, each group a pass of its own, the variances the same to the
+/// bit).
+pub fn band(modal: &Modal, record: &LinearRecord, coefficients: &[DMatrix<f64>]) -> Vec<Vec<f64>> {
     let width = modal.width();
     let samples = record.excitation.len();
     let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(samples); coefficients.len()];
@@ -806,7 +785,7 @@ mod tests {
             floors: &floors,
         };
         let modal = Modal::new(&params, dt, &floors, &directions).expect("distinct modes");
-        let got = band(&modal, &record);
+        let got = band(&modal, &record, modal.coefficients());
         let (mut worst, mut peak) = (0.0f64, 0.0f64);
         accelerations_along(&params, &record, &directions, |k, _, dv| {
             for slot in 0..floors.len() {

@@ -275,12 +275,25 @@ pub fn acceleration_band(
     };
     // Through the modes (one product a block), else the sensitivity state in groups.
     if let Some(modal) = Modal::new(&params, data.dt, &floors, &directions) {
-        let band = band(&modal, &record);
+        let band = band_on_threads(&modal, &record);
         if band.iter().flatten().all(|v| v.is_finite()) {
             return Some(band);
         }
     }
     band_in_groups(&params, &record, &directions)
+}
+
+/// The band through the modes with the measured slots shared among the cores, each group a
+/// pass of its own over the record (the modes' recursion, a small part of the work, repeated):
+/// every slot's variance is computed as in one pass, to the bit.
+fn band_on_threads(modal: &Modal, record: &LinearRecord) -> Vec<Vec<f64>> {
+    let slots = modal.coefficients();
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let groups: Vec<&[DMatrix<f64>]> = slots.chunks(slots.len().div_ceil(threads).max(1)).collect();
+    crate::parallel::on_threads(&groups, threads, |group| band(modal, record, group))
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// Directions a pass of [`band_in_groups`] takes at most: up to ten storeys (30 parameters)
