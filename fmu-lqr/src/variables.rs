@@ -237,8 +237,17 @@ fn describe_channel(c: &Channel, excitation: &Excitation) -> String {
 }
 
 fn variables(layout: &Layout) -> Vec<Variable> {
-    let n = layout.storeys();
-    let s = &layout.structure;
+    let mut v = measured_inputs(layout);
+    v.push(excitation_input(&layout.structure.excitation));
+    v.push(control_force_output(layout.actuator_floor));
+    v.extend(gains(layout.storeys()));
+    v.extend(observer_model(&layout.structure));
+    v.extend(estimator_parameters(layout));
+    v
+}
+
+/// The measured channels, inputs sampled at `fmi2DoStep`.
+fn measured_inputs(layout: &Layout) -> Vec<Variable> {
     let mut v = Vec::new();
     for c in &layout.measured {
         let Channel::Response { quantity, .. } = *c else {
@@ -248,24 +257,36 @@ fn variables(layout: &Layout) -> Vec<Variable> {
         v.push(
             Variable::real_input(&c.name(), vr, unit_of(quantity), 0.0).describe(&format!(
                 "{}, sampled at fmi2DoStep",
-                describe_channel(c, &s.excitation)
+                describe_channel(c, &layout.structure.excitation)
             )),
         );
     }
-    v.push(match s.excitation {
+    v
+}
+
+/// The excitation now: the Kalman observer's known input.
+fn excitation_input(excitation: &Excitation) -> Variable {
+    match excitation {
         Excitation::Force { floor } => Variable::real_input("force", FORCE, "N", 0.0).describe(
             &format!("excitation force on floor {floor} now (the Kalman observer's known input)"),
         ),
         Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0)
             .describe("ground acceleration at the base now (the Kalman observer's known input)"),
-    });
+    }
+}
+
+fn control_force_output(actuator_floor: usize) -> Variable {
     let mut out = Variable::real_output("control_force", CONTROL_FORCE, "N").describe(&format!(
-        "the command on floor {} computed at the last fmi2DoStep from the sample at its start; it acts on the structure over the next step",
-        layout.actuator_floor
+        "the command on floor {actuator_floor} computed at the last fmi2DoStep from the sample at its start; it acts on the structure over the next step"
     ));
     // Changes only at fmi2DoStep: no direct feedthrough from the inputs.
     out.variability = Variability::Discrete;
-    v.push(out);
+    out
+}
+
+/// `gain{i}` per state and `state_scale`.
+fn gains(n: usize) -> Vec<Variable> {
+    let mut v = Vec::new();
     for i in 0..2 * n {
         let state = if i < n {
             format!("y{}", i + 1)
@@ -285,7 +306,13 @@ fn variables(layout: &Layout) -> Vec<Variable> {
             .min(0.0)
             .describe("metres per state unit (1e-3: the state in mm and mm/s)"),
     );
-    for i in 0..n {
+    v
+}
+
+/// `m{i}`, `c{i}`, `k{i}`: the observer's model, at the structure's values.
+fn observer_model(s: &Structure) -> Vec<Variable> {
+    let mut v = Vec::new();
+    for i in 0..s.storeys() {
         let k = i + 1;
         v.push(
             Variable::real_parameter(&format!("m{k}"), MASS + i as u32, "kg", s.mass[i])
@@ -293,7 +320,7 @@ fn variables(layout: &Layout) -> Vec<Variable> {
                 .describe(&format!("mass of floor {k} (the observer's model)")),
         );
     }
-    for i in 0..n {
+    for i in 0..s.storeys() {
         let k = i + 1;
         v.push(
             Variable::real_parameter(&format!("c{k}"), DAMPING + i as u32, "N.s/m", s.damping[i])
@@ -303,7 +330,7 @@ fn variables(layout: &Layout) -> Vec<Variable> {
                 )),
         );
     }
-    for i in 0..n {
+    for i in 0..s.storeys() {
         let k = i + 1;
         v.push(
             Variable::real_parameter(
@@ -316,19 +343,22 @@ fn variables(layout: &Layout) -> Vec<Variable> {
             .describe(&format!("stiffness of storey {k} (the observer's model)")),
         );
     }
+    v
+}
+
+/// `estimator` and its settings: `highpass_hz`, `process_sd`, `sensor_sd{j}`, `sample_interval`.
+fn estimator_parameters(layout: &Layout) -> Vec<Variable> {
     let m = layout.measured.len();
-    v.push(
+    let mut v = vec![
         Variable::integer_parameter("estimator", ESTIMATOR, 0)
             .min(0.0)
             .max(1.0)
             .describe(&format!("0: integrate the accelerations with drift removal (highpass_hz; needs every floor's acceleration); 1: steady-state Kalman observer (process_sd, sensor_sd1..{m})")),
-    );
-    v.push(
         Variable::real_parameter("highpass_hz", HIGHPASS_HZ, "Hz", DEFAULT_HIGHPASS_HZ)
             .min(0.0)
             .describe("corner of the integrating estimator's drift removal"),
-    );
-    let (process_unit, process_what) = match s.excitation {
+    ];
+    let (process_unit, process_what) = match layout.structure.excitation {
         Excitation::Force { floor } => ("N", format!("a white force error on floor {floor}")),
         Excitation::Base => ("m/s2", "a white ground acceleration error".to_owned()),
     };

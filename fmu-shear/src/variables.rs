@@ -135,22 +135,41 @@ fn units() -> Vec<Unit> {
 }
 
 fn variables(p: &ShearParameters) -> Vec<Variable> {
-    let n = p.storeys() as u32;
-    let excitation = match p.excitation {
+    let n = p.storeys();
+    let excitation = excitation_input(p);
+    let input_vr = excitation.vr;
+    let mut v = vec![excitation, control_force_input(p)];
+    v.extend(responses(p, input_vr));
+    v.extend(structure_parameters(p));
+    v.extend(start_state(n));
+    v.extend(integration_parameters(p));
+    v.extend(sensitivities(n, input_vr));
+    v.extend(Effects::variables(n));
+    v
+}
+
+/// The excitation input: `force` on its floor, or `ground_acc` at the base.
+fn excitation_input(p: &ShearParameters) -> Variable {
+    match p.excitation {
         Excitation::Force { floor } => Variable::real_input("force", FORCE, "N", 0.0)
             .describe(&format!("excitation force on floor {floor} (the shaker)")),
         Excitation::Base => Variable::real_input("ground_acc", GROUND_ACC, "m/s2", 0.0).describe(
             "ground acceleration at the base (the model is in coordinates relative to the ground)",
         ),
-    };
-    let input_vr = excitation.vr;
-    let mut v = vec![
-        excitation,
-        Variable::real_input("control_force", CONTROL_FORCE, "N", 0.0).describe(&format!(
-            "control force on floor {}, acting against the excitation",
-            p.control_floor
-        )),
-    ];
+    }
+}
+
+fn control_force_input(p: &ShearParameters) -> Variable {
+    Variable::real_input("control_force", CONTROL_FORCE, "N", 0.0).describe(&format!(
+        "control force on floor {}, acting against the excitation",
+        p.control_floor
+    ))
+}
+
+/// `acc{i}`, `disp{i}`, `vel{i}` per floor and `drift{i}` per storey, in that order.
+fn responses(p: &ShearParameters, input_vr: u32) -> Vec<Variable> {
+    let n = p.storeys() as u32;
+    let mut v = Vec::new();
     let reads = match p.excitation {
         Excitation::Force { .. } => "absolute acceleration",
         Excitation::Base => "absolute acceleration (relative plus ground_acc)",
@@ -191,7 +210,14 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             )),
         );
     }
-    for i in 0..n as usize {
+    v
+}
+
+/// `m{i}`, `c{i}`, `k{i}` at the structure's values.
+fn structure_parameters(p: &ShearParameters) -> Vec<Variable> {
+    let n = p.storeys();
+    let mut v = Vec::new();
+    for i in 0..n {
         let k = i + 1;
         v.push(
             Variable::real_parameter(&format!("m{k}"), MASS + i as u32, "kg", p.mass[i])
@@ -199,7 +225,7 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
                 .describe(&format!("mass of floor {k}")),
         );
     }
-    for i in 0..n as usize {
+    for i in 0..n {
         let k = i + 1;
         v.push(
             Variable::real_parameter(&format!("c{k}"), DAMPING + i as u32, "N.s/m", p.damping[i])
@@ -207,7 +233,7 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
                 .describe(&format!("viscous damping of storey {k}")),
         );
     }
-    for i in 0..n as usize {
+    for i in 0..n {
         let k = i + 1;
         v.push(
             Variable::real_parameter(
@@ -220,6 +246,13 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             .describe(&format!("lateral stiffness of storey {k}")),
         );
     }
+    v
+}
+
+/// `disp{i}_start`, `vel{i}_start`: the state a run starts from.
+fn start_state(n: usize) -> Vec<Variable> {
+    let n = n as u32;
+    let mut v = Vec::new();
     for (first, name, unit, what) in [
         (DISP_START, "disp", "m", "displacement"),
         (VEL_START, "vel", "m/s", "velocity"),
@@ -234,34 +267,41 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             );
         }
     }
-    v.push(
+    v
+}
+
+/// `substeps` and `integrator`.
+fn integration_parameters(p: &ShearParameters) -> Vec<Variable> {
+    vec![
         Variable::integer_parameter("substeps", SUBSTEPS, p.substeps as i32)
             .min(1.0)
             .max(10000.0)
             .describe("RK4 sub-steps per communication step: the linear model's step map; with effects, when integrator = 1 (or 2 and not contacts alone)"),
-    );
-    v.push(
         Variable::integer_parameter("integrator", INTEGRATOR, 0)
             .min(0.0)
             .max(2.0)
             .describe("with effects: 0 exact step maps per contact region (contacts alone) or error-controlled Dormand-Prince 5(4) (other effects), split at contact kinks; 1 RK4 with substeps fixed sub-steps, split at contact kinks; 2 exact for contacts alone, otherwise as 1"),
-    );
-    let names = structure::building::parameter_names(n as usize);
-    v.push(
+    ]
+}
+
+/// The `sensitivities` switch and the outputs `d_acc{f}_d_{p}` it turns on.
+fn sensitivities(n: usize, input_vr: u32) -> Vec<Variable> {
+    let names = structure::building::parameter_names(n);
+    let mut v = vec![
         Variable::boolean_parameter("sensitivities", SENSITIVITIES, false).describe(&format!(
             "carry the forward sensitivities of the accelerations to {}..{}, {}..{}, {}..{} (the linear model: with an effect on they are NaN)",
-            names[0], names[n as usize - 1], names[n as usize], names[2 * n as usize - 1],
-            names[2 * n as usize], names[3 * n as usize - 1]
+            names[0], names[n - 1], names[n], names[2 * n - 1],
+            names[2 * n], names[3 * n - 1]
         )),
-    );
-    for f in 0..n as usize {
+    ];
+    for f in 0..n {
         for (j, name) in names.iter().enumerate() {
-            let unit = ["m/(s2.kg)", "m/(kg.s)", "m/kg"][j / n as usize];
+            let unit = ["m/(s2.kg)", "m/(kg.s)", "m/kg"][j / n];
             let floor = f + 1;
             v.push(
                 Variable::real_output(
                     &format!("d_acc{floor}_d_{name}"),
-                    sensitivity_vr(f, j, n as usize),
+                    sensitivity_vr(f, j, n),
                     unit,
                 )
                 .describe(&format!(
@@ -271,7 +311,6 @@ fn variables(p: &ShearParameters) -> Vec<Variable> {
             );
         }
     }
-    v.extend(Effects::variables(n as usize));
     v
 }
 
