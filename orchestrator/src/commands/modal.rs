@@ -3,7 +3,7 @@
 //! identified from a record (SSI-COV, and LSCF when the excitation was measured), beside the
 //! twin's when `--twin` is given too.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 
@@ -156,50 +156,10 @@ fn run_data(args: &ModalArgs) -> Result<()> {
         ..IdentifyOptions::default()
     };
     options.validate()?;
-    // Records with the excitation, or ambient ones (responses only: SSI-COV alone).
-    let read = ReadOptions::default();
-    let measured = args
-        .data
-        .iter()
-        .map(|path| has_excitation_column(path, &read))
-        .collect::<Result<Vec<_>, _>>()?;
-    let record = if measured.iter().all(|&m| m) {
-        let runs = args
-            .data
-            .iter()
-            .map(|path| Measurement::read_with(path, &read))
-            .collect::<Result<Vec<_>, _>>()?;
-        identify(&runs, &options)?
-    } else if measured.iter().all(|&m| !m) {
-        let runs = args
-            .data
-            .iter()
-            .map(|path| AmbientRecord::read(path, &read))
-            .collect::<Result<Vec<_>, _>>()?;
-        identify_ambient(&runs, &options)?
-    } else {
-        bail!(
-            "runs of one test share their channels: {} have the excitation, {} do not",
-            names(&args.data, &measured, true),
-            names(&args.data, &measured, false)
-        );
-    };
+    let record = identify_records(&args.data, &options)?;
     print_record_modes(&record);
     let twin = match &args.twin {
-        Some(path) => {
-            let twin = Twin::load(Some(path))?;
-            let modes = twin_modes(
-                &twin,
-                &ModalOptions {
-                    samples: args.samples,
-                    ..ModalOptions::default()
-                },
-            )?;
-            let comparison = pair_modes(&modes, &record.observed(), &record.floors);
-            print_twin_modes(&modes);
-            print_comparison(&record, &comparison);
-            Some((modes, comparison))
-        }
+        Some(path) => Some(beside_the_twin(path, args.samples, &record)?),
         None => None,
     };
     if let Some(path) = &args.report {
@@ -212,38 +172,98 @@ fn run_data(args: &ModalArgs) -> Result<()> {
         write_json(path, &value)?;
     }
     if let Some(path) = &args.plot {
-        crate::report::modal_plot::plot_stabilisation(&record, path)?;
-        if record.frf.is_some() {
-            let frf_path = crate::report::modal_plot::frf_path(path);
-            crate::report::modal_plot::plot_frf(&record, &frf_path)?;
-        }
-        // With the twin: its shapes along the height with the record's beside them
-        // (`<stem>-shapes.svg`) and the MAC matrix (`<stem>-mac.svg`).
-        if let Some((modes, comparison)) = &twin {
-            let sibling = |suffix: &str| {
-                let stem = path
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| "modal".into());
-                path.with_file_name(format!("{stem}-{suffix}.svg"))
-            };
-            let observed: Vec<(f64, Vec<f64>)> = record
-                .observed()
-                .iter()
-                .map(|o| (o.frequency, o.shape.iter().map(|c| c.re).collect()))
-                .collect();
-            let shapes = crate::report::mode_plot::ObservedShapes {
-                floors: &record.floors,
-                modes: observed,
-                comparison: Some(comparison),
-            };
-            crate::report::mode_plot::plot_mode_shapes(modes, Some(&shapes), &sibling("shapes"))?;
-            if !comparison.mac_matrix.is_empty()
-                && comparison.mac_matrix.first().is_some_and(|r| !r.is_empty())
-            {
-                crate::report::mode_plot::plot_mac_matrix(comparison, &sibling("mac"))?;
-            }
-        }
+        plot_data(&record, twin.as_ref(), path)?;
+    }
+    Ok(())
+}
+
+/// The records' modes: records with the excitation, or ambient ones (responses only: SSI-COV
+/// alone); a mix of the two is refused.
+fn identify_records(data: &[PathBuf], options: &IdentifyOptions) -> Result<RecordModes> {
+    let read = ReadOptions::default();
+    let measured = data
+        .iter()
+        .map(|path| has_excitation_column(path, &read))
+        .collect::<Result<Vec<_>, _>>()?;
+    if measured.iter().all(|&m| m) {
+        let runs = data
+            .iter()
+            .map(|path| Measurement::read_with(path, &read))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(identify(&runs, options)?)
+    } else if measured.iter().all(|&m| !m) {
+        let runs = data
+            .iter()
+            .map(|path| AmbientRecord::read(path, &read))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(identify_ambient(&runs, options)?)
+    } else {
+        bail!(
+            "runs of one test share their channels: {} have the excitation, {} do not",
+            names(data, &measured, true),
+            names(data, &measured, false)
+        );
+    }
+}
+
+/// The twin's modes paired with the record's, both printed.
+fn beside_the_twin(
+    path: &Path,
+    samples: usize,
+    record: &RecordModes,
+) -> Result<(TwinModes, ModeComparison)> {
+    let twin = Twin::load(Some(path))?;
+    let modes = twin_modes(
+        &twin,
+        &ModalOptions {
+            samples,
+            ..ModalOptions::default()
+        },
+    )?;
+    let comparison = pair_modes(&modes, &record.observed(), &record.floors);
+    print_twin_modes(&modes);
+    print_comparison(record, &comparison);
+    Ok((modes, comparison))
+}
+
+/// The stabilisation diagram at `path` and the FRFs beside it; with the twin, its shapes along
+/// the height with the record's beside them (`<stem>-shapes.svg`) and the MAC matrix
+/// (`<stem>-mac.svg`).
+fn plot_data(
+    record: &RecordModes,
+    twin: Option<&(TwinModes, ModeComparison)>,
+    path: &Path,
+) -> Result<()> {
+    crate::report::modal_plot::plot_stabilisation(record, path)?;
+    if record.frf.is_some() {
+        let frf_path = crate::report::modal_plot::frf_path(path);
+        crate::report::modal_plot::plot_frf(record, &frf_path)?;
+    }
+    let Some((modes, comparison)) = twin else {
+        return Ok(());
+    };
+    let sibling = |suffix: &str| {
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "modal".into());
+        path.with_file_name(format!("{stem}-{suffix}.svg"))
+    };
+    let observed: Vec<(f64, Vec<f64>)> = record
+        .observed()
+        .iter()
+        .map(|o| (o.frequency, o.shape.iter().map(|c| c.re).collect()))
+        .collect();
+    let shapes = crate::report::mode_plot::ObservedShapes {
+        floors: &record.floors,
+        modes: observed,
+        comparison: Some(comparison),
+    };
+    crate::report::mode_plot::plot_mode_shapes(modes, Some(&shapes), &sibling("shapes"))?;
+    if !comparison.mac_matrix.is_empty()
+        && comparison.mac_matrix.first().is_some_and(|r| !r.is_empty())
+    {
+        crate::report::mode_plot::plot_mac_matrix(comparison, &sibling("mac"))?;
     }
     Ok(())
 }
