@@ -1,7 +1,14 @@
 //! The run executed: the FMUs instantiated, their ports wired (connections, bindings, system
 //! inputs), the master stepped over the plan and the outputs recorded into columns.
 
-use super::*;
+use crate::cosim::import::{Fmu, Instance, ScalarType, ScalarVariable};
+use crate::cosim::master::{
+    Algorithm, NodeId, Observer, Port, Recording, RunEnd, System, TypedPort,
+};
+
+use super::model::{port_type, set_value, Model, Value};
+use super::plan::Plan;
+use super::{Column, RunError, RunResult};
 
 pub(super) struct Columns {
     pub(super) ports: Vec<Port>,

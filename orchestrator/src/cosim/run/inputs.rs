@@ -1,7 +1,12 @@
 //! The input file: its columns matched to the model's inputs, its rows interpolated (continuous
 //! Reals) or held (the rest) at each communication point, its events.
 
-use super::*;
+use std::path::Path;
+
+use crate::cosim::import::{Causality, ScalarType, ScalarVariable};
+
+use super::model::{closest, parse_value, Model, Value};
+use super::RunError;
 
 /// One input column bound to a variable.
 pub(super) struct InputColumn {

@@ -30,20 +30,12 @@ mod plan;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::cosim::import::{
-    self, Causality, Fmu, ImportError, Instance, ModelDescription, ScalarType, ScalarVariable,
-    UnpackLimits, Unpacked, UnpackedFmu,
-};
-use crate::cosim::master::{
-    Algorithm, MasterError, NodeId, Observer, Port, PortType, Recording, RunEnd, System, TypedPort,
-};
-use crate::cosim::ssp::{self, Connection, SsvValue};
+use crate::cosim::import::{ImportError, ScalarType};
+use crate::cosim::master::{Algorithm, MasterError};
 
-// What the stages share: each submodule reads the others' through `use super::*`.
-use execute::*;
-use inputs::*;
-use model::*;
-use plan::*;
+use execute::execute;
+use model::Model;
+use plan::plan;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {

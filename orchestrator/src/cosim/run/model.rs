@@ -1,7 +1,16 @@
 //! The run's model: the FMU or the SSP system's components with their modelDescriptions, the
 //! start values checked against them (a name not found gets the closest ones suggested) and set.
 
-use super::*;
+use std::path::{Path, PathBuf};
+
+use crate::cosim::import::{
+    self, Causality, ImportError, Instance, ModelDescription, ScalarType, ScalarVariable,
+    UnpackLimits, Unpacked, UnpackedFmu,
+};
+use crate::cosim::master::PortType;
+use crate::cosim::ssp::{self, Connection, SsvValue};
+
+use super::RunError;
 
 pub(super) struct Component {
     /// Instance name (the SSP component's name, or the FMU's model identifier).

@@ -2,7 +2,13 @@
 //! events for an FMU that handles variable steps), the step and the inputs, checked before any
 //! FMU's code is loaded.
 
-use super::*;
+use std::path::Path;
+
+use crate::cosim::import::{Causality, ScalarType, ScalarVariable};
+
+use super::inputs::{isclose, InputTable};
+use super::model::{parse_value, settable, ssv_value, Model, Value};
+use super::{RunError, RunOptions};
 
 /// fmpy's `auto_interval`: a round step giving 500 to 1000 points.
 pub(super) fn auto_interval(span: f64) -> f64 {
