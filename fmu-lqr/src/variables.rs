@@ -10,7 +10,7 @@ use std::sync::{Mutex, OnceLock};
 
 use fmi2::{DefaultExperiment, ModelInfo, Unit, Variability, Variable};
 use serde::{Deserialize, Serialize};
-use structure::channel::{Channel, ExcitationKind, Quantity};
+use structure::channel::{Channel, Quantity};
 use structure::{Excitation, Structure, MAX_STOREYS};
 
 /// The floor the control force acts on by default: the paper rig's.
@@ -185,15 +185,9 @@ impl Layout {
         Ok(self)
     }
 
-    /// The paper's rig (its table is [`info`]).
+    /// The paper's rig (its table is [`info`]): the default layout.
     pub fn is_paper(&self) -> bool {
-        use structure::paper;
-        paper::is_paper_rig(&self.structure)
-            && self.actuator_floor == paper::CONTROL_FLOOR
-            && paper::is_measured(
-                &self.measured,
-                ExcitationKind::of(&self.structure.excitation),
-            )
+        *self == Layout::default()
     }
 }
 

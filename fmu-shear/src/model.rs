@@ -85,6 +85,15 @@ impl ShearParameters {
         self.mass.len()
     }
 
+    /// How the model is laid out: its storeys, excitation and control floor.
+    pub fn layout(&self) -> structure::paper::Layout {
+        structure::paper::Layout {
+            storeys: self.storeys(),
+            excitation: self.excitation,
+            control_floor: self.control_floor,
+        }
+    }
+
     /// The structure these parameters describe.
     pub fn structure(&self) -> Structure {
         Structure {
@@ -369,8 +378,7 @@ impl ShearModel {
         x0.extend_from_slice(&self.displacement);
         x0.extend_from_slice(&self.velocity);
         let p = &self.params;
-        let rig =
-            structure::paper::is_controlled_layout(p.storeys(), p.excitation, p.control_floor);
+        let rig = structure::paper::is_paper_rig(&p.layout());
         if self.effects.any_enabled() && rig {
             // The paper's layout: the net input on floor 1 and the state a fixed array, as its
             // effect paths always stepped it (their results to the bit); every other layout

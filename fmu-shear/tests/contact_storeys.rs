@@ -278,11 +278,7 @@ fn exact_contacts_on_any_building_against_a_fine_reference() {
 #[test]
 fn the_generic_code_on_the_paper_rig_equals_the_fixed_array_path() {
     let p = ShearParameters::default();
-    assert!(structure::paper::is_controlled_layout(
-        p.storeys(),
-        p.excitation,
-        p.control_floor
-    ));
+    assert!(structure::paper::is_paper_rig(&p.layout()));
     let (e, c) = inputs(Excitation::Force { floor: 1 });
     // (bumpers, steps that must end in contact at least, bar relative to the peak)
     type Case<'a> = (&'a [(usize, f64, f64, i32)], usize, f64);

@@ -60,7 +60,7 @@ fn largest_linear_drift() -> f64 {
 fn run(bumpers: &[Bumper]) -> Vec<[f64; 6]> {
     let p = ShearParameters::default();
     assert!(
-        structure::paper::is_controlled_layout(p.storeys(), p.excitation, p.control_floor),
+        structure::paper::is_paper_rig(&p.layout()),
         "the default parameters are the rig"
     );
     let mut model = ShearModel::new(p, Effects::new(3));

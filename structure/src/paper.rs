@@ -1,10 +1,9 @@
 //! The reference paper's rig, the one place that says what it is: a three-storey frame shaken by
 //! a force at floor 1 (a shaker), the control force on that floor too, an accelerometer on each
 //! floor (`acc1..acc3`), and the paper's prior means (its Table 1) for every floor and storey.
-//! Every "is this the rig?" is asked here, of what the asker has: a building's layout
-//! ([`is_layout`], with its control floor [`is_controlled_layout`]), a record's channels
-//! ([`is_channels`], as channels and excitation [`is_measured`]) or a whole structure
-//! ([`is_paper_rig`]). The rig's record and hybrid-test facts ([`header`], [`SPLIT_FLOOR`]) and
+//! Every "is this the rig?" is the one question [`is_paper_rig`], asked of what the asker has
+//! ([`Rig`]): a whole structure, a model's [`Layout`] (its storeys, excitation and control
+//! floor) or a record's channel names. The rig's record and hybrid-test facts ([`header`], [`SPLIT_FLOOR`]) and
 //! the structure its synthetic records are made of ([`DATASET1_MASS`] ...) live here too.
 
 use crate::building::{Excitation, Structure};
@@ -66,35 +65,48 @@ pub fn header() -> String {
     header
 }
 
-/// Whether a building of `storeys` storeys under `excitation` is laid out as the rig (three
-/// storeys, the shaker at floor 1), whatever its masses, dampings and stiffnesses.
-pub fn is_layout(storeys: usize, excitation: Excitation) -> bool {
-    storeys == STOREYS && excitation == EXCITATION
+/// The one question, "is this the paper's rig?", asked of what the asker has.
+pub fn is_paper_rig<R: Rig + ?Sized>(what: &R) -> bool {
+    what.is_paper_rig()
 }
 
-/// Whether a model of `storeys` storeys under `excitation`, its control force on
-/// `control_floor`, is laid out as the rig (the force and the control force on floor 1): the
-/// shear FMU steps it with effects on its fixed arrays and the net force on that floor.
-pub fn is_controlled_layout(storeys: usize, excitation: Excitation, control_floor: usize) -> bool {
-    is_layout(storeys, excitation) && control_floor == CONTROL_FLOOR
+/// What the rig can be recognised in: each tells whether it is the rig as far as it shows.
+pub trait Rig {
+    fn is_paper_rig(&self) -> bool;
 }
 
-/// Whether `channels` are the rig's, in its order: the one test of "is this the rig's record?"
-/// (its reports then show the floors side by side, as the paper does).
-pub fn is_channels<S: AsRef<str>>(channels: &[S]) -> bool {
-    channels.len() == CHANNELS.len() && channels.iter().zip(CHANNELS).all(|(c, p)| c.as_ref() == p)
+/// A structure is the rig at its prior means (what a twin made by `twin init` holds).
+impl Rig for Structure {
+    fn is_paper_rig(&self) -> bool {
+        *self == structure()
+    }
 }
 
-/// Whether `channels` measured under an excitation of kind `excitation` are the rig's (its
-/// accelerometers in floor order and the shaker's force): what the corrector and the
-/// controller FMUs ask before taking the rig's own variable table.
-pub fn is_measured(channels: &[Channel], excitation: ExcitationKind) -> bool {
-    excitation == ExcitationKind::of(&EXCITATION) && channels == self::channels().as_slice()
+/// A record's channel names are the rig's in its order, [`CHANNELS`] (its reports then show the
+/// floors side by side, as the paper does).
+impl<S: AsRef<str>> Rig for [S] {
+    fn is_paper_rig(&self) -> bool {
+        self.len() == CHANNELS.len() && self.iter().zip(CHANNELS).all(|(c, p)| c.as_ref() == p)
+    }
 }
 
-/// Whether `structure` is the rig at its prior means (what a twin made by `twin init` holds).
-pub fn is_paper_rig(structure: &Structure) -> bool {
-    *structure == self::structure()
+/// How a model is laid out, whatever its masses, dampings and stiffnesses: its storeys, its
+/// excitation and the floor its control force acts on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Layout {
+    pub storeys: usize,
+    pub excitation: Excitation,
+    pub control_floor: usize,
+}
+
+/// A layout is the rig's with three storeys, the shaker and the control force on floor 1: the
+/// shear FMU then steps it with effects on its fixed arrays and the net force on that floor.
+impl Rig for Layout {
+    fn is_paper_rig(&self) -> bool {
+        self.storeys == STOREYS
+            && self.excitation == EXCITATION
+            && self.control_floor == CONTROL_FLOOR
+    }
 }
 
 #[cfg(test)]
@@ -103,25 +115,31 @@ mod tests {
 
     #[test]
     fn the_rig_is_the_default_structure_and_its_layout() {
+        let layout = |storeys, excitation, control_floor| Layout {
+            storeys,
+            excitation,
+            control_floor,
+        };
         assert_eq!(structure(), Structure::default());
         assert!(is_paper_rig(&Structure::default()));
-        assert!(is_layout(STOREYS, Excitation::default()));
-        assert!(!is_layout(STOREYS, Excitation::Base));
-        assert!(!is_layout(4, EXCITATION));
-        assert!(is_controlled_layout(STOREYS, EXCITATION, CONTROL_FLOOR));
-        assert!(!is_controlled_layout(STOREYS, EXCITATION, 2));
+        assert!(is_paper_rig(&layout(STOREYS, Excitation::default(), 1)));
+        assert!(!is_paper_rig(&layout(STOREYS, Excitation::Base, 1)));
+        assert!(!is_paper_rig(&layout(4, EXCITATION, 1)));
+        assert!(is_paper_rig(&layout(STOREYS, EXCITATION, CONTROL_FLOOR)));
+        assert!(!is_paper_rig(&layout(STOREYS, EXCITATION, 2)));
         let mut stiffer = structure();
         stiffer.stiffness[0] *= 1.01;
         assert!(!is_paper_rig(&stiffer));
-        assert!(is_layout(stiffer.mass.len(), stiffer.excitation));
-        assert!(is_channels(&CHANNELS));
-        assert!(!is_channels(&["acc1", "acc3", "acc2"]));
-        assert!(!is_channels(&["acc1", "acc2"]));
+        assert!(is_paper_rig(&layout(
+            stiffer.mass.len(),
+            stiffer.excitation,
+            CONTROL_FLOOR
+        )));
+        assert!(is_paper_rig(&CHANNELS[..]));
+        assert!(!is_paper_rig(&["acc1", "acc3", "acc2"][..]));
+        assert!(!is_paper_rig(&["acc1", "acc2"][..]));
         let names: Vec<String> = channels().iter().map(Channel::name).collect();
-        assert!(is_channels(&names));
-        assert!(is_measured(&channels(), ExcitationKind::Force));
-        assert!(!is_measured(&channels(), ExcitationKind::GroundAcc));
-        assert!(!is_measured(&channels()[..2], ExcitationKind::Force));
+        assert!(is_paper_rig(names.as_slice()));
         assert_eq!(header(), "time,force,acc1,acc2,acc3");
     }
 }

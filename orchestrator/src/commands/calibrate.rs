@@ -181,7 +181,7 @@ fn is_rig_record(records: &[RecordCalibration]) -> bool {
     let [record] = records else {
         return false;
     };
-    ::structure::paper::is_channels(&record.channels)
+    ::structure::paper::is_paper_rig(record.channels.as_slice())
 }
 
 fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated: &[ChannelNmse]) {
@@ -223,7 +223,7 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
         }
     }
     for v in validated {
-        let shown = if ::structure::paper::is_channels(&v.channels) {
+        let shown = if ::structure::paper::is_paper_rig(v.channels.as_slice()) {
             per_floor(&v.nmse)
         } else {
             per_channel(&v.channels, &v.nmse)

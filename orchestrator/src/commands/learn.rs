@@ -208,7 +208,7 @@ fn print_fixed_threshold(fixed: &FixedThreshold, channels: &[String]) {
         ),
         _ => String::new(),
     };
-    if ::structure::paper::is_channels(channels) {
+    if ::structure::paper::is_paper_rig(channels) {
         println!(
             "fixed threshold ({}{how}): {:.3e} / {:.3e} / {:.3e} (m/s²)²",
             fixed.rule, fixed.values[0], fixed.values[1], fixed.values[2]

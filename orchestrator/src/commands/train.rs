@@ -83,7 +83,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let trained = train_selected(&twin, &data, &options, selection.as_ref())?;
     if !trained.selection.is_empty() {
-        let rig = ::structure::paper::is_channels(&trained.channels);
+        let rig = ::structure::paper::is_paper_rig(trained.channels.as_slice());
         if rig {
             println!("lags   NLML (floors 1 / 2 / 3)                 total");
         } else {
@@ -120,7 +120,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         summary.target,
         summary.seconds
     );
-    if ::structure::paper::is_channels(&trained.channels) {
+    if ::structure::paper::is_paper_rig(trained.channels.as_slice()) {
         println!(
             "NMSE % of the corrected twin on {}: {:.3} / {:.3} / {:.3}",
             data.path.display(),

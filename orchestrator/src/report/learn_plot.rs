@@ -53,7 +53,7 @@ impl Channels {
             .map(|r| r.trace.channels.clone())
             .unwrap_or_default();
         let labels: Vec<String> =
-            if channels.is_empty() || ::structure::paper::is_channels(&channels) {
+            if channels.is_empty() || ::structure::paper::is_paper_rig(channels.as_slice()) {
                 (1..=::structure::paper::STOREYS)
                     .map(|f| format!("floor {f}"))
                     .collect()

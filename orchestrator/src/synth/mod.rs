@@ -364,7 +364,13 @@ pub fn synth_controlled(
     control: Option<InLoopController>,
 ) -> Result<(SynthRecord, Truth)> {
     s.validate("scenario")?;
-    if control.is_some() && !::structure::paper::is_layout(s.storeys(), s.excitation) {
+    if control.is_some()
+        && !::structure::paper::is_paper_rig(&::structure::paper::Layout {
+            storeys: s.storeys(),
+            excitation: s.excitation,
+            control_floor: ::structure::paper::CONTROL_FLOOR,
+        })
+    {
         return Err(SynthError::Scenario(format!(
             "a controller in the loop is written for the paper's layout (3 storeys, a force at floor 1), not {} storeys under {}",
             s.storeys(),

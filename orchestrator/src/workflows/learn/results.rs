@@ -180,7 +180,7 @@ pub fn table(results: &[ModeResult]) -> String {
         .and_then(|r| r.records.first())
         .map(|r| r.trace.channels.clone())
         .unwrap_or_default();
-    if channels.is_empty() || ::structure::paper::is_channels(&channels) {
+    if channels.is_empty() || ::structure::paper::is_paper_rig(channels.as_slice()) {
         out.push_str("\n\nfinal NMSE % (floors 1/2/3); physics only in the first column\n");
     } else {
         out.push_str(&format!(
