@@ -29,11 +29,12 @@ def require_built(*paths: Path) -> None:
 
 
 def run_twin(binary: Path, *args: str, check: bool = False, timeout: float = 900,
-             fmu_dir: Path | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+             fmu_dir: Path | None = None, cwd: Path | None = None,
+             extra_env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     """`binary` (this build's `twin`) run with `args`, its output captured as text, TWIN_FMU_DIR
-    this build's FMUs (or `fmu_dir`) and TWIN_FMU_LOG unset. `check`: assert that it exited 0,
-    the message naming the command, its exit code and its output."""
-    env = dict(os.environ, TWIN_FMU_DIR=str(fmu_dir or TARGET / "fmu"))
+    this build's FMUs (or `fmu_dir`), TWIN_FMU_LOG unset and `extra_env` added. `check`: assert
+    that it exited 0, the message naming the command, its exit code and its output."""
+    env = dict(os.environ, TWIN_FMU_DIR=str(fmu_dir or TARGET / "fmu"), **(extra_env or {}))
     env.pop("TWIN_FMU_LOG", None)
     done = subprocess.run([str(binary), *args], capture_output=True, text=True, env=env,
                           timeout=timeout, cwd=cwd)
@@ -48,12 +49,17 @@ def run_twin_ok(binary: Path, *args: str, **options) -> subprocess.CompletedProc
     return run_twin(binary, *args, check=True, **options)
 
 
+def twin_binary_path() -> Path:
+    """The `twin` CLI of this build (or the file named by TWIN_BIN, or TWIN_BINARY)."""
+    named = os.environ.get("TWIN_BIN") or os.environ.get("TWIN_BINARY")
+    return Path(named) if named else TARGET / "release" / "twin"
+
+
 @pytest.fixture(scope="session")
 def twin_binary() -> Path:
-    """The `twin` CLI of this build (or the file named by TWIN_BIN, or TWIN_BINARY); a test that
-    needs it fails, naming the build command, when it is missing."""
-    named = os.environ.get("TWIN_BIN") or os.environ.get("TWIN_BINARY")
-    path = Path(named) if named else TARGET / "release" / "twin"
+    """[`twin_binary_path`]; a test that needs it fails, naming the build command, when it is
+    missing."""
+    path = twin_binary_path()
     require_built(path)
     return path
 

@@ -9,16 +9,13 @@ same.
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numpy as np
 
 import modal_records as mr
 import shear_twin as st
-
-REPO = Path(__file__).resolve().parents[2]
-TWIN = REPO / "target" / "release" / "twin"
+from conftest import run_twin_ok
 
 
 def ambient_record(path: Path, stiffness=None, seed: int = 11) -> Path:
@@ -36,7 +33,7 @@ def the_twin():
                    nominal=nominal)
 
 
-def test_an_ambient_record_is_diagnosed_by_its_modes(tmp_path):
+def test_an_ambient_record_is_diagnosed_by_its_modes(tmp_path, twin_binary):
     twin = the_twin()
     unchanged = twin.diagnose_ambient(str(ambient_record(tmp_path / "same.csv")))
     assert unchanged["evidence"] == "ambient"
@@ -63,8 +60,7 @@ def test_an_ambient_record_is_diagnosed_by_its_modes(tmp_path):
     saved = tmp_path / "twin.ssp"
     twin.save(str(saved))
     report = tmp_path / "cli.json"
-    subprocess.run([str(TWIN), "diagnose", "--twin", str(saved), "--data", str(record),
-                    "--report", str(report)], check=True, capture_output=True)
+    run_twin_ok(twin_binary, "diagnose", "--twin", str(saved), "--data", str(record), "--report", str(report))
     cli = json.loads(report.read_text())
     assert cli["action"] == d["action"]
     assert [e["parameter"] for e in cli["explanations"]] == [e["parameter"] for e in d["explanations"]]

@@ -18,19 +18,16 @@ import pandas as pd
 import pytest
 
 import shear_twin as st
+from conftest import run_twin, twin_binary_path
 
 REPO = Path(__file__).resolve().parents[2]
-TWIN = REPO / "target" / "release" / "twin"
+TWIN = twin_binary_path()
 DATA = REPO / "data"
-
-
-def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
-    return subprocess.run([str(TWIN), *args], cwd=cwd, capture_output=True, text=True)
 
 
 def test_compare_gives_the_cli_report_and_predictions(tmp_path):
     report, predictions = tmp_path / "r.json", tmp_path / "p.csv"
-    done = cli("compare", "--data", "data/dataset3.csv", "--report", str(report), "--predictions", str(predictions))
+    done = run_twin(TWIN, "compare", "--data", "data/dataset3.csv", "--report", str(report), "--predictions", str(predictions), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
     c = st.Twin.default().compare(st.Record.read("data/dataset3.csv"))
@@ -93,7 +90,7 @@ def test_bad_data_raises_the_cli_message(tmp_path):
     lines[6] = lines[6].replace(",", ",x", 1)
     bad = tmp_path / "bad.csv"
     bad.write_text("\n".join(lines) + "\n")
-    done = cli("compare", "--data", str(bad))
+    done = run_twin(TWIN, "compare", "--data", str(bad), cwd=REPO)
     assert done.returncode == 1
     message = done.stderr.strip().removeprefix("twin: error: ")
     assert ":7:" in message  # the file and line
@@ -129,7 +126,7 @@ def test_a_record_from_arrays_has_an_accelerometer_per_floor_given():
 
 def test_a_missing_twin_raises_the_cli_message(tmp_path):
     missing = tmp_path / "nothing.ssp"
-    done = cli("compare", "--twin", str(missing), "--data", "data/dataset1.csv")
+    done = run_twin(TWIN, "compare", "--twin", str(missing), "--data", "data/dataset1.csv", cwd=REPO)
     with pytest.raises(st.TwinError) as caught:
         st.Twin.open(str(missing))
     assert str(caught.value) == done.stderr.strip().removeprefix("twin: error: ")
@@ -232,7 +229,7 @@ def test_errors_of_options_are_exceptions():
 # standard input and MQTT with a callback, fleet; errors with the CLI's messages.
 
 def cli_error(*args: str) -> str:
-    done = cli(*args)
+    done = run_twin(TWIN, *args, cwd=REPO)
     assert done.returncode != 0, done.stdout
     return done.stderr.strip().removeprefix("twin: error: ")
 
@@ -246,7 +243,7 @@ def calibrated():
 
 def test_train_is_the_cli_training(tmp_path):
     out, report = tmp_path / "t.ssp", tmp_path / "t.json"
-    done = cli("train", "--data", "data/dataset1.csv", "--stride", "8", "--out", str(out), "--report", str(report))
+    done = run_twin(TWIN, "train", "--data", "data/dataset1.csv", "--stride", "8", "--out", str(out), "--report", str(report), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
     twin, trained = st.Twin.default().train(st.Record.read("data/dataset1.csv"), stride=8)
@@ -275,7 +272,7 @@ def test_train_selects_lags_and_refuses_a_zero_stride():
 def test_learn_is_the_cli_learning(tmp_path):
     report = tmp_path / "l.json"
     args = ["--mode", "uniform", "--initial", "64", "--nmse-every", "50"]
-    done = cli("learn", "--data", "data/dataset1.csv", "data/dataset2.csv", *args, "--report", str(report))
+    done = run_twin(TWIN, "learn", "--data", "data/dataset1.csv", "data/dataset2.csv", *args, "--report", str(report), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
     records = [st.Record.read("data/dataset1.csv"), st.Record.read("data/dataset2.csv")]
@@ -299,7 +296,7 @@ def test_learn_is_the_cli_learning(tmp_path):
 def test_run_is_the_cli_run(tmp_path):
     fmu = REPO / "target" / "fmu" / "fmu_shear.fmu"
     output = tmp_path / "run.csv"
-    done = cli("run", str(fmu), "--stop", "0.5", "--set", "k2=3000", "--output", str(output))
+    done = run_twin(TWIN, "run", str(fmu), "--stop", "0.5", "--set", "k2=3000", "--output", str(output), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = pd.read_csv(output)
     ran = st.run(fmu, stop=0.5, sets={"k2": 3000})
@@ -320,8 +317,8 @@ def test_control_retunes_schedules_and_exports_an_ssp(calibrated, tmp_path):
     calibrated.save(str(tmp_path / "c.ssp"))
     report, ssp = tmp_path / "control.json", tmp_path / "controlled.ssp"
     flags = ["--q", "10", "--gap", "2-3:5e-4", "--retune", "--schedule"]
-    done = cli("control", "--twin", str(tmp_path / "c.ssp"), "--data", str(DATA / "dataset3.csv"), *flags,
-               "--report", str(report), "--ssp", str(tmp_path / "cli.ssp"), "--plot", str(tmp_path / "cli.svg"))
+    done = run_twin(TWIN, "control", "--twin", str(tmp_path / "c.ssp"), "--data", str(DATA / "dataset3.csv"), *flags,
+               "--report", str(report), "--ssp", str(tmp_path / "cli.ssp"), "--plot", str(tmp_path / "cli.svg"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads(report.read_text())
     control = calibrated.control(record, [10], gaps=["2-3:5e-4"], retune=True, schedule=True, ssp=ssp,
@@ -492,8 +489,8 @@ def test_synth_with_a_controller_in_the_loop_is_the_cli_record(calibrated, tmp_p
     control = calibrated.control(record, [1e3])
     (tmp_path / "control.json").write_text(control.to_json())
     (tmp_path / "scenario.json").write_text(json.dumps({"seed": 5, "duration": 4.0}))
-    done = cli("synth", "--scenario", str(tmp_path / "scenario.json"), "--controller", str(tmp_path / "control.json"),
-               "--out", str(tmp_path / "cli.csv"))
+    done = run_twin(TWIN, "synth", "--scenario", str(tmp_path / "scenario.json"), "--controller", str(tmp_path / "control.json"),
+               "--out", str(tmp_path / "cli.csv"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     ours, _ = st.synth({"seed": 5, "duration": 4.0}, controller=control)
     theirs = st.Record.read(str(tmp_path / "cli.csv")).to_dict()
@@ -506,12 +503,12 @@ def test_synth_with_a_controller_in_the_loop_is_the_cli_record(calibrated, tmp_p
 
 def test_plots_are_the_cli_plots(tmp_path):
     """`plot=` draws what `--plot` draws, byte for byte (the same data, title and drawing)."""
-    done = cli("compare", "--data", "data/dataset3.csv", "--plot", str(tmp_path / "cli.svg"), "--frf")
+    done = run_twin(TWIN, "compare", "--data", "data/dataset3.csv", "--plot", str(tmp_path / "cli.svg"), "--frf", cwd=REPO)
     assert done.returncode == 0, done.stderr
     st.Twin.default().compare(st.Record.read("data/dataset3.csv"), plot=tmp_path / "py.svg", frf=True)
     assert (tmp_path / "py.svg").read_bytes() == (tmp_path / "cli.svg").read_bytes()
     fmu = REPO / "target" / "fmu" / "fmu_shear.fmu"
-    done = cli("run", str(fmu), "--stop", "0.5", "--output", str(tmp_path / "r.csv"), "--plot", str(tmp_path / "run-cli.svg"))
+    done = run_twin(TWIN, "run", str(fmu), "--stop", "0.5", "--output", str(tmp_path / "r.csv"), "--plot", str(tmp_path / "run-cli.svg"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     st.run(fmu, stop=0.5, plot=tmp_path / "run-py.svg")
     assert (tmp_path / "run-py.svg").read_bytes() == (tmp_path / "run-cli.svg").read_bytes()
@@ -522,7 +519,7 @@ def test_plots_are_the_cli_plots(tmp_path):
 
 
 def test_export_fmus_writes_what_the_cli_writes(tmp_path):
-    done = cli("export-fmus", "--out", str(tmp_path / "cli"))
+    done = run_twin(TWIN, "export-fmus", "--out", str(tmp_path / "cli"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     written = st.export_fmus(tmp_path / "py")
     assert sorted(Path(p).name for p in written) == sorted(p.name for p in (tmp_path / "cli").iterdir())
@@ -533,7 +530,7 @@ def test_export_fmus_writes_what_the_cli_writes(tmp_path):
 
 def test_hybrid_threshold_and_run_are_the_cli_reports(tmp_path):
     short = ["--duration", "12", "--a-err", "0", "--a-err", "0.05"]
-    done = cli("hybrid", "threshold", *short, "--report", str(tmp_path / "t.json"))
+    done = run_twin(TWIN, "hybrid", "threshold", *short, "--report", str(tmp_path / "t.json"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads((tmp_path / "t.json").read_text())
     twin = st.Twin.default()
@@ -541,7 +538,7 @@ def test_hybrid_threshold_and_run_are_the_cli_reports(tmp_path):
     assert threshold.thresholds == expected["thresholds"]  # the same computation: equal to the bit
     assert {k: v for k, v in threshold.to_dict().items() if k != "seconds"} == \
         {k: v for k, v in expected.items() if k != "seconds"}
-    done = cli("hybrid", "run", *short, "--report", str(tmp_path / "r.json"))
+    done = run_twin(TWIN, "hybrid", "run", *short, "--report", str(tmp_path / "r.json"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     run = twin.hybrid_run(duration=12.0, a_err=[0.0, 0.05], plot=tmp_path / "run.svg")
     assert run.to_dict() == json.loads((tmp_path / "r.json").read_text())
@@ -554,7 +551,7 @@ def test_hybrid_threshold_and_run_are_the_cli_reports(tmp_path):
         twin.hybrid_threshold(coupling="sideways")
     # The split: the paper's by default, the other by name, as the CLI's --split.
     assert threshold.split == "specimen-floors-2-3"
-    done = cli("hybrid", "threshold", *short, "--split", "specimen-floor-3", "--report", str(tmp_path / "t3.json"))
+    done = run_twin(TWIN, "hybrid", "threshold", *short, "--split", "specimen-floor-3", "--report", str(tmp_path / "t3.json"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     other = twin.hybrid_threshold(duration=12.0, a_err=[0.0, 0.05], split="specimen-floor-3")
     assert other.thresholds == json.loads((tmp_path / "t3.json").read_text())["thresholds"]
@@ -573,10 +570,10 @@ def test_a_measured_frf_is_read_and_calibrated_on_as_the_cli_does(tmp_path):
     assert np.array_equal(read["frequency"], table["frequency"].to_numpy())
     assert np.allclose(read["channels"]["acc2"], table["acc2_db"].to_numpy(), rtol=0, atol=1e-12)
     drawings = tmp_path / "drawings.ssp"
-    done = cli("init", "--nominal", str(DATA / "frf" / "nominal.json"), "--out", str(drawings))
+    done = run_twin(TWIN, "init", "--nominal", str(DATA / "frf" / "nominal.json"), "--out", str(drawings), cwd=REPO)
     assert done.returncode == 0, done.stderr
-    done = cli("calibrate", "--twin", str(drawings), "--frf", str(frf), "--band", "3:40", "--gain-offset",
-               "--out", str(tmp_path / "cli.ssp"), "--report", str(tmp_path / "cli.json"))
+    done = run_twin(TWIN, "calibrate", "--twin", str(drawings), "--frf", str(frf), "--band", "3:40", "--gain-offset",
+               "--out", str(tmp_path / "cli.ssp"), "--report", str(tmp_path / "cli.json"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads((tmp_path / "cli.json").read_text())
     twin, report = st.Twin.open(drawings).calibrate(frf=frf, band=(3.0, 40.0), gain_offset=True)
@@ -597,10 +594,10 @@ def test_add_physics_takes_the_hybrid_tests_contact_as_the_cli_does(calibrated, 
     saved = tmp_path / "cal.ssp"
     calibrated.save(str(saved))
     hybrid = tmp_path / "h.json"
-    done = cli("hybrid", "run", "--twin", str(saved), "--peak", "5", "--a-err", "0", "--report", str(hybrid))
+    done = run_twin(TWIN, "hybrid", "run", "--twin", str(saved), "--peak", "5", "--a-err", "0", "--report", str(hybrid), cwd=REPO)
     assert done.returncode == 0, done.stderr
-    done = cli("add-physics", "--twin", str(saved), "--hybrid", str(hybrid), "--out", str(tmp_path / "a.ssp"),
-               "--report", str(tmp_path / "a.json"))
+    done = run_twin(TWIN, "add-physics", "--twin", str(saved), "--hybrid", str(hybrid), "--out", str(tmp_path / "a.ssp"),
+               "--report", str(tmp_path / "a.json"), cwd=REPO)
     assert done.returncode == 0, done.stderr
     expected = json.loads((tmp_path / "a.json").read_text())
     twin, report = st.Twin.open(saved).add_physics(hybrid=hybrid)

@@ -21,6 +21,7 @@ import pytest
 
 import shear_twin as st
 from shear_twin import fleet
+from conftest import run_twin, run_twin_ok
 
 REPO = Path(__file__).resolve().parents[2]
 VENV_BIN = Path(sys.executable).parent
@@ -48,12 +49,11 @@ def results(rows):
     return [{k: r[k] for k in ("structure", "action", "effect", "nmse_before", "nmse_after", "error")} for r in rows]
 
 
-def test_bad_data_is_an_error_in_its_row_and_the_fleet_goes_on(synthetic_fleet, one_worker, tmp_path):
+def test_bad_data_is_an_error_in_its_row_and_the_fleet_goes_on(synthetic_fleet, one_worker, tmp_path, twin_binary):
     rows, summary = one_worker
     bad = [r for r in rows if r["structure"] == "bad00"]
     assert len(bad) == 1
-    done = subprocess.run([str(REPO / "target/release/twin"), "compare", "--data", bad[0]["record"]],
-                          capture_output=True, text=True, cwd=REPO)
+    done = run_twin(twin_binary, "compare", "--data", bad[0]["record"], cwd=REPO)
     assert bad[0]["error"] == done.stderr.strip().removeprefix("twin: error: ")
     assert "bad00.csv:5:" in bad[0]["error"]
     good = [r for r in rows if r["structure"] != "bad00"]
@@ -141,7 +141,7 @@ def test_a_killed_worker_loses_nothing_and_counts_nothing_twice(synthetic_fleet,
     assert results(rows) == results(one_worker[0])  # deterministic: as with one worker
 
 
-def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path):
+def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path, twin_binary):
     # Compare only (the diagnoses ran above), to keep the test short.
     manifest = json.loads(synthetic_fleet.read_text())
     manifest["tasks"] = ["compare"]
@@ -151,10 +151,8 @@ def test_twin_fleet_writes_the_report(synthetic_fleet, tmp_path):
     compare_only = tmp_path / "manifest.json"
     compare_only.write_text(json.dumps(manifest))
     out = tmp_path / "report"
-    done = subprocess.run([str(REPO / "target/release/twin"), "fleet", str(compare_only), "--workers", "2",
-                           "--out", str(out)], capture_output=True, text=True, cwd=REPO,
-                          env={**os.environ, "TWIN_PYTHON": sys.executable})
-    assert done.returncode == 0, done.stderr
+    done = run_twin_ok(twin_binary, "fleet", str(compare_only), "--workers", "2", "--out", str(out), cwd=REPO,
+                       extra_env={"TWIN_PYTHON": sys.executable})
     frame = pd.read_parquet(out / "fleet.parquet")
     assert list(frame["structure"]) == ["s000", "s001", "s002", "s003", "bad00"]
     assert list(pd.read_csv(out / "fleet.csv")["structure"]) == list(frame["structure"])

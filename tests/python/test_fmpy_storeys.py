@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 
@@ -25,6 +24,8 @@ import scipy.linalg
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
+
+from conftest import run_twin, run_twin_ok
 
 ROOT = Path(__file__).resolve().parents[2]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
@@ -71,13 +72,8 @@ def make_fmu(twin_binary: Path, storeys: int, excitation: str, values: dict, fol
     nominal_path = folder / "nominal.json"
     nominal_path.write_text(json.dumps(values))
     twin = folder / "twin.ssp"
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    completed = subprocess.run(
-        [str(twin_binary), "init", "--storeys", str(storeys), "--excitation", excitation,
-         "--nominal", str(nominal_path), "--out", str(twin)],
-        capture_output=True, text=True, env=env, timeout=120,
-    )
-    assert completed.returncode == 0, completed.stderr
+    run_twin_ok(twin_binary, "init", "--storeys", str(storeys), "--excitation", excitation,
+                "--nominal", str(nominal_path), "--out", str(twin), timeout=120)
     fmu = folder / "fmu_shear.fmu"
     with zipfile.ZipFile(twin) as archive, archive.open("resources/fmu_shear.fmu") as source:
         fmu.write_bytes(source.read())
@@ -196,10 +192,7 @@ def test_the_fmu_for_n_storeys_validates_and_equals_the_exact_discretisation(
 def test_a_structure_the_fmu_cannot_model_is_refused_by_name(twin_binary, tmp_path):
     bad = tmp_path / "nominal.json"
     bad.write_text(json.dumps({"m": [5.0, -1.0], "c": [1.0, 1.0], "k": [4000.0, 4000.0]}))
-    completed = subprocess.run(
-        [str(twin_binary), "init", "--nominal", str(bad), "--out", str(tmp_path / "t.ssp")],
-        capture_output=True, text=True, env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")), timeout=60,
-    )
+    completed = run_twin(twin_binary, "init", "--nominal", str(bad), "--out", str(tmp_path / "t.ssp"), timeout=60)
     assert completed.returncode != 0
     assert "nominal.json" in completed.stderr and "m2" in completed.stderr, completed.stderr
     assert not (tmp_path / "t.ssp").exists()

@@ -24,16 +24,15 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
+from conftest import run_twin_ok
+
 REPO_ROOT = Path(__file__).resolve().parents[2]
-TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO_ROOT / "target"))
 RATE = 512.0
 SUBSTEPS = 4
 DURATION = 20.0
@@ -47,10 +46,8 @@ STEPPED_TOL = 0.02
 def calibrated(twin_binary, tmp_path_factory) -> Path:
     """The twin calibrated on dataset1: the structure the thresholds are computed on."""
     out = tmp_path_factory.mktemp("hybrid_twin") / "calibrated.ssp"
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    args = [str(twin_binary), "calibrate", "--data", str(REPO_ROOT / "data" / "dataset1.csv"), "--out", str(out)]
-    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
-    assert done.returncode == 0, done.stderr
+    run_twin_ok(twin_binary, "calibrate", "--data", str(REPO_ROOT / "data" / "dataset1.csv"), "--out", str(out),
+                timeout=600)
     return out
 
 
@@ -77,14 +74,12 @@ def excitation(tmp_path_factory) -> tuple[Path, np.ndarray]:
 def thresholds(twin_binary: Path, twin: Path, csv_path: Path, directory: Path, *extra: str) -> dict:
     """`twin hybrid threshold` of `twin`'s structure at A_ERRS: the report."""
     report = directory / ("threshold" + "_".join(extra).replace("-", "") + ".json")
-    args = [str(twin_binary), "hybrid", "threshold", "--twin", str(twin), "--excitation", str(csv_path)]
+    args = ["hybrid", "threshold", "--twin", str(twin), "--excitation", str(csv_path)]
     args += ["--substeps", str(SUBSTEPS), "--report", str(report)]
     for a in A_ERRS:
         args += ["--a-err", repr(a)]
     args += list(extra)
-    env = dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu"))
-    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
-    assert done.returncode == 0, f"{' '.join(args)}: exit {done.returncode}\n{done.stderr}"
+    done = run_twin_ok(twin_binary, *args, timeout=600)
     return json.loads(report.read_text()) | {"stdout": done.stdout}
 
 

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 from pathlib import Path
 
 import pytest
 
 import shear_twin as st
+from conftest import run_twin_ok
 
 ROOT = Path(__file__).resolve().parents[2]
 BINARY = Path(os.environ.get("TWIN_BINARY", ROOT / "target" / "release" / "twin"))
@@ -34,13 +34,9 @@ def synth(folder: Path, name: str, seed: int) -> Path:
     nominal = folder / "nominal.json"
     nominal.write_text(json.dumps(NOMINAL))
     record = folder / name
-    env = dict(os.environ, TWIN_FMU_DIR=str(FMU_DIR))
-    done = subprocess.run(
-        [str(BINARY), "synth", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal),
-         "--channels", "acc1,acc3,acc5", "--units", "acc=g", "--duration", "20", "--seed", str(seed),
-         "--out", str(record)],
-        capture_output=True, text=True, env=env, timeout=300)
-    assert done.returncode == 0, done.stderr
+    run_twin_ok(BINARY, "synth", "--storeys", "5", "--excitation", "base", "--nominal", str(nominal),
+                "--channels", "acc1,acc3,acc5", "--units", "acc=g", "--duration", "20", "--seed", str(seed),
+                "--out", str(record), fmu_dir=FMU_DIR, timeout=300)
     return record
 
 

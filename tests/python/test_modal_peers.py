@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import logging
-import subprocess
 import warnings
 from pathlib import Path
 
@@ -32,6 +31,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
+
+from conftest import run_twin_ok
 
 
 # The band-limited five-storey building of tests/modal.rs (5.0–33.9 Hz, 0.36–2.3 %): force at
@@ -57,8 +58,7 @@ def synth_and_identify(twin: Path, folder: Path, name: str, flags: list[str]):
                              folder / f"{name}-modes.json")
     for command in (["synth", "--out", str(record), "--truth", str(truth), *flags],
                     ["modal", "--data", str(record), "--report", str(report)]):
-        done = subprocess.run([str(twin), *command], capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, done.stderr
+        run_twin_ok(twin, *command, timeout=600)
     data = np.loadtxt(record, delimiter=",", skiprows=1)
     structure = json.loads(truth.read_text())["structure"]
     mck = tuple(np.asarray(structure[key], float) for key in ("m", "c", "k"))

@@ -10,13 +10,13 @@ the file named by the environment variable TWIN_BIN.
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import modal_records as mr
+from conftest import run_twin_ok
 
 
 DURATION = 1200.0
@@ -31,9 +31,7 @@ def identified(twin_binary, tmp_path_factory):
     record = folder / "five-storey.csv"
     _, _, acc = mr.write_record(record, DURATION, DT, seed=3)
     report = folder / "modes.json"
-    done = subprocess.run([str(twin_binary), "modal", "--data", str(record), "--report",
-                           str(report)], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
+    run_twin_ok(twin_binary, "modal", "--data", str(record), "--report", str(report), timeout=600)
     ours = json.loads(report.read_text())["record"]
     theirs = mr.strid_modes(acc, 1.0 / DT)
     return ours, theirs, mr.exact_modes()

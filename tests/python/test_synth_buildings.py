@@ -11,15 +11,13 @@ synth's default `between_samples = linear` makes it):
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from test_fmpy_storeys import TARGET
+from conftest import run_twin, run_twin_ok
 
 G = 9.80665
 
@@ -32,12 +30,7 @@ RELATIVE_BAR = 1e-7
 
 def synth(binary: Path, folder: Path, *flags: str) -> tuple[list[str], np.ndarray, dict]:
     out, truth = folder / "record.csv", folder / "truth.json"
-    completed = subprocess.run(
-        [str(binary), "synth", "--out", str(out), "--truth", str(truth), *flags],
-        capture_output=True, text=True, timeout=300,
-        env=dict(os.environ, TWIN_FMU_DIR=str(TARGET / "fmu")),
-    )
-    assert completed.returncode == 0, completed.stderr
+    run_twin_ok(binary, "synth", "--out", str(out), "--truth", str(truth), *flags, timeout=300)
     lines = out.read_text().splitlines()
     header = lines[0].split(",")
     data = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
@@ -157,10 +150,7 @@ def test_a_site_or_channel_the_building_lacks_is_refused_by_name(twin_binary, tm
         (["--storeys", "2", "--excitation", "force:3"], "force:3"),
         (["--units", "acc=mm/s"], "mm/s"),
     ):
-        completed = subprocess.run(
-            [str(twin_binary), "synth", "--out", str(tmp_path / "x.csv"), *flags],
-            capture_output=True, text=True, timeout=60,
-        )
+        completed = run_twin(twin_binary, "synth", "--out", str(tmp_path / "x.csv"), *flags, timeout=60)
         assert completed.returncode != 0, flags
         assert says in completed.stderr, (flags, completed.stderr)
         assert not (tmp_path / "x.csv").exists()
