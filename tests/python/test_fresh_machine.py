@@ -3,7 +3,8 @@ apt-get, installed) before anything is built, so a machine without chromium stop
 first seconds with the packages to install — not after twenty minutes at the live page's
 screenshot. The demo itself is too long for the test command; this runs its first step on a PATH
 without chromium and chromedriver, with SHEAR_TWIN_NO_INSTALL=1 so it reports instead of
-installing.
+installing. As root on a machine with apt-get, the same first step installs the two packages
+and the demo goes on: shown on that PATH with an `apt-get` (and an `id`) of the test's own.
 """
 
 import os
@@ -56,3 +57,37 @@ def test_the_demo_prerequisites_hold_on_the_test_machine():
     run = subprocess.run([str(ROOT / "scripts/prerequisites.sh"), "--demo", "--check"], cwd=ROOT,
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 0, run.stderr
+
+
+FAKE_APT_GET = """#!/bin/sh
+echo "$@" >> "{log}"
+if [ "$1" = install ]; then
+  for name in chromium chromedriver; do
+    printf '#!/bin/sh\\nexit 0\\n' > "{bin}/$name"
+    chmod +x "{bin}/$name"
+  done
+fi
+"""
+
+
+def test_the_demos_first_step_installs_chromium_as_root_with_apt_get(tmp_path):
+    """`scripts/prerequisites.sh --demo` (the demo's first step) on a PATH without chromium,
+    chromedriver and apt-get, as root (a stand-in `id -u` says 0) with a stand-in `apt-get` that
+    logs its arguments and puts the two programs on that PATH as `apt-get install` would: it
+    installs exactly the two Debian packages, checks them again and exits 0, so the demo goes on
+    to its next section instead of stopping."""
+    bin_dir = path_without(tmp_path, MISSING + ("apt-get", "id"))
+    log = tmp_path / "apt-get.log"
+    (Path(bin_dir) / "apt-get").write_text(FAKE_APT_GET.format(log=log, bin=bin_dir))
+    (Path(bin_dir) / "id").write_text("#!/bin/sh\necho 0\n")
+    for name in ("apt-get", "id"):
+        (Path(bin_dir) / name).chmod(0o755)
+    env = dict(os.environ, PATH=bin_dir)
+    env.pop("SHEAR_TWIN_NO_INSTALL", None)
+    run = subprocess.run([str(ROOT / "scripts/prerequisites.sh"), "--demo"], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert "installing chromium chromium-driver" in run.stderr, run.stderr
+    assert log.read_text().splitlines() == ["update -qq", "install -y -qq chromium chromium-driver"]
+    for name in MISSING:
+        assert (Path(bin_dir) / name).is_file(), name
