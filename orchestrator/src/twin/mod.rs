@@ -284,6 +284,31 @@ impl Twin {
         names
     }
 
+    /// A copy that gives out every one of `channels`: those it does not give out under their
+    /// name wired from its physics component (whose shear FMU has `acc<i>`, `vel<i>` and
+    /// `disp<i>` for every floor); None when it gives them all already.
+    pub fn wired_for(&self, channels: &[::structure::channel::Channel]) -> Option<Twin> {
+        let outputs = self.system_outputs();
+        let missing: Vec<String> = channels
+            .iter()
+            .map(::structure::channel::Channel::name)
+            .filter(|n| !outputs.contains(n))
+            .collect();
+        if missing.is_empty() {
+            return None;
+        }
+        let mut copy = self.duplicate();
+        for name in missing {
+            copy.connections.push(Connection {
+                start_element: Some(PHYSICS.into()),
+                start_connector: name.clone(),
+                end_element: None,
+                end_connector: name,
+            });
+        }
+        Some(copy)
+    }
+
     /// The measurement noise variance the twin holds for `channel` (in its SI unit, squared);
     /// None for a channel it was never calibrated on, or an uncalibrated twin.
     pub fn noise_variance_of(&self, channel: ::structure::channel::Channel) -> Option<f64> {

@@ -11,7 +11,7 @@ use crate::evaluation::compare::{compare, CompareOptions, Comparison};
 use crate::evaluation::stats::variance;
 use crate::twin::data::Measurement;
 use crate::twin::system::{SystemBuilder, SystemError};
-use crate::twin::{Connection, ParameterValue, Twin, PHYSICS};
+use crate::twin::{ParameterValue, Twin, PHYSICS};
 
 /// A run's error is the system builder's: the twin, the master or the wiring.
 pub type RunError = SystemError;
@@ -147,28 +147,10 @@ pub fn run_twin(
         inputs.push(("control_force", control.clone()));
     }
     // Channels the twin gives out under their name, and those read from its physics.
-    let system_outputs = twin.system_outputs();
-    let names: Vec<String> = data.responses.iter().map(|s| s.channel.name()).collect();
-    let from_physics: Vec<&String> = names
-        .iter()
-        .filter(|n| !system_outputs.contains(n))
-        .collect();
-    let wired;
-    let twin = if from_physics.is_empty() {
-        twin
-    } else {
-        let mut copy = twin.duplicate();
-        for name in from_physics {
-            copy.connections.push(Connection {
-                start_element: Some(PHYSICS.into()),
-                start_connector: name.clone(),
-                end_element: None,
-                end_connector: name.clone(),
-            });
-        }
-        wired = copy;
-        &wired
-    };
+    let measured: Vec<Channel> = data.responses.iter().map(|s| s.channel).collect();
+    let names: Vec<String> = measured.iter().map(Channel::name).collect();
+    let wired = twin.wired_for(&measured);
+    let twin = wired.as_ref().unwrap_or(twin);
     let builder = SystemBuilder::open(twin)?;
     let mut running = builder.build(start, inputs)?;
     let system_outputs = twin.system_outputs();

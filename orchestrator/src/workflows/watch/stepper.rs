@@ -3,41 +3,16 @@
 //! through the master's step-at-a-time calls (the excitation for the next point →
 //! `System::step` → the measured channels' predictions), so a stream gets the batch run's
 //! prediction from the same stepping code. A channel the twin does not give out under its name
-//! is read from its physics component, as `run_twin` reads it ([`wired`]).
+//! is read from its physics component, as `run_twin` reads it ([`Twin::wired_for`]).
 
 use ::structure::channel::Channel;
 
 use crate::cosim::import::StepEnd;
 use crate::cosim::master::{MasterError, NodeId, Port, SavedNode, SavedState};
 use crate::twin::system::{SystemBuilder, SystemError, TwinSystem};
-use crate::twin::{Connection, ParameterValue, Twin, TwinError, PHYSICS};
+use crate::twin::{ParameterValue, Twin, TwinError, PHYSICS};
 
 use super::WatchError;
-
-/// A copy of `twin` that gives out every one of `channels` (those it does not give out under
-/// their name wired from its physics component, whose shear FMU has `acc<i>`, `vel<i>` and
-/// `disp<i>` for every floor); None when it gives them all already.
-pub fn wired(twin: &Twin, channels: &[Channel]) -> Option<Twin> {
-    let outputs = twin.system_outputs();
-    let missing: Vec<String> = channels
-        .iter()
-        .map(Channel::name)
-        .filter(|n| !outputs.contains(n))
-        .collect();
-    if missing.is_empty() {
-        return None;
-    }
-    let mut copy = twin.duplicate();
-    for name in missing {
-        copy.connections.push(Connection {
-            start_element: Some(PHYSICS.into()),
-            start_connector: name.clone(),
-            end_element: None,
-            end_connector: name,
-        });
-    }
-    Some(copy)
-}
 
 /// The GP corrector's learning interface: the measured values and the learn flag it takes,
 /// the latent variances and training-set size it gives; per measured channel, in the stream's

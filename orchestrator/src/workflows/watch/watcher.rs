@@ -11,7 +11,7 @@ use super::options::{WatchOptions, GAP_FACTOR, NOISE_REFERENCE};
 use super::stepper::Stepper;
 use super::stream::{LineReader, Run};
 use super::supervise::{Decision, LearnOptions};
-use super::{modes, stepper, WatchError};
+use super::{modes, WatchError};
 use crate::record::nominal_step;
 use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
 use crate::twin::Twin;
@@ -57,7 +57,7 @@ pub(super) fn open_stepper(
     channels: &[Channel],
     learning: &LearnOptions,
 ) -> Result<(Stepper, Option<u32>), WatchError> {
-    let wired = stepper::wired(twin, channels);
+    let wired = twin.wired_for(channels);
     let mut stepper = Stepper::new(wired.as_ref().unwrap_or(twin), excitation, channels)?;
     let mut budget = Some(learning.budget);
     if stepper.has_learner() {
