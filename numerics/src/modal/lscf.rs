@@ -184,8 +184,56 @@ impl ToeplitzSums {
 pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, IdentificationError> {
     options.validate()?;
     check_frf(frf)?;
+    let bins = band_bins_for_order(frf, options)?;
+    let period = 1.0 / (2.0 * options.band.1);
+    let weights = bin_weights(frf, &bins, options.weighting);
+    let normal = NormalMatrices::of(&toeplitz_sums(
+        frf,
+        &bins,
+        &weights,
+        period,
+        options.max_order + 1,
+    ));
+    let mut orders = Vec::new();
+    let mut order = options.min_order;
+    while order <= options.max_order {
+        let reduced = match normal.reduced(order) {
+            Ok(reduced) => reduced,
+            // A narrow band's basis (a short arc of the unit circle) loses rank as the order
+            // grows: the orders below are the diagram; none at all is an error.
+            Err(output) if orders.is_empty() => {
+                return Err(IdentificationError::Numerical {
+                    what: "LSCF",
+                    why: format!(
+                        "the basis' normal matrix of order {order} (output {}) is \
+                         singular: too few bins of weight in the band",
+                        output + 1
+                    ),
+                });
+            }
+            Err(_) => break,
+        };
+        let eigenvalues = denominator_poles(&reduced, order, period, options.band)?;
+        let shapes = lsfd(frf, options.band, &eigenvalues)?;
+        let mut poles: Vec<Pole> = eigenvalues
+            .into_iter()
+            .zip(shapes)
+            .map(|(l, shape)| Pole::new(l, shape))
+            .collect();
+        poles.sort_by(|a, b| a.frequency.total_cmp(&b.frequency));
+        orders.push(ModelOrder { order, poles });
+        order += options.order_step;
+    }
+    Ok(orders)
+}
+
+/// The band's bins, enough of them for the largest order: each order needs more equations than
+/// unknowns, 2 per bin (real and imaginary parts).
+fn band_bins_for_order(
+    frf: &Frf,
+    options: &LscfOptions,
+) -> Result<Vec<(usize, f64)>, IdentificationError> {
     let bins = band_bins(frf, options.band);
-    // Each order needs more equations than unknowns; 2 per bin (real and imaginary parts).
     let needed = options.max_order + 2;
     if bins.len() < needed {
         return Err(IdentificationError::TooShort {
@@ -200,17 +248,19 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
             ),
         });
     }
-    let period = 1.0 / (2.0 * options.band.1);
-    let max = options.max_order;
-    let outputs = frf.response.len();
-    let weights = bin_weights(frf, &bins, options.weighting);
-    let size = max + 1;
-    // Per output R_o, S_o and T_o at the largest order; each order takes the leading block.
-    // With w the squared weight: R_jm = Re Σ w conj(Ω^j) Ω^m; S_jm = Re Σ w conj(Ω^j) (−H Ω^m);
-    // T_jm = Re Σ w |H|² conj(Ω^j) Ω^m. On the unit circle conj(Ω^j) Ω^m = Ω^(m−j): all three
-    // are Toeplitz, from the sums over the bins of w Ω^d, w H Ω^d, w H Ω^−d and w |H|² Ω^d,
-    // d = 0..=max (O(bins · max) where the matrices entry by entry are O(bins · max²)).
-    let mut sums = vec![ToeplitzSums::new(size); outputs];
+    Ok(bins)
+}
+
+/// Per output, the sums over the bins of `w Ω^d`, `w H Ω^d`, `w H Ω^−d` and `w |H|² Ω^d`,
+/// `d = 0..size` (O(bins · max) where the matrices entry by entry are O(bins · max²)).
+fn toeplitz_sums(
+    frf: &Frf,
+    bins: &[(usize, f64)],
+    weights: &[Vec<f64>],
+    period: f64,
+    size: usize,
+) -> Vec<ToeplitzSums> {
+    let mut sums = vec![ToeplitzSums::new(size); frf.response.len()];
     for (b, (k, w_bin)) in bins.iter().enumerate() {
         let omega = Complex::from_polar(1.0, w_bin * period);
         for (o, sum) in sums.iter_mut().enumerate() {
@@ -227,89 +277,97 @@ pub fn lscf(frf: &Frf, options: &LscfOptions) -> Result<Vec<ModelOrder>, Identif
             }
         }
     }
-    let r: Vec<DMatrix<f64>> = sums
-        .iter()
-        .map(|t| DMatrix::from_fn(size, size, |j, m| t.basis[j.abs_diff(m)].re))
-        .collect();
-    let s: Vec<DMatrix<f64>> = sums
-        .iter()
-        .map(|t| {
-            DMatrix::from_fn(size, size, |j, m| {
-                if m >= j {
-                    -t.forward[m - j].re
-                } else {
-                    -t.backward[j - m].re
-                }
+    sums
+}
+
+/// Per output R_o, S_o and T_o at the largest order; each order takes the leading block. With
+/// w the squared weight: R_jm = Re Σ w conj(Ω^j) Ω^m; S_jm = Re Σ w conj(Ω^j) (−H Ω^m);
+/// T_jm = Re Σ w |H|² conj(Ω^j) Ω^m. On the unit circle conj(Ω^j) Ω^m = Ω^(m−j): all three
+/// are Toeplitz, from the [`ToeplitzSums`].
+struct NormalMatrices {
+    r: Vec<DMatrix<f64>>,
+    s: Vec<DMatrix<f64>>,
+    t: Vec<DMatrix<f64>>,
+}
+
+impl NormalMatrices {
+    fn of(sums: &[ToeplitzSums]) -> Self {
+        let size = sums.first().map_or(0, |t| t.basis.len());
+        let r = sums
+            .iter()
+            .map(|t| DMatrix::from_fn(size, size, |j, m| t.basis[j.abs_diff(m)].re))
+            .collect();
+        let s = sums
+            .iter()
+            .map(|t| {
+                DMatrix::from_fn(size, size, |j, m| {
+                    if m >= j {
+                        -t.forward[m - j].re
+                    } else {
+                        -t.backward[j - m].re
+                    }
+                })
             })
-        })
-        .collect();
-    let t: Vec<DMatrix<f64>> = sums
-        .iter()
-        .map(|t| DMatrix::from_fn(size, size, |j, m| t.squared[j.abs_diff(m)].re))
-        .collect();
-    let mut orders = Vec::new();
-    let mut order = options.min_order;
-    'orders: while order <= max {
+            .collect();
+        let t = sums
+            .iter()
+            .map(|t| DMatrix::from_fn(size, size, |j, m| t.squared[j.abs_diff(m)].re))
+            .collect();
+        NormalMatrices { r, s, t }
+    }
+
+    /// The reduced normal matrix of `order`, `Σ_o T_o − S_oᵀ R_o⁻¹ S_o` over the leading
+    /// blocks; Err(o) when output o's basis block is singular.
+    fn reduced(&self, order: usize) -> Result<DMatrix<f64>, usize> {
         let n = order + 1;
         let mut reduced = DMatrix::<f64>::zeros(n, n);
-        for o in 0..outputs {
-            let Some(r_chol) = r[o].view((0, 0), (n, n)).into_owned().cholesky() else {
-                // A narrow band's basis (a short arc of the unit circle) loses rank as the
-                // order grows: the orders below are the diagram; none at all is an error.
-                if orders.is_empty() {
-                    return Err(IdentificationError::Numerical {
-                        what: "LSCF",
-                        why: format!(
-                            "the basis' normal matrix of order {order} (output {}) is \
-                             singular: too few bins of weight in the band",
-                            o + 1
-                        ),
-                    });
-                }
-                break 'orders;
+        for o in 0..self.r.len() {
+            let Some(r_chol) = self.r[o].view((0, 0), (n, n)).into_owned().cholesky() else {
+                return Err(o);
             };
-            let s_n = s[o].view((0, 0), (n, n)).into_owned();
-            reduced += t[o].view((0, 0), (n, n)) - s_n.transpose() * r_chol.solve(&s_n);
+            let s_n = self.s[o].view((0, 0), (n, n)).into_owned();
+            reduced += self.t[o].view((0, 0), (n, n)) - s_n.transpose() * r_chol.solve(&s_n);
         }
-        // α_order = 1: the other coefficients solve the leading block.
-        let lead = reduced.view((0, 0), (order, order)).into_owned();
-        let rhs = -reduced.view((0, order), (order, 1)).into_owned();
-        let alpha = lead
-            .svd(true, true)
-            .solve(&rhs, 1e-14 * reduced.norm())
-            .map_err(|why| IdentificationError::Numerical {
-                what: "LSCF (denominator)",
-                why: why.to_owned(),
-            })?;
-        // Companion matrix of z^order + Σ α_j z^j.
-        let mut companion = DMatrix::<f64>::zeros(order, order);
-        for j in 0..order {
-            companion[(0, j)] = -alpha[order - 1 - j];
-            if j + 1 < order {
-                companion[(j + 1, j)] = 1.0;
-            }
-        }
-        let roots = companion.complex_eigenvalues();
-        let eigenvalues: Vec<Complex> = roots
-            .iter()
-            .filter(|z| z.im > 0.0 && z.norm() > 0.0)
-            .map(|z| z.ln() / period)
-            .filter(|l| {
-                let f = l.norm() / (2.0 * std::f64::consts::PI);
-                f >= options.band.0 && f <= options.band.1
-            })
-            .collect();
-        let shapes = lsfd(frf, options.band, &eigenvalues)?;
-        let mut poles: Vec<Pole> = eigenvalues
-            .into_iter()
-            .zip(shapes)
-            .map(|(l, shape)| Pole::new(l, shape))
-            .collect();
-        poles.sort_by(|a, b| a.frequency.total_cmp(&b.frequency));
-        orders.push(ModelOrder { order, poles });
-        order += options.order_step;
+        Ok(reduced)
     }
-    Ok(orders)
+}
+
+/// The denominator of `order` solved from the reduced normal matrix (α_order = 1: the other
+/// coefficients solve the leading block), its roots as continuous-time poles of positive
+/// frequency inside `band`.
+fn denominator_poles(
+    reduced: &DMatrix<f64>,
+    order: usize,
+    period: f64,
+    band: (f64, f64),
+) -> Result<Vec<Complex>, IdentificationError> {
+    let lead = reduced.view((0, 0), (order, order)).into_owned();
+    let rhs = -reduced.view((0, order), (order, 1)).into_owned();
+    let alpha = lead
+        .svd(true, true)
+        .solve(&rhs, 1e-14 * reduced.norm())
+        .map_err(|why| IdentificationError::Numerical {
+            what: "LSCF (denominator)",
+            why: why.to_owned(),
+        })?;
+    // Companion matrix of z^order + Σ α_j z^j.
+    let mut companion = DMatrix::<f64>::zeros(order, order);
+    for j in 0..order {
+        companion[(0, j)] = -alpha[order - 1 - j];
+        if j + 1 < order {
+            companion[(j + 1, j)] = 1.0;
+        }
+    }
+    let roots = companion.complex_eigenvalues();
+    Ok(roots
+        .iter()
+        .filter(|z| z.im > 0.0 && z.norm() > 0.0)
+        .map(|z| z.ln() / period)
+        .filter(|l| {
+            let f = l.norm() / (2.0 * std::f64::consts::PI);
+            f >= band.0 && f <= band.1
+        })
+        .collect())
 }
 
 /// The squared weight of each band bin (`bins`' order) of each output under `weighting`.
