@@ -11,7 +11,7 @@
 //!
 //! Needs the FMUs: `scripts/build-fmus.sh` (found through `TWIN_FMU_DIR`).
 
-use std::path::Path;
+use std::ffi::OsStr;
 use std::sync::OnceLock;
 
 use orchestrator::calibrate::{calibrate, calibrated_twin, CalibrationSetup};
@@ -23,7 +23,7 @@ use orchestrator::synth::{
 use orchestrator::twin::Twin;
 
 mod common;
-use common::{assert_effect, assert_recalibrated, fmu_dir, twin_cmd, workspace, worst};
+use common::{assert_effect, assert_recalibrated, fmu_dir, twin_fails, twin_ok, workspace, worst};
 
 const NOISE_SD: f64 = 0.003;
 
@@ -224,21 +224,9 @@ fn a_record_without_change_needs_nothing_and_no_candidate_passes() {
 
 // Bouc–Wen hysteresis, which the library lacks, is in `tests/discovery.rs`.
 
-/// Run `twin` with the arguments in order; its stdout.
-fn cli(a: &[&str], b: &[&Path], c: &[&str], d: &[&Path]) -> String {
-    let out = twin_cmd()
-        .args(a)
-        .args(b)
-        .args(c)
-        .args(d)
-        .output()
-        .expect("twin runs");
-    assert!(
-        out.status.success(),
-        "twin {a:?} {b:?} {c:?} {d:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+/// `twin ARGS`, which must succeed: its stdout.
+fn cli(args: &[&OsStr]) -> String {
+    String::from_utf8_lossy(&twin_ok(args).stdout).into_owned()
 }
 
 /// The bundled story through the CLI: calibrate on dataset1, diagnose dataset3 (the report
@@ -253,19 +241,25 @@ fn dataset3_contact_between_floors_2_and_3_is_found_and_added_through_the_cli() 
     let plot = dir.path().join("d.svg");
     let added = dir.path().join("added.ssp");
     let cmp = dir.path().join("cmp.json");
-    cli(&["calibrate", "--data"], &[&ds1], &["--out"], &[&cal]);
-    let stdout = cli(
-        &["diagnose", "--twin"],
-        &[&cal],
-        &["--data"],
-        &[
-            &ds3,
-            Path::new("--report"),
-            &report,
-            Path::new("--plot"),
-            &plot,
-        ],
-    );
+    let os = OsStr::new;
+    cli(&[
+        os("calibrate"),
+        os("--data"),
+        ds1.as_os_str(),
+        os("--out"),
+        cal.as_os_str(),
+    ]);
+    let stdout = cli(&[
+        os("diagnose"),
+        os("--twin"),
+        cal.as_os_str(),
+        os("--data"),
+        ds3.as_os_str(),
+        os("--report"),
+        report.as_os_str(),
+        os("--plot"),
+        plot.as_os_str(),
+    ]);
     assert!(stdout.contains("add_physics"), "{stdout}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
@@ -293,19 +287,27 @@ fn dataset3_contact_between_floors_2_and_3_is_found_and_added_through_the_cli() 
     let svg = std::fs::read_to_string(&plot).expect("plot");
     assert!(svg.contains("contact@2-3") && svg.contains("drift of storey 3"));
 
-    let stdout = cli(
-        &["add-physics", "--twin"],
-        &[&cal, Path::new("--diagnosis"), &report],
-        &["--data"],
-        &[&ds3, Path::new("--out"), &added],
-    );
+    let stdout = cli(&[
+        os("add-physics"),
+        os("--twin"),
+        cal.as_os_str(),
+        os("--diagnosis"),
+        report.as_os_str(),
+        os("--data"),
+        ds3.as_os_str(),
+        os("--out"),
+        added.as_os_str(),
+    ]);
     assert!(stdout.contains("contact@2-3"), "{stdout}");
-    cli(
-        &["compare", "--twin"],
-        &[&added],
-        &["--data"],
-        &[&ds3, Path::new("--report"), &cmp],
-    );
+    cli(&[
+        os("compare"),
+        os("--twin"),
+        added.as_os_str(),
+        os("--data"),
+        ds3.as_os_str(),
+        os("--report"),
+        cmp.as_os_str(),
+    ]);
     let c: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cmp).expect("compare report"))
             .expect("JSON");
@@ -313,24 +315,17 @@ fn dataset3_contact_between_floors_2_and_3_is_found_and_added_through_the_cli() 
     assert!(worst(&nmse) < 5.0, "compare after add-physics: {nmse:?}");
 }
 
-/// Run `twin` expecting failure; its stderr.
-fn cli_fails(args: &[&std::ffi::OsStr]) -> String {
-    let out = twin_cmd().args(args).output().expect("twin runs");
-    assert!(!out.status.success(), "twin {args:?} succeeded");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
 #[test]
 fn bad_requests_are_refused_with_the_reason_and_write_nothing() {
     let dir = tempfile::tempdir().expect("temporary directory");
     let default = dir.path().join("default.ssp");
-    cli(&["init", "--out"], &[&default], &[], &[]);
+    cli(&[OsStr::new("init"), OsStr::new("--out"), default.as_os_str()]);
     let ds3 = workspace().join("data/dataset3.csv");
     let report = dir.path().join("r.json");
     let out = dir.path().join("o.ssp");
     let os = |s: &'static str| std::ffi::OsStr::new(s);
     // An uncalibrated twin has no noise level to judge against.
-    let e = cli_fails(&[
+    let e = twin_fails(&[
         os("diagnose"),
         os("--twin"),
         default.as_os_str(),
@@ -346,7 +341,7 @@ fn bad_requests_are_refused_with_the_reason_and_write_nothing() {
     assert!(!report.exists());
     // Effects outside the grammar, and a diagnosis that names none.
     for (effect, says) in [("contact@1-3", "adjacent"), ("magnet@2", "unknown kind")] {
-        let e = cli_fails(&[
+        let e = twin_fails(&[
             os("add-physics"),
             os("--twin"),
             default.as_os_str(),
@@ -361,7 +356,7 @@ fn bad_requests_are_refused_with_the_reason_and_write_nothing() {
     }
     let none = dir.path().join("none.json");
     std::fs::write(&none, r#"{"action": "none", "effect": null}"#).expect("write");
-    let e = cli_fails(&[
+    let e = twin_fails(&[
         os("add-physics"),
         os("--twin"),
         default.as_os_str(),

@@ -88,7 +88,7 @@ pub fn twin_cmd() -> std::process::Command {
 }
 
 /// `twin ARGS`, run to its end: its output.
-pub fn twin(args: &[&str]) -> std::process::Output {
+pub fn twin<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> std::process::Output {
     twin_cmd()
         .args(args)
         .output()
@@ -97,15 +97,29 @@ pub fn twin(args: &[&str]) -> std::process::Output {
 
 /// `twin ARGS`, which must succeed: its output (a failure shows the arguments and `twin`'s
 /// stderr).
-pub fn twin_ok(args: &[&str]) -> std::process::Output {
+pub fn twin_ok<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> std::process::Output {
     let out = twin(args);
     assert!(
         out.status.success(),
         "twin {}: {}",
-        args.join(" "),
+        shown(args),
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// `twin ARGS`, which must fail: its stderr.
+pub fn twin_fails<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
+    let out = twin(args);
+    assert!(!out.status.success(), "twin {} succeeded", shown(args));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn shown<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> String {
+    args.iter()
+        .map(|a| a.as_ref().to_string_lossy())
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// The worst floor's value (the largest; a figure per floor, at least one floor).
