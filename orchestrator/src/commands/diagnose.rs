@@ -303,6 +303,17 @@ fn the_fits(d: &Diagnosis) -> String {
             );
         }
     }
+    if let (Some(head), false) = (d.race_head, d.raced_out.is_empty()) {
+        let out: Vec<String> = d
+            .raced_out
+            .iter()
+            .map(|(label, w)| format!("{label} {w:.3} %"))
+            .collect();
+        s += &format!(
+            "raced out     on the first {head} samples (worst held-out NMSE): {}\n",
+            out.join(", ")
+        );
+    }
     for (label, error) in &d.failed_candidates {
         s += &format!("  failed {label}: {error}\n");
     }

@@ -400,6 +400,8 @@ impl Baseline {
             candidates: Vec::new(),
             failed_candidates: Vec::new(),
             screened_out: Vec::new(),
+            race_head: None,
+            raced_out: Vec::new(),
             localisation: shown.localisation,
             sensing: self.channels.sensing(),
             modes: shown.modes,

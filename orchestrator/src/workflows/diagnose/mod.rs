@@ -73,7 +73,8 @@
 //!
 //! [`diagnose`] below reads as its stages, one submodule each: `baseline` (set-up: the record's
 //! blocks, the twin and its physics run and scored, the report so far), `significance` (stage
-//! 2), [`sensor`] (3a), `screen` (the library screened), `round_one` (the recalibration and the
+//! 2), [`sensor`] (3a), `screen` (the library screened), `race` (on a long record, the
+//! screened candidates raced on its head), `round_one` (the recalibration and the
 //! candidates fitted alone), `search` (forward selection through [`select`], and discovery
 //! through [`discover`]), `verdict` (the action and its evidence). They share `channels` (the
 //! record's channels), `physics` (the physics run), `fit` (one alternative's fit), `localise`
@@ -96,6 +97,7 @@ mod fit;
 mod localise;
 mod options;
 mod physics;
+mod race;
 pub mod report;
 mod round_one;
 mod screen;
@@ -118,6 +120,7 @@ use crate::workflows::calibrate::CalibrateError;
 
 use baseline::baseline;
 use channels::worst;
+use race::raced;
 use round_one::{baseline_evidence, fit_round_one, report_round_one};
 use screen::screened;
 use search::{discovery, search_library};
@@ -184,6 +187,7 @@ pub use fit::{fit_substeps, FIT_STEP_PHASE};
 pub use options::FIT_SUBSTEPS;
 pub use options::{DiagnoseOptions, Gates, Progress};
 pub(crate) use physics::storeys_of;
+pub use race::{RACE_HEAD, RACE_MIN, RACE_SHOWS};
 pub use screen::{SCREEN_DECISIVE, SCREEN_KEEP, SCREEN_SITES};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -239,14 +243,16 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
     // 3–4. The alternatives, in parallel: the recalibration and every screened candidate.
     let baseline_evidence = baseline_evidence(&b, data, options)?;
     let ground = b.ground(data, options);
-    let candidates = screened(&ground, &mut diagnosis, b.candidates.clone())?;
+    let library = screened(&ground, &mut diagnosis, b.candidates.clone())?;
+    let candidates = raced(&ground, &mut diagnosis, library.clone())?;
     let results = fit_round_one(&ground, &candidates, baseline_evidence)?;
     let before_worst = worst(&b.scores.nmse_before_held_out);
     let round = report_round_one(&ground, &mut diagnosis, &candidates, results, before_worst)?;
     let order = by_evidence(&diagnosis.candidates);
 
     // 5. Forward selection (see `select`), while the error is still to be explained.
-    let ctx = b.selection_context(data, options, baseline_evidence, &candidates);
+    // A full round (on recalibrated physics) tries every screened candidate, raced or not.
+    let ctx = b.selection_context(data, options, baseline_evidence, &library);
     let explain = alarm.raised && sensor_fault.is_none();
     let search = search_library(&ctx, &b, &mut diagnosis, &round, before_worst, explain)?;
 

@@ -276,6 +276,12 @@ pub struct Diagnosis {
     /// best sites): label and the share of the held-out residual their linearised force leaves
     /// ([`super::discover::screen`]); empty when every candidate was fitted.
     pub screened_out: Vec<(String, f64)>,
+    /// On a long record, the samples of its head the candidates were raced on before round 1
+    /// (`race`); None when they were not raced.
+    pub race_head: Option<usize>,
+    /// The candidates the race left out: label and worst-floor held-out NMSE (%) on the head,
+    /// best first; empty when there was no race.
+    pub raced_out: Vec<(String, f64)>,
     pub localisation: Localisation,
     /// Per channel: its quantity, how the localisation reads it, and how much of the verdict's
     /// change it saw.

@@ -83,7 +83,6 @@ pub(super) fn fit_round_one(
         storeys,
         split,
         reals,
-        scales,
         ..
     } = *g;
     let current = parameter_names(storeys)
@@ -133,24 +132,7 @@ pub(super) fn fit_round_one(
                     &BTreeMap::new(),
                     vec![current.clone()],
                 ),
-                Job::Effect(c) => {
-                    let twin = with_switches(&physics, Some(c))?;
-                    let params = c.parameters(&scales);
-                    fit(
-                        &twin,
-                        data,
-                        params.iter().map(|p| p.0.clone()).collect(),
-                        params.iter().map(|p| (p.0.clone(), p.2)).collect(),
-                        split,
-                        options.starts,
-                        1,
-                        options.simulations_per_start,
-                        options,
-                        baseline_evidence,
-                        &BTreeMap::new(),
-                        c.starts_at(&scales),
-                    )
-                }
+                Job::Effect(c) => fit_alone(g, c, baseline_evidence),
             }?;
             Ok((fitted, t.elapsed().as_secs_f64()))
         },
@@ -161,6 +143,31 @@ pub(super) fn fit_round_one(
         slots[*i] = Some(r);
     }
     Ok(slots.into_iter().flatten().collect())
+}
+
+/// `candidate` fitted alone on the ground's record and split (its own parameters under their
+/// priors, from its starts; the physics held at the twin's values), in one thread.
+pub(super) fn fit_alone(
+    g: &Ground,
+    candidate: &Candidate,
+    baseline_evidence: f64,
+) -> Result<Fitted> {
+    let twin = with_switches(g.physics, Some(candidate))?;
+    let params = candidate.parameters(g.scales);
+    fit(
+        &twin,
+        g.data,
+        params.iter().map(|p| p.0.clone()).collect(),
+        params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+        g.split,
+        g.options.starts,
+        1,
+        g.options.simulations_per_start,
+        g.options,
+        baseline_evidence,
+        &BTreeMap::new(),
+        candidate.starts_at(g.scales),
+    )
 }
 
 /// Round 1's results into the diagnosis: the recalibration's report and every candidate's

@@ -22,7 +22,10 @@
 //!    on their own by 10 % or more (at most [`SCREENED`]), at other FMU locations than those
 //!    chosen:
 //!    a second effect that shows no trace alone rarely matters beside the first, and the
-//!    screening keeps a round to seconds.
+//!    screening keeps a round to seconds. On a long record whose model error shows on its
+//!    head, a round's candidates are first raced there as round 1's are (`race`): only those
+//!    that cut the model's error on the head by 10 % are fitted on the whole record, the
+//!    others are listed in the round's `tried` as raced out, with their head's error.
 //! 5. **Polish**: every chosen effect and the nine physics parameters jointly, one start from
 //!    the values fitted (a local refinement: the globally searched fits are the rounds' own),
 //!    kept when it lowers the held-out error. The physics is freed only here, at the end: freed
@@ -38,6 +41,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::race::{race, Head, RACE_HEAD};
 use super::{
     estimates, fit, with_switches, worst, Addition, Candidate, Channels, DiagnoseError,
     DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
@@ -135,26 +139,70 @@ impl Context<'_> {
 
     /// Each of `candidates` fitted alone on `base` (its parameters only).
     fn round(&self, base: &Twin, candidates: &[Candidate]) -> Vec<(Candidate, Result<Fitted>)> {
-        let o = self.options;
-        let results = on_threads(candidates, o.threads, |c| {
-            let twin = with_switches(base, Some(c))?;
-            let params = c.parameters(self.scales);
-            fit(
-                &twin,
-                self.data,
-                params.iter().map(|p| p.0.clone()).collect(),
-                params.iter().map(|p| (p.0.clone(), p.2)).collect(),
-                self.split,
-                o.starts,
-                1,
-                o.simulations_per_start,
-                o,
-                self.baseline_evidence,
-                &BTreeMap::new(),
-                c.starts_at(self.scales),
-            )
+        let results = on_threads(candidates, self.options.threads, |c| {
+            self.fit_on(base, c, self.data, self.split)
         });
         candidates.iter().copied().zip(results).collect()
+    }
+
+    /// `candidate` fitted alone on `base` on `data` under `split` (the record or its head).
+    fn fit_on(
+        &self,
+        base: &Twin,
+        candidate: &Candidate,
+        data: &Measurement,
+        split: super::Split,
+    ) -> Result<Fitted> {
+        let o = self.options;
+        let twin = with_switches(base, Some(candidate))?;
+        let params = candidate.parameters(self.scales);
+        fit(
+            &twin,
+            data,
+            params.iter().map(|p| p.0.clone()).collect(),
+            params.iter().map(|p| (p.0.clone(), p.2)).collect(),
+            split,
+            o.starts,
+            1,
+            o.simulations_per_start,
+            o,
+            self.baseline_evidence,
+            &BTreeMap::new(),
+            candidate.starts_at(self.scales),
+        )
+    }
+
+    /// A round's candidates after a race on the record's head on top of `base`, the model so
+    /// far (see `race`), when the library is the default, the record long and the model's
+    /// error shows on the head; else `next` as it is. The raced out go into `tried` with their
+    /// head's worst-floor held-out NMSE.
+    fn raced(
+        &self,
+        base: &Twin,
+        selection: &Selection,
+        next: &[Candidate],
+        tried: &mut Vec<(String, f64)>,
+    ) -> Vec<Candidate> {
+        if self.options.candidates.is_some() || next.len() <= 1 {
+            return next.to_vec();
+        }
+        let (Some(head), Some(model)) = (Head::of(self.data, &self.split), &selection.fitted)
+        else {
+            return next.to_vec();
+        };
+        let predicted = self.channels.predicted(&model.run);
+        let Some(before) = head.error_shown(self.channels, &predicted, self.split.held_out) else {
+            return next.to_vec();
+        };
+        let split = head.split(&self.split);
+        let (kept, out) = race(next.to_vec(), before, self.options, |c| {
+            self.fit_on(base, c, &head.data, split)
+        });
+        for (c, w) in out {
+            let label = format!("{} (raced out on the first {RACE_HEAD} samples)", c.label());
+            tried.push((label, w));
+        }
+        kept
     }
 
     /// `addition` on top of the model of `chosen` at `values`: its parameters and the nine
@@ -493,8 +541,9 @@ fn next_round(
             .join(", ")
     ));
     let base = ctx.model(&selection.chosen, &selection.values)?;
+    let next = ctx.raced(&base, selection, next, tried);
     let mut results = Vec::new();
-    for (c, r) in ctx.round(&base, next) {
+    for (c, r) in ctx.round(&base, &next) {
         match r {
             Ok(f) => {
                 tried.push((c.label(), worst(&f.nmse_held_out)));
