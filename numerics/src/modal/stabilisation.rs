@@ -385,6 +385,10 @@ pub enum Rejection {
     /// share of itself — a pole the FRF fit made of noise, or of a nonlinearity's trace (a
     /// contact's harmonics), not a resonance the force drove.
     NotInRecord,
+    /// An FRF fit of too few channels for a shape to tell noise from a mode: formed only past
+    /// the model orders asked for, where no FRF peak took the sweep on: a pole of the
+    /// higher orders' noise.
+    Unsought,
 }
 
 impl Rejection {
@@ -403,6 +407,10 @@ impl Rejection {
             Rejection::NotInRecord => {
                 "the record taken whole explains next to nothing more with it (noise, or a \
                  nonlinearity's trace)"
+            }
+            Rejection::Unsought => {
+                "formed only past the orders asked for, at no peak the sweep went on for (a \
+                 pole of noise on too few channels for a shape)"
             }
             Rejection::FewOrders => {
                 "found at too few model orders beside the best-supported mode (a pole of noise)"

@@ -18,6 +18,15 @@ use numerics::modal::stabilisation::{
     SelectionOptions, StabilisationDiagram, ONE_CHANNEL_AMONG,
 };
 
+/// LSCF's model orders, swept past the orders asked for (`asked`) while modes were forming
+/// or FRF peaks unexplained; on an FRF of fewer than [`ONE_CHANNEL_AMONG`] channels, the
+/// peaks the sweep went on for (`sought`).
+pub(super) struct Sweep {
+    pub(super) orders: Vec<ModelOrder>,
+    pub(super) sought: Option<Vec<f64>>,
+    pub(super) asked: usize,
+}
+
 impl Estimation<'_> {
     /// A method's stabilisation diagram over its model orders and the physical modes chosen
     /// from it, screened.
@@ -62,65 +71,49 @@ impl Estimation<'_> {
     }
 
     /// LSCF's model orders over `band`: 2 to the largest order asked for, then on by
-    /// [`LSCF_ORDER_STEP`] orders at a time, up to [`LSCF_ORDER_REACH`] times it, while the
-    /// highest order holds stable poles no chosen mode is made of ([`forming_poles`]) where
-    /// the FRF peaks (`evidence`: a pole of noise forming at the top order does not take the
-    /// sweep on, whose higher orders would make more of them), on an FRF of at least
-    /// [`ONE_CHANNEL_AMONG`] channels: a stable shape across orders is what tells a forming
-    /// mode from noise, and one channel's shape says nothing (a lab frame's single-channel
-    /// runs, swept on, gained ten modes of noise between 40 and 56 Hz, where their FRFs have
-    /// noise peaks of coherence 0.5). The sweep also ends where the basis loses rank (a
-    /// narrow band's short arc).
+    /// [`LSCF_ORDER_STEP`] orders at a time, up to [`LSCF_ORDER_REACH`] times it, while
+    /// [`Estimation::sweep_on`] finds modes still forming or FRF peaks no mode explains. The
+    /// sweep also ends where the basis loses rank (a narrow band's short arc).
     pub(super) fn lscf_orders(
         &self,
         frf: &Frf,
         band: (f64, f64),
         evidence: &Peaks,
-    ) -> Result<Vec<ModelOrder>, IdentifyError> {
+        screen: &ScreenOptions,
+    ) -> Result<Sweep, IdentifyError> {
         let first = LscfOptions {
             max_order: self.options.max_order,
             weighting: self.options.weighting,
             ..LscfOptions::over(band)
         };
         let mut orders = lscf(frf, &first).map_err(self.sampling.method_err("LSCF"))?;
-        let reach = if self.options.extend_orders && frf.response.len() >= ONE_CHANNEL_AMONG {
+        let reach = if self.options.extend_orders {
             LSCF_ORDER_REACH * self.options.max_order
         } else {
             self.options.max_order
         };
-        let selection = self.selection(true);
+        let shapes_tell = frf.response.len() >= ONE_CHANNEL_AMONG;
         let peaks = evidence.peaks_within(band);
+        let mut sought: Vec<f64> = Vec::new();
         loop {
             let top = orders.last().map_or(0, |o| o.order);
             // Short of the orders asked for: the basis lost rank (a narrow band).
             if top < first.max_order || top + first.order_step > reach {
                 break;
             }
-            let diagram = StabilisationDiagram::new(orders.clone(), self.options.stability)
-                .map_err(self.sampling.method_err("the diagram"))?;
-            let modes =
-                select_modes(&diagram, &selection).map_err(self.sampling.method_err("LSCF"))?;
-            let supported = evidence.of();
-            let forming = forming_poles(&diagram, &selection, &modes)
-                .iter()
-                .any(|p| supported.supports(p.frequency));
-            // Nothing forming at the top order, but the FRF peaks where no mode is yet: a
-            // broad band whose modes sit low in it (an eight-storey tower forced at its top
-            // over 0–50 Hz stood nowhere at order 40, all eight modes by 120); or a peak
-            // below the highest mode standing that no mode explains (a lab frame forced by
-            // white noise over 0–250 Hz had its 9.03 and 13.43 Hz at order 40, its 0.39 %
-            // 3.17 Hz not yet; above the highest mode the FRF's noise has coherent wiggles
-            // that would take every such sweep on).
-            let top_mode = modes
-                .iter()
-                .map(|m| m.frequency)
-                .fold(f64::NEG_INFINITY, f64::max);
-            // Explained within two bins of the grid the peak was found on (a short record's
-            // averaged FRF: dataset1's 8.20 Hz peak on 0.2 Hz bins is its 8.36 Hz mode).
-            let unexplained = peaks.iter().any(|p| {
-                (modes.is_empty() || *p < top_mode) && !explained(*p, &modes, &evidence.frequencies)
-            });
-            if !forming && !unexplained {
+            let Some(unexplained) =
+                self.sweep_on(&orders, evidence, &peaks, screen, shapes_tell)?
+            else {
+                break;
+            };
+            // On too few channels for a shape, the peaks sought are those unexplained at the
+            // orders asked for, and the sweep goes on only while one of them still is: the
+            // modes of noise the higher orders make would raise the highest mode and make the
+            // noise peaks below it unexplained in turn (the lab frame's 1–60 Hz run 2 with
+            // 5 % coloured noise: 48.3 and 51.1 Hz at order 60, then 40.6–46.0 Hz).
+            if shapes_tell || top == first.max_order {
+                sought.extend(unexplained);
+            } else if !unexplained.iter().any(|p| sought.contains(p)) {
                 break;
             }
             let next = LscfOptions {
@@ -135,7 +128,96 @@ impl Estimation<'_> {
                 _ => break,
             }
         }
-        Ok(orders)
+        Ok(Sweep {
+            orders,
+            sought: (!shapes_tell).then_some(sought),
+            asked: first.max_order,
+        })
+    }
+
+    /// LSCF's modes over `band`: its sweep ([`Estimation::lscf_orders`]) and the modes chosen
+    /// from it. On an FRF of too few channels for a shape to tell noise from a mode, the
+    /// orders past those asked for add only the modes at the peaks they were swept on for
+    /// ([`orders::with_sought`]): the higher orders of one channel split its modes and make
+    /// modes of its noise (the lab frame's 1–60 Hz runs with 5 % coloured noise swept to
+    /// order 100: run 3 lost 3.17 and 9.03 Hz to split doubles and gained 8.89–44.1 Hz).
+    pub(super) fn lscf_modes(
+        &self,
+        frf: &Frf,
+        band: (f64, f64),
+        evidence: Peaks,
+        screen: &ScreenOptions,
+        floors: &[(usize, (usize, i32))],
+    ) -> Result<MethodModes, IdentifyError> {
+        let sweep = self.lscf_orders(frf, band, &evidence, screen)?;
+        let swept_on = sweep.orders.last().is_some_and(|o| o.order > sweep.asked);
+        let Some(sought) = sweep.sought.filter(|_| swept_on) else {
+            return self.chosen_modes("LSCF", Some(band), sweep.orders, screen, floors, evidence);
+        };
+        let bins = evidence.frequencies.clone();
+        let asked: Vec<ModelOrder> = sweep
+            .orders
+            .iter()
+            .filter(|o| o.order <= sweep.asked)
+            .cloned()
+            .collect();
+        let base =
+            self.chosen_modes("LSCF", Some(band), asked, screen, floors, evidence.clone())?;
+        let full = self.chosen_modes("LSCF", Some(band), sweep.orders, screen, floors, evidence)?;
+        Ok(orders::with_sought(base, full, &sought, sweep.asked, &bins))
+    }
+
+    /// Whether LSCF's sweep goes on past `orders` (Some: the FRF `peaks` no mode explains
+    /// yet, possibly none), and why:
+    /// - the highest order holds stable poles no chosen mode is made of ([`forming_poles`])
+    ///   where the FRF peaks (`evidence`: a pole of noise forming at the top order does not
+    ///   take the sweep on, whose higher orders would make more of them), on an FRF of at
+    ///   least [`ONE_CHANNEL_AMONG`] channels (`shapes_tell`): a stable shape across orders
+    ///   is what tells a forming mode from noise, and one channel's shape says nothing (a lab
+    ///   frame's single-channel runs, swept on for forming poles, gained ten modes of noise
+    ///   between 40 and 56 Hz, where their FRFs have noise peaks of coherence 0.5);
+    /// - nothing forming, but the FRF peaks where no mode is yet (a broad band whose modes
+    ///   sit low in it: an eight-storey tower forced at its top over 0–50 Hz stood nowhere
+    ///   at order 40, all eight modes by 120), or a peak below the highest mode standing
+    ///   that no mode explains (a lab frame forced by white noise over 0–250 Hz had its
+    ///   9.03 and 13.43 Hz at order 40, its 0.39 % 3.17 Hz not yet). The highest mode is
+    ///   the highest the screens keep (`screen`'s and the FRF peak screen): above it the
+    ///   FRF's noise has coherent wiggles, and a pole at the force's band edge (the lab
+    ///   frame's 1–60 Hz single-channel runs: 57.2 Hz) would take the sweep on for them.
+    fn sweep_on(
+        &self,
+        orders: &[ModelOrder],
+        evidence: &Peaks,
+        peaks: &[f64],
+        screen: &ScreenOptions,
+        shapes_tell: bool,
+    ) -> Result<Option<Vec<f64>>, IdentifyError> {
+        let diagram = StabilisationDiagram::new(orders.to_vec(), self.options.stability)
+            .map_err(self.sampling.method_err("the diagram"))?;
+        let selection = self.selection(true);
+        let modes = select_modes(&diagram, &selection).map_err(self.sampling.method_err("LSCF"))?;
+        let supported = evidence.of();
+        let forming = shapes_tell
+            && forming_poles(&diagram, &selection, &modes)
+                .iter()
+                .any(|p| supported.supports(p.frequency));
+        let (standing, mut aside) = screen_modes(modes.clone(), screen);
+        let standing = screen_by_peaks(standing, &mut aside, &supported);
+        let top_mode = standing
+            .iter()
+            .map(|m| m.frequency)
+            .fold(f64::NEG_INFINITY, f64::max);
+        // Explained within two bins of the grid the peak was found on (a short record's
+        // averaged FRF: dataset1's 8.20 Hz peak on 0.2 Hz bins is its 8.36 Hz mode).
+        let unexplained: Vec<f64> = peaks
+            .iter()
+            .copied()
+            .filter(|p| {
+                (standing.is_empty() || *p < top_mode)
+                    && !explained(*p, &modes, &evidence.frequencies)
+            })
+            .collect();
+        Ok((forming || !unexplained.is_empty()).then_some(unexplained))
     }
 
     /// With a measured force: the FRF's report, and the input–output method's modes over the
@@ -159,8 +241,7 @@ impl Estimation<'_> {
             let averaged = self.averaged_frf(&frf)?;
             let averaged = averaged.as_ref().unwrap_or(&frf);
             let evidence = Peaks::of_frf(averaged);
-            let orders = self.lscf_orders(&frf, band, &evidence)?;
-            let chosen = self.chosen_modes("LSCF", Some(band), orders, screen, floors, evidence)?;
+            let chosen = self.lscf_modes(&frf, band, evidence, screen, floors)?;
             let chosen = shoulder::restored_shoulders(chosen, averaged, floors);
             let chosen = shoulder::screened_by_misfit(chosen, averaged);
             let evidence_bin = match averaged.frequencies.as_slice() {

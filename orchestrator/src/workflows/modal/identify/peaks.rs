@@ -8,6 +8,7 @@ use super::SpectrumReport;
 
 /// The measured magnitudes a method's modes must peak in: each channel's FRF magnitude for
 /// the input–output method, the responses' total spectrum (its square root) for SSI-COV.
+#[derive(Clone)]
 pub(super) struct Peaks {
     pub(super) frequencies: Vec<f64>,
     pub(super) curves: Vec<Vec<f64>>,

@@ -96,8 +96,7 @@ impl Estimation<'_> {
                     .band
                     .unwrap_or_else(|| fit_band(&frf, force_psd, top));
                 let evidence = Peaks::of_frf(&frf);
-                let sweep = self.lscf_orders(&frf, band, &evidence)?;
-                let method = self.chosen_modes("LSCF", Some(band), sweep, screen, &[], evidence)?;
+                let method = self.lscf_modes(&frf, band, evidence, screen, &[])?;
                 Ok(RunModes { band, method })
             })
             .collect()
