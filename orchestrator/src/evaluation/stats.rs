@@ -1,5 +1,10 @@
 //! The few statistics the twin's error measures are made of: mean, variance (population, 1/N),
-//! RMS and the NMSE, and the first sample a measure counts.
+//! RMS and the NMSE, the worst of a per-floor measure, and the first sample a measure counts.
+
+/// The largest of `x` (the worst floor or channel of an NMSE per floor); −∞ for none.
+pub fn worst(x: &[f64]) -> f64 {
+    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
 
 /// `Σ x / N`; NaN for no samples.
 pub fn mean(x: &[f64]) -> f64 {

@@ -8,7 +8,7 @@ use ::structure::channel::{Channel, Quantity};
 
 use crate::cosim::master::{Clock, Recorder};
 use crate::evaluation::compare::{compare, CompareOptions, Comparison};
-use crate::evaluation::stats::variance;
+use crate::evaluation::stats::{variance, worst};
 use crate::twin::data::Measurement;
 use crate::twin::system::{SystemBuilder, SystemError};
 use crate::twin::{ParameterValue, Twin, PHYSICS};
@@ -215,7 +215,7 @@ pub const VALIDATION_CAP: f64 = 1.0;
 
 /// Whether a validation record's NMSE (per floor or channel, %) counts as the twin's validation level.
 pub fn accepted_for_validation(nmse: &[f64]) -> bool {
-    worst_floor(nmse) <= VALIDATION_CAP
+    !nmse.is_empty() && worst(nmse) <= VALIDATION_CAP
 }
 
 /// The twin's validation NMSE from its validation records (name, NMSE per floor): the worst
@@ -225,12 +225,8 @@ pub fn validation_nmse<N: AsRef<[f64]>>(validated: &[(String, N)]) -> Option<f64
     validated
         .iter()
         .filter(|(_, n)| accepted_for_validation(n.as_ref()))
-        .map(|(_, n)| worst_floor(n.as_ref()))
+        .map(|(_, n)| worst(n.as_ref()))
         .reduce(f64::max)
-}
-
-fn worst_floor(n: &[f64]) -> f64 {
-    n.iter().copied().fold(0.0, f64::max)
 }
 
 /// Practical significance: below this NMSE (%) nothing is reported as failing.

@@ -183,6 +183,4 @@ pub(super) fn nmse_on(measured: &[Vec<f64>], predicted: &[Vec<f64>], idx: &[usiz
         .collect()
 }
 
-pub(super) fn worst(x: &[f64]) -> f64 {
-    x.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-}
+pub(super) use crate::evaluation::stats::worst;
