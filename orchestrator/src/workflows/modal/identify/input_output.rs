@@ -220,8 +220,9 @@ impl Estimation<'_> {
         Ok((forming || !unexplained.is_empty()).then_some(unexplained))
     }
 
-    /// With a measured force: the FRF's report, and the input–output method's modes over the
-    /// band asked for or the one the force excites (when that method is asked for).
+    /// With a measured force: the FRF's report, the input–output method's modes over the
+    /// band asked for or the one the force excites (when that method is asked for), and on a
+    /// single test (not roving) the FRF a mode's peak is judged on.
     pub(super) fn with_force(
         &self,
         force_psd: &[f64],
@@ -229,19 +230,26 @@ impl Estimation<'_> {
         channels: &[Channel],
         floors: &[(usize, (usize, i32))],
         screen: &ScreenOptions,
-    ) -> Result<(FrfReport, Option<MethodModes>), IdentifyError> {
+    ) -> Result<(FrfReport, Option<MethodModes>, Option<Peaks>), IdentifyError> {
         let frf = self.measured_frf()?;
         let band = match self.options.band {
             Some(band) => band,
             None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * self.sampling.nyquist),
         };
-        let input_output = if self.options.input_output && self.roving {
-            Some(self.roving_modes(force_psd, floors, screen)?)
-        } else if self.options.input_output {
-            let averaged = self.averaged_frf(&frf)?;
-            let averaged = averaged.as_ref().unwrap_or(&frf);
-            let evidence = Peaks::of_frf(averaged);
-            let chosen = self.lscf_modes(&frf, band, evidence, screen, floors)?;
+        if self.roving {
+            let input_output = self
+                .options
+                .input_output
+                .then(|| self.roving_modes(force_psd, floors, screen))
+                .transpose()?;
+            let report = frf_report(frf, channels, first, self.sampling.segment_length);
+            return Ok((report, input_output, None));
+        }
+        let averaged = self.averaged_frf(&frf)?;
+        let averaged = averaged.as_ref().unwrap_or(&frf);
+        let evidence = Peaks::of_frf(averaged);
+        let input_output = if self.options.input_output {
+            let chosen = self.lscf_modes(&frf, band, evidence.clone(), screen, floors)?;
             let chosen = shoulder::restored_shoulders(chosen, averaged, floors);
             let chosen = shoulder::screened_by_misfit(chosen, averaged);
             let evidence_bin = match averaged.frequencies.as_slice() {
@@ -253,7 +261,7 @@ impl Estimation<'_> {
             None
         };
         let report = frf_report(frf, channels, first, self.sampling.segment_length);
-        Ok((report, input_output))
+        Ok((report, input_output, Some(evidence)))
     }
 
     /// When the spectra average fewer than [`EVIDENCE_SEGMENTS`] segments (a short record
