@@ -176,7 +176,7 @@ pub(super) fn keep(
     let failed = ranked.iter().filter(|r| r.2 == f64::NEG_INFINITY).count();
     let cutting = ranked[failed..]
         .iter()
-        .take_while(|r| r.2 <= 0.9 * before)
+        .take_while(|r| r.2 <= select::CUT_ALONE * before)
         .count()
         .clamp(1, select::SCREENED);
     let out: Vec<(Candidate, f64)> = ranked
