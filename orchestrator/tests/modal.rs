@@ -161,7 +161,7 @@ mod records {
     use numerics::modal::{mac, modes, Mode};
     use orchestrator::record::Measurement;
     use orchestrator::synth::{synth_record, NoiseLevel, Scenario};
-    use orchestrator::workflows::modal::identify::RecordModes;
+    use orchestrator::workflows::modal::identify::{RecordMode, RecordModes};
     use orchestrator::workflows::modal::{identify, IdentifyOptions};
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
@@ -264,14 +264,12 @@ mod records {
     }
 
     fn lscf_frequencies(found: &RecordModes) -> Vec<f64> {
-        found
-            .input_output
-            .as_ref()
-            .expect("LSCF ran")
-            .modes
-            .iter()
-            .map(|m| m.identified.frequency)
-            .collect()
+        frequencies_of(&found.input_output.as_ref().expect("LSCF ran").modes)
+    }
+
+    /// The identified frequencies of a method's modes, in its order.
+    fn frequencies_of(modes: &[RecordMode]) -> Vec<f64> {
+        modes.iter().map(|m| m.identified.frequency).collect()
     }
 
     /// Five storeys (5.0–33.9 Hz, damping 0.35–2.3 %), the force at floor 2 band-limited to
@@ -330,12 +328,7 @@ mod records {
         // force's band edge, on a record like this one from another generator; such modes are
         // set aside by the edge and peak screens). Measured: the five modes within −0.09 to
         // +0.14 %, none spurious (bars 0.5 %, none).
-        let ssi: Vec<f64> = found
-            .ssi
-            .modes
-            .iter()
-            .map(|m| m.identified.frequency)
-            .collect();
+        let ssi: Vec<f64> = frequencies_of(&found.ssi.modes);
         let (nearest, spurious) = matched(&ssi, &exact);
         for ((_, error), e) in nearest.iter().zip(&exact) {
             assert!(error.abs() < 0.005, "SSI-COV {} Hz: {error}", e.frequency);
@@ -542,20 +535,10 @@ mod records {
             );
             assert!(shape > 0.95, "MAC {shape}");
         }
-        let ssi: Vec<f64> = found
-            .ssi
-            .modes
-            .iter()
-            .map(|m| m.identified.frequency)
-            .collect();
+        let ssi: Vec<f64> = frequencies_of(&found.ssi.modes);
         let (_, spurious) = matched(&ssi, &exact);
         assert!(spurious.is_empty(), "SSI-COV spurious {spurious:?}");
-        let fdd: Vec<f64> = found
-            .fdd
-            .modes
-            .iter()
-            .map(|m| m.identified.frequency)
-            .collect();
+        let fdd: Vec<f64> = frequencies_of(&found.fdd.modes);
         println!("FDD {fdd:?}");
         let (_, spurious) = matched(&fdd, &exact[..1]);
         assert!(
@@ -594,12 +577,7 @@ mod records {
                 100.0 * m.identified.damping_sd
             );
         }
-        let fdd: Vec<f64> = found
-            .fdd
-            .modes
-            .iter()
-            .map(|m| m.identified.frequency)
-            .collect();
+        let fdd: Vec<f64> = frequencies_of(&found.fdd.modes);
         let (nearest, spurious) = matched(&fdd, &exact);
         for ((i, error), e) in nearest.iter().zip(&exact) {
             let damping = found.fdd.modes[*i].identified.damping / e.damping - 1.0;
@@ -677,12 +655,7 @@ mod records {
                 "{}: LSCF {frequencies:.4?} over {:?}; SSI-COV {:.4?}",
                 data.responses[0].channel.name(),
                 found.input_output.as_ref().and_then(|m| m.band),
-                found
-                    .ssi
-                    .modes
-                    .iter()
-                    .map(|m| m.identified.frequency)
-                    .collect::<Vec<_>>()
+                frequencies_of(&found.ssi.modes)
             );
             let (nearest, spurious) = matched(&frequencies, &exact);
             // Modes 2 and 3 in every run. Mode 1 (0.43 %: a quarter of a 0.24 Hz bin wide)
@@ -860,19 +833,9 @@ mod records {
                     .iter()
                     .map(|r| (r.mode.frequency, r.mode.orders.len(), r.rejection))
                     .collect::<Vec<_>>(),
-                found
-                    .ssi
-                    .modes
-                    .iter()
-                    .map(|m| m.identified.frequency)
-                    .collect::<Vec<_>>()
+                frequencies_of(&found.ssi.modes)
             );
-            let fdd: Vec<f64> = found
-                .fdd
-                .modes
-                .iter()
-                .map(|m| m.identified.frequency)
-                .collect();
+            let fdd: Vec<f64> = frequencies_of(&found.fdd.modes);
             let (fdd_nearest, fdd_spurious) = matched(&fdd, &exact);
             println!(
                 "FDD {:+.3?} %, spurious {fdd_spurious:.3?}, set aside {:.3?}",
