@@ -331,7 +331,11 @@ fn the_fits(d: &Diagnosis) -> String {
                 .iter()
                 .copied()
                 .fold(f64::NEG_INFINITY, f64::max),
-            if step.joint_kept { "" } else { ", not kept" }
+            match (step.joint_kept, step.settled) {
+                (false, _) => ", not kept",
+                (true, true) => "; no later round: the joint refit explains the record",
+                (true, false) => "",
+            }
         );
     }
     s
