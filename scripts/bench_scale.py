@@ -268,7 +268,7 @@ class Bench:
             self.rows["compare"].append({"storeys": n, "samples": samples, **r})
         if "calibrate" not in skip:
             rec = None
-            for starts in (1, DEFAULT_STARTS):
+            for starts in self.a.starts:
                 out, rep = d / f"cal-s{starts}.ssp", d / f"cal-s{starts}.json"
                 cmd = [self.twin, "calibrate", "--twin", str(b["init"]), "--data", str(b["cal"]), "--starts",
                        str(starts), "--out", str(out), "--report", str(rep)]
@@ -645,6 +645,8 @@ def main() -> None:
     parser.add_argument("--skip", default="", help=f"comma-separated: any of {','.join(COMMANDS + CASES)}")
     parser.add_argument("--max-seconds", type=float, default=600.0,
                         help="a single run longer than this is stopped, not repeated and shown as '> S s'")
+    parser.add_argument("--starts", type=int, nargs="+", default=[1, DEFAULT_STARTS],
+                        help="the calibrations' start counts at each grid point (the roving case runs 1 and 12)")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--work", type=Path,
                         help="keep the buildings, records and twins in this directory (default: a temporary one)")
