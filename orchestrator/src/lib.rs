@@ -14,7 +14,8 @@
 //! - `fsutil`: the one atomic file write.
 //!
 //! The `twin` command line (clap, anyhow, progress bars, printing) is the binary's own
-//! (`src/commands`, a module of `main.rs`): the library computes and returns data.
+//! (`src/commands`, a module of `main.rs`; its crates are the feature `cli`'s): the library
+//! computes and returns data.
 
 pub mod blocks;
 pub mod choice;

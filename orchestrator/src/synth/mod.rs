@@ -331,31 +331,6 @@ pub struct InLoopController {
     pub seed: u64,
 }
 
-impl InLoopController {
-    /// A `twin control` report's design `q` (None: its first stable one) in the loop, at the
-    /// report's controller rate and with its sensor noise (none if it had none), drawn from
-    /// `seed`. A bad report or design is refused now, before a record is made.
-    pub fn from_report(
-        spec: crate::workflows::control::ControllerSpec,
-        q: Option<f64>,
-        seed: u64,
-    ) -> std::result::Result<Self, crate::workflows::control::ControlError> {
-        let interval = 1.0 / spec.control_rate_hz;
-        spec.controller(q, interval)?;
-        let floors = spec.structure()?.storeys();
-        let sensor_sd = spec
-            .sensor_noise_sd
-            .clone()
-            .unwrap_or_else(|| vec![0.0; floors]);
-        Ok(InLoopController {
-            make: Box::new(move |dt| spec.controller(q, dt).map_err(|e| e.to_string())),
-            interval,
-            sensor_sd,
-            seed,
-        })
-    }
-}
-
 /// Make a record with a controller in the loop (`None`: passive, as [`synth_record`]). The
 /// record gets a `control` column: the control force at each sample, as the controller set it
 /// there.

@@ -5,6 +5,7 @@ use super::closed_loop::{simulate, Gains, LoopLaw, LoopSetup, StateSource};
 use super::design::{plant_measuring, with_actuator_at};
 use super::runs::{check_record, force_limit};
 use super::ControlError;
+use crate::synth::InLoopController;
 use crate::twin::data::Measurement;
 use crate::twin::Twin;
 use numerics::lqr::Estimator;
@@ -199,4 +200,31 @@ pub fn predict_controlled(
     Ok(crate::twin::run::Prediction::of_accelerations(
         r.time, r.acc,
     ))
+}
+
+/// The synthetic structure's in-loop controller made from a control report: the control
+/// workflow reads its own report, so the synthetic structure needs nothing above it.
+impl InLoopController {
+    /// A `twin control` report's design `q` (None: its first stable one) in the loop, at the
+    /// report's controller rate and with its sensor noise (none if it had none), drawn from
+    /// `seed`. A bad report or design is refused now, before a record is made.
+    pub fn from_report(
+        spec: ControllerSpec,
+        q: Option<f64>,
+        seed: u64,
+    ) -> Result<Self, ControlError> {
+        let interval = 1.0 / spec.control_rate_hz;
+        spec.controller(q, interval)?;
+        let floors = spec.structure()?.storeys();
+        let sensor_sd = spec
+            .sensor_noise_sd
+            .clone()
+            .unwrap_or_else(|| vec![0.0; floors]);
+        Ok(InLoopController {
+            make: Box::new(move |dt| spec.controller(q, dt).map_err(|e| e.to_string())),
+            interval,
+            sensor_sd,
+            seed,
+        })
+    }
 }
