@@ -3,7 +3,8 @@
 //! floor (`acc1..acc3`), and the paper's prior means (its Table 1) for every floor and storey.
 //! Every "is this the rig?" is the one question [`is_paper_rig`], asked of what the asker has
 //! ([`Rig`]): a whole structure, a model's [`Layout`] (its storeys, excitation and control
-//! floor) or a record's channel names. The rig's record and hybrid-test facts ([`header`], [`SPLIT_FLOOR`]) and
+//! floor), a record's channel names, the channels a record measures ([`Measured`]) or a hybrid
+//! test's cut ([`HybridCut`]). The rig's record and hybrid-test facts ([`header`], [`SPLIT_FLOOR`]) and
 //! the structure its synthetic records are made of ([`DATASET1_MASS`] ...) live here too.
 
 use crate::building::{Excitation, Structure};
@@ -109,6 +110,59 @@ impl Rig for Layout {
     }
 }
 
+/// A record's channels as the rig's workflows read them: its excitation and its responses, in
+/// any order, with other channels beside the rig's allowed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measured {
+    pub excitation: Channel,
+    pub responses: Vec<Channel>,
+}
+
+/// What a record lacks of the rig's: the shaker's force, or a floor's accelerometer (one of
+/// [`channels`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Missing {
+    Force,
+    Response(Channel),
+}
+
+impl Measured {
+    /// The first of the rig's channels the record lacks: the force, then the accelerometers in
+    /// floor order.
+    pub fn missing(&self) -> Option<Missing> {
+        if self.excitation != Channel::Excitation(ExcitationKind::of(&EXCITATION)) {
+            return Some(Missing::Force);
+        }
+        channels()
+            .into_iter()
+            .find(|channel| !self.responses.contains(channel))
+            .map(Missing::Response)
+    }
+}
+
+/// A record measures the rig when it has the shaker's force and every floor's accelerometer
+/// (what the workflows written for the rig's three floors read).
+impl Rig for Measured {
+    fn is_paper_rig(&self) -> bool {
+        self.missing().is_none()
+    }
+}
+
+/// Where a hybrid test cuts a frame: its storeys and the floor of the cut.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HybridCut {
+    pub storeys: usize,
+    pub floor: usize,
+}
+
+/// A cut is the rig's hybrid test when it cuts the rig's storeys at [`SPLIT_FLOOR`] (what the
+/// substructure FMU's variables are laid out for).
+impl Rig for HybridCut {
+    fn is_paper_rig(&self) -> bool {
+        self.storeys == STOREYS && self.floor == SPLIT_FLOOR
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,5 +195,44 @@ mod tests {
         let names: Vec<String> = channels().iter().map(Channel::name).collect();
         assert!(is_paper_rig(names.as_slice()));
         assert_eq!(header(), "time,force,acc1,acc2,acc3");
+    }
+
+    #[test]
+    fn a_record_measures_the_rig_with_its_force_and_every_floors_accelerometer() {
+        let force = Channel::Excitation(ExcitationKind::Force);
+        let ground = Channel::Excitation(ExcitationKind::GroundAcc);
+        let acc = |floor| Channel::Response {
+            quantity: Quantity::Acceleration,
+            floor,
+        };
+        let vel2 = Channel::Response {
+            quantity: Quantity::Velocity,
+            floor: 2,
+        };
+        let measured = |excitation, responses: &[Channel]| Measured {
+            excitation,
+            responses: responses.to_vec(),
+        };
+        let rig = measured(force, &[acc(3), vel2, acc(1), acc(2)]);
+        assert!(is_paper_rig(&rig));
+        assert_eq!(rig.missing(), None);
+        let no_force = measured(ground, &[acc(1), acc(2), acc(3)]);
+        assert_eq!(no_force.missing(), Some(Missing::Force));
+        assert!(!is_paper_rig(&no_force));
+        let two_floors = measured(force, &[acc(1), vel2, acc(3)]);
+        assert_eq!(two_floors.missing(), Some(Missing::Response(acc(2))));
+        assert!(!is_paper_rig(&two_floors));
+        assert!(is_paper_rig(&HybridCut {
+            storeys: STOREYS,
+            floor: SPLIT_FLOOR
+        }));
+        assert!(!is_paper_rig(&HybridCut {
+            storeys: STOREYS,
+            floor: 1
+        }));
+        assert!(!is_paper_rig(&HybridCut {
+            storeys: 4,
+            floor: SPLIT_FLOOR
+        }));
     }
 }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use ::structure::channel::{
     parse_header_field, split_unit, Channel, ExcitationKind, Quantity, Unit,
 };
+use ::structure::paper;
 
 use super::grid::{nominal_grid, resolution, GridError};
 use super::ColumnMap;
@@ -67,9 +68,6 @@ fn acc_channel(floor: usize) -> Channel {
     }
 }
 
-/// The paper's rig has an accelerometer on each of its three floors.
-const PAPER_FLOORS: usize = ::structure::paper::STOREYS;
-
 impl Measurement {
     pub fn len(&self) -> usize {
         self.time.len()
@@ -125,31 +123,39 @@ impl Measurement {
             .map(|s| s.values.as_slice())
     }
 
+    /// The record's channels as the paper's rig sees them (`is_paper_rig` of it: a force and an
+    /// accelerometer on each of the rig's floors).
+    pub fn rig_channels(&self) -> paper::Measured {
+        paper::Measured {
+            excitation: self.excitation.channel,
+            responses: self.responses.iter().map(|s| s.channel).collect(),
+        }
+    }
+
     /// Whether the record has what the workflows written for the paper's rig need: a force and
-    /// an accelerometer on floors 1 to 3. Err names the first missing column.
+    /// an accelerometer on floors 1 to 3 ([`Measurement::rig_channels`]). Err names the first
+    /// missing column.
     pub fn require_paper_rig(&self) -> Result<(), DataError> {
         let err = |message: String| DataError {
             path: self.path.clone(),
             line: self.header_line,
             message,
         };
-        if self.excitation.channel != Channel::Excitation(ExcitationKind::Force) {
-            return Err(err(format!(
+        match self.rig_channels().missing() {
+            None => Ok(()),
+            Some(paper::Missing::Force) => Err(err(format!(
                 "missing column 'force': this command needs the force; the record is excited \
                  by '{}'",
                 self.excitation.channel.name()
-            )));
+            ))),
+            Some(paper::Missing::Response(channel)) => Err(err(format!(
+                "missing column '{}': this command needs an accelerometer on each of floors 1 \
+                 to {}; the record has {}",
+                channel.name(),
+                paper::STOREYS,
+                self.channel_names().join(", ")
+            ))),
         }
-        for floor in 1..=PAPER_FLOORS {
-            if self.channel(acc_channel(floor)).is_none() {
-                return Err(err(format!(
-                    "missing column 'acc{floor}': this command needs an accelerometer on each of \
-                     floors 1 to {PAPER_FLOORS}; the record has {}",
-                    self.channel_names().join(", ")
-                )));
-            }
-        }
-        Ok(())
     }
 
     /// The channels' names, excitation first.

@@ -62,7 +62,8 @@ fn twin_structure(twin: &Twin) -> Result<Structure, CalibrateError> {
 /// know it (its comparison, band and plot): the structure is the paper's and the record has a
 /// force and `acc1..acc3`.
 fn paper_rig(structure: &Structure, data: &Measurement) -> bool {
-    ::structure::paper::is_paper_rig(structure) && data.require_paper_rig().is_ok()
+    ::structure::paper::is_paper_rig(structure)
+        && ::structure::paper::is_paper_rig(&data.rig_channels())
 }
 
 /// The calibrated twin's NMSE % per channel of `data` after the transient: on the paper's rig

@@ -33,7 +33,10 @@ const PHYSICAL_OUTPUTS: [&str; 5] = ["measured_force", "y3", "v3", "relative", "
 /// Whether the substructure FMU's variables fit `s`: the paper's rig, three storeys cut at
 /// its [`::structure::paper::SPLIT_FLOOR`] (its `m1..m3`, `y2`, `y3`, ...).
 pub fn serves(s: &Frame) -> bool {
-    s.storeys() == ::structure::paper::STOREYS && s.floor == ::structure::paper::SPLIT_FLOOR
+    ::structure::paper::is_paper_rig(&::structure::paper::HybridCut {
+        storeys: s.storeys(),
+        floor: s.floor,
+    })
 }
 
 /// The FMU's role for the physical substructure of `split`.
