@@ -158,11 +158,12 @@ fn a_softer_storey_pairs_as_a_frequency_drop_in_units_of_the_sd() {
 // ---------------------------------------------------------------------------------------------
 
 mod records {
+    use numerics::modal::stabilisation::Rejection;
     use numerics::modal::{mac, modes, Mode};
-    use orchestrator::record::Measurement;
+    use orchestrator::record::{AmbientRecord, Measurement};
     use orchestrator::synth::{synth_record, NoiseLevel, Scenario};
     use orchestrator::workflows::modal::identify::{RecordMode, RecordModes};
-    use orchestrator::workflows::modal::{identify, IdentifyOptions};
+    use orchestrator::workflows::modal::{identify, identify_ambient, IdentifyOptions};
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
     use structure::channel::{Channel, Quantity, Unit};
@@ -968,5 +969,137 @@ mod records {
             assert!(shape >= 0.95, "{frequency} Hz: MAC {shape}");
             assert!(damping.abs() < 0.10, "{frequency} Hz: damping {damping}");
         }
+    }
+
+    /// A five-storey tower driven at its top by a mass damper: the damper's force narrow-band
+    /// around `centre` Hz (±0.1 Hz, RMS 1 N) over a broadband floor (0–50 Hz, RMS `floor_rms`
+    /// N, the actuator's and the wind's share), 100 Hz for 410 s, every floor measured, 2 %
+    /// white and 2 % coloured noise on each part. The structure is linear, so the record is
+    /// the sum of the two parts' records.
+    fn mass_damper_record(centre: f64, floor_rms: f64, seed: u64) -> (Measurement, Vec<Mode>) {
+        let tower = (&[5.2; 5][..], &[4021.0; 5][..], &[3.0; 5][..]);
+        let floors = [1, 2, 3, 4, 5];
+        let (mut data, exact) = record(
+            5,
+            tower,
+            5,
+            (100.0, 410.0),
+            (centre - 0.1, centre + 0.1),
+            &floors,
+            0.02,
+            seed,
+        );
+        let (broad, _) = record(
+            5,
+            tower,
+            5,
+            (100.0, 410.0),
+            (0.0, 50.0),
+            &floors,
+            0.02,
+            seed + 7,
+        );
+        let scale = floor_rms;
+        for (v, b) in data
+            .excitation
+            .values
+            .iter_mut()
+            .zip(&broad.excitation.values)
+        {
+            *v += scale * b;
+        }
+        for (r, b) in data.responses.iter_mut().zip(&broad.responses) {
+            for (v, w) in r.values.iter_mut().zip(&b.values) {
+                *v += scale * w;
+            }
+        }
+        (data, exact)
+    }
+
+    /// A five-storey tower (1.26–8.49 Hz, damping 0.30–2.0 %) driven at its top by a mass
+    /// damper whose force is narrow-band at 2.4–2.6 Hz, between modes 1 and 2, over a floor
+    /// 50 dB lower (0–50 Hz: [`mass_damper_record`]); 100 Hz for 410 s, every floor measured.
+    /// Before: `twin modal` failed outright (LSCF fitted the narrow band alone, 34 bins, too
+    /// few for order 40: the floor's bins were below 1 % of the force's typical level); the
+    /// same responses without the force (`identify_ambient`) gave SSI-COV 2.5004 Hz (ζ
+    /// 0.14 %, MPC 1.000) as a mode and FDD 2.4893 Hz. Now the band is widened to where the
+    /// FRF is coherent (0.95–40 Hz), and a mode at the force's own peak that the FRF does not
+    /// peak at is set aside `excitation`. Measured: LSCF 5/5 within 0.03 %, damping +0.0 to
+    /// +2.3 % (3.68 Hz), none spurious; SSI-COV's 2.5004 Hz and (with the floor at 58 dB) FDD's
+    /// 2.4893 Hz set aside `excitation`. Bars: the 0.5 % and damping within the larger
+    /// of 10 % and 2.5 reported sds; nothing kept at the force's peak.
+    #[test]
+    fn a_mass_dampers_force_peak_is_set_aside_as_excitation() {
+        let (data, exact) = mass_damper_record(2.5, 0.05, 5);
+        let found =
+            identify(std::slice::from_ref(&data), &IdentifyOptions::default()).expect("identified");
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        let (low, high) = io.band.expect("LSCF's band");
+        println!("LSCF over {low:.3}–{high:.3} Hz");
+        assert!(low < exact[0].frequency && high > exact[4].frequency);
+        let (nearest, spurious) = matched(&lscf_frequencies(&found), &exact);
+        for ((i, error), e) in nearest.iter().zip(&exact) {
+            let m = &io.modes[*i].identified;
+            println!(
+                "LSCF {:.4} Hz ({:+.3} %), ζ {:.3} ± {:.3} % for {:.3} %",
+                m.frequency,
+                100.0 * error,
+                100.0 * m.damping,
+                100.0 * m.damping_sd,
+                100.0 * e.damping
+            );
+            assert!(error.abs() < 0.005, "{} Hz: {error}", e.frequency);
+            let bar = (0.10 * e.damping).max(2.5 * m.damping_sd);
+            assert!(
+                (m.damping - e.damping).abs() <= bar,
+                "{} Hz: ζ {}",
+                e.frequency,
+                m.damping
+            );
+        }
+        assert!(spurious.is_empty(), "LSCF spurious {spurious:?}");
+        assert_eq!(io.modes.len(), exact.len());
+        let at_peak = |f: f64| (2.4..=2.6).contains(&f);
+        let methods = [
+            (io.method, &io.modes, &io.rejected),
+            (found.ssi.method, &found.ssi.modes, &found.ssi.rejected),
+            (found.fdd.method, &found.fdd.modes, &found.fdd.rejected),
+        ];
+        for (method, modes, rejected) in methods {
+            let kept = frequencies_of(modes);
+            let excitation: Vec<f64> = rejected
+                .iter()
+                .filter(|r| r.rejection == Rejection::Excitation)
+                .map(|r| r.mode.frequency)
+                .collect();
+            println!("{method}: kept {kept:.4?}, excitation {excitation:.4?}");
+            assert!(!kept.iter().any(|f| at_peak(*f)), "{method} kept {kept:?}");
+            assert!(excitation.iter().all(|f| at_peak(*f)), "{excitation:?}");
+        }
+        let ssi_excitation = found
+            .ssi
+            .rejected
+            .iter()
+            .filter(|r| r.rejection == Rejection::Excitation);
+        assert_eq!(
+            ssi_excitation.count(),
+            1,
+            "SSI-COV's pole at the force's peak"
+        );
+        // The same responses without the force: output-only, nothing tells the force's peak
+        // from a mode (a narrow-band random force is a resonance of what drives the tower).
+        // Measured: SSI-COV 2.5004 Hz (ζ 0.14 %) kept beside 3.67–8.49 Hz; printed only.
+        let ambient = AmbientRecord {
+            path: data.path.clone(),
+            time: data.time.clone(),
+            dt: data.dt,
+            responses: data.responses.clone(),
+            header_line: None,
+        };
+        let found = identify_ambient(&[ambient], &IdentifyOptions::default()).expect("ambient");
+        println!(
+            "without the force: SSI-COV {:.4?}",
+            frequencies_of(&found.ssi.modes)
+        );
     }
 }

@@ -360,6 +360,10 @@ pub enum Rejection {
     ExcitationEdge,
     /// Outside the band the measured force excites: nothing there was driven to respond.
     OutsideExcitation,
+    /// At the measured force's own spectral peak (a mass damper's or a shaker's narrow band
+    /// over a broad floor), where no FRF peaks: the responses peak there because the force
+    /// does, and an output-only method reads that peak as a lightly damped pole.
+    Excitation,
     /// Its shape is one channel (of at least [`ONE_CHANNEL_AMONG`]): the largest component
     /// holds [`ScreenOptions::one_channel`] of the shape's power or more — noise, or a
     /// sensor's own resonance, not a mode of a frame whose floors move together.
@@ -396,6 +400,9 @@ impl Rejection {
         match self {
             Rejection::ExcitationEdge => "at the edge of the force's band (excitation)",
             Rejection::OutsideExcitation => "outside the force's band (excitation)",
+            Rejection::Excitation => {
+                "at the force's own spectral peak, where the FRF does not peak (excitation)"
+            }
             Rejection::OneChannel => "its shape is one channel",
             Rejection::Unresolved => {
                 "one resonance with a stronger mode (within the record's resolution, or as close \

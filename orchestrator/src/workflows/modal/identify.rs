@@ -5,6 +5,7 @@
 //! modes. Any channels, units and excitation; several runs of one test average together.
 
 mod band;
+mod excitation;
 mod input_output;
 mod leaky;
 mod orders;
@@ -29,7 +30,11 @@ use numerics::modal::stabilisation::{
 use numerics::modal::IdentificationError;
 
 use band::screen_options;
-pub use band::{excited_band, fit_band, BAND_COHERENCE, EXCITED_FRACTION};
+pub use band::{
+    excited_band, fit_band, measured_band, BAND_COHERENCE, COHERENT_RUN, EXCITED_FRACTION,
+    MEASURED_COHERENCE,
+};
+pub use excitation::{FORCE_PEAK, FORCE_PEAK_WIDTH};
 use peaks::Peaks;
 use report::{frf_report, record_modes, shape_floors};
 pub use report::{
@@ -218,22 +223,46 @@ fn identify_runs(
     let channels: Vec<Channel> = everywhere.iter().map(|(c, _)| *c).collect();
     let floors = shape_floors(&channels);
     let force_psd = estimation.force_spectrum(runs)?;
-    let screen = screen_options(force_psd.as_deref(), &spectrum.frequencies, options);
-    let ssi = estimation.output_only(first, &floors, &screen, Peaks::of_spectrum(&spectrum))?;
-    let (frf, input_output, frf_peaks) = match &force_psd {
-        Some(force_psd) => {
-            let (report, input_output, peaks) =
-                estimation.with_force(force_psd, first, &channels, &floors, &screen)?;
-            (Some(report), input_output, peaks)
+    let measured = match &force_psd {
+        Some(psd) => Some((psd.as_slice(), estimation.measured_frf()?)),
+        None => None,
+    };
+    let screen = screen_options(
+        measured.as_ref().map(|(psd, frf)| (*psd, frf)),
+        &spectrum.frequencies,
+        options,
+    );
+    let mut ssi = estimation.output_only(first, &floors, &screen, Peaks::of_spectrum(&spectrum))?;
+    let (frf, mut input_output, frf_peaks, force_peaks) = match measured {
+        Some((force_psd, frf)) => {
+            let peaks = screen.excited.map_or_else(Vec::new, |band| {
+                excitation::force_peaks(&frf.frequencies, force_psd, band)
+            });
+            let whole = Peaks::of_frf(&frf);
+            let (report, input_output, evidence) =
+                estimation.with_force(frf, force_psd, first, &channels, &floors, &screen)?;
+            (Some(report), input_output, evidence, Some((peaks, whole)))
         }
-        None => (None, None, None),
+        None => (None, None, None, None),
     };
     let fdd_band = input_output.as_ref().and_then(|m| m.band).unwrap_or((
         spectrum.frequencies.get(1).copied().unwrap_or(0.0),
         DEFAULT_BAND_TOP * estimation.sampling.nyquist,
     ));
-    let fdd_evidence = frf_peaks.unwrap_or_else(|| Peaks::of_spectrum(&spectrum));
-    let fdd = estimation.non_parametric(first, &floors, &screen, fdd_band, fdd_evidence)?;
+    let fdd_evidence = frf_peaks
+        .clone()
+        .unwrap_or_else(|| Peaks::of_spectrum(&spectrum));
+    let mut fdd = estimation.non_parametric(first, &floors, &screen, fdd_band, fdd_evidence)?;
+    if let Some((peaks, whole)) = &force_peaks {
+        let frf = frf_peaks.as_ref().unwrap_or(whole);
+        let methods = input_output
+            .iter_mut()
+            .map(|m| (&mut m.modes, &mut m.rejected));
+        let methods = methods.chain([(&mut ssi.modes, &mut ssi.rejected)]);
+        for (modes, rejected) in methods.chain([(&mut fdd.modes, &mut fdd.rejected)]) {
+            excitation::set_aside_excitation(modes, rejected, peaks, frf);
+        }
+    }
     let verdicts = super::verdicts::verdicts(
         &input_output
             .iter()

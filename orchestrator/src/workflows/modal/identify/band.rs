@@ -2,17 +2,20 @@
 //! against its typical level, trimmed to where the FRF is coherent; the screen's options from
 //! it.
 
+use numerics::modal::spectral::Frf;
 use numerics::modal::stabilisation::ScreenOptions;
 
 use super::IdentifyOptions;
 
-/// What sets an identified mode aside, with the band the force excites (when it was measured).
+/// What sets an identified mode aside, with the band the force excites (when it was measured,
+/// with its FRF: [`measured_band`]).
 pub(super) fn screen_options(
-    force_psd: Option<&[f64]>,
+    force: Option<(&[f64], &Frf)>,
     frequencies: &[f64],
     options: &IdentifyOptions,
 ) -> ScreenOptions {
-    let excitation = force_psd.and_then(|psd| excited_band(frequencies, psd));
+    let excitation =
+        force.and_then(|(psd, frf)| measured_band(frequencies, psd, Some(&frf.coherence)));
     ScreenOptions {
         excited: excitation.map(|e| e.0),
         edges: excitation.map_or((false, false), |e| e.1),
@@ -77,14 +80,64 @@ pub fn excited_band(frequencies: &[f64], force_psd: &[f64]) -> Option<((f64, f64
     ))
 }
 
+/// A bin outside the force's [`excited_band`] is measured all the same where some output's
+/// coherence with the force is at least this over [`COHERENT_RUN`] bins in a row.
+pub const MEASURED_COHERENCE: f64 = 0.8;
+/// How many bins in a row [`MEASURED_COHERENCE`] must hold: noise alone reaches it at a bin
+/// now and then (a Welch average of four segments: about one bin in a thousand), not over a
+/// run of bins.
+pub const COHERENT_RUN: usize = 5;
+
+/// [`excited_band`], widened to the bins where the FRF is measured although the force is
+/// weak there beside its strongest part: a mass damper's force, narrow-band around its own
+/// frequency, over a floor 50 dB lower (the actuator's and the wind's share), drives the
+/// tower's modes well above the sensors' noise (coherence 0.9 and more at them) while every
+/// bin of the floor is below [`EXCITED_FRACTION`] of the narrow band's level. The band's
+/// ends are from the runs of [`COHERENT_RUN`] bins at [`MEASURED_COHERENCE`] (`coherence`:
+/// per output, per bin); an end so widened is not an edge (the response fading into the
+/// noise there is not the force falling off).
+pub fn measured_band(
+    frequencies: &[f64],
+    force_psd: &[f64],
+    coherence: Option<&[Vec<f64>]>,
+) -> Option<((f64, f64), (bool, bool))> {
+    let ((low, high), (low_edge, high_edge)) = excited_band(frequencies, force_psd)?;
+    let Some((first, last)) = coherence.and_then(|c| coherent_runs(c, frequencies.len())) else {
+        return Some(((low, high), (low_edge, high_edge)));
+    };
+    let (f_first, f_last) = (frequencies[first], frequencies[last]);
+    Some((
+        (low.min(f_first), high.max(f_last)),
+        (low_edge && f_first >= low, high_edge && f_last <= high),
+    ))
+}
+
+/// The first and last bin (above DC) of the runs of at least [`COHERENT_RUN`] bins where some
+/// output's coherence is [`MEASURED_COHERENCE`] or more.
+fn coherent_runs(coherence: &[Vec<f64>], bins: usize) -> Option<(usize, usize)> {
+    let bins = coherence.iter().map(Vec::len).fold(bins, usize::min);
+    let coherent = |k: usize| coherence.iter().any(|c| c[k] >= MEASURED_COHERENCE);
+    let (mut first, mut last, mut run) = (None, None, 0);
+    for k in 1..bins {
+        run = if coherent(k) { run + 1 } else { 0 };
+        if run >= COHERENT_RUN {
+            first.get_or_insert(k + 1 - COHERENT_RUN);
+            last = Some(k);
+        }
+    }
+    first.zip(last)
+}
+
 /// The band LSCF fits by default: from the lowest to the highest bin (below `top` Hz) where
-/// the force has power ([`EXCITED_FRACTION`] of its typical level) and some output's
+/// the force has power ([`EXCITED_FRACTION`] of its typical level, or the FRF is measured all
+/// the same: [`measured_band`]) and some output's
 /// coherence with it is at least [`BAND_COHERENCE`]. Outside it the FRF is noise divided by
 /// next to nothing, which a rational fit turns into poles. Falls back to the first bin to
 /// `top` when no bin qualifies (the fit then says so by its diagram).
-pub fn fit_band(frf: &numerics::modal::spectral::Frf, force_psd: &[f64], top: f64) -> (f64, f64) {
+pub fn fit_band(frf: &Frf, force_psd: &[f64], top: f64) -> (f64, f64) {
     let fallback = (frf.frequencies[1], top);
-    let Some(((low, high), _)) = excited_band(&frf.frequencies, force_psd) else {
+    let Some(((low, high), _)) = measured_band(&frf.frequencies, force_psd, Some(&frf.coherence))
+    else {
         return fallback;
     };
     let usable: Vec<usize> = (1..frf.frequencies.len())

@@ -220,18 +220,18 @@ impl Estimation<'_> {
         Ok((forming || !unexplained.is_empty()).then_some(unexplained))
     }
 
-    /// With a measured force: the FRF's report, the input–output method's modes over the
+    /// With a measured force and its FRF (`frf`, [`Estimation::measured_frf`]): the FRF's report, the input–output method's modes over the
     /// band asked for or the one the force excites (when that method is asked for), and on a
     /// single test (not roving) the FRF a mode's peak is judged on.
     pub(super) fn with_force(
         &self,
+        frf: Frf,
         force_psd: &[f64],
         first: &RunView<'_>,
         channels: &[Channel],
         floors: &[(usize, (usize, i32))],
         screen: &ScreenOptions,
     ) -> Result<(FrfReport, Option<MethodModes>, Option<Peaks>), IdentifyError> {
-        let frf = self.measured_frf()?;
         let band = match self.options.band {
             Some(band) => band,
             None => fit_band(&frf, force_psd, DEFAULT_BAND_TOP * self.sampling.nyquist),
