@@ -94,6 +94,11 @@ pub struct IdentifyOptions {
 pub const DEFAULT_SEGMENTS: usize = 4;
 /// The default LSCF band's top, as a fraction of Nyquist (the anti-aliasing roll-off above).
 pub const DEFAULT_BAND_TOP: f64 = 0.8;
+/// The least coherence of the FRF near an FDD/EFDD peak, with the force measured (the issue's
+/// bar for a peak an engineer reads off the FRF): FDD takes every maximum of the first
+/// singular value, with no model order to tell noise by, and the parametric methods' 0.5
+/// let a noise peak of the lab frame's single-channel 1–60 Hz run through (49.62 Hz).
+pub const FDD_PEAK_COHERENCE: f64 = 0.7;
 /// Orders LSCF's sweep goes on by, past [`IdentifyOptions::max_order`], while modes are still
 /// forming at its highest order ([`forming_poles`]).
 pub const LSCF_ORDER_STEP: usize = 20;
@@ -394,7 +399,8 @@ impl Estimation<'_> {
 
     /// FDD/EFDD's modes over `band`, screened as the others' (on a roving test, the first
     /// run's, like SSI-COV). Set aside: a mode where no measured curve peaks (`evidence`: the
-    /// FRF when the force was measured, the responses' spectrum otherwise), or whose bell
+    /// FRF when the force was measured, the responses' spectrum otherwise), or where that
+    /// FRF's coherence stays below [`FDD_PEAK_COHERENCE`] within two bins, or whose bell
     /// reads a frequency away from its peak ([`Rejection::NoPeak`]: the singular value's
     /// shoulder beside a mode, or its noise; the lab frame forced over 0–250 Hz had 8.48 and
     /// 14.01 Hz beside its 9.03 and 13.43 Hz); a peak inside a higher peak's bell
@@ -428,6 +434,13 @@ impl Estimation<'_> {
         let found = fdd(&spectra, welch.window(), &FddOptions::over(band));
         let (modes, mut rejected) = screen_modes(found.modes, screen);
         let modes = screen_by_peaks(modes, &mut rejected, &evidence.of());
+        let (modes, weak): (Vec<_>, Vec<_>) = modes
+            .into_iter()
+            .partition(|m| evidence.coherent_near(m.frequency, FDD_PEAK_COHERENCE));
+        rejected.extend(
+            weak.into_iter()
+                .map(|m| RejectedMode::new(m, Rejection::NoPeak)),
+        );
         let shoulders = found.shoulders.into_iter();
         rejected.extend(shoulders.map(|m| RejectedMode::new(m, Rejection::Unresolved)));
         let off_peak = found.off_peak.into_iter();

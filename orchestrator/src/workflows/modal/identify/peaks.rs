@@ -66,6 +66,25 @@ impl Peaks {
         peaks
     }
 
+    /// Whether some curve's coherence reaches `least` within two bins of `frequency` (a
+    /// spectrum, without coherence: always). Two bins, as [`Peaks::peaks_within`] judges a
+    /// peak coherent: a resonance narrower than a bin dips H1's coherence at its own bin.
+    pub(super) fn coherent_near(&self, frequency: f64, least: f64) -> bool {
+        let Some(coherence) = &self.coherence else {
+            return true;
+        };
+        let near = match self.frequencies.as_slice() {
+            [a, b, ..] => 2.0 * (b - a),
+            _ => return true,
+        };
+        let bins: Vec<usize> = (0..self.frequencies.len())
+            .filter(|k| (self.frequencies[*k] - frequency).abs() <= near)
+            .collect();
+        coherence
+            .iter()
+            .any(|c| bins.iter().any(|k| c.get(*k).is_some_and(|v| *v >= least)))
+    }
+
     pub(super) fn of(&self) -> PeakEvidence<'_> {
         PeakEvidence {
             frequencies: &self.frequencies,
