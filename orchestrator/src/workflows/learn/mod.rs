@@ -128,14 +128,14 @@ use crate::twin::run::RunError;
 pub use modes::{chosen_modes, learned_twin, run_modes, FORGETTING, MODE};
 pub use refit::{initial_floors, RefitSchedule};
 pub use results::{
-    change_flags, table, ChangeFlag, ModeResult, NmsePoint, RecordResult, RefitRecord, Timing,
-    Trace,
+    change_flags, table, ChangeFlag, FixedThreshold, ModeResult, NmsePoint, RecordResult,
+    RefitRecord, Stretch, Timing, Trace,
 };
 pub use run::run_mode;
 pub use stream::{corrected, prepare, Stream};
 pub use threshold::{
-    fixed_threshold, reference_threshold, relative_threshold, FixedThreshold, Stretch,
-    THRESHOLD_STRIDE, THRESHOLD_TEST_SAMPLES,
+    fixed_threshold, reference_threshold, relative_threshold, THRESHOLD_STRIDE,
+    THRESHOLD_TEST_SAMPLES,
 };
 
 // What the stages share: each submodule reads the others' through `use super::*`.

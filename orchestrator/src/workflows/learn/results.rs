@@ -1,10 +1,30 @@
 //! What a mode's run gives: per record its queries, NMSE after each update, refits and timings,
 //! the possible changes flagged, and the Table 2 view of every mode.
 
-use super::threshold::FixedThreshold;
 use crate::blocks::supervisor::Mode;
 use fmu_gp_corrector::Floors;
 use serde::Serialize;
+
+/// How the fixed threshold was set, for the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct FixedThreshold {
+    /// Per channel, in its unit squared ((m/s²)² for an acceleration).
+    pub values: Vec<f64>,
+    /// `given` (`--threshold`), `reference GP` or `1e-3 × measured variance`.
+    pub rule: String,
+    /// The reference GP's training stretch: record, first and last time (s), points.
+    pub trained_on: Option<Stretch>,
+    /// The unseen stretch the maximum is taken over.
+    pub tested_on: Option<Stretch>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Stretch {
+    pub record: String,
+    pub from: f64,
+    pub to: f64,
+    pub points: usize,
+}
 
 /// A run of consecutive queried samples long enough to suggest the structure changed.
 #[derive(Clone, Debug, Serialize, PartialEq)]

@@ -3,13 +3,13 @@
 //! schedule; the training set carried to the next record.
 
 use super::refit::{refit_floors, RefitSchedule};
+use super::results::FixedThreshold;
 use super::results::{
     change_flags, ModeResult, NmsePoint, RecordResult, RefitRecord, Timing, Trace,
 };
 use super::stream::{
     corrected, corrected_from_means, sync, track, trained, Stream, PARALLEL_TRACKING,
 };
-use super::threshold::FixedThreshold;
 use super::{LearnError, LearnOptions, Result};
 use crate::blocks::supervisor::{Mode, Supervisor};
 use crate::cosim::master::Block;

@@ -3,37 +3,16 @@
 //! reference stretch).
 
 use super::refit::fit_floors;
+use super::results::{FixedThreshold, Stretch};
 use super::stream::{trained, Stream};
 use super::{LearnError, LearnOptions, Result, PAPER_THRESHOLD};
 use fmu_gp_corrector::TargetForm;
-use serde::Serialize;
 
 /// Samples of the test stretch whose largest latent variance is the fixed threshold (the
 /// reference paper's Fig. 8: the first 100 points of dataset two).
 pub const THRESHOLD_TEST_SAMPLES: usize = 100;
 /// The reference GP of [`reference_threshold`] learns every this many samples of its record.
 pub const THRESHOLD_STRIDE: usize = 2;
-
-/// How the fixed threshold was set, for the report.
-#[derive(Clone, Debug, Serialize)]
-pub struct FixedThreshold {
-    /// Per channel, in its unit squared ((m/s²)² for an acceleration).
-    pub values: Vec<f64>,
-    /// `given` (`--threshold`), `reference GP` or `1e-3 × measured variance`.
-    pub rule: String,
-    /// The reference GP's training stretch: record, first and last time (s), points.
-    pub trained_on: Option<Stretch>,
-    /// The unseen stretch the maximum is taken over.
-    pub tested_on: Option<Stretch>,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct Stretch {
-    pub record: String,
-    pub from: f64,
-    pub to: f64,
-    pub points: usize,
-}
 
 impl Stretch {
     pub(super) fn of(stream: &Stream, range: std::ops::Range<usize>, points: usize) -> Self {
