@@ -14,6 +14,7 @@ mod report;
 mod roving;
 mod runs;
 mod shoulder;
+pub mod verdicts;
 
 use serde::Serialize;
 use structure::channel::Channel;
@@ -268,7 +269,7 @@ fn identify_runs(
             excitation::set_aside_excitation(modes, rejected, peaks, frf);
         }
     }
-    let verdicts = super::verdicts::verdicts(
+    let verdicts = verdicts::verdicts(
         &input_output
             .iter()
             .map(|m| (m.method, m.modes.as_slice()))

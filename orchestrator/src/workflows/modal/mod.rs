@@ -9,7 +9,6 @@ pub mod explain;
 pub mod identify;
 pub mod pair;
 pub mod twin;
-pub mod verdicts;
 
 pub use evidence::{
     evidence_of, modal_evidence, modal_evidence_with, ModalBand, ModalEvidence, ModeShift,
@@ -18,7 +17,8 @@ pub use explain::{explain_shifts, Explanation};
 pub use identify::{identify, identify_ambient, IdentifyError, IdentifyOptions, RecordModes};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
 pub use twin::{twin_modes, ModalOptions, TwinMode, TwinModes};
-pub use verdicts::{verdicts, ModeVerdict};
+// The methods' verdicts are the identification's last stage (identify/verdicts.rs).
+pub use identify::verdicts::{self, verdicts, ModeVerdict};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModalError {

@@ -95,7 +95,7 @@ pub struct RecordModes {
     pub input_output: Option<MethodModes>,
     pub fdd: FddModes,
     /// Every method's modes side by side.
-    pub verdicts: Vec<super::super::verdicts::ModeVerdict>,
+    pub verdicts: Vec<super::verdicts::ModeVerdict>,
     pub options: IdentifyOptions,
 }
 

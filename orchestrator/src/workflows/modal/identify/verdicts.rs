@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use super::identify::RecordMode;
+use super::RecordMode;
 use numerics::modal::mac;
 
 /// Two methods' modes within this relative frequency of each other are one mode.
