@@ -17,6 +17,7 @@ pub mod options;
 pub mod ssp;
 
 mod estimators;
+mod outcome;
 mod predict;
 mod report;
 mod response;
@@ -45,7 +46,7 @@ pub use runs::{check_estimator, check_record, measured_channels, substeps_for};
 
 // What the stages share: each submodule reads the others' through `use super::*`.
 use estimators::*;
-use report::*;
+use outcome::control_outcome;
 use response::*;
 use retune::*;
 use runs::*;
