@@ -26,12 +26,6 @@ pub fn compare(
         &Result<crate::workflows::modal::ModalEvidence, crate::workflows::modal::ModalError>,
     >,
 ) -> Value {
-    let explained: Vec<f64> = compared
-        .noise_nmse
-        .iter()
-        .zip(&compared.band_nmse)
-        .map(|(noise, band)| noise + band)
-        .collect();
     let mut report = json!({
         "twin": twin.describe(),
         "data": data.path.display().to_string(),
@@ -44,7 +38,7 @@ pub fn compare(
             "parameter_uncertainty": compared.parameter_variance.is_some(),
             "noise_nmse": compared.noise_nmse,
             "parameter_nmse": compared.band_nmse,
-            "explained_nmse": explained,
+            "explained_nmse": compared.explained_nmse(),
         },
         "tolerance": compared.tolerance.value,
         "tolerance_source": compared.tolerance.source,

@@ -279,6 +279,18 @@ pub struct Compared {
     pub tolerance: Tolerance,
 }
 
+impl Compared {
+    /// NMSE per channel (%) the whole band explains: the noise's and the parameter
+    /// uncertainty's shares together.
+    pub fn explained_nmse(&self) -> Vec<f64> {
+        self.noise_nmse
+            .iter()
+            .zip(&self.band_nmse)
+            .map(|(noise, band)| noise + band)
+            .collect()
+    }
+}
+
 /// Run `twin` on `data` and compare every measured channel after `transient`: the one sequence
 /// behind `twin compare`, the calibrated twin's plot and the NMSE after calibrating or training.
 /// The band includes the parameter uncertainty; the tolerance is the twin's default.
