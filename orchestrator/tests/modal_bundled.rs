@@ -16,8 +16,10 @@
 //! 16.82 and 17.94 Hz at MPC 0.71 / 0.73) and FDD/EFDD 7 (0.46, 1.40, 4.66, 7.46 Hz of
 //! noise); dataset2 LSCF 3, FDD/EFDD 6 (1.14, 3.31, 3.78 Hz).
 
+use numerics::modal::modes;
 use numerics::modal::stabilisation::Rejection;
 use orchestrator::record::Measurement;
+use orchestrator::synth::{synth_record, Scenario};
 use orchestrator::workflows::modal::identify::{RecordMode, RecordModes};
 use orchestrator::workflows::modal::{identify, IdentifyOptions};
 use std::path::PathBuf;
@@ -59,7 +61,9 @@ fn methods(found: &RecordModes) -> Vec<(&'static str, Vec<f64>)> {
 /// −0.01 / +1.37 / +0.72 %); SSI-COV within 2 % — the 1 % is not its on a 20 s record
 /// forced by a band-limited (not white) force, which output-only methods take for white:
 /// measured −1.96 / +0.08 / −0.14 % and −0.98 / −0.74 / +0.48 % (the first mode's −1.9 % stays
-/// at 30 and 40 block rows). The side-by-side table has three rows, each mode found by all
+/// at 15–40 block rows: −1.84 to −1.96 %; it is the scatter of an output-only estimate on
+/// 1,024 samples, not a bias: [`ssi_covs_first_mode_scatters_with_the_records_length`]).
+/// The side-by-side table has three rows, each mode found by all
 /// three methods.
 #[test]
 fn the_bundled_records_give_their_three_modes_and_nothing_else() {
@@ -141,4 +145,56 @@ fn the_bumpers_record_gives_three_modes_and_sets_the_contacts_poles_aside() {
         unneeded.iter().all(|f| *f > 17.0 && *f < 19.0),
         "{unneeded:?}"
     );
+}
+
+/// SSI-COV's first mode on records like dataset1 (the rig's own generator, `twin synth`'s
+/// defaults: three storeys, a white force at floor 1, 3 % sensor noise, 51.2 Hz), ten seeds,
+/// the exact mode known (2.0024 Hz, 0.9 % damped). On 20 s (1,024 samples, dataset1's length)
+/// its error scatters about no bias: measured mean +0.17 %, sd 0.81 %, −0.90 to +1.66 %
+/// (LSCF through the measured force: within 0.03 % on nine seeds); on 200 s the sd is 0.19 %,
+/// every seed within 0.46 % — the scatter shrinks as 1/√T, as a statistical error does.
+/// dataset1's −1.96 % is 2.4 such sds: the 1 % is not an output-only method's on a
+/// 20 s record of a 2 Hz mode (40 cycles, its decay 8.5 s), whatever the block rows or the
+/// orders; SSI-COV's reported sd (the spread over model orders, 0.0009 Hz there) does not
+/// show it. Bars: 20 s, the mean within 0.5 % (no bias); 200 s, every seed within the
+/// issue's 1 % and the mean within 0.2 %.
+#[test]
+fn ssi_covs_first_mode_scatters_with_the_records_length() {
+    for (duration, every, mean_bar) in [(20.0, f64::INFINITY, 0.005), (200.0, 0.01, 0.002)] {
+        let errors: Vec<f64> = (1..=10)
+            .map(|seed| {
+                let mut scenario = Scenario::default();
+                scenario.seed = seed;
+                scenario.duration = duration;
+                let (made, _) = synth_record(&scenario).expect("a record");
+                let s = scenario.structure();
+                let exact = modes(&s.mass_matrix(), &s.damping_matrix(), &s.stiffness_matrix())
+                    .expect("exact modes")[0]
+                    .frequency;
+                let found =
+                    identify(&[made.measurement], &IdentifyOptions::default()).expect("identified");
+                found
+                    .ssi
+                    .modes
+                    .iter()
+                    .map(|m| m.identified.frequency / exact - 1.0)
+                    .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+                    .expect("SSI-COV found a mode")
+            })
+            .collect();
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let sd =
+            (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / errors.len() as f64).sqrt();
+        println!(
+            "{duration} s: SSI-COV mode 1 {:+.2?} %, mean {:+.2} %, sd {:.2} %",
+            errors.iter().map(|e| 100.0 * e).collect::<Vec<_>>(),
+            100.0 * mean,
+            100.0 * sd
+        );
+        assert!(mean.abs() < mean_bar, "{duration} s: mean {mean}");
+        assert!(
+            errors.iter().all(|e| e.abs() < every),
+            "{duration} s: {errors:?}"
+        );
+    }
 }
