@@ -25,6 +25,8 @@ phase() { # phase NAME COMMAND...: run it, note its wall time, return its status
 }
 
 phase prerequisites scripts/prerequisites.sh
+# The library's import graph against its layers (ARCHITECTURE.md, "Layers"): a fraction of a second.
+phase "import graph" scripts/import-graph.py >/dev/null
 
 start=$SECONDS
 python_log=$(mktemp "${TMPDIR:-/tmp}/shear-twin-setup-python.XXXXXX")
