@@ -163,9 +163,11 @@ fn ssi_covs_first_mode_scatters_with_the_records_length() {
     for (duration, every, mean_bar) in [(20.0, f64::INFINITY, 0.005), (200.0, 0.01, 0.002)] {
         let errors: Vec<f64> = (1..=10)
             .map(|seed| {
-                let mut scenario = Scenario::default();
-                scenario.seed = seed;
-                scenario.duration = duration;
+                let scenario = Scenario {
+                    seed,
+                    duration,
+                    ..Scenario::default()
+                };
                 let (made, _) = synth_record(&scenario).expect("a record");
                 let s = scenario.structure();
                 let exact = modes(&s.mass_matrix(), &s.damping_matrix(), &s.stiffness_matrix())

@@ -220,9 +220,10 @@ impl Estimation<'_> {
         Ok((forming || !unexplained.is_empty()).then_some(unexplained))
     }
 
-    /// With a measured force and its FRF (`frf`, [`Estimation::measured_frf`]): the FRF's report, the input–output method's modes over the
-    /// band asked for or the one the force excites (when that method is asked for), and on a
-    /// single test (not roving) the FRF a mode's peak is judged on.
+    /// With a measured force and its FRF (`frf`, [`Estimation::measured_frf`]): the FRF's
+    /// report, the input–output method's modes over the band asked for or the one the force
+    /// excites (when that method is asked for), and on a single test (not roving) the FRF a
+    /// mode's peak is judged on.
     pub(super) fn with_force(
         &self,
         frf: Frf,
