@@ -450,55 +450,47 @@ pub(super) fn forward(
     loop {
         let started = Instant::now();
         let picked = pick(&results, &passing, current, gates.step_cut);
-        // A parameter change is a move too: in the first round, when no effect passes alone
-        // and the recalibration cuts the error more than the best effect, it is taken first and
-        // the effects are tried again on the recalibrated physics.
         let recal = worst(&recalibrated.nmse_held_out);
-        let take_recalibration = round == 1
-            && !picked.is_some_and(|(_, passed)| passed)
-            && recal * gates.step_cut <= current
-            && picked.is_none_or(|((_, f), _)| recal < worst(&f.nmse_held_out));
-        if take_recalibration {
-            let step = Step {
-                round,
-                worst_before: current,
-                tried: std::mem::take(&mut tried),
-                started,
-            };
-            adopt_recalibration(&mut selection, recalibrated, step);
-            current = recal;
-            physics_moved = true;
-            full_round_next = true;
-            selection.fitted = Some(recalibrated.clone());
-            if ctx.good_enough(&recalibrated.nmse_held_out) {
-                break;
+        let take_recalibration =
+            round == 1 && takes_recalibration(picked, recal, current, gates.step_cut);
+        let step = Step {
+            round,
+            worst_before: current,
+            tried: std::mem::take(&mut tried),
+            started,
+        };
+        match (take_recalibration, picked) {
+            (true, _) => {
+                adopt_recalibration(&mut selection, recalibrated, step);
+                current = recal;
+                physics_moved = true;
+                full_round_next = true;
+                selection.fitted = Some(recalibrated.clone());
+                if ctx.good_enough(&recalibrated.nmse_held_out) {
+                    break;
+                }
             }
-        } else {
-            let Some(((c, alone), _)) = picked else {
-                selection.not_added = tried;
-                break;
-            };
-            let step = Step {
-                round,
-                worst_before: current,
-                tried: std::mem::take(&mut tried),
-                started,
-            };
-            let (worst_now, done) = add_picked(
-                ctx,
-                &mut selection,
-                *c,
-                alone,
-                physics_moved,
-                step,
-                progress,
-            );
-            current = worst_now;
-            if done {
-                break;
+            (false, Some(((c, alone), _))) => {
+                let (worst_now, done) = add_picked(
+                    ctx,
+                    &mut selection,
+                    *c,
+                    alone,
+                    physics_moved,
+                    step,
+                    progress,
+                );
+                current = worst_now;
+                if done {
+                    break;
+                }
+                if let Some(polished) = settled(ctx, &selection, &mut probe, progress) {
+                    return Ok(polished);
+                }
             }
-            if let Some(polished) = settled(ctx, &selection, &mut probe, progress) {
-                return Ok(polished);
+            (false, None) => {
+                selection.not_added = step.tried;
+                break;
             }
         }
         // The next round, at locations not yet chosen: the whole library on recalibrated
@@ -515,15 +507,41 @@ pub(super) fn forward(
             screened = screen(&results, current);
         }
     }
+    Ok(finish(ctx, selection, probe, progress))
+}
+
+/// Whether the first round takes the recalibration (worst-floor held-out NMSE `recal`) as its
+/// move, the model's error `current`: a parameter change is a move too. When no effect passes
+/// alone (`picked`, with whether it passed) and the recalibration cuts the error by the step
+/// gate and more than the best effect, it is taken first and the effects are tried again on
+/// the recalibrated physics.
+fn takes_recalibration(
+    picked: Option<(&(Candidate, Fitted), bool)>,
+    recal: f64,
+    current: f64,
+    step_cut: f64,
+) -> bool {
+    !picked.is_some_and(|(_, passed)| passed)
+        && recal * step_cut <= current
+        && picked.is_none_or(|((_, f), _)| recal < worst(&f.nmse_held_out))
+}
+
+/// The selection polished (see `polish`); when nothing was added since a long record's
+/// `probe`, its joint refit is this model's polish.
+fn finish(
+    ctx: &Context,
+    mut selection: Selection,
+    probe: Option<Selection>,
+    progress: &dyn Fn(&str),
+) -> Selection {
     match probe {
-        // Nothing was added since the probe: its joint refit is this model's polish.
-        Some(polished) if polished.chosen == selection.chosen => Ok(Selection {
+        Some(polished) if polished.chosen == selection.chosen => Selection {
             not_added: selection.not_added,
             ..polished
-        }),
+        },
         _ => {
             polish(ctx, &mut selection, progress);
-            Ok(selection)
+            selection
         }
     }
 }
