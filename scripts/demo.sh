@@ -65,7 +65,8 @@ head -4 "$out/calibrate-roving.txt"
 echo "-- a third run on floor 2, and the three runs' modes merged through the measured force: every floor's shape --"
 "$twin" synth --seed 13 --duration 240 --channels acc2 --out "$out/roving-floor2.csv" >/dev/null
 "$twin" modal --data "$out/roving-floor1.csv" --data "$out/roving-floor2.csv" \
-  --data "$out/roving-floor3.csv" --report "$out/modal-roving.json" | head -5
+  --data "$out/roving-floor3.csv" --report "$out/modal-roving.json" > "$out/modal-roving.txt"
+head -5 "$out/modal-roving.txt"
 
 for n in 1 2 3; do
   echo
@@ -201,8 +202,9 @@ echo '{"ground_motion": {"strong_end": 100000}}' > "$b5/stationary.json"
   --channels acc1,acc3,acc5 --units acc=g --duration 300 --seed 4 --change k2@150:0.85 --out "$b5/softer-storey.csv" >/dev/null
 "$twin" watch --no-diagnosis --track-modes --twin "$b5/nominal.ssp" --source "$b5/softer-storey.csv" \
   --alerts "$b5/softer-storey-alerts.jsonl" --modes-plot "$b5/softer-storey-frequencies.svg" >/dev/null
-grep '"kind":"frequency"' "$b5/softer-storey-alerts.jsonl" | head -2
-"$twin" modal --twin "$b5/nominal.ssp" --plot "$b5/modes.svg" --samples 0 | head -3
+grep -m 2 '"kind":"frequency"' "$b5/softer-storey-alerts.jsonl"
+"$twin" modal --twin "$b5/nominal.ssp" --plot "$b5/modes.svg" --samples 0 > "$b5/modes.txt"
+head -3 "$b5/modes.txt"
 echo "-- an ambient record (the responses alone, as a building's monitoring measures them: no ground_acc"
 echo "   column) of the building with storey 2 15 % softer: diagnosed by its modes --"
 "$twin" synth --scenario "$b5/stationary.json" --storeys 5 --excitation base --nominal data/five-storey/nominal.json \
