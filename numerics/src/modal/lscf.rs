@@ -123,6 +123,12 @@ impl LscfOptions {
 }
 
 /// The FRF's bins inside `band`: (index, ω rad/s).
+/// The highest (even) model order the bins of `frf` within `band` can fit: each order needs
+/// `order + 2` bins (more equations than unknowns). 0 when not even order 2 fits.
+pub fn highest_order(frf: &Frf, band: (f64, f64)) -> usize {
+    band_bins(frf, band).len().saturating_sub(2) & !1
+}
+
 fn band_bins(frf: &Frf, band: (f64, f64)) -> Vec<(usize, f64)> {
     frf.frequencies
         .iter()

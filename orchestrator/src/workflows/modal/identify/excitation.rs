@@ -16,15 +16,51 @@ pub const FORCE_PEAK: f64 = 10.0;
 /// ±0.1 Hz at 2.5 Hz is 8 %), not a force whose level merely slopes across its band.
 pub const FORCE_PEAK_WIDTH: f64 = 0.25;
 
-/// Hz, the force's own peaks within `band`: each run of bins where `force_psd` stands
-/// [`FORCE_PEAK`] times above its median over `band`, at most [`FORCE_PEAK_WIDTH`] of its
-/// centre wide, widened by a bin each side. None for a force flat over its band (a shaker's
-/// band-limited noise), or whose power is all in one narrow band (nothing to stand above).
+/// Hz, the force's own peaks within `band`, the band it excites: each run of bins where
+/// `force_psd` stands [`FORCE_PEAK`] times above its median over `band`, at most
+/// [`FORCE_PEAK_WIDTH`] of its centre wide, widened by a bin each side; else, for a force whose
+/// power is all in one narrow band, that band ([`narrow_band`]). None for a force flat over a
+/// broad band (a shaker's band-limited noise).
 pub(super) fn force_peaks(
     frequencies: &[f64],
     force_psd: &[f64],
     band: (f64, f64),
 ) -> Vec<(f64, f64)> {
+    let within = peaks_within(frequencies, force_psd, band);
+    if !within.is_empty() {
+        return within;
+    }
+    narrow_band(frequencies, force_psd, band)
+        .into_iter()
+        .collect()
+}
+
+/// The band a force excites, widened by a bin each side, when the force's power is all there
+/// and the band is narrow: at most [`FORCE_PEAK_WIDTH`] of its centre wide, its median PSD
+/// [`FORCE_PEAK`] times above the median of the rest of the spectrum (a mass damper or a
+/// shaker held at one frequency, with no floor for a peak to stand above inside the band). On
+/// a 5-storey tower driven at 2.4–2.6 Hz alone, FDD read the force's band as a 2.54 Hz mode
+/// (its modes 1.26 and 3.68 Hz on either side).
+fn narrow_band(frequencies: &[f64], force_psd: &[f64], band: (f64, f64)) -> Option<(f64, f64)> {
+    let (low, high) = band;
+    if high - low > FORCE_PEAK_WIDTH * 0.5 * (low + high) || frequencies.len() < 2 {
+        return None;
+    }
+    let median = |inside: bool| {
+        let mut levels: Vec<f64> = (1..frequencies.len().min(force_psd.len()))
+            .filter(|&k| (frequencies[k] >= low && frequencies[k] <= high) == inside)
+            .map(|k| force_psd[k])
+            .collect();
+        levels.sort_by(f64::total_cmp);
+        levels.get(levels.len() / 2).copied()
+    };
+    let bin = frequencies[1] - frequencies[0];
+    let (inside, outside) = (median(true)?, median(false)?);
+    (inside > 0.0 && inside >= FORCE_PEAK * outside).then_some((low - bin, high + bin))
+}
+
+/// [`force_peaks`]'s runs of bins standing above the force's median over `band`.
+fn peaks_within(frequencies: &[f64], force_psd: &[f64], band: (f64, f64)) -> Vec<(f64, f64)> {
     let bins: Vec<usize> = (1..frequencies.len().min(force_psd.len()))
         .filter(|&k| frequencies[k] >= band.0 && frequencies[k] <= band.1)
         .collect();
@@ -125,7 +161,8 @@ mod tests {
     use super::*;
 
     /// A narrow band 10⁴ times above a broad floor is the force's peak; a flat band-limited
-    /// force and a force that is all one narrow band have none.
+    /// force has none; a force that is all one narrow band has that band (a flat spectrum
+    /// read over a narrow band has none).
     #[test]
     fn a_narrow_band_over_a_floor_is_the_forces_peak() {
         let frequencies: Vec<f64> = (0..500).map(|k| 0.1 * k as f64).collect();
@@ -141,6 +178,18 @@ mod tests {
         );
         let flat = vec![1.0; 500];
         assert!(force_peaks(&frequencies, &flat, (0.1, 49.9)).is_empty());
-        assert!(force_peaks(&frequencies, &floor_and_peak, (2.4, 2.6)).is_empty());
+        let narrow = force_peaks(&frequencies, &floor_and_peak, (2.4, 2.6));
+        assert_eq!(narrow.len(), 1, "{narrow:?}");
+        assert!(
+            (narrow[0].0 - 2.3).abs() < 1e-9 && (narrow[0].1 - 2.7).abs() < 1e-9,
+            "{narrow:?}"
+        );
+        assert!(force_peaks(&frequencies, &flat, (2.4, 2.6)).is_empty());
+        // All its power in 1–4 Hz, wider than a quarter of its centre: a band-limited force,
+        // not a peak.
+        let band_limited: Vec<f64> = (0..500)
+            .map(|k| if (10..=40).contains(&k) { 1.0 } else { 1e-4 })
+            .collect();
+        assert!(force_peaks(&frequencies, &band_limited, (1.0, 4.0)).is_empty());
     }
 }

@@ -11,7 +11,7 @@ use super::{
     IdentifyError, MethodModes, RunView, DEFAULT_BAND_TOP, EVIDENCE_SEGMENTS, LSCF_ORDER_REACH,
     LSCF_ORDER_STEP,
 };
-use numerics::modal::lscf::{lscf, LscfOptions};
+use numerics::modal::lscf::{highest_order, lscf, LscfOptions};
 use numerics::modal::spectral::{Frf, Welch};
 use numerics::modal::stabilisation::{
     forming_poles, screen_by_peaks, screen_modes, select_modes, ModelOrder, ScreenOptions,
@@ -70,7 +70,9 @@ impl Estimation<'_> {
         }
     }
 
-    /// LSCF's model orders over `band`: 2 to the largest order asked for, then on by
+    /// LSCF's model orders over `band`: 2 to the largest order asked for (or the highest a
+    /// narrow band's bins fit: a mass damper's 2.4–2.6 Hz alone is 41 bins, short of order 40's
+    /// 42, and failed the whole identification), then on by
     /// [`LSCF_ORDER_STEP`] orders at a time, up to [`LSCF_ORDER_REACH`] times it, while
     /// [`Estimation::sweep_on`] finds modes still forming or FRF peaks no mode explains. The
     /// sweep also ends where the basis loses rank (a narrow band's short arc).
@@ -81,8 +83,9 @@ impl Estimation<'_> {
         evidence: &Peaks,
         screen: &ScreenOptions,
     ) -> Result<Sweep, IdentifyError> {
+        let fits = highest_order(frf, band).max(2);
         let first = LscfOptions {
-            max_order: self.options.max_order,
+            max_order: self.options.max_order.min(fits),
             weighting: self.options.weighting,
             ..LscfOptions::over(band)
         };
