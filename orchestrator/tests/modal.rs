@@ -338,6 +338,65 @@ mod records {
         assert_eq!(ssi.len(), exact.len(), "SSI-COV {ssi:?}");
     }
 
+    /// Ten storeys (2.6–35 Hz), the force at floor 2 band-limited to 0.5–40 Hz, 200 Hz for
+    /// 300 s, every floor measured, 2 % white and 5 % coloured noise: the tallest of the
+    /// issue's 3–10-storey buildings. (At floor 3 the force sits on a node of mode 4 — a
+    /// uniform chain's mode j is sin((2j − 1) i π / 21) at floor i — and no method can see it.)
+    /// Measured: LSCF's ten modes within 0.007 %, damping within 0.8 % of the exact; SSI-COV 7
+    /// of 10 (not 2.64, 33.74, 34.92 Hz), none spurious. Bars: the 0.5 % and damping
+    /// within the larger of 10 % and 2.5 reported sds for LSCF, nothing spurious for both.
+    /// FDD, a cross-check, kept 4.1457 Hz, no mode: printed, not asserted (open).
+    #[test]
+    fn every_mode_of_a_ten_storey_building_under_a_band_limited_force() {
+        let (data, exact) = record(
+            10,
+            (&[5.2; 10], &[64_000.0; 10], &[14.0; 10]),
+            2,
+            (200.0, 300.0),
+            (0.5, 40.0),
+            &(1..=10).collect::<Vec<_>>(),
+            0.05,
+            21,
+        );
+        let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
+        let io = found.input_output.as_ref().expect("LSCF ran");
+        println!("band {:?}", io.band);
+        println!(
+            "exact {:.4?}",
+            exact.iter().map(|e| e.frequency).collect::<Vec<_>>()
+        );
+        println!("LSCF {:.4?}", lscf_frequencies(&found));
+        println!("SSI {:.4?}", frequencies_of(&found.ssi.modes));
+        println!("FDD {:.4?}", frequencies_of(&found.fdd.modes));
+        let (nearest, spurious) = matched(&lscf_frequencies(&found), &exact);
+        for ((i, error), e) in nearest.iter().zip(&exact) {
+            let m = &io.modes[*i].identified;
+            println!(
+                "{:.4} Hz: LSCF {:+.4} %, ζ {:.3} ± {:.3} % for {:.3} %",
+                e.frequency,
+                100.0 * error,
+                100.0 * m.damping,
+                100.0 * m.damping_sd,
+                100.0 * e.damping
+            );
+            assert!(error.abs() < 0.005, "{} Hz: {error}", e.frequency);
+            let bar = (0.10 * e.damping).max(2.5 * m.damping_sd);
+            assert!(
+                (m.damping - e.damping).abs() <= bar,
+                "{} Hz: ζ {} for {}",
+                e.frequency,
+                m.damping,
+                e.damping
+            );
+        }
+        assert!(spurious.is_empty(), "LSCF spurious {spurious:?}");
+        assert_eq!(io.modes.len(), exact.len());
+        let ssi = frequencies_of(&found.ssi.modes);
+        println!("SSI-COV {ssi:.4?}");
+        let (_, spurious) = matched(&ssi, &exact);
+        assert!(spurious.is_empty(), "SSI-COV spurious {spurious:?}");
+    }
+
     /// Towers whose modes sit low in a broad force's band: five storeys (1.26–8.49 Hz) under a
     /// force at the top over the whole record's band, 0–50 Hz at 100 Hz for 410 s (the
     /// `twin synth --storeys 5 --excitation force:5` tower), seven storeys (0.93–8.66 Hz) and
