@@ -158,7 +158,7 @@ fn a_softer_storey_pairs_as_a_frequency_drop_in_units_of_the_sd() {
 // ---------------------------------------------------------------------------------------------
 
 mod records {
-    use numerics::modal::stabilisation::Rejection;
+    use numerics::modal::stabilisation::{IdentifiedMode, Rejection};
     use numerics::modal::{mac, modes, Mode};
     use orchestrator::record::{AmbientRecord, Measurement};
     use orchestrator::synth::{synth_record, NoiseLevel, Scenario};
@@ -264,6 +264,12 @@ mod records {
         (nearest, spurious)
     }
 
+    /// The damping bar: `m`'s damping within the larger of 10 % of the exact mode's and
+    /// 2.5 of its reported sds.
+    fn damping_within_bar(m: &IdentifiedMode, e: &Mode) -> bool {
+        (m.damping - e.damping).abs() <= (0.10 * e.damping).max(2.5 * m.damping_sd)
+    }
+
     /// Every exact mode found by LSCF within the 0.5 % and its damping within the
     /// larger of 10 % and 2.5 reported sds, and no LSCF mode 1 % from every exact one.
     fn lscf_holds_every_mode(found: &RecordModes, exact: &[Mode]) {
@@ -281,9 +287,8 @@ mod records {
                 100.0 * e.damping
             );
             assert!(error.abs() < 0.005, "{} Hz: {error}", e.frequency);
-            let bar = (0.10 * e.damping).max(2.5 * m.damping_sd);
             assert!(
-                (m.damping - e.damping).abs() <= bar,
+                damping_within_bar(m, e),
                 "{} Hz: ζ {} for {}",
                 e.frequency,
                 m.damping,
@@ -971,9 +976,8 @@ mod records {
                     100.0 * e.damping,
                     100.0 * error
                 );
-                let bar = (0.10 * e.damping).max(2.5 * m.damping_sd);
                 assert!(
-                    (m.damping - e.damping).abs() <= bar,
+                    damping_within_bar(m, e),
                     "{name}: {} Hz: damping {} for {}",
                     e.frequency,
                     m.damping,

@@ -46,16 +46,15 @@ fn narrow_band(frequencies: &[f64], force_psd: &[f64], band: (f64, f64)) -> Opti
     if high - low > FORCE_PEAK_WIDTH * 0.5 * (low + high) || frequencies.len() < 2 {
         return None;
     }
-    let median = |inside: bool| {
-        let mut levels: Vec<f64> = (1..frequencies.len().min(force_psd.len()))
-            .filter(|&k| (frequencies[k] >= low && frequencies[k] <= high) == inside)
-            .map(|k| force_psd[k])
-            .collect();
-        levels.sort_by(f64::total_cmp);
-        levels.get(levels.len() / 2).copied()
+    let bins = |inside: bool| {
+        (1..frequencies.len().min(force_psd.len()))
+            .filter(move |&k| (frequencies[k] >= low && frequencies[k] <= high) == inside)
     };
     let bin = frequencies[1] - frequencies[0];
-    let (inside, outside) = (median(true)?, median(false)?);
+    let (inside, outside) = (
+        median_level(force_psd, bins(true))?,
+        median_level(force_psd, bins(false))?,
+    );
     (inside > 0.0 && inside >= FORCE_PEAK * outside).then_some((low - bin, high + bin))
 }
 
@@ -67,9 +66,9 @@ fn peaks_within(frequencies: &[f64], force_psd: &[f64], band: (f64, f64)) -> Vec
     if bins.len() < 3 {
         return Vec::new();
     }
-    let mut levels: Vec<f64> = bins.iter().map(|&k| force_psd[k]).collect();
-    levels.sort_by(f64::total_cmp);
-    let median = levels[levels.len() / 2];
+    let Some(median) = median_level(force_psd, bins.iter().copied()) else {
+        return Vec::new();
+    };
     let bin = frequencies[1] - frequencies[0];
     let mut peaks = Vec::new();
     let mut run: Option<(f64, f64)> = None;
@@ -87,6 +86,13 @@ fn peaks_within(frequencies: &[f64], force_psd: &[f64], band: (f64, f64)) -> Vec
         .filter(|(low, high)| high - low <= FORCE_PEAK_WIDTH * 0.5 * (low + high))
         .map(|(low, high)| (low - bin, high + bin))
         .collect()
+}
+
+/// The median of `force_psd` over `bins`; None when there are none.
+fn median_level(force_psd: &[f64], bins: impl Iterator<Item = usize>) -> Option<f64> {
+    let mut levels: Vec<f64> = bins.map(|k| force_psd[k]).collect();
+    levels.sort_by(f64::total_cmp);
+    levels.get(levels.len() / 2).copied()
 }
 
 /// Moves the modes of `modes` that lie in one of the force's `peaks` and that no FRF peak
