@@ -4,6 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod modal_records;
+
 /// The workspace root (the bundled data is under `data/`).
 pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
