@@ -35,8 +35,8 @@ import scipy.signal
 from conftest import run_twin_ok
 
 
-# The band-limited five-storey building of tests/modal.rs (5.0–33.9 Hz, 0.36–2.3 %): force at
-# floor 2, 0.5–40 Hz, 200 Hz for 300 s, every floor measured, 2 % sensor noise.
+# The band-limited five-storey building of tests/modal_buildings.rs (5.0–33.9 Hz, 0.36–2.3 %):
+# force at floor 2, 0.5–40 Hz, 200 Hz for 300 s, every floor measured, 2 % sensor noise.
 FIVE = ["--storeys", "5", "--excitation", "force:2", "--mass", "5.2,5.2,5.2,5.2,5.2",
         "--stiffness", "64000,64000,64000,64000,64000", "--damping", "14,14,14,14,14",
         "--sample-rate", "200", "--duration", "300", "--low-hz", "0.5", "--band-hz", "40",

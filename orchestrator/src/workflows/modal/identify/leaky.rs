@@ -22,7 +22,7 @@ use super::{record_modes, Estimation, MethodModes};
 pub const LEAKY_BINS: f64 = 4.0;
 
 /// The least relative rise of the time-domain fit's residual, the mode left out, for a leaky
-/// mode to stand ([`Rejection::NotInRecord`]). Measured (`tests/modal.rs`,
+/// mode to stand ([`Rejection::NotInRecord`]). Measured (`tests/modal_*.rs`,
 /// `tests/modal_bundled.rs`, `tests/modal_evidence.rs`, the bundled records): the structural
 /// modes 0.126–1946 (the lowest a five-storey tower's top mode, 8.41 Hz, not leaky; the
 /// lowest leaky one dataset3's 2.00 Hz, 0.316, its record's contact leaving a linear fit

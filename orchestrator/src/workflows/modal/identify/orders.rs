@@ -8,7 +8,7 @@ use super::peaks::explained;
 use super::MethodModes;
 
 /// The least share of the largest cluster's orders a mode's cluster holds. Measured on the
-/// project's records (`tests/modal.rs`, `tests/modal_bundled.rs`, `tests/modal_evidence.rs`,
+/// project's records (`tests/modal_*.rs`, `tests/modal_bundled.rs`, `tests/modal_evidence.rs`,
 /// LSCF): structural modes hold 0.52–1.00 of the largest cluster (the lowest: the paper rig's
 /// dataset2 5.75 Hz, 13 of 25, set aside anyway as one resonance with 5.96 Hz; then the
 /// ten-storey tower's top mode, 19 of 35, and the eight-storey one's 6.54 Hz, 9 of 16);
@@ -61,7 +61,7 @@ pub(super) fn screen_by_orders(
 /// whole sweep (`full`) the ones at an FRF peak the sweep went on for (`sought`, within two
 /// bins of `bins`) that no mode of `base` explains; the whole sweep's other modes formed past
 /// `asked` set aside ([`Rejection::Unsought`]). The diagram is the whole sweep's. Measured on
-/// the lab frame's single-channel runs (`tests/modal.rs`): forced over 0–250 Hz, the sweep
+/// the lab frame's single-channel runs (`tests/modal_lab.rs`): forced over 0–250 Hz, the sweep
 /// went on for the 0.39 %-damped 3.17 Hz peak, which a mode formed past order 40 explains;
 /// forced over 1–60 Hz with 5 % coloured noise, run 3's whole sweep (to order 100) split
 /// 3.17 and 9.03 Hz into doubles and made modes of noise at 8.89–44.1 Hz that passed every
