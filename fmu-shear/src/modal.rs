@@ -7,8 +7,9 @@
 //! recursion `zⱼ,ₖ₊₁ = φ(λⱼ) zⱼₖ + γ₀(λⱼ) eₖ + γ₁(λⱼ) ėₖ` of the same sub-steps. A parameter
 //! moves each mode's eigenvalue (`λⱼ' = wⱼᵀ A' vⱼ`) and its projector
 //! (`Pⱼ' = Σᵢ≠ⱼ (Pᵢ A' Pⱼ + Pⱼ A' Pᵢ)/(λⱼ − λᵢ)`, simple eigenvalues), so an output's derivative
-//! is a fixed linear combination of `zⱼ`, `∂zⱼ/∂λ` (a second scalar recursion), the state and
-//! the input: `∂yₖ/∂θ = K ζₖ`. Per sample that is O(N) recursions and one row of `ζ`; a fit's
+//! is a fixed linear combination of `zⱼ`, `∂zⱼ/∂λ` (a second scalar recursion) and the input
+//! (the state, from rest `Σⱼ vⱼ βⱼ zⱼ`, folded into the `zⱼ` terms): `∂yₖ/∂θ = K ζₖ`, `ζₖ` of
+//! `4N + 1` entries. Per sample that is O(N) recursions and one row of `ζ`; a fit's
 //! `Jᵀ J` is `K (Σₖ ζₖ ζₖᵀ) Kᵀ` — one Gram matrix of `ζ` for every channel and parameter, where
 //! the sensitivity state costs `2N × 3N × 2N` a sample ([`crate::batch`]).
 //!
@@ -192,7 +193,9 @@ impl Modes {
 
 /// The derivatives of the measured accelerations through the modes: `∂yₖ/∂(direction a)` is
 /// row `a` of `coefficients[slot]` times `ζₖ` (`[Re z, Im z, Re ∂z/∂λ, Im ∂z/∂λ]` of each kept
-/// mode, then the state, then the excitation).
+/// mode, then the excitation). A run starts at rest, so the state is the modes' sum
+/// `xₖ = Σⱼ vⱼ βⱼ zⱼₖ`: its part of a derivative is folded into the modes' `z` coefficients and
+/// `ζ` carries no state (`4 · kept + 1` entries, not `4 · kept + 2N + 1`).
 pub struct Modal {
     map: LinearStepMap,
     steps: Vec<ModeStep>,
@@ -233,15 +236,15 @@ impl Modal {
         let derivatives: Vec<AccelerationRows> = (0..3 * n)
             .map(|theta| AccelerationRows::derivative(params, theta))
             .collect();
-        let parts = ModeParts::new(&modes, &derivatives, &alpha);
+        let parts = ModeParts::new(&modes, &derivatives, &alpha, floors);
         // One slot's 3N × L coefficients at a time, in one buffer, taken along the directions.
-        let mut k = DMatrix::zeros(derivatives.len(), 4 * modes.kept.len() + s + 1);
+        let mut k = DMatrix::zeros(derivatives.len(), 4 * modes.kept.len() + 1);
         let unit = unit_rows(directions);
         let coefficients = floors
             .iter()
             .enumerate()
-            .map(|(slot, &f)| {
-                assemble(&modes, &parts, &alpha, &derivatives, (slot, f), &mut k);
+            .map(|(slot, _)| {
+                assemble(&modes, &parts, &alpha, &derivatives, slot, &mut k);
                 along(directions, unit.as_deref(), &k)
             })
             .collect();
@@ -266,7 +269,7 @@ impl Modal {
 
     /// The length of `ζₖ`.
     pub fn width(&self) -> usize {
-        4 * self.steps.len() + self.states + 1
+        4 * self.steps.len() + 1
     }
 
     /// Per slot, the d × L coefficients of `ζ`.
@@ -278,7 +281,21 @@ impl Modal {
     /// `k0`, `predictions[slot][b]` what the accelerometer of `slot` reads at sample `k0 + b`
     /// (as [`crate::batch::accelerations_along`] gives it, to the bit) and `zeta` (L × block,
     /// column-major) their `ζ`.
-    pub fn run(&self, record: &LinearRecord, mut each: impl FnMut(usize, &[Vec<f64>], &[f64])) {
+    pub fn run(&self, record: &LinearRecord, each: impl FnMut(usize, &[Vec<f64>], &[f64])) {
+        self.pass(record, true, each);
+    }
+
+    /// [`Modal::run`]'s `ζ` alone (`each(k0, zeta)`), without the state the predictions need.
+    pub fn zeta(&self, record: &LinearRecord, mut each: impl FnMut(usize, &[f64])) {
+        self.pass(record, false, |k0, _, zeta| each(k0, zeta));
+    }
+
+    fn pass(
+        &self,
+        record: &LinearRecord,
+        predict: bool,
+        mut each: impl FnMut(usize, &[Vec<f64>], &[f64]),
+    ) {
         let (s, width) = (self.states, self.width());
         let e = record.excitation;
         let samples = e.len();
@@ -299,20 +316,21 @@ impl Modal {
                 for (m, (zm, wm)) in z.iter().zip(&w).enumerate() {
                     column[4 * m..4 * m + 4].copy_from_slice(&[zm.re, zm.im, wm.re, wm.im]);
                 }
-                let direct = 4 * self.steps.len();
-                column[direct..direct + s].copy_from_slice(&x);
-                column[direct + s] = e[k];
+                column[4 * self.steps.len()] = e[k];
+                for ((step, zm), wm) in self.steps.iter().zip(&mut z).zip(&mut w) {
+                    let input = step.g0 * e[k] + step.g1 * slope;
+                    *wm = step.phi * *wm + step.dphi * *zm + step.dg0 * e[k] + step.dg1 * slope;
+                    *zm = step.phi * *zm + input;
+                }
+                if !predict {
+                    continue;
+                }
                 for ((sparse, b_e), out) in self.outputs.iter().zip(&mut predictions) {
                     let mut value = b_e * e[k];
                     for &(c, a) in sparse {
                         value += a * x[c];
                     }
                     out.push(if self.base { value + e[k] } else { value });
-                }
-                for ((step, zm), wm) in self.steps.iter().zip(&mut z).zip(&mut w) {
-                    let input = step.g0 * e[k] + step.g1 * slope;
-                    *wm = step.phi * *wm + step.dphi * *zm + step.dg0 * e[k] + step.dg1 * slope;
-                    *zm = step.phi * *zm + input;
                 }
                 let inputs = StepInputs {
                     excitation: e[k],
@@ -330,10 +348,12 @@ impl Modal {
 }
 
 /// What each parameter does to each kept mode: the measured slots' coefficient of `zⱼ` through
-/// the projector's part in the other modes (`outputs`: slots × (3N · kept), column `θ · kept + m`),
-/// its part through the mode itself (`own`, to be taken times αⱼ) and the eigenvalue's derivative
-/// (`dlambda`), both 3N × kept.
+/// the projector's part in the other modes and through the state at a fixed state (`A'`'s row of
+/// the slot's floor times `vⱼ βⱼ`: the state from rest is `Σⱼ vⱼ βⱼ zⱼ`) (`outputs`: slots ×
+/// (3N · kept), column `θ · kept + m`), its part through the mode itself (`own`, to be taken
+/// times αⱼ) and the eigenvalue's derivative (`dlambda`), both 3N × kept; the slots' floors.
 struct ModeParts {
+    floors: Vec<usize>,
     outputs: Mat<C64>,
     own: DMatrix<C64>,
     dlambda: DMatrix<C64>,
@@ -346,7 +366,12 @@ impl ModeParts {
     /// rows. The outputs' part `Σᵢ αᵢ (Wᵀ A' V)ᵢⱼ βⱼ / (λⱼ − λᵢ)` is `βⱼ Σᵣ Yᵣⱼ Gⱼ[r]`, with
     /// `Gⱼ = (α ∘ 1/(λⱼ − λ)) Wᵀ_a` the same for every parameter: one product per kept mode, and
     /// O(N) a parameter after it (where a dense `Wᵀ A' V` costs O(N³) a parameter).
-    fn new(modes: &Modes, derivatives: &[AccelerationRows], alpha: &Mat<C64>) -> ModeParts {
+    fn new(
+        modes: &Modes,
+        derivatives: &[AccelerationRows],
+        alpha: &Mat<C64>,
+        floors: &[usize],
+    ) -> ModeParts {
         let s = modes.lambda.len();
         let n = s / 2;
         let p = derivatives.len();
@@ -377,12 +402,19 @@ impl ModeParts {
             for (m, &(j, _)) in modes.kept.iter().enumerate() {
                 let col = theta * kept + m;
                 let beta = modes.beta[j];
-                for slot in 0..slots {
+                for (slot, floor) in floors.iter().enumerate() {
                     let through: C64 = y
                         .rows
                         .iter()
                         .zip(&y.values)
-                        .map(|(&r, yr)| yr[j] * g[(m * slots + slot, r)])
+                        .map(|(&r, yr)| {
+                            let state = if r == *floor {
+                                yr[j]
+                            } else {
+                                C64::new(0.0, 0.0)
+                            };
+                            yr[j] * g[(m * slots + slot, r)] + state
+                        })
                         .sum();
                     outputs[(slot, col)] = through * beta;
                 }
@@ -406,6 +438,7 @@ impl ModeParts {
             }
         }
         ModeParts {
+            floors: floors.to_vec(),
             outputs,
             own,
             dlambda,
@@ -444,22 +477,21 @@ impl SparseRows {
 }
 
 /// The derivatives' coefficients of `ζ` of the slot `(slot, floor)` along the 3N parameters,
-/// into `k` (3N × L): each kept mode's `zⱼ` (`Σᵢ … + αⱼ own`) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as
-/// twice the real part of a conjugate pair, then the state and the excitation at a fixed state.
+/// into `k` (3N × L): each kept mode's `zⱼ` (`Σᵢ … + αⱼ own`, the first with the state's part
+/// at a fixed state, see [`ModeParts`]) and `∂zⱼ/∂λ` (`αⱼ βⱼ λⱼ'`), as twice the real part of a
+/// conjugate pair, then the excitation's at a fixed state.
 fn assemble(
     modes: &Modes,
     parts: &ModeParts,
     alpha: &Mat<C64>,
     derivatives: &[AccelerationRows],
-    (slot, f): (usize, usize),
+    slot: usize,
     k: &mut DMatrix<f64>,
 ) {
     let kept = modes.kept.len();
-    let s = modes.lambda.len();
     let cz = &parts.outputs;
-    let direct = 4 * kept;
-    // Column by column (the matrix's order): a mode's four, then the state's, then the
-    // excitation's, each down the parameters.
+    // Column by column (the matrix's order): a mode's four, then the excitation's, each down
+    // the parameters.
     for (m, &(j, weight)) in modes.kept.iter().enumerate() {
         let a = alpha[(slot, j)];
         let ab = a * modes.beta[j];
@@ -473,10 +505,7 @@ fn assemble(
         }
     }
     for (theta, d) in derivatives.iter().enumerate() {
-        for c in 0..s {
-            k[(theta, direct + c)] = d.a[(f, c)];
-        }
-        k[(theta, direct + s)] = d.b_excitation[f];
+        k[(theta, 4 * kept)] = d.b_excitation[parts.floors[slot]];
     }
 }
 
@@ -634,7 +663,7 @@ pub fn band(modal: &Modal, record: &LinearRecord, coefficients: &[DMatrix<f64>])
     let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(samples); coefficients.len()];
     let d = coefficients.first().map_or(0, DMatrix::nrows);
     let mut along = Mat::<f64>::zeros(d, BLOCK);
-    modal.run(record, |_, _, zeta| {
+    modal.zeta(record, |_, zeta| {
         let len = zeta.len() / width;
         let z = MatRef::from_column_major_slice(zeta, width, len);
         for (k, variances) in coefficients.iter().zip(&mut out) {
@@ -705,7 +734,7 @@ mod tests {
 
     /// Four, twelve and twenty storeys, a force and ground motion: `K ζₖ` is the sensitivity
     /// state's derivative at every sample, and the predictions are its values to the bit.
-    /// Measured worst 7.5e-12 of the largest derivative (twenty storeys, ground motion); the bar
+    /// Measured worst 7.8e-12 of the largest derivative (twenty storeys, ground motion); the bar
     /// 1e-8.
     #[test]
     fn the_modes_give_the_sensitivity_states_derivatives() {
