@@ -648,7 +648,7 @@ impl Background {
                 e.answer = result
                     .as_ref()
                     .ok()
-                    .and_then(super::answer)
+                    .and_then(super::adopt::answer)
                     .map(|a| (second::to_json(&a), job.span().1));
             }
         }
@@ -734,7 +734,7 @@ fn effect_before(twin: &Twin, d: &Diagnosis, m: &Measurement, at: f64) -> Option
     if d.action != Action::AddPhysics {
         return None;
     }
-    let answer = super::answer(d)?;
+    let answer = super::adopt::answer(d)?;
     let (old, new) = before_the_change(twin, &answer, m, at, BEFORE_SKIP).ok()??;
     let label = d
         .effects

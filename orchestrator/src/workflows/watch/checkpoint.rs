@@ -1,20 +1,17 @@
 //! The checkpoint: everything a restarted watcher needs to go on exactly (stream position,
-//! comparison state, counters, the FMUs' serialised states), saved now and then and read back
-//! at the start; the noise reference's running sums.
+//! comparison state, counters, the FMUs' serialised states), read back at the start (the
+//! watcher saves it now and then); the noise reference's running sums.
 
 use super::adopt::Adopted;
 use super::online::{Detector, Options};
 use super::stepper::{NodeState, Stepper};
 use super::supervise::Supervisor;
-use super::watcher::Watcher;
 use super::{background, WatchError};
-use crate::fsutil::write_text_atomically;
 use ::structure::channel::Channel;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::Instant;
 
 /// A checkpoint's format version (2: any channels).
 pub(super) const CHECKPOINT_VERSION: u32 = 2;
@@ -175,24 +172,4 @@ pub(super) fn start_state(
         }
         None => State::fresh(detector_options, excitation, channels.to_vec()),
     })
-}
-
-impl Watcher<'_> {
-    pub(super) fn save(&mut self) -> Result<(), WatchError> {
-        let Some(path) = &self.options.checkpoint else {
-            return Ok(());
-        };
-        if self.state.segment_start.is_some() {
-            self.state.fmu = self.stepper.save()?;
-            self.state.fmu_last = self.stepper.last();
-        }
-        if let Some(b) = &self.background {
-            self.state.background = b.saved.clone();
-        }
-        let text = serde_json::to_string(&self.state)
-            .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
-        write_text_atomically(path, &text)?;
-        self.saved_at = Some(Instant::now());
-        Ok(())
-    }
 }

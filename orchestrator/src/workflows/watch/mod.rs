@@ -20,11 +20,14 @@ mod second;
 pub mod stepper;
 pub mod supervise;
 
+// The watch's own files in layers: data and rules (adopt, alerts, checkpoint, observe, options,
+// stream) below the watcher that uses them, the run over the stream on top.
 mod adopt;
 mod alerts;
 mod checkpoint;
 mod observe;
 mod options;
+mod run;
 mod stream;
 mod watcher;
 
@@ -43,18 +46,16 @@ use online::Options;
 use supervise::Supervisor;
 
 pub use adopt::Adopted;
+use alerts::Alerts;
+use checkpoint::{read_checkpoint, start_state};
 pub use observe::{LearningSummary, LiveState, Observer, Point, Status, Summary};
+use options::check_options;
 pub use options::{
     StreamSource, WatchOptions, CHECKPOINT_EVERY, FILE_IDLE, GAP_FACTOR, NOISE_REFERENCE, WINDOW,
 };
-
-// What the stages share: each submodule reads the others' through `use super::*`.
-use adopt::*;
-use alerts::*;
-use checkpoint::*;
-use options::*;
-use stream::*;
-use watcher::*;
+use run::{end, read_stream};
+use stream::{opening, stream_header, LineReader, Opening, Stream};
+use watcher::{background_of, modes_to_track, open_stepper, Watcher};
 
 #[derive(Debug, thiserror::Error)]
 pub enum WatchError {

@@ -2,15 +2,11 @@
 //! [`Observer`] (`twin watch --serve`) told of the samples, alerts and state, and the summary the
 //! `end` alert carries.
 
-use super::background::Background;
 use super::mqtt::ConnectionStats;
-use super::online::Detector;
-use super::watcher::Watcher;
-use ::structure::channel::Channel;
 use serde::Serialize;
 use serde_json::Value;
 use std::collections::BTreeMap;
-use std::time::{Instant, SystemTime};
+use std::time::SystemTime;
 
 /// What the progress display shows.
 #[derive(Debug, Clone)]
@@ -133,108 +129,4 @@ pub struct LearningSummary {
     pub threshold: Option<Vec<f64>>,
     /// The largest V(f) / threshold over the stream.
     pub largest_ratio: f64,
-}
-
-pub(super) fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
-    Status {
-        samples: w.state.samples,
-        time: w.state.last_time.unwrap_or(0.0),
-        samples_per_second: this_run as f64 / started.elapsed().as_secs_f64().max(1e-9),
-        channels: w.state.channels.iter().map(Channel::name).collect(),
-        rolling_nmse: w
-            .state
-            .detector
-            .as_ref()
-            .map_or_else(|| w.nan(), Detector::rolling_nmse),
-        open_window: w.state.detector.as_ref().is_some_and(Detector::window_open),
-        diagnosing: w.background.as_ref().is_some_and(Background::busy),
-    }
-}
-
-impl Watcher<'_> {
-    /// Tell the live view, if any; a panic in it drops the view, never the watch.
-    pub(super) fn observe<R>(&mut self, call: impl FnOnce(&mut dyn Observer) -> R) -> Option<R> {
-        let observer = self.observer.as_deref_mut()?;
-        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| call(observer))) {
-            Ok(r) => Some(r),
-            Err(_) => {
-                eprintln!("the live page failed; the watch goes on without it");
-                self.observer = None;
-                None
-            }
-        }
-    }
-
-    /// The sample just processed (its line read at `began`), to the live view when it is due.
-    pub(super) fn show(&mut self, time: f64, began: Instant) {
-        if self.observer.is_none() || !self.observe(|o| o.due(time)).unwrap_or(false) {
-            return;
-        }
-        // The wall time it was read at, from the instant the loop took anyway: no clock read
-        // per sample for the page.
-        let read_at = SystemTime::now()
-            .checked_sub(began.elapsed())
-            .unwrap_or(SystemTime::UNIX_EPOCH);
-        let band = self
-            .state
-            .noise_variance
-            .as_ref()
-            .map(|v| v.iter().map(|v| 3.0 * v.sqrt()).collect());
-        let latent_sd = if self.stepper.has_learner() && self.state.segment_start.is_some() {
-            self.stepper
-                .latent_variance()
-                .ok()
-                .flatten()
-                .map(|v| v.iter().map(|v| v.max(0.0).sqrt()).collect())
-        } else {
-            None
-        };
-        let (rolling_nmse, open_window) = match &self.state.detector {
-            Some(d) => (d.rolling_nmse(), d.window_open()),
-            None => (self.nan(), false),
-        };
-        let measured = std::mem::take(&mut self.measured);
-        let predicted = std::mem::take(&mut self.predicted);
-        let point = Point {
-            time,
-            read_at,
-            measured: &measured,
-            predicted: &predicted,
-            band,
-            latent_sd,
-            rolling_nmse,
-            open_window,
-        };
-        self.observe(|o| o.point(&point));
-        self.measured = measured;
-        self.predicted = predicted;
-    }
-
-    /// The state, to the live view.
-    pub(super) fn show_state(&mut self, this_run: u64, elapsed: f64, finished: bool) {
-        if self.observer.is_none() {
-            return;
-        }
-        let samples_per_second = this_run as f64 / elapsed.max(1e-9);
-        let state = LiveState {
-            samples: self.state.samples,
-            time: self.state.last_time.unwrap_or(0.0),
-            samples_per_second,
-            real_time_factor: self.state.dt.map_or(f64::NAN, |dt| samples_per_second * dt),
-            gaps: self.state.gaps,
-            missing_samples: self.state.missing_samples,
-            bad_lines: self.state.bad_lines,
-            duplicates: self.state.duplicates,
-            mqtt: self.reader.mqtt().map(|m| m.stats),
-            checkpoint_age: self.saved_at.map(|t| t.elapsed().as_secs_f64()),
-            diagnosing: self.background.as_ref().is_some_and(Background::busy),
-            open_window: self
-                .state
-                .detector
-                .as_ref()
-                .is_some_and(Detector::window_open),
-            finished,
-        };
-        self.observe(|o| o.state(&state));
-    }
 }

@@ -1,17 +1,14 @@
 //! Reading the stream: its lines (standard input, a growing file, an MQTT topic), the header
-//! checked against the twin's structure, the opening of a resumed or broker stream, and the
-//! loop over its samples ([`read_stream`]) with their gaps and duplicates.
+//! checked against the twin's structure, the opening of a resumed or broker stream, and what
+//! reading it measured ([`Run`]). The loop over its samples is [`super::run`]'s.
 
 use super::alerts::Latency;
 use super::checkpoint::State;
 use super::mqtt::{ConnectionEvent, MqttSource};
-use super::observe::{status, Status};
 use super::options::{StreamSource, WatchOptions};
-use super::watcher::{structure_excitation, Watcher};
 use super::{io, WatchError};
 use crate::record::{default_header, ColumnMap, LineLayout};
 use ::structure::channel::Channel;
-use serde_json::json;
 use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::time::{Duration, Instant};
@@ -255,175 +252,6 @@ impl Run {
     }
 }
 
-/// The stream read to its end: each line a header (a broker's), a bad sample or a sample
-/// watched; the checkpoint saved every `checkpoint_every` samples, `progress` and the live view
-/// told five times a second.
-pub(super) fn read_stream(
-    w: &mut Watcher,
-    stream: &Stream,
-    header: &mut Header,
-    progress: &mut impl FnMut(&Status),
-) -> Result<Run, WatchError> {
-    let options = w.options;
-    let mut position = Position {
-        // Lines and samples the checkpoint has consumed are skipped (a broker does not
-        // replay: there only the samples' times tell what was seen).
-        skip_lines: if stream.from_broker { 0 } else { w.state.lines },
-        skip_until: w.state.last_time,
-        line_number: 0,
-        this_run: 0,
-    };
-    let mut latency = Latency::new();
-    let started = Instant::now();
-    let mut since_save: u64 = 0;
-    let mut last_status = Instant::now();
-    // Time spent waiting for a live source (a followed file, a broker), left out of the speed.
-    let mut waited = Duration::ZERO;
-    loop {
-        let asked = Instant::now();
-        let Some(line) = w.next_line()? else {
-            break;
-        };
-        if stream.live {
-            waited += asked.elapsed();
-        }
-        if line.trim().is_empty() {
-            // A file's blank line still counts for the line numbers; a broker's empty line is
-            // only a connection change.
-            if !stream.from_broker {
-                position.line_number += 1;
-            }
-            continue;
-        }
-        position.line_number += 1;
-        if stream.from_broker && is_header(&line) {
-            broker_header(w, stream, header, line, position.line_number)?;
-            continue;
-        }
-        let began = Instant::now();
-        match seen(w, stream, header, &line, &mut position) {
-            Seen::Skipped => {}
-            Seen::Bad(reason) => {
-                w.state.bad_lines += 1;
-                let time = w.state.last_time;
-                // A file's line numbers count the header as line 1; a broker's count the lines
-                // of its messages from 1.
-                let line = if stream.from_broker {
-                    position.line_number
-                } else {
-                    position.line_number + 1
-                };
-                w.alert(time, "bad_sample", json!({"line": line, "reason": reason}))?;
-            }
-            Seen::Sample(time, excitation) => {
-                w.sample(time, excitation)?;
-                w.show(time, began);
-                position.this_run += 1;
-                latency.add(began.elapsed().as_secs_f64());
-                since_save += 1;
-                if since_save >= options.checkpoint_every {
-                    since_save = 0;
-                    w.save()?;
-                }
-                if last_status.elapsed() > Duration::from_millis(200) {
-                    last_status = Instant::now();
-                    progress(&status(w, position.this_run, started));
-                    let elapsed = started.elapsed().saturating_sub(waited).as_secs_f64();
-                    w.show_state(position.this_run, elapsed, false);
-                }
-            }
-        }
-    }
-    Ok(Run {
-        samples: position.this_run,
-        latency,
-        started,
-        waited,
-    })
-}
-
-/// Where the stream is: the line read last, the samples this run took, and what a checkpoint
-/// consumed already (skipped).
-pub(super) struct Position {
-    pub(super) skip_lines: u64,
-    pub(super) skip_until: Option<f64>,
-    pub(super) line_number: u64,
-    pub(super) this_run: u64,
-}
-
-/// What a data line is to the watch.
-pub(super) enum Seen {
-    /// Consumed by the run a checkpoint saved, or a broker's duplicate.
-    Skipped,
-    Bad(String),
-    /// A sample's time and excitation (its responses in the watcher's `measured`).
-    Sample(f64, f64),
-}
-
-/// A broker's header line mid-stream: the header from then on, or a bad sample when it does not
-/// fit the stream.
-pub(super) fn broker_header(
-    w: &mut Watcher,
-    stream: &Stream,
-    header: &mut Header,
-    line: String,
-    line_number: u64,
-) -> Result<(), WatchError> {
-    match Header::parse(&line, &w.options.columns, stream.structure, stream.describe)
-        .and_then(|h| h.for_stream(stream.excitation, stream.channels))
-    {
-        Ok(h) => {
-            *header = h;
-            w.state.header = Some(line);
-        }
-        Err(e) => {
-            w.state.bad_lines += 1;
-            let time = w.state.last_time;
-            w.alert(
-                time,
-                "bad_sample",
-                json!({"line": line_number, "reason": e.to_string()}),
-            )?;
-        }
-    }
-    Ok(())
-}
-
-/// A data line read into the watcher's `measured`: skipped when a checkpoint consumed it or a
-/// broker sent it twice, bad when it does not parse or its time does not increase.
-pub(super) fn seen(
-    w: &mut Watcher,
-    stream: &Stream,
-    header: &Header,
-    line: &str,
-    position: &mut Position,
-) -> Seen {
-    let sample = header.0.sample_into(line, &mut w.measured);
-    if position.line_number <= position.skip_lines {
-        return Seen::Skipped;
-    }
-    if let (Ok((t, ..)), Some(until)) = (&sample, position.skip_until) {
-        if position.this_run == 0 && *t <= until {
-            w.state.lines = position.line_number;
-            return Seen::Skipped;
-        }
-    }
-    w.state.lines = position.line_number;
-    if let (true, Ok((t, ..)), Some(last)) = (stream.from_broker, &sample, w.state.last_time) {
-        if *t <= last {
-            w.state.duplicates += 1;
-            return Seen::Skipped;
-        }
-    }
-    match (sample, w.state.last_time) {
-        (Ok((t, _)), Some(last)) if t <= last => {
-            Seen::Bad(format!("time {t} does not increase (previous {last})"))
-        }
-        (Ok((time, excitation)), _) => Seen::Sample(time, excitation),
-        (Err(reason), _) => Seen::Bad(reason),
-    }
-}
-
 /// Whether a line of an MQTT stream is a header (it starts with a letter, as a column name
 /// does and a time does not).
 pub(super) fn is_header(line: &str) -> bool {
@@ -431,14 +259,9 @@ pub(super) fn is_header(line: &str) -> bool {
         .starts_with(|c: char| c.is_ascii_alphabetic())
 }
 
-impl Watcher<'_> {
-    /// The next line of the stream, the connection's changes reported.
-    pub(super) fn next_line(&mut self) -> Result<Option<String>, WatchError> {
-        if let Some(line) = self.pushed_back.take() {
-            return Ok(Some(line));
-        }
-        let line = self.reader.next();
-        self.connection_alerts()?;
-        line
-    }
+/// The excitation column of `structure`: `force` or `ground_acc`.
+pub(super) fn structure_excitation(structure: &::structure::Structure) -> Channel {
+    Channel::Excitation(::structure::channel::ExcitationKind::of(
+        &structure.excitation,
+    ))
 }

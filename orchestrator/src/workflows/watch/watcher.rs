@@ -1,23 +1,32 @@
-//! One sample's stage: the twin's FMUs stepped once, the prediction compared with each measured
-//! channel once the noise band is known, the modes tracked and the learner supervised; and the
-//! watch's end, its summary.
+//! The watcher: the watch's state between samples (the checkpoint's [`State`], the twin's
+//! stepper, the alerts file, the stream's reader, the background diagnosis, the live view) and
+//! what it does with them. Per sample, the twin's FMUs stepped once, the prediction compared with
+//! each measured channel once the noise band is known, the modes tracked and the learner
+//! supervised; the alerts written; the live view told; the checkpoint saved; a background
+//! diagnosis's answer reported and, on a firm verdict, its twin adopted. It stands on the data
+//! and rules of the files below it (alerts, adopt, checkpoint, observe, options, stream); the
+//! loop over the stream and the watch's end ([`super::run`]) stand on it.
 
+use super::adopt::{adopted_path, answer, answer_fields, answered, Adopted};
 use super::alerts::{floats, window_values, Alerts};
-use super::background::Background;
+use super::background::{self, Background, Columns, Finished};
 use super::checkpoint::{State, Welford};
-use super::observe::{status, LearningSummary, Observer, Status, Summary};
-use super::online::{names_and_floors, Detector};
+use super::mqtt::ConnectionEvent;
+use super::observe::{LiveState, Observer, Point, Status};
+use super::online::{names_and_floors, Detector, Event};
 use super::options::{WatchOptions, GAP_FACTOR, NOISE_REFERENCE};
 use super::stepper::Stepper;
-use super::stream::{LineReader, Run};
+use super::stream::LineReader;
 use super::supervise::{Decision, LearnOptions};
 use super::{modes, WatchError};
+use crate::fsutil::write_text_atomically;
 use crate::record::nominal_step;
-use crate::twin::run::{Tolerance, PRIOR_NOISE_FRACTION};
-use crate::twin::Twin;
+use crate::twin::run::PRIOR_NOISE_FRACTION;
+use crate::twin::{ParameterValue, Twin, TwinError};
 use ::structure::channel::Channel;
 use serde_json::{json, Value};
-use std::time::{Duration, Instant};
+use std::path::PathBuf;
+use std::time::{Instant, SystemTime};
 
 pub(super) struct Watcher<'a> {
     /// Told of every alert written (its JSON object); an error stops the watch.
@@ -91,103 +100,30 @@ pub(super) fn modes_to_track(
     .map_err(|e| WatchError::Options(format!("the twin's modes: {e}")))
 }
 
-/// The excitation column of `structure`: `force` or `ground_acc`.
-pub(super) fn structure_excitation(structure: &::structure::Structure) -> Channel {
-    Channel::Excitation(::structure::channel::ExcitationKind::of(
-        &structure.excitation,
-    ))
-}
-
-/// The stream's end: the checkpoint saved, the open segment finished, the diagnoses still
-/// running awaited, and the `end` alert with the run's summary.
-pub(super) fn end(
-    w: &mut Watcher,
-    run: &Run,
+/// The background diagnosis, when the watch runs one.
+pub(super) fn background_of(
+    twin: &Twin,
+    options: &WatchOptions,
+    state: &State,
+    excitation: Channel,
     channels: &[Channel],
-    tolerance: &Tolerance,
-    budget: Option<u32>,
-    progress: &mut impl FnMut(&Status),
-) -> Result<Summary, WatchError> {
-    let options = w.options;
-    // Saved before the stream's end is judged: a watcher restarted on a source that grew goes
-    // on from here.
-    w.save()?;
-    let elapsed = run.seconds();
-    let this_run = run.samples;
-    let last = w.state.last_time;
-    // The NMSE over the last window at the end (after an adoption: the live twin's).
-    let rolling = w
-        .state
-        .detector
-        .as_ref()
-        .map_or_else(|| w.nan(), Detector::rolling_nmse);
-    if let Some(d) = &mut w.state.detector {
-        let events = d.finish_segment();
-        w.events(last.unwrap_or(0.0), events)?;
-    }
-    progress(&status(w, this_run, run.started));
-    let finished = w.background.as_mut().map(Background::finish);
-    for f in finished.into_iter().flatten() {
-        w.diagnosed(f)?;
-    }
-    let rate = this_run as f64 / elapsed.max(1e-9);
-    let real_time = w.state.dt.map_or(f64::NAN, |dt| rate * dt);
-    let summary = Summary {
-        samples: w.state.samples,
-        samples_this_run: this_run,
-        bad_lines: w.state.bad_lines,
-        duplicates: w.state.duplicates,
-        gaps: w.state.gaps,
-        missing_samples: w.state.missing_samples,
-        alerts: w.state.alerts.clone(),
-        failing_windows: w.state.detector.as_ref().map_or(0, |d| d.failing_windows),
-        mqtt: w.reader.mqtt().map(|m| m.stats),
-        learning: match &w.state.supervisor {
-            Some(s) => Some(LearningSummary {
-                queries: s.queries,
-                learned: options.learning.learn,
-                training_points: if w.state.segment_start.is_some() {
-                    w.stepper.training_points()?
-                } else {
-                    None
-                },
-                budget,
-                threshold: s.threshold.clone(),
-                largest_ratio: s.largest_ratio,
-            }),
-            None => None,
-        },
-        channels: channels.iter().map(Channel::name).collect(),
-        nmse: w
-            .state
-            .detector
-            .as_ref()
-            .map_or_else(|| w.nan(), |d| d.overall.nmse()),
-        noise_source: w.noise_source(),
-        samples_per_second: rate,
-        real_time_factor: real_time,
-        latency_median_us: 1e6 * run.latency.quantile(0.5),
-        latency_p99_us: 1e6 * run.latency.quantile(0.99),
-        tolerance: tolerance.value,
-        still_failing: std::mem::take(&mut w.cut_windows),
-    };
-    let mut body =
-        serde_json::to_value(&summary).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
-    if let Value::Object(map) = &mut body {
-        map.insert("nmse".into(), floats(&summary.nmse));
-        map.insert("rolling_nmse".into(), floats(&rolling));
-        map.insert("tolerance_source".into(), json!(tolerance.source));
-        map.insert(
-            "still_failing".into(),
-            window_values(summary.still_failing.clone()),
-        );
-    }
-    w.alert(last, "end", body)?;
-    w.show_state(this_run, elapsed, true);
-    if let Some(m) = w.reader.mqtt() {
-        m.close(Duration::from_secs(5));
-    }
-    Ok(summary)
+) -> Option<Background> {
+    options.diagnosis.map(|o| {
+        let diagnose = crate::workflows::diagnose::DiagnoseOptions {
+            transient: options.transient,
+            tolerance: options.tolerance,
+            ..Default::default()
+        };
+        let columns = Columns {
+            excitation,
+            channels: channels.to_vec(),
+        };
+        let mut b = Background::new(twin, o, diagnose, state.background.clone(), columns);
+        if let Some(dt) = state.dt {
+            b.set_dt(dt);
+        }
+        b
+    })
 }
 
 impl Watcher<'_> {
@@ -442,5 +378,470 @@ impl Watcher<'_> {
             }
         }
         Ok(())
+    }
+}
+
+// The alerts: written, sent on, and made of the detector's events and the connection's.
+impl Watcher<'_> {
+    pub(super) fn alert(
+        &mut self,
+        time: Option<f64>,
+        kind: &str,
+        mut body: Value,
+    ) -> Result<(), WatchError> {
+        self.state.seq += 1;
+        *self.state.alerts.entry(kind.to_owned()).or_default() += 1;
+        if let Value::Object(map) = &mut body {
+            map.insert("seq".into(), json!(self.state.seq));
+            map.insert("time".into(), json!(time));
+            map.insert("kind".into(), json!(kind));
+        }
+        self.send(&body)
+    }
+
+    /// To the alerts file and, from an MQTT source, to the alerts topic.
+    pub(super) fn send(&mut self, body: &Value) -> Result<(), WatchError> {
+        if self.alerts.write(body)? {
+            if let Some(m) = self.reader.mqtt() {
+                m.publish_alert(body.to_string())?;
+            }
+            self.observe(|o| o.alert(body));
+            (self.on_alert)(body).map_err(WatchError::Callback)?;
+        }
+        Ok(())
+    }
+
+    /// The broker connection's changes as `connection` alerts (without a sequence number: a
+    /// resumed run's connections are its own).
+    pub(super) fn connection_alerts(&mut self) -> Result<(), WatchError> {
+        let Some(m) = self.reader.mqtt() else {
+            return Ok(());
+        };
+        let events = m.take_events();
+        self.report_connection(events)
+    }
+
+    /// Connection changes as `connection` alerts.
+    pub(super) fn report_connection(
+        &mut self,
+        events: Vec<ConnectionEvent>,
+    ) -> Result<(), WatchError> {
+        let Some(m) = self.reader.mqtt() else {
+            return Ok(());
+        };
+        let broker = format!("{}:{}", m.url().host, m.url().port);
+        for event in events {
+            let body = match event {
+                ConnectionEvent::Connected { session_present } => json!({
+                    "time": self.state.last_time, "kind": "connection", "state": "connected",
+                    "broker": broker, "session_present": session_present}),
+                ConnectionEvent::Lost { reason } => json!({
+                    "time": self.state.last_time, "kind": "connection", "state": "lost",
+                    "broker": broker, "reason": reason}),
+            };
+            *self
+                .state
+                .alerts
+                .entry("connection".to_owned())
+                .or_default() += 1;
+            self.send(&body)?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn events(&mut self, time: f64, events: Vec<Event>) -> Result<(), WatchError> {
+        for event in events {
+            match event {
+                Event::Opened {
+                    start,
+                    channels,
+                    nmse,
+                    change,
+                } => {
+                    if let Some(b) = &mut self.background {
+                        b.opened(start, time, change.clone());
+                    }
+                    let rolling = self
+                        .state
+                        .detector
+                        .as_ref()
+                        .map_or_else(|| self.nan(), Detector::rolling_nmse);
+                    let (channels, floors) = names_and_floors(&self.state.channels, &channels);
+                    let change = change.map(|c| {
+                        json!({"time": c.time, "low": c.low, "high": c.high,
+                               "log_likelihood_ratio": c.log_likelihood_ratio,
+                               "variance_ratio": floats(&c.variance_ratio),
+                               "inflation": c.inflation})
+                    });
+                    self.alert(
+                        Some(time),
+                        "failing",
+                        json!({"start": start, "floors": floors, "channels": channels,
+                               "nmse": floats(nmse), "rolling_nmse": floats(rolling),
+                               "change": change}),
+                    )?;
+                }
+                Event::Closed {
+                    window,
+                    failing,
+                    was_opened,
+                    cut,
+                } => {
+                    if let Some(b) = &mut self.background {
+                        b.closed(window.start, window.end, failing);
+                    }
+                    if failing && !was_opened {
+                        self.alert(
+                            Some(time),
+                            "failing",
+                            json!({"start": window.start, "floors": window.floors,
+                                   "channels": window.channels, "nmse": floats(&window.nmse)}),
+                        )?;
+                    }
+                    if cut {
+                        // The segment ended with the window open: no return to the band. The
+                        // gap's or the end's alert carries it.
+                        if failing || was_opened {
+                            self.cut_windows.push(window);
+                        }
+                    } else if failing || was_opened {
+                        let rolling = self
+                            .state
+                            .detector
+                            .as_ref()
+                            .map_or_else(|| self.nan(), Detector::rolling_nmse);
+                        self.alert(
+                            Some(time),
+                            "recovered",
+                            json!({"start": window.start, "end": window.end,
+                                   "floors": window.floors, "channels": window.channels,
+                                   "nmse": floats(&window.nmse), "withdrawn": !failing,
+                                   "in_band_for": self.state.options.merge_gap,
+                                   "rolling_nmse": floats(rolling)}),
+                        )?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+// What a caller sees while the watch runs: the status and the live view.
+
+pub(super) fn status(w: &Watcher<'_>, this_run: u64, started: Instant) -> Status {
+    Status {
+        samples: w.state.samples,
+        time: w.state.last_time.unwrap_or(0.0),
+        samples_per_second: this_run as f64 / started.elapsed().as_secs_f64().max(1e-9),
+        channels: w.state.channels.iter().map(Channel::name).collect(),
+        rolling_nmse: w
+            .state
+            .detector
+            .as_ref()
+            .map_or_else(|| w.nan(), Detector::rolling_nmse),
+        open_window: w.state.detector.as_ref().is_some_and(Detector::window_open),
+        diagnosing: w.background.as_ref().is_some_and(Background::busy),
+    }
+}
+
+impl Watcher<'_> {
+    /// Tell the live view, if any; a panic in it drops the view, never the watch.
+    pub(super) fn observe<R>(&mut self, call: impl FnOnce(&mut dyn Observer) -> R) -> Option<R> {
+        let observer = self.observer.as_deref_mut()?;
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| call(observer))) {
+            Ok(r) => Some(r),
+            Err(_) => {
+                eprintln!("the live page failed; the watch goes on without it");
+                self.observer = None;
+                None
+            }
+        }
+    }
+
+    /// The sample just processed (its line read at `began`), to the live view when it is due.
+    pub(super) fn show(&mut self, time: f64, began: Instant) {
+        if self.observer.is_none() || !self.observe(|o| o.due(time)).unwrap_or(false) {
+            return;
+        }
+        // The wall time it was read at, from the instant the loop took anyway: no clock read
+        // per sample for the page.
+        let read_at = SystemTime::now()
+            .checked_sub(began.elapsed())
+            .unwrap_or(SystemTime::UNIX_EPOCH);
+        let band = self
+            .state
+            .noise_variance
+            .as_ref()
+            .map(|v| v.iter().map(|v| 3.0 * v.sqrt()).collect());
+        let latent_sd = if self.stepper.has_learner() && self.state.segment_start.is_some() {
+            self.stepper
+                .latent_variance()
+                .ok()
+                .flatten()
+                .map(|v| v.iter().map(|v| v.max(0.0).sqrt()).collect())
+        } else {
+            None
+        };
+        let (rolling_nmse, open_window) = match &self.state.detector {
+            Some(d) => (d.rolling_nmse(), d.window_open()),
+            None => (self.nan(), false),
+        };
+        let measured = std::mem::take(&mut self.measured);
+        let predicted = std::mem::take(&mut self.predicted);
+        let point = Point {
+            time,
+            read_at,
+            measured: &measured,
+            predicted: &predicted,
+            band,
+            latent_sd,
+            rolling_nmse,
+            open_window,
+        };
+        self.observe(|o| o.point(&point));
+        self.measured = measured;
+        self.predicted = predicted;
+    }
+
+    /// The state, to the live view.
+    pub(super) fn show_state(&mut self, this_run: u64, elapsed: f64, finished: bool) {
+        if self.observer.is_none() {
+            return;
+        }
+        let samples_per_second = this_run as f64 / elapsed.max(1e-9);
+        let state = LiveState {
+            samples: self.state.samples,
+            time: self.state.last_time.unwrap_or(0.0),
+            samples_per_second,
+            real_time_factor: self.state.dt.map_or(f64::NAN, |dt| samples_per_second * dt),
+            gaps: self.state.gaps,
+            missing_samples: self.state.missing_samples,
+            bad_lines: self.state.bad_lines,
+            duplicates: self.state.duplicates,
+            mqtt: self.reader.mqtt().map(|m| m.stats),
+            checkpoint_age: self.saved_at.map(|t| t.elapsed().as_secs_f64()),
+            diagnosing: self.background.as_ref().is_some_and(Background::busy),
+            open_window: self
+                .state
+                .detector
+                .as_ref()
+                .is_some_and(Detector::window_open),
+            finished,
+        };
+        self.observe(|o| o.state(&state));
+    }
+}
+
+// The checkpoint saved, and the next line read.
+impl Watcher<'_> {
+    pub(super) fn save(&mut self) -> Result<(), WatchError> {
+        let Some(path) = &self.options.checkpoint else {
+            return Ok(());
+        };
+        if self.state.segment_start.is_some() {
+            self.state.fmu = self.stepper.save()?;
+            self.state.fmu_last = self.stepper.last();
+        }
+        if let Some(b) = &self.background {
+            self.state.background = b.saved.clone();
+        }
+        let text = serde_json::to_string(&self.state)
+            .map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+        write_text_atomically(path, &text)?;
+        self.saved_at = Some(Instant::now());
+        Ok(())
+    }
+}
+
+impl Watcher<'_> {
+    /// The next line of the stream, the connection's changes reported.
+    pub(super) fn next_line(&mut self) -> Result<Option<String>, WatchError> {
+        if let Some(line) = self.pushed_back.take() {
+            return Ok(Some(line));
+        }
+        let line = self.reader.next();
+        self.connection_alerts()?;
+        line
+    }
+}
+
+// A background diagnosis reported and, on a firm verdict, its twin adopted.
+impl Watcher<'_> {
+    /// A background diagnosis finished: its report beside the alerts, and a `diagnosis`
+    /// alert (without a sequence number: when it comes depends on the machine).
+    pub(super) fn diagnosed(&mut self, finished: Finished) -> Result<(), WatchError> {
+        *self.state.alerts.entry("diagnosis".to_owned()).or_default() += 1;
+        let job = &finished.job;
+        if self
+            .alerts
+            .diagnosed
+            .contains(&(job.window_start, job.round))
+        {
+            // Reported before a restart.
+            return Ok(());
+        }
+        let mut body = self.diagnosis_body(&finished);
+        let mut adoption = None;
+        match &finished.result {
+            Ok(d) => {
+                let path = self.write_diagnosis(d, job)?;
+                if self.options.adopt && finished.firm {
+                    adoption = answer(d).map(|p| (p, background::verdict(d), path.clone()));
+                }
+                if let Value::Object(m) = &mut body {
+                    answer_fields(m, d, &path);
+                }
+            }
+            Err(error) => {
+                if let Value::Object(m) = &mut body {
+                    m.insert("error".into(), json!(error));
+                }
+            }
+        }
+        self.alerts.diagnosed.push((job.window_start, job.round));
+        self.send(&body)?;
+        let Some((parameters, verdict, report)) = adoption else {
+            return Ok(());
+        };
+        self.adopt(&parameters, verdict, report)?;
+        if let (Some(c), Some(b)) = (&finished.second, &mut self.background) {
+            b.second(c);
+        }
+        Ok(())
+    }
+
+    /// The diagnosis alert's body before its answer: the samples it used (all from `from` to
+    /// `to`; after a located change, those from the change on are the ones its error measures
+    /// score) and, after a change, whether it is firm, its evidence, what it waited for.
+    pub(super) fn diagnosis_body(&self, finished: &Finished) -> Value {
+        let job = &finished.job;
+        let (from, to) = job.span();
+        let width = job.columns.width();
+        let mut body = json!({
+            "time": self.state.last_time, "kind": "diagnosis", "window_start": job.window_start,
+            "from": from, "to": to, "samples_used": job.samples.len() / width,
+            "seconds": finished.seconds, "round": job.round,
+        });
+        if let (Some(change), Value::Object(m)) = (job.change, &mut body) {
+            m.insert("change_time".into(), json!(change));
+            m.insert("post_change_seconds".into(), json!(to - change));
+            m.insert("firm".into(), json!(finished.firm));
+            if let Some(w) = &finished.weight {
+                m.insert("evidence".into(), json!(w));
+            }
+            if let Some(b) = &finished.before {
+                // Its effects against the samples before the change: there all along?
+                m.insert("before_the_change".into(), json!(b));
+            }
+            if let Some(why) = &finished.because {
+                // How much post-change data it waited for, and why that was enough.
+                m.insert(
+                    "waited".into(),
+                    json!(format!(
+                        "{:.1} s of post-change data, because {why}",
+                        to - change
+                    )),
+                );
+            }
+            if let Some(c) = &finished.second {
+                // It answered on the samples before a second change found in them.
+                m.insert(
+                    "second_change".into(),
+                    json!({"time": c.time, "low": c.low, "high": c.high}),
+                );
+            }
+        }
+        body
+    }
+
+    /// The diagnosis report written beside the alerts, and the samples it ran on (for `twin
+    /// add-physics --diagnosis R --data R.csv`, the live page's accept); the report's path.
+    pub(super) fn write_diagnosis(
+        &self,
+        d: &crate::workflows::diagnose::Diagnosis,
+        job: &background::Job,
+    ) -> Result<PathBuf, WatchError> {
+        let k = self.background.as_ref().map_or(0, |b| b.saved.reported);
+        let path = background::report_path(&self.options.alerts, k);
+        let text =
+            serde_json::to_string_pretty(d).map_err(|e| WatchError::Checkpoint(e.to_string()))?;
+        write_text_atomically(&path, &text)?;
+        let samples = path.with_extension("csv");
+        if let Ok(m) = background::record(job) {
+            write_text_atomically(&samples, &crate::record::csv_text(&m))?;
+        }
+        Ok(path)
+    }
+
+    /// Adopt the twin a firm verdict names ([`answer`]): written beside the alerts, swapped in
+    /// at the current point,
+    /// the live twin of later diagnoses; an `adopted` alert, and the checkpoint records it. Its
+    /// physics goes on from the state it reaches over the samples kept (from rest 70 s back
+    /// with the defaults: what is left of the start is e^(−ζωt), far below the noise), not from
+    /// the old twin's, which has been failing since the change; over the kept samples before
+    /// that change the twins live then run instead ([`Background::reached`]: a structure that
+    /// changed twice is not the second answer's before the first change). No sample is lost.
+    pub(super) fn adopt(
+        &mut self,
+        parameters: &[(String, ParameterValue)],
+        verdict: String,
+        report: PathBuf,
+    ) -> Result<(), WatchError> {
+        let Some((time, excitation)) = self.stepper.last() else {
+            return Ok(());
+        };
+        let adopted = answered(&self.live, parameters)?;
+        let path = adopted_path(&self.options.alerts, self.state.adopted.len() + 1);
+        adopted.write(&path)?;
+        let (mut stepper, _) = open_stepper(
+            &adopted,
+            self.state.excitation,
+            &self.state.channels,
+            &self.options.learning,
+        )?;
+        let state = match self.background.as_ref().map(|b| (b, b.kept())) {
+            Some((b, Ok(kept))) => b
+                .reached(&adopted, &kept)
+                .map_err(|e| WatchError::Twin(TwinError::Message(e.to_string())))?,
+            _ => None,
+        };
+        match &state {
+            Some(state) => stepper.start_from(time, state)?,
+            None => stepper.start(time)?,
+        }
+        stepper.advance(time, excitation, &mut self.predicted)?;
+        self.stepper = stepper;
+        if let Some(b) = &mut self.background {
+            b.adopted(&adopted);
+        }
+        // The comparison starts anew with the adopted twin (a segment of its own, the stream's
+        // NMSE and window count going on): the windows open now are the change's, resolved
+        // by it, and a further change opens a window (and an episode) of its own.
+        let events = match &mut self.state.detector {
+            Some(d) => d.finish_segment(),
+            None => Vec::new(),
+        };
+        let open = self.cut_windows.len();
+        self.events(time, events)?;
+        let resolved = window_values(self.cut_windows.split_off(open));
+        self.live = adopted;
+        self.state.adopted.push(Adopted {
+            at: time,
+            twin: path.clone(),
+            verdict: verdict.clone(),
+            report: report.clone(),
+        });
+        self.alert(
+            Some(time),
+            "adopted",
+            json!({"twin": path, "verdict": verdict, "report": report, "resolves": resolved,
+                   "from": if state.is_some() { "its state over the samples kept" } else { "rest" },
+                   "parameters": parameters.iter().map(|(n, v)| json!({"name": n, "value": match v {
+                       ParameterValue::Real(x) => json!(x),
+                       ParameterValue::Integer(i) => json!(i),
+                       ParameterValue::Boolean(b) => json!(b),
+                   }})).collect::<Vec<_>>()}),
+        )
     }
 }
