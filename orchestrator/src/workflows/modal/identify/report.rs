@@ -95,7 +95,7 @@ pub struct RecordModes {
     pub input_output: Option<MethodModes>,
     pub fdd: FddModes,
     /// Every method's modes side by side.
-    pub verdicts: Vec<super::verdicts::ModeVerdict>,
+    pub verdicts: Vec<ModeVerdict>,
     pub options: IdentifyOptions,
 }
 
@@ -186,4 +186,32 @@ pub(super) fn record_modes(
             }
         })
         .collect()
+}
+
+/// The methods' verdicts side by side ([`super::verdicts`]): one method's answer for a mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodVerdict {
+    pub method: &'static str,
+    /// Hz.
+    pub frequency: f64,
+    pub damping: f64,
+    pub damping_sd: f64,
+}
+
+/// The MAC between two methods' shapes of one mode (when their shapes are at the same floors).
+#[derive(Debug, Clone, Serialize)]
+pub struct ShapeAgreement {
+    pub methods: (&'static str, &'static str),
+    pub mac: f64,
+}
+
+/// One row of the verdicts' table.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeVerdict {
+    /// Hz, the mean of the methods' frequencies.
+    pub frequency: f64,
+    pub found_by: Vec<MethodVerdict>,
+    pub macs: Vec<ShapeAgreement>,
+    /// Found by one method only (of more than one that ran).
+    pub one_method_only: bool,
 }

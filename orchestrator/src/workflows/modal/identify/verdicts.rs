@@ -3,41 +3,12 @@
 //! frequencies and damping, the MAC between their shapes, and whether one method alone found
 //! it (a mode to look at twice).
 
-use serde::Serialize;
-
+pub use super::report::{MethodVerdict, ModeVerdict, ShapeAgreement};
 use super::RecordMode;
 use numerics::modal::mac;
 
 /// Two methods' modes within this relative frequency of each other are one mode.
 pub const SAME_MODE: f64 = 0.02;
-
-/// One method's answer for a mode.
-#[derive(Debug, Clone, Serialize)]
-pub struct MethodVerdict {
-    pub method: &'static str,
-    /// Hz.
-    pub frequency: f64,
-    pub damping: f64,
-    pub damping_sd: f64,
-}
-
-/// The MAC between two methods' shapes of one mode (when their shapes are at the same floors).
-#[derive(Debug, Clone, Serialize)]
-pub struct ShapeAgreement {
-    pub methods: (&'static str, &'static str),
-    pub mac: f64,
-}
-
-/// One row of the table.
-#[derive(Debug, Clone, Serialize)]
-pub struct ModeVerdict {
-    /// Hz, the mean of the methods' frequencies.
-    pub frequency: f64,
-    pub found_by: Vec<MethodVerdict>,
-    pub macs: Vec<ShapeAgreement>,
-    /// Found by one method only (of more than one that ran).
-    pub one_method_only: bool,
-}
 
 /// The table of `methods` (each its name and modes), by frequency. A mode joins the row of
 /// the modes below it when it is within [`SAME_MODE`] of the row's highest (each method once
