@@ -11,8 +11,8 @@ use super::fit::{climbs, Split};
 use super::localise::{localise, missing_floor_force, missing_shear};
 use super::physics::{prior_scales, run_physics, storeys_of, PhysicsReals, PhysicsRun};
 use super::{
-    check_sites, select, Action, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
-    LatentVariance, Localisation, Result, Scales, Series,
+    check_sites, Action, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis, LatentVariance,
+    Localisation, Result, Scales, Series,
 };
 use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::{first_after_transient, variance};
@@ -453,31 +453,6 @@ impl Baseline {
             reals: &self.reals,
             scales: &self.scales,
             base_run: &self.base_run,
-        }
-    }
-
-    /// What the forward selection and discovery read; a full round tries `candidates`.
-    pub(super) fn selection_context<'a>(
-        &'a self,
-        data: &'a Measurement,
-        options: &'a DiagnoseOptions,
-        baseline_evidence: f64,
-        candidates: &'a [Candidate],
-    ) -> select::Context<'a> {
-        select::Context {
-            physics: &self.physics,
-            data,
-            options,
-            scales: &self.scales,
-            reals: &self.reals,
-            split: self.split(),
-            baseline_evidence,
-            explained_held_out: (0..self.nc)
-                .map(|c| self.scores.noise_nmse_held_out[c] + self.scores.band_nmse[c])
-                .collect(),
-            channels: &self.channels,
-            candidates,
-            tolerance: self.scores.tolerance.value,
         }
     }
 }

@@ -35,7 +35,6 @@
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
 
 use structure::channel::Quantity;
 use structure::effects::{Function, Kind, Placement, Site, Term};
@@ -51,6 +50,8 @@ mod sensitivity;
 
 use columns::{columns, quantile, site_states};
 use sensitivity::sensitivity;
+
+pub use super::report::{Found, SiteModel};
 
 /// RK4 sub-steps per sample of the sensitivity runs.
 pub const SUBSTEPS: u32 = 8;
@@ -240,27 +241,6 @@ fn site_score(
         .map(|e| e / reference)
         .filter(|x| x.is_finite())
         .fold(1.0, f64::min)
-}
-
-/// One site's sparse model.
-#[derive(Clone, Debug, Serialize)]
-pub struct SiteModel {
-    pub site: String,
-    /// `function` names (with `s` where used) of the selected terms.
-    pub terms: Vec<String>,
-    /// Held-out weighted residual left (linearised), as a fraction of what the physics
-    /// parameters alone leave (1 = the terms explain nothing more).
-    pub held_out_fraction: f64,
-}
-
-/// What was found: the terms (regression coefficients) and every site's model.
-#[derive(Clone, Debug, Serialize)]
-pub struct Found {
-    #[serde(skip)]
-    pub terms: Vec<Term>,
-    pub site: String,
-    pub held_out_fraction: f64,
-    pub sites: Vec<SiteModel>,
 }
 
 /// Weighted Gram matrix, right-hand side and residual energy over `rows`.

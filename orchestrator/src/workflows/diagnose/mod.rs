@@ -175,10 +175,8 @@ pub use add::{
 };
 pub use ambient::{diagnose_ambient, AmbientDiagnosis};
 pub use candidate::{Addition, Candidate, Kind, Scales, Side};
-pub use discover::Found;
 pub use options::{check_sites, parse_additions, parse_candidates};
 pub use report::*;
-pub use sensor::{SensorFit, SensorSd};
 
 pub use baseline::blocks;
 pub(crate) use channels::Channels;
@@ -252,7 +250,7 @@ pub fn diagnose(twin: &Twin, data: &Measurement, options: &DiagnoseOptions) -> R
 
     // 5. Forward selection (see `select`), while the error is still to be explained.
     // A full round (on recalibrated physics) tries every screened candidate, raced or not.
-    let ctx = b.selection_context(data, options, baseline_evidence, &library);
+    let ctx = select::Context::of(&b, data, options, baseline_evidence, &library);
     let explain = alarm.raised && sensor_fault.is_none();
     let search = search_library(&ctx, &b, &mut diagnosis, &round, before_worst, explain)?;
 

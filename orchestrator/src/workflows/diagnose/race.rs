@@ -8,7 +8,7 @@
 //! one on all of them: the candidates are first fitted alone on that head (the same fit, split
 //! and starts, in parallel), ranked by their worst-floor held-out NMSE there, and only those a
 //! later round could use go on to the whole record — the ones that cut the head's error by 10 %
-//! or more (what the forward selection's later rounds try), at most [`select::SCREENED`],
+//! or more (what the forward selection's later rounds try), at most [`SCREENED`],
 //! always the best one. The others are reported in `raced_out` with their head's error.
 //!
 //! The race runs only where it can judge and pays: the default library (candidates the user
@@ -21,8 +21,16 @@ use super::baseline::Ground;
 use super::channels::{worst, Channels};
 use super::fit::{Fitted, Split};
 use super::round_one::fit_alone;
-use super::{select, Candidate, DiagnoseOptions, Diagnosis, Result};
+use super::{Candidate, DiagnoseOptions, Diagnosis, Result};
 use crate::twin::data::Measurement;
+
+/// Candidates a round after the first tries, at most.
+pub const SCREENED: usize = 6;
+
+/// A later round tries only candidates that, fitted alone, brought the model's worst-floor
+/// held-out NMSE to this share of it or below (a 10 % cut); the race on a record's head keeps
+/// the same.
+pub const CUT_ALONE: f64 = 0.9;
 
 /// Samples of the record's head the candidates are raced on: the calibration ladder's first
 /// rung, the head every fit on the whole record screens its starts on anyway (a race on twice
@@ -103,7 +111,7 @@ pub(super) fn raced(
     diagnosis: &mut Diagnosis,
     candidates: Vec<Candidate>,
 ) -> Result<Vec<Candidate>> {
-    if g.options.candidates.is_some() || candidates.len() <= select::SCREENED {
+    if g.options.candidates.is_some() || candidates.len() <= SCREENED {
         return Ok(candidates);
     }
     let Some(head) = Head::of(g.data, &g.split) else {
@@ -159,7 +167,7 @@ where
 
 /// The candidates kept from a race with these head `errors` (worst-floor held-out NMSE, -∞ for
 /// a fit that failed) against the twin's `before`: those that cut it by 10 % or more, best
-/// first, at most [`select::SCREENED`] of them, and always the best one (every failed one too);
+/// first, at most [`SCREENED`] of them, and always the best one (every failed one too);
 /// the kept in the library's order, the rest best first.
 pub(super) fn keep(
     candidates: Vec<Candidate>,
@@ -176,9 +184,9 @@ pub(super) fn keep(
     let failed = ranked.iter().filter(|r| r.2 == f64::NEG_INFINITY).count();
     let cutting = ranked[failed..]
         .iter()
-        .take_while(|r| r.2 <= select::CUT_ALONE * before)
+        .take_while(|r| r.2 <= CUT_ALONE * before)
         .count()
-        .clamp(1, select::SCREENED);
+        .clamp(1, SCREENED);
     let out: Vec<(Candidate, f64)> = ranked
         .split_off((failed + cutting).min(ranked.len()))
         .into_iter()
@@ -211,7 +219,7 @@ mod tests {
             })
             .collect();
         let (kept, out) = keep(library.clone(), errors.clone(), 100.0);
-        assert_eq!(kept.len(), select::SCREENED);
+        assert_eq!(kept.len(), SCREENED);
         assert_eq!(kept.len() + out.len(), n);
         let cubic = library
             .iter()

@@ -3,8 +3,9 @@
 use std::collections::BTreeMap;
 
 use serde::Serialize;
+use structure::effects::Term;
 
-use super::{select, Action, Addition, Candidate, Found, Gates, Kind, SensorFit};
+use super::{Action, Addition, Candidate, Gates, Kind};
 use crate::evaluation::compare::FailingWindow;
 use crate::evaluation::stats::variance;
 
@@ -257,7 +258,7 @@ pub struct Diagnosis {
     /// sd and 1 %, largest move first (empty unless the action is `add_physics`).
     pub physics_moved: Vec<MovedParameter>,
     /// The forward selection's rounds.
-    pub selection: Vec<select::SelectionStep>,
+    pub selection: Vec<SelectionStep>,
     /// The search for an effect outside the library, when it ran.
     pub discovery: Option<DiscoveryReport>,
     /// The faulty channel, when the action is `sensor_fault`.
@@ -381,4 +382,88 @@ pub struct RecordNmse {
     pub nmse_before: Vec<f64>,
     pub nmse_after: Vec<f64>,
     pub noise_variance: Vec<f64>,
+}
+
+/// One round of the forward selection.
+#[derive(Clone, Debug, Serialize)]
+pub struct SelectionStep {
+    pub round: usize,
+    /// The effect added in this round.
+    pub added: String,
+    /// Worst-floor held-out NMSE of the model before the round.
+    pub worst_before: f64,
+    /// Held-out NMSE per floor with the effect added, everything else held.
+    pub nmse_held_out_effect: Vec<f64>,
+    /// Held-out NMSE per floor after the joint refit of every chosen effect and the physics.
+    pub nmse_held_out_joint: Vec<f64>,
+    /// Whether the joint refit was kept (it lowered the held-out error).
+    pub joint_kept: bool,
+    /// Every candidate the round tried: label and worst-floor held-out NMSE.
+    pub tried: Vec<(String, f64)>,
+    pub seconds: f64,
+    /// The model after this round, refitted jointly with the physics, explained the record,
+    /// so no later round ran (a long record's shortcut, `settled`).
+    pub settled: bool,
+}
+
+/// One site's sparse model.
+#[derive(Clone, Debug, Serialize)]
+pub struct SiteModel {
+    pub site: String,
+    /// `function` names (with `s` where used) of the selected terms.
+    pub terms: Vec<String>,
+    /// Held-out weighted residual left (linearised), as a fraction of what the physics
+    /// parameters alone leave (1 = the terms explain nothing more).
+    pub held_out_fraction: f64,
+}
+
+/// What was found: the terms (regression coefficients) and every site's model.
+#[derive(Clone, Debug, Serialize)]
+pub struct Found {
+    #[serde(skip)]
+    pub terms: Vec<Term>,
+    pub site: String,
+    pub held_out_fraction: f64,
+    pub sites: Vec<SiteModel>,
+}
+
+/// A channel's fitted fault: `measured ≈ gain·predicted + offset + drift·(t − t₀)`, `t₀` the
+/// record's first sample time.
+#[derive(Clone, Debug, Serialize)]
+pub struct SensorFit {
+    /// The channel's name, e.g. `acc2`.
+    pub channel: String,
+    /// Its floor, from 1.
+    pub floor: usize,
+    pub gain: f64,
+    /// m/s².
+    pub offset: f64,
+    /// m/s² per s.
+    pub drift: f64,
+    /// Posterior (least-squares) sd of gain, offset and drift.
+    pub sd: SensorSd,
+    /// This floor's held-out NMSE (%) before and with the fault modelled.
+    pub nmse_held_out_before: f64,
+    pub nmse_held_out: f64,
+    /// The same over the whole record after the transient.
+    pub nmse_after: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SensorSd {
+    pub gain: f64,
+    pub offset: f64,
+    pub drift: f64,
+}
+
+impl SensorFit {
+    /// The channel as the fault model reads it from the prediction.
+    pub fn apply(&self, predicted: &[f64], time: &[f64]) -> Vec<f64> {
+        let t0 = time.first().copied().unwrap_or(0.0);
+        predicted
+            .iter()
+            .zip(time)
+            .map(|(p, t)| self.gain * p + self.offset + self.drift * (t - t0))
+            .collect()
+    }
 }

@@ -41,9 +41,10 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use serde::Serialize;
-
+use super::baseline::Baseline;
 use super::race::{race, Head, RACE_HEAD, RACE_MIN};
+pub use super::race::{CUT_ALONE, SCREENED};
+pub use super::report::SelectionStep;
 use super::{
     estimates, fit, with_switches, worst, Addition, Candidate, Channels, DiagnoseError,
     DiagnoseOptions, Estimates, Fitted, PhysicsReals, Result, Scales,
@@ -53,39 +54,9 @@ use crate::twin::data::Measurement;
 use crate::twin::{ParameterValue, Twin, PHYSICS};
 use structure::building::parameter_names;
 
-/// Candidates a round after the first tries, at most.
-pub const SCREENED: usize = 6;
-
-/// A later round tries only candidates that, fitted alone, brought the model's worst-floor
-/// held-out NMSE to this share of it or below (a 10 % cut); the race on a record's head keeps
-/// the same.
-pub const CUT_ALONE: f64 = 0.9;
-
 /// Simulations the joint refit may use (one start from fitted values: it converges in a few
 /// hundred; the budget stops a refit that wanders).
 pub const JOINT_SIMULATIONS: usize = 900;
-
-/// One round of the forward selection.
-#[derive(Clone, Debug, Serialize)]
-pub struct SelectionStep {
-    pub round: usize,
-    /// The effect added in this round.
-    pub added: String,
-    /// Worst-floor held-out NMSE of the model before the round.
-    pub worst_before: f64,
-    /// Held-out NMSE per floor with the effect added, everything else held.
-    pub nmse_held_out_effect: Vec<f64>,
-    /// Held-out NMSE per floor after the joint refit of every chosen effect and the physics.
-    pub nmse_held_out_joint: Vec<f64>,
-    /// Whether the joint refit was kept (it lowered the held-out error).
-    pub joint_kept: bool,
-    /// Every candidate the round tried: label and worst-floor held-out NMSE.
-    pub tried: Vec<(String, f64)>,
-    pub seconds: f64,
-    /// The model after this round, refitted jointly with the physics, explained the record,
-    /// so no later round ran (a long record's shortcut, `settled`).
-    pub settled: bool,
-}
 
 /// What the rounds read.
 pub(super) struct Context<'a> {
@@ -102,6 +73,34 @@ pub(super) struct Context<'a> {
     /// The candidates a full round tries.
     pub candidates: &'a [Candidate],
     pub tolerance: f64,
+}
+
+impl<'a> Context<'a> {
+    /// What the forward selection and discovery read of `baseline`; a full round tries
+    /// `candidates`.
+    pub(super) fn of(
+        baseline: &'a Baseline,
+        data: &'a Measurement,
+        options: &'a DiagnoseOptions,
+        baseline_evidence: f64,
+        candidates: &'a [Candidate],
+    ) -> Self {
+        Context {
+            physics: &baseline.physics,
+            data,
+            options,
+            scales: &baseline.scales,
+            reals: &baseline.reals,
+            split: baseline.split(),
+            baseline_evidence,
+            explained_held_out: (0..baseline.nc)
+                .map(|c| baseline.scores.noise_nmse_held_out[c] + baseline.scores.band_nmse[c])
+                .collect(),
+            channels: &baseline.channels,
+            candidates,
+            tolerance: baseline.scores.tolerance.value,
+        }
+    }
 }
 
 /// The chosen effects, in order, and the model they make.

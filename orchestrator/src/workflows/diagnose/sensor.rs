@@ -6,10 +6,10 @@
 //! channel whose fault explains the error, while every other floor is already fine, is a
 //! `sensor_fault`.
 
-use serde::Serialize;
 use structure::channel::{Channel, Quantity};
 
 use super::baseline::Baseline;
+pub use super::report::{SensorFit, SensorSd};
 use super::{Action, Diagnosis, Gates};
 use crate::evaluation::stats::nmse;
 use crate::twin::data::Measurement;
@@ -20,47 +20,6 @@ const PARAMETERS: usize = 3;
 type Parameters = nalgebra::SVector<f64, PARAMETERS>;
 /// The normal matrix XᵀX of the fault model's least squares.
 type Normal = nalgebra::SMatrix<f64, PARAMETERS, PARAMETERS>;
-
-/// A channel's fitted fault: `measured ≈ gain·predicted + offset + drift·(t − t₀)`, `t₀` the
-/// record's first sample time.
-#[derive(Clone, Debug, Serialize)]
-pub struct SensorFit {
-    /// The channel's name, e.g. `acc2`.
-    pub channel: String,
-    /// Its floor, from 1.
-    pub floor: usize,
-    pub gain: f64,
-    /// m/s².
-    pub offset: f64,
-    /// m/s² per s.
-    pub drift: f64,
-    /// Posterior (least-squares) sd of gain, offset and drift.
-    pub sd: SensorSd,
-    /// This floor's held-out NMSE (%) before and with the fault modelled.
-    pub nmse_held_out_before: f64,
-    pub nmse_held_out: f64,
-    /// The same over the whole record after the transient.
-    pub nmse_after: f64,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct SensorSd {
-    pub gain: f64,
-    pub offset: f64,
-    pub drift: f64,
-}
-
-impl SensorFit {
-    /// The channel as the fault model reads it from the prediction.
-    pub fn apply(&self, predicted: &[f64], time: &[f64]) -> Vec<f64> {
-        let t0 = time.first().copied().unwrap_or(0.0);
-        predicted
-            .iter()
-            .zip(time)
-            .map(|(p, t)| self.gain * p + self.offset + self.drift * (t - t0))
-            .collect()
-    }
-}
 
 /// Fit the channel `channel` (on floor `floor`, from 1) on the `fitted` samples, score on
 /// `held_out` and `after`. `None` when the normal equations are singular (a constant
