@@ -6,12 +6,11 @@ use anyhow::{bail, Result};
 
 use super::write_json;
 use crate::twin::data::Measurement;
-use crate::twin::run::Tolerance;
 use crate::twin::{RecordRef, RecordRole, Twin};
 use crate::workflows::calibrate::validated::{check_plot, ChannelNmse};
 use crate::workflows::calibrate::{
     calibrate_validated, default_parameters, read_priors, Calibration, CalibrationSetup,
-    RecordCalibration, Validated,
+    RecordCalibration,
 };
 use crate::workflows::options::check_svg;
 
@@ -119,13 +118,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         setup.prior_spec = Some(read_priors(path).map_err(anyhow::Error::msg)?);
     }
     let validation: Vec<&Measurement> = validation.iter().collect();
-    let Validated {
-        twin: mut new_twin,
-        calibration,
-        validated,
-    } = calibrate_validated(&twin, &runs, &validation, &setup)?;
+    let mut result = calibrate_validated(&twin, &runs, &validation, &setup)?;
     // The records, for `twin add-physics` to refit over.
-    new_twin.records = args
+    result.twin.records = args
         .data
         .iter()
         .map(|p| RecordRef::of(p, RecordRole::Calibration))
@@ -138,28 +133,21 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     let data = runs[0];
 
     // All computed: now write, each file atomically.
-    new_twin.write(&args.out)?;
+    result.twin.write(&args.out)?;
     if let Some(path) = &args.report {
-        let report = crate::report::json::calibrate(
-            &twin,
-            &new_twin,
-            Some(&args.out),
-            data,
-            args.transient,
-            &calibration,
-            &validated,
-        );
+        let report =
+            crate::report::json::calibrate(&twin, Some(&args.out), data, args.transient, &result);
         write_json(path, &report)?;
     }
     if let Some(path) = &args.plot {
         let comparison =
-            crate::twin::run::run_and_compare(&new_twin, data, args.transient, |_, _| {})?
+            crate::twin::run::run_and_compare(&result.twin, data, args.transient, |_, _| {})?
                 .comparison;
         crate::report::plot_calibrated(&comparison, data, path)?;
     }
 
-    print_calibration(&runs, &calibration, &validated);
-    let tolerance = Tolerance::resolve(&new_twin, None);
+    print_calibration(&runs, &result.calibration, &result.validated);
+    let tolerance = &result.tolerance;
     println!(
         "tolerance of compare and diagnose: {:.3} % NMSE ({})",
         tolerance.value, tolerance.source
@@ -231,7 +219,7 @@ fn print_calibration(runs: &[&Measurement], calibration: &Calibration, validated
         println!(
             "NMSE % on {}: {shown}{}",
             v.data,
-            if crate::twin::run::accepted_for_validation(&v.nmse) {
+            if v.accepted {
                 ""
             } else {
                 " (above the cap: not taken as the twin's validation level)"

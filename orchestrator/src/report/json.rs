@@ -6,10 +6,9 @@ use std::path::Path;
 use serde_json::{json, Value};
 
 use crate::twin::data::Measurement;
-use crate::twin::run::{accepted_for_validation, Compared, Tolerance};
+use crate::twin::run::Compared;
 use crate::twin::Twin;
-use crate::workflows::calibrate::validated::ChannelNmse;
-use crate::workflows::calibrate::Calibration;
+use crate::workflows::calibrate::validated::Validated;
 
 /// `twin compare --report`: `compared` is `twin` run on `data` after `transient` seconds.
 /// Every per-channel array (`nmse`, `noise_variance`, the band's, a failing window's `nmse`) is
@@ -59,17 +58,16 @@ pub fn compare(
 }
 
 /// `twin calibrate --report`: `twin` calibrated on `data` (the first of its runs) into
-/// `calibrated` (written to `out`, when it is), checked on the `validated` records. `runs` has
-/// every run's noise variances and NMSE by channel name.
+/// `result`'s twin (written to `out`, when it is), checked on its validation records. `runs`
+/// has every run's noise variances and NMSE by channel name.
 pub fn calibrate(
     twin: &Twin,
-    calibrated: &Twin,
     out: Option<&Path>,
     data: &Measurement,
     transient: f64,
-    calibration: &Calibration,
-    validated: &[ChannelNmse],
+    result: &Validated,
 ) -> Value {
+    let calibration = &result.calibration;
     let by_name = |names: &[String], values: &[f64]| -> serde_json::Map<String, Value> {
         names
             .iter()
@@ -99,17 +97,18 @@ pub fn calibrate(
                 "noise_log_sd": by_name(&r.channels, &r.noise_log_sd),
             }))
             .collect::<Vec<_>>(),
-        "validation": validated
+        "validation": result
+            .validated
             .iter()
             .map(|v| json!({
                 "data": v.data,
                 "nmse": v.nmse,
                 "nmse_by_channel": by_name(&v.channels, &v.nmse),
-                "accepted": accepted_for_validation(&v.nmse),
+                "accepted": v.accepted,
             }))
             .collect::<Vec<_>>(),
-        "validation_nmse": calibrated.validation_nmse,
-        "tolerance": Tolerance::resolve(calibrated, None),
+        "validation_nmse": result.twin.validation_nmse,
+        "tolerance": result.tolerance,
         "starts": calibration.starts,
         "heads": calibration.heads,
         "simulations": calibration.simulations,

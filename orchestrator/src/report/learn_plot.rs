@@ -52,14 +52,7 @@ impl Channels {
             .first()
             .map(|r| r.trace.channels.clone())
             .unwrap_or_default();
-        let labels: Vec<String> =
-            if channels.is_empty() || ::structure::paper::is_paper_rig(channels.as_slice()) {
-                (1..=::structure::paper::STOREYS)
-                    .map(|f| format!("floor {f}"))
-                    .collect()
-            } else {
-                channels.clone()
-            };
+        let labels = result.channel_labels.clone();
         let units = (0..labels.len())
             .map(|f| match channels.get(f).and_then(|c| Channel::parse(c)) {
                 Some(c) if c.quantity() == Quantity::Velocity => ("m/s", "V(f) (m/s)²"),

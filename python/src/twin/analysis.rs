@@ -97,15 +97,8 @@ impl Twin {
                     .map_err(|e| to_py(kind, e))?;
             }
             // `twin calibrate --report`'s fields, less `out` (nothing is written here).
-            let report = orchestrator::report::json::calibrate(
-                &self.twin,
-                &v.twin,
-                None,
-                data,
-                setup.transient,
-                &v.calibration,
-                &v.validated,
-            );
+            let report =
+                orchestrator::report::json::calibrate(&self.twin, None, data, setup.transient, &v);
             // The records read from files, for `add_physics` to refit over, as `twin
             // calibrate` stores them (records made from arrays have no file to name).
             let mut calibrated = v.twin;

@@ -11,7 +11,7 @@ use super::{
 use ::structure::Structure;
 
 use crate::twin::data::Measurement;
-use crate::twin::run::{nmse_on, RunError};
+use crate::twin::run::{accepted_for_validation, nmse_on, RunError, Tolerance};
 use crate::twin::simulator::Simulator;
 use crate::twin::{Twin, TwinError, PHYSICS};
 use crate::workflows::options::{check_threads, check_transient_leaves, InvalidOption};
@@ -40,6 +40,21 @@ pub struct ChannelNmse {
     pub data: String,
     pub channels: Vec<String>,
     pub nmse: Vec<f64>,
+    /// Whether it counts as the twin's validation level ([`accepted_for_validation`]: its
+    /// worst channel under the cap).
+    pub accepted: bool,
+}
+
+impl ChannelNmse {
+    fn new(data: String, channels: Vec<String>, nmse: Vec<f64>) -> Self {
+        let accepted = accepted_for_validation(&nmse);
+        ChannelNmse {
+            data,
+            channels,
+            nmse,
+            accepted,
+        }
+    }
 }
 
 /// What `twin calibrate` computes.
@@ -48,6 +63,9 @@ pub struct Validated {
     pub calibration: Calibration,
     /// Each validation record's NMSE % per channel under the calibrated twin.
     pub validated: Vec<ChannelNmse>,
+    /// The calibrated twin's default tolerance of compare and diagnose (from its worst
+    /// accepted validation NMSE).
+    pub tolerance: Tolerance,
 }
 
 /// The building of `twin`'s physics component.
@@ -78,11 +96,11 @@ pub fn channel_nmse(
 ) -> Result<ChannelNmse, CalibrateRunError> {
     let name = data.path.display().to_string();
     if paper_rig(structure, data) {
-        return Ok(ChannelNmse {
-            data: name,
-            channels: data.responses.iter().map(|s| s.channel.name()).collect(),
-            nmse: nmse_on(twin, data, transient)?,
-        });
+        return Ok(ChannelNmse::new(
+            name,
+            data.responses.iter().map(|s| s.channel.name()).collect(),
+            nmse_on(twin, data, transient)?,
+        ));
     }
     let physics = twin
         .component(PHYSICS)
@@ -101,16 +119,15 @@ pub fn channel_nmse(
     sim.record(&[], &[], &outputs, &mut out)
         .map_err(CalibrateError::from)?;
     let first = crate::evaluation::stats::first_after_transient(&data.time, transient);
-    Ok(ChannelNmse {
-        data: name,
-        channels: data.responses.iter().map(|s| s.channel.name()).collect(),
-        nmse: data
-            .responses
+    Ok(ChannelNmse::new(
+        name,
+        data.responses.iter().map(|s| s.channel.name()).collect(),
+        data.responses
             .iter()
             .zip(&out)
             .map(|(s, p)| crate::evaluation::compare::nmse(&s.values[first..], &p[first..]))
             .collect(),
-    })
+    ))
 }
 
 /// Calibrate `twin` on the runs `data` (one MAP over all of them: the structure's parameters
@@ -148,10 +165,12 @@ pub fn calibrate_validated(
             .map(|v| (v.data.clone(), v.nmse.clone()))
             .collect::<Vec<_>>(),
     );
+    let tolerance = Tolerance::resolve(&new_twin, None);
     Ok(Validated {
         twin: new_twin,
         calibration,
         validated,
+        tolerance,
     })
 }
 

@@ -96,6 +96,9 @@ pub struct ModeResult {
     /// The GPs at the end of the last record (what `--out` puts into the twin).
     #[serde(skip)]
     pub final_gps: Floors,
+    /// What its plot calls the channels ([`channel_labels`]).
+    #[serde(skip)]
+    pub channel_labels: Vec<String>,
 }
 
 /// One hyperparameter refit of the channels' GPs.
@@ -142,6 +145,18 @@ impl ModeResult {
             Some(f) => Mode::Adaptive(f).tag(),
             None => self.mode.clone(),
         }
+    }
+}
+
+/// What a plot calls `channels` (a record's, by name): "floor i" on the paper's rig (and when
+/// no record names them), the channel's name otherwise.
+pub fn channel_labels(channels: &[String]) -> Vec<String> {
+    if channels.is_empty() || ::structure::paper::is_paper_rig(channels) {
+        (1..=::structure::paper::STOREYS)
+            .map(|f| format!("floor {f}"))
+            .collect()
+    } else {
+        channels.to_vec()
     }
 }
 

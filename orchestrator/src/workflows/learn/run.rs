@@ -5,7 +5,7 @@
 use super::refit::{refit_floors, RefitSchedule};
 use super::results::FixedThreshold;
 use super::results::{
-    change_flags, ModeResult, NmsePoint, RecordResult, RefitRecord, Timing, Trace,
+    change_flags, channel_labels, ModeResult, NmsePoint, RecordResult, RefitRecord, Timing, Trace,
 };
 use super::stream::{
     corrected, corrected_from_means, sync, track, trained, Stream, PARALLEL_TRACKING,
@@ -531,6 +531,7 @@ impl<'a> ModeRun<'a> {
         let seconds = started.elapsed().as_secs_f64();
         timing.other =
             seconds - timing.tracking_setup - timing.learning - timing.refits - timing.tracking;
+        let channel_labels = channel_labels(records.first().map_or(&[][..], |r| &r.trace.channels));
         Ok(ModeResult {
             mode: mode.name(),
             forgetting_factor: match mode {
@@ -550,6 +551,7 @@ impl<'a> ModeRun<'a> {
                 .map(|stream| Ok(stream.nmse(&corrected(&floors, stream, options.target)?)))
                 .collect::<Result<_>>()?,
             final_gps: floors,
+            channel_labels,
         })
     }
 }
