@@ -30,7 +30,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "orchestra
 
 # Bottom first; a module may import only from the layers below its own.
 LAYERS = [
-    ["fsutil", "parallel", "choice"],
+    ["fsutil", "parallel", "choice", "notice"],
     ["record"],
     ["cosim", "evaluation"],
     ["twin", "blocks", "synth"],

@@ -11,7 +11,8 @@
 //! - `synth`: the synthetic structure that makes records with known truth;
 //! - `report`: JSON and SVG plots;
 //! - `choice`: the options with a closed set of values, by name;
-//! - `fsutil`: the one atomic file write.
+//! - `fsutil`: the one atomic file write;
+//! - `notice`: what the library has to say besides its results, handed to the caller's sink.
 //!
 //! The `twin` command line (clap, anyhow, progress bars, printing) is the binary's own
 //! (`src/commands`, a module of `main.rs`; its crates are the feature `cli`'s): the library
@@ -22,6 +23,7 @@ pub mod choice;
 pub mod cosim;
 pub mod evaluation;
 pub mod fsutil;
+pub mod notice;
 pub mod parallel;
 pub mod record;
 pub mod report;

@@ -16,6 +16,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     restore_sigpipe();
+    print_notices();
     match commands::run(commands::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
@@ -23,6 +24,17 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The library's notices on stderr: every live page failure; the FMUs' log messages only when
+/// `TWIN_FMU_LOG` is set.
+fn print_notices() {
+    let fmu_log = std::env::var_os("TWIN_FMU_LOG").is_some();
+    orchestrator::notice::set_sink(move |n| {
+        if n.topic != orchestrator::notice::Topic::FmuLog || fmu_log {
+            eprintln!("{}", n.text);
+        }
+    });
 }
 
 /// A command whose output is piped into `head` (or any reader that stops early) ends quietly, as

@@ -164,6 +164,14 @@ pub(crate) fn to_object<'py>(
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
+    // The FMUs' log messages on stderr when TWIN_FMU_LOG is set, as `twin` prints them.
+    if std::env::var_os("TWIN_FMU_LOG").is_some() {
+        orchestrator::notice::set_sink(|n| {
+            if n.topic == orchestrator::notice::Topic::FmuLog {
+                eprintln!("{}", n.text);
+            }
+        });
+    }
     m.add("ShearTwinError", py.get_type::<ShearTwinError>())?;
     m.add("DataError", py.get_type::<DataError>())?;
     m.add("TwinError", py.get_type::<TwinError>())?;

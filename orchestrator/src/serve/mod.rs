@@ -131,7 +131,9 @@ pub fn start(
                 }
             });
             if let Err(e) = served {
-                eprintln!("the page's server stopped: {e}; the watch goes on");
+                crate::notice::notify(crate::notice::Topic::LivePage, || {
+                    format!("the page's server stopped: {e}; the watch goes on")
+                });
             }
             runtime.shutdown_background();
         })

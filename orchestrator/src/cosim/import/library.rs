@@ -35,8 +35,8 @@ pub struct FmuMessage {
     pub text: String,
 }
 
-/// Where an instance's messages go: kept for error reports, and echoed to stderr when
-/// `TWIN_FMU_LOG` is set.
+/// Where an instance's messages go: kept for error reports, and handed on as notices
+/// ([`crate::notice`], topic `FmuLog`; `twin` prints them when `TWIN_FMU_LOG` is set).
 #[derive(Debug, Default)]
 struct MessageLog {
     instance: String,
@@ -69,9 +69,9 @@ unsafe extern "C" fn log_sink(
         category: text(category),
         text: text(message),
     };
-    if std::env::var_os("TWIN_FMU_LOG").is_some() {
-        eprintln!("[{}] {}: {}", log.instance, entry.category, entry.text);
-    }
+    crate::notice::notify(crate::notice::Topic::FmuLog, || {
+        format!("[{}] {}: {}", log.instance, entry.category, entry.text)
+    });
     if let Ok(mut messages) = log.messages.lock() {
         messages.push(entry);
     }

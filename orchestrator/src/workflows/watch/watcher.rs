@@ -552,7 +552,9 @@ impl Watcher<'_> {
         match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| call(observer))) {
             Ok(r) => Some(r),
             Err(_) => {
-                eprintln!("the live page failed; the watch goes on without it");
+                crate::notice::notify(crate::notice::Topic::LivePage, || {
+                    "the live page failed; the watch goes on without it".to_owned()
+                });
                 self.observer = None;
                 None
             }
