@@ -21,9 +21,9 @@ mod system;
 pub use clock::Clock;
 pub use decimated::Decimated;
 pub use recorder::Recorder;
-pub use slave::{Block, Observer, Slave};
+pub use slave::{Block, NodeId, Observer, Port, Slave};
 pub use system::{
-    Algorithm, NodeId, Port, PortType, Recording, RunEnd, SavedNode, SavedState, System, TypedPort,
+    Algorithm, PortType, Recording, RunEnd, SavedNode, SavedState, System, TypedPort,
 };
 
 #[derive(Debug, thiserror::Error)]

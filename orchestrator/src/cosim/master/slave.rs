@@ -1,8 +1,19 @@
 //! What the master steps and watches: a slave (an FMU instance, or a mock in tests), a block
 //! evaluated in zero time, an observer of the communication points.
 
-use super::{MasterError, Port};
+use super::MasterError;
 use crate::cosim::import::{Instance, StepEnd};
+
+/// A node of the system: a slave or a block, by its place in the system's list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NodeId(pub usize);
+
+/// Where a value comes from: a node's output port, or a replayed signal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Port {
+    Output(NodeId, usize),
+    Signal(usize),
+}
 
 fn unsupported(what: &str) -> MasterError {
     MasterError::Config(format!("this slave has no {what} variables"))

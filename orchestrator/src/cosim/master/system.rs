@@ -1,6 +1,6 @@
 //! Nodes, connections and the stepping loop.
 
-use super::{Block, Clock, MasterError, Observer, Slave};
+use super::{Block, Clock, MasterError, NodeId, Observer, Port, Slave};
 use crate::cosim::import::StepEnd;
 
 /// The FMI type a slave's port carries. Enumerations travel as `Integer`, as FMI 2.0 gets and
@@ -36,16 +36,6 @@ impl TypedPort {
             ty: PortType::Real,
         }
     }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct NodeId(pub usize);
-
-/// Where a value comes from: a node's output port, or a replayed signal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Port {
-    Output(NodeId, usize),
-    Signal(usize),
 }
 
 /// How the master steps the slaves within a communication step.
