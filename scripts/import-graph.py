@@ -12,13 +12,12 @@ script prints the edges between the top-level modules and between the workflows,
 
 - a top-level module imports one in its own or a higher layer (LAYERS, bottom first),
 - the workflows (workflows/<name>) import each other in a circle, or
-- the files of one workflow import each other in a circle (workflows/<name>/<file>, a folder
+- the files of one module import each other in a circle (e.g. workflows/<name>/<file>, a folder
   counted as one file and its own files checked the same way).
 
-A file naming its own parent module (an item defined there) is not counted. Circles among the
-files of the other modules are listed with --files, not failed.
+A file naming its own parent module (an item defined there) is not counted.
 
-    scripts/import-graph.py [--files]
+    scripts/import-graph.py
 """
 
 import os
@@ -272,20 +271,14 @@ def main():
               + ", ".join(sorted("/".join(t) for t in workflows[source])))
     for circle in circles(workflows):
         failures.append("the workflows import each other in a circle: " + " ↔ ".join(circle))
-    # The files of each workflow, and of each folder within one.
-    for folder in folders(modules, ("workflows",)):
-        if len(folder) < 2:
+    # The files of each module (a workflow, cosim/master, …), and of each folder within one;
+    # the top-level modules and the workflows are checked above.
+    for folder in folders(modules, ()):
+        if len(folder) < 1 or folder == ("workflows",):
             continue
         for circle in circles(cut(graph, len(folder) + 1, folder)):
             failures.append(f"the files of {'/'.join(folder)} import each other in a circle: "
                             + " ↔ ".join(circle))
-    if "--files" in sys.argv:
-        print("circles among the files of the other modules (listed, not failed):")
-        for folder in folders(modules, ()):
-            if folder[:1] == ("workflows",):
-                continue
-            for circle in circles(cut(graph, len(folder) + 1, folder)):
-                print(f"  {'/'.join(folder) or '(crate)'}: " + " ↔ ".join(circle))
     for failure in failures:
         print(f"import-graph: {failure}", file=sys.stderr)
     return 1 if failures else 0
