@@ -258,3 +258,21 @@ pub fn table(results: &[ModeResult]) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rigs_channels_are_floors_and_any_others_their_names() {
+        let names = |c: &[&str]| c.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let floors = names(&["floor 1", "floor 2", "floor 3"]);
+        assert_eq!(channel_labels(&names(&["acc1", "acc2", "acc3"])), floors);
+        assert_eq!(channel_labels(&[]), floors);
+        // Another order, or another channel set, is shown by name.
+        let other = names(&["acc2", "acc1", "acc3"]);
+        assert_eq!(channel_labels(&other), other);
+        let five = names(&["acc1", "vel3", "disp5"]);
+        assert_eq!(channel_labels(&five), five);
+    }
+}
