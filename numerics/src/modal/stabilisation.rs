@@ -393,6 +393,10 @@ pub enum Rejection {
     /// the model orders asked for, where no FRF peak took the sweep on: a pole of the
     /// higher orders' noise.
     Unsought,
+    /// An FDD peak where the spectral matrix's first singular value is less than
+    /// [`crate::modal::fdd::SEPARATION`] times its second: no one shape holds the peak, a
+    /// chance maximum of the noise between modes.
+    Unseparated,
 }
 
 impl Rejection {
@@ -421,6 +425,10 @@ impl Rejection {
             }
             Rejection::FewOrders => {
                 "found at too few model orders beside the best-supported mode (a pole of noise)"
+            }
+            Rejection::Unseparated => {
+                "no one shape holds the spectral matrix at the peak (its first singular value \
+                 under 50 times the second: noise)"
             }
         }
     }

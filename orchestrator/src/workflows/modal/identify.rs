@@ -405,7 +405,8 @@ impl Estimation<'_> {
     /// reads a frequency away from its peak ([`Rejection::NoPeak`]: the singular value's
     /// shoulder beside a mode, or its noise; the lab frame forced over 0–250 Hz had 8.48 and
     /// 14.01 Hz beside its 9.03 and 13.43 Hz); a peak inside a higher peak's bell
-    /// ([`Rejection::Unresolved`]: the same resonance).
+    /// ([`Rejection::Unresolved`]: the same resonance); a peak no one shape holds
+    /// ([`Rejection::Unseparated`]: the noise's).
     fn non_parametric(
         &self,
         first: &RunView<'_>,
@@ -446,6 +447,8 @@ impl Estimation<'_> {
         rejected.extend(shoulders.map(|m| RejectedMode::new(m, Rejection::Unresolved)));
         let off_peak = found.off_peak.into_iter();
         rejected.extend(off_peak.map(|m| RejectedMode::new(m, Rejection::NoPeak)));
+        let unseparated = found.unseparated.into_iter();
+        rejected.extend(unseparated.map(|m| RejectedMode::new(m, Rejection::Unseparated)));
         rejected.sort_by(|a, b| a.mode.frequency.total_cmp(&b.mode.frequency));
         Ok(FddModes {
             method: "FDD/EFDD",
