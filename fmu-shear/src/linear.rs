@@ -246,34 +246,54 @@ impl LinearStepMap {
 }
 
 /// `out = A [x; extra]` for `A` stored column-major (`out.len()` rows, one column per entry
-/// of `x` then of `extra`). Four rows at a time, their sums in a register while the columns
+/// of `x` then of `extra`). Four rows at a time (then two, then one), their sums in a register while the columns
 /// go by (a plain column-major product reads and writes `out` once per column); each row's
 /// terms are added in column order, as a row-major dot product adds them, so the result is the
 /// same to the bit.
 #[inline]
 pub(crate) fn product_by_columns(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64]) {
-    const LANES: usize = 4;
     let rows = out.len();
-    let weights = || x.iter().chain(extra).copied();
     let mut start = 0;
-    while start + LANES <= rows {
-        let mut sums = [0.0f64; LANES];
-        for (column, w) in columns.chunks_exact(rows).zip(weights()) {
-            let block = &column[start..start + LANES];
-            for (s, a) in sums.iter_mut().zip(block) {
-                *s += a * w;
-            }
-        }
-        out[start..start + LANES].copy_from_slice(&sums);
-        start += LANES;
+    while start + 4 <= rows {
+        rows_by_columns::<4>(columns, x, extra, out, start);
+        start += 4;
     }
-    for (r, slot) in out.iter_mut().enumerate().skip(start) {
-        let mut sum = 0.0;
-        for (column, w) in columns.chunks_exact(rows).zip(weights()) {
-            sum += column[r] * w;
-        }
-        *slot = sum;
+    if start + 2 <= rows {
+        rows_by_columns::<2>(columns, x, extra, out, start);
+        start += 2;
     }
+    if start < rows {
+        rows_by_columns::<1>(columns, x, extra, out, start);
+    }
+}
+
+/// Rows `start..start + L` of [`product_by_columns`]: their sums in registers while the
+/// state's columns and then the extra ones go by (two plain loops: one chained iterator over
+/// both cost a 6-state step three times its multiplications).
+#[inline(always)]
+fn rows_by_columns<const L: usize>(
+    columns: &[f64],
+    x: &[f64],
+    extra: &[f64],
+    out: &mut [f64],
+    start: usize,
+) {
+    let rows = out.len();
+    let (state, inputs) = columns.split_at(x.len() * rows);
+    let mut sums = [0.0f64; L];
+    let mut add = |column: &[f64], w: f64| {
+        let block = &column[start..start + L];
+        for (s, a) in sums.iter_mut().zip(block) {
+            *s += a * w;
+        }
+    };
+    for (column, &w) in state.chunks_exact(rows).zip(x) {
+        add(column, w);
+    }
+    for (column, &w) in inputs.chunks_exact(rows).zip(extra) {
+        add(column, w);
+    }
+    out[start..start + L].copy_from_slice(&sums);
 }
 
 /// Whether a step of `step` may reuse a map built for `built`: equal but for the rounding of a
