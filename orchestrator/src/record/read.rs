@@ -373,15 +373,16 @@ fn csv_header<'a>(
     let (comments, comment_lines) =
         leading_comments(bytes).map_err(|(line, m)| err(Some(line), m))?;
     let header_line = comment_lines + 1;
+    // Fields are trimmed where they are read (the reader's own trimming rebuilt every row: a
+    // tenth of reading a record).
     let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
         .comment(Some(b'#'))
         .from_reader(bytes);
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| err(Some(header_line), format!("bad header: {e}")))?
         .iter()
-        .map(str::to_owned)
+        .map(|h| h.trim().to_owned())
         .collect();
     if header.iter().all(|h| h.is_empty()) {
         return Err(err(
@@ -449,7 +450,7 @@ fn read_file(
             ));
         }
         for (i, field) in record.iter().enumerate() {
-            let value = parse_value(&header[i], field).map_err(|m| err(line(), m))?;
+            let value = parse_value(&header[i], field.trim()).map_err(|m| err(line(), m))?;
             columns[i].push(value);
         }
         if let Some(t) = layout.time {
