@@ -9,14 +9,13 @@ use orchestrator::workflows::modal::{identify, IdentifyOptions};
 mod common;
 use common::modal_records::*;
 
-/// Five storeys (5.0–33.9 Hz, damping 0.35–2.3 %), the force at floor 2 band-limited to
-/// 0.5–40 Hz (the fifth mode near the band's top), 200 Hz for 300 s, every floor measured,
-/// 2 % white and 5 % coloured noise. The default LSCF finds every mode and nothing else:
-/// measured within 0.007 %, MAC 1.0000 (bars 0.5 %, 0.95); fitted over 2.98–40.0 Hz (the
-/// coloured noise takes the coherence below 0.5 under 3 Hz).
-#[test]
-fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
-    let (data, exact) = record(
+/// The five-storey record of the LSCF and FDD tests below: the force at floor 2 band-limited to
+/// 0.5–40 Hz, 200 Hz for 300 s, every floor measured, 5 % coloured noise, seed 11.
+fn five_storeys() -> (
+    orchestrator::record::Measurement,
+    Vec<numerics::modal::Mode>,
+) {
+    record(
         5,
         (&[5.2; 5], &[64_000.0; 5], &[14.0; 5]),
         2,
@@ -25,7 +24,17 @@ fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
         &[1, 2, 3, 4, 5],
         0.05,
         11,
-    );
+    )
+}
+
+/// Five storeys (5.0–33.9 Hz, damping 0.35–2.3 %), the force at floor 2 band-limited to
+/// 0.5–40 Hz (the fifth mode near the band's top), 200 Hz for 300 s, every floor measured,
+/// 2 % white and 5 % coloured noise. The default LSCF finds every mode and nothing else:
+/// measured within 0.007 %, MAC 1.0000 (bars 0.5 %, 0.95); fitted over 2.98–40.0 Hz (the
+/// coloured noise takes the coherence below 0.5 under 3 Hz).
+#[test]
+fn lscf_finds_every_mode_of_a_band_limited_record_and_nothing_else() {
+    let (data, exact) = five_storeys();
     let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
     let io = found.input_output.as_ref().expect("LSCF ran");
     println!("band {:?}", io.band);
@@ -286,16 +295,7 @@ fn a_mode_on_its_neighbours_shoulder_is_kept() {
 /// 3) to 1.000; no FDD-only peak. Bars: 0.5 %, 30 %, MAC 0.90, none FDD-only.
 #[test]
 fn fdd_cross_checks_the_parametric_methods() {
-    let (data, exact) = record(
-        5,
-        (&[5.2; 5], &[64_000.0; 5], &[14.0; 5]),
-        2,
-        (200.0, 300.0),
-        (0.5, 40.0),
-        &[1, 2, 3, 4, 5],
-        0.05,
-        11,
-    );
+    let (data, exact) = five_storeys();
     let found = identify(&[data], &IdentifyOptions::default()).expect("identified");
     for m in &found.fdd.modes {
         println!(
