@@ -79,12 +79,15 @@ class Report:
         return key in self._data
 
     def keys(self):
+        """The report's field names (the CLI's JSON keys)."""
         return self._data.keys()
 
     def to_dict(self) -> dict[str, Any]:
+        """The report as the CLI's JSON, a dict."""
         return self._data
 
     def to_json(self, indent: int | None = 2) -> str:
+        """The report as the CLI's JSON text."""
         return _json.dumps(self._data, indent=indent)
 
     def __repr__(self) -> str:
@@ -131,14 +134,17 @@ class Twin:
 
     @property
     def path(self) -> str | None:
+        """The archive the twin was opened from, None for one made in memory."""
         return self._native.path
 
     @property
     def parameters(self) -> dict[str, dict[str, float | int | bool]]:
+        """The parameter values by component: ``{"physics": {"k2": 4300.0, ...}}``."""
         return self._native.parameters
 
     @property
     def noise_variance(self) -> dict[str, float] | None:
+        """The calibrated noise variance by channel (SI units squared), None when uncalibrated."""
         return self._native.noise_variance
 
     def __repr__(self) -> str:
