@@ -161,29 +161,7 @@ fn the_bumpers_record_gives_three_modes_and_sets_the_contacts_poles_aside() {
 #[test]
 fn ssi_covs_first_mode_scatters_with_the_records_length() {
     for (duration, every, mean_bar) in [(20.0, f64::INFINITY, 0.005), (200.0, 0.01, 0.002)] {
-        let errors: Vec<f64> = (1..=10)
-            .map(|seed| {
-                let scenario = Scenario {
-                    seed,
-                    duration,
-                    ..Scenario::default()
-                };
-                let (made, _) = synth_record(&scenario).expect("a record");
-                let s = scenario.structure();
-                let exact = modes(&s.mass_matrix(), &s.damping_matrix(), &s.stiffness_matrix())
-                    .expect("exact modes")[0]
-                    .frequency;
-                let found =
-                    identify(&[made.measurement], &IdentifyOptions::default()).expect("identified");
-                found
-                    .ssi
-                    .modes
-                    .iter()
-                    .map(|m| m.identified.frequency / exact - 1.0)
-                    .min_by(|a, b| a.abs().total_cmp(&b.abs()))
-                    .expect("SSI-COV found a mode")
-            })
-            .collect();
+        let errors = first_mode_errors(duration, |found| &found.ssi.modes);
         let mean = errors.iter().sum::<f64>() / errors.len() as f64;
         let sd =
             (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / errors.len() as f64).sqrt();
@@ -199,4 +177,50 @@ fn ssi_covs_first_mode_scatters_with_the_records_length() {
             "{duration} s: {errors:?}"
         );
     }
+}
+
+/// LSCF's (through the measured force) first mode on the same ten 20 s records. On seed 6 LSCF
+/// made two poles of the 2.0024 Hz resonance, 2.0290 and 1.9394 Hz, and the time-domain
+/// refinement of the kept one ran with the other still in the fit: +1.33 %. With the set-aside
+/// pole out of the refit, measured every seed within 0.032 % (seed 6 −0.003 %); the bar 0.1 %.
+#[test]
+fn lscfs_first_mode_holds_on_every_short_record() {
+    let errors = first_mode_errors(20.0, |found| {
+        &found
+            .input_output
+            .as_ref()
+            .expect("LSCF ran: the force is measured")
+            .modes
+    });
+    println!(
+        "20 s: LSCF mode 1 {:+.3?} %",
+        errors.iter().map(|e| 100.0 * e).collect::<Vec<_>>()
+    );
+    assert!(errors.iter().all(|e| e.abs() < 0.001), "{errors:?}");
+}
+
+/// Per seed 1..=10 of `twin synth`'s defaults over `duration` s, the relative error of the
+/// nearest of `method`'s frequencies to the exact first mode.
+fn first_mode_errors(duration: f64, method: impl Fn(&RecordModes) -> &[RecordMode]) -> Vec<f64> {
+    (1..=10)
+        .map(|seed| {
+            let scenario = Scenario {
+                seed,
+                duration,
+                ..Scenario::default()
+            };
+            let (made, _) = synth_record(&scenario).expect("a record");
+            let s = scenario.structure();
+            let exact = modes(&s.mass_matrix(), &s.damping_matrix(), &s.stiffness_matrix())
+                .expect("exact modes")[0]
+                .frequency;
+            let found =
+                identify(&[made.measurement], &IdentifyOptions::default()).expect("identified");
+            method(&found)
+                .iter()
+                .map(|m| m.identified.frequency / exact - 1.0)
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+                .expect("the method found a mode")
+        })
+        .collect()
 }

@@ -37,7 +37,9 @@ impl Estimation<'_> {
     /// damping of the record taken whole in the time domain through its measured force; the
     /// modes unchanged when the record has no force, is several runs, has no leaky mode, or
     /// the fit is singular, and a mode unchanged when its refined frequency moved by more than
-    /// a bin (the time-domain fit did not hold to LSCF's peak).
+    /// a bin (the time-domain fit did not hold to LSCF's peak). When the record sets modes aside
+    /// (not needed, or one resonance with a kept mode), the kept leaky modes are refined again
+    /// without them.
     pub(super) fn refined_leaky(
         &self,
         mut method: MethodModes,
@@ -69,31 +71,31 @@ impl Estimation<'_> {
         let Some(refined) = fit.refine(&start, &leaky) else {
             return method;
         };
-        for &i in &leaky {
-            let (frequency, damping) = refined[i];
-            if (frequency - start[i].0).abs() > bin {
-                continue;
-            }
-            let (frequency_sd, damping_sd) = fit
-                .curvature_sds(&refined, i)
-                .unwrap_or((modes[i].frequency_sd, modes[i].damping_sd));
-            modes[i] = IdentifiedMode {
-                frequency,
-                frequency_sd,
-                damping,
-                damping_sd,
-                ..modes[i].clone()
-            };
-        }
+        fit.take_refined(&mut modes, &refined, &leaky, &start, bin);
         let screened = Screened {
             leaky: &leaky,
             peak_window: 2.0 * evidence_bin,
             screen,
         };
-        let modes = match fit.rises(&modes) {
-            Some(rises) => screened.by_record(modes, &rises, &mut method.rejected),
-            None => modes,
+        let Some(rises) = fit.rises(&modes) else {
+            method.modes = record_modes(modes, floors);
+            return method;
         };
+        let kept = screened.by_record(&modes, &rises, &mut method.rejected);
+        let origin: Vec<(f64, f64)> = kept.iter().map(|&i| start[i]).collect();
+        let kept_leaky: Vec<usize> = (0..kept.len())
+            .filter(|&k| leaky.contains(&kept[k]))
+            .collect();
+        let mut modes: Vec<IdentifiedMode> = kept.iter().map(|&i| modes[i].clone()).collect();
+        // A pole set aside shared its resonance with one kept (two poles LSCF made of one
+        // peak, each pulled off it by the other): the record taken whole again without it, the
+        // kept leaky modes refined alone.
+        if modes.len() < start.len() && !kept_leaky.is_empty() {
+            let again: Vec<(f64, f64)> = modes.iter().map(|m| (m.frequency, m.damping)).collect();
+            if let Some(refined) = fit.refine(&again, &kept_leaky) {
+                fit.take_refined(&mut modes, &refined, &kept_leaky, &origin, bin);
+            }
+        }
         method.modes = record_modes(modes, floors);
         method
     }
@@ -108,7 +110,7 @@ struct Screened<'a> {
 }
 
 impl Screened<'_> {
-    /// `modes` without (moved to `rejected`, sorted by frequency) the leaky ones the record
+    /// The places in `modes` of those kept: without (moved to `rejected`, sorted by frequency) the leaky ones the record
     /// taken whole does not need (`rises` below [`MIN_RESIDUAL_RISE`]: the misfit screen
     /// leaves a leaky mode alone, this judges it), and those of the same shape as a mode the
     /// record needs more within the peak screen's window of it: one FRF peak supports one
@@ -117,18 +119,18 @@ impl Screened<'_> {
     /// the contact's stiffer state, which a linear fit reads as a second pole).
     fn by_record(
         &self,
-        modes: Vec<IdentifiedMode>,
+        modes: &[IdentifiedMode],
         rises: &[f64],
         rejected: &mut Vec<RejectedMode>,
-    ) -> Vec<IdentifiedMode> {
+    ) -> Vec<usize> {
         let verdicts: Vec<Option<Rejection>> = (0..modes.len())
-            .map(|i| self.verdict(&modes, rises, i))
+            .map(|i| self.verdict(modes, rises, i))
             .collect();
         let mut kept = Vec::with_capacity(modes.len());
-        for (mode, verdict) in modes.into_iter().zip(verdicts) {
+        for (i, verdict) in verdicts.into_iter().enumerate() {
             match verdict {
-                Some(rejection) => rejected.push(RejectedMode::new(mode, rejection)),
-                None => kept.push(mode),
+                Some(rejection) => rejected.push(RejectedMode::new(modes[i].clone(), rejection)),
+                None => kept.push(i),
             }
         }
         rejected.sort_by(|a, b| a.mode.frequency.total_cmp(&b.mode.frequency));
@@ -160,6 +162,35 @@ struct TimeDomain<'a> {
 }
 
 impl TimeDomain<'_> {
+    /// The modes at `leaky` given their `refined` frequency and damping with the residual's
+    /// curvature sds, each unless it moved more than `bin` from LSCF's (`origin`: the fit did
+    /// not hold to LSCF's peak).
+    fn take_refined(
+        &self,
+        modes: &mut [IdentifiedMode],
+        refined: &[(f64, f64)],
+        leaky: &[usize],
+        origin: &[(f64, f64)],
+        bin: f64,
+    ) {
+        for &i in leaky {
+            let (frequency, damping) = refined[i];
+            if (frequency - origin[i].0).abs() > bin {
+                continue;
+            }
+            let (frequency_sd, damping_sd) = self
+                .curvature_sds(refined, i)
+                .unwrap_or((modes[i].frequency_sd, modes[i].damping_sd));
+            modes[i] = IdentifiedMode {
+                frequency,
+                frequency_sd,
+                damping,
+                damping_sd,
+                ..modes[i].clone()
+            };
+        }
+    }
+
     /// The fit's residual (the outputs' relative residual powers, summed) at `modes`
     /// (frequency Hz, damping ratio).
     fn residual(&self, modes: &[(f64, f64)]) -> Option<f64> {
