@@ -71,18 +71,20 @@ impl Estimation<'_> {
         let Some(refined) = fit.refine(&start, &leaky) else {
             return method;
         };
-        fit.take_refined(&mut modes, &refined, &leaky, &start, bin);
+        let taken = fit.take_refined(&mut modes, &refined, &leaky, &start, bin);
         let screened = Screened {
             leaky: &leaky,
             peak_window: 2.0 * evidence_bin,
             screen,
         };
         let Some(rises) = fit.rises(&modes) else {
+            fit.with_curvature_sds(&mut modes, &taken);
             method.modes = record_modes(modes, floors);
             return method;
         };
         let kept = screened.by_record(&modes, &rises, &mut method.rejected);
         let origin: Vec<(f64, f64)> = kept.iter().map(|&i| start[i]).collect();
+        let mut taken: Vec<bool> = kept.iter().map(|&i| taken[i]).collect();
         let kept_leaky: Vec<usize> = (0..kept.len())
             .filter(|&k| leaky.contains(&kept[k]))
             .collect();
@@ -93,9 +95,12 @@ impl Estimation<'_> {
         if modes.len() < start.len() && !kept_leaky.is_empty() {
             let again: Vec<(f64, f64)> = modes.iter().map(|m| (m.frequency, m.damping)).collect();
             if let Some(refined) = fit.refine(&again, &kept_leaky) {
-                fit.take_refined(&mut modes, &refined, &kept_leaky, &origin, bin);
+                let retaken = fit.take_refined(&mut modes, &refined, &kept_leaky, &origin, bin);
+                taken.iter_mut().zip(retaken).for_each(|(t, r)| *t |= r);
             }
         }
+        // The sds once, from the modes as they end.
+        fit.with_curvature_sds(&mut modes, &taken);
         method.modes = record_modes(modes, floors);
         method
     }
@@ -162,9 +167,9 @@ struct TimeDomain<'a> {
 }
 
 impl TimeDomain<'_> {
-    /// The modes at `leaky` given their `refined` frequency and damping with the residual's
-    /// curvature sds, each unless it moved more than `bin` from LSCF's (`origin`: the fit did
-    /// not hold to LSCF's peak).
+    /// The modes at `leaky` given their `refined` frequency and damping, each unless it moved
+    /// more than `bin` from LSCF's (`origin`: the fit did not hold to LSCF's peak); per mode,
+    /// whether it took them.
     fn take_refined(
         &self,
         modes: &mut [IdentifiedMode],
@@ -172,22 +177,28 @@ impl TimeDomain<'_> {
         leaky: &[usize],
         origin: &[(f64, f64)],
         bin: f64,
-    ) {
+    ) -> Vec<bool> {
+        let mut taken = vec![false; modes.len()];
         for &i in leaky {
             let (frequency, damping) = refined[i];
-            if (frequency - origin[i].0).abs() > bin {
-                continue;
+            if (frequency - origin[i].0).abs() <= bin {
+                modes[i].frequency = frequency;
+                modes[i].damping = damping;
+                taken[i] = true;
             }
-            let (frequency_sd, damping_sd) = self
-                .curvature_sds(refined, i)
-                .unwrap_or((modes[i].frequency_sd, modes[i].damping_sd));
-            modes[i] = IdentifiedMode {
-                frequency,
-                frequency_sd,
-                damping,
-                damping_sd,
-                ..modes[i].clone()
-            };
+        }
+        taken
+    }
+
+    /// The `taken` modes' frequency and damping sds from the residual's curvature at `modes`
+    /// (their own where it is not curved upward).
+    fn with_curvature_sds(&self, modes: &mut [IdentifiedMode], taken: &[bool]) {
+        let at: Vec<(f64, f64)> = modes.iter().map(|m| (m.frequency, m.damping)).collect();
+        for (i, _) in taken.iter().enumerate().filter(|(_, t)| **t) {
+            if let Some((frequency_sd, damping_sd)) = self.curvature_sds(&at, i) {
+                modes[i].frequency_sd = frequency_sd;
+                modes[i].damping_sd = damping_sd;
+            }
         }
     }
 
