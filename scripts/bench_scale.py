@@ -273,7 +273,7 @@ class Bench:
                 cmd = [self.twin, "calibrate", "--twin", str(b["init"]), "--data", str(b["cal"]), "--starts",
                        str(starts), "--out", str(out), "--report", str(rep)]
                 job = {"kind": "calibrate", "data": str(b["cal"]), "storeys": n, "priors": cal_priors,
-                       "samples": "after", "starts": starts, "workers": self.cpus}
+                       "samples": "after", "starts": starts, "workers": min(self.cpus, starts)}
 
                 def peer(job=job):
                     got = peer_job(job, self.work, self.cap)
@@ -434,7 +434,7 @@ class Bench:
 
             def peer(starts=starts):
                 got = peer_job({"kind": "roving", "data": [str(p) for p in runs], "storeys": n, "priors": priors,
-                                "starts": starts, "workers": self.cpus}, self.work, self.cap)
+                                "starts": starts, "workers": min(self.cpus, starts)}, self.work, self.cap)
                 return (None, None) if got is None else (got["seconds"], got)
 
             r = self.series(f"roving calibrate --starts {starts}", ours, peer)

@@ -338,7 +338,7 @@ impl Twin {
             path: path.to_owned(),
             message,
         };
-        let unpacked = import::unpack(path, UnpackLimits::default())?;
+        let unpacked = import::unpack_system(path, UnpackLimits::default())?;
         let root = unpacked.path();
         let ssd = std::fs::read_to_string(root.join("SystemStructure.ssd"))
             .map_err(|e| invalid(format!("no readable SystemStructure.ssd: {e}")))?;

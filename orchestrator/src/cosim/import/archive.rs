@@ -99,6 +99,10 @@ fn cache_keys_in_use() -> std::sync::MutexGuard<'static, BTreeSet<String>> {
 /// which [`evict`] leaves alone.
 pub const EMBEDDED_ARCHIVES: &str = "embedded";
 
+/// The cache's folder of the FMU archives stored in twins' archives ([`unpack_system`]), which
+/// [`evict`] leaves alone (they have their own limit).
+pub const SYSTEM_ARCHIVES: &str = "archives";
+
 /// How many FMUs the cache keeps; beyond, the oldest idle ones are removed when one is added.
 const CACHE_ENTRIES: usize = 16;
 
@@ -306,6 +310,7 @@ fn evict(root: &Path, keep: &str, in_use: &BTreeSet<String>) {
             let name = e.file_name();
             name != keep
                 && name != EMBEDDED_ARCHIVES
+                && name != SYSTEM_ARCHIVES
                 && !name.to_str().is_some_and(|n| in_use.contains(n))
         })
         .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
@@ -360,12 +365,19 @@ fn safe_relative_path(name: &str) -> Option<PathBuf> {
 }
 
 pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportError> {
+    let mut zip = open_zip(archive, limits)?;
+    unpack_entries(&mut zip, archive, limits, |_| true)
+}
+
+/// The archive at `archive` as a zip, refused with its name when it is none or has more
+/// entries than `limits` allow.
+fn open_zip(archive: &Path, limits: UnpackLimits) -> Result<zip::ZipArchive<File>, ImportError> {
     let bad = |message: String| ImportError::Archive {
         path: archive.to_owned(),
         message,
     };
     let file = File::open(archive).map_err(|e| bad(format!("cannot open: {e}")))?;
-    let mut zip = zip::ZipArchive::new(file).map_err(|e| bad(format!("not a zip archive: {e}")))?;
+    let zip = zip::ZipArchive::new(file).map_err(|e| bad(format!("not a zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
         return Err(bad(format!(
             "{} entries, more than the limit of {}",
@@ -373,6 +385,17 @@ pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportEr
             limits.max_entries
         )));
     }
+    Ok(zip)
+}
+
+/// The entries of `zip` that `wanted` takes, into a temporary directory: in memory when there is
+/// room (see [`memory_root`]), else in the system's temporary directory.
+fn unpack_entries(
+    zip: &mut zip::ZipArchive<File>,
+    archive: &Path,
+    limits: UnpackLimits,
+    wanted: impl Fn(&str) -> bool + Copy,
+) -> Result<Unpacked, ImportError> {
     let declared: u64 = (0..zip.len())
         .filter_map(|i| zip.by_index_raw(i).ok().map(|e| e.size()))
         .fold(0, u64::saturating_add);
@@ -384,16 +407,137 @@ pub fn unpack(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportEr
             max_total_bytes: limits.max_total_bytes.min(declared),
             ..limits
         };
-        if let Ok(dir) = unpack_into(&mut zip, &root, archive, in_memory, |_| true) {
+        if let Ok(dir) = unpack_into(zip, &root, archive, in_memory, wanted) {
             return Ok(Unpacked {
                 place: Place::Temporary(dir),
             });
         }
     }
-    let dir = unpack_into(&mut zip, &std::env::temp_dir(), archive, limits, |_| true)?;
+    let dir = unpack_into(zip, &std::env::temp_dir(), archive, limits, wanted)?;
     Ok(Unpacked {
         place: Place::Temporary(dir),
     })
+}
+
+/// [`unpack`] of a system's archive (a twin's `.ssp`) whose FMUs are stored entries (not
+/// deflated, as `Twin::write` stores them): each such FMU is kept in the FMU cache's
+/// [`SYSTEM_ARCHIVES`] folder as a file of its own, named by the entry's name, CRC-32 and size
+/// (the trust the cache already gives an FMU's own entries, see [`unpack_fmu`]), and the
+/// unpacked directory has a symbolic link to it where the entry would be. Opening the same twin
+/// again, or another twin with the same FMU, then copies nothing: unpacking the 1.5 MB FMU of a
+/// 10-storey twin into the memory file system and removing it at exit were a tenth of a `twin
+/// compare`'s CPU time. A file there is used only if it has the entry's size; one is written
+/// through a temporary file (the zip reader checks its CRC-32) and renamed into place. Without
+/// a cache, or when anything about it fails, the entry is unpacked as [`unpack`] does.
+pub fn unpack_system(archive: &Path, limits: UnpackLimits) -> Result<Unpacked, ImportError> {
+    let folder = fmu_cache_root().map(|root| root.join(SYSTEM_ARCHIVES));
+    unpack_system_into(archive, limits, folder.as_deref())
+}
+
+/// [`unpack_system`] with the FMUs kept in `folder` (none: no cache).
+fn unpack_system_into(
+    archive: &Path,
+    limits: UnpackLimits,
+    folder: Option<&Path>,
+) -> Result<Unpacked, ImportError> {
+    let mut zip = open_zip(archive, limits)?;
+    let Some(folder) = folder else {
+        return unpack_entries(&mut zip, archive, limits, |_| true);
+    };
+    let linked: Vec<(String, PathBuf)> = (0..zip.len())
+        .filter_map(|index| cached_fmu(&mut zip, index, folder, limits))
+        .collect();
+    let unpacked = unpack_entries(&mut zip, archive, limits, |name| {
+        !linked.iter().any(|(n, _)| n == name)
+    })?;
+    for (name, file) in &linked {
+        let target = safe_relative_path(name).map(|r| unpacked.path().join(r));
+        let made = target.as_ref().is_some_and(|target| {
+            target
+                .parent()
+                .is_some_and(|p| std::fs::create_dir_all(p).is_ok())
+                && symlink_file(file, target).is_ok()
+        });
+        if !made {
+            return unpack(archive, limits);
+        }
+    }
+    if !linked.is_empty() {
+        evict_archives(folder, &linked);
+    }
+    Ok(unpacked)
+}
+
+/// The FMU cache's file of entry `index` of a system's archive when the entry is a stored
+/// `resources/….fmu` and the file is there or could be written: (the entry's name, the file).
+fn cached_fmu(
+    zip: &mut zip::ZipArchive<File>,
+    index: usize,
+    folder: &Path,
+    limits: UnpackLimits,
+) -> Option<(String, PathBuf)> {
+    let entry = zip.by_index_raw(index).ok()?;
+    let name = entry.name().to_owned();
+    let stored = entry.compression() == zip::CompressionMethod::Stored;
+    let file_name = name
+        .strip_prefix("resources/")
+        .filter(|n| n.ends_with(".fmu") && !n.contains('/') && safe_relative_path(n).is_some())?;
+    if !stored || entry.is_dir() || entry.is_symlink() || entry.size() > limits.max_total_bytes {
+        return None;
+    }
+    let stem = file_name.strip_suffix(".fmu").unwrap_or(file_name);
+    let (size, crc) = (entry.size(), entry.crc32());
+    drop(entry);
+    let path = folder.join(format!("{stem}-{crc:08x}-{size:x}.fmu"));
+    if std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == size) {
+        // Marks it as in use, so that eviction spares it.
+        let _ = File::open(&path).and_then(|f| f.set_modified(std::time::SystemTime::now()));
+        return Some((name, path));
+    }
+    create_private_dir(folder).ok()?;
+    let mut entry = zip.by_index(index).ok()?;
+    let mut tmp = tempfile::NamedTempFile::new_in(folder).ok()?;
+    let written = io::copy(&mut (&mut entry).take(size + 1), tmp.as_file_mut()).ok()?;
+    if written != size {
+        return None;
+    }
+    tmp.persist(&path).ok()?;
+    Some((name, path))
+}
+
+#[cfg(unix)]
+fn symlink_file(file: &Path, link: &Path) -> io::Result<()> {
+    std::os::unix::fs::symlink(file, link)
+}
+
+#[cfg(not(unix))]
+fn symlink_file(file: &Path, link: &Path) -> io::Result<()> {
+    std::fs::copy(file, link).map(|_| ())
+}
+
+/// Remove the oldest files of [`SYSTEM_ARCHIVES`] beyond [`CACHE_ENTRIES`] among those idle for
+/// [`IDLE_BEFORE_EVICTION`], never the ones just `linked`.
+fn evict_archives(folder: &Path, linked: &[(String, PathBuf)]) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    let now = std::time::SystemTime::now();
+    let mut dated: Vec<(std::time::SystemTime, PathBuf)> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| !linked.iter().any(|(_, f)| f == p))
+        .filter_map(|p| Some((std::fs::metadata(&p).ok()?.modified().ok()?, p)))
+        .collect();
+    if dated.len() + linked.len() <= CACHE_ENTRIES {
+        return;
+    }
+    dated.sort();
+    let excess = dated.len() + linked.len() - CACHE_ENTRIES;
+    for (modified, path) in dated.into_iter().take(excess) {
+        if now.duration_since(modified).unwrap_or_default() >= IDLE_BEFORE_EVICTION {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
 }
 
 /// A directory of a memory file system (tmpfs) to unpack `declared` bytes into, when there is
@@ -653,6 +797,68 @@ mod tests {
         let again = unpack_cached(last[0].path(), root.path(), limits).expect("cached");
         assert!(again.path().join("binaries/linux64/a.so").is_file());
         drop((recent, last));
+    }
+
+    /// A twin's stored FMU is kept once in the cache's folder and linked, its other entries
+    /// unpacked; a deflated FMU, or no cache, is unpacked as before; a damaged file in the
+    /// folder (another size) is written again.
+    #[test]
+    fn a_systems_stored_fmus_are_linked_from_the_cache() {
+        let fmu_bytes = vec![7u8; 70_000];
+        let ssp = |method: zip::CompressionMethod| {
+            let file = tempfile::NamedTempFile::new().expect("tmp");
+            let mut zip = zip::ZipWriter::new(file.reopen().expect("reopen"));
+            let deflated = zip::write::SimpleFileOptions::default();
+            zip.start_file("SystemStructure.ssd", deflated)
+                .expect("ssd");
+            zip.write_all(b"<ssd/>").expect("write");
+            let options = deflated.compression_method(method);
+            zip.start_file("resources/fmu_shear.fmu", options)
+                .expect("fmu");
+            zip.write_all(&fmu_bytes).expect("write");
+            zip.finish().expect("finish");
+            file
+        };
+        let (stored, deflated) = (
+            ssp(zip::CompressionMethod::Stored),
+            ssp(zip::CompressionMethod::Deflated),
+        );
+        let folder = tempfile::tempdir().expect("folder");
+        let limits = UnpackLimits::default();
+        let open = |archive: &Path, folder: Option<&Path>| {
+            let unpacked = unpack_system_into(archive, limits, folder).expect("unpacked");
+            let fmu = unpacked.path().join("resources/fmu_shear.fmu");
+            assert_eq!(std::fs::read(&fmu).expect("fmu"), fmu_bytes);
+            let ssd = std::fs::read(unpacked.path().join("SystemStructure.ssd")).expect("ssd");
+            assert_eq!(ssd, b"<ssd/>");
+            let linked = std::fs::symlink_metadata(&fmu)
+                .expect("meta")
+                .file_type()
+                .is_symlink();
+            (unpacked, linked)
+        };
+        let cached = || {
+            std::fs::read_dir(folder.path())
+                .expect("folder")
+                .map(|e| e.expect("entry").path())
+                .collect::<Vec<_>>()
+        };
+        let (first, linked) = open(stored.path(), Some(folder.path()));
+        assert!(linked && cfg!(unix), "the stored FMU is linked");
+        let files = cached();
+        assert_eq!(files.len(), 1, "{files:?}");
+        drop(first);
+        assert!(files[0].is_file(), "the cache's file outlives the twin");
+        let (_again, linked) = open(stored.path(), Some(folder.path()));
+        assert!(linked);
+        assert_eq!(cached(), files, "the same file reused");
+        std::fs::write(&files[0], b"damaged").expect("damage");
+        let (_repaired, _) = open(stored.path(), Some(folder.path()));
+        assert_eq!(std::fs::read(&files[0]).expect("read"), fmu_bytes);
+        let (_deflated, linked) = open(deflated.path(), Some(folder.path()));
+        assert!(!linked, "a deflated FMU is unpacked");
+        let (_uncached, linked) = open(stored.path(), None);
+        assert!(!linked, "without a cache the FMU is unpacked");
     }
 
     #[test]

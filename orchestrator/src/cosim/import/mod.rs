@@ -7,7 +7,9 @@ pub mod model_description;
 
 use std::path::{Path, PathBuf};
 
-pub use archive::{fmu_cache_root, unpack, unpack_fmu, UnpackLimits, Unpacked, EMBEDDED_ARCHIVES};
+pub use archive::{
+    fmu_cache_root, unpack, unpack_fmu, unpack_system, UnpackLimits, Unpacked, EMBEDDED_ARCHIVES,
+};
 pub use library::{
     file_uri, FmuMessage, Instance, Library, StateCapabilities, StateHandle, StepEnd,
 };
