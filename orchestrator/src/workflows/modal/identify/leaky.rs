@@ -48,10 +48,7 @@ impl Estimation<'_> {
         screen: &ScreenOptions,
     ) -> MethodModes {
         let bin = 1.0 / (self.sampling.segment_length as f64 * self.sampling.dt);
-        let [run] = self.spectral_runs.as_slice() else {
-            return method;
-        };
-        let Some(input) = run.input else {
+        let Some(fit) = self.time_domain() else {
             return method;
         };
         let mut modes: Vec<IdentifiedMode> =
@@ -63,11 +60,6 @@ impl Estimation<'_> {
             return method;
         }
         let start: Vec<(f64, f64)> = modes.iter().map(|m| (m.frequency, m.damping)).collect();
-        let fit = TimeDomain {
-            dt: self.sampling.dt,
-            input,
-            run,
-        };
         let Some(refined) = fit.refine(&start, &leaky) else {
             return method;
         };
@@ -103,6 +95,19 @@ impl Estimation<'_> {
         fit.with_curvature_sds(&mut modes, &taken);
         method.modes = record_modes(modes, floors);
         method
+    }
+
+    /// The record taken whole in the time domain through its measured force: None without a
+    /// force or on several runs.
+    pub(super) fn time_domain(&self) -> Option<TimeDomain<'_>> {
+        let [run] = self.spectral_runs.as_slice() else {
+            return None;
+        };
+        Some(TimeDomain {
+            dt: self.sampling.dt,
+            input: run.input?,
+            run,
+        })
     }
 }
 
@@ -160,7 +165,7 @@ impl Screened<'_> {
 }
 
 /// One run taken whole: its sampling step, measured force and responses.
-struct TimeDomain<'a> {
+pub(super) struct TimeDomain<'a> {
     dt: f64,
     input: &'a [f64],
     run: &'a Run<'a>,
@@ -204,7 +209,7 @@ impl TimeDomain<'_> {
 
     /// The fit's residual (the outputs' relative residual powers, summed) at `modes`
     /// (frequency Hz, damping ratio).
-    fn residual(&self, modes: &[(f64, f64)]) -> Option<f64> {
+    pub(super) fn residual(&self, modes: &[(f64, f64)]) -> Option<f64> {
         let poles: Vec<Complex> = modes.iter().map(|(f, z)| pole(*f, *z)).collect();
         time_fit::fit_residues(self.dt, self.input, self.run.outputs, &poles).map(|f| f.residual)
     }
