@@ -54,7 +54,7 @@ fn methods(found: &RecordModes) -> Vec<(&'static str, Vec<f64>)> {
 }
 
 /// Each method's default result is the calibrated twin's three modes, nothing else: LSCF
-/// within 1 % (measured: dataset1 −0.07 / −0.08 / −0.21 %, dataset2 −0.04 / +0.24 / −0.05 %);
+/// within 1 % (measured: dataset1 −0.08 / −0.08 / −0.19 %, dataset2 −0.04 / +0.24 / −0.05 %);
 /// FDD/EFDD within 1.2 % (measured −0.66 / +0.83 / −0.27 % and −0.01 / −0.45 / −0.91 %:
 /// EFDD's 0.2 Hz bins, seven segments of 256, make a bell of three to eight bins; before it
 /// read its zero crossings only where the correlation decays, −0.67 / +0.94 / +0.80 % and
@@ -179,29 +179,54 @@ fn ssi_covs_first_mode_scatters_with_the_records_length() {
     }
 }
 
-/// LSCF's (through the measured force) first mode on the same ten 20 s records. On seed 6 LSCF
-/// made two poles of the 2.0024 Hz resonance, 2.0290 and 1.9394 Hz, and the time-domain
-/// refinement of the kept one ran with the other still in the fit: +1.33 %. With the set-aside
-/// pole out of the refit, measured every seed within 0.032 % (seed 6 −0.003 %); the bar 0.1 %.
+/// LSCF's (through the measured force) modes on the same ten 20 s records, every one of them.
+/// On seed 6 LSCF made two poles of the 2.0024 Hz resonance, 2.0290 and 1.9394 Hz, and the
+/// time-domain refinement of the kept one ran with the other still in the fit: +1.33 %. On
+/// seed 7 the 8.379 Hz mode's cluster followed a pole of noise where its track split (8.35 Hz
+/// to order 24, then 8.29 falling to 8.23 Hz): 8.2873 Hz, −1.09 %, the mode's own branch
+/// (8.3946 Hz) set aside as one resonance with it. With the set-aside pole out of the refit,
+/// and the record deciding which of one resonance's two modes stands, measured: the first mode
+/// within 0.032 % on every seed (bar 0.1 %); every mode within 0.386 % (seed 9's 5.9258 Hz for
+/// 5.9487; seed 7's third +0.186 %), the bar the 0.5 % (0.11 points of margin); three
+/// modes and no other on each.
 #[test]
-fn lscfs_first_mode_holds_on_every_short_record() {
-    let errors = first_mode_errors(20.0, |found| {
+fn lscfs_modes_hold_on_every_short_record() {
+    let errors = mode_errors(20.0, |found| {
         &found
             .input_output
             .as_ref()
             .expect("LSCF ran: the force is measured")
             .modes
     });
-    println!(
-        "20 s: LSCF mode 1 {:+.3?} %",
-        errors.iter().map(|e| 100.0 * e).collect::<Vec<_>>()
-    );
-    assert!(errors.iter().all(|e| e.abs() < 0.001), "{errors:?}");
+    for (seed, (errors, count)) in (1..).zip(&errors) {
+        println!(
+            "20 s, seed {seed}: LSCF {count} modes, errors {:+.3?} %",
+            errors.iter().map(|e| 100.0 * e).collect::<Vec<_>>()
+        );
+        assert_eq!(*count, errors.len(), "seed {seed}: a mode more or fewer");
+        assert!(errors[0].abs() < 0.001, "seed {seed}: {errors:?}");
+        assert!(
+            errors.iter().all(|e| e.abs() < 0.005),
+            "seed {seed}: {errors:?}"
+        );
+    }
 }
 
 /// Per seed 1..=10 of `twin synth`'s defaults over `duration` s, the relative error of the
 /// nearest of `method`'s frequencies to the exact first mode.
 fn first_mode_errors(duration: f64, method: impl Fn(&RecordModes) -> &[RecordMode]) -> Vec<f64> {
+    mode_errors(duration, method)
+        .into_iter()
+        .map(|(errors, _)| errors[0])
+        .collect()
+}
+
+/// Per seed 1..=10 of `twin synth`'s defaults over `duration` s: per exact mode, the relative
+/// error of the nearest of `method`'s frequencies; and how many modes the method reported.
+fn mode_errors(
+    duration: f64,
+    method: impl Fn(&RecordModes) -> &[RecordMode],
+) -> Vec<(Vec<f64>, usize)> {
     (1..=10)
         .map(|seed| {
             let scenario = Scenario {
@@ -212,15 +237,21 @@ fn first_mode_errors(duration: f64, method: impl Fn(&RecordModes) -> &[RecordMod
             let (made, _) = synth_record(&scenario).expect("a record");
             let s = scenario.structure();
             let exact = modes(&s.mass_matrix(), &s.damping_matrix(), &s.stiffness_matrix())
-                .expect("exact modes")[0]
-                .frequency;
+                .expect("exact modes");
             let found =
                 identify(&[made.measurement], &IdentifyOptions::default()).expect("identified");
-            method(&found)
+            let found = method(&found);
+            let errors = exact
                 .iter()
-                .map(|m| m.identified.frequency / exact - 1.0)
-                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
-                .expect("the method found a mode")
+                .map(|e| {
+                    found
+                        .iter()
+                        .map(|m| m.identified.frequency / e.frequency - 1.0)
+                        .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+                        .expect("the method found a mode")
+                })
+                .collect();
+            (errors, found.len())
         })
         .collect()
 }

@@ -14,6 +14,7 @@ mod report;
 mod roving;
 mod runs;
 mod shoulder;
+mod split;
 pub mod verdicts;
 
 use serde::Serialize;

@@ -256,6 +256,7 @@ impl Estimation<'_> {
             let chosen = self.lscf_modes(&frf, band, evidence.clone(), screen, floors)?;
             let chosen = shoulder::restored_shoulders(chosen, averaged, floors);
             let chosen = shoulder::screened_by_misfit(chosen, averaged);
+            let chosen = self.resolved_by_record(chosen, floors, screen);
             let evidence_bin = match averaged.frequencies.as_slice() {
                 [a, b, ..] => b - a,
                 _ => 0.0,
