@@ -536,7 +536,10 @@ fn read_component(root: &Path, c: ssp::SsdComponent) -> Result<Component, String
 /// variances, the parameters' covariance, the validation NMSE and the records.
 fn read_system_values(root: &Path, binding: &str) -> Result<SystemValues, String> {
     let ssv = std::fs::read_to_string(root.join(binding)).map_err(|e| e.to_string())?;
-    let mut values: BTreeMap<String, ParameterValue> = BTreeMap::new();
+    // Gathered, then made a map at once: the file's names come sorted, and a map built from a
+    // sorted list compares each name once (inserting one by one compared each about eleven
+    // times: 1,900 names of a 20-storey twin, most of them `covariance.*`).
+    let mut values: Vec<(String, ParameterValue)> = Vec::new();
     let mut strings: BTreeMap<String, String> = BTreeMap::new();
     for (name, value) in ssp::parse_ssv(&ssv)? {
         let value = match value {
@@ -553,8 +556,10 @@ fn read_system_values(root: &Path, binding: &str) -> Result<SystemValues, String
                 ))
             }
         };
-        values.insert(name, value);
+        values.push((name, value));
     }
+    // The last of a repeated name wins, as it did inserted one by one.
+    let values: BTreeMap<String, ParameterValue> = values.into_iter().collect();
     let records = read_records(&strings)?;
     let noise_variance = noise::NoiseVariances::from_parameters(&values)?;
     let parameter_covariance = read_covariance(&values)?;
@@ -736,8 +741,8 @@ fn read_records(strings: &BTreeMap<String, String>) -> Result<Vec<RecordRef>, St
 fn read_covariance(
     values: &BTreeMap<String, ParameterValue>,
 ) -> Result<Option<ParameterCovariance>, String> {
-    let mut names = Vec::new();
-    let mut entries = BTreeMap::new();
+    let mut names: Vec<&str> = Vec::new();
+    let mut entries: Vec<(&str, &str, f64)> = Vec::new();
     for (key, value) in values {
         let Some(pair) = key.strip_prefix(COVARIANCE_PREFIX) else {
             continue;
@@ -755,30 +760,45 @@ fn read_covariance(
             if *x < 0.0 {
                 return Err(format!("{key} = {x}: a variance cannot be negative"));
             }
-            names.push(a.to_owned());
+            names.push(a);
         }
-        entries.insert((a.to_owned(), b.to_owned()), *x);
+        entries.push((a, b, *x));
     }
     if entries.is_empty() {
         return Ok(None);
     }
-    let get = |a: &str, b: &str| {
-        entries
-            .get(&(a.to_owned(), b.to_owned()))
-            .or_else(|| entries.get(&(b.to_owned(), a.to_owned())))
-            .copied()
-            .ok_or_else(|| format!("{COVARIANCE_PREFIX}{a}.{b} is missing"))
-    };
-    let matrix = names
+    // Each entry (A, B) where the matrix has both; (B, A) where it gives no (A, B) itself.
+    let index: BTreeMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (*n, i)).collect();
+    let n = names.len();
+    let mut matrix: Vec<Vec<Option<f64>>> = vec![vec![None; n]; n];
+    let placed: Vec<(usize, usize, f64)> = entries
         .iter()
-        .map(|a| {
-            names
-                .iter()
-                .map(|b| get(a, b))
+        .filter_map(|(a, b, x)| Some((*index.get(a)?, *index.get(b)?, *x)))
+        .collect();
+    for &(i, j, x) in &placed {
+        matrix[i][j] = Some(x);
+    }
+    for &(i, j, x) in &placed {
+        matrix[j][i].get_or_insert(x);
+    }
+    let matrix = matrix
+        .into_iter()
+        .enumerate()
+        .map(|(i, row)| {
+            row.into_iter()
+                .enumerate()
+                .map(|(j, x)| {
+                    x.ok_or_else(|| {
+                        format!("{COVARIANCE_PREFIX}{}.{} is missing", names[i], names[j])
+                    })
+                })
                 .collect::<Result<Vec<f64>, _>>()
         })
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Some(ParameterCovariance { names, matrix }))
+    Ok(Some(ParameterCovariance {
+        names: names.into_iter().map(str::to_owned).collect(),
+        matrix,
+    }))
 }
 
 /// An `.ssv` parameter set as twin parameters: Real, Integer and Boolean values.
@@ -805,6 +825,45 @@ fn parse_ssv(xml: &str) -> Result<Vec<(String, ParameterValue)>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The covariance's names in the file's order, an entry given one way filling both, an
+    /// entry given both ways kept as given, a missing pair named, an entry of a name without
+    /// its variance left out.
+    #[test]
+    fn covariance_is_read_from_its_entries() {
+        let real = |entries: &[(&str, f64)]| -> BTreeMap<String, ParameterValue> {
+            entries
+                .iter()
+                .map(|(k, x)| (format!("{COVARIANCE_PREFIX}{k}"), ParameterValue::Real(*x)))
+                .collect()
+        };
+        let values = real(&[
+            ("k1.k1", 4.0),
+            ("k2.k2", 9.0),
+            ("k1.k2", 1.5),
+            ("m1.m1", 0.25),
+            ("m1.k1", -0.5),
+            ("k1.m1", -0.25),
+            ("m1.k2", 0.125),
+            ("c9.k1", 7.0),
+        ]);
+        let c = read_covariance(&values).expect("read").expect("present");
+        assert_eq!(c.names, ["k1", "k2", "m1"]);
+        assert_eq!(
+            c.matrix,
+            [
+                vec![4.0, 1.5, -0.25],
+                vec![1.5, 9.0, 0.125],
+                vec![-0.5, 0.125, 0.25]
+            ]
+        );
+        let missing = real(&[("k1.k1", 4.0), ("k2.k2", 9.0)]);
+        assert_eq!(
+            read_covariance(&missing).unwrap_err(),
+            "covariance.k1.k2 is missing"
+        );
+        assert!(read_covariance(&BTreeMap::new()).expect("read").is_none());
+    }
 
     #[test]
     fn ssv_round_trips() {
