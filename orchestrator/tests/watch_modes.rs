@@ -30,6 +30,11 @@ fn building() -> Structure {
 }
 
 fn twin(dir: &Path) -> PathBuf {
+    twin_excited(dir, "base")
+}
+
+/// The five-storey twin, excited at `excitation` (`base`, `force:F`).
+fn twin_excited(dir: &Path, excitation: &str) -> PathBuf {
     let nominal = dir.join("nominal.json");
     std::fs::write(
         &nominal,
@@ -43,7 +48,7 @@ fn twin(dir: &Path) -> PathBuf {
             "--storeys",
             "5",
             "--excitation",
-            "base",
+            excitation,
             "--nominal",
         ])
         .arg(&nominal)
@@ -142,8 +147,11 @@ fn an_unchanged_building_keeps_its_frequencies_in_the_band() {
             }
         }
     }
+    println!("worst tracked shift {worst:.2} %, modes found per window {found:?}");
     // Measured: the worst tracked shift 0.76 % (the band's floor is 1.5 %); the first three
-    // modes found in most windows, the upper two (little excited from the ground) in few.
+    // modes found in most windows (20, 19, 16 of 24, windows identified as `twin modal`
+    // identifies a record; by the diagram's clusters alone 21, 19, 16), the upper two (little
+    // excited from the ground) in few (0 and 1; before 1 and 1).
     assert!(worst < 1.0, "worst tracked shift {worst} %");
     assert!(
         found[0] >= 18 && found[2] >= 12,
@@ -195,10 +203,81 @@ fn a_softer_storey_moves_the_first_frequency_out_of_the_band_after_the_change() 
         "the first mode tracked late in {} windows",
         late.len()
     );
+    println!("late shifts {late:.2?} %, exact {expected:.2} %");
     for s in late {
         assert!(
             (s - expected).abs() < 0.8,
             "tracked {s} %, exact {expected} %"
         );
     }
+}
+
+/// A force at floor 2 band-limited to 0.5–6.5 Hz, its top edge inside the building's band
+/// (1.26, 3.68, 5.80, 7.45 and 8.50 Hz), 300 s at 51.2 Hz, acc1/3/5 in g and the force
+/// measured: the windows are identified as `twin modal` identifies a record, and a pole at the
+/// force's band edge (which output-only SSI-COV reads as a lightly damped mode) is set aside,
+/// not tracked as a twin mode. Before (the diagram's clusters alone, unscreened): twin mode 4
+/// (7.45 Hz) tracked at the edge's 6.27–6.37 Hz in 4 of the 24 windows; now none, and no
+/// `frequency` alert on the unchanged building. The modes the force drives still tracked:
+/// measured modes 1–3 in 20, 24 and 13 windows (bars 18, 18, 12).
+#[test]
+fn a_band_limited_forces_edge_is_not_tracked_as_a_mode() {
+    let dir = tempfile::tempdir().expect("dir");
+    let d = dir.path();
+    let twin = twin_excited(d, "force:2");
+    let scenario = d.join("band.json");
+    std::fs::write(&scenario, r#"{"force": {"low_hz": 0.5, "band_hz": 6.5}}"#).expect("scenario");
+    let source = d.join("band.csv");
+    run(twin_cmd()
+        .arg("synth")
+        .arg("--scenario")
+        .arg(&scenario)
+        .args([
+            "--storeys",
+            "5",
+            "--excitation",
+            "force:2",
+            "--duration",
+            "300",
+        ])
+        .args([
+            "--seed",
+            "5",
+            "--channels",
+            "acc1,acc3,acc5",
+            "--units",
+            "acc=g",
+        ])
+        .arg("--out")
+        .arg(&source));
+    let alerts = watch(&twin, &source, &d.join("band.jsonl"));
+    let modes = of_kind(&alerts, "modes");
+    assert_eq!(modes.len(), 24);
+    let edge = 6.5;
+    let mut at_edge = 0;
+    let mut found = vec![0usize; 5];
+    for m in &modes {
+        for (i, t) in m["modes"].as_array().expect("modes").iter().enumerate() {
+            if let Some(f) = t["frequency"].as_f64() {
+                found[i] += 1;
+                if (f / edge - 1.0).abs() < 0.05 {
+                    at_edge += 1;
+                    println!("{}: twin mode {} tracked at {f:.4} Hz", m["time"], i + 1);
+                }
+            }
+        }
+    }
+    println!("modes found per window {found:?}; tracked at the edge {at_edge}");
+    assert_eq!(
+        at_edge, 0,
+        "a pole at the force's band edge tracked as a mode"
+    );
+    assert!(
+        of_kind(&alerts, "frequency").is_empty(),
+        "a frequency alert on an unchanged building"
+    );
+    assert!(
+        found[0] >= 18 && found[1] >= 18 && found[2] >= 12,
+        "{found:?}"
+    );
 }

@@ -20,7 +20,7 @@ pub mod verdicts;
 use serde::Serialize;
 use structure::channel::Channel;
 
-use crate::record::{AmbientRecord, Measurement};
+use crate::record::{AmbientRecord, Measurement, Signal};
 use numerics::modal::fdd::{fdd, FddOptions};
 use numerics::modal::lscf::Weighting;
 use numerics::modal::spectral::{Run, Welch, MIN_SEGMENT};
@@ -202,6 +202,25 @@ pub fn identify_ambient(
         })
         .collect();
     identify_runs(&views, options)
+}
+
+/// Identifies the modes of one stretch of a stream sampled every `dt` s (`twin watch
+/// --track-modes`' window): its `responses` and, when measured, its `excitation`, as `twin
+/// modal` identifies a record — the same selection and screens (the force's band edge and
+/// peaks, one-channel shapes, one resonance, no peak in the spectrum).
+pub fn identify_window(
+    dt: f64,
+    excitation: Option<&Signal>,
+    responses: &[Signal],
+    options: &IdentifyOptions,
+) -> Result<RecordModes, IdentifyError> {
+    let view = RunView {
+        path: std::path::Path::new("the stream's window"),
+        dt,
+        excitation,
+        responses,
+    };
+    identify_runs(&[view], options)
 }
 
 /// Identifies the modes of `runs` (one test): their total spectrum, SSI-COV's modes, and with

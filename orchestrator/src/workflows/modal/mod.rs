@@ -14,7 +14,9 @@ pub use evidence::{
     evidence_of, modal_evidence, modal_evidence_with, ModalBand, ModalEvidence, ModeShift,
 };
 pub use explain::{explain_shifts, Explanation};
-pub use identify::{identify, identify_ambient, IdentifyError, IdentifyOptions, RecordModes};
+pub use identify::{
+    identify, identify_ambient, identify_window, IdentifyError, IdentifyOptions, RecordModes,
+};
 pub use pair::{pair_modes, ModeComparison, ModePair, ObservedMode};
 pub use twin::{twin_modes, ModalOptions, TwinMode, TwinModes};
 // The methods' verdicts are the identification's last stage (identify/verdicts.rs).

@@ -1,6 +1,9 @@
 //! Frequency tracking in operation: the modes identified on a sliding window of the stream
-//! (output-only, SSI-COV: in operation the excitation is whatever the structure meets) and set
-//! against the twin's modes and their band. Every `every` seconds of stream time the last
+//! (SSI-COV's, output-only: in operation the excitation is whatever the structure meets) and
+//! set against the twin's modes and their band. A window is identified as `twin modal`
+//! identifies a record ([`identify_window`]): the same selection and screens, with the
+//! stream's excitation where it varies (a pole at the force's band edge or its own spectral
+//! peak set aside, not tracked as a mode). Every `every` seconds of stream time the last
 //! `window` seconds of every response channel are identified; each identified mode is paired
 //! with the twin's, and a twin mode whose tracked frequency stays outside its band for
 //! `persistence` identifications in a row is reported once as having left it (and again only
@@ -16,13 +19,12 @@ use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
-use crate::workflows::modal::{pair_modes, ModeComparison, ObservedMode, TwinModes};
-use ::structure::channel::{Channel, Quantity};
-use numerics::modal::spectral::Run;
-use numerics::modal::ssi::{ssi_cov, SsiOptions};
-use numerics::modal::stabilisation::{
-    select_modes, SelectionOptions, StabilisationDiagram, StabilityTolerances,
+use crate::record::Signal;
+use crate::workflows::modal::{
+    identify_window, pair_modes, IdentifyOptions, ModeComparison, ObservedMode, TwinModes,
 };
+use ::structure::channel::{Channel, Quantity};
+use numerics::modal::stabilisation::IdentifiedMode;
 
 /// `twin watch --track-modes`: the sliding window and the band.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -105,24 +107,33 @@ pub struct Tracker {
     twin: TwinModes,
     channels: Vec<Channel>,
     buffers: Vec<VecDeque<f64>>,
+    /// The stream's excitation (force or ground acceleration) over the window.
+    excitation: (Channel, VecDeque<f64>),
     capacity: usize,
     every: usize,
     since: usize,
     dt: f64,
     outside_runs: Vec<usize>,
     reported: Vec<bool>,
-    ssi: SsiOptions,
+    identify: IdentifyOptions,
 }
 
 impl Tracker {
-    /// A tracker of `channels` sampled every `dt` s against `twin`'s modes.
-    pub fn new(options: TrackOptions, twin: TwinModes, channels: Vec<Channel>, dt: f64) -> Tracker {
+    /// A tracker of `channels` and the `excitation` sampled every `dt` s against `twin`'s modes.
+    pub fn new(
+        options: TrackOptions,
+        twin: TwinModes,
+        channels: Vec<Channel>,
+        excitation: Channel,
+        dt: f64,
+    ) -> Tracker {
         let capacity = (options.window / dt).round().max(1.0) as usize;
         let every = (options.every / dt).round().max(1.0) as usize;
         let n = twin.modes.len();
         Tracker {
             options,
             buffers: vec![VecDeque::with_capacity(capacity); channels.len()],
+            excitation: (excitation, VecDeque::with_capacity(capacity)),
             channels,
             capacity,
             every,
@@ -130,11 +141,11 @@ impl Tracker {
             dt,
             outside_runs: vec![0; n],
             reported: vec![false; n],
-            ssi: SsiOptions {
-                min_order: 2,
+            // SSI-COV alone (no FRF fit), to four poles a twin mode.
+            identify: IdentifyOptions {
                 max_order: (4 * n).max(20),
-                order_step: 2,
-                block_rows: None,
+                input_output: false,
+                ..IdentifyOptions::default()
             },
             twin,
         }
@@ -145,15 +156,23 @@ impl Tracker {
         for b in &mut self.buffers {
             b.clear();
         }
+        self.excitation.1.clear();
         self.since = 0;
     }
 
-    /// One sample of every channel; an identification when one is due and the window is full.
-    pub fn push(&mut self, time: f64, values: &[f64]) -> Option<Result<Tracked, String>> {
-        if values.iter().any(|v| !v.is_finite()) {
+    /// One sample of the excitation and every channel; an identification when one is due and
+    /// the window is full.
+    pub fn push(
+        &mut self,
+        time: f64,
+        excitation: f64,
+        values: &[f64],
+    ) -> Option<Result<Tracked, String>> {
+        if !excitation.is_finite() || values.iter().any(|v| !v.is_finite()) {
             return None;
         }
-        for (b, &v) in self.buffers.iter_mut().zip(values) {
+        let buffers = self.buffers.iter_mut().chain([&mut self.excitation.1]);
+        for (b, &v) in buffers.zip(values.iter().chain([&excitation])) {
             if b.len() == self.capacity {
                 b.pop_front();
             }
@@ -175,39 +194,40 @@ impl Tracker {
         // Each channel scaled to unit variance (acceleration, velocity and displacement
         // channels side by side), the shapes scaled back afterwards.
         let mut scales = Vec::with_capacity(self.buffers.len());
-        let data: Vec<Vec<f64>> = self
+        let responses: Vec<Signal> = self
             .buffers
             .iter()
-            .map(|b| {
+            .zip(&self.channels)
+            .map(|(b, channel)| {
                 let n = b.len() as f64;
                 let mean = b.iter().sum::<f64>() / n;
                 let sd = (b.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
                 let sd = if sd > 0.0 { sd } else { 1.0 };
                 scales.push(sd);
-                b.iter().map(|v| (v - mean) / sd).collect()
+                Signal {
+                    channel: *channel,
+                    unit: channel.quantity().si(),
+                    values: b.iter().map(|v| (v - mean) / sd).collect(),
+                }
             })
             .collect();
-        let outputs: Vec<&[f64]> = data.iter().map(Vec::as_slice).collect();
-        let run = Run {
-            input: None,
-            outputs: &outputs,
+        let (channel, values) = &self.excitation;
+        let excitation = Signal {
+            channel: *channel,
+            unit: channel.quantity().si(),
+            values: values.iter().copied().collect(),
         };
-        let orders = ssi_cov(&[run], self.dt, &self.ssi).map_err(|e| e.to_string())?;
-        let diagram = StabilisationDiagram::new(orders, StabilityTolerances::default())
+        let found = identify_window(self.dt, Some(&excitation), &responses, &self.identify)
             .map_err(|e| e.to_string())?;
-        let identified =
-            select_modes(&diagram, &SelectionOptions::default()).map_err(|e| e.to_string())?;
+        let identified: Vec<IdentifiedMode> =
+            found.ssi.modes.into_iter().map(|m| m.identified).collect();
         let comparison = self.compare(&identified, &scales);
         Ok(self.judge(time, &identified, &comparison))
     }
 
     /// The identified modes paired with the twin's, by shape at the floors the acceleration
     /// channels measure when there are two or more of them, else by frequency.
-    fn compare(
-        &self,
-        identified: &[numerics::modal::stabilisation::IdentifiedMode],
-        scales: &[f64],
-    ) -> ModeComparison {
+    fn compare(&self, identified: &[IdentifiedMode], scales: &[f64]) -> ModeComparison {
         let acc: Vec<usize> = (0..self.channels.len())
             .filter(|&c| self.channels[c].quantity() == Quantity::Acceleration)
             .collect();
@@ -234,7 +254,7 @@ impl Tracker {
     fn judge(
         &mut self,
         time: f64,
-        identified: &[numerics::modal::stabilisation::IdentifiedMode],
+        identified: &[IdentifiedMode],
         comparison: &ModeComparison,
     ) -> Tracked {
         let mut modes = Vec::with_capacity(self.twin.modes.len());

@@ -253,7 +253,7 @@ impl Watcher<'_> {
         if let Some(b) = &mut self.background {
             b.push(time, excitation, &self.measured);
         }
-        self.track(time)?;
+        self.track(time, excitation)?;
         self.state.samples += 1;
         self.state.last_time = Some(time);
         let known = self.noise_known(time - start);
@@ -290,7 +290,7 @@ impl Watcher<'_> {
     /// The modes on the sliding window: a `modes` alert per identification, `frequency` when a
     /// twin mode leaves its band (`frequency_back` when it returns), `modes_failed` when the
     /// window could not be identified.
-    pub(super) fn track(&mut self, time: f64) -> Result<(), WatchError> {
+    pub(super) fn track(&mut self, time: f64, excitation: f64) -> Result<(), WatchError> {
         if self.tracker.is_none() {
             if let (Some(dt), Some(options)) = (self.state.dt, self.options.modes) {
                 if let Some(twin) = self.twin_modes.take() {
@@ -298,6 +298,7 @@ impl Watcher<'_> {
                         options,
                         twin,
                         self.state.channels.clone(),
+                        self.state.excitation,
                         dt,
                     ));
                 }
@@ -306,7 +307,7 @@ impl Watcher<'_> {
         let Some(tracker) = &mut self.tracker else {
             return Ok(());
         };
-        let Some(result) = tracker.push(time, &self.measured) else {
+        let Some(result) = tracker.push(time, excitation, &self.measured) else {
             return Ok(());
         };
         match result {
