@@ -105,7 +105,7 @@ pub fn columns_csv(
     }
     header.push(b'\n');
     out.write_all(&header)?;
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let threads = crate::parallel::cores();
     // Rows a thread formats at least: below, a thread costs more than it saves.
     const ROWS_PER_THREAD: usize = 256;
     let mut first = 0;

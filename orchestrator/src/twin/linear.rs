@@ -288,7 +288,7 @@ pub fn acceleration_band(
 /// every slot's variance is computed as in one pass, to the bit.
 fn band_on_threads(modal: &Modal, record: &LinearRecord) -> Vec<Vec<f64>> {
     let slots = modal.coefficients();
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let threads = crate::parallel::cores();
     let groups: Vec<&[DMatrix<f64>]> = slots.chunks(slots.len().div_ceil(threads).max(1)).collect();
     crate::parallel::on_threads(&groups, threads, |group| band(modal, record, group))
         .into_iter()
@@ -316,7 +316,7 @@ fn band_in_groups(
             directions.columns(first, end - first).into_owned()
         })
         .collect();
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+    let threads = crate::parallel::cores();
     let parts =
         crate::parallel::on_threads(&groups, threads, |group| band_along(params, record, group));
     let mut band: Option<Vec<Vec<f64>>> = None;

@@ -681,7 +681,7 @@ fn finite_difference_columns(
             })
             .collect())
     };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = crate::parallel::cores();
     let parameters: Vec<usize> = (0..p).collect();
     crate::parallel::on_threads(&parameters, threads, |&j| sensitivity(j))
         .into_iter()

@@ -111,9 +111,7 @@ impl Default for CalibrationSetup {
             seed: 1,
             noise_fraction: 0.02,
             noise_log_variance: 1.0,
-            threads: std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1),
+            threads: crate::parallel::cores(),
             mask: None,
             simulations_per_start: SIMULATIONS_PER_START,
             initial: BTreeMap::new(),

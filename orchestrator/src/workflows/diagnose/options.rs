@@ -158,9 +158,7 @@ impl Default for DiagnoseOptions {
             starts: 3,
             recalibration_starts: 8,
             simulations_per_start: 250,
-            threads: std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1),
+            threads: crate::parallel::cores(),
             seed: 1,
             always_fit: false,
             tolerance: None,
