@@ -519,6 +519,16 @@ impl ShearModel {
         Ok(())
     }
 
+    /// The floor whose acceleration `get_real(vr)` reads, exactly where it reads one.
+    fn acceleration_slot(&self, vr: u32) -> Option<usize> {
+        let other = sensitivity_index(vr, self.storeys()).is_some()
+            || matches!(vr, FORCE | GROUND_ACC | CONTROL_FORCE);
+        if other {
+            return None;
+        }
+        self.index_in(vr, ACC)
+    }
+
     fn index_in(&self, vr: u32, first: u32) -> Option<usize> {
         vr.checked_sub(first)
             .map(|i| i as usize)
@@ -676,10 +686,22 @@ impl CoSimModel for ShearModel {
     }
 
     /// Every floor's acceleration comes from one evaluation of the equations of motion (the
-    /// effects' forces included): computed once for the call, not once per floor.
+    /// effects' forces included): computed, or checked against the state and inputs, once for
+    /// the call, not once per floor (the check compares 2N + 2 values: reading 20 floors one
+    /// by one cost 7.3M instructions in a 1,024-sample 20-storey run, the steps themselves 10M).
     fn get_reals(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), ModelError> {
+        let mut checked = false;
         for (slot, &vr) in out.iter_mut().zip(vrs) {
-            *slot = self.get_real(vr)?;
+            *slot = match self.acceleration_slot(vr) {
+                Some(i) => {
+                    if !checked {
+                        self.read_accelerations();
+                        checked = true;
+                    }
+                    self.read.values[i]
+                }
+                None => self.get_real(vr)?,
+            };
         }
         Ok(())
     }

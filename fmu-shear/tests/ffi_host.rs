@@ -277,6 +277,41 @@ fn accelerations_reflect_a_force_set_after_the_last_step() {
     );
 }
 
+/// A batch of reads mixing accelerations with other variables (their state checked once for
+/// the call) gives each value a read of its own gives, after steps and after an input set
+/// between steps.
+#[test]
+fn a_batch_read_equals_the_reads_one_by_one() {
+    let s = Slave::initialized(guid());
+    shake(&s, 0, 25);
+    let mut vrs = vec![
+        ACC + 2,
+        FORCE,
+        DISP + 1,
+        ACC,
+        CONTROL_FORCE,
+        ACC + 1,
+        VEL + 2,
+        ACC,
+    ];
+    vrs.extend((0..3).map(|i| DRIFT + i));
+    let bits = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+    for change in [None, Some(1.7)] {
+        if let Some(df) = change {
+            let force = s.real(FORCE);
+            assert_eq!(s.set_reals(&[FORCE], &[force + df]), fmi2OK);
+        }
+        let (status, batch) = s.get_reals(&vrs);
+        assert_eq!(status, fmi2OK);
+        let single: Vec<f64> = vrs.iter().map(|&vr| s.real(vr)).collect();
+        assert_eq!(
+            bits(batch),
+            bits(single),
+            "after a force change: {change:?}"
+        );
+    }
+}
+
 /// Steps from rest under a constant force with every storey stiffness `k` and one RK4 step per
 /// sample, until a step fails; asserts that every step reporting fmi2OK left finite outputs.
 /// Returns the index of the failed step, if one failed within `max_steps`.
