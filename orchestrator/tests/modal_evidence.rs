@@ -15,7 +15,7 @@ use orchestrator::workflows::modal::{modal_evidence, twin::structure_modes, Moda
 use structure::{Excitation, Structure};
 
 mod common;
-use common::twin_cmd;
+use common::{synth_five_storeys_in_g, twin_cmd};
 
 fn building() -> Structure {
     Structure::uniform(5, 5.2, 3.0, 4021.0, Excitation::Base)
@@ -59,28 +59,7 @@ fn record(dir: &Path, name: &str, softer: bool) -> PathBuf {
     let scenario = dir.join("stationary.json");
     std::fs::write(&scenario, r#"{"ground_motion": {"strong_end": 100000}}"#).expect("scenario");
     let out = dir.join(format!("{name}.csv"));
-    let mut cmd = twin_cmd();
-    cmd.arg("synth")
-        .arg("--scenario")
-        .arg(&scenario)
-        .args([
-            "--storeys",
-            "5",
-            "--excitation",
-            "base",
-            "--duration",
-            "120",
-        ])
-        .args([
-            "--seed",
-            "5",
-            "--channels",
-            "acc1,acc3,acc5",
-            "--units",
-            "acc=g",
-        ])
-        .arg("--out")
-        .arg(&out);
+    let mut cmd = synth_five_storeys_in_g(&scenario, "base", 120, 5, &out);
     if softer {
         cmd.args(["--change", "k2@0:0.85"]);
     }

@@ -12,7 +12,7 @@ use serde_json::Value;
 use structure::{Excitation, Structure};
 
 mod common;
-use common::twin_cmd;
+use common::{synth_five_storeys_in_g, twin_cmd};
 
 const CHANGE_AT: f64 = 150.0;
 
@@ -62,28 +62,7 @@ fn stream(dir: &Path, name: &str, seed: u64, change: bool) -> PathBuf {
     let scenario = dir.join("stationary.json");
     std::fs::write(&scenario, r#"{"ground_motion": {"strong_end": 100000}}"#).expect("scenario");
     let out = dir.join(format!("{name}.csv"));
-    let mut cmd = twin_cmd();
-    cmd.arg("synth")
-        .arg("--scenario")
-        .arg(&scenario)
-        .args([
-            "--storeys",
-            "5",
-            "--excitation",
-            "base",
-            "--duration",
-            "300",
-        ])
-        .args([
-            "--seed",
-            &seed.to_string(),
-            "--channels",
-            "acc1,acc3,acc5",
-            "--units",
-            "acc=g",
-        ])
-        .arg("--out")
-        .arg(&out);
+    let mut cmd = synth_five_storeys_in_g(&scenario, "base", 300, seed, &out);
     if change {
         cmd.args(["--change", &format!("k2@{CHANGE_AT}:0.85")]);
     }
@@ -228,28 +207,9 @@ fn a_band_limited_forces_edge_is_not_tracked_as_a_mode() {
     let scenario = d.join("band.json");
     std::fs::write(&scenario, r#"{"force": {"low_hz": 0.5, "band_hz": 6.5}}"#).expect("scenario");
     let source = d.join("band.csv");
-    run(twin_cmd()
-        .arg("synth")
-        .arg("--scenario")
-        .arg(&scenario)
-        .args([
-            "--storeys",
-            "5",
-            "--excitation",
-            "force:2",
-            "--duration",
-            "300",
-        ])
-        .args([
-            "--seed",
-            "5",
-            "--channels",
-            "acc1,acc3,acc5",
-            "--units",
-            "acc=g",
-        ])
-        .arg("--out")
-        .arg(&source));
+    run(&mut synth_five_storeys_in_g(
+        &scenario, "force:2", 300, 5, &source,
+    ));
     let alerts = watch(&twin, &source, &d.join("band.jsonl"));
     let modes = of_kind(&alerts, "modes");
     assert_eq!(modes.len(), 24);

@@ -89,6 +89,30 @@ pub fn twin_cmd() -> std::process::Command {
     cmd
 }
 
+/// `twin synth` of the five-storey test building under the scenario file `scenario`, excited by
+/// `excitation` (`base`, `force:2`), `duration` seconds, noise seed `seed`, acc1/3/5 in g,
+/// written to `out`; the caller may add arguments (a change) before running it.
+pub fn synth_five_storeys_in_g(
+    scenario: &Path,
+    excitation: &str,
+    duration: u32,
+    seed: u64,
+    out: &Path,
+) -> std::process::Command {
+    let mut cmd = twin_cmd();
+    cmd.arg("synth").arg("--scenario").arg(scenario);
+    cmd.args(["--storeys", "5", "--excitation", excitation]);
+    cmd.args([
+        "--duration",
+        &duration.to_string(),
+        "--seed",
+        &seed.to_string(),
+    ]);
+    cmd.args(["--channels", "acc1,acc3,acc5", "--units", "acc=g"]);
+    cmd.arg("--out").arg(out);
+    cmd
+}
+
 /// `twin ARGS`, run to its end: its output.
 pub fn twin<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> std::process::Output {
     twin_cmd()
