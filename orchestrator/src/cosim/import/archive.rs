@@ -37,6 +37,10 @@ impl Default for UnpackLimits {
 #[derive(Debug)]
 pub struct Unpacked {
     place: Place,
+    /// Shared locks on the FMU cache's archive files this directory links to
+    /// ([`unpack_system`]), held while it lives: eviction leaves a locked file alone, so a
+    /// long-running process (a watch) can still read its twin's FMU days later.
+    held: Vec<File>,
 }
 
 #[derive(Debug)]
@@ -240,6 +244,7 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
         in_use.insert(key.clone());
         return Some(Unpacked {
             place: Place::Cached { dir, key },
+            held: Vec::new(),
         });
     }
     // A directory of this open's own: the resources from the archive, the rest linked to the
@@ -258,6 +263,7 @@ fn unpack_cached(archive: &Path, root: &Path, limits: UnpackLimits) -> Option<Un
         } else {
             Place::Temporary(own)
         },
+        held: Vec::new(),
     })
 }
 
@@ -410,12 +416,14 @@ fn unpack_entries(
         if let Ok(dir) = unpack_into(zip, &root, archive, in_memory, wanted) {
             return Ok(Unpacked {
                 place: Place::Temporary(dir),
+                held: Vec::new(),
             });
         }
     }
     let dir = unpack_into(zip, &std::env::temp_dir(), archive, limits, wanted)?;
     Ok(Unpacked {
         place: Place::Temporary(dir),
+        held: Vec::new(),
     })
 }
 
@@ -444,13 +452,13 @@ fn unpack_system_into(
     let Some(folder) = folder else {
         return unpack_entries(&mut zip, archive, limits, |_| true);
     };
-    let linked: Vec<(String, PathBuf)> = (0..zip.len())
+    let linked: Vec<(String, PathBuf, File)> = (0..zip.len())
         .filter_map(|index| cached_fmu(&mut zip, index, folder, limits))
         .collect();
-    let unpacked = unpack_entries(&mut zip, archive, limits, |name| {
-        !linked.iter().any(|(n, _)| n == name)
+    let mut unpacked = unpack_entries(&mut zip, archive, limits, |name| {
+        !linked.iter().any(|(n, _, _)| n == name)
     })?;
-    for (name, file) in &linked {
+    for (name, file, _) in &linked {
         let target = safe_relative_path(name).map(|r| unpacked.path().join(r));
         let made = target.as_ref().is_some_and(|target| {
             target
@@ -462,20 +470,23 @@ fn unpack_system_into(
             return unpack(archive, limits);
         }
     }
-    if !linked.is_empty() {
-        evict_archives(folder, &linked);
+    let files: Vec<PathBuf> = linked.iter().map(|(_, f, _)| f.clone()).collect();
+    unpacked.held = linked.into_iter().map(|(_, _, held)| held).collect();
+    if !files.is_empty() {
+        evict_archives(folder, &files);
     }
     Ok(unpacked)
 }
 
 /// The FMU cache's file of entry `index` of a system's archive when the entry is a stored
-/// `resources/….fmu` and the file is there or could be written: (the entry's name, the file).
+/// `resources/….fmu` and the file is there or could be written, held (a shared lock, see
+/// [`hold`]): (the entry's name, the file, its held handle).
 fn cached_fmu(
     zip: &mut zip::ZipArchive<File>,
     index: usize,
     folder: &Path,
     limits: UnpackLimits,
-) -> Option<(String, PathBuf)> {
+) -> Option<(String, PathBuf, File)> {
     let entry = zip.by_index_raw(index).ok()?;
     let name = entry.name().to_owned();
     let stored = entry.compression() == zip::CompressionMethod::Stored;
@@ -490,9 +501,11 @@ fn cached_fmu(
     drop(entry);
     let path = folder.join(format!("{stem}-{crc:08x}-{size:x}.fmu"));
     if std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == size) {
-        // Marks it as in use, so that eviction spares it.
+        // Marks it as recently used, so that eviction spares it.
         let _ = File::open(&path).and_then(|f| f.set_modified(std::time::SystemTime::now()));
-        return Some((name, path));
+        if let Some(held) = hold(&path) {
+            return Some((name, path, held));
+        }
     }
     create_private_dir(folder).ok()?;
     let mut entry = zip.by_index(index).ok()?;
@@ -502,7 +515,42 @@ fn cached_fmu(
         return None;
     }
     tmp.persist(&path).ok()?;
-    Some((name, path))
+    let held = hold(&path)?;
+    Some((name, path, held))
+}
+
+/// `path` opened and share-locked (`flock`), if it is still the file at `path` once locked (an
+/// eviction may have removed it in between): what keeps [`evict_archives`] from removing it.
+fn hold(path: &Path) -> Option<File> {
+    let file = File::open(path).ok()?;
+    #[cfg(unix)]
+    {
+        use rustix::fs::{flock, FlockOperation};
+        use std::os::unix::fs::MetadataExt;
+        flock(&file, FlockOperation::NonBlockingLockShared).ok()?;
+        let (held, now) = (file.metadata().ok()?, std::fs::metadata(path).ok()?);
+        if (held.dev(), held.ino()) != (now.dev(), now.ino()) {
+            return None;
+        }
+    }
+    Some(file)
+}
+
+/// Remove `path` unless a process holds it ([`hold`]): taken exclusively, without waiting.
+fn remove_unheld(path: &Path) {
+    #[cfg(unix)]
+    {
+        use rustix::fs::{flock, FlockOperation};
+        let Ok(file) = File::open(path) else {
+            return;
+        };
+        if flock(&file, FlockOperation::NonBlockingLockExclusive).is_err() {
+            return;
+        }
+        let _ = std::fs::remove_file(path);
+    }
+    #[cfg(not(unix))]
+    let _ = std::fs::remove_file(path);
 }
 
 #[cfg(unix)]
@@ -516,8 +564,8 @@ fn symlink_file(file: &Path, link: &Path) -> io::Result<()> {
 }
 
 /// Remove the oldest files of [`SYSTEM_ARCHIVES`] beyond [`CACHE_ENTRIES`] among those idle for
-/// [`IDLE_BEFORE_EVICTION`], never the ones just `linked`.
-fn evict_archives(folder: &Path, linked: &[(String, PathBuf)]) {
+/// [`IDLE_BEFORE_EVICTION`], never the ones just `linked` nor one another process holds.
+fn evict_archives(folder: &Path, linked: &[PathBuf]) {
     let Ok(entries) = std::fs::read_dir(folder) else {
         return;
     };
@@ -525,7 +573,7 @@ fn evict_archives(folder: &Path, linked: &[(String, PathBuf)]) {
     let mut dated: Vec<(std::time::SystemTime, PathBuf)> = entries
         .flatten()
         .map(|e| e.path())
-        .filter(|p| !linked.iter().any(|(_, f)| f == p))
+        .filter(|p| !linked.contains(p))
         .filter_map(|p| Some((std::fs::metadata(&p).ok()?.modified().ok()?, p)))
         .collect();
     if dated.len() + linked.len() <= CACHE_ENTRIES {
@@ -535,7 +583,7 @@ fn evict_archives(folder: &Path, linked: &[(String, PathBuf)]) {
     let excess = dated.len() + linked.len() - CACHE_ENTRIES;
     for (modified, path) in dated.into_iter().take(excess) {
         if now.duration_since(modified).unwrap_or_default() >= IDLE_BEFORE_EVICTION {
-            let _ = std::fs::remove_file(&path);
+            remove_unheld(&path);
         }
     }
 }
@@ -859,6 +907,37 @@ mod tests {
         assert!(!linked, "a deflated FMU is unpacked");
         let (_uncached, linked) = open(stored.path(), None);
         assert!(!linked, "without a cache the FMU is unpacked");
+    }
+
+    /// Beyond the cache's limit the oldest idle archive files go, but not one a process holds
+    /// (a twin open in a long-running watch reads its FMU long after opening it).
+    #[test]
+    fn eviction_spares_an_archive_a_process_holds() {
+        let folder = tempfile::tempdir().expect("folder");
+        let files: Vec<PathBuf> = (0..CACHE_ENTRIES + 2)
+            .map(|i| {
+                let path = folder.path().join(format!("fmu_shear-{i:08x}-10.fmu"));
+                std::fs::write(&path, b"archive").expect("write");
+                let age = std::time::Duration::from_secs(3600 * (100 - i as u64));
+                let f = File::options().write(true).open(&path).expect("open");
+                f.set_modified(std::time::SystemTime::now() - age)
+                    .expect("mtime");
+                path
+            })
+            .collect();
+        // The oldest is held; the two oldest are beyond the limit.
+        let held = hold(&files[0]).expect("held");
+        evict_archives(folder.path(), &[]);
+        assert!(files[0].exists(), "a held archive stays");
+        assert_eq!(
+            files[1].exists(),
+            !cfg!(unix),
+            "an idle one beyond the limit goes"
+        );
+        assert!(files[2..].iter().all(|f| f.exists()));
+        drop(held);
+        evict_archives(folder.path(), &[]);
+        assert!(!files[0].exists() || !cfg!(unix), "released, it goes too");
     }
 
     #[test]
