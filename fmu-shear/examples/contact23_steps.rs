@@ -22,7 +22,7 @@ fn main() {
     let mut slave = Slave::with(&[("contact23_enabled", true)], &[("integrator", 0)]);
     let mut sum = 0.0;
     for _ in 0..records {
-        slave.record(&force, |acc| sum += acc[0] + acc[1] + acc[2]);
+        slave.record(&force, |acc| sum += acc.iter().sum::<f64>());
     }
     println!("{records} records of {STEPS} steps: checksum {sum:.17e}");
 }

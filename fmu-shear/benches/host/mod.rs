@@ -12,27 +12,21 @@ use fmu_shear::variables::{info, ACC, FORCE};
 pub const STEP: f64 = 1.0 / 51.2;
 pub const STEPS: usize = 1024;
 
-/// A deterministic band-limited force: sines from 0.125 Hz to 25 Hz, about 1 N RMS.
+#[path = "../../tests/common/mod.rs"]
+mod common;
+
+/// A deterministic band-limited force: 200 sines from 0.125 Hz to 25 Hz, about 1 N RMS.
 pub fn record_force() -> Vec<f64> {
-    const COMPONENTS: usize = 200;
-    let amplitude = (2.0 / COMPONENTS as f64).sqrt();
-    (0..=STEPS)
-        .map(|n| {
-            let t = n as f64 * STEP;
-            (1..=COMPONENTS)
-                .map(|j| {
-                    let phase = std::f64::consts::TAU * (j as f64 * 0.618_033_988_749_895).fract();
-                    amplitude * (std::f64::consts::TAU * 0.125 * j as f64 * t + phase).sin()
-                })
-                .sum()
-        })
-        .collect()
+    common::sines(STEPS, STEP, 200, 0.125)
 }
 
-/// One co-simulation instance, initialized, with the host's clock.
+/// One co-simulation instance, initialized, with the host's clock and the floors' acceleration
+/// outputs of the structure it was instantiated for (the FMU's default table, the paper's rig).
 pub struct Slave {
     component: fmi2Component,
     time: f64,
+    outputs: Vec<fmi2ValueReference>,
+    acc: Vec<f64>,
 }
 
 fn ok(status: fmi2Status, call: &str) {
@@ -102,18 +96,19 @@ impl Slave {
             fmu_shear::fmi2ExitInitializationMode(component),
             "fmi2ExitInitializationMode",
         );
+        let storeys = fmu_shear::ShearParameters::default().storeys();
         Slave {
             component,
             time: 0.0,
+            outputs: (0..storeys as u32).map(|i| ACC + i).collect(),
+            acc: vec![0.0; storeys],
         }
     }
 
     /// Apply the force over the step → step → read the accelerations.
     #[inline]
-    pub fn step(&mut self, force: f64, slope: f64) -> [f64; 3] {
+    pub fn step(&mut self, force: f64, slope: f64) -> &[f64] {
         let order: fmi2Integer = 1;
-        let outputs = [ACC, ACC + 1, ACC + 2];
-        let mut acc = [0.0; 3];
         // SAFETY: arrays of the lengths passed, alive for the calls.
         unsafe {
             ok(
@@ -133,16 +128,21 @@ impl Slave {
         // SAFETY: as above.
         ok(
             unsafe {
-                fmu_shear::fmi2GetReal(self.component, outputs.as_ptr(), 3, acc.as_mut_ptr())
+                fmu_shear::fmi2GetReal(
+                    self.component,
+                    self.outputs.as_ptr(),
+                    self.outputs.len(),
+                    self.acc.as_mut_ptr(),
+                )
             },
             "fmi2GetReal",
         );
-        acc
+        &self.acc
     }
 
     /// One record of `STEPS` steps under `force` (`STEPS + 1` samples: the last one's slope),
     /// `each` given every step's accelerations.
-    pub fn record(&mut self, force: &[f64], mut each: impl FnMut([f64; 3])) {
+    pub fn record(&mut self, force: &[f64], mut each: impl FnMut(&[f64])) {
         for n in 0..STEPS {
             each(self.step(force[n], (force[n + 1] - force[n]) / STEP));
         }

@@ -4,15 +4,21 @@
 /// 0.25 to 25 Hz with fixed phases, about 1 N RMS.
 #[allow(dead_code)]
 pub fn band_limited_force(steps: usize, step: f64) -> Vec<f64> {
-    const COMPONENTS: usize = 100;
-    let amplitude = (2.0 / COMPONENTS as f64).sqrt();
+    sines(steps, step, 100, 0.25)
+}
+
+/// `steps + 1` samples at steps of `step` s of `components` sines at multiples of `lowest_hz`,
+/// their phases fixed (the golden ratio's multiples), about 1 N RMS.
+#[allow(dead_code)]
+pub fn sines(steps: usize, step: f64, components: usize, lowest_hz: f64) -> Vec<f64> {
+    let amplitude = (2.0 / components as f64).sqrt();
     (0..=steps)
         .map(|n| {
             let t = n as f64 * step;
-            (1..=COMPONENTS)
+            (1..=components)
                 .map(|j| {
                     let phase = std::f64::consts::TAU * (j as f64 * 0.618_033_988_749_895).fract();
-                    amplitude * (std::f64::consts::TAU * 0.25 * j as f64 * t + phase).sin()
+                    amplitude * (std::f64::consts::TAU * lowest_hz * j as f64 * t + phase).sin()
                 })
                 .sum()
         })
