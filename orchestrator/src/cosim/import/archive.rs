@@ -501,9 +501,9 @@ fn cached_fmu(
     drop(entry);
     let path = folder.join(format!("{stem}-{crc:08x}-{size:x}.fmu"));
     if std::fs::metadata(&path).is_ok_and(|m| m.is_file() && m.len() == size) {
-        // Marks it as recently used, so that eviction spares it.
-        let _ = File::open(&path).and_then(|f| f.set_modified(std::time::SystemTime::now()));
         if let Some(held) = hold(&path) {
+            // Marked as recently used, so that eviction spares it.
+            let _ = held.set_modified(std::time::SystemTime::now());
             return Some((name, path, held));
         }
     }
