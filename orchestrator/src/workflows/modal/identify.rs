@@ -184,7 +184,7 @@ pub fn identify(
             responses: &r.responses,
         })
         .collect();
-    identify_runs(&views, options)
+    identify_runs(&views, options, |stage| stage.record_modes())
 }
 
 /// Identifies the modes of ambient records (responses only): SSI-COV alone, no FRF.
@@ -201,7 +201,7 @@ pub fn identify_ambient(
             responses: &r.responses,
         })
         .collect();
-    identify_runs(&views, options)
+    identify_runs(&views, options, |stage| stage.record_modes())
 }
 
 /// Identifies the modes of one stretch of a stream sampled every `dt` s (`twin watch
@@ -220,15 +220,18 @@ pub fn identify_window(
         excitation,
         responses,
     };
-    identify_runs(&[view], options)
+    identify_runs(&[view], options, |stage| stage.record_modes())
 }
 
 /// Identifies the modes of `runs` (one test): their total spectrum, SSI-COV's modes, and with
-/// a measured excitation the FRF and the input–output method's modes.
-fn identify_runs(
+/// a measured excitation the FRF and the input–output method's modes; `finish` takes them on
+/// from there ([`Stage::record_modes`]: the force's own peaks set aside, FDD/EFDD's
+/// cross-check, the verdicts).
+fn identify_runs<T>(
     runs: &[RunView<'_>],
     options: &IdentifyOptions,
-) -> Result<RecordModes, IdentifyError> {
+    finish: fn(Stage<'_>) -> Result<T, IdentifyError>,
+) -> Result<T, IdentifyError> {
     options.validate()?;
     let roving = check_runs(runs)?;
     let first = &runs[0];
@@ -258,8 +261,8 @@ fn identify_runs(
         &spectrum.frequencies,
         options,
     );
-    let mut ssi = estimation.output_only(first, &floors, &screen, Peaks::of_spectrum(&spectrum))?;
-    let (frf, mut input_output, frf_peaks, force_peaks) = match measured {
+    let ssi = estimation.output_only(first, &floors, &screen, Peaks::of_spectrum(&spectrum))?;
+    let (frf, input_output, frf_peaks, force_peaks) = match measured {
         Some((force_psd, frf)) => {
             let peaks = screen.excited.map_or_else(Vec::new, |band| {
                 excitation::force_peaks(&frf.frequencies, force_psd, band)
@@ -271,52 +274,103 @@ fn identify_runs(
         }
         None => (None, None, None, None),
     };
-    let fdd_band = input_output.as_ref().and_then(|m| m.band).unwrap_or((
-        spectrum.frequencies.get(1).copied().unwrap_or(0.0),
-        DEFAULT_BAND_TOP * estimation.sampling.nyquist,
-    ));
-    let fdd_evidence = frf_peaks
-        .clone()
-        .unwrap_or_else(|| Peaks::of_spectrum(&spectrum));
-    let mut fdd = estimation.non_parametric(first, &floors, &screen, fdd_band, fdd_evidence)?;
-    if let Some((peaks, whole)) = &force_peaks {
-        let frf = frf_peaks.as_ref().unwrap_or(whole);
-        let methods = input_output
-            .iter_mut()
-            .map(|m| (&mut m.modes, &mut m.rejected));
-        let methods = methods.chain([(&mut ssi.modes, &mut ssi.rejected)]);
-        for (modes, rejected) in methods.chain([(&mut fdd.modes, &mut fdd.rejected)]) {
-            excitation::set_aside_excitation(modes, rejected, peaks, frf);
-        }
-    }
-    let verdicts = verdicts::verdicts(
-        &input_output
-            .iter()
-            .map(|m| (m.method, m.modes.as_slice()))
-            .chain([
-                (ssi.method, ssi.modes.as_slice()),
-                (fdd.method, fdd.modes.as_slice()),
-            ])
-            .collect::<Vec<_>>(),
-    );
-
-    Ok(RecordModes {
-        records: estimation.sampling.records,
-        dt: estimation.sampling.dt,
-        samples: runs.iter().map(RunView::len).collect(),
-        excitation: first
-            .excitation
-            .map_or_else(|| "none (ambient)".to_owned(), |e| e.channel.name()),
-        channels: channels.iter().map(|c| c.name()).collect(),
-        floors: floors.iter().map(|(floor, _)| *floor).collect(),
-        frf,
+    finish(Stage {
+        runs,
+        estimation: &estimation,
         spectrum,
+        channels,
+        floors,
+        screen,
         ssi,
+        frf,
         input_output,
-        fdd,
-        verdicts,
-        options: options.clone(),
+        frf_peaks,
+        force_peaks,
     })
+}
+
+/// One test's spectra, FRF and parametric modes, before the force's own peaks are set aside
+/// and before the non-parametric cross-check: what every identification shares.
+struct Stage<'a> {
+    runs: &'a [RunView<'a>],
+    estimation: &'a Estimation<'a>,
+    spectrum: SpectrumReport,
+    channels: Vec<Channel>,
+    floors: Vec<(usize, (usize, i32))>,
+    screen: ScreenOptions,
+    ssi: MethodModes,
+    frf: Option<FrfReport>,
+    input_output: Option<MethodModes>,
+    /// The FRF a mode's peak is judged on (a single test, the force measured).
+    frf_peaks: Option<Peaks>,
+    /// With the force measured: its own spectral peaks, and the whole FRF's peaks.
+    force_peaks: Option<(Vec<(f64, f64)>, Peaks)>,
+}
+
+impl Stage<'_> {
+    /// Everything `twin modal --data` reports: the parametric modes and FDD/EFDD's, a mode at
+    /// the force's own peak set aside in each, and the methods' verdicts side by side.
+    fn record_modes(self) -> Result<RecordModes, IdentifyError> {
+        let Stage {
+            runs,
+            estimation,
+            spectrum,
+            channels,
+            floors,
+            screen,
+            mut ssi,
+            frf,
+            mut input_output,
+            frf_peaks,
+            force_peaks,
+        } = self;
+        let first = &runs[0];
+        let fdd_band = input_output.as_ref().and_then(|m| m.band).unwrap_or((
+            spectrum.frequencies.get(1).copied().unwrap_or(0.0),
+            DEFAULT_BAND_TOP * estimation.sampling.nyquist,
+        ));
+        let fdd_evidence = frf_peaks
+            .clone()
+            .unwrap_or_else(|| Peaks::of_spectrum(&spectrum));
+        let mut fdd = estimation.non_parametric(first, &floors, &screen, fdd_band, fdd_evidence)?;
+        if let Some((peaks, whole)) = &force_peaks {
+            let frf = frf_peaks.as_ref().unwrap_or(whole);
+            let methods = input_output
+                .iter_mut()
+                .map(|m| (&mut m.modes, &mut m.rejected));
+            let methods = methods.chain([(&mut ssi.modes, &mut ssi.rejected)]);
+            for (modes, rejected) in methods.chain([(&mut fdd.modes, &mut fdd.rejected)]) {
+                excitation::set_aside_excitation(modes, rejected, peaks, frf);
+            }
+        }
+        let verdicts = verdicts::verdicts(
+            &input_output
+                .iter()
+                .map(|m| (m.method, m.modes.as_slice()))
+                .chain([
+                    (ssi.method, ssi.modes.as_slice()),
+                    (fdd.method, fdd.modes.as_slice()),
+                ])
+                .collect::<Vec<_>>(),
+        );
+        Ok(RecordModes {
+            records: estimation.sampling.records.clone(),
+            dt: estimation.sampling.dt,
+            samples: runs.iter().map(RunView::len).collect(),
+            excitation: first
+                .excitation
+                .map_or_else(|| "none (ambient)".to_owned(), |e| e.channel.name()),
+            channels: channels.iter().map(|c| c.name()).collect(),
+            floors: floors.iter().map(|(floor, _)| *floor).collect(),
+            frf,
+            spectrum,
+            ssi,
+            input_output,
+            fdd,
+            verdicts,
+            options: estimation.options.clone(),
+        })
+    }
 }
 
 /// What the spectra and both methods are estimated with: the options, the runs' sampling, the
