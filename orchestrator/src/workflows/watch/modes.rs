@@ -220,7 +220,7 @@ impl Tracker {
         let found = identify_window(self.dt, Some(&excitation), &responses, &self.identify)
             .map_err(|e| e.to_string())?;
         let identified: Vec<IdentifiedMode> =
-            found.ssi.modes.into_iter().map(|m| m.identified).collect();
+            found.modes.into_iter().map(|m| m.identified).collect();
         let comparison = self.compare(&identified, &scales);
         Ok(self.judge(time, &identified, &comparison))
     }
