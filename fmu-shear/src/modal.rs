@@ -326,10 +326,7 @@ impl Modal {
                     continue;
                 }
                 for ((sparse, b_e), out) in self.outputs.iter().zip(&mut predictions) {
-                    let mut value = b_e * e[k];
-                    for &(c, a) in sparse {
-                        value += a * x[c];
-                    }
+                    let value = sparse_row(b_e * e[k], sparse, &x);
                     out.push(if self.base { value + e[k] } else { value });
                 }
                 let inputs = StepInputs {
@@ -345,6 +342,15 @@ impl Modal {
             start += len;
         }
     }
+}
+
+/// `first + Σ a x[c]` over a row's nonzero entries `(c, a)`, in their order (the batch's terms
+/// in the batch's order: the same bits). A function of its own, not inlined: inside the pass's
+/// loop, short of registers, the sum was kept on the stack, a store and a load per term on the
+/// chain of additions.
+#[inline(never)]
+fn sparse_row(first: f64, row: &[(usize, f64)], x: &[f64]) -> f64 {
+    row.iter().fold(first, |v, &(c, a)| v + a * x[c])
 }
 
 /// What each parameter does to each kept mode: the measured slots' coefficient of `zⱼ` through
@@ -853,7 +859,11 @@ mod tests {
         let p = 3 * n;
         let mut jtj = vec![DMatrix::<f64>::zeros(p, p); 3];
         let mut jtr = vec![DVector::<f64>::zeros(p); 3];
+        let mut batch_predictions = vec![Vec::new(); 3];
         accelerations_along(&params, &record, &directions, |k, v, dv| {
+            for (all, value) in batch_predictions.iter_mut().zip(v) {
+                all.push(*value);
+            }
             if used.binary_search(&k).is_err() {
                 return;
             }
@@ -863,6 +873,11 @@ mod tests {
                 jtr[slot] += &row * (measured[slot][k] - v[slot]);
             }
         });
+        // The predictions are the batch's to the bit: the same terms in the same order.
+        assert_eq!(
+            got.predictions, batch_predictions,
+            "the batch's predictions"
+        );
         for slot in 0..3 {
             let (a, g) = &got.blocks[slot];
             let scale = jtj[slot].amax();
