@@ -148,6 +148,7 @@ fn up_the_ladder(
             evaluations: 0,
             runs: 0,
             objective: f64::INFINITY,
+            at_hand: None,
         };
         let Some(next) = finish_start(&mut sims, target, from, target.budget) else {
             return Ok(None);

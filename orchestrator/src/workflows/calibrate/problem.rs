@@ -33,6 +33,19 @@ pub(super) struct Problem<'s, 'a> {
 
 impl Problem<'_, '_> {
     pub(super) fn weighted(&self, z: &[f64]) -> Option<DVector<f64>> {
+        // A point whose normals are at hand (the fit before ended there) is not run again:
+        // its residuals are those normals'.
+        let known = self
+            .at_hand
+            .borrow()
+            .as_ref()
+            .filter(|(at, _)| at.as_slice() == z)
+            .map(|(_, model)| model.r.clone());
+        if let Some(r) = known {
+            let weighted = with_prior_rows(&r, &self.weights, z);
+            *self.last.borrow_mut() = Some((z.to_vec(), r));
+            return Some(weighted);
+        }
         *self.evaluations.borrow_mut() += 1;
         *self.runs.borrow_mut() += self.target.records.len();
         let mut sims = self.sims.borrow_mut();
@@ -191,19 +204,22 @@ impl lm::LeastSquares for Problem<'_, '_> {
         if *self.evaluations.borrow() > self.budget {
             return None;
         }
-        let at_hand = self
+        // The normals at hand stay (not taken): where the fit ends, the next outer iteration
+        // starts from them.
+        let held = self
             .at_hand
-            .borrow_mut()
-            .take()
-            .filter(|(at, _)| at.as_slice() == z)
-            .map(|(_, model)| model);
-        let sensitive = at_hand.or_else(|| {
+            .borrow()
+            .as_ref()
+            .is_some_and(|(at, _)| at.as_slice() == z);
+        if !held {
             let mut sims = self.sims.borrow_mut();
-            let model = sensitivity_normals(&mut sims, self.target, z)?;
-            *self.runs.borrow_mut() += self.target.records.len();
-            Some(model)
-        });
-        if let Some(model) = sensitive {
+            let model = sensitivity_normals(&mut sims, self.target, z);
+            if model.is_some() {
+                *self.runs.borrow_mut() += self.target.records.len();
+            }
+            *self.at_hand.borrow_mut() = model.map(|m| (z.to_vec(), m));
+        }
+        if let Some((_, model)) = self.at_hand.borrow().as_ref() {
             // Counted as the p runs it replaces, so a start's budget buys the same iterations.
             *self.evaluations.borrow_mut() += z.len();
             let block_weights: Vec<f64> = self

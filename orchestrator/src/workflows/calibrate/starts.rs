@@ -4,7 +4,7 @@
 use super::lm;
 use super::prior::{Prior, Space};
 use super::problem::Problem;
-use super::target::{raw_residuals, simulators, sse_per_block, Target};
+use super::target::{raw_residuals, simulators, sse_per_block, ModelNormals, Target};
 use super::{CalibrationSetup, StartOutcome, SCREEN_EVALUATIONS_PER_PARAMETER, SCREEN_KEEP};
 use crate::twin::simulator::Simulator;
 use crate::twin::TwinError;
@@ -77,6 +77,9 @@ pub(super) struct Running {
     pub(super) runs: usize,
     /// The negative log posterior at (z, s).
     pub(super) objective: f64,
+    /// The model's normal equations at `z`, from the last trial of the fit before: the next
+    /// outer iteration's fit starts there without running it again.
+    pub(super) at_hand: Option<(Vec<f64>, ModelNormals)>,
 }
 
 /// Outer iterations a start makes at most: a fit of the parameters under fixed noise weights,
@@ -94,6 +97,7 @@ pub(super) fn new_start(target: &Target, z0: Vec<f64>) -> Running {
         evaluations: 0,
         runs: 0,
         objective: f64::INFINITY,
+        at_hand: None,
     }
 }
 
@@ -129,7 +133,7 @@ pub(super) fn outer_iteration<'a>(
         buf: RefCell::new(Default::default()),
         evaluations: RefCell::new(0),
         runs: RefCell::new(0),
-        at_hand: RefCell::new(None),
+        at_hand: RefCell::new(start.at_hand.take()),
         last: RefCell::new(None),
         budget: budget.saturating_sub(start.evaluations),
     };
@@ -140,6 +144,7 @@ pub(super) fn outer_iteration<'a>(
     };
     start.evaluations += *problem.evaluations.borrow();
     start.runs += *problem.runs.borrow();
+    start.at_hand = problem.at_hand.take().filter(|(at, _)| *at == start.z);
     // The fit's last trial is usually where it ended (a fit stops on the step it would take
     // next, untried): its residuals are at hand.
     let r = match problem.last.take() {
@@ -445,6 +450,7 @@ mod tests {
             evaluations: 10,
             runs: 10,
             objective,
+            at_hand: None,
         }
     }
 
