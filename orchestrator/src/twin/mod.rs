@@ -382,15 +382,17 @@ impl Twin {
 
     /// Write the archive to `path` (through a temporary file: a failure leaves nothing half-written).
     pub fn write(&self, path: &Path) -> Result<(), TwinError> {
-        // The FMUs are read first, so that a missing one is named as itself.
-        let mut fmus: Vec<(&str, Vec<u8>)> = Vec::new();
+        // The FMUs are opened first, so that a missing one is named as itself; each is copied
+        // into the archive through a small buffer (read whole, a 1.5 MB FMU cost a fresh heap's
+        // page faults, a tenth of a three-storey calibration's process).
+        let mut fmus: Vec<(&str, std::fs::File)> = Vec::new();
         for c in &self.components {
             if !fmus.iter().any(|(name, _)| *name == c.fmu_name) {
-                let bytes = std::fs::read(&c.fmu_path).map_err(|source| TwinError::Io {
+                let file = std::fs::File::open(&c.fmu_path).map_err(|source| TwinError::Io {
                     path: c.fmu_path.clone(),
                     source,
                 })?;
-                fmus.push((&c.fmu_name, bytes));
+                fmus.push((&c.fmu_name, file));
             }
         }
         crate::fsutil::write_atomically(path, |file| {
@@ -404,10 +406,10 @@ impl Twin {
             // Stored: an FMU is itself an archive, and opening the twin should not inflate it
             // twice.
             let stored = options.compression_method(zip::CompressionMethod::Stored);
-            for (name, bytes) in &fmus {
+            for (name, file) in &mut fmus {
                 zip.start_file(format!("resources/{name}"), stored)
                     .map_err(zip_err)?;
-                zip.write_all(bytes)?;
+                std::io::copy(file, &mut zip)?;
             }
             for c in &self.components {
                 zip.start_file(format!("resources/{}.ssv", c.name), options)

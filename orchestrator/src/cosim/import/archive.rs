@@ -452,13 +452,13 @@ fn unpack_system_into(
     let Some(folder) = folder else {
         return unpack_entries(&mut zip, archive, limits, |_| true);
     };
-    let linked: Vec<(String, PathBuf, File)> = (0..zip.len())
+    let linked: Vec<CachedFmu> = (0..zip.len())
         .filter_map(|index| cached_fmu(&mut zip, index, folder, limits))
         .collect();
     let mut unpacked = unpack_entries(&mut zip, archive, limits, |name| {
-        !linked.iter().any(|(n, _, _)| n == name)
+        !linked.iter().any(|c| c.name == name)
     })?;
-    for (name, file, _) in &linked {
+    for CachedFmu { name, file, .. } in &linked {
         let target = safe_relative_path(name).map(|r| unpacked.path().join(r));
         let made = target.as_ref().is_some_and(|target| {
             target
@@ -470,23 +470,38 @@ fn unpack_system_into(
             return unpack(archive, limits);
         }
     }
-    let files: Vec<PathBuf> = linked.iter().map(|(_, f, _)| f.clone()).collect();
-    unpacked.held = linked.into_iter().map(|(_, _, held)| held).collect();
-    if !files.is_empty() {
+    let files: Vec<PathBuf> = linked.iter().map(|c| c.file.clone()).collect();
+    // The folder grows only when a file is written: only then may it be over its bound (as the
+    // FMU cache evicts only when it unpacks); a hit costs no listing of the folder.
+    let wrote = linked.iter().any(|c| c.written);
+    unpacked.held = linked.into_iter().map(|c| c.held).collect();
+    if wrote {
         evict_archives(folder, &files);
     }
     Ok(unpacked)
 }
 
+/// A system's FMU entry kept in the FMU cache's archives folder (see [`cached_fmu`]).
+struct CachedFmu {
+    /// The entry's name in the system's archive.
+    name: String,
+    /// The cache's file.
+    file: PathBuf,
+    /// The file opened and share-locked ([`hold`]).
+    held: File,
+    /// Written by this call (not there before).
+    written: bool,
+}
+
 /// The FMU cache's file of entry `index` of a system's archive when the entry is a stored
 /// `resources/….fmu` and the file is there or could be written, held (a shared lock, see
-/// [`hold`]): (the entry's name, the file, its held handle).
+/// [`hold`]).
 fn cached_fmu(
     zip: &mut zip::ZipArchive<File>,
     index: usize,
     folder: &Path,
     limits: UnpackLimits,
-) -> Option<(String, PathBuf, File)> {
+) -> Option<CachedFmu> {
     let entry = zip.by_index_raw(index).ok()?;
     let name = entry.name().to_owned();
     let stored = entry.compression() == zip::CompressionMethod::Stored;
@@ -504,7 +519,12 @@ fn cached_fmu(
         if let Some(held) = hold(&path) {
             // Marked as recently used, so that eviction spares it.
             let _ = held.set_modified(std::time::SystemTime::now());
-            return Some((name, path, held));
+            return Some(CachedFmu {
+                name,
+                file: path,
+                held,
+                written: false,
+            });
         }
     }
     create_private_dir(folder).ok()?;
@@ -516,7 +536,12 @@ fn cached_fmu(
     }
     tmp.persist(&path).ok()?;
     let held = hold(&path)?;
-    Some((name, path, held))
+    Some(CachedFmu {
+        name,
+        file: path,
+        held,
+        written: true,
+    })
 }
 
 /// `path` opened and share-locked (`flock`), if it is still the file at `path` once locked (an
