@@ -115,6 +115,7 @@ def peer_job(job: dict, work: Path, cap: float) -> dict | None:
     """A peer calibration in a child process (its own pool), so that it can be stopped at `cap`."""
     path = work / f"job-{time.monotonic_ns()}.pkl"
     path.write_bytes(pickle.dumps(job))
+    began = time.perf_counter()
     p = subprocess.Popen([sys.executable, __file__, "--peer-job", str(path)], start_new_session=True)
     try:
         p.wait(timeout=cap)
@@ -122,9 +123,12 @@ def peer_job(job: dict, work: Path, cap: float) -> dict | None:
         os.killpg(p.pid, signals.SIGKILL)
         p.wait()
         return None
+    process = time.perf_counter() - began
     if p.returncode != 0:
         raise PeerFailed(f"peer job {job['kind']} failed ({p.returncode})")
-    return pickle.loads(path.with_suffix(".out").read_bytes())
+    # The job's process end to end (python, numpy/scipy imported, the record read, the fit):
+    # what a user of the peer waits for, as a user of ours waits for `twin calibrate`.
+    return {**pickle.loads(path.with_suffix(".out").read_bytes()), "process_seconds": process}
 
 
 class PeerFailed(Exception):
@@ -283,9 +287,14 @@ class Bench:
                 job = {"kind": "calibrate", "data": str(b["cal"]), "storeys": n, "priors": cal_priors,
                        "samples": "after", "starts": starts, "workers": min(self.cpus, starts)}
 
-                def peer(job=job):
+                peer_processes: list[float] = []
+
+                def peer(job=job, peer_processes=peer_processes):
                     got = peer_job(job, self.work, self.cap)
-                    return (None, None) if got is None else (got["seconds"], got)
+                    if got is None:
+                        return None, None
+                    peer_processes.append(got["process_seconds"])
+                    return got["seconds"], got
 
                 fits: list[float] = []
 
@@ -297,6 +306,7 @@ class Bench:
 
                 r = self.series(f"{label} calibrate --starts {starts}", ours, peer)
                 r["ours_fit"] = float(np.median(fits)) if fits else None
+                r["peer_process"] = float(np.median(peer_processes)) if peer_processes else None
                 if r["ours"] is not None:
                     report = json.loads(rep.read_text())
                     rec = rec or bs.Record(b["cal"], n)
@@ -519,15 +529,21 @@ def report(bench: Bench, args, cpus: int, total: float) -> None:
               f"{cpus} processes); J: bench_storeys' one formula (lower = better posterior)")
         print("  'fit s': the calibration in our process (the report's seconds: records in memory, the twin not yet "
               "written), as the peer's seconds are its fit in its process; 'fit ×' = peer / fit s")
-        print(f"{head} {'fit s':>9} {'fit ×':>7} {'starts':>6} {'J ours':>12} {'J peer':>12}")
+        print("  'proc s': the peer's process end to end (python started, numpy/scipy imported, the record read, "
+              "the fit), as ours is; 'proc ×' = proc s / ours s")
+        print(f"{head} {'fit s':>9} {'fit ×':>7} {'proc s':>8} {'proc ×':>7} {'starts':>6} {'J ours':>12} {'J peer':>12}")
         for r in rows["calibrate"]:
             jo = f"{r['ours_j']:12.2f}" if r.get("ours_j") is not None else f"{'—':>12}"
             jp = f"{r['peer_j']:12.2f}" if r.get("peer_j") is not None else f"{'—':>12}"
             fit = r.get("ours_fit")
             fs = f"{fit:9.3f}" if fit else f"{'—':>9}"
             fr = f"{r['peer'] / fit:7.1f}" if fit and r.get("peer") is not None else f"{'—':>7}"
+            proc = r.get("peer_process")
+            ps = f"{proc:8.3f}" if proc else f"{'—':>8}"
+            pr = f"{proc / r['ours']:7.1f}" if proc and r.get("ours") else f"{'—':>7}"
             print(f"{r['storeys']!s:>6} {r['samples']!s:>9} | {cell(r, 'ours', cap)} {cell(r, 'peer', cap)} {ratio(r)} "
-                  f"{fs} {fr} {r['starts']:>6} {jo} {jp}" + (f"  ({r['peer_note']})" if r.get("peer_note") else ""))
+                  f"{fs} {fr} {ps} {pr} {r['starts']:>6} {jo} {jp}"
+                  + (f"  ({r['peer_note']})" if r.get("peer_note") else ""))
     if rows["diagnose"]:
         print("\ndiagnose: the whole `twin diagnose` (its default threads). NO FULL PEER: the nonlinear candidates are "
               "ours only; 'peer' is bench_storeys' peer of the recalibration job alone (8 starts, 1 process), its ratio "

@@ -81,10 +81,8 @@ import zipfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import control
 import numpy as np
 import scipy
-from scipy import signal
 from scipy.linalg import expm
 from scipy.optimize import least_squares
 
@@ -205,6 +203,11 @@ def peer_compare(ssp: Path, data: Path, storeys: int, out: Path, how: str) -> tu
     rec = Record(data, storeys)
     phys = read_physics(ssp, storeys)
     a, b, cy, dy = state_space(phys["m"], phys["c"], phys["k"])
+    # Imported where used: a calibration peer's process (what a user's fit script imports) needs
+    # neither, and python-control alone takes a second to import.
+    import control
+    from scipy import signal
+
     if how == "lsim":
         _, y, _ = signal.lsim((a, b, cy, dy), rec.force, rec.grid, interp=True)
         y = y.T
@@ -438,6 +441,8 @@ def main() -> None:
             phys = read_physics(cal_ssp, n)
             fast = simulate(phys["m"], phys["c"], phys["k"], rec_cal.force, rec_cal.dt)
             a, bb, cy, dy = state_space(phys["m"], phys["c"], phys["k"])
+            from scipy import signal
+
             _, slow, _ = signal.lsim((a, bb, cy, dy), rec_cal.force, rec_cal.grid, interp=True)
             row["peer_simulation_vs_lsim"] = float(np.max(np.abs(fast - slow.T)) / np.max(np.abs(slow)))
             if row["peer_simulation_vs_lsim"] > 1e-9:
@@ -507,6 +512,8 @@ def main() -> None:
             rows.append(row)
 
     total = time.perf_counter() - started
+    import control
+
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     print()
     print(f"Cost with N: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, {platform.node()}, "
