@@ -4,6 +4,7 @@
 //! ([`ssi`]), input–output LSCF with LSFD shapes ([`lscf`]), the stabilisation diagram and the
 //! automatic choice of the physical modes ([`stabilisation`]).
 
+mod bell_fit;
 pub mod eigen;
 pub mod error;
 pub mod fdd;
