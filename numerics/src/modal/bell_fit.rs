@@ -11,7 +11,7 @@ use rustfft::FftPlanner;
 use super::Complex;
 
 /// Samples of the window kernel per bin.
-const KERNEL_STEPS: usize = 16;
+const KERNEL_STEPS: usize = 8;
 /// Bins either side of a bin over which the kernel is summed (the Hann kernel's side lobes
 /// fall as the sixth power of the offset: at 6 bins they are 10⁻⁶ of its peak).
 const KERNEL_REACH: usize = 6;
@@ -74,7 +74,7 @@ fn misfit(kernel: &[f64], bins: &[f64], values: &[f64], centre: f64, half: f64) 
 
 /// A bell's resonance (`values`, the bell's bins, its peak at index `peak`): its centre and
 /// half-power half-width in bins (the centre from the peak's bin), with the half-width's
-/// standard error, fitted on a grid refined three times round its best point. None with
+/// standard error, fitted on an 11 × 11 grid refined five times round its best point. None with
 /// fewer than four bins or a value that is not positive.
 pub(crate) fn fit_bell(kernel: &[f64], values: &[f64], peak: usize) -> Option<(f64, f64, f64)> {
     if values.len() < 4 || !values.iter().all(|v| *v > 0.0) {
@@ -85,12 +85,12 @@ pub(crate) fn fit_bell(kernel: &[f64], values: &[f64], peak: usize) -> Option<(f
     // Centre within a bin of the peak; half-width 0.01 to 100 bins on a log scale.
     let (mut centre, mut log_half) = (0.0, 0.0_f64);
     let (mut span_c, mut span_h) = (1.0, (100.0_f64).ln());
-    for _ in 0..4 {
+    for _ in 0..6 {
         let mut best = (f64::INFINITY, centre, log_half);
-        for i in 0..=20 {
-            let c = centre + span_c * (i as f64 / 10.0 - 1.0);
-            for j in 0..=20 {
-                let lh = log_half + span_h * (j as f64 / 10.0 - 1.0);
+        for i in 0..=10 {
+            let c = centre + span_c * (i as f64 / 5.0 - 1.0);
+            for j in 0..=10 {
+                let lh = log_half + span_h * (j as f64 / 5.0 - 1.0);
                 let e = cost(c, lh.exp());
                 if e < best.0 {
                     best = (e, c, lh);
@@ -98,8 +98,8 @@ pub(crate) fn fit_bell(kernel: &[f64], values: &[f64], peak: usize) -> Option<(f
             }
         }
         (centre, log_half) = (best.1, best.2);
-        span_c /= 5.0;
-        span_h /= 5.0;
+        span_c /= 2.5;
+        span_h /= 2.5;
     }
     let half = log_half.exp();
     // The half-width's standard error from the misfit's curvature in log half-width.

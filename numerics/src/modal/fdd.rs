@@ -264,7 +264,7 @@ fn efdd(
 /// truncated bell leaves of the correlation decays as the kernel's transform, not as the
 /// mode. Measured on the band-limited test buildings (bins 0.0122 Hz): the fit's widths
 /// 1.3, 2.8 and 6.5 bins (exact 0.8, 2.8 and 7.0) took those modes' damping error from
-/// +197, −26 and −57 % to +62, −0.2 and −7 %; the next modes' fits, 23 and 25 bins wide,
+/// +197, −26 and −57 % to +62, +0.2 and −7 %; the next modes' fits, 23 and 25 bins wide,
 /// were no better than the correlation (+24 against −19 %, +1 against +13 %) and the widest
 /// worse (+85 against −2 %: far from the peak a mode's bell is not a Lorentzian). 10 lies
 /// 1.5 times above the widest fitted and 2.3 times below the next.
