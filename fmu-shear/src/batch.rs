@@ -22,7 +22,7 @@ use nalgebra::DMatrix;
 use structure::Excitation;
 
 use crate::kernels::axpy;
-use crate::linear::{AccelerationRows, LinearStepMap, StepInputs, INPUT_COLUMNS};
+use crate::linear::{sparse_row, AccelerationRows, LinearStepMap, StepInputs, INPUT_COLUMNS};
 use crate::model::ShearParameters;
 use crate::sensitivity::SensitivityMaps;
 
@@ -229,14 +229,12 @@ impl Outputs {
         let (y, v) = x.split_at(n);
         for i in 0..n {
             // ∂a_i/∂m_i = −(row i's value)/m_i, the ground acceleration's −1 aside.
-            let mut row = if self.base {
+            let first = if self.base {
                 0.0
             } else {
                 self.rows.b_excitation[i] * ek
             };
-            for &(c, a) in &self.sparse[i] {
-                row += a * x[c];
-            }
+            let row = sparse_row(first, &self.sparse[i], x);
             self.add(i, i, -row / self.mass[i]);
         }
         for s in 0..n {

@@ -245,6 +245,15 @@ impl LinearStepMap {
     }
 }
 
+/// `first + Σ a x[c]` over a row's nonzero entries `(c, a)`, in their order: the modal pass
+/// and the batch add the same terms in the same order, so their predictions are the same bits.
+/// A function of its own, not inlined: inside the modal pass's loop, short of registers, the
+/// sum was kept on the stack, a store and a load per term on the chain of additions.
+#[inline(never)]
+pub(crate) fn sparse_row(first: f64, row: &[(usize, f64)], x: &[f64]) -> f64 {
+    row.iter().fold(first, |v, &(c, a)| v + a * x[c])
+}
+
 /// `out = A [x; extra]` for `A` stored column-major (`out.len()` rows, one column per entry
 /// of `x` then of `extra`). A block of rows at a time, their sums in registers while the
 /// columns go by (a plain column-major product reads and writes `out` once per column); each

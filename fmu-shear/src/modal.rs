@@ -26,7 +26,7 @@ use nalgebra::{Complex, DMatrix, DVector, SMatrix};
 use structure::Excitation;
 
 use crate::batch::LinearRecord;
-use crate::linear::{AccelerationRows, LinearStepMap, StepInputs};
+use crate::linear::{sparse_row, AccelerationRows, LinearStepMap, StepInputs};
 use crate::model::ShearParameters;
 
 type C64 = Complex<f64>;
@@ -342,15 +342,6 @@ impl Modal {
             start += len;
         }
     }
-}
-
-/// `first + Σ a x[c]` over a row's nonzero entries `(c, a)`, in their order (the batch's terms
-/// in the batch's order: the same bits). A function of its own, not inlined: inside the pass's
-/// loop, short of registers, the sum was kept on the stack, a store and a load per term on the
-/// chain of additions.
-#[inline(never)]
-fn sparse_row(first: f64, row: &[(usize, f64)], x: &[f64]) -> f64 {
-    row.iter().fold(first, |v, &(c, a)| v + a * x[c])
 }
 
 /// What each parameter does to each kept mode: the measured slots' coefficient of `zⱼ` through
