@@ -41,27 +41,30 @@ impl Problem<'_, '_> {
             .as_ref()
             .filter(|(at, _)| at.as_slice() == z)
             .map(|(_, model)| model.r.clone());
-        if let Some(r) = known {
-            let weighted = with_prior_rows(&r, &self.weights, z);
-            *self.last.borrow_mut() = Some((z.to_vec(), r));
-            return Some(weighted);
-        }
+        let r = match known {
+            Some(r) => r,
+            None => self.run(z)?,
+        };
+        let weighted = with_prior_rows(&r, &self.weights, z);
+        *self.last.borrow_mut() = Some((z.to_vec(), r));
+        Some(weighted)
+    }
+
+    /// The residuals `y − ŷ` of a run at `z`, counted.
+    fn run(&self, z: &[f64]) -> Option<Vec<f64>> {
         *self.evaluations.borrow_mut() += 1;
         *self.runs.borrow_mut() += self.target.records.len();
         let mut sims = self.sims.borrow_mut();
         // With sensitivities, every trial runs with them: an accepted trial's Jacobian is then
         // at hand, for less than a run of its own.
-        let r = match sensitivity_normals(&mut sims, self.target, z) {
+        match sensitivity_normals(&mut sims, self.target, z) {
             Some(model) => {
                 let r = model.r.clone();
                 *self.at_hand.borrow_mut() = Some((z.to_vec(), model));
-                r
+                Some(r)
             }
-            None => raw_residuals(&mut sims, self.target, z, &mut self.buf.borrow_mut())?,
-        };
-        let weighted = with_prior_rows(&r, &self.weights, z);
-        *self.last.borrow_mut() = Some((z.to_vec(), r));
-        Some(weighted)
+            None => raw_residuals(&mut sims, self.target, z, &mut self.buf.borrow_mut()),
+        }
     }
 
     /// The forward-difference Jacobian at `z` (`base` its residuals), one run per parameter:
