@@ -646,22 +646,12 @@ struct Comments {
 /// The `#` lines (and blank lines) before the header: `# rate = 1000` (Hz), `# start = 12.5`
 /// (s); other comments are free text. Returns them and how many lines they take.
 fn leading_comments(bytes: &[u8]) -> Result<(Comments, u64), (u64, String)> {
-    // Only the lines before the header are text to read here: up to the first line that is
-    // neither blank nor a comment (the whole first 64 kB made text was a tenth of reading a
-    // 1,024-sample record).
-    let mut end = 0;
-    for line in bytes[..bytes.len().min(64 * 1024)].split_inclusive(|b| *b == b'\n') {
-        let text = String::from_utf8_lossy(line);
-        let trimmed = text.trim();
-        if !(trimmed.is_empty() || trimmed.starts_with('#')) {
-            break;
-        }
-        end += line.len();
-    }
-    let text = String::from_utf8_lossy(&bytes[..end]);
+    // Line by line up to the first that is neither blank nor a comment: only those lines are
+    // made text (the whole first 64 kB made text was a tenth of reading a 1,024-sample record).
     let mut comments = Comments::default();
     let mut lines = 0;
-    for line in text.lines() {
+    for line in bytes[..bytes.len().min(64 * 1024)].split_inclusive(|b| *b == b'\n') {
+        let line = String::from_utf8_lossy(line);
         let trimmed = line.trim();
         if !(trimmed.is_empty() || trimmed.starts_with('#')) {
             break;
