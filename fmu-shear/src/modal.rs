@@ -850,7 +850,7 @@ mod tests {
         let p = 3 * n;
         let mut jtj = vec![DMatrix::<f64>::zeros(p, p); 3];
         let mut jtr = vec![DVector::<f64>::zeros(p); 3];
-        let mut batch_predictions = vec![Vec::new(); 3];
+        let mut batch_predictions = vec![Vec::new(); jtj.len()];
         accelerations_along(&params, &record, &directions, |k, v, dv| {
             for (all, value) in batch_predictions.iter_mut().zip(v) {
                 all.push(*value);
