@@ -455,7 +455,7 @@ impl ModelInfo {
     /// is 1,601 variables and 621 kB of XML, rendered for nothing at every instantiation.
     /// [`DESCRIPTION_FORMAT`] changes it when the writing of the description does.
     fn fingerprint(&self) -> String {
-        let mut h = Fnv2::default();
+        let mut h = Fingerprint::default();
         h.text(DESCRIPTION_FORMAT);
         for text in [
             &self.model_name,
@@ -726,46 +726,16 @@ fn fmt_real(x: f64) -> String {
     }
 }
 
-/// A GUID from the content of the description: FNV-1a, two 64-bit lanes with different offsets,
+/// A GUID from the content of the description: XXH3's 128-bit hash (the `xxhash-rust` crate),
 /// fed as the description is written. Not cryptographic; it only has to change whenever the
-/// variable table does.
-struct Fnv2 {
-    a: u64,
-    b: u64,
-}
+/// variable table does. (A byte-at-a-time FNV-1a was 0.18 ms of a 20-storey shear table's
+/// 1.14 ms; the table is built at every instantiation and by the host that checks the GUID.)
+#[derive(Default)]
+struct Fingerprint(xxhash_rust::xxh3::Xxh3Default);
 
-impl Default for Fnv2 {
-    fn default() -> Self {
-        Fnv2 {
-            a: 0xcbf2_9ce4_8422_2325,
-            b: 0x6c62_272e_07bb_0142,
-        }
-    }
-}
-
-impl std::io::Write for Fnv2 {
-    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
-        // Both lanes in one pass: two independent chains of multiplies, the same values as one
-        // lane after the other.
-        const PRIME: u64 = 0x0100_0000_01b3;
-        let (mut a, mut b) = (self.a, self.b);
-        for &byte in bytes {
-            let byte = u64::from(byte);
-            a = (a ^ byte).wrapping_mul(PRIME);
-            b = (b ^ byte).wrapping_mul(PRIME);
-        }
-        (self.a, self.b) = (a, b);
-        Ok(bytes.len())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-impl Fnv2 {
+impl Fingerprint {
     fn bytes(&mut self, bytes: &[u8]) {
-        let _ = std::io::Write::write(self, bytes);
+        self.0.update(bytes);
     }
 
     /// A text with its length first, so that no two lists of texts feed the same bytes.
@@ -783,7 +753,8 @@ impl Fnv2 {
     }
 
     fn guid(&self) -> String {
-        let (a, b) = (self.a, self.b);
+        let hash = self.0.digest128();
+        let (a, b) = ((hash >> 64) as u64, hash as u64);
         let mut s = String::with_capacity(38);
         let _ = write!(
             s,
